@@ -1,0 +1,121 @@
+"""Render the VR-006L xacro to URDF text, from Python or the command line.
+
+Why this exists: on Debian 12 the only ROS 1 xacro is PyPI's ``xacro==1.13.3``, whose ``load_yaml``
+calls ``yaml.load(f)`` without a Loader, which PyYAML 6 (Debian 12) rejects with
+``load() missing 1 required positional argument: 'Loader'``. Our macro reads every dimension from
+``config/kinematics_vr006l.yaml`` with ``load_yaml``, so we render through this module, which swaps in
+a safe YAML loader inside xacro's expression namespace (nothing else in the process changes). On a
+ROS distribution whose xacro already works with PyYAML 6 the swap changes nothing.
+
+Command line (what the launch files call)::
+
+    xacro_compat FILE.xacro [name:=value ...] [-o OUT.urdf]
+"""
+from __future__ import annotations
+
+import argparse
+import inspect
+import os
+import sys
+from typing import Dict, Optional, Sequence
+
+PACKAGE = "panasonic_vr006l_support"
+
+
+class DescriptionError(Exception):
+    """The robot description could not be rendered; the message says why."""
+
+
+def package_dir() -> str:
+    """The support package's directory: from rospkg when available, else the source tree."""
+    try:
+        import rospkg  # optional: present in any ROS environment
+
+        return rospkg.RosPack().get_path(PACKAGE)
+    except Exception:  # rospkg missing, or the package is not on ROS_PACKAGE_PATH
+        return os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+
+
+def default_xacro_path() -> str:
+    return os.path.join(package_dir(), "urdf", "vr006l.xacro")
+
+
+def default_kinematics_yaml() -> str:
+    return os.path.join(package_dir(), "config", "kinematics_vr006l.yaml")
+
+
+def _yaml_load_needs_loader() -> bool:
+    import yaml
+
+    param = inspect.signature(yaml.load).parameters.get("Loader")
+    return param is not None and param.default is inspect.Parameter.empty
+
+
+def _install_safe_load_yaml(xacro_module) -> None:
+    """Make xacro's ``load_yaml`` work with PyYAML >= 6 (see the module docstring)."""
+    if not _yaml_load_needs_loader():
+        return
+    import yaml
+
+    def load_yaml(filename):
+        filename = xacro_module.abs_filename_spec(filename)
+        oldstack = xacro_module.push_file(filename)
+        try:
+            with open(filename) as stream:
+                return yaml.safe_load(stream)
+        except OSError as exc:
+            raise xacro_module.XacroException("cannot read YAML file %s: %s" % (filename, exc))
+        finally:
+            xacro_module.restore_filestack(oldstack)
+            xacro_module.all_includes.append(filename)
+
+    xacro_module.global_symbols["load_yaml"] = load_yaml
+
+
+def render_urdf(xacro_path: Optional[str] = None, mappings: Optional[Dict[str, str]] = None) -> str:
+    """Process a xacro file (default: the VR-006L top level) and return the URDF as text.
+
+    ``mappings`` are xacro args (``{"prefix": "r1_"}``). Raises DescriptionError on any failure.
+    """
+    try:
+        import xacro
+    except ImportError as exc:
+        raise DescriptionError(
+            "xacro is not installed: run scripts/setup (it installs xacro==1.13.3 from PyPI)") from exc
+    path = xacro_path or default_xacro_path()
+    if not os.path.isfile(path):
+        raise DescriptionError("xacro file not found: %s" % path)
+    _install_safe_load_yaml(xacro)
+    try:
+        doc = xacro.process_file(path, mappings=dict(mappings or {}))
+    except Exception as exc:  # xacro raises many types (XacroException, NameError, KeyError...)
+        raise DescriptionError("xacro failed on %s: %s" % (path, exc)) from exc
+    return doc.toprettyxml(indent="  ")
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="xacro_compat",
+        description="Render a xacro file to URDF (xacro 1.13 with a PyYAML-6-safe load_yaml).")
+    parser.add_argument("input", nargs="?", default=None,
+                        help="xacro file (default: the VR-006L top-level xacro)")
+    parser.add_argument("mappings", nargs="*", metavar="name:=value", help="xacro arguments")
+    parser.add_argument("-o", "--output", help="write the URDF here instead of standard output")
+    args = parser.parse_args(argv)
+    mappings = {}
+    for item in args.mappings:
+        if ":=" not in item:
+            parser.error("argument %r is not of the form name:=value" % item)
+        key, value = item.split(":=", 1)
+        mappings[key] = value
+    try:
+        text = render_urdf(args.input, mappings)
+    except DescriptionError as exc:
+        print("xacro_compat: error: %s" % exc, file=sys.stderr)
+        return 1
+    if args.output:
+        with open(args.output, "w") as out:
+            out.write(text)
+    else:
+        sys.stdout.write(text)
+    return 0

@@ -1,0 +1,90 @@
+"""Every launch file of every package parses and resolves (args, $(find), xacro commands, YAML loads).
+
+`roslaunch --dump-params` loads the whole configuration the way a launch would, including running the
+`command=` of robot_description, without starting a master or any node.
+"""
+import glob
+import os
+import subprocess
+import unittest
+
+import yaml
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# extra args for launch files whose defaults are not enough to load them
+ARGS = {
+    "planning_context.launch": [["load_robot_description:=true"], ["load_robot_description:=false"]],
+}
+
+
+def launch_files():
+    return sorted(glob.glob(os.path.join(REPO, "*", "launch", "*.launch")))
+
+
+class Loaded:
+    """Outcome of `roslaunch --dump-params`. It exits 0 even when the file does not load (it prints
+    "Unable to load file ..." on stderr), so success is: exit 0, no such message, parameters printed."""
+
+    def __init__(self, res):
+        self.stdout, self.stderr = res.stdout, res.stderr
+        self.ok = res.returncode == 0 and "Unable to load" not in res.stderr and bool(res.stdout.strip())
+
+
+def dump_params(path, args=()):
+    return Loaded(subprocess.run(["roslaunch", "--dump-params", path] + list(args),
+                                 capture_output=True, text=True, timeout=60))
+
+
+class LaunchFilesTest(unittest.TestCase):
+    def test_there_are_launch_files(self):
+        names = [os.path.basename(p) for p in launch_files()]
+        for expected in ("load_vr006l.launch", "test_vr006l.launch", "planning_context.launch"):
+            self.assertIn(expected, names)
+
+    def test_every_launch_file_loads(self):
+        for path in launch_files():
+            for args in ARGS.get(os.path.basename(path), [[]]):
+                with self.subTest(launch=os.path.relpath(path, REPO), args=args):
+                    res = dump_params(path, args)
+                    self.assertTrue(res.ok, res.stderr[-2000:])
+                    params = yaml.safe_load(res.stdout) or {}
+                    self.assertIsInstance(params, dict)
+
+    def test_load_vr006l_puts_a_urdf_on_the_parameter_server(self):
+        res = dump_params(os.path.join(REPO, "panasonic_vr006l_support", "launch", "load_vr006l.launch"),
+                          ["prefix:=left_"])
+        self.assertTrue(res.ok, res.stderr)
+        urdf = yaml.safe_load(res.stdout)["/robot_description"]
+        self.assertIn('<link name="left_tool0"/>', urdf)
+
+    def test_planning_context_loads_srdf_limits_and_kinematics(self):
+        res = dump_params(os.path.join(REPO, "panasonic_vr006l_moveit_config", "launch", "planning_context.launch"))
+        self.assertTrue(res.ok, res.stderr)
+        params = yaml.safe_load(res.stdout)
+        self.assertIn('<group name="manipulator">', params["/robot_description_semantic"])
+        self.assertEqual(params["/robot_description_planning/joint_limits/joint_5/max_velocity"], 5.23)
+        self.assertIn("/robot_description_kinematics/manipulator/kinematics_solver_timeout", params)
+        self.assertNotIn("/robot_description", params)
+
+    def test_a_broken_launch_file_is_reported(self):
+        """The check above can fail: a missing YAML, a missing include, a failing command, an unset arg."""
+        import tempfile
+
+        broken = [
+            '<rosparam command="load" file="$(find panasonic_vr006l_support)/config/nope.yaml"/>',
+            '<include file="$(find panasonic_vr006l_support)/launch/nope.launch"/>',
+            '<param name="x" command="$(find panasonic_vr006l_support)/scripts/xacro_compat /nope.xacro"/>',
+            '<arg name="a"/><param name="x" value="$(arg a)"/>',
+        ]
+        for body in broken:
+            with self.subTest(body=body):
+                with tempfile.NamedTemporaryFile("w", suffix=".launch", delete=False) as f:
+                    f.write("<launch>%s<param name='y' value='1'/></launch>" % body)
+                try:
+                    self.assertFalse(dump_params(f.name).ok)
+                finally:
+                    os.unlink(f.name)
+
+
+if __name__ == "__main__":
+    unittest.main()

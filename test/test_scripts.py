@@ -1,0 +1,50 @@
+"""The user-facing scripts: help, clear errors, and the workspace environment they provide."""
+import os
+import subprocess
+import unittest
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def script(name, *args, env=None, timeout=120):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run([os.path.join(REPO, "scripts", name)] + list(args),
+                          capture_output=True, text=True, timeout=timeout, env=e)
+
+
+class ScriptsTest(unittest.TestCase):
+    def test_help_of_every_script(self):
+        for name in ("setup", "run", "test"):
+            res = script(name, "--help")
+            self.assertEqual(res.returncode, 0, name + res.stderr)
+            self.assertIn("scripts/" + name, res.stdout, name)
+
+    def test_unknown_options_are_refused(self):
+        for name in ("setup", "run", "test"):
+            res = script(name, "--bogus")
+            self.assertEqual(res.returncode, 2, name)
+            self.assertIn("--bogus", res.stderr, name)
+
+    def test_env_gives_the_workspace_and_debians_python(self):
+        res = script("env", "bash", "-c", 'echo "$ROS_PACKAGE_PATH"; python3 -c "import sys, rospy; print(sys.executable)"; rospack find vr_driver')
+        self.assertEqual(res.returncode, 0, res.stderr)
+        lines = res.stdout.split()
+        self.assertIn(os.path.realpath(REPO), [os.path.realpath(p) for p in lines[0].split(":")])
+        self.assertEqual(os.path.realpath(lines[1]), os.path.realpath("/usr/bin/python3"))
+        self.assertEqual(os.path.realpath(lines[2]), os.path.realpath(os.path.join(REPO, "vr_driver")))
+
+    def test_env_without_a_built_workspace_says_so(self):
+        res = script("env", "true", env={"VR_WS": "/nonexistent/ws"})
+        self.assertEqual(res.returncode, 2)
+        self.assertIn("run scripts/setup", res.stderr)
+
+    def test_setup_is_idempotent_and_quick_when_everything_is_there(self):
+        res = script("setup", "--no-build")
+        self.assertEqual(res.returncode, 0, res.stderr)
+        self.assertIn("Debian packages: all", res.stdout)
+        self.assertNotIn("installing", res.stdout)
+
+
+if __name__ == "__main__":
+    unittest.main()

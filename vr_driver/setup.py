@@ -1,0 +1,7 @@
+from setuptools import setup
+from catkin_pkg.python_setup import generate_distutils_setup
+
+setup(**generate_distutils_setup(
+    packages=['vr_driver'],
+    package_dir={'': 'src'},
+))
