@@ -39,6 +39,16 @@ class ScriptsTest(unittest.TestCase):
         self.assertEqual(res.returncode, 2)
         self.assertIn("run scripts/setup", res.stderr)
 
+    def test_setup_check_finds_a_missing_debian_package(self):
+        """The detection a fresh machine depends on: an absent package is reported, nothing installed."""
+        res = script("setup", "--check", env={"VR_SETUP_EXTRA_APT": "no-such-package-vr006l"})
+        self.assertEqual(res.returncode, 1, res.stdout + res.stderr)
+        self.assertIn("missing Debian packages: no-such-package-vr006l", res.stdout)
+        self.assertNotIn("installing", res.stdout)
+        ok = script("setup", "--check")
+        self.assertEqual(ok.returncode, 0, ok.stdout + ok.stderr)
+        self.assertIn("nothing missing", ok.stdout)
+
     def test_setup_is_idempotent_and_quick_when_everything_is_there(self):
         res = script("setup", "--no-build")
         self.assertEqual(res.returncode, 0, res.stderr)
