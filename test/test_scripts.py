@@ -15,13 +15,13 @@ def script(name, *args, env=None, timeout=120):
 
 class ScriptsTest(unittest.TestCase):
     def test_help_of_every_script(self):
-        for name in ("setup", "run", "test"):
+        for name in ("setup", "run", "test", "bench"):
             res = script(name, "--help")
             self.assertEqual(res.returncode, 0, name + res.stderr)
             self.assertIn("scripts/" + name, res.stdout, name)
 
     def test_unknown_options_are_refused(self):
-        for name in ("setup", "run", "test"):
+        for name in ("setup", "run", "test", "bench"):
             res = script(name, "--bogus")
             self.assertEqual(res.returncode, 2, name)
             self.assertIn("--bogus", res.stderr, name)
@@ -33,6 +33,12 @@ class ScriptsTest(unittest.TestCase):
         self.assertIn(os.path.realpath(REPO), [os.path.realpath(p) for p in lines[0].split(":")])
         self.assertEqual(os.path.realpath(lines[1]), os.path.realpath("/usr/bin/python3"))
         self.assertEqual(os.path.realpath(lines[2]), os.path.realpath(os.path.join(REPO, "vr_driver")))
+
+    def test_env_names_the_independent_profibus_peer(self):
+        """scripts/test installs pyprofibus 1.13 into its own venv; our runtime never imports it."""
+        res = script("env", "bash", "-c", '"$VR_PEER_PYTHON" -c "import pyprofibus, importlib.metadata as m; print(m.version(\'pyprofibus\'))"; python3 -c "import pyprofibus" 2>/dev/null && echo leaked || echo isolated')
+        self.assertEqual(res.returncode, 0, res.stderr)
+        self.assertEqual(res.stdout.split(), ["1.13", "isolated"])
 
     def test_env_without_a_built_workspace_says_so(self):
         res = script("env", "true", env={"VR_WS": "/nonexistent/ws"})
