@@ -5,6 +5,8 @@
     │   └── PhyTimeoutError      (also a TimeoutError)
     ├── FdlError                 FDL layer problems
     │   ├── FrameError           a malformed telegram (bad SD, LE/LEr, FCS, ED, address, SAP...)
+    │   │   ├── FcsError         the frame check sequence does not match
+    │   │   └── TruncatedFrameError  the bytes end before the frame does
     │   └── FdlTimeoutError      no reply within the slot time after all retries (also a TimeoutError)
     ├── DpError                  DP service / state machine problems (wrong ident, Cfg rejected...)
     │   └── DpTimeoutError       (also a TimeoutError)
@@ -22,6 +24,8 @@ __all__ = [
     "PhyTimeoutError",
     "FdlError",
     "FrameError",
+    "FcsError",
+    "TruncatedFrameError",
     "FdlTimeoutError",
     "DpError",
     "DpTimeoutError",
@@ -48,6 +52,14 @@ class FdlError(ProfibusError):
 
 class FrameError(FdlError):
     """A telegram is malformed; the message says which check failed."""
+
+
+class FcsError(FrameError):
+    """The frame check sequence (sum mod 256) does not match the frame."""
+
+
+class TruncatedFrameError(FrameError):
+    """The byte string ends before the frame it starts is complete."""
 
 
 class FdlTimeoutError(FdlError, TimeoutError):

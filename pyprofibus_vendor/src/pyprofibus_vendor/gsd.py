@@ -41,7 +41,9 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
-from .errors import ConfigError, GsdError
+from . import dp as _dp
+from .dp import CfgIdentifier
+from .errors import ConfigError, DpError, GsdError
 
 __all__ = [
     "STANDARD_BAUDRATES",
@@ -168,100 +170,20 @@ def _parse_int_list(text: str) -> Optional[List[int]]:
 # Cfg identifier bytes
 # --------------------------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class CfgIdentifier:
-    """One decoded Cfg identifier (one byte in the general format; header + length/manufacturer
-    bytes in the special format). Lengths are in bytes; input = slave -> master."""
-
-    raw: bytes
-    input_len: int
-    output_len: int
-    words: bool
-    consistent: bool
-    special: bool
-    manufacturer_data: bytes = b""
-
-    def describe(self) -> str:
-        """Short human text, e.g. ``"in 4"``, ``"in/out 14 consistent"``, ``"empty slot"``."""
-        if self.input_len and self.output_len and self.input_len == self.output_len and not self.special:
-            text = "in/out %d" % self.input_len
-        else:
-            parts = []
-            if self.output_len:
-                parts.append("out %d" % self.output_len)
-            if self.input_len:
-                parts.append("in %d" % self.input_len)
-            text = ", ".join(parts) if parts else "empty slot"
-        if self.words:
-            text += " (words)"
-        if self.consistent:
-            text += " consistent"
-        if self.manufacturer_data:
-            text += " +%d manufacturer bytes" % len(self.manufacturer_data)
-        return text
-
-
 def decode_cfg(cfg: bytes) -> Tuple[CfgIdentifier, ...]:
-    """Split Chk_Cfg bytes into identifiers and decode each one.
-
-    Raises ConfigError when a special-format identifier is cut short.
-    """
-    data = bytes(cfg)
-    result = []
-    pos = 0
-    while pos < len(data):
-        start = pos
-        head = data[pos]
-        pos += 1
-        direction = (head >> 4) & 0x03
-        if direction:  # general format
-            units = (head & 0x0F) + 1
-            words = bool(head & 0x40)
-            length = units * 2 if words else units
-            result.append(CfgIdentifier(
-                raw=data[start:pos],
-                input_len=length if direction in (1, 3) else 0,
-                output_len=length if direction in (2, 3) else 0,
-                words=words,
-                consistent=bool(head & 0x80),
-                special=False,
-            ))
-            continue
-        # special format: 00 none, 01 input, 10 output, 11 output then input
-        length_kinds = {0: (), 1: ("in",), 2: ("out",), 3: ("out", "in")}[head >> 6]
-        n_manufacturer = head & 0x0F
-        needed = len(length_kinds) + n_manufacturer
-        if pos + needed > len(data):
-            raise ConfigError(
-                "Cfg identifier 0x%02X at offset %d needs %d more byte(s), only %d left"
-                % (head, start, needed, len(data) - pos))
-        lengths = {"in": 0, "out": 0}
-        words = consistent = False
-        for kind in length_kinds:
-            byte = data[pos]
-            pos += 1
-            units = (byte & 0x3F) + 1
-            lengths[kind] = units * 2 if byte & 0x40 else units
-            words = words or bool(byte & 0x40)
-            consistent = consistent or bool(byte & 0x80)
-        manufacturer = data[pos:pos + n_manufacturer]
-        pos += n_manufacturer
-        result.append(CfgIdentifier(
-            raw=data[start:pos],
-            input_len=lengths["in"],
-            output_len=lengths["out"],
-            words=words,
-            consistent=consistent,
-            special=True,
-            manufacturer_data=manufacturer,
-        ))
-    return tuple(result)
+    """Split Chk_Cfg bytes into decoded identifiers (``dp.decode_cfg``); ConfigError when cut short."""
+    try:
+        return _dp.decode_cfg(cfg)
+    except DpError as exc:
+        raise ConfigError(str(exc)) from exc
 
 
 def cfg_io_lengths(cfg: bytes) -> Tuple[int, int]:
-    """Total (input_len, output_len) in bytes described by Chk_Cfg bytes."""
-    idents = decode_cfg(cfg)
-    return sum(i.input_len for i in idents), sum(i.output_len for i in idents)
+    """Total (input_len, output_len) in bytes described by Chk_Cfg bytes; ConfigError when cut short."""
+    try:
+        return _dp.cfg_io_lengths(cfg)
+    except DpError as exc:
+        raise ConfigError(str(exc)) from exc
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,0 +1,862 @@
+"""DP master class 1: per-slave state machines over one byte link.
+
+Per slave (``_transition`` logs each change; handlers are in ``_handlers``,
+per-state time limits in ``_state_limits``)::
+
+    INIT ---FDL_Status OK---> WAIT_DIAG ---diag---> SET_PRM ---SC---> CHK_CFG ---SC--->
+    CHECK_DIAG ---diag ready (no Prm_Req/Cfg_Fault/Prm_Fault, locked by us)---> DATA_EXCHANGE
+    CHECK_DIAG ---not ready yet---> CHECK_DIAG (poll again, bounded by the state limit)
+    DATA_EXCHANGE ---DH/RDH reply---> DX_DIAG ---diag ready---> DATA_EXCHANGE
+    any state ---no reply after the retries / RS / fault / state limit---> BACKOFF
+    BACKOFF ---back-off time over---> INIT
+
+A *turn* is one transaction with one slave (request, then reply or timeout
+after ``max_retry`` repetitions with the same FCB); slaves take turns in
+order and a completed round is a *cycle*. Slot time and retry limit come
+from the baud rate (:class:`BusTiming`); on a pty or USB adapter software
+latency dominates, so the reply timeout never goes below ``reply_timeout_floor``.
+
+Outputs are latched (the application sets them whenever it likes; every
+Data_Exchange sends the latest). Inputs are kept as the last good image
+with its timestamp; only replies that passed every check (FCS, ED, LE,
+addresses, FC, SAPs, exact length) are delivered.
+
+The core is :meth:`DpMaster.step` (non-blocking, time injected); the
+blocking API (:meth:`DpMaster.cycle`, :meth:`DpMaster.run_cycles`,
+:meth:`DpMaster.run`) waits in ``link.recv`` or on an Event, never spinning.
+"""
+from __future__ import annotations
+
+import enum
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable, Dict, List, Optional, Tuple
+
+from .dp import (MASTER_SAP, ChkCfg, DiagStatus1, DiagStatus2, GcCommand, GlobalControl,
+                 PrmStationStatus, Sap, SetPrm, SlaveDiag, cfg_io_lengths, explain_diag,
+                 global_control_frame, request_frame, watchdog_factors)
+from .errors import ConfigError, DpError, DpTimeoutError, PhyError, ProfibusError
+from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction,
+                  ResponseStatus, Sd1, Sd2, Sd3, ShortAck, StationType)
+from .phy import Link
+
+__all__ = ["BusTiming", "SlaveSpec", "MasterSlaveState", "SlaveCounters", "MasterCounters",
+           "SlaveHandle", "AcyclicRequest", "DpMaster"]
+
+log = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+
+# baud -> (slot time, max TSDR) in bit times; IEC 61158 default bus parameters
+_SLOT_TABLE = [
+    (187_500, 100, 60),
+    (500_000, 200, 100),
+    (1_500_000, 300, 150),
+    (3_000_000, 400, 250),
+    (6_000_000, 600, 450),
+    (12_000_000, 1000, 800),
+]
+_RETRY_TABLE = [(1_500_000, 1), (3_000_000, 2), (6_000_000, 3), (12_000_000, 4)]
+STANDARD_BAUDS = (9600, 19200, 45450, 93750, 187500, 500000, 1500000, 3000000, 6000000,
+                  12000000)
+
+
+@dataclass(frozen=True)
+class BusTiming:
+    """Bus timing derived from the baud rate (times in bit times)."""
+
+    baud: int
+    slot_bits: int
+    max_tsdr_bits: int
+    max_retry: int
+    min_tsdr_bits: int = 11
+    tsyn_bits: int = 33
+
+    @classmethod
+    def for_baud(cls, baud: int, max_retry: Optional[int] = None) -> "BusTiming":
+        if not isinstance(baud, int) or not 9600 <= baud <= 12_000_000:
+            raise ConfigError(f"baud {baud!r} outside 9600 .. 12000000")
+        slot, tsdr = next((s, t) for top, s, t in _SLOT_TABLE if baud <= top)
+        retry = next(r for top, r in _RETRY_TABLE if baud <= top)
+        if baud not in STANDARD_BAUDS:
+            log.warning("baud %d is not a PROFIBUS standard rate", baud)
+        return cls(baud, slot, tsdr, retry if max_retry is None else max_retry)
+
+    def bits(self, n: float) -> float:
+        """Seconds for ``n`` bit times."""
+        return n / self.baud
+
+    def chars(self, n: int) -> float:
+        """Seconds on the wire for ``n`` characters of 11 bits."""
+        return n * 11 / self.baud
+
+    @property
+    def slot_time(self) -> float:
+        return self.bits(self.slot_bits)
+
+
+@dataclass(frozen=True)
+class SlaveSpec:
+    """What the master needs to know about one slave.
+
+    ``watchdog`` (seconds, None = off) becomes WD_Fact_1/2; sizes default to
+    what ``cfg`` describes (input = slave -> master).
+    """
+
+    address: int
+    ident: int
+    cfg: bytes
+    input_size: Optional[int] = None
+    output_size: Optional[int] = None
+    watchdog: Optional[float] = 0.3
+    user_prm_data: bytes = b""
+    group_ident: int = 0
+    min_tsdr: int = 0
+    sync_req: bool = False
+    freeze_req: bool = False
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.address <= 125:
+            raise ConfigError(f"slave address {self.address} out of range 0..125")
+        if not 0 <= self.ident <= 0xFFFF:
+            raise ConfigError(f"ident 0x{self.ident:X} out of range")
+        try:
+            cfg = ChkCfg(bytes(self.cfg)).cfg
+            n_in, n_out = cfg_io_lengths(cfg)
+        except DpError as err:
+            raise ConfigError(f"slave {self.address}: bad cfg: {err}") from err
+        object.__setattr__(self, "cfg", cfg)
+        object.__setattr__(self, "user_prm_data", bytes(self.user_prm_data))
+        if self.input_size is None:
+            object.__setattr__(self, "input_size", n_in)
+        if self.output_size is None:
+            object.__setattr__(self, "output_size", n_out)
+        if self.watchdog is not None:
+            watchdog_factors(self.watchdog)  # validates the range
+
+    def set_prm(self) -> SetPrm:
+        status = PrmStationStatus.LOCK_REQ
+        f1 = f2 = 1
+        if self.watchdog is not None:
+            status |= PrmStationStatus.WD_ON
+            f1, f2 = watchdog_factors(self.watchdog)
+        if self.sync_req:
+            status |= PrmStationStatus.SYNC_REQ
+        if self.freeze_req:
+            status |= PrmStationStatus.FREEZE_REQ
+        return SetPrm(self.ident, status, f1, f2, self.min_tsdr, self.group_ident,
+                      self.user_prm_data)
+
+
+class MasterSlaveState(enum.Enum):
+    INIT = "INIT"                    # FDL_Status request
+    WAIT_DIAG = "WAIT_DIAG"          # first Slave_Diag
+    SET_PRM = "SET_PRM"
+    CHK_CFG = "CHK_CFG"
+    CHECK_DIAG = "CHECK_DIAG"        # Slave_Diag after Chk_Cfg
+    DATA_EXCHANGE = "DATA_EXCHANGE"
+    DX_DIAG = "DX_DIAG"              # Slave_Diag fetched after a DH reply
+    BACKOFF = "BACKOFF"              # waiting before re-initialisation
+
+
+_CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
+
+
+@dataclass
+class SlaveCounters:
+    requests: int = 0
+    retries: int = 0
+    timeouts: int = 0           # transactions without a valid reply after all retries
+    invalid_replies: int = 0    # valid telegrams that were not an acceptable reply
+    data_exchanges: int = 0     # good Data_Exchange replies
+    diag_reads: int = 0
+    losses: int = 0             # left Data_Exchange
+    reconnects: int = 0         # came back to Data_Exchange after a loss
+    state_changes: int = 0
+    faults: int = 0             # init attempts ended by a fault or time limit
+
+
+@dataclass
+class MasterCounters:
+    cycles: int = 0
+    requests: int = 0
+    retries: int = 0
+    timeouts: int = 0
+    invalid_replies: int = 0
+    unexpected_frames: int = 0  # telegrams received while nothing was awaited
+    reconnects: int = 0
+    losses: int = 0
+    state_changes: int = 0
+    global_controls: int = 0
+    phy_errors: int = 0
+    overruns: int = 0           # fixed-rate loop cycles that started late
+    fcs_errors: int = 0         # copied from the deframer
+    garbage_bytes: int = 0      # copied from the deframer
+
+
+@dataclass
+class AcyclicRequest:
+    """A queued Get_Cfg / Rd_Inp / Rd_Outp, executed in a Data_Exchange turn."""
+
+    sap: Sap
+    done: bool = False
+    result: Optional[bytes] = None
+    error: Optional[ProfibusError] = None
+
+
+class SlaveHandle:
+    """The master's view of one slave (read by the application)."""
+
+    def __init__(self, spec: SlaveSpec, now: float) -> None:
+        self.spec = spec
+        self.address = spec.address
+        self.state = MasterSlaveState.INIT
+        self.state_since = now
+        self.counters = SlaveCounters()
+        self.fcb = FcbRequester()
+        self.last_diag: Optional[SlaveDiag] = None
+        self.backoff_until = now
+        self.failures = 0           # consecutive failed (re)initialisations
+        self.was_connected = False
+        self.jobs: List[AcyclicRequest] = []
+        self._outputs = bytes(spec.output_size or 0)
+        self._inputs: Optional[bytes] = None
+        self._inputs_time: Optional[float] = None
+        self._lock = threading.Lock()
+
+    @property
+    def connected(self) -> bool:
+        """True while the slave is in Data_Exchange (or fetching diag from it)."""
+        return self.state in _CONNECTED
+
+    @property
+    def outputs(self) -> bytes:
+        """The latched output image sent in every Data_Exchange."""
+        return self._outputs
+
+    @outputs.setter
+    def outputs(self, data: bytes) -> None:
+        data = bytes(data)
+        if len(data) != self.spec.output_size:
+            raise DpError(f"slave {self.address}: {len(data)} output bytes, expected "
+                          f"{self.spec.output_size}")
+        with self._lock:
+            self._outputs = data
+
+    @property
+    def inputs(self) -> Optional[bytes]:
+        """Last good input image, or None before the first one."""
+        return self._inputs
+
+    @property
+    def inputs_time(self) -> Optional[float]:
+        """Clock time when :attr:`inputs` arrived."""
+        return self._inputs_time
+
+    def inputs_age(self, now: float) -> Optional[float]:
+        return None if self._inputs_time is None else now - self._inputs_time
+
+    def _store_inputs(self, data: bytes, now: float) -> None:
+        with self._lock:
+            self._inputs = data
+            self._inputs_time = now
+
+
+@dataclass
+class _Pending:
+    slave: SlaveHandle
+    kind: str                 # fdl_status | diag | set_prm | chk_cfg | dx | job
+    raw: bytes
+    deadline: float
+    timeout: float
+    retries: int = 0
+    job: Optional[AcyclicRequest] = None
+
+
+class DpMaster:
+    """DP master class 1 on one link.
+
+    Typical use (one slave on a serial device)::
+
+        link = SerialLink("/dev/ttyUSB0", 19200)
+        master = DpMaster(link, address=2, baud=19200)
+        robot = master.add_slave(SlaveSpec(4, 0x06C6, bytes.fromhex("1313131123232321")))
+        robot.outputs = bytes(14)
+        master.run_cycles(10)
+        print(robot.connected, robot.inputs, master.counters)
+    """
+
+    def __init__(self, link: Link, address: int = 2, baud: int = 19200, *,
+                 clock: Clock = time.monotonic, timing: Optional[BusTiming] = None,
+                 max_retry: Optional[int] = None, reply_timeout_floor: float = 0.05,
+                 backoff_min: float = 0.1, backoff_max: float = 1.0,
+                 state_limit: float = 1.0,
+                 on_state_change: Optional[Callable[[SlaveHandle, MasterSlaveState,
+                                                     MasterSlaveState, str], None]] = None
+                 ) -> None:
+        if not 0 <= address <= 125:
+            raise ConfigError(f"master address {address} out of range 0..125")
+        self.link = link
+        self.address = address
+        self.timing = timing or BusTiming.for_baud(baud, max_retry)
+        if max_retry is not None and timing is not None:
+            self.timing = BusTiming(self.timing.baud, self.timing.slot_bits,
+                                    self.timing.max_tsdr_bits, max_retry)
+        self.clock = clock
+        self.reply_timeout_floor = reply_timeout_floor
+        self.backoff_min = backoff_min
+        self.backoff_max = backoff_max
+        self.on_state_change = on_state_change
+        self.counters = MasterCounters()
+        self.deframer = Deframer()
+        self.slaves: List[SlaveHandle] = []
+        self._by_addr: Dict[int, SlaveHandle] = {}
+        self._turn = 0
+        self._turns = 0               # completed turns (for step() bookkeeping)
+        self._pending: Optional[_Pending] = None
+        self._gc_queue: List[GlobalControl] = []
+        self._sent_in_round = False
+        self._round_idle = False
+        self._handlers: Dict[MasterSlaveState, Callable[[SlaveHandle, float], bool]] = {
+            MasterSlaveState.INIT: self._do_init,
+            MasterSlaveState.WAIT_DIAG: self._do_diag,
+            MasterSlaveState.SET_PRM: self._do_set_prm,
+            MasterSlaveState.CHK_CFG: self._do_chk_cfg,
+            MasterSlaveState.CHECK_DIAG: self._do_diag,
+            MasterSlaveState.DATA_EXCHANGE: self._do_data_exchange,
+            MasterSlaveState.DX_DIAG: self._do_diag,
+            MasterSlaveState.BACKOFF: self._do_backoff,
+        }
+        self._state_limits: Dict[MasterSlaveState, Optional[float]] = {
+            MasterSlaveState.INIT: None,
+            MasterSlaveState.WAIT_DIAG: state_limit,
+            MasterSlaveState.SET_PRM: state_limit,
+            MasterSlaveState.CHK_CFG: state_limit,
+            MasterSlaveState.CHECK_DIAG: state_limit,
+            MasterSlaveState.DATA_EXCHANGE: None,
+            MasterSlaveState.DX_DIAG: state_limit,
+            MasterSlaveState.BACKOFF: None,
+        }
+        self._reply_handlers: Dict[str, Callable[[_Pending, Frame, float], None]] = {
+            "fdl_status": self._on_fdl_status,
+            "diag": self._on_diag,
+            "set_prm": self._on_ack,
+            "chk_cfg": self._on_ack,
+            "dx": self._on_dx,
+            "job": self._on_job,
+        }
+
+    # -- configuration / application API -------------------------------------------------
+    def add_slave(self, spec: SlaveSpec) -> SlaveHandle:
+        if spec.address == self.address or spec.address in self._by_addr:
+            raise ConfigError(f"slave address {spec.address} already in use")
+        handle = SlaveHandle(spec, self.clock())
+        self.slaves.append(handle)
+        self._by_addr[spec.address] = handle
+        log.info("master %d: slave %d ident 0x%04X cfg %s (%d in / %d out bytes), "
+                 "Set_Prm %s", self.address, spec.address, spec.ident, spec.cfg.hex(" "),
+                 spec.input_size, spec.output_size, spec.set_prm().encode().hex(" "))
+        return handle
+
+    def slave(self, address: int) -> SlaveHandle:
+        try:
+            return self._by_addr[address]
+        except KeyError:
+            raise ConfigError(f"no slave {address} configured") from None
+
+    def set_outputs(self, address: int, data: bytes) -> None:
+        self.slave(address).outputs = data
+
+    def inputs(self, address: int) -> Tuple[Optional[bytes], Optional[float]]:
+        """``(last good inputs, age in seconds)`` of one slave."""
+        h = self.slave(address)
+        return h.inputs, h.inputs_age(self.clock())
+
+    def global_control(self, command: GcCommand, group_select: int = 0) -> None:
+        """Queue a broadcast Global_Control; it goes out before the next turn."""
+        self._gc_queue.append(GlobalControl(GcCommand(command), group_select))
+
+    def request(self, address: int, sap: Sap) -> AcyclicRequest:
+        """Queue Get_Cfg / Rd_Inp / Rd_Outp; runs in the slave's next DX turn."""
+        if sap not in (Sap.GET_CFG, Sap.RD_INP, Sap.RD_OUTP):
+            raise ConfigError(f"SAP {sap} is not an acyclic read service")
+        job = AcyclicRequest(Sap(sap))
+        self.slave(address).jobs.append(job)
+        return job
+
+    def replace_link(self, link: Link) -> None:
+        """Continue on a new link (e.g. a reopened serial port)."""
+        self.link = link
+        self._pending = None
+        self.deframer.reset()
+
+    def close(self) -> None:
+        self.link.close()
+
+    # -- state machine core -----------------------------------------------------------
+    def _transition(self, slave: SlaveHandle, new: MasterSlaveState, reason: str,
+                    now: float) -> None:
+        old = slave.state
+        if old is new:
+            return
+        slave.state = new
+        slave.state_since = now
+        slave.counters.state_changes += 1
+        self.counters.state_changes += 1
+        level = logging.INFO
+        if old in _CONNECTED and new not in _CONNECTED:
+            slave.counters.losses += 1
+            self.counters.losses += 1
+            level = logging.WARNING
+        if new is MasterSlaveState.DATA_EXCHANGE and old not in _CONNECTED:
+            if slave.was_connected:
+                slave.counters.reconnects += 1
+                self.counters.reconnects += 1
+            slave.was_connected = True
+            slave.failures = 0
+        log.log(level, "slave %d: %s -> %s (%s)", slave.address, old.value, new.value, reason)
+        if self.on_state_change is not None:
+            self.on_state_change(slave, old, new, reason)
+
+    def _fail(self, slave: SlaveHandle, reason: str, now: float) -> None:
+        """End the current attempt: back off, then start again at INIT."""
+        slave.failures += 1
+        if slave.state is not MasterSlaveState.INIT:
+            slave.counters.faults += 1
+        delay = 0.0 if slave.state in _CONNECTED else min(
+            self.backoff_max, self.backoff_min * 2 ** max(0, slave.failures - 1))
+        slave.backoff_until = now + delay
+        slave.fcb.reset()
+        for job in slave.jobs:
+            job.done, job.error = True, DpError(f"slave {slave.address} lost: {reason}")
+        slave.jobs.clear()
+        self._transition(slave, MasterSlaveState.BACKOFF,
+                         f"{reason}; retry in {delay:.2f} s", now)
+
+    def _reply_timeout(self, request_len: int, reply_len: int) -> float:
+        t = self.timing
+        wire = t.chars(request_len + reply_len) + t.bits(t.tsyn_bits) + t.slot_time
+        return max(self.reply_timeout_floor, wire)
+
+    def _send(self, slave: SlaveHandle, kind: str, frame: Frame, reply_len: int,
+              now: float, job: Optional[AcyclicRequest] = None) -> None:
+        raw = frame.encode()
+        timeout = self._reply_timeout(len(raw), reply_len)
+        self._pending = _Pending(slave, kind, raw, now + timeout, timeout, job=job)
+        self._transmit(raw)
+        slave.counters.requests += 1
+        self.counters.requests += 1
+        self._sent_in_round = True
+
+    def _transmit(self, raw: bytes) -> None:
+        # TSYN: the line must be quiet before a request; drop stale bytes
+        self.link.flush_input()
+        self.deframer.reset()
+        self.link.send(raw)
+
+    def _end_turn(self) -> None:
+        self._pending = None
+        self._turns += 1
+        self._turn += 1
+        if self._turn >= len(self.slaves):
+            self._turn = 0
+            self.counters.cycles += 1
+            self._round_idle = not self._sent_in_round
+            self._sent_in_round = False
+
+    def step(self, now: Optional[float] = None) -> float:
+        """Do whatever is due at ``now`` without blocking.
+
+        Returns the clock time at which calling again makes sense (``now``
+        when there is more to do right away). :class:`PhyError` from the link
+        propagates after every slave was marked lost.
+        """
+        now = self.clock() if now is None else now
+        try:
+            return self._step(now)
+        except PhyError:
+            self.counters.phy_errors += 1
+            self._pending = None
+            for s in self.slaves:
+                if s.state is not MasterSlaveState.BACKOFF:
+                    self._fail(s, "link failed", now)
+            raise
+
+    def _step(self, now: float) -> float:
+        turns = self._turns
+        self._poll_rx(now, 0.0)
+        if self._turns != turns:
+            return now  # a reply completed a turn: let the caller see it first
+        if self._pending is not None:
+            if now < self._pending.deadline:
+                return self._pending.deadline
+            self._on_timeout(now)
+            return now
+        if self._gc_queue:
+            gc = self._gc_queue.pop(0)
+            self._transmit(global_control_frame(self.address, gc).encode())
+            self.counters.global_controls += 1
+            log.info("master %d: Global_Control %s group 0x%02X", self.address,
+                     gc.command, gc.group_select)
+            return now
+        if not self.slaves:
+            return now + 1.0
+        slave = self.slaves[self._turn]
+        limit = self._state_limits[slave.state]
+        if limit is not None and now - slave.state_since > limit:
+            self._fail(slave, f"state {slave.state.value} took longer than {limit} s", now)
+            self._end_turn()
+            return now
+        sent = self._handlers[slave.state](slave, now)
+        if not sent:
+            self._end_turn()
+            if self._turn == 0 and self._round_idle:
+                return self.next_wakeup(now)
+        return now
+
+    def next_wakeup(self, now: float) -> float:
+        """Earliest time something is due (pending deadline, end of a back-off)."""
+        if self._pending is not None:
+            return self._pending.deadline
+        if self._gc_queue:
+            return now
+        times = [s.backoff_until if s.state is MasterSlaveState.BACKOFF else now
+                 for s in self.slaves]
+        return max(now, min(times)) if times else now + 1.0
+
+    # -- receiving ------------------------------------------------------------------------
+    def _poll_rx(self, now: float, timeout: float) -> None:
+        data = self.link.recv(4096, timeout)
+        if data:
+            self._feed(data, now)
+
+    def _feed(self, data: bytes, now: float) -> None:
+        frames = self.deframer.feed(data)
+        self.counters.fcs_errors = self.deframer.counters.fcs_errors
+        self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
+        for frame in frames:
+            pending = self._pending
+            if pending is None:
+                self.counters.unexpected_frames += 1
+                continue
+            if not self._addressed_to_us(pending, frame):
+                self.counters.unexpected_frames += 1
+                continue
+            self._reply_handlers[pending.kind](pending, frame, now)
+            if self._pending is None:
+                return  # turn finished; ignore the rest (flushed before the next request)
+        if self._pending is not None:
+            need = self.deframer.bytes_needed()
+            if need:  # a reply is arriving: give it time to complete
+                extra = self.timing.chars(need) + self.reply_timeout_floor
+                self._pending.deadline = max(self._pending.deadline, now + extra)
+
+    def _addressed_to_us(self, pending: _Pending, frame: Frame) -> bool:
+        if isinstance(frame, ShortAck):
+            return True
+        if not isinstance(frame, (Sd1, Sd2, Sd3)):
+            return False
+        return (not frame.fc.request and frame.da == self.address
+                and frame.sa == pending.slave.address)
+
+    def _invalid(self, pending: _Pending, why: str) -> None:
+        """A telegram that is not an acceptable reply: ignore it, keep waiting."""
+        pending.slave.counters.invalid_replies += 1
+        self.counters.invalid_replies += 1
+        log.debug("slave %d: ignoring reply: %s", pending.slave.address, why)
+
+    def _on_timeout(self, now: float) -> None:
+        p = self._pending
+        assert p is not None
+        if p.retries < self.timing.max_retry:
+            p.retries += 1
+            p.slave.counters.retries += 1
+            self.counters.retries += 1
+            p.deadline = now + p.timeout
+            self._transmit(p.raw)  # same bytes, same FCB
+            return
+        p.slave.counters.timeouts += 1
+        self.counters.timeouts += 1
+        slave = p.slave
+        if p.job is not None:
+            slave.jobs.remove(p.job)
+            p.job.done, p.job.error = True, DpTimeoutError(
+                f"slave {slave.address}: no reply to {p.job.sap.name}")
+        self._pending = None
+        what = {"fdl_status": "FDL_Status", "diag": "Slave_Diag", "set_prm": "Set_Prm",
+                "chk_cfg": "Chk_Cfg", "dx": "Data_Exchange", "job": "acyclic request"}[p.kind]
+        self._fail(slave, f"no reply to {what} after {p.retries} retries", now)
+        self._end_turn()
+
+    # -- request handlers (one per state) -----------------------------------------------
+    def _do_init(self, slave: SlaveHandle, now: float) -> bool:
+        slave.fcb.reset()
+        frame = Sd1(slave.address, self.address, FrameControl.req(RequestFunction.FDL_STATUS))
+        self._send(slave, "fdl_status", frame, 6, now)
+        return True
+
+    def _do_backoff(self, slave: SlaveHandle, now: float) -> bool:
+        if now < slave.backoff_until:
+            return False
+        self._transition(slave, MasterSlaveState.INIT, "back-off over", now)
+        return self._do_init(slave, now)
+
+    def _sap_request(self, slave: SlaveHandle, kind: str, sap: Sap, payload: bytes,
+                     reply_len: int, now: float, job: Optional[AcyclicRequest] = None) -> bool:
+        fcb, fcv = slave.fcb.bits()
+        frame = request_frame(slave.address, self.address, fcb, fcv, sap, payload)
+        self._send(slave, kind, frame, reply_len, now, job)
+        return True
+
+    def _do_diag(self, slave: SlaveHandle, now: float) -> bool:
+        return self._sap_request(slave, "diag", Sap.SLAVE_DIAG, b"", 6 + 2 + 9, now)
+
+    def _do_set_prm(self, slave: SlaveHandle, now: float) -> bool:
+        return self._sap_request(slave, "set_prm", Sap.SET_PRM, slave.spec.set_prm().encode(),
+                                 1, now)
+
+    def _do_chk_cfg(self, slave: SlaveHandle, now: float) -> bool:
+        return self._sap_request(slave, "chk_cfg", Sap.CHK_CFG, slave.spec.cfg, 1, now)
+
+    def _do_data_exchange(self, slave: SlaveHandle, now: float) -> bool:
+        if slave.jobs:
+            job = slave.jobs[0]
+            return self._sap_request(slave, "job", job.sap, b"", 255, now, job)
+        fcb, fcv = slave.fcb.bits()
+        frame = request_frame(slave.address, self.address, fcb, fcv, None, slave.outputs)
+        self._send(slave, "dx", frame, (slave.spec.input_size or 0) + 9, now)
+        return True
+
+    # -- reply handlers -------------------------------------------------------------------
+    def _on_fdl_status(self, p: _Pending, frame: Frame, now: float) -> None:
+        if not isinstance(frame, Sd1):
+            return self._invalid(p, f"FDL_Status answered with {type(frame).__name__}")
+        slave = p.slave
+        self._pending = None
+        if frame.fc.status != ResponseStatus.OK or frame.fc.station_type != StationType.SLAVE:
+            self._fail(slave, f"FDL_Status reply {frame.fc} (not a ready slave)", now)
+        else:
+            self._transition(slave, MasterSlaveState.WAIT_DIAG, "station answers FDL_Status",
+                             now)
+        self._end_turn()
+
+    def _sap_reply_data(self, p: _Pending, frame: Frame, sap: int) -> Optional[bytes]:
+        """The payload of a good SAP data reply, or None (counted as invalid)."""
+        if not isinstance(frame, (Sd2, Sd3)):
+            self._invalid(p, f"{type(frame).__name__} instead of a data reply")
+            return None
+        if frame.fc.status not in (ResponseStatus.DL, ResponseStatus.DH,
+                                   ResponseStatus.RDL, ResponseStatus.RDH):
+            self._invalid(p, f"reply status {frame.fc}")
+            return None
+        if frame.dsap != MASTER_SAP or frame.ssap != sap:
+            self._invalid(p, f"reply SAPs {frame.dsap}/{frame.ssap}, expected {MASTER_SAP}/{sap}")
+            return None
+        return frame.data
+
+    def _refused(self, p: _Pending, frame: Frame, now: float) -> bool:
+        """An SD1 negative reply (RS/UE/RR/NR...) ends the attempt."""
+        if isinstance(frame, Sd1) and frame.fc.status not in (ResponseStatus.OK,):
+            slave = p.slave
+            self._pending = None
+            slave.fcb.acknowledge()
+            self._fail(slave, f"{p.kind} refused by the slave ({frame.fc})", now)
+            self._end_turn()
+            return True
+        return False
+
+    def _on_diag(self, p: _Pending, frame: Frame, now: float) -> None:
+        if self._refused(p, frame, now):
+            return
+        data = self._sap_reply_data(p, frame, Sap.SLAVE_DIAG)
+        if data is None:
+            return
+        try:
+            diag = SlaveDiag.decode(data)
+        except DpError as err:
+            return self._invalid(p, f"bad diag: {err}")
+        slave = p.slave
+        self._pending = None
+        slave.fcb.acknowledge()
+        slave.counters.diag_reads += 1
+        if diag != slave.last_diag:
+            log.info("slave %d diag: %s", slave.address, explain_diag(diag, self.address))
+        slave.last_diag = diag
+        if diag.ident != slave.spec.ident:
+            log.error("slave %d reports ident 0x%04X, configured 0x%04X", slave.address,
+                      diag.ident, slave.spec.ident)
+        foreign = diag.locked_by not in (None, self.address)
+        state = slave.state
+        if foreign and not diag.status2 & DiagStatus2.PRM_REQ:
+            self._fail(slave, f"locked by another master ({diag.master_address})", now)
+        elif state is MasterSlaveState.WAIT_DIAG:
+            self._transition(slave, MasterSlaveState.SET_PRM, "diag read", now)
+        elif diag.ready_for(self.address):
+            self._transition(slave, MasterSlaveState.DATA_EXCHANGE, "slave ready", now)
+        elif (diag.status1 & (DiagStatus1.PRM_FAULT | DiagStatus1.CFG_FAULT
+                              | DiagStatus1.NOT_SUPPORTED)
+              or diag.status2 & DiagStatus2.PRM_REQ or diag.locked_by != self.address
+              or state is MasterSlaveState.DX_DIAG
+              and diag.status1 & DiagStatus1.STATION_NOT_READY):
+            self._fail(slave, "diag: " + "; ".join(diag.words(self.address)), now)
+        # else: not ready yet / static diag -> read diag again next turn
+        self._end_turn()
+
+    def _on_ack(self, p: _Pending, frame: Frame, now: float) -> None:
+        if self._refused(p, frame, now):
+            return
+        if not isinstance(frame, (ShortAck, Sd1)):
+            return self._invalid(p, f"{type(frame).__name__} instead of an acknowledgement")
+        slave = p.slave
+        self._pending = None
+        slave.fcb.acknowledge()
+        if p.kind == "set_prm":
+            self._transition(slave, MasterSlaveState.CHK_CFG, "Set_Prm acknowledged", now)
+        else:
+            self._transition(slave, MasterSlaveState.CHECK_DIAG, "Chk_Cfg acknowledged", now)
+        self._end_turn()
+
+    def _on_dx(self, p: _Pending, frame: Frame, now: float) -> None:
+        slave = p.slave
+        n_in = slave.spec.input_size or 0
+        if isinstance(frame, ShortAck):
+            if n_in:
+                return self._invalid(p, "short ack instead of input data")
+            status = ResponseStatus.DL
+            data = b""
+        elif isinstance(frame, Sd1):
+            status = frame.fc.status
+            if status not in (ResponseStatus.DL, ResponseStatus.DH, ResponseStatus.OK):
+                self._refused(p, frame, now)
+                return
+            if n_in:
+                return self._invalid(p, "no input data in the reply")
+            data = b""
+        else:
+            assert isinstance(frame, (Sd2, Sd3))
+            status = frame.fc.status
+            if frame.dsap is not None or frame.ssap is not None:
+                return self._invalid(p, "Data_Exchange reply with SAPs")
+            if status not in (ResponseStatus.DL, ResponseStatus.DH, ResponseStatus.RDL,
+                              ResponseStatus.RDH):
+                return self._invalid(p, f"Data_Exchange reply status {frame.fc}")
+            if len(frame.data) != n_in:
+                return self._invalid(p, f"{len(frame.data)} input bytes, expected {n_in}")
+            data = frame.data
+        self._pending = None
+        slave.fcb.acknowledge()
+        slave._store_inputs(data, now)
+        slave.counters.data_exchanges += 1
+        if status in (ResponseStatus.DH, ResponseStatus.RDH):
+            self._transition(slave, MasterSlaveState.DX_DIAG, "slave signals new diagnosis",
+                             now)
+        self._end_turn()
+
+    def _on_job(self, p: _Pending, frame: Frame, now: float) -> None:
+        job = p.job
+        assert job is not None
+        if isinstance(frame, Sd1) and frame.fc.status != ResponseStatus.OK:
+            self._pending = None
+            p.slave.fcb.acknowledge()
+            p.slave.jobs.remove(job)
+            job.done, job.error = True, DpError(f"{job.sap.name} refused ({frame.fc})")
+            self._end_turn()
+            return
+        data = self._sap_reply_data(p, frame, job.sap)
+        if data is None:
+            return
+        self._pending = None
+        p.slave.fcb.acknowledge()
+        p.slave.jobs.remove(job)
+        job.done, job.result = True, bytes(data)
+        self._end_turn()
+
+    # -- blocking API -----------------------------------------------------------------------
+    def _wait(self, until: float) -> None:
+        """Block until bytes arrive or ``until`` (clock time) passes."""
+        left = until - self.clock()
+        if left > 0:
+            data = self.link.recv(4096, left)
+            if data:
+                self._feed(data, self.clock())
+
+    def cycle(self, timeout: Optional[float] = None) -> bool:
+        """Run until every slave had one turn (one bus cycle). Blocks in the link.
+
+        If nothing was sent in the round (all slaves backing off) it also waits
+        for the earliest back-off end, so a loop of cycles never spins. Returns
+        False if ``timeout`` seconds passed first.
+        """
+        start = self.clock()
+        end = None if timeout is None else start + timeout
+        target = self.counters.cycles + 1
+        while self.counters.cycles < target:
+            now = self.clock()
+            if end is not None and now >= end:
+                return False
+            wake = self.step(now)
+            if wake > now:
+                self._wait(wake if end is None else min(wake, end))
+        if self._round_idle:
+            now = self.clock()
+            wake = self.next_wakeup(now)
+            self._wait(wake if end is None else min(wake, end))
+        return True
+
+    def run_cycles(self, n: int, on_cycle: Optional[Callable[["DpMaster"], None]] = None
+                   ) -> None:
+        for _ in range(n):
+            self.cycle()
+            if on_cycle is not None:
+                on_cycle(self)
+
+    def run(self, period: float, stop: threading.Event,
+            on_cycle: Optional[Callable[["DpMaster"], None]] = None) -> None:
+        """Fixed-rate loop: one cycle every ``period`` seconds until ``stop`` is set."""
+        next_start = self.clock()
+        while not stop.is_set():
+            self.cycle(timeout=max(period, 1.0))
+            if on_cycle is not None:
+                on_cycle(self)
+            next_start += period
+            now = self.clock()
+            if next_start < now:
+                self.counters.overruns += 1
+                next_start = now
+            else:
+                stop.wait(next_start - now)
+
+    def wait_for(self, job: AcyclicRequest, timeout: float = 2.0) -> bytes:
+        """Run cycles until ``job`` is done; return its data or raise its error."""
+        end = self.clock() + timeout
+        while not job.done:
+            if self.clock() >= end:
+                raise DpTimeoutError(f"{job.sap.name} not done within {timeout} s")
+            self.cycle(timeout=max(0.0, end - self.clock()))
+        if job.error is not None:
+            raise job.error
+        assert job.result is not None
+        return job.result
+
+    def get_cfg(self, address: int, timeout: float = 2.0) -> bytes:
+        return self.wait_for(self.request(address, Sap.GET_CFG), timeout)
+
+    def read_inputs(self, address: int, timeout: float = 2.0) -> bytes:
+        return self.wait_for(self.request(address, Sap.RD_INP), timeout)
+
+    def read_outputs(self, address: int, timeout: float = 2.0) -> bytes:
+        return self.wait_for(self.request(address, Sap.RD_OUTP), timeout)
+
+    def wait_connected(self, address: int, timeout: float = 5.0) -> bool:
+        """Run cycles until the slave is in Data_Exchange (True) or timeout (False)."""
+        end = self.clock() + timeout
+        slave = self.slave(address)
+        while not slave.connected:
+            left = end - self.clock()
+            if left <= 0:
+                return False
+            self.cycle(timeout=left)
+        return True
+

@@ -1,0 +1,594 @@
+"""DP master: every state transition with an injected clock, plus the blocking API."""
+from __future__ import annotations
+
+import logging
+import threading
+import unittest
+from typing import Callable, List, Optional
+
+from pyprofibus_vendor.dp import (DiagStatus1, GcCommand, Sap, SlaveDiag, reply_frame,
+                                  watchdog_factors)
+from pyprofibus_vendor.dp_master import (BusTiming, DpMaster, MasterSlaveState as S, SlaveSpec)
+from pyprofibus_vendor.dp_slave import DpSlave, SlaveLink, SlaveServer, SlaveState
+from pyprofibus_vendor.errors import ConfigError, DpError, DpTimeoutError, PhyError
+from pyprofibus_vendor.fdl import (Frame, FrameControl, ResponseStatus, Sd1, Sd2, ShortAck,
+                                   StationType, decode_frame)
+from pyprofibus_vendor.phy import FaultyLink, MemoryLink
+
+from _helpers import (MASTER, ROBOT_CFG, ROBOT_IDENT, SLAVE, FakeClock, ScriptedLink,
+                      transform)
+from test_fdl import (CHK_CFG_REQ, DIAG_REPLY_1, DIAG_REPLY_2, DIAG_REQ, DX_REPLY, DX_REQ,
+                      FDL_STATUS_REPLY, FDL_STATUS_REQ, SET_PRM_REQ)
+
+ROBOT = SlaveSpec(SLAVE, ROBOT_IDENT, ROBOT_CFG, watchdog=0.3)
+STARTUP = [(S.INIT, S.WAIT_DIAG), (S.WAIT_DIAG, S.SET_PRM), (S.SET_PRM, S.CHK_CFG),
+           (S.CHK_CFG, S.CHECK_DIAG), (S.CHECK_DIAG, S.DATA_EXCHANGE)]
+
+
+class Rig:
+    """Master + in-process echo slave, both on one fake clock."""
+
+    def __init__(self, spec: SlaveSpec = ROBOT, slave_ident: int = ROBOT_IDENT,
+                 slave_cfg: bytes = ROBOT_CFG, wrap: Optional[Callable] = None, **kw) -> None:
+        self.clock = FakeClock()
+        self.slave = DpSlave(SLAVE, slave_ident, slave_cfg, clock=self.clock)
+        self.slave.on_outputs = self._echo
+        self.slave_outputs: List[bytes] = []
+        self.link = SlaveLink(self.slave)
+        link = wrap(self.link) if wrap else self.link
+        self.changes: List[tuple] = []
+        self.master = DpMaster(link, MASTER, 19200, clock=self.clock,
+                               on_state_change=lambda h, o, n, r: self.changes.append((o, n, r)),
+                               **kw)
+        self.h = self.master.add_slave(spec)
+
+    def _echo(self, data: bytes) -> None:
+        self.slave_outputs.append(data)
+        if len(data) == self.slave.input_size:
+            self.slave.inputs = transform(data)
+
+    def steps(self, n: int, dt: float = 0.001) -> None:
+        for _ in range(n):
+            self.master.step()
+            self.clock.advance(dt)
+
+    def until(self, pred: Callable[[], bool], max_steps: int = 10000, dt: float = 0.001) -> int:
+        for i in range(max_steps):
+            if pred():
+                return i
+            self.master.step()
+            self.clock.advance(dt)
+        raise AssertionError("condition not reached")
+
+    def transitions(self) -> List[tuple]:
+        return [(o, n) for o, n, _ in self.changes]
+
+
+class TimingTest(unittest.TestCase):
+    def test_table(self):
+        expect = {9600: (100, 1), 19200: (100, 1), 93750: (100, 1), 187500: (100, 1),
+                  500000: (200, 1), 1500000: (300, 1), 3000000: (400, 2), 6000000: (600, 3),
+                  12000000: (1000, 4)}
+        for baud, (slot, retry) in expect.items():
+            t = BusTiming.for_baud(baud)
+            self.assertEqual((t.slot_bits, t.max_retry), (slot, retry), baud)
+        self.assertAlmostEqual(BusTiming.for_baud(19200).slot_time, 100 / 19200)
+        self.assertEqual(BusTiming.for_baud(19200, max_retry=3).max_retry, 3)
+
+    def test_bad_and_odd_baud(self):
+        for bad in (1200, 12_000_001, "19200"):
+            with self.assertRaises(ConfigError):
+                BusTiming.for_baud(bad)
+        with self.assertLogs("pyprofibus_vendor.dp_master", logging.WARNING):
+            self.assertEqual(BusTiming.for_baud(115200).slot_bits, 100)
+
+    def test_reply_timeout(self):
+        m = DpMaster(SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)), baud=9600,
+                     reply_timeout_floor=0.0)
+        # 23 + 23 characters at 9600 baud plus TSYN and slot time
+        self.assertAlmostEqual(m._reply_timeout(23, 23), 46 * 11 / 9600 + 133 / 9600)
+        m2 = DpMaster(SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)), baud=12_000_000)
+        self.assertEqual(m2._reply_timeout(23, 23), 0.05)
+
+
+class SpecTest(unittest.TestCase):
+    def test_derived(self):
+        self.assertEqual((ROBOT.input_size, ROBOT.output_size), (14, 14))
+        prm = ROBOT.set_prm()
+        self.assertEqual(prm.encode(), bytes.fromhex("88 1E 01 00 06 C6 00"))
+        off = SlaveSpec(SLAVE, ROBOT_IDENT, ROBOT_CFG, watchdog=None, sync_req=True,
+                        freeze_req=True, group_ident=2).set_prm()
+        self.assertIsNone(off.watchdog_time)
+        self.assertEqual(off.encode()[0], 0xB0)
+        self.assertEqual(SlaveSpec(SLAVE, 1, ROBOT_CFG, watchdog=5.0).set_prm().encode()[1:3],
+                         bytes(watchdog_factors(5.0)))
+
+    def test_invalid(self):
+        for kw in (dict(address=126), dict(ident=-1), dict(cfg=b""), dict(cfg=b"\xC0"),
+                   dict(watchdog=1000.0)):
+            args = dict(address=SLAVE, ident=ROBOT_IDENT, cfg=ROBOT_CFG)
+            args.update(kw)
+            with self.assertRaises(ConfigError):
+                SlaveSpec(**args)
+
+
+class StartupTest(unittest.TestCase):
+    def test_every_startup_transition_and_fc_sequence(self):
+        rig = Rig()
+        sent: List[Frame] = []
+        real_send = rig.link.send
+        rig.link.send = lambda data: (sent.append(decode_frame(data)), real_send(data))
+        rig.until(lambda: rig.h.state is S.DATA_EXCHANGE)
+        self.assertEqual(rig.transitions(), STARTUP)
+        self.assertIs(rig.slave.state, SlaveState.DATA_EXCH)
+        self.assertEqual([f.fc.encode() for f in sent], [0x49, 0x6D, 0x5D, 0x7D, 0x5D])
+        self.assertEqual([getattr(f, "dsap", None) for f in sent], [None, 60, 61, 62, 60])
+        self.assertTrue(rig.h.connected)
+        self.assertEqual(rig.h.last_diag.master_address, MASTER)
+        rig.steps(4)
+        self.assertEqual([f.fc.encode() for f in sent[5:7]], [0x7D, 0x5D])  # FCB toggles
+        self.assertEqual(rig.master.counters.state_changes, 5)
+        self.assertEqual(rig.master.counters.reconnects, 0)
+
+    def test_reproduces_the_recorded_startup_byte_for_byte(self):
+        """Master 2, slave 8, ident 0x4D14, cfg 3D, WD 300 ms, group 1 (PROFIBUS.md)."""
+        script = {FDL_STATUS_REQ: FDL_STATUS_REPLY, DIAG_REQ: DIAG_REPLY_1,
+                  SET_PRM_REQ: b"\xE5", CHK_CFG_REQ: b"\xE5"}
+        tx: List[bytes] = []
+
+        def respond(frame: Frame) -> Optional[bytes]:
+            raw = frame.encode()
+            tx.append(raw)
+            if raw in script:
+                return script[raw]
+            if getattr(frame, "dsap", None) == 60:
+                return DIAG_REPLY_2
+            if raw == DX_REQ:
+                return DX_REPLY
+            return None
+
+        clock = FakeClock()
+        m = DpMaster(ScriptedLink(respond), 2, 19200, clock=clock)
+        h = m.add_slave(SlaveSpec(8, 0x4D14, b"\x3d", watchdog=0.3, group_ident=1))
+        h.outputs = bytes(range(1, 15))
+        for _ in range(20):
+            m.step()
+            clock.advance(0.001)
+            if h.inputs is not None:
+                break
+        self.assertEqual(tx[:6], [FDL_STATUS_REQ, DIAG_REQ, SET_PRM_REQ, CHK_CFG_REQ,
+                                  bytes.fromhex("68 05 05 68 88 82 5D 3C 3E E1 16"), DX_REQ])
+        self.assertEqual(h.inputs, bytes(range(1, 15)))
+
+    def test_accepts_sd2_diag_reply(self):
+        """Many slaves send the 8-byte diag unit as SD2, not SD3; both must work."""
+        slave = DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)
+
+        def respond(frame: Frame) -> Optional[bytes]:
+            reply = slave.handle(frame)
+            if reply is None:
+                return None
+            if getattr(reply, "ssap", None) == 60:
+                reply = Sd2(reply.da, reply.sa, reply.fc, reply.data, reply.dsap, reply.ssap)
+            return reply.encode()
+
+        clock = FakeClock()
+        m = DpMaster(ScriptedLink(respond), MASTER, clock=clock)
+        h = m.add_slave(ROBOT)
+        for _ in range(12):
+            m.step()
+        self.assertIs(h.state, S.DATA_EXCHANGE)
+
+
+class DataExchangeTest(unittest.TestCase):
+    def test_latched_outputs_and_inputs_with_age(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        self.assertEqual(rig.h.outputs, bytes(14))
+        rig.h.outputs = b"\x01" * 14
+        rig.until(lambda: rig.h.inputs == transform(b"\x01" * 14))
+        t_in = rig.h.inputs_time
+        for _ in range(5):                       # no new set: the latched image goes out
+            rig.steps(2)
+        self.assertEqual(rig.slave_outputs[-5:], [b"\x01" * 14] * 5)
+        self.assertGreater(rig.h.inputs_time, t_in)
+        data, age = rig.master.inputs(SLAVE)
+        self.assertEqual(data, transform(b"\x01" * 14))
+        self.assertGreaterEqual(age, 0.0)
+        self.assertEqual(rig.h.inputs_age(rig.h.inputs_time + 0.25), 0.25)
+        rig.master.set_outputs(SLAVE, b"\x02" * 14)
+        rig.steps(4)
+        self.assertEqual(rig.slave.outputs, b"\x02" * 14)
+        self.assertGreater(rig.master.counters.cycles, 10)
+        with self.assertRaises(DpError):
+            rig.h.outputs = b"\x00"
+
+    def test_retry_keeps_fcb_and_slave_repeats_reply(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        drops = {"n": 1}
+        real_send = rig.link.send
+        sent: List[bytes] = []
+
+        def lossy_send(data: bytes) -> None:
+            sent.append(bytes(data))
+            real_send(data)
+            if drops["n"]:
+                drops["n"] -= 1
+                rig.link.flush_input()       # the reply is lost on the way back
+
+        rig.link.send = lossy_send
+        rig.h.outputs = b"\x09" * 14
+        rig.until(lambda: rig.h.inputs == transform(b"\x09" * 14), dt=0.02)
+        self.assertEqual(sent[0], sent[1])                  # identical retry, same FCB
+        self.assertEqual(rig.master.counters.retries, 1)
+        self.assertEqual(rig.slave.counters.duplicates, 1)
+        self.assertEqual(rig.slave_outputs.count(b"\x09" * 14), 1)   # executed once
+        self.assertTrue(rig.h.connected)
+
+    def test_output_only_slave(self):
+        spec = SlaveSpec(SLAVE, ROBOT_IDENT, b"\x2D")
+        rig = Rig(spec, slave_cfg=b"\x2D")
+        rig.until(lambda: rig.h.connected)
+        rig.h.outputs = b"\x05" * 14
+        rig.until(lambda: rig.slave.outputs == b"\x05" * 14)
+        rig.steps(2)
+        self.assertEqual(rig.h.inputs, b"")
+        self.assertEqual(rig.master.counters.invalid_replies, 0)
+
+
+class LossAndRecoveryTest(unittest.TestCase):
+    def test_no_station_backs_off_with_growing_delay(self):
+        clock = FakeClock()
+        link = ScriptedLink(lambda f: None)
+        m = DpMaster(link, MASTER, clock=clock, backoff_min=0.1, backoff_max=0.4)
+        h = m.add_slave(ROBOT)
+        starts = []
+        for _ in range(30000):
+            m.step()
+            if h.state is S.INIT and (not starts or starts[-1][1] is not S.INIT):
+                starts.append((clock.t, S.INIT))
+            elif h.state is not S.INIT and starts and starts[-1][1] is S.INIT:
+                starts.append((clock.t, h.state))
+            clock.advance(0.001)
+            if len(starts) >= 12:
+                break
+        inits = [t for t, s in starts if s is S.INIT]
+        gaps = [round(b - a, 2) for a, b in zip(inits, inits[1:])]
+        # each attempt: 2 x 50 ms timeouts, then back-off 0.1, 0.2, 0.4, 0.4 ...
+        self.assertEqual(gaps[:4], [0.2, 0.3, 0.5, 0.5])
+        self.assertTrue(all(f.encode() == link.sent[0].encode() for f in link.sent))
+        self.assertEqual(m.counters.retries, m.counters.timeouts)   # one retry each
+        self.assertEqual(m.counters.losses, 0)
+
+    def test_cut_link_leaves_dx_and_recovers_after_restore(self):
+        faulty: List[FaultyLink] = []
+        rig = Rig(wrap=lambda l: faulty.append(FaultyLink(l)) or faulty[0])
+        rig.until(lambda: rig.h.connected)
+        faulty[0].cut()
+        rig.until(lambda: not rig.h.connected, dt=0.01)
+        self.assertEqual(rig.changes[-1][1], S.BACKOFF)
+        self.assertIn("no reply to Data_Exchange", rig.changes[-1][2])
+        self.assertEqual(rig.master.counters.losses, 1)
+        rig.steps(300, dt=0.01)                              # still cut: stays away
+        self.assertFalse(rig.h.connected)
+        rig.slave.step()                  # (a slave server would do this on its own)
+        self.assertIs(rig.slave.state, SlaveState.WAIT_PRM)  # slave watchdog expired
+        faulty[0].restore()
+        rig.until(lambda: rig.h.connected, dt=0.01)
+        self.assertEqual(rig.master.counters.reconnects, 1)
+        self.assertEqual(rig.h.counters.reconnects, 1)
+
+    def test_slave_watchdog_rs_reply_reinitialises(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        rig.clock.advance(1.0)                               # slave watchdog runs out
+        rig.until(lambda: not rig.h.connected)
+        self.assertIn("refused", rig.changes[-1][2])
+        self.assertIn("RS", rig.changes[-1][2])
+        rig.until(lambda: rig.h.connected)
+        self.assertEqual(rig.master.counters.reconnects, 1)
+        self.assertEqual(rig.transitions()[-7:], [(S.DATA_EXCHANGE, S.BACKOFF),
+                                                  (S.BACKOFF, S.INIT)] + STARTUP)
+
+    def test_dh_fetches_diag_then_continues(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        rig.slave.set_diag(b"\x43\x01\x02")
+        rig.until(lambda: rig.h.state is S.DX_DIAG)
+        rig.until(lambda: rig.h.state is S.DATA_EXCHANGE)
+        self.assertEqual(rig.transitions()[-2:], [(S.DATA_EXCHANGE, S.DX_DIAG),
+                                                  (S.DX_DIAG, S.DATA_EXCHANGE)])
+        self.assertEqual(rig.h.last_diag.ext_diag, b"\x43\x01\x02")
+        self.assertEqual(rig.master.counters.losses, 0)
+
+    def test_dh_with_prm_req_reinitialises(self):
+        slave = DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)
+        restarted = {"yes": False}
+
+        def respond(frame: Frame) -> Optional[bytes]:
+            reply = slave.handle(frame)
+            if restarted["yes"] and slave.state is SlaveState.DATA_EXCH and reply is not None \
+                    and isinstance(reply, Sd2) and reply.dsap is None:
+                reply = Sd2(reply.da, reply.sa, FrameControl.resp(ResponseStatus.DH), reply.data)
+                slave._transition(SlaveState.WAIT_PRM, "test: restart")
+                slave._locker = None
+            return None if reply is None else reply.encode()
+
+        clock = FakeClock()
+        changes: List[tuple] = []
+        m = DpMaster(ScriptedLink(respond), MASTER, clock=clock,
+                     on_state_change=lambda h, o, n, r: changes.append((o, n)))
+        h = m.add_slave(ROBOT)
+        while not h.connected:
+            m.step()
+        restarted["yes"] = True
+        for _ in range(4):
+            m.step()
+        self.assertEqual(changes[-2:], [(S.DATA_EXCHANGE, S.DX_DIAG), (S.DX_DIAG, S.BACKOFF)])
+        self.assertTrue(h.last_diag.status1 & DiagStatus1.STATION_NOT_READY)
+        restarted["yes"] = False
+        for _ in range(20):
+            m.step()
+        self.assertTrue(h.connected)
+        self.assertEqual(h.counters.reconnects, 1)
+
+    def test_link_failure_raises_phy_error_and_marks_slave_lost(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        rig.link.close()
+        with self.assertRaises(PhyError):
+            rig.steps(3)
+        self.assertIs(rig.h.state, S.BACKOFF)
+        self.assertEqual(rig.master.counters.phy_errors, 1)
+        rig.master.replace_link(SlaveLink(rig.slave))
+        rig.until(lambda: rig.h.connected)
+
+
+class FaultsDuringInitTest(unittest.TestCase):
+    def test_wrong_ident_prm_fault_backs_off_without_spinning(self):
+        rig = Rig(slave_ident=0x4D14)
+        with self.assertLogs("pyprofibus_vendor.dp_master", logging.INFO) as logs:
+            rig.steps(5000, dt=0.001)                        # 5 simulated seconds
+        self.assertFalse(rig.h.connected)
+        text = "\n".join(logs.output)
+        self.assertIn("parameter fault", text)
+        self.assertIn("reports ident 0x4D14", text)
+        self.assertIn((S.CHECK_DIAG, S.BACKOFF), rig.transitions())
+        # back-off capped at 1 s: a handful of attempts, not thousands
+        self.assertLess(rig.master.counters.requests, 60)
+        self.assertGreater(rig.h.counters.faults, 3)
+
+    def test_cfg_fault(self):
+        rig = Rig(slave_cfg=b"\x3D")
+        rig.steps(200)
+        self.assertFalse(rig.h.connected)
+        self.assertTrue(rig.h.last_diag.status1 & DiagStatus1.CFG_FAULT)
+        self.assertIn("configuration fault", rig.changes[-1][2])
+
+    def test_locked_by_another_master(self):
+        rig = Rig()
+        from test_dp_slave import Requester
+        other = Requester(rig.slave, address=3)
+        other.set_prm()
+        rig.steps(20)
+        self.assertFalse(rig.h.connected)
+        self.assertIn((S.WAIT_DIAG, S.BACKOFF), rig.transitions())
+        self.assertIn("locked by another master (3)", rig.changes[-1][2])
+
+    def test_not_ready_then_ready_and_state_limit(self):
+        slave = DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)
+        holdoff = {"n": 3}
+
+        def respond(frame: Frame) -> Optional[bytes]:
+            reply = slave.handle(frame)
+            if (getattr(reply, "ssap", None) == 60 and slave.state is SlaveState.DATA_EXCH
+                    and holdoff["n"]):
+                holdoff["n"] -= 1
+                busy = SlaveDiag(DiagStatus1.STATION_NOT_READY, 0x0C, 0, MASTER, ROBOT_IDENT)
+                reply = reply_frame(frame, SLAVE, busy.encode())
+            return None if reply is None else reply.encode()
+
+        clock = FakeClock()
+        changes: List[tuple] = []
+        m = DpMaster(ScriptedLink(respond), MASTER, clock=clock,
+                     on_state_change=lambda h, o, n, r: changes.append((o, n)))
+        h = m.add_slave(ROBOT)
+        for _ in range(30):
+            m.step()
+        self.assertTrue(h.connected)
+        self.assertEqual(changes, STARTUP)
+        self.assertGreaterEqual(h.counters.diag_reads, 5)
+        # a slave that never becomes ready hits the CHECK_DIAG time limit
+        holdoff["n"] = 10 ** 6
+        slave._transition(SlaveState.WAIT_PRM, "test")
+        slave._locker = None
+        for _ in range(3000):
+            m.step()
+            clock.advance(0.001)
+        self.assertIn((S.CHECK_DIAG, S.BACKOFF), changes)
+
+    def _scripted(self, respond_fn) -> tuple:
+        slave = DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)
+        clock = FakeClock()
+        changes: List[tuple] = []
+        m = DpMaster(ScriptedLink(lambda f: respond_fn(slave, f)), MASTER, clock=clock,
+                     on_state_change=lambda h, o, n, r: changes.append((o, n, r)))
+        m.add_slave(ROBOT)
+        for _ in range(40):
+            m.step()
+            clock.advance(0.03)
+        return changes
+
+    def test_set_prm_refused(self):
+        def respond(slave, frame):
+            if getattr(frame, "dsap", None) == Sap.SET_PRM:
+                return Sd1(MASTER, SLAVE, FrameControl.resp(ResponseStatus.RS)).encode()
+            reply = slave.handle(frame)
+            return None if reply is None else reply.encode()
+
+        changes = self._scripted(respond)
+        self.assertEqual(changes[2][:2], (S.SET_PRM, S.BACKOFF))
+        self.assertIn("set_prm refused", changes[2][2])
+
+    def test_chk_cfg_unanswered(self):
+        def respond(slave, frame):
+            reply = slave.handle(frame)
+            if getattr(frame, "dsap", None) == Sap.CHK_CFG:
+                return None
+            return None if reply is None else reply.encode()
+
+        changes = self._scripted(respond)
+        self.assertEqual(changes[3][:2], (S.CHK_CFG, S.BACKOFF))
+        self.assertIn("no reply to Chk_Cfg after 1 retries", changes[3][2])
+
+    def test_fdl_status_from_a_master_station(self):
+        reply = Sd1(MASTER, SLAVE, FrameControl.resp(ResponseStatus.OK,
+                                                     StationType.MASTER_IN_RING)).encode()
+        clock = FakeClock()
+        m = DpMaster(ScriptedLink(lambda f: reply), MASTER, clock=clock)
+        h = m.add_slave(ROBOT)
+        m.step()
+        m.step()
+        self.assertIs(h.state, S.BACKOFF)
+
+    def test_invalid_replies_are_ignored(self):
+        bad_replies = [
+            Sd1(MASTER, SLAVE + 1, FrameControl.resp(ResponseStatus.OK)).encode(),   # wrong SA
+            Sd1(MASTER + 1, SLAVE, FrameControl.resp(ResponseStatus.OK)).encode(),   # wrong DA
+            ShortAck().encode(),                                  # SC to FDL_Status
+        ]
+        clock = FakeClock()
+        m = DpMaster(ScriptedLink(lambda f: b"".join(bad_replies)), MASTER, clock=clock)
+        h = m.add_slave(ROBOT)
+        m.step()
+        m.step()
+        self.assertIs(h.state, S.INIT)
+        self.assertEqual(m.counters.invalid_replies, 1)
+        self.assertEqual(m.counters.unexpected_frames, 2)
+
+    def test_wrong_length_and_saps_in_data_exchange_not_delivered(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        good_inputs = rig.h.inputs
+        fc = FrameControl.resp(ResponseStatus.DL)
+        forged = [Sd2(MASTER, SLAVE, fc, b"\x01" * 13).encode(),
+                  Sd2(MASTER, SLAVE, fc, b"\x01" * 14, 62, 60).encode(),
+                  Sd2(MASTER, SLAVE, FrameControl.resp(ResponseStatus.NR), b"\x01" * 14).encode(),
+                  ShortAck().encode()]
+        rig.link.send = lambda data: rig.link._rx.extend(b"".join(forged))
+        rig.steps(3)
+        self.assertEqual(rig.h.inputs, good_inputs)
+        self.assertEqual(rig.master.counters.invalid_replies, 4)
+
+
+class ServicesTest(unittest.TestCase):
+    def test_global_control_broadcast(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        rig.h.outputs = b"\x03" * 14
+        rig.steps(4)
+        rig.master.global_control(GcCommand.CLEAR_DATA)
+        sent: List[bytes] = []
+        real = rig.link.send
+        rig.link.send = lambda d: (sent.append(bytes(d)), real(d))
+        rig.steps(1)
+        self.assertEqual(sent[0], bytes.fromhex("68 07 07 68 FF 82 46 3A 3E 02 00 41 16"))
+        self.assertEqual(rig.slave.outputs, bytes(14))
+        self.assertEqual(rig.master.counters.global_controls, 1)
+
+    def test_acyclic_reads(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        rig.h.outputs = b"\x04" * 14
+        rig.steps(4)
+        jobs = [rig.master.request(SLAVE, sap) for sap in (Sap.GET_CFG, Sap.RD_INP,
+                                                            Sap.RD_OUTP)]
+        rig.until(lambda: all(j.done for j in jobs))
+        self.assertEqual([j.result for j in jobs],
+                         [ROBOT_CFG, transform(b"\x04" * 14), b"\x04" * 14])
+        self.assertTrue(rig.h.connected)
+        with self.assertRaises(ConfigError):
+            rig.master.request(SLAVE, Sap.SET_PRM)
+
+    def test_acyclic_refused_or_lost(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        rig.slave._sap_handlers.pop(Sap.RD_OUTP)
+        job = rig.master.request(SLAVE, Sap.RD_OUTP)
+        rig.until(lambda: job.done)
+        self.assertIsInstance(job.error, DpError)
+        faulty = FaultyLink(rig.link)
+        rig.master.replace_link(faulty)
+        faulty.cut()
+        job = rig.master.request(SLAVE, Sap.GET_CFG)
+        rig.until(lambda: job.done, dt=0.01)
+        self.assertIsInstance(job.error, DpTimeoutError)
+
+    def test_configuration_errors(self):
+        m = DpMaster(SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)), MASTER)
+        m.add_slave(ROBOT)
+        with self.assertRaises(ConfigError):
+            m.add_slave(ROBOT)
+        with self.assertRaises(ConfigError):
+            m.add_slave(SlaveSpec(MASTER, ROBOT_IDENT, ROBOT_CFG))
+        with self.assertRaises(ConfigError):
+            m.slave(99)
+        with self.assertRaises(ConfigError):
+            DpMaster(m.link, 126)
+        with self.assertRaises(DpError):
+            SlaveLink([])
+
+
+class BlockingApiTest(unittest.TestCase):
+    """Real time, a slave server thread on a memory link; waits are event driven."""
+
+    def setUp(self) -> None:
+        self.master_end, slave_end = MemoryLink.pair()
+        self.slave = DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)
+        self.slave.on_outputs = lambda d: setattr(self.slave, "inputs", transform(d))
+        self.server = SlaveServer(slave_end, self.slave, flush_on_start=False)
+        self.server.start()
+        self.master = DpMaster(self.master_end, MASTER, 19200, reply_timeout_floor=0.5)
+        self.h = self.master.add_slave(ROBOT)
+
+    def tearDown(self) -> None:
+        self.server.stop()
+
+    def test_cycles_and_reads(self):
+        self.assertTrue(self.master.wait_connected(SLAVE, 10))
+        for i in range(50):
+            out = bytes([i]) * 14
+            self.h.outputs = out
+            self.assertTrue(self.master.cycle(timeout=5))
+            self.assertEqual(self.h.inputs, transform(out))
+        self.master.run_cycles(5)
+        self.assertEqual(self.master.get_cfg(SLAVE), ROBOT_CFG)
+        self.assertEqual(self.master.read_outputs(SLAVE), bytes([49]) * 14)
+        self.assertEqual(self.master.read_inputs(SLAVE), transform(bytes([49]) * 14))
+
+    def test_fixed_rate_loop_stops_on_event(self):
+        stop = threading.Event()
+        seen = []
+
+        def on_cycle(m: DpMaster) -> None:
+            seen.append(m.counters.cycles)
+            if m.slave(SLAVE).connected and len(seen) >= 20:
+                stop.set()
+
+        self.master.run(0.001, stop, on_cycle)
+        self.assertTrue(self.h.connected)
+        self.assertEqual(seen, sorted(seen))
+
+    def test_absent_slave_does_not_spin(self):
+        m = DpMaster(MemoryLink.pair()[0], MASTER, reply_timeout_floor=0.01,
+                     backoff_min=0.05, backoff_max=0.05)
+        h = m.add_slave(SlaveSpec(9, ROBOT_IDENT, ROBOT_CFG))
+        m.run_cycles(6)
+        self.assertFalse(h.connected)
+        # every cycle either waited for a reply or for the back-off: few requests
+        self.assertLessEqual(m.counters.requests, 8)
+
+
+if __name__ == "__main__":
+    unittest.main()
