@@ -72,6 +72,16 @@ def _install_safe_load_yaml(xacro_module) -> None:
     xacro_module.global_symbols["load_yaml"] = load_yaml
 
 
+def _ensure_package_path() -> None:
+    """Let ``$(find panasonic_vr006l_support)`` resolve outside a sourced workspace (plain pytest on
+    the source tree): append the folder holding this package to ROS_PACKAGE_PATH when it is missing."""
+    root = os.path.dirname(package_dir())
+    current = os.environ.get("ROS_PACKAGE_PATH", "")
+    entries = [os.path.realpath(p) for p in current.split(os.pathsep) if p]
+    if os.path.realpath(root) not in entries:
+        os.environ["ROS_PACKAGE_PATH"] = os.pathsep.join([p for p in (current, root) if p])
+
+
 def render_urdf(xacro_path: Optional[str] = None, mappings: Optional[Dict[str, str]] = None) -> str:
     """Process a xacro file (default: the VR-006L top level) and return the URDF as text.
 
@@ -86,6 +96,7 @@ def render_urdf(xacro_path: Optional[str] = None, mappings: Optional[Dict[str, s
     if not os.path.isfile(path):
         raise DescriptionError("xacro file not found: %s" % path)
     _install_safe_load_yaml(xacro)
+    _ensure_package_path()
     try:
         doc = xacro.process_file(path, mappings=dict(mappings or {}))
     except Exception as exc:  # xacro raises many types (XacroException, NameError, KeyError...)
