@@ -51,7 +51,8 @@ import PyKDL as kdl
 
 from .errors import (IkTimeoutError, JointLimitError, KinematicsError, ModelError, NearSingularError, PoseError,
                      UnreachableError)
-from .poses import ControllerPose, FrameConventions, check_transform, make_transform, rpy_to_matrix, wrap_angle
+from .poses import (ControllerPose, FrameConventions, check_transform, finite_number, make_transform, rpy_to_matrix,
+                    wrap_angle)
 
 __all__ = [
     "UrdfJoint",
@@ -688,18 +689,7 @@ class Kinematics:
         if len(items) != self.dof:
             raise PoseError("joints must have %d values (%s), got %d"
                             % (self.dof, ", ".join(self.joint_names), len(items)))
-        out = []
-        for name, v in zip(self.joint_names, items):
-            if isinstance(v, bool) or v is None:
-                raise PoseError("%s must be a finite number, got %r" % (name, v))
-            try:
-                f = float(v)
-            except (TypeError, ValueError) as exc:
-                raise PoseError("%s must be a finite number, got %r" % (name, v)) from exc
-            if not math.isfinite(f):
-                raise PoseError("%s must be a finite number, got %r" % (name, f))
-            out.append(f)
-        return tuple(out)
+        return tuple(finite_number(v, name) for name, v in zip(self.joint_names, items))
 
     def limit_violations(self, q: Sequence[float], tol: float = 1e-9) -> List[str]:
         lim = self.limits

@@ -63,7 +63,7 @@ GIMBAL_EPS = 1e-9
 
 # --------------------------------------------------------------------------------------------- scalars
 
-def _finite(value: Any, name: str) -> float:
+def finite_number(value: Any, name: str) -> float:
     """``value`` as a float, or PoseError naming ``name`` when it is not a finite real number."""
     if isinstance(value, (bool, np.bool_)) or value is None:
         raise PoseError("%s must be a finite number, got %r" % (name, value))
@@ -85,7 +85,7 @@ def _vector(values: Any, length: int, name: str) -> Tuple[float, ...]:
         raise PoseError("%s must be a sequence of %d numbers, got %r" % (name, length, values)) from exc
     if len(items) != length:
         raise PoseError("%s must have %d values, got %d" % (name, length, len(items)))
-    return tuple(_finite(v, "%s[%d]" % (name, i)) for i, v in enumerate(items))
+    return tuple(finite_number(v, "%s[%d]" % (name, i)) for i, v in enumerate(items))
 
 
 def _label(name: str) -> str:
@@ -263,7 +263,7 @@ class ControllerPose:
     def __post_init__(self) -> None:
         for name, unit in zip(CONTROLLER_FIELDS, _UNITS):
             label = "%s [%s]" % (_label(name), unit)
-            object.__setattr__(self, name, _finite(getattr(self, name), label))
+            object.__setattr__(self, name, finite_number(getattr(self, name), label))
 
     @classmethod
     def from_sequence(cls, values: Any) -> "ControllerPose":
