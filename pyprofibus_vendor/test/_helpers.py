@@ -3,9 +3,7 @@ from __future__ import annotations
 
 from typing import Callable, List, Optional
 
-from pyprofibus_vendor.fdl import Deframer, Frame
-from pyprofibus_vendor.phy import Link
-from pyprofibus_vendor.errors import PhyError
+from pyprofibus_vendor.fdl import Frame, RespondingLink
 
 ROBOT_IDENT = 0x06C6
 ROBOT_CFG = bytes.fromhex("13 13 13 11 23 23 23 21")   # 4In x3, 2In, 4Out x3, 2Out
@@ -33,7 +31,7 @@ def transform(outputs: bytes) -> bytes:
     return bytes((b ^ 0xA5) for b in outputs)
 
 
-class ScriptedLink(Link):
+class ScriptedLink(RespondingLink):
     """A thread-free link whose far end is a Python function.
 
     Every complete frame sent is recorded in ``sent`` and passed to
@@ -41,34 +39,12 @@ class ScriptedLink(Link):
     """
 
     def __init__(self, respond: Callable[[Frame], Optional[bytes]]) -> None:
-        self.respond = respond
+        super().__init__("scripted link")
+        self._respond = respond
         self.sent: List[Frame] = []
-        self.deframer = Deframer()
-        self._rx = bytearray()
-        self._closed = False
 
-    def send(self, data: bytes) -> None:
-        if self._closed:
-            raise PhyError("closed")
-        for frame in self.deframer.feed(data):
-            self.sent.append(frame)
-            reply = self.respond(frame)
-            if reply:
-                self._rx += reply
+    def respond(self, frame: Frame) -> Optional[bytes]:
+        self.sent.append(frame)
+        return self._respond(frame)
 
-    def recv(self, max_bytes: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
-        if self._closed:
-            raise PhyError("closed")
-        out = bytes(self._rx[:max_bytes])
-        del self._rx[:max_bytes]
-        return out
 
-    def flush_input(self) -> None:
-        self._rx.clear()
-
-    def close(self) -> None:
-        self._closed = True
-
-    @property
-    def closed(self) -> bool:
-        return self._closed

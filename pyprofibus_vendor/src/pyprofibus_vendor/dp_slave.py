@@ -43,7 +43,7 @@ from .dp import (MAX_DIAG_LEN, ChkCfg, DiagStatus1, DiagStatus2, DiagStatus3, Gc
                  cfg_io_lengths, reply_frame)
 from .errors import DpError, PhyError, ProfibusError
 from .fdl import (BROADCAST, Deframer, FcbResponder, Frame, FrameControl, RequestFunction,
-                  ResponseStatus, Sd1, Sd4, ShortAck)
+                  RespondingLink, ResponseStatus, Sd1, Sd4, ShortAck)
 from .phy import Link
 
 __all__ = ["SlaveState", "SlaveCounters", "DpSlave", "SlaveServer", "SlaveLink"]
@@ -507,7 +507,7 @@ def _dispatch(slaves: Iterable[DpSlave], frame: Frame, now: float) -> Optional[F
     return reply
 
 
-class SlaveLink(Link):
+class SlaveLink(RespondingLink):
     """A thread-free in-process link with slave engine(s) at the far end.
 
     Bytes sent are deframed and handled at once by the slaves (with the
@@ -517,44 +517,17 @@ class SlaveLink(Link):
     raises :class:`PhyError` instead.
     """
 
+    wait_when_empty = True
+
     def __init__(self, slaves: SlaveSet) -> None:
+        super().__init__("slave link")
         self.slaves = _as_list(slaves)
         if not self.slaves:
             raise DpError("SlaveLink needs at least one slave")
-        self.deframer = Deframer()
-        self._rx = bytearray()
-        self._closed = False
 
-    def send(self, data: bytes) -> None:
-        if self._closed:
-            raise PhyError("slave link closed")
-        for frame in self.deframer.feed(bytes(data)):
-            reply = _dispatch(self.slaves, frame, self.slaves[0].clock())
-            if reply is not None:
-                self._rx += reply.encode()
-
-    def recv(self, max_bytes: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
-        if self._closed:
-            raise PhyError("slave link closed")
-        if not self._rx:
-            if timeout is None:
-                raise PhyError("slave link: recv(timeout=None) with nothing to receive")
-            if timeout > 0:
-                time.sleep(timeout)  # nothing can arrive: a blocking read just times out
-            return b""
-        out = bytes(self._rx[:max_bytes])
-        del self._rx[:max_bytes]
-        return out
-
-    def flush_input(self) -> None:
-        self._rx.clear()
-
-    def close(self) -> None:
-        self._closed = True
-
-    @property
-    def closed(self) -> bool:
-        return self._closed
+    def respond(self, frame: Frame) -> Optional[bytes]:
+        reply = _dispatch(self.slaves, frame, self.slaves[0].clock())
+        return None if reply is None else reply.encode()
 
 
 @dataclass

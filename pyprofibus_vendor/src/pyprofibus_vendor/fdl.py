@@ -35,17 +35,19 @@ from __future__ import annotations
 
 import enum
 import logging
+import time
 from dataclasses import dataclass, field
 from typing import Callable, Dict, List, Optional, Tuple, Union
 
-from .errors import FcsError, FrameError, TruncatedFrameError
+from .errors import FcsError, FrameError, PhyError, TruncatedFrameError
+from .phy import Link
 
 __all__ = [
     "SD1", "SD2", "SD3", "SD4", "SC", "ED", "BROADCAST", "MAX_STATION", "DEFAULT_SLAVE_ADDRESS",
     "MAX_DU_LEN", "StartDelimiter", "FcBit", "RequestFunction", "ResponseStatus", "StationType",
     "FrameControl", "Sd1", "Sd2", "Sd3", "Sd4", "ShortAck", "Frame", "data_frame",
     "decode_frame", "frame_length", "fcs", "Deframer", "DeframerCounters",
-    "FcbRequester", "FcbResponder",
+    "FcbRequester", "FcbResponder", "RespondingLink",
 ]
 
 log = logging.getLogger(__name__)
@@ -648,3 +650,58 @@ class FcbResponder:
             self._last.clear()
         else:
             self._last.pop(sa, None)
+
+
+class RespondingLink(Link):
+    """A thread-free in-process link whose far end answers frames synchronously.
+
+    Bytes sent are deframed; each complete frame goes to :meth:`respond`, and the bytes it returns
+    (if any) become readable by :meth:`recv`. Subclasses define ``respond``. With nothing buffered,
+    ``recv`` returns ``b""`` at once unless ``wait_when_empty`` is set, in which case it lets the
+    timeout pass first (nothing else could produce bytes meanwhile); ``timeout=None`` would wait
+    for ever and raises :class:`PhyError` instead.
+    """
+
+    wait_when_empty = False
+
+    def __init__(self, name: str = "responding link") -> None:
+        self.name = name
+        self.deframer = Deframer()
+        self._rx = bytearray()
+        self._closed = False
+
+    def respond(self, frame: Frame) -> Optional[bytes]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def send(self, data: bytes) -> None:
+        if self._closed:
+            raise PhyError("%s closed" % self.name)
+        for frame in self.deframer.feed(bytes(data)):
+            reply = self.respond(frame)
+            if reply:
+                self._rx += reply
+
+    def recv(self, max_bytes: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+        if self._closed:
+            raise PhyError("%s closed" % self.name)
+        if not self._rx:
+            if not self.wait_when_empty:
+                return b""
+            if timeout is None:
+                raise PhyError("%s: recv(timeout=None) with nothing to receive" % self.name)
+            if timeout > 0:
+                time.sleep(timeout)  # nothing can arrive: a blocking read just times out
+            return b""
+        out = bytes(self._rx[:max_bytes])
+        del self._rx[:max_bytes]
+        return out
+
+    def flush_input(self) -> None:
+        self._rx.clear()
+
+    def close(self) -> None:
+        self._closed = True
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
