@@ -1,0 +1,217 @@
+"""The driver's parameters: one validated, immutable record built from a plain mapping.
+
+ROS-free: the node passes ``rospy.get_param("~")`` (a dict), tests pass dicts. Every value is
+checked at start; a bad one raises :class:`ParamError` naming the parameter, its value and what
+is allowed, and the node exits with that message. The documented defaults live in
+``config/vr_driver.yaml``; the same defaults are here so the core runs without ROS.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Any, Dict, Mapping, Optional, Tuple
+
+from .errors import VrDriverError
+from .poses import ControllerPose, Workspace
+
+DEFAULT_PORT = "/dev/ttyUSB0"
+DEFAULT_JOINT_NAMES = tuple("joint_%d" % i for i in range(1, 7))
+
+
+class ParamError(VrDriverError, ValueError):
+    """A bad driver parameter. ``name`` is the parameter (e.g. ``workspace/x``)."""
+
+    def __init__(self, name: str, value: Any, reason: str) -> None:
+        self.name = name
+        self.value = value
+        self.reason = reason
+        super().__init__("parameter ~%s = %r: %s" % (name, value, reason))
+
+
+def _number(params: Mapping[str, Any], name: str, default: float, lo: float, hi: float,
+            lo_open: bool = False) -> float:
+    value = params.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ParamError(name, value, "expected a finite number")
+    if value < lo or value > hi or (lo_open and value == lo):
+        raise ParamError(name, value, "must be in %s%g, %g]" % ("(" if lo_open else "[", lo, hi))
+    return float(value)
+
+
+def _integer(params: Mapping[str, Any], name: str, default: Optional[int], lo: int, hi: int
+             ) -> Optional[int]:
+    value = params.get(name, default)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ParamError(name, value, "expected an integer")
+    if not lo <= value <= hi:
+        raise ParamError(name, value, "must be in [%d, %d]" % (lo, hi))
+    return value
+
+
+def _string(params: Mapping[str, Any], name: str, default: str, allowed: Tuple[str, ...] = ()
+            ) -> str:
+    value = params.get(name, default)
+    if not isinstance(value, str):
+        raise ParamError(name, value, "expected a string")
+    if allowed and value not in allowed:
+        raise ParamError(name, value, "must be one of %s" % ", ".join(allowed))
+    return value
+
+
+def _boolean(params: Mapping[str, Any], name: str, default: bool) -> bool:
+    value = params.get(name, default)
+    if not isinstance(value, bool):
+        raise ParamError(name, value, "expected true or false")
+    return value
+
+
+def _vector(params: Mapping[str, Any], name: str, default: Tuple[float, ...], length: int
+            ) -> Tuple[float, ...]:
+    value = params.get(name, default)
+    if not isinstance(value, (list, tuple)) or len(value) != length:
+        raise ParamError(name, value, "expected a list of %d numbers" % length)
+    out = []
+    for item in value:
+        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
+            raise ParamError(name, value, "expected a list of %d finite numbers" % length)
+        out.append(float(item))
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class DriverParams:
+    """Everything the driver reads at start (see config/vr_driver.yaml for the documentation)."""
+
+    # link to the controller
+    bus_config: str = ""                 # "" = pyprofibus_vendor's default robot bus (vr006l_bus.yaml)
+    port: str = ""                       # "" = the bus config's phy.device (default /dev/ttyUSB0)
+    baud: Optional[int] = None           # None = the bus config's baud
+    master_address: Optional[int] = None
+    slave_address: int = 4
+    watchdog_ms: Optional[int] = None    # None = the bus config's value
+    cycle_rate: float = 20.0             # Data_Exchange cycles per second
+    byte_order: str = "little"
+    link_timeout: float = 0.5            # no good reply for this long = link lost [s]
+    reconnect_period: float = 0.5        # between reopen attempts while the link is lost [s]
+    # handshake
+    accept_timeout: float = 1.0          # target sent -> controller busy/done [s]
+    release_timeout: float = 1.0         # flag cleared -> controller ready [s]
+    motion_timeout_factor: float = 3.0   # motion timeout = factor * preview duration + margin
+    motion_timeout_margin: float = 5.0   # [s]
+    # safety and model
+    workspace: Workspace = field(default_factory=Workspace)
+    controller_joint_names: Tuple[str, ...] = DEFAULT_JOINT_NAMES
+    tcp_offset: Tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)   # mm, deg in the flange frame
+    base_frame: str = "base"
+    # publishing
+    status_rate: float = 10.0
+    joint_states_rate: float = 20.0
+    diagnostics_period: float = 1.0
+    publish_markers: bool = True
+
+    @classmethod
+    def from_dict(cls, params: Optional[Mapping[str, Any]] = None) -> "DriverParams":
+        """Validate ``params`` (missing keys take the defaults; unknown keys are errors)."""
+        params = dict(params or {})
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(params) - known)
+        if unknown:
+            raise ParamError(unknown[0], params[unknown[0]],
+                             "unknown parameter (known: %s)" % ", ".join(sorted(known)))
+        d = cls()
+        bus_config = _string(params, "bus_config", d.bus_config)
+        if bus_config and not os.path.isfile(bus_config):
+            raise ParamError("bus_config", bus_config, "no such file")
+        names = params.get("controller_joint_names", list(d.controller_joint_names))
+        if (not isinstance(names, (list, tuple)) or len(names) != 6
+                or not all(isinstance(n, str) and n for n in names) or len(set(names)) != 6):
+            raise ParamError("controller_joint_names", names, "expected 6 distinct joint names")
+        workspace = params.get("workspace", {})
+        if not isinstance(workspace, Mapping):
+            raise ParamError("workspace", workspace, "expected a mapping {x, y, z, angle}")
+        try:
+            workspace = Workspace.from_dict(workspace)
+        except (VrDriverError, TypeError, ValueError) as exc:
+            raise ParamError("workspace", dict(workspace), str(exc)) from None
+        tcp = _vector(params, "tcp_offset", d.tcp_offset, 6)
+        try:
+            ControllerPose(*tcp)
+        except VrDriverError as exc:
+            raise ParamError("tcp_offset", list(tcp), str(exc)) from None
+        base_frame = _string(params, "base_frame", d.base_frame)
+        if not base_frame:
+            raise ParamError("base_frame", base_frame, "must not be empty")
+        out = cls(
+            bus_config=bus_config,
+            port=_string(params, "port", d.port),
+            baud=_integer(params, "baud", d.baud, 9600, 12_000_000),
+            master_address=_integer(params, "master_address", d.master_address, 0, 125),
+            slave_address=_integer(params, "slave_address", d.slave_address, 0, 125),
+            watchdog_ms=_integer(params, "watchdog_ms", d.watchdog_ms, 0, 650_000),
+            cycle_rate=_number(params, "cycle_rate", d.cycle_rate, 0.0, 1000.0, lo_open=True),
+            byte_order=_string(params, "byte_order", d.byte_order, ("little", "big")),
+            link_timeout=_number(params, "link_timeout", d.link_timeout, 0.0, 10.0, lo_open=True),
+            reconnect_period=_number(params, "reconnect_period", d.reconnect_period, 0.05, 1.0),
+            accept_timeout=_number(params, "accept_timeout", d.accept_timeout, 0.0, 60.0, lo_open=True),
+            release_timeout=_number(params, "release_timeout", d.release_timeout, 0.0, 60.0, lo_open=True),
+            motion_timeout_factor=_number(params, "motion_timeout_factor", d.motion_timeout_factor, 1.0, 100.0),
+            motion_timeout_margin=_number(params, "motion_timeout_margin", d.motion_timeout_margin, 0.0, 600.0),
+            workspace=workspace,
+            controller_joint_names=tuple(names),
+            tcp_offset=tcp,
+            base_frame=base_frame,
+            status_rate=_number(params, "status_rate", d.status_rate, 0.0, 1000.0, lo_open=True),
+            joint_states_rate=_number(params, "joint_states_rate", d.joint_states_rate, 0.0, 1000.0,
+                                      lo_open=True),
+            diagnostics_period=_number(params, "diagnostics_period", d.diagnostics_period, 0.1, 60.0),
+            publish_markers=_boolean(params, "publish_markers", d.publish_markers),
+        )
+        if out.link_timeout < 2.0 / out.cycle_rate:
+            raise ParamError("link_timeout", out.link_timeout,
+                             "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz)"
+                             % (2.0 / out.cycle_rate, out.cycle_rate))
+        return out
+
+    def bus(self) -> "Any":
+        """The PROFIBUS bus configuration: the bus config file (or the package default) with
+        this record's overrides applied, validated again by pyprofibus_vendor. Raises ParamError."""
+        from pyprofibus_vendor.config import BusConfig, ConfigError, load_config, default_robot_config
+        try:
+            base = (load_config(self.bus_config) if self.bus_config
+                    else default_robot_config(self.port or DEFAULT_PORT))
+        except ConfigError as exc:
+            raise ParamError("bus_config", self.bus_config, str(exc)) from None
+        data: Dict[str, Any] = base.to_dict()
+        data["cycle_rate_hz"] = self.cycle_rate
+        if self.port:
+            data["phy"]["device"] = self.port
+        if self.baud is not None:
+            data["baud"] = self.baud
+        if self.master_address is not None:
+            data["master_address"] = self.master_address
+        slaves = [s for s in data["slaves"] if s["address"] == self.slave_address]
+        if not slaves:
+            raise ParamError("slave_address", self.slave_address, "no such slave in the bus config "
+                             "(have %s)" % ", ".join(str(s["address"]) for s in data["slaves"]))
+        if self.watchdog_ms is not None:
+            slaves[0]["watchdog_ms"] = self.watchdog_ms or None
+        data["slaves"] = slaves
+        try:
+            bus = BusConfig.from_dict(data)
+        except ConfigError as exc:
+            key = getattr(exc, "key", "") or ""
+            name = {"baud": "baud", "master_address": "master_address",
+                    "phy.device": "port"}.get(key, "bus_config")
+            raise ParamError(name, getattr(self, name, None), str(exc)) from None
+        if bus.phy.type != "serial":
+            raise ParamError("bus_config", self.bus_config, "the driver needs a serial PHY, not %r"
+                             % bus.phy.type)
+        slave = bus.slaves[0]
+        if slave.input_len != 14 or slave.output_len != 14:
+            raise ParamError("bus_config", self.bus_config, "the controller protocol needs 14 bytes "
+                             "each way; the configured modules give %d in / %d out"
+                             % (slave.input_len, slave.output_len))
+        return bus

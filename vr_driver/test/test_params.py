@@ -1,0 +1,93 @@
+"""DriverParams: the documented config file is valid, defaults equal it, every bad value is
+refused with a message naming the parameter."""
+import math
+import os
+
+import pytest
+import yaml
+
+from vr_driver.params import DriverParams, ParamError
+
+CONFIG = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "config",
+                      "vr_driver.yaml")
+
+
+def load():
+    with open(CONFIG) as f:
+        return yaml.safe_load(f)
+
+
+def test_config_file_is_valid_and_equals_the_built_in_defaults():
+    data = load()
+    assert DriverParams.from_dict(data) == DriverParams.from_dict({"port": "/dev/ttyUSB0",
+                                                                   "baud": 19200,
+                                                                   "master_address": 2,
+                                                                   "watchdog_ms": 300})
+
+
+def test_config_file_documents_every_parameter():
+    assert set(load()) == set(DriverParams.__dataclass_fields__)
+    with open(CONFIG) as f:
+        for line in f:
+            if line[:1].isalpha():       # a top-level key line carries its own comment
+                assert "#" in line or line.rstrip().endswith(":"), line
+
+
+def test_bus_overrides_reach_the_profibus_config():
+    bus = DriverParams.from_dict({"port": "/tmp/vr_pty", "baud": 187500, "cycle_rate": 50.0,
+                                  "watchdog_ms": 0}).bus()
+    assert bus.phy.device == "/tmp/vr_pty"
+    assert bus.baud == 187500
+    assert bus.cycle_rate_hz == 50.0
+    (slave,) = bus.slaves
+    assert (slave.address, slave.ident, slave.cfg.hex(" ")) == (4, 0x06C6, "13 13 13 11 23 23 23 21")
+    assert slave.watchdog_ms is None
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("baud", 12345, "not a PROFIBUS-DP bit rate"),
+    ("baud", "fast", "integer"),
+    ("master_address", 4, "also the address"),
+    ("master_address", 126, "[0, 125]"),
+    ("slave_address", 5, "no such slave"),
+    ("cycle_rate", math.nan, "finite"),
+    ("cycle_rate", 0, "(0, 1000]"),
+    ("byte_order", "middle", "little, big"),
+    ("link_timeout", 0.01, "two bus cycles"),
+    ("reconnect_period", 2.0, "[0.05, 1]"),
+    ("workspace", {"x": [1400, 100]}, "lower bound"),
+    ("workspace", {"q": [0, 1]}, "unknown keys"),
+    ("workspace", [1, 2], "mapping"),
+    ("controller_joint_names", ["j1", "j2"], "6 distinct"),
+    ("controller_joint_names", ["j"] * 6, "6 distinct"),
+    ("tcp_offset", [0, 0, 0, 0, 0], "6 numbers"),
+    ("tcp_offset", [0, 0, math.inf, 0, 0, 0], "finite"),
+    ("publish_markers", "yes", "true or false"),
+    ("bus_config", "/nonexistent/bus.yaml", "no such file"),
+    ("status_rate", -1, "(0, 1000]"),
+    ("base_frame", "", "empty"),
+    ("speed", 1, "unknown parameter"),
+])
+def test_bad_values_name_the_parameter(name, value, words):
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({name: value}).bus()
+    assert err.value.name == name
+    assert ("~%s" % name) in str(err.value)
+    assert words in str(err.value)
+
+
+def test_bus_config_file_errors_are_reported_with_the_parameter(tmp_path):
+    bad = tmp_path / "bus.yaml"
+    bad.write_text("master_address: 2\nbaud: 19200\nphy: {type: serial, device: /dev/x}\nslaves: []\n")
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"bus_config": str(bad)}).bus()
+    assert err.value.name == "bus_config" and "at least one slave" in str(err.value)
+
+
+def test_wrong_io_length_is_refused(tmp_path):
+    bus = tmp_path / "bus.yaml"
+    bus.write_text("master_address: 2\nbaud: 19200\nphy: {type: serial, device: /dev/x}\n"
+                   "slaves:\n  - {name: r, address: 4, gsd: PAN06C6.gsd, cfg: '13 23'}\n")
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"bus_config": str(bus)}).bus()
+    assert "14 bytes each way" in str(err.value)
