@@ -10,8 +10,14 @@
     │   │   └── IkTimeoutError   the numeric search spent its budget (also a TimeoutError)
     │   ├── NearSingularError    the configuration is too close to a singularity
     │   └── JointLimitError      the only solutions (or the given joints) violate a joint limit
-    └── MotionError              a motion cannot be generated (joint jump, bad via point, ...)
-        └── PathDeviationError   the interpolated path leaves its tolerance
+    ├── MotionError              a motion cannot be generated (joint jump, bad via point, ...)
+    │   └── PathDeviationError   the interpolated path leaves its tolerance
+    └── ProtocolError            a 14-byte controller record cannot be encoded / decoded, or a
+        │                        protocol parameter (byte order, move type) is invalid
+        └── HandshakeError       the request handshake with the controller cannot proceed (not
+            │                    ready, a target already in flight)
+            ├── HandshakeTimeout the controller did not accept / finish / release in time
+            └── TargetRejected   the controller answered REJECTED to a target
 
 Motion planning re-raises kinematic errors unchanged when a single step fails (the message names
 the step), so callers catch ``VrDriverError`` or one of its direct children. Foreign exceptions
@@ -30,6 +36,10 @@ __all__ = [
     "JointLimitError",
     "MotionError",
     "PathDeviationError",
+    "ProtocolError",
+    "HandshakeError",
+    "HandshakeTimeout",
+    "TargetRejected",
 ]
 
 
@@ -74,3 +84,37 @@ class MotionError(VrDriverError):
 
 class PathDeviationError(MotionError):
     """The interpolated path leaves its tolerance around the programmed geometry."""
+
+
+class ProtocolError(VrDriverError):
+    """A controller record (DESIGN.md §4) cannot be encoded or decoded (wrong length, a flag byte not
+    0/1, an unknown move type / state / status bit, a value outside int16), or a protocol parameter
+    such as the byte order is invalid. The message names the byte or field and the allowed values."""
+
+
+class HandshakeError(ProtocolError):
+    """The request handshake cannot proceed: the controller is not READY (or not yet seen READY with
+    the flag cleared), or a target is still in flight."""
+
+
+class HandshakeTimeout(HandshakeError, TimeoutError):
+    """The controller did not accept, finish or release a target within its time limit.
+
+    ``target`` is the wire command (or None), ``stage`` one of "accept", "motion", "release",
+    ``reason`` a sentence for the user."""
+
+    def __init__(self, reason: str, target: object = None, stage: str = ""):
+        super().__init__(reason)
+        self.reason = reason
+        self.target = target
+        self.stage = stage
+
+
+class TargetRejected(HandshakeError):
+    """The controller answered REJECTED to a target. ``target`` is the wire command, ``reason`` a
+    sentence (what the controller's status bits say, when known)."""
+
+    def __init__(self, reason: str, target: object = None):
+        super().__init__(reason)
+        self.reason = reason
+        self.target = target
