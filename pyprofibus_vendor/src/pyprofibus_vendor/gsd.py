@@ -41,6 +41,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
+from . import _cli
 from . import dp as _dp
 from .dp import CfgIdentifier
 from .errors import ConfigError, DpError, GsdError
@@ -953,11 +954,18 @@ def build_user_prm_data(gsd: Gsd, module_names: Sequence[str] = ()) -> bytes:
 # --------------------------------------------------------------------------------------------------
 
 def _arg_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
-        prog="python3 -m pyprofibus_vendor.gsd",
-        description="Show what a PROFIBUS-DP GSD file declares and, with --modules, the Chk_Cfg "
-                    "bytes and data lengths of a module selection.",
-        epilog="Exit status: 0 ok, 1 the GSD or the module selection is wrong, 2 usage error.")
+    parser = _cli.make_parser(
+        "gsd",
+        "Show what a PROFIBUS-DP GSD file declares and, with --modules, the Chk_Cfg bytes and "
+        "data lengths of a module selection.",
+        {_cli.EXIT_OK: "ok",
+         _cli.EXIT_FAILED: "the GSD file cannot be read or is wrong, or the module selection does "
+                           "not fit it",
+         _cli.EXIT_USAGE: "usage error"},
+        examples=['python3 -m pyprofibus_vendor.gsd gsd/PAN06C6.gsd',
+                  'python3 -m pyprofibus_vendor.gsd gsd/PAN06C6.gsd --json '
+                  '--modules "4 Bytes In,4 Bytes In,4 Bytes In,2 Bytes In,'
+                  '4 Bytes Out,4 Bytes Out,4 Bytes Out,2 Bytes Out"'])
     parser.add_argument("file", help="GSD file (ISO-8859-1 text)")
     parser.add_argument("--modules", metavar="NAMES",
                         help='comma-separated module names in Chk_Cfg order, e.g. '
@@ -966,12 +974,7 @@ def _arg_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: Optional[Sequence[str]] = None) -> int:
-    """CLI entry point; returns the exit status."""
-    try:
-        args = _arg_parser().parse_args(argv)
-    except SystemExit as exc:   # --help (0) or a usage error (2)
-        return exc.code if isinstance(exc.code, int) else 2
+def _run_cli(args: argparse.Namespace) -> int:
     try:
         gsd = load_gsd(args.file)
         selection = None
@@ -982,15 +985,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             selection = {"modules": names, "chk_cfg": format_hex(cfg),
                          "input_len": in_len, "output_len": out_len,
                          "user_prm_data": format_hex(build_user_prm_data(gsd, names))}
-    except ConfigError as exc:
-        print("error: %s" % exc, file=sys.stderr)
-        return 1
+    except ConfigError as exc:  # the GSD file is what this tool checks: its faults are status 1
+        raise _cli.OperationFailed(str(exc)) from None
     if args.json:
         out = gsd.to_dict()
         if selection is not None:
             out["selection"] = selection
         print(json.dumps(out, indent=2, sort_keys=True))
-        return 0
+        return _cli.EXIT_OK
     print(gsd.summary())
     if selection is not None:
         print("Selection (%d modules): %s" % (len(selection["modules"]), ", ".join(selection["modules"])))
@@ -999,7 +1001,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print("  Output (master -> slave) %d bytes" % selection["output_len"])
         if selection["user_prm_data"]:
             print("  User_Prm_Data     %s" % selection["user_prm_data"])
-    return 0
+    return _cli.EXIT_OK
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """CLI entry point; returns the exit status (see :mod:`._cli` for the scheme)."""
+    return _cli.run(_arg_parser(), _run_cli, argv)
 
 
 if __name__ == "__main__":
