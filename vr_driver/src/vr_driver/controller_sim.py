@@ -1,0 +1,783 @@
+"""The virtual G2 controller: a DP slave running the robot-side program of DESIGN.md §4 against a
+simulated arm. ROS-free.
+
+Pieces:
+
+- :class:`~vr_driver.sim_arm.SimArm` (``sim_arm.py``): joints, planned motions played back
+  ``speed_factor`` times faster, e-stop / drives / error, whole-mm/deg pose reports.
+- :class:`ControllerProgram`: the program loop. Each :meth:`~ControllerProgram.step` (``now``
+  injected) checks the DP watchdog, reads the slave's output image (the master's command), runs
+  :class:`~vr_driver.protocol.ControllerHandshake` and the arm, and writes the
+  :class:`~vr_driver.protocol.Feedback` into the slave's input image. Every handled request becomes
+  one :class:`~vr_driver.sim_arm.LogEntry` in the :class:`~vr_driver.sim_arm.ExecutionLog`.
+- :class:`VirtualController`: a :class:`~pyprofibus_vendor.DpSlave` (ident 0x06C6, address 4, the
+  default Chk_Cfg ``13 13 13 11 23 23 23 21``) served on a pty pair it creates (optionally
+  symlinked), on a device, or on any link, plus the program loop in a thread at a fixed period.
+- :func:`main`: ``python3 -m vr_driver.controller_sim`` (see ``--help``).
+
+Rules of the program (also in ``doc/controller_program.md``):
+
+- Only a record the master sent in the current Data_Exchange session counts (a session starts
+  each time the slave enters Data_Exchange). Outside Data_Exchange, and in a new session before
+  the master's first Data_Exchange, there is no command (flag 0); the slave itself replaces its
+  outputs by the safe image (all zero) when it leaves Data_Exchange.
+- Disarmed at start and after every link loss: a request counts only after a record with the flag
+  at 0. A flag still raised from before the loss is answered REJECTED (held until the flag drops,
+  logged with the reason) and nothing moves, so a motion never starts from a stale request.
+- Link loss (the DP watchdog expired, or the master re-parameterised the slave -- also when it
+  did so between two loops): the arm stops at
+  once -- at the position of the watchdog deadline, so it never moves longer than the watchdog
+  time after the master's last telegram --, the target in flight ends REJECTED in the log, the via
+  point is dropped and the handshake restarts at READY. The master must send a new target.
+- Flag 2 (stop, ``Command.stop``) while BUSY halts the arm at once where it is (the simulation has
+  no braking distance); the target ends REJECTED. Outside BUSY flag 2 is "no request".
+- E-stop, drives off or an error during a motion stop the arm at once (sim_arm); the target ends
+  REJECTED (state 3, held until the flag drops). While any of them is active a request is
+  REJECTED and the status bits say which (ESTOP; DRIVES_POWERED clear; ERROR). The e-stop also
+  clears DRIVES_POWERED while it is pressed.
+- A target the arm cannot reach or plan (outside the reach, joint limits, joint jump, singular,
+  degenerate circle) is REJECTED without motion; a CIRC_END without a stored via as well.
+- A record the program cannot decode (flag byte not 0/1/2, unknown move type) is treated as flag 0
+  and counted in :attr:`ControllerProgram.bad_records` (a log warning names the bytes); the
+  master then sees no answer and times out.
+- PROGRAM_RUNNING is set in every record the program writes.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import math
+import os
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from typing import IO, Any, Callable, Mapping, Optional, Sequence, Tuple, Union
+
+from pyprofibus_vendor.config import default_robot_config
+from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
+from pyprofibus_vendor.errors import ProfibusError
+from pyprofibus_vendor.phy import Link
+from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
+
+from .errors import ProtocolError, VrDriverError
+from .kinematics import Kinematics
+from .poses import HOME_POSE, ControllerPose
+from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
+from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
+
+__all__ = [
+    "DEFAULT_ADDRESS",
+    "DEFAULT_BAUD",
+    "DEFAULT_LOOP_PERIOD",
+    "FAULTS",
+    "PARAM_NAMES",
+    "SimError",
+    "SimDeviceError",
+    "SimOptions",
+    "ControllerProgram",
+    "VirtualController",
+    "robot_slave",
+    "main",
+]
+
+log = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+
+DEFAULT_ADDRESS = 4
+DEFAULT_BAUD = 19200
+DEFAULT_LOOP_PERIOD = 0.01
+
+#: exit codes of the command line
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
+
+FAULTS = ("estop", "drives_powered", "error")
+
+#: ROS private parameter name -> SimOptions field
+PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "baud": "baud",
+               "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
+               "byte_order": "byte_order", "log_file": "log_file"}
+
+
+class SimError(VrDriverError):
+    """A bad virtual-controller option (the message names it), or its device cannot be served."""
+
+
+class SimDeviceError(SimError):
+    """The link / device / pty / symlink cannot be created or served."""
+
+
+# ------------------------------------------------------------------------------------------- options
+
+def _positive(value: Any, name: str) -> float:
+    number = float("nan")
+    if not isinstance(value, bool):
+        try:
+            number = float(value)
+        except (TypeError, ValueError):
+            pass
+    if not (math.isfinite(number) and number > 0.0):
+        raise SimError("%s must be a finite number > 0, got %r" % (name, value))
+    return number
+
+
+def _int_option(value: Any, name: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool):
+        raise SimError("%s must be an integer in %d..%d, got %r" % (name, lo, hi, value))
+    try:
+        number = int(value)
+        if number != float(value):
+            raise ValueError(value)
+    except (TypeError, ValueError):
+        raise SimError("%s must be an integer in %d..%d, got %r" % (name, lo, hi, value)) from None
+    if not lo <= number <= hi:
+        raise SimError("%s = %d is outside %d..%d" % (name, number, lo, hi))
+    return number
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """The virtual controller's settings, validated (CLI options and ROS private parameters both
+    end up here). ``device``: serve this existing device; else a pty pair is created and, with
+    ``pty_link``, its device end is symlinked there."""
+
+    device: Optional[str] = None
+    pty_link: Optional[str] = None
+    address: int = DEFAULT_ADDRESS
+    baud: int = DEFAULT_BAUD
+    speed_factor: float = 1.0
+    initial_pose: Tuple[float, ...] = HOME_POSE.as_tuple()
+    loop_period: float = DEFAULT_LOOP_PERIOD
+    byte_order: str = ByteOrder.LITTLE.value
+    log_file: Optional[str] = None
+
+    def __post_init__(self) -> None:
+        for name in ("device", "pty_link", "log_file"):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, str):
+                raise SimError("%s must be a path, got %r" % (name, value))
+            object.__setattr__(self, name, value or None)
+        if self.device and self.pty_link:
+            raise SimError("give either device (serve an existing device) or pty_link (create a pty "
+                           "and link it there), not both")
+        object.__setattr__(self, "address", _int_option(self.address, "addr", 0, 125))
+        object.__setattr__(self, "baud", _int_option(self.baud, "baud", 9600, 12_000_000))
+        try:  # the DP bit rates, checked by the bus configuration
+            default_robot_config("virtual", self.baud, phy_type="memory", slave_address=self.address)
+        except ProfibusError as exc:
+            raise SimError(str(exc)) from exc
+        object.__setattr__(self, "speed_factor", _positive(self.speed_factor, "speed_factor"))
+        object.__setattr__(self, "loop_period", _positive(self.loop_period, "loop_period"))
+        try:
+            pose = ControllerPose.from_sequence(self.initial_pose)
+        except VrDriverError as exc:
+            raise SimError("initial_pose: %s" % exc) from exc
+        object.__setattr__(self, "initial_pose", pose.as_tuple())
+        try:
+            object.__setattr__(self, "byte_order", ByteOrder.parse(self.byte_order).value)
+        except ProtocolError as exc:
+            raise SimError(str(exc)) from exc
+
+    @classmethod
+    def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
+        """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
+        initial_pose (6 numbers), loop_period, byte_order, log_file. Unknown keys are refused."""
+        unknown = sorted(set(params) - set(PARAM_NAMES))
+        if unknown:
+            raise SimError("unknown parameter(s) %s (known: %s)"
+                           % (", ".join(unknown), ", ".join(sorted(PARAM_NAMES))))
+        return cls(**{PARAM_NAMES[k]: v for k, v in params.items()})
+
+
+def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic) -> DpSlave:
+    """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()``."""
+    slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
+    return DpSlave(address, slave_cfg.ident, slave_cfg.cfg, clock=clock)
+
+
+# -------------------------------------------------------------------------------------- the program
+
+@dataclass
+class _Pending:
+    seq: int
+    command: Command
+    via: Optional[Command]
+    start_time: float
+
+
+class ControllerProgram:
+    """The robot-side program loop (DESIGN.md §4) on one DP slave and one simulated arm.
+
+    Call :meth:`step` once per loop with the clock time; it returns the Feedback it wrote. Not
+    thread-safe by itself: one thread runs it (the arm and the log are thread-safe, so faults can be
+    injected from anywhere).
+
+    The program hooks the slave's ``on_outputs`` / ``on_state_change`` (chaining hooks already set)
+    to tell the master's records of the current Data_Exchange session from the safe image: a
+    *session* starts each time the slave enters Data_Exchange; until the master's first
+    Data_Exchange of that session there is no command at all. A session that ended (or was
+    replaced by a new one between two loops) is a link loss. After a link loss, and at start, the
+    program is *disarmed*: a request only counts after a record with the flag at 0 -- a flag still
+    raised from before is answered REJECTED (held until the flag drops) and nothing moves.
+    """
+
+    def __init__(self, slave: DpSlave, arm: SimArm, *, byte_order: Any = ByteOrder.LITTLE,
+                 execution_log: Optional[ExecutionLog] = None) -> None:
+        self.slave = slave
+        self.arm = arm
+        self.byte_order = ByteOrder.parse(byte_order)
+        self.log = execution_log if execution_log is not None else ExecutionLog()
+        self.handshake = ControllerHandshake()
+        self.loops = 0
+        self.bad_records = 0
+        self.link_losses = 0
+        self.last_feedback: Optional[Feedback] = None
+        self.last_command: Optional[Command] = None
+        self._seq = 0
+        self._pending: Optional[_Pending] = None
+        self._armed = False
+        self._active_session: Optional[int] = None   # the session the last loop ran in
+        self._deadline: Optional[float] = None      # watchdog deadline seen at the last loop
+        self._expiries = slave.counters.watchdog_expiries
+        self._bad_raw: Optional[bytes] = None
+        # written by the slave's hooks (the server thread), read by step()
+        self._io_lock = threading.Lock()
+        self._session = 1 if slave.state is SlaveState.DATA_EXCH else 0
+        self._record_of_session: Optional[bytes] = None
+        self._left_reason = ""
+        self._chained_outputs = slave.on_outputs
+        self._chained_state = slave.on_state_change
+        slave.on_outputs = self._on_outputs
+        slave.on_state_change = self._on_state_change
+
+    # ------------------------------------------------------------------------- slave hooks
+    def _on_outputs(self, data: bytes) -> None:
+        with self._io_lock:
+            if self.slave.state is SlaveState.DATA_EXCH:     # not the safe image of a leaving slave
+                self._record_of_session = bytes(data)
+        if self._chained_outputs is not None:
+            self._chained_outputs(data)
+
+    def _on_state_change(self, old: SlaveState, new: SlaveState, reason: str) -> None:
+        with self._io_lock:
+            if new is SlaveState.DATA_EXCH:
+                self._session += 1
+            if old is SlaveState.DATA_EXCH:
+                self._left_reason = reason
+            self._record_of_session = None
+        if self._chained_state is not None:
+            self._chained_state(old, new, reason)
+
+    # ---------------------------------------------------------------------------- read-outs
+    @property
+    def state(self) -> ControllerState:
+        return self.handshake.state
+
+    @property
+    def connected(self) -> bool:
+        """True while the slave was in Data_Exchange at the last loop."""
+        return self._active_session is not None
+
+    @property
+    def armed(self) -> bool:
+        """True once a record with the flag at 0 was seen in the current session."""
+        return self._armed
+
+    def status_bits(self) -> StatusBits:
+        bits = StatusBits.PROGRAM_RUNNING
+        if self.arm.drives_powered:
+            bits |= StatusBits.DRIVES_POWERED
+        if self.arm.estop:
+            bits |= StatusBits.ESTOP
+        if self.arm.error is not None:
+            bits |= StatusBits.ERROR
+        if self.arm.moving:
+            bits |= StatusBits.IN_MOTION
+        return bits | self.handshake.status_bits()
+
+    # ------------------------------------------------------------------------------- the loop
+    def step(self, now: float) -> Feedback:
+        """One program loop at clock time ``now``."""
+        self.loops += 1
+        deadline = self.slave.next_deadline()
+        self.slave.step(now)                        # expire the watchdog here, not a poll later
+        connected = self.slave.state is SlaveState.DATA_EXCH
+        with self._io_lock:
+            session, raw, left_reason = self._session, self._record_of_session, self._left_reason
+        if self._active_session is not None and (not connected or session != self._active_session):
+            self._link_lost(now, deadline, left_reason)
+        self._active_session = session if connected else None
+        self._deadline = self.slave.next_deadline() if connected else None
+        command = self._decode(raw) if connected and raw is not None else None
+        self.last_command = command
+        stale = False
+        if command is not None and not self._armed:
+            if command.request:
+                stale = True                        # raised before we saw it at 0: not a new request
+            else:
+                self._armed = True
+
+        result = self.arm.step(now)
+        if result is not None and self._pending is not None:
+            self.handshake.finish(result.ok, result.reason)
+            self._record(Outcome.EXECUTED if result.ok else Outcome.REJECTED, result.reason,
+                         result.end_time, result.aborted)
+
+        before = self.handshake.state
+        blocked = self.arm.blocked_reason()
+        if stale:
+            blocked = "the request flag was already raised when the link (re)started; the controller " \
+                      "accepts a request only after it has seen the flag at 0"
+        start = self.handshake.step(command, arm_idle=blocked is None and not self.arm.moving)
+        if self.handshake.stop_requested and self._pending is not None:
+            self._stop_on_request(now)
+        if before is ControllerState.READY and self.handshake.state is not ControllerState.READY:
+            assert command is not None
+            self._seq += 1
+            via = self.handshake.active_via if start is not None else None
+            self._pending = _Pending(self._seq, command, via, now)
+            if start is not None:
+                self._begin(start, via, now)
+            elif self.handshake.state is ControllerState.DONE:       # a via point, stored
+                self._record(Outcome.VIA_STORED, "", now)
+            else:
+                self._record(Outcome.REJECTED, blocked or self.handshake.reason, now)
+
+        feedback = self.handshake.feedback(self.arm.reported_pose(), self.status_bits())
+        self.slave.inputs = feedback.encode(self.byte_order)
+        self.last_feedback = feedback
+        return feedback
+
+    # ------------------------------------------------------------------------------- helpers
+    def _decode(self, raw: bytes) -> Optional[Command]:
+        try:
+            command = Command.decode(raw, self.byte_order)
+        except ProtocolError as exc:
+            self.bad_records += 1
+            if raw != self._bad_raw:               # once per distinct record, not every loop
+                log.warning("ignoring the master's record %s: %s", raw.hex(" "), exc)
+            self._bad_raw = raw
+            return None
+        self._bad_raw = None
+        return command
+
+    def _begin(self, command: Command, via: Optional[Command], now: float) -> None:
+        ok, reason = self.arm.begin(command.move_type.to_move_type(), command.pose,
+                                    via=None if via is None else via.pose, now=now)
+        if not ok:
+            self.handshake.finish(False, reason)
+            self._record(Outcome.REJECTED, reason, now)
+
+    def _stop_on_request(self, now: float) -> None:
+        """Flag 2 while BUSY: halt the arm where it is, answer REJECTED (unless it had arrived)."""
+        why = "stopped by the master (flag 2)"
+        self.arm.stop(why, now=now)
+        result = self.arm.step(now)
+        ok = result is not None and result.ok
+        self.handshake.finish(ok, "" if ok else why)
+        self._record(Outcome.EXECUTED if ok else Outcome.REJECTED, "" if ok else why,
+                     result.end_time if result is not None else now, result is not None and result.aborted)
+
+    def _link_lost(self, now: float, deadline: Optional[float], left_reason: str) -> None:
+        self.link_losses += 1
+        self._armed = False
+        expired = self.slave.counters.watchdog_expiries != self._expiries
+        self._expiries = self.slave.counters.watchdog_expiries
+        # the deadline seen now, or the one of the last loop if the server thread expired it first
+        if deadline is None:
+            deadline = self._deadline
+        stop_time = now
+        if expired and deadline is not None:
+            stop_time = min(now, max(deadline, self.arm.last_step_time))
+        why = "DP watchdog expired (master silent)" if expired else \
+            "link to the master lost (slave left Data_Exchange: %s)" % (left_reason or "unknown reason")
+        log.warning("%s: stopping the arm, resetting the program", why)
+        self.arm.stop(why, now=stop_time)
+        result = self.arm.step(stop_time)
+        if self._pending is not None and self.handshake.state is ControllerState.BUSY:
+            ok = result is not None and result.ok
+            reason = "" if ok else why
+            self.handshake.finish(ok, reason)
+            end = result.end_time if result is not None else stop_time
+            self._record(Outcome.EXECUTED if ok else Outcome.REJECTED, reason, end,
+                         result is not None and result.aborted)
+        self.handshake.reset()
+
+    def _record(self, outcome: Outcome, reason: str, end_time: float, aborted: bool = False) -> None:
+        p = self._pending
+        if p is None:
+            return
+        self._pending = None
+        entry = LogEntry(
+            seq=p.seq, move_type=p.command.move_type.name, target=p.command.values, outcome=outcome,
+            reason=reason, start_time=p.start_time, end_time=end_time,
+            final_pose=self.arm.reported_pose(), aborted=aborted,
+            via=None if p.via is None else p.via.values)
+        if outcome is Outcome.REJECTED:
+            log.info("target %d %s %s rejected: %s", p.seq, entry.move_type, entry.target, reason)
+        else:
+            log.debug("target %d %s %s %s", p.seq, entry.move_type, entry.target, outcome.value)
+        self.log.append(entry)
+
+
+# -------------------------------------------------------------------------------- the whole device
+
+class VirtualController:
+    """The virtual G2: DP slave + program loop + simulated arm, on a link.
+
+    ``link``: None (default) creates a raw pty pair -- clients open :attr:`device_path`; with
+    ``pty_link`` a symlink to it is made there (replacing a stale symlink, never another file) and
+    removed by :meth:`stop`. A string serves that existing device (``SerialLink(link, baud)``). A
+    :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
+
+    Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
+    :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
+    :meth:`set_error`, :meth:`clear_faults`. :meth:`wait_until` blocks on a condition over the
+    feedback. :meth:`step` runs one program loop by hand (tests with an injected clock; do not mix
+    with :meth:`start`).
+    """
+
+    def __init__(self, link: Union[None, str, Link] = None, *, address: int = DEFAULT_ADDRESS,
+                 baud: int = DEFAULT_BAUD, speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
+                 loop_period: float = DEFAULT_LOOP_PERIOD, byte_order: Any = ByteOrder.LITTLE,
+                 pty_link: Optional[str] = None, log_file: Optional[str] = None,
+                 kinematics: Optional[Kinematics] = None, arm: Optional[SimArm] = None,
+                 clock: Clock = time.monotonic) -> None:
+        pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
+        self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
+                                  address=address, baud=baud, speed_factor=speed_factor,
+                                  initial_pose=tuple(pose), loop_period=loop_period,
+                                  byte_order=ByteOrder.parse(byte_order).value, log_file=log_file)
+        if pty_link is not None and link is not None:
+            raise SimError("pty_link is only for a pty the controller creates (link=None)")
+        self.clock = clock
+        self.loop_period = self.options.loop_period
+        if arm is None:
+            try:
+                arm = SimArm(kinematics, speed_factor=self.options.speed_factor,
+                             initial_pose=ControllerPose(*self.options.initial_pose), clock=clock)
+            except VrDriverError as exc:
+                raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
+        self.arm = arm
+        self.execution_log = ExecutionLog()
+        self.slave = robot_slave(self.options.address, clock)
+        self.program = ControllerProgram(self.slave, self.arm, byte_order=self.options.byte_order,
+                                         execution_log=self.execution_log)
+        self._cond = threading.Condition()
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.error: Optional[BaseException] = None
+        self.overruns = 0
+        self.pty: Optional[PtyPair] = None
+        self.symlink: Optional[str] = None
+        self.device_path = ""                     # what a master opens (pty slave path or the device)
+        self._owns_link = False
+        self._log_fh: Optional[IO[str]] = None
+        if self.options.log_file:
+            try:
+                self._log_fh = open(self.options.log_file, "a", encoding="utf-8")
+            except OSError as exc:
+                raise SimError("cannot open the log file %s: %s" % (self.options.log_file, exc)) from exc
+            self.execution_log.add_listener(self._write_log_line)
+        try:
+            self.link = self._open_link(link)
+        except BaseException:
+            self._close_log()
+            raise
+        self.server = SlaveServer(self.link, self.slave, clock=clock)
+
+    # ----------------------------------------------------------------------- set-up / tear-down
+    def _open_link(self, link: Union[None, str, Link]) -> Link:
+        if isinstance(link, Link):
+            return link
+        if isinstance(link, str):
+            try:
+                made = SerialLink(link, self.options.baud)
+            except ProfibusError as exc:
+                raise SimDeviceError(str(exc)) from exc
+            self._owns_link = True
+            self.device_path = link
+            return made
+        try:
+            self.pty = open_pty_pair()
+        except ProfibusError as exc:
+            raise SimDeviceError(str(exc)) from exc
+        self.device_path = self.pty.slave_path
+        if self.options.pty_link:
+            try:
+                self._make_symlink(self.options.pty_link, self.pty.slave_path)
+            except SimDeviceError:
+                self.pty.close()
+                raise
+        self._owns_link = True
+        return self.pty.master_link()
+
+    def _make_symlink(self, path: str, target: str) -> None:
+        if os.path.lexists(path) and not os.path.islink(path):
+            raise SimDeviceError("pty link %s exists and is not a symlink: not replacing it" % path)
+        tmp = "%s.%d.tmp" % (path, os.getpid())
+        try:
+            if os.path.lexists(tmp):
+                os.unlink(tmp)
+            os.symlink(target, tmp)
+            os.replace(tmp, path)
+        except OSError as exc:
+            raise SimDeviceError("cannot create the pty link %s -> %s: %s" % (path, target, exc)) from exc
+        self.symlink = path
+
+    def start(self) -> "VirtualController":
+        """Serve the bus and run the program loop in background threads."""
+        if self._thread is not None:
+            return self
+        self._stop.clear()
+        self.server.start()
+        self._thread = threading.Thread(target=self._run, name="vr-sim-program", daemon=True)
+        self._thread.start()
+        log.info("virtual G2 controller on %s: DP slave %d (ident 0x%04X), loop %.0f ms, speed x%g",
+                 self.device_path or self.link, self.slave.address, self.slave.ident,
+                 self.loop_period * 1e3, self.arm.speed_factor)
+        return self
+
+    def stop(self) -> None:
+        """Stop the threads, close what this object opened, remove the pty symlink. Idempotent."""
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(5.0)
+        self.server.stop()
+        if self._owns_link:
+            self.link.close()
+            self._owns_link = False
+        if self.pty is not None:
+            self.pty.close()
+            self.pty = None
+        if self.symlink is not None:
+            try:
+                if os.path.islink(self.symlink):
+                    os.unlink(self.symlink)
+            except OSError as exc:
+                log.warning("cannot remove the pty link %s: %s", self.symlink, exc)
+            self.symlink = None
+        self._close_log()
+
+    close = stop
+
+    def __enter__(self) -> "VirtualController":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+    def _close_log(self) -> None:
+        fh, self._log_fh = self._log_fh, None
+        if fh is not None:
+            self.execution_log.remove_listener(self._write_log_line)
+            fh.close()
+
+    def _write_log_line(self, entry: LogEntry) -> None:
+        fh = self._log_fh
+        if fh is not None:
+            fh.write(entry.to_json() + "\n")
+            fh.flush()
+
+    # ----------------------------------------------------------------------------- the loop
+    def _run(self) -> None:
+        period = self.loop_period
+        next_time = self.clock()
+        while not self._stop.is_set():
+            now = self.clock()
+            try:
+                self.step(now)
+            except Exception as exc:  # noqa: BLE001 - record, report, end the loop
+                self.error = exc
+                log.exception("program loop failed")
+                with self._cond:
+                    self._cond.notify_all()
+                return
+            next_time += period
+            now = self.clock()
+            if next_time < now:
+                self.overruns += 1
+                next_time = now
+            self._stop.wait(next_time - now)
+
+    def step(self, now: Optional[float] = None) -> Feedback:
+        """One program loop (at ``now``, default the clock)."""
+        feedback = self.program.step(self.clock() if now is None else now)
+        with self._cond:
+            self._cond.notify_all()
+        return feedback
+
+    def wait_until(self, predicate: Callable[[Feedback], bool], timeout: float) -> bool:
+        """Block until ``predicate(feedback)`` holds after a program loop (True) or ``timeout``."""
+        def check() -> bool:
+            if self.error is not None:
+                return True
+            fb = self.program.last_feedback
+            return fb is not None and predicate(fb)
+        with self._cond:
+            ok = self._cond.wait_for(check, timeout)
+        return bool(ok) and self.error is None
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    @property
+    def server_error(self) -> Optional[BaseException]:
+        return self.server.error
+
+    # ---------------------------------------------------------------------------- read-outs
+    @property
+    def state(self) -> ControllerState:
+        return self.program.state
+
+    @property
+    def feedback(self) -> Optional[Feedback]:
+        return self.program.last_feedback
+
+    @property
+    def slave_state(self) -> SlaveState:
+        return self.slave.state
+
+    @property
+    def log(self) -> ExecutionLog:
+        return self.execution_log
+
+    @property
+    def pose(self) -> IntPose:
+        """The reported pose (whole mm / deg)."""
+        return self.arm.reported_pose()
+
+    @property
+    def joints(self) -> Tuple[float, ...]:
+        return self.arm.joints
+
+    # ---------------------------------------------------------------------------- injections
+    def set_estop(self, pressed: bool) -> None:
+        log.warning("e-stop %s", "pressed" if pressed else "released")
+        self.arm.set_estop(pressed)
+
+    def set_drives_powered(self, powered: bool) -> None:
+        log.warning("drives %s", "on" if powered else "off")
+        self.arm.set_drives_powered(powered)
+
+    def set_error(self, error: Any = True) -> None:
+        log.warning("controller error %s", "cleared" if not error else "set: %s" % (error,))
+        self.arm.set_error(error)
+
+    def clear_faults(self) -> None:
+        """Release the e-stop, power the drives, clear the error."""
+        self.arm.set_estop(False)
+        self.arm.set_drives_powered(True)
+        self.arm.set_error(None)
+
+    def set_fault(self, fault: str, active: bool) -> Tuple[bool, str]:
+        """Service-style injection (the ROS node's handlers): ``fault`` one of ``estop``,
+        ``drives_powered``, ``error``. Returns (success, message)."""
+        if fault == "estop":
+            self.set_estop(active)
+            return True, "e-stop %s" % ("pressed" if active else "released")
+        if fault == "drives_powered":
+            self.set_drives_powered(active)
+            return True, "drives %s%s" % ("on" if active else "off",
+                                          " (no power while the e-stop is pressed)"
+                                          if active and self.arm.estop else "")
+        if fault == "error":
+            self.set_error("injected error" if active else None)
+            return True, "error %s" % ("set" if active else "cleared")
+        return False, "unknown fault %r (one of %s)" % (fault, ", ".join(FAULTS))
+
+
+# ============================================================================================== CLI
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python3 -m vr_driver.controller_sim",
+        description="Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
+                    "robot-side program of the 14-byte protocol against a simulated VR-006L. Without "
+                    "--device it creates a pty pair; the first line on stdout is the device path "
+                    "for the master. Stops cleanly on SIGINT / SIGTERM.",
+        epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--pty-link", metavar="PATH",
+                       help="create a pty pair and symlink its device end at PATH (removed on exit)")
+    where.add_argument("--device", metavar="DEV", help="serve an existing serial device (or pyserial URL)")
+    p.add_argument("--addr", type=int, default=DEFAULT_ADDRESS, help="DP slave address (default 4)")
+    p.add_argument("--baud", type=int, default=DEFAULT_BAUD, help="DP bit rate (default 19200)")
+    p.add_argument("--speed-factor", type=float, default=1.0,
+                   help="play motions this many times faster than real time (default 1)")
+    p.add_argument("--initial-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   default=list(HOME_POSE.as_tuple()),
+                   help="start pose in mm / deg (default home 1120 0 725 0 45 0)")
+    p.add_argument("--loop-period", type=float, default=DEFAULT_LOOP_PERIOD,
+                   help="program loop period in seconds (default 0.01)")
+    p.add_argument("--byte-order", choices=("little", "big"), default="little",
+                   help="byte order of the int16 words (default little)")
+    p.add_argument("--log-file", metavar="FILE",
+                   help="append one JSON line per executed / rejected target")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
+    parser = _parser()
+    args = parser.parse_args(argv)          # exits 2 on a bad option
+    out = stdout if stdout is not None else sys.stdout
+    level = logging.WARNING - 10 * min(2, args.verbose)
+    logging.basicConfig(level=level, stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        options = SimOptions(device=args.device, pty_link=args.pty_link, address=args.addr, baud=args.baud,
+                             speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
+                             loop_period=args.loop_period, byte_order=args.byte_order,
+                             log_file=args.log_file)
+    except SimError as exc:
+        parser.print_usage(sys.stderr)
+        print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
+        return EXIT_USAGE
+
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: Any) -> None:
+        stop.set()
+
+    old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
+    controller: Optional[VirtualController] = None
+    try:
+        try:
+            controller = VirtualController(options.device, address=options.address, baud=options.baud,
+                                           speed_factor=options.speed_factor,
+                                           initial_pose=options.initial_pose,
+                                           loop_period=options.loop_period, byte_order=options.byte_order,
+                                           pty_link=options.pty_link, log_file=options.log_file)
+        except SimDeviceError as exc:
+            print("%s: device error: %s" % (parser.prog, exc), file=sys.stderr)
+            return EXIT_DEVICE
+        except SimError as exc:
+            parser.print_usage(sys.stderr)
+            print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
+            return EXIT_USAGE
+        controller.start()
+        print(controller.device_path, file=out, flush=True)
+        if controller.symlink:
+            log.info("pty %s linked at %s", controller.device_path, controller.symlink)
+        while not stop.wait(0.2):
+            if controller.server_error is not None:
+                print("%s: device error: %s" % (parser.prog, controller.server_error), file=sys.stderr)
+                return EXIT_DEVICE
+            if controller.error is not None:
+                print("%s: internal error: %s" % (parser.prog, controller.error), file=sys.stderr)
+                return EXIT_FAILURE
+        return EXIT_OK
+    finally:
+        if controller is not None:
+            controller.stop()
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,416 @@
+"""The simulated arm of the virtual G2 controller, and its execution log. ROS-free, no I/O.
+
+:class:`SimArm` holds the joints of the arm and plays back trajectories of
+:class:`~vr_driver.motion.MotionPlanner` (PTP joint-interpolated, LIN straight, CIRC through a via
+point) in time divided by ``speed_factor``. Time is injected: :meth:`SimArm.begin` and
+:meth:`SimArm.step` take ``now``; the run-time injections (e-stop, drives, error) read the arm's
+clock (default ``time.monotonic``, the same clock the program loop uses) so that a stop lands at
+the exact position of the moment it was injected.
+
+It reports what a real G2 reports: the TCP pose rounded to whole mm and degrees
+(:meth:`SimArm.reported_pose`), angles wrapped into (-180, 180].
+
+Rules (DESIGN.md §5, also ``doc/controller_program.md``):
+
+- A target is planned when it is started; a target outside the reach or the joint limits, or any
+  planning failure (joint jump, singularity, degenerate circle), is refused with the planner's
+  message and nothing moves.
+- Nothing starts while the e-stop is pressed, the drives are off or an error is set; the refusal
+  names the first of these.
+- The e-stop cuts the drive power: while it is pressed the drives read "off" whatever the drives
+  switch says; releasing it restores the switch's state (no separate re-power needed in the sim).
+- E-stop, drives off or an error *during* a motion stops the arm at once, at the position of that
+  moment; the motion ends refused (``aborted``) with the reason. :meth:`SimArm.stop` does the same
+  for the program (link loss / watchdog).
+- Clearing a fault does not resume an aborted motion: the master must send a new target.
+
+Thread safety: every public method takes the arm's lock, so injections from a ROS service thread
+and the program loop may interleave freely.
+"""
+from __future__ import annotations
+
+import enum
+import json
+import math
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from .errors import MotionError, VrDriverError
+from .kinematics import Kinematics
+from .motion import MotionPlanner, MotionSettings, MoveType, Trajectory
+from .poses import HOME_POSE, ControllerPose, wrap_degrees
+from .protocol import INT16_MAX, INT16_MIN, round_half_away
+
+__all__ = [
+    "IntPose",
+    "round_pose",
+    "Outcome",
+    "MotionResult",
+    "LogEntry",
+    "ExecutionLog",
+    "SimArm",
+]
+
+Clock = Callable[[], float]
+
+#: a pose as the controller reports it: whole mm and degrees
+IntPose = Tuple[int, int, int, int, int, int]
+
+_INT16 = (INT16_MIN, INT16_MAX)
+
+
+def round_pose(pose: Any) -> IntPose:
+    """A pose in whole mm / degrees as the G2 reports it: rounded half away from zero (the wire's
+    rounding, :func:`vr_driver.protocol.round_half_away`), angles wrapped into (-180, 180], every
+    value clamped into int16."""
+    if not isinstance(pose, ControllerPose):
+        pose = ControllerPose.from_sequence(pose)
+    out = []
+    for i, value in enumerate(pose.as_tuple()):
+        v = round_half_away(value)
+        if i >= 3:
+            v = int(wrap_degrees(float(v)))
+        out.append(min(_INT16[1], max(_INT16[0], v)))
+    return tuple(out)  # type: ignore[return-value]
+
+
+class Outcome(enum.Enum):
+    EXECUTED = "executed"        # the motion ran to its end
+    REJECTED = "rejected"        # refused before it started (nothing moved) or aborted while moving
+    VIA_STORED = "via_stored"    # a circular via point, acknowledged without motion
+
+
+@dataclass(frozen=True)
+class MotionResult:
+    """How a motion ended: ``ok`` (reached the target) or not, why, and whether the arm moved."""
+
+    ok: bool
+    reason: str = ""
+    aborted: bool = False        # it had started moving when it was stopped
+    end_time: float = 0.0
+
+
+@dataclass(frozen=True)
+class LogEntry:
+    """One target the controller handled (one accepted request of the handshake)."""
+
+    seq: int                     # 1, 2, 3, ... in the order the requests were accepted
+    move_type: str               # "PTP", "LIN", "CIRC_END", "CIRC_VIA"
+    target: IntPose              # the commanded pose (mm, deg) as received
+    outcome: Outcome
+    reason: str                  # why it was refused or aborted ("" when executed / stored)
+    start_time: float            # clock time the request was accepted
+    end_time: float              # clock time of the outcome
+    final_pose: IntPose          # the reported pose after the outcome
+    aborted: bool = False        # the arm had moved when the motion was stopped
+    via: Optional[IntPose] = None  # the via point used by a CIRC_END
+
+    @property
+    def duration(self) -> float:
+        return self.end_time - self.start_time
+
+    def to_dict(self) -> Dict[str, Any]:
+        return {
+            "seq": self.seq,
+            "time": self.end_time,
+            "start_time": self.start_time,
+            "duration": self.duration,
+            "move_type": self.move_type,
+            "target": list(self.target),
+            "via": None if self.via is None else list(self.via),
+            "outcome": self.outcome.value,
+            "reason": self.reason,
+            "aborted": self.aborted,
+            "final_pose": list(self.final_pose),
+        }
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), sort_keys=True)
+
+
+class ExecutionLog:
+    """Thread-safe list of :class:`LogEntry` with listeners and a blocking wait.
+
+    Listeners (``add_listener(fn)``) are called with each new entry in the thread that appended it,
+    outside the log's lock; an exception in one is recorded in :attr:`listener_errors` and does not
+    stop the others (the program loop must not die of a broken log file).
+    """
+
+    def __init__(self) -> None:
+        self._entries: List[LogEntry] = []
+        self._cond = threading.Condition()
+        self._listeners: List[Callable[[LogEntry], None]] = []
+        self.listener_errors: List[BaseException] = []
+
+    def add_listener(self, listener: Callable[[LogEntry], None]) -> None:
+        with self._cond:
+            self._listeners.append(listener)
+
+    def remove_listener(self, listener: Callable[[LogEntry], None]) -> None:
+        with self._cond:
+            if listener in self._listeners:
+                self._listeners.remove(listener)
+
+    def append(self, entry: LogEntry) -> None:
+        with self._cond:
+            self._entries.append(entry)
+            listeners = list(self._listeners)
+            self._cond.notify_all()
+        for listener in listeners:
+            try:
+                listener(entry)
+            except Exception as exc:  # noqa: BLE001 - a listener must not break the program loop
+                self.listener_errors.append(exc)
+
+    def entries(self) -> List[LogEntry]:
+        """A copy of the entries so far."""
+        with self._cond:
+            return list(self._entries)
+
+    def __len__(self) -> int:
+        with self._cond:
+            return len(self._entries)
+
+    def __getitem__(self, index: int) -> LogEntry:
+        with self._cond:
+            return self._entries[index]
+
+    def wait_for(self, count: int, timeout: Optional[float] = None) -> bool:
+        """Block until the log has at least ``count`` entries (True) or ``timeout`` passed (False)."""
+        with self._cond:
+            return self._cond.wait_for(lambda: len(self._entries) >= count, timeout)
+
+    def clear(self) -> None:
+        with self._cond:
+            self._entries.clear()
+
+
+@dataclass
+class _Motion:
+    trajectory: Trajectory
+    start_time: float
+    move_type: MoveType
+
+
+class SimArm:
+    """A simulated VR-006L: joints, planned motions played back ``speed_factor`` times faster, faults.
+
+    ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
+    SRDF's ``home`` state (PoseError / a KinematicsError if it is not reachable).
+    """
+
+    def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MotionPlanner] = None, *,
+                 speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
+                 initial_joints: Optional[Sequence[float]] = None,
+                 settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic) -> None:
+        if not (isinstance(speed_factor, (int, float)) and not isinstance(speed_factor, bool)
+                and math.isfinite(speed_factor) and speed_factor > 0.0):
+            raise MotionError("speed_factor must be a finite number > 0, got %r" % (speed_factor,))
+        self.kin = kinematics if kinematics is not None else Kinematics.default()
+        self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
+        self.speed_factor = float(speed_factor)
+        self.clock = clock
+        self._lock = threading.RLock()
+        if initial_joints is not None:
+            joints = self.kin.check_limits(initial_joints)
+        else:
+            pose = initial_pose if isinstance(initial_pose, ControllerPose) else \
+                ControllerPose.from_sequence(initial_pose)
+            seed = self.kin.named_states.get("home")
+            joints = self.kin.ik_pose(pose, seed=seed)
+        self._joints: Tuple[float, ...] = tuple(float(v) for v in joints)
+        self._pose = self.kin.fk_pose(self._joints)
+        self._motion: Optional[_Motion] = None
+        self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
+        self._estop = False
+        self._drives = True
+        self._error: Optional[str] = None
+        self._last_step = -math.inf                       # clock time of the last position update
+
+    # ------------------------------------------------------------------------------- read-outs
+    @property
+    def joints(self) -> Tuple[float, ...]:
+        with self._lock:
+            return self._joints
+
+    @property
+    def pose(self) -> ControllerPose:
+        """The exact TCP pose (float mm / deg) at the last step."""
+        with self._lock:
+            return self._pose
+
+    def reported_pose(self) -> IntPose:
+        """The pose as the controller reports it (whole mm / degrees)."""
+        with self._lock:
+            return round_pose(self._pose)
+
+    @property
+    def last_step_time(self) -> float:
+        """Clock time the position was last brought up to date (-inf before any)."""
+        with self._lock:
+            return self._last_step
+
+    @property
+    def moving(self) -> bool:
+        with self._lock:
+            return self._motion is not None
+
+    @property
+    def estop(self) -> bool:
+        with self._lock:
+            return self._estop
+
+    @property
+    def drives_powered(self) -> bool:
+        """True when the drives carry power: the drives switch is on and the e-stop is released."""
+        with self._lock:
+            return self._drives and not self._estop
+
+    @property
+    def error(self) -> Optional[str]:
+        """The injected error text, or None."""
+        with self._lock:
+            return self._error
+
+    def blocked_reason(self) -> Optional[str]:
+        """Why no motion may start now (e-stop, drives off, error), or None."""
+        with self._lock:
+            if self._estop:
+                return "e-stop pressed"
+            if not self._drives:
+                return "drives not powered"
+            if self._error is not None:
+                return "controller error: %s" % self._error
+            return None
+
+    def motion_remaining(self, now: Optional[float] = None) -> float:
+        """Wall time [s] until the current motion ends (0 when idle)."""
+        with self._lock:
+            if self._motion is None:
+                return 0.0
+            now = self.clock() if now is None else now
+            m = self._motion
+            return max(0.0, m.trajectory.duration / self.speed_factor - (now - m.start_time))
+
+    # ---------------------------------------------------------------------------- injections
+    def set_estop(self, pressed: bool, now: Optional[float] = None) -> None:
+        """Press (True) or release (False) the e-stop. Pressing stops a motion at once."""
+        with self._lock:
+            self._estop = bool(pressed)
+            if self._estop:
+                self._abort("e-stop pressed during the motion", now)
+
+    def set_drives_powered(self, powered: bool, now: Optional[float] = None) -> None:
+        """Switch the drives on or off. Switching off stops a motion at once."""
+        with self._lock:
+            self._drives = bool(powered)
+            if not self._drives:
+                self._abort("drives switched off during the motion", now)
+
+    def set_error(self, error: Any, now: Optional[float] = None) -> None:
+        """Set (a truthy value; a string is kept as the error text) or clear (False / None) the
+        controller error. Setting it stops a motion at once."""
+        with self._lock:
+            if not error:
+                self._error = None
+                return
+            self._error = error if isinstance(error, str) else "injected error"
+            self._abort("controller error during the motion: %s" % self._error, now)
+
+    def stop(self, reason: str, now: Optional[float] = None) -> bool:
+        """Stop a motion at once (program-side stop, e.g. the master went silent). True if one ran."""
+        with self._lock:
+            return self._abort(reason, now)
+
+    # ------------------------------------------------------------------------------- motions
+    def plan(self, move_type: Any, target: Any, via: Any = None) -> Trajectory:
+        """The trajectory a motion to ``target`` would follow from the current joints (raises the
+        planner's VrDriverError when it cannot)."""
+        with self._lock:
+            start = self._joints
+        return self.planner.plan(MoveType.parse(move_type), start, target, via)
+
+    def begin(self, move_type: Any, target: Any, via: Any = None, now: Optional[float] = None
+              ) -> Tuple[bool, str]:
+        """Start a motion: ``(True, "")``, or ``(False, reason)`` when it is refused (a fault, a
+        motion already running, no via for CIRC, unreachable, planning failed); nothing moves then."""
+        with self._lock:
+            now = self.clock() if now is None else now
+            blocked = self.blocked_reason()
+            if blocked is not None:
+                return False, blocked
+            if self._motion is not None:
+                return False, "a motion is already running"
+            try:
+                kind = MoveType.parse(move_type)
+                if kind is MoveType.CIRC and via is None:
+                    return False, "circular end point without a stored via point"
+                traj = self.planner.plan(kind, self._joints, target, via)
+            except VrDriverError as exc:
+                return False, "%s: %s" % (type(exc).__name__, exc)
+            self._result = None
+            self._last_step = max(self._last_step, now)
+            self._motion = _Motion(traj, now, kind)
+            if traj.duration <= 0.0:      # already there
+                self._finish(now)
+            return True, ""
+
+    def step(self, now: Optional[float] = None) -> Optional[MotionResult]:
+        """Advance the arm to ``now``. Returns the result of a motion that ended since the last
+        call (once), else None."""
+        with self._lock:
+            now = self.clock() if now is None else now
+            self._last_step = max(self._last_step, now)
+            if self._motion is not None:
+                m = self._motion
+                elapsed = (now - m.start_time) * self.speed_factor
+                if elapsed >= m.trajectory.duration:
+                    self._finish(now)
+                else:
+                    self._move_to(self._sample(m.trajectory, max(0.0, elapsed)))
+            result, self._result = self._result, None
+            return result
+
+    # ------------------------------------------------------------------------------- helpers
+    def _finish(self, now: float) -> None:
+        m = self._motion
+        assert m is not None
+        self._move_to(m.trajectory.goal)
+        self._motion = None
+        self._result = MotionResult(True, "", False, now)
+
+    def _abort(self, reason: str, now: Optional[float]) -> bool:
+        m = self._motion
+        if m is None:
+            return False
+        now = self.clock() if now is None else now
+        now = max(now, self._last_step)                  # never back along the path
+        self._last_step = now
+        elapsed = (now - m.start_time) * self.speed_factor
+        if elapsed >= m.trajectory.duration:
+            # it had already arrived before the stop: the motion was complete
+            self._finish(min(now, m.start_time + m.trajectory.duration / self.speed_factor))
+            return False
+        self._move_to(self._sample(m.trajectory, max(0.0, elapsed)))
+        self._motion = None
+        self._result = MotionResult(False, reason, True, now)
+        return True
+
+    def _move_to(self, joints: Sequence[float]) -> None:
+        self._joints = tuple(float(v) for v in joints)
+        self._pose = self.kin.fk_pose(self._joints)
+
+    @staticmethod
+    def _sample(traj: Trajectory, t: float) -> Tuple[float, ...]:
+        """Joints at time ``t`` (linear in joint space between samples, as the planner assumes)."""
+        times = traj.times
+        i = int(np.searchsorted(times, t, side="right")) - 1
+        i = max(0, min(i, len(times) - 2))
+        t0, t1 = float(times[i]), float(times[i + 1])
+        f = 0.0 if t1 <= t0 else min(1.0, max(0.0, (t - t0) / (t1 - t0)))
+        q = traj.positions[i] + f * (traj.positions[i + 1] - traj.positions[i])
+        return tuple(float(v) for v in q)

@@ -1,0 +1,119 @@
+"""ROS node `virtual_controller`: the thin ROS edge of :class:`vr_driver.controller_sim.VirtualController`.
+
+Private parameters (validated by ``controller_sim.SimOptions``; defaults in brackets):
+``~pty_link`` [""] create a pty pair and symlink its device end here; ``~device`` [""] serve this
+existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.0];
+``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
+``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets).
+
+Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
+``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
+``~set_error`` (True sets a controller error). Publishes ``~executed`` (std_msgs/String, latched):
+one JSON object per handled target (``sim_arm.LogEntry.to_json``: seq, move_type, target, outcome
+executed / rejected / via_stored, reason, times, final_pose).
+
+Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Any, Dict, Mapping, Tuple
+
+import rospy
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, SetBoolResponse
+
+from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES, SimDeviceError,
+                             SimError, SimOptions, VirtualController)
+from .sim_arm import LogEntry
+
+#: parameters the node writes itself (not options)
+_OWN_PARAMS = ("device_path",)
+
+_SERVICES = (("set_estop", "estop"), ("set_drives_powered", "drives_powered"), ("set_error", "error"))
+
+
+class _RosLogHandler(logging.Handler):
+    """Route the core's Python logging to rosout."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        text = self.format(record)
+        if record.levelno >= logging.ERROR:
+            rospy.logerr("%s", text)
+        elif record.levelno >= logging.WARNING:
+            rospy.logwarn("%s", text)
+        elif record.levelno >= logging.INFO:
+            rospy.loginfo("%s", text)
+        else:
+            rospy.logdebug("%s", text)
+
+
+def split_params(params: Mapping[str, Any]) -> Tuple[Dict[str, Any], Tuple[str, ...]]:
+    """(the option parameters, the names of unknown ones) from ``rospy.get_param('~')``."""
+    known = {k: v for k, v in params.items() if k in PARAM_NAMES}
+    unknown = tuple(sorted(k for k in params if k not in PARAM_NAMES and k not in _OWN_PARAMS))
+    return known, unknown
+
+
+def main() -> int:
+    rospy.init_node("virtual_controller")
+    logger = logging.getLogger("vr_driver")
+    logger.addHandler(_RosLogHandler())
+    logger.setLevel(logging.INFO)
+    params, unknown = split_params(rospy.get_param("~", {}) or {})
+    if unknown:
+        rospy.logwarn("virtual_controller: ignoring unknown parameter(s) %s", ", ".join(unknown))
+    try:
+        options = SimOptions.from_mapping(params)
+        controller = VirtualController(options.device, address=options.address, baud=options.baud,
+                                       speed_factor=options.speed_factor, initial_pose=options.initial_pose,
+                                       loop_period=options.loop_period, byte_order=options.byte_order,
+                                       pty_link=options.pty_link, log_file=options.log_file)
+    except SimDeviceError as exc:
+        rospy.logfatal("virtual_controller: device error: %s", exc)
+        return EXIT_DEVICE
+    except SimError as exc:
+        rospy.logfatal("virtual_controller: %s", exc)
+        return EXIT_USAGE
+
+    executed = rospy.Publisher("~executed", String, queue_size=100, latch=True)
+
+    def publish(entry: LogEntry) -> None:
+        executed.publish(String(data=entry.to_json()))
+
+    def handler(fault: str):
+        def handle(request: Any) -> Any:
+            ok, message = controller.set_fault(fault, bool(request.data))
+            return SetBoolResponse(success=ok, message=message)
+        return handle
+
+    controller.log.add_listener(publish)
+    services = [rospy.Service("~" + name, SetBool, handler(fault)) for name, fault in _SERVICES]
+    rospy.on_shutdown(controller.stop)
+    controller.start()
+    rospy.set_param("~device_path", controller.device_path)
+    rospy.loginfo("virtual_controller: DP slave %d on %s%s, speed x%g", options.address, controller.device_path,
+                  " (linked at %s)" % controller.symlink if controller.symlink else "", options.speed_factor)
+    status = EXIT_OK
+    rate = rospy.Rate(5.0)
+    try:
+        while not rospy.is_shutdown():
+            if controller.server_error is not None:
+                rospy.logfatal("virtual_controller: device error: %s", controller.server_error)
+                status = EXIT_DEVICE
+                break
+            if controller.error is not None:
+                rospy.logfatal("virtual_controller: program loop failed: %s", controller.error)
+                status = EXIT_FAILURE
+                break
+            try:
+                rate.sleep()
+            except rospy.ROSInterruptException:
+                break
+    finally:
+        for service in services:
+            service.shutdown()
+        controller.stop()
+    if status != EXIT_OK:
+        rospy.signal_shutdown("virtual controller failed")
+    return status
