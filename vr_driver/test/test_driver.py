@@ -1,0 +1,249 @@
+"""DriverCore (the logic behind the `interface` node) against the virtual G2 controller over a REAL
+pty pair: our serial PHY, DP master and handshake on one end, the DP slave and simulated arm on the
+other. No ROS. Waiting is on job results and status predicates with deadlines, never on sleeps."""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from typing import Callable
+
+import pytest
+
+from vr_driver.controller_sim import VirtualController
+from vr_driver.driver import DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveRequest
+from vr_driver.errors import VrDriverError
+from vr_driver.kinematics import Kinematics
+from vr_driver.motion import MoveType
+from vr_driver.params import DriverParams
+from vr_driver.poses import HOME_POSE, ControllerPose
+from vr_driver.sim_arm import Outcome
+
+BAUD = 187500
+
+
+@pytest.fixture(scope="module")
+def kin():
+    return Kinematics.default()
+
+
+class Rig:
+    """A virtual controller on a pty symlinked at ``path`` and a DriverCore driving it."""
+
+    def __init__(self, tmp_path, kin, speed_factor=20.0):
+        self.path = str(tmp_path / "g2")
+        self.kin = kin
+        self.speed_factor = speed_factor
+        self.sim = self.new_sim()
+        self.params = DriverParams.from_dict({
+            "port": self.path, "baud": BAUD, "cycle_rate": 50.0, "link_timeout": 0.3,
+            "reconnect_period": 0.2, "watchdog_ms": 300, "accept_timeout": 0.5})
+        self.core = DriverCore(self.params, kinematics=kin)
+        self.statuses = []
+        self.core.add_listener(self.statuses.append)
+        self._cond = threading.Condition()
+        self.core.add_listener(self._notify)
+        self.core.start()
+
+    def new_sim(self):
+        return VirtualController(pty_link=self.path, baud=BAUD, speed_factor=self.speed_factor,
+                                 loop_period=0.01, kinematics=self.kin).start()
+
+    def _notify(self, _status):
+        with self._cond:
+            self._cond.notify_all()
+
+    def wait_status(self, predicate: Callable[[DriverStatus], bool], timeout: float) -> DriverStatus:
+        end = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                status = self.core.status()
+                if predicate(status):
+                    return status
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise AssertionError("status condition not met within %.1f s; last: %s %s %s"
+                                         % (timeout, status.link.value, status.link_reason,
+                                            status.feedback))
+                self._cond.wait(left)
+
+    def wait_ready(self, timeout: float = 5.0) -> DriverStatus:
+        return self.wait_status(lambda s: s.motion_possible and s.joints_valid
+                                and self.core.handshake.ready, timeout)
+
+    def close(self):
+        self.core.stop()
+        self.sim.stop()
+
+
+@pytest.fixture
+def rig(tmp_path, kin):
+    r = Rig(tmp_path, kin)
+    yield r
+    r.close()
+
+
+def executed(sim):
+    return [(e.move_type, tuple(e.target), e.outcome) for e in sim.log.entries()]
+
+
+def test_connects_and_reports_joints_that_match_the_controller_pose(rig, kin):
+    status = rig.wait_ready()
+    assert status.link is LinkState.CONNECTED
+    assert status.pose == ControllerPose(1120, 0, 725, 0, 45, 0)
+    fk = kin.fk_pose(status.joints)
+    dp, da = fk.distance_to(status.pose)
+    assert dp < 1.0 and da < 0.5
+    assert status.error_code == 0 and status.cycle_rate > 5.0
+
+
+def test_ptp_lin_circ_each_executed_once(rig):
+    rig.wait_ready()
+    moves = [
+        MoveRequest(MoveType.PTP, (1000, 200, 800, 0, 45, 0)),
+        MoveRequest(MoveType.LIN, (1000, -150, 800, 0, 45, 0)),
+        MoveRequest(MoveType.CIRC, (1000, 150, 800, 0, 45, 0), via=(1100, 0, 800, 0, 45, 0)),
+    ]
+    for move in moves:
+        job = rig.core.submit(move)
+        result = job.wait(20.0)
+        assert result is not None and result.success, result
+        assert result.reached.distance_to(move.target)[0] <= 1.0
+    assert executed(rig.sim) == [
+        ("PTP", (1000, 200, 800, 0, 45, 0), Outcome.EXECUTED),
+        ("LIN", (1000, -150, 800, 0, 45, 0), Outcome.EXECUTED),
+        ("CIRC_VIA", (1100, 0, 800, 0, 45, 0), Outcome.VIA_STORED),
+        ("CIRC_END", (1000, 150, 800, 0, 45, 0), Outcome.EXECUTED),
+    ]
+    assert rig.core.status().counters.targets_sent == 4
+
+
+@pytest.mark.parametrize("target, words", [
+    ((1500, 0, 725, 0, 45, 0), "outside the workspace"),
+    ((1120, 0, float("nan"), 0, 45, 0), "finite"),
+    ((1400, 0, 1400, 0, 0, 0), "reach"),
+])
+def test_bad_targets_are_refused_before_anything_is_sent(rig, target, words):
+    rig.wait_ready()
+    with pytest.raises(VrDriverError) as err:
+        rig.core.submit(MoveRequest(MoveType.PTP, target))
+    assert words in str(err.value).lower() or words in str(err.value)
+    assert rig.sim.log.entries() == [] and rig.core.status().counters.targets_sent == 0
+
+
+def test_cancel_mid_motion_stops_the_arm(tmp_path, kin):
+    r = Rig(tmp_path, kin, speed_factor=1.0)
+    try:
+        r.wait_ready()
+        target = ControllerPose(900, -500, 900, 0, 45, 0)
+        job = r.core.submit(MoveRequest(MoveType.PTP, target))
+        r.wait_status(lambda s: s.feedback is not None and s.feedback.state.name == "BUSY"
+                      and s.pose != HOME_POSE, 5.0)
+        r.core.cancel(job, "test cancel")
+        result = job.wait(5.0)
+        assert result is not None and not result.success and result.phase is JobPhase.CANCELLED
+        still = r.wait_status(lambda s: s.feedback is not None and s.feedback.state.name == "READY", 5.0)
+        stopped_at = still.pose
+        assert stopped_at.distance_to(target)[0] > 50.0          # it did not go on to the target
+        (entry,) = r.sim.log.entries()
+        assert entry.outcome is Outcome.REJECTED and "stop" in entry.reason
+        assert r.sim.pose == tuple(round(v) for v in stopped_at.as_tuple()) or \
+            ControllerPose(*r.sim.pose).distance_to(stopped_at)[0] <= 1.0
+    finally:
+        r.close()
+
+
+def test_joint_path_is_streamed_in_order_and_validated_first(rig, kin):
+    rig.wait_ready()
+    names = list(rig.core.joint_names)
+    start = rig.core.status().joints
+    points = [[start[0] + 0.1 * k, start[1], start[2] - 0.05 * k, 0.0, start[4], 0.1 * k]
+              for k in range(1, 6)]
+    bad = points[:2] + [[0.0, 0.0, 0.0, 0.0, 0.0, 99.0]] + points[3:]
+    with pytest.raises(DriverError, match="point 2"):
+        rig.core.submit_joint_path(names, bad)
+    with pytest.raises(DriverError, match="joint names"):
+        rig.core.submit_joint_path(["a", "b", "c", "d", "e", "f"], points)
+    assert rig.sim.log.entries() == []
+    jobs = rig.core.submit_joint_path(list(reversed(names)), [list(reversed(p)) for p in points])
+    results = [job.wait(20.0) for job in jobs]
+    assert all(r is not None and r.success for r in results), results
+    logged = [tuple(e.target) for e in rig.sim.log.entries()]
+    assert logged == [job.preview.commands[0].values for job in jobs]
+    # the controller works in whole mm / deg: the last point is reached to that resolution
+    dp, da = kin.fk_pose(rig.core.status().joints).distance_to(kin.fk_pose(points[-1]))
+    assert dp <= 1.0 and da <= 1.0
+
+
+def test_empty_joint_path_stops(tmp_path, kin):
+    r = Rig(tmp_path, kin, speed_factor=1.0)
+    try:
+        r.wait_ready()
+        names = list(r.core.joint_names)
+        q = list(r.core.status().joints)
+        jobs = r.core.submit_joint_path(names, [[q[0] + 0.6] + q[1:], [q[0] - 0.6] + q[1:]])
+        r.wait_status(lambda s: s.feedback is not None and s.feedback.state.name == "BUSY", 5.0)
+        assert r.core.submit_joint_path(names, []) == []
+        results = [job.wait(5.0) for job in jobs]
+        assert all(res is not None and not res.success for res in results)
+        r.wait_status(lambda s: s.feedback is not None and s.feedback.state.name == "READY"
+                      and r.core.handshake.ready, 5.0)
+        assert len(r.sim.log.entries()) == 1                          # the second never went out
+    finally:
+        r.close()
+
+
+def test_estop_refuses_goals_until_cleared(rig):
+    rig.wait_ready()
+    rig.sim.set_estop(True)
+    status = rig.wait_status(lambda s: s.feedback is not None and not s.motion_possible, 3.0)
+    assert "emergency stop" in status.why_no_motion()
+    with pytest.raises(DriverError, match="emergency stop"):
+        rig.core.submit(MoveRequest(MoveType.PTP, (1000, 0, 800, 0, 45, 0)))
+    rig.sim.set_estop(False)
+    rig.sim.set_drives_powered(True)
+    rig.wait_ready()
+    assert rig.core.submit(MoveRequest(MoveType.PTP, (1000, 0, 800, 0, 45, 0))).wait(20.0).success
+    assert len(rig.sim.log.entries()) == 1
+
+
+def test_controller_restart_loses_then_regains_control(rig):
+    rig.wait_ready()
+    slow = MoveRequest(MoveType.PTP, (900, -500, 900, 0, 45, 0))
+    job = rig.core.submit(slow)
+    rig.wait_status(lambda s: s.feedback is not None and s.feedback.state.name == "BUSY", 5.0)
+    killed = time.monotonic()
+    rig.sim.stop()
+    lost = rig.wait_status(lambda s: not s.connected, 2.0)
+    t_lost = time.monotonic() - killed
+    assert lost.feedback is None and not lost.joints_valid and lost.error_code != 0
+    result = job.wait(2.0)
+    assert result is not None and not result.success and "lost" in result.reason
+    assert t_lost < 1.0
+    attempts = rig.core.status().counters.reconnect_attempts
+    rig.wait_status(lambda s: s.counters.reconnect_attempts >= attempts + 2, 3.0)   # keeps trying
+    assert not os.path.exists(rig.path)
+    rig.sim = rig.new_sim()
+    back = time.monotonic()
+    rig.wait_ready(5.0)
+    assert time.monotonic() - back < 2.5
+    assert rig.sim.log.entries() == []                                 # nothing re-sent by itself
+    assert rig.core.submit(MoveRequest(MoveType.PTP, (1000, 0, 800, 0, 45, 0))).wait(20.0).success
+
+
+def test_missing_port_is_reported_and_retried(tmp_path, kin):
+    params = DriverParams.from_dict({"port": str(tmp_path / "nothing"), "baud": BAUD,
+                                     "reconnect_period": 0.1})
+    core = DriverCore(params, kinematics=kin)
+    seen = threading.Event()
+    core.add_listener(lambda s: s.counters.reconnect_attempts >= 3 and seen.set())
+    core.start()
+    try:
+        assert seen.wait(5.0)
+        s = core.status()
+        assert s.link is LinkState.PORT_ERROR and "cannot open" in s.link_reason
+        assert "nothing" in s.link_reason and not s.motion_possible
+        with pytest.raises(DriverError, match="no link"):
+            core.submit(MoveRequest(MoveType.PTP, HOME_POSE))
+    finally:
+        core.stop()
