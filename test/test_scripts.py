@@ -1,6 +1,9 @@
 """The user-facing scripts: help, clear errors, and the workspace environment they provide."""
 import os
+import select
+import signal
 import subprocess
+import time
 import unittest
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -60,6 +63,34 @@ class ScriptsTest(unittest.TestCase):
         self.assertEqual(res.returncode, 0, res.stderr)
         self.assertIn("Debian packages: all", res.stdout)
         self.assertNotIn("installing", res.stdout)
+
+    def test_run_drives_the_virtual_controller_and_stops_cleanly(self):
+        """The README's first command: one call brings up the driver against the virtual controller."""
+        proc = subprocess.Popen([os.path.join(REPO, "scripts", "run"), "--ros-port", "11533",
+                                 "sim_port:=/tmp/vr006l_test_run_%d" % os.getpid()],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                start_new_session=True)
+        seen, end = [], time.monotonic() + 90
+        try:
+            while time.monotonic() < end:
+                ready, _, _ = select.select([proc.stdout], [], [], 1.0)
+                if not ready:
+                    continue
+                line = proc.stdout.readline()
+                if not line:
+                    break
+                seen.append(line)
+                if "controller connected: READY" in line:
+                    break
+            self.assertTrue(any("controller connected: READY" in l for l in seen), "".join(seen[-30:]))
+        finally:
+            os.killpg(proc.pid, signal.SIGINT)
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        self.assertFalse(os.path.exists("/tmp/vr006l_test_run_%d" % os.getpid()))   # pty link removed
 
 
 if __name__ == "__main__":

@@ -490,6 +490,7 @@ class DriverCore:
             self._link_down(LinkState.PORT_ERROR, reason)
             return
         self.counters.port_opens += 1
+        self._slave_reason = ""
         master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
                           backoff_max=min(1.0, self.params.reconnect_period),
                           on_state_change=self._on_slave_state)

@@ -16,7 +16,6 @@ Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
 from __future__ import annotations
 
-import logging
 from typing import Any, Dict, Mapping, Tuple
 
 import rospy
@@ -25,27 +24,13 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES, SimDeviceError,
                              SimError, SimOptions, VirtualController)
+from .ros_logging import route_to_rosout
 from .sim_arm import LogEntry
 
 #: parameters the node writes itself (not options)
 _OWN_PARAMS = ("device_path",)
 
 _SERVICES = (("set_estop", "estop"), ("set_drives_powered", "drives_powered"), ("set_error", "error"))
-
-
-class _RosLogHandler(logging.Handler):
-    """Route the core's Python logging to rosout."""
-
-    def emit(self, record: logging.LogRecord) -> None:
-        text = self.format(record)
-        if record.levelno >= logging.ERROR:
-            rospy.logerr("%s", text)
-        elif record.levelno >= logging.WARNING:
-            rospy.logwarn("%s", text)
-        elif record.levelno >= logging.INFO:
-            rospy.loginfo("%s", text)
-        else:
-            rospy.logdebug("%s", text)
 
 
 def split_params(params: Mapping[str, Any]) -> Tuple[Dict[str, Any], Tuple[str, ...]]:
@@ -57,9 +42,7 @@ def split_params(params: Mapping[str, Any]) -> Tuple[Dict[str, Any], Tuple[str, 
 
 def main() -> int:
     rospy.init_node("virtual_controller")
-    logger = logging.getLogger("vr_driver")
-    logger.addHandler(_RosLogHandler())
-    logger.setLevel(logging.INFO)
+    route_to_rosout("vr_driver", "pyprofibus_vendor")
     params, unknown = split_params(rospy.get_param("~", {}) or {})
     if unknown:
         rospy.logwarn("virtual_controller: ignoring unknown parameter(s) %s", ", ".join(unknown))

@@ -1,0 +1,331 @@
+"""ROS node `interface`: the thin ROS edge of :class:`vr_driver.driver.DriverCore`.
+
+Publishes robot_status, joint_states, tool_pose, /diagnostics and ~markers; serves the
+move_to_pose action and the stop_motion service; subscribes joint_path_command. All decisions
+(validation, preview, handshake, reconnect) are in the ROS-free core.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import threading
+from typing import List, Optional
+
+import actionlib
+import diagnostic_updater
+import rospy
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import Point, PoseStamped
+from sensor_msgs.msg import JointState
+from std_srvs.srv import Trigger, TriggerResponse
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import Marker, MarkerArray
+
+from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, MoveToPoseGoal,
+                           MoveToPoseResult, RobotMode, RobotStatus, TriState)
+
+from .driver import DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest
+from .errors import VrDriverError
+from .motion import MoveType
+from .params import DriverParams, ParamError
+from .poses import ControllerPose
+from .protocol import StatusBits
+from .ros_logging import route_to_rosout
+
+_MOVE_TYPES = {MoveToPoseGoal.PTP: MoveType.PTP, MoveToPoseGoal.LIN: MoveType.LIN,
+               MoveToPoseGoal.CIRC: MoveType.CIRC}
+
+
+def tristate(value: Optional[bool]) -> TriState:
+    return TriState(val=TriState.UNKNOWN if value is None else (TriState.TRUE if value else TriState.FALSE))
+
+
+def robot_status_msg(status: DriverStatus, stamp: rospy.Time) -> RobotStatus:
+    """RobotStatus from a core snapshot. Link down: in_error TRUE, motion_possible FALSE, the rest
+    UNKNOWN (the driver cannot tell)."""
+    msg = RobotStatus()
+    msg.header.stamp = stamp
+    fb = status.feedback
+    if fb is None:
+        msg.mode = RobotMode(val=RobotMode.UNKNOWN)
+        for name in ("e_stopped", "drives_powered", "in_motion"):
+            setattr(msg, name, tristate(None))
+        msg.motion_possible = tristate(False)
+        msg.in_error = tristate(True)
+    else:
+        bits = fb.status
+        msg.mode = RobotMode(val=RobotMode.AUTO if bits & StatusBits.PROGRAM_RUNNING else RobotMode.MANUAL)
+        msg.e_stopped = tristate(bool(bits & StatusBits.ESTOP))
+        msg.drives_powered = tristate(bool(bits & StatusBits.DRIVES_POWERED))
+        msg.in_motion = tristate(bool(bits & StatusBits.IN_MOTION))
+        msg.in_error = tristate(bool(bits & StatusBits.ERROR) or status.error_code != 0)
+        msg.motion_possible = tristate(status.motion_possible)
+    msg.error_code = status.error_code
+    return msg
+
+
+def cartesian(pose: Optional[ControllerPose]) -> CartesianPose:
+    if pose is None:
+        return CartesianPose()
+    return CartesianPose(*pose.as_tuple())
+
+
+def pose_from_msg(msg: CartesianPose, what: str) -> ControllerPose:
+    return ControllerPose.from_sequence((msg.x, msg.y, msg.z, msg.rx, msg.ry, msg.rz)) if msg is not None \
+        else None
+
+
+class InterfaceNode:
+    def __init__(self, params: DriverParams):
+        self.params = params
+        self.core = DriverCore(params)
+        self.names = list(params.controller_joint_names)
+        self.status_pub = rospy.Publisher("robot_status", RobotStatus, queue_size=10)
+        self.joint_pub = rospy.Publisher("joint_states", JointState, queue_size=10)
+        self.pose_pub = rospy.Publisher("tool_pose", PoseStamped, queue_size=10)
+        self.marker_pub = rospy.Publisher("~markers", MarkerArray, queue_size=2, latch=True)
+        self.diag = diagnostic_updater.Updater()
+        self.diag.setHardwareID("Panasonic G2 (PROFIBUS-DP slave %d on %s)"
+                                % (self.core.slave_config.address, self.core.bus.phy.device))
+        self.diag.add("link", self._diag_link)
+        self.diag.add("controller", self._diag_controller)
+        self.diag.period = params.diagnostics_period
+        self.server = actionlib.SimpleActionServer("move_to_pose", MoveToPoseAction,
+                                                   execute_cb=self._execute, auto_start=False)
+        self.stop_srv = rospy.Service("stop_motion", Trigger, self._stop_motion)
+        self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
+                                         queue_size=1)
+        self._last_link = None
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        self.core.add_listener(self._on_status)
+        self.core.start()
+        self.server.start()
+        self.timers = [
+            rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
+            rospy.Timer(rospy.Duration(1.0 / self.params.joint_states_rate), self._publish_joints),
+            rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.update()),
+        ]
+        rospy.on_shutdown(self.shutdown)
+        rospy.loginfo("interface: driving slave %d on %s at %d bit/s, %g Hz bus cycle",
+                      self.core.slave_config.address, self.core.bus.phy.device, self.core.bus.baud,
+                      self.core.bus.cycle_rate_hz)
+
+    def shutdown(self) -> None:
+        for timer in getattr(self, "timers", []):
+            timer.shutdown()
+        self.core.stop()
+
+    # ------------------------------------------------------------------ publishing
+    def _on_status(self, status: DriverStatus) -> None:
+        """Bus thread: log link state changes once, in words."""
+        if status.link is not self._last_link:
+            self._last_link = status.link
+            if status.link is LinkState.CONNECTED:
+                rospy.loginfo("controller connected: %s", status.feedback.describe() if status.feedback else "")
+            else:
+                rospy.logwarn("controller link %s: %s", status.link.value, status.link_reason)
+
+    def _publish_status(self, _event=None) -> None:
+        self.status_pub.publish(robot_status_msg(self.core.status(), rospy.Time.now()))
+
+    def _publish_joints(self, _event=None) -> None:
+        status = self.core.status()
+        if not status.joints_valid or status.joints is None or status.pose is None:
+            return                           # no position feedback while the link is down
+        stamp = rospy.Time.now()
+        js = JointState()
+        js.header.stamp = stamp
+        js.name = self.names
+        js.position = list(status.joints)
+        self.joint_pub.publish(js)
+        (px, py, pz), (qx, qy, qz, qw) = status.pose.to_ros()
+        ps = PoseStamped()
+        ps.header.stamp = stamp
+        ps.header.frame_id = self.params.base_frame
+        ps.pose.position.x, ps.pose.position.y, ps.pose.position.z = px, py, pz
+        ps.pose.orientation.x, ps.pose.orientation.y = qx, qy
+        ps.pose.orientation.z, ps.pose.orientation.w = qz, qw
+        self.pose_pub.publish(ps)
+
+    def _diag_link(self, stat):
+        s = self.core.status()
+        if s.link is LinkState.CONNECTED:
+            stat.summary(DiagnosticStatus.OK, "connected, %.1f cycles/s" % s.cycle_rate)
+        else:
+            stat.summary(DiagnosticStatus.ERROR, "%s: %s" % (s.link.value, s.link_reason))
+        stat.add("link state", s.link.value)
+        stat.add("link reason", s.link_reason)
+        stat.add("device", self.core.bus.phy.device)
+        stat.add("baud", str(self.core.bus.baud))
+        stat.add("slave state", s.slave_state)
+        stat.add("cycle rate [1/s]", "%.1f" % s.cycle_rate)
+        for key in ("cycles", "retries", "timeouts", "fcs_errors", "invalid_replies", "losses",
+                    "reconnects", "phy_errors"):
+            if key in s.master_counters:
+                stat.add("bus %s" % key.replace("_", " "), str(s.master_counters[key]))
+        c = s.counters
+        for key in ("port_opens", "port_errors", "reconnect_attempts", "losses", "reconnects",
+                    "protocol_errors"):
+            stat.add("link %s" % key.replace("_", " "), str(getattr(c, key)))
+        if s.last_diag:
+            stat.add("last slave diag", s.last_diag)
+        return stat
+
+    def _diag_controller(self, stat):
+        s = self.core.status()
+        fb = s.feedback
+        if fb is None:
+            stat.summary(DiagnosticStatus.STALE, "no feedback (%s)" % s.link_reason)
+        else:
+            level = DiagnosticStatus.OK if s.motion_possible else DiagnosticStatus.WARN
+            if fb.status & (StatusBits.ERROR | StatusBits.ESTOP):
+                level = DiagnosticStatus.ERROR
+            stat.summary(level, "%s; %s" % (fb.state.name, fb.status.describe()))
+            stat.add("pose", " ".join(str(v) for v in fb.values))
+            stat.add("why no motion", s.why_no_motion() or "-")
+        c = s.counters
+        for key in ("targets_sent", "targets_done", "targets_rejected", "targets_aborted"):
+            stat.add(key.replace("_", " "), str(getattr(c, key)))
+        stat.add("queue", str(s.queue_length))
+        return stat
+
+    def _publish_markers(self, job: MoveJob) -> None:
+        """Goal arrow and previewed TCP path on ~markers (a failure here never blocks a move)."""
+        if not self.params.publish_markers:
+            return
+        try:
+            self.marker_pub.publish(self._markers(job))
+        except Exception as exc:  # markers are a display aid only
+            rospy.logwarn("could not publish the preview markers: %s", exc)
+
+    def _markers(self, job: MoveJob) -> MarkerArray:
+        stamp = rospy.Time.now()
+        frame = self.params.base_frame
+        goal = Marker()
+        goal.header.stamp, goal.header.frame_id = stamp, frame
+        goal.ns, goal.id, goal.type, goal.action = "goal", 0, Marker.ARROW, Marker.ADD
+        (px, py, pz), (qx, qy, qz, qw) = job.preview.target.to_ros()
+        goal.pose.position.x, goal.pose.position.y, goal.pose.position.z = px, py, pz
+        goal.pose.orientation.x, goal.pose.orientation.y = qx, qy
+        goal.pose.orientation.z, goal.pose.orientation.w = qz, qw
+        goal.scale.x, goal.scale.y, goal.scale.z = 0.1, 0.01, 0.01
+        goal.color.r, goal.color.g, goal.color.a = 1.0, 0.5, 1.0
+        path = Marker()
+        path.header.stamp, path.header.frame_id = stamp, frame
+        path.ns, path.id, path.type, path.action = "path", 0, Marker.LINE_STRIP, Marker.ADD
+        path.pose.orientation.w = 1.0
+        path.scale.x = 0.004
+        path.color.g, path.color.b, path.color.a = 0.8, 1.0, 1.0
+        for pose in job.preview.trajectory.poses():
+            x, y, z = pose.position_m
+            path.points.append(Point(x, y, z))
+        return MarkerArray(markers=[goal, path])
+
+    # ------------------------------------------------------------------ commands
+    def _request_from_goal(self, goal: MoveToPoseGoal) -> MoveRequest:
+        if goal.move_type not in _MOVE_TYPES:
+            raise DriverError("move_type %d is unknown (1 PTP, 2 LIN, 3 CIRC)" % goal.move_type)
+        kind = _MOVE_TYPES[goal.move_type]
+        target = pose_from_msg(goal.target, "target")
+        via = pose_from_msg(goal.via, "via") if goal.has_via else None
+        if kind is MoveType.CIRC and via is None:
+            raise DriverError("a CIRC goal needs has_via = true and a via pose")
+        if kind is not MoveType.CIRC and goal.has_via:
+            raise DriverError("has_via is only allowed with CIRC goals")
+        return MoveRequest(kind, target, via, preview_only=goal.preview_only)
+
+    def _execute(self, goal: MoveToPoseGoal) -> None:
+        result = MoveToPoseResult()
+        feedback = MoveToPoseFeedback(phase=MoveToPoseFeedback.PHASE_VALIDATING)
+        status = self.core.status()
+        feedback.current = cartesian(status.pose)
+        self.server.publish_feedback(feedback)
+        try:
+            request = self._request_from_goal(goal)
+            if request.preview_only:
+                preview = self.core.preview(request)
+                job = None
+            else:
+                job = self.core.submit(request)
+                preview = job.preview
+        except (VrDriverError, ValueError, TypeError) as exc:
+            result.success = False
+            result.reason = "refused: %s" % exc
+            result.reached = cartesian(status.pose)
+            rospy.logwarn("move_to_pose %s", result.reason)
+            self.server.set_aborted(result, result.reason)
+            return
+        result.joint_target = list(preview.joint_target)
+        result.estimated_duration = preview.duration
+        feedback.phase = MoveToPoseFeedback.PHASE_PREVIEW
+        self.server.publish_feedback(feedback)
+        if job is None:
+            result.success = True
+            result.reached = cartesian(status.pose)
+            self.server.set_succeeded(result, "preview only: reachable, %.2f s" % preview.duration)
+            return
+        self._publish_markers(job)
+        rate = rospy.Rate(max(5.0, min(50.0, self.params.joint_states_rate)))
+        cancelled = False
+        while not job.done:
+            if rospy.is_shutdown():
+                self.core.cancel(job, "driver shutting down")
+                break
+            if self.server.is_preempt_requested() and not cancelled:
+                cancelled = True
+                self.core.cancel(job, "goal cancelled by the client")
+                feedback.phase = MoveToPoseFeedback.PHASE_STOPPING
+            elif not cancelled:
+                feedback.phase = (MoveToPoseFeedback.PHASE_MOVING if job.phase is JobPhase.MOVING
+                                  else MoveToPoseFeedback.PHASE_SENDING)
+            s = self.core.status()
+            if s.pose is not None:
+                feedback.current = cartesian(s.pose)
+                feedback.distance_to_go, feedback.angle_to_go = s.pose.distance_to(preview.target)
+            self.server.publish_feedback(feedback)
+            job.wait(rate.sleep_dur.to_sec())
+        res = job.wait(5.0)
+        s = self.core.status()
+        reached = res.reached if res is not None and res.reached is not None else s.pose
+        result.reached = cartesian(reached)
+        result.success = bool(res is not None and res.success)
+        result.reason = res.reason if res is not None else "no result"
+        if result.success:
+            self.server.set_succeeded(result)
+        elif cancelled or (res is not None and res.phase is JobPhase.CANCELLED):
+            self.server.set_preempted(result, result.reason)
+        else:
+            rospy.logwarn("move_to_pose failed: %s", result.reason)
+            self.server.set_aborted(result, result.reason)
+
+    def _stop_motion(self, _req) -> TriggerResponse:
+        n = self.core.stop_motion("stop_motion service called")
+        return TriggerResponse(success=True, message="stop sent; %d job(s) ended" % n)
+
+    def _joint_path(self, msg: JointTrajectory) -> None:
+        points = [list(p.positions) for p in msg.points]
+        try:
+            jobs = self.core.submit_joint_path(msg.joint_names, points)
+        except (VrDriverError, ValueError, TypeError) as exc:
+            rospy.logerr("joint_path_command refused: %s", exc)
+            return
+        if jobs:
+            rospy.loginfo("joint_path_command: %d points queued", len(jobs))
+            self._publish_markers(jobs[-1])
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    rospy.init_node("interface")
+    route_to_rosout("vr_driver", "pyprofibus_vendor")
+    try:
+        params = DriverParams.from_dict(rospy.get_param("~", {}))
+        node = InterfaceNode(params)
+    except ParamError as exc:
+        rospy.logfatal("interface: %s", exc)
+        sys.stderr.write("interface: %s\n" % exc)
+        return 2
+    node.start()
+    rospy.spin()
+    return 0

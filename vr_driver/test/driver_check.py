@@ -1,0 +1,288 @@
+#!/usr/bin/python3
+"""rostest of the driver against the virtual controller (launch/driver.launch, sim:=true): a real
+roscore, real nodes, a real pty carrying real PROFIBUS telegrams.
+
+Run by test/driver.test. The virtual controller's execution log is read from
+/virtual_controller/executed (one JSON object per handled target), so "executed once" is checked on
+what the controller did, not on what the driver believes. Waits are on messages with deadlines."""
+from __future__ import annotations
+
+import json
+import math
+import threading
+import time
+import unittest
+from typing import Callable, List, Optional
+
+import actionlib
+import rospy
+import rostest
+from actionlib_msgs.msg import GoalStatus
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from sensor_msgs.msg import JointState
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from vr_driver.kinematics import Kinematics
+from vr_driver.msg import CartesianPose, MoveToPoseAction, MoveToPoseGoal, RobotStatus, TriState
+from vr_driver.poses import ControllerPose
+
+PKG = "vr_driver"
+HOME = (1120, 0, 725, 0, 45, 0)
+
+
+class Recorder:
+    """Keeps every message of a topic with its arrival time; wait_for(predicate) with a deadline."""
+
+    def __init__(self, topic, kind):
+        self.messages: List = []
+        self.times: List[float] = []
+        self.cond = threading.Condition()
+        self.sub = rospy.Subscriber(topic, kind, self._cb, queue_size=100)
+
+    def _cb(self, msg):
+        with self.cond:
+            self.messages.append(msg)
+            self.times.append(time.monotonic())
+            self.cond.notify_all()
+
+    def wait_for(self, predicate: Callable[[object], bool], timeout: float, after: float = 0.0):
+        end = time.monotonic() + timeout
+        with self.cond:
+            while True:
+                for msg, t in zip(self.messages, self.times):
+                    if t >= after and predicate(msg):
+                        return msg
+                left = end - time.monotonic()
+                if left <= 0:
+                    return None
+                self.cond.wait(left)
+
+    def wait_count(self, n: int, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        with self.cond:
+            while len(self.messages) < n:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self.cond.wait(left)
+        return True
+
+    def last(self):
+        with self.cond:
+            return self.messages[-1] if self.messages else None
+
+
+def cp(values) -> CartesianPose:
+    return CartesianPose(*[float(v) for v in values])
+
+
+def as_pose(msg: CartesianPose) -> ControllerPose:
+    return ControllerPose(msg.x, msg.y, msg.z, msg.rx, msg.ry, msg.rz)
+
+
+class DriverTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("driver_check")
+        cls.kin = Kinematics.default()
+        cls.executed = Recorder("/virtual_controller/executed", String)
+        cls.status = Recorder("/robot_status", RobotStatus)
+        cls.joints = Recorder("/joint_states", JointState)
+        cls.tool = Recorder("/tool_pose", PoseStamped)
+        cls.diag = Recorder("/diagnostics", DiagnosticArray)
+        cls.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
+        cls.started = time.monotonic()
+        assert cls.client.wait_for_server(rospy.Duration(20.0)), "move_to_pose server not up"
+        rospy.wait_for_service("/virtual_controller/set_estop", 20.0)
+        cls.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
+        cls.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
+        cls.stop_motion = rospy.ServiceProxy("/stop_motion", Trigger)
+        cls.path_pub = rospy.Publisher("/joint_path_command", JointTrajectory, queue_size=1)
+
+    # -------------------------------------------------------------------- helpers
+    def entries(self):
+        with self.executed.cond:
+            return [json.loads(m.data) for m in self.executed.messages]
+
+    def wait_motion_possible(self, timeout=10.0):
+        msg = self.status.wait_for(lambda m: m.motion_possible.val == TriState.TRUE, timeout,
+                                   after=time.monotonic())
+        self.assertIsNotNone(msg, "motion_possible never became TRUE")
+
+    def move(self, kind, target, via=None, preview_only=False, timeout=40.0):
+        goal = MoveToPoseGoal(target=cp(target), move_type=kind, has_via=via is not None,
+                              via=cp(via) if via is not None else CartesianPose(),
+                              preview_only=preview_only)
+        self.client.send_goal(goal)
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(timeout)), "no result in time")
+        return self.client.get_state(), self.client.get_result()
+
+    def wait_entries(self, n, timeout=10.0):
+        self.assertTrue(self.executed.wait_count(n, timeout), "expected %d executed entries, have %d"
+                        % (n, len(self.executed.messages)))
+        return self.entries()
+
+    # -------------------------------------------------------------------- tests (run in name order)
+    def test_01_status_and_joint_states_at_their_rates(self):
+        first = self.status.wait_for(lambda m: True, 5.0)
+        self.assertIsNotNone(first, "no robot_status within 5 s of launch")
+        self.assertIsNotNone(self.joints.wait_for(lambda m: True, 5.0), "no joint_states within 5 s")
+        self.wait_motion_possible()
+        t0 = time.monotonic()
+        n_status, n_joints = len(self.status.messages), len(self.joints.messages)
+        self.status.wait_for(lambda m: False, 2.0)          # collect for 2 s
+        dt = time.monotonic() - t0
+        status_rate = (len(self.status.messages) - n_status) / dt
+        joint_rate = (len(self.joints.messages) - n_joints) / dt
+        self.assertAlmostEqual(status_rate, 10.0, delta=3.0)
+        self.assertAlmostEqual(joint_rate, 20.0, delta=5.0)
+        js = self.joints.last()
+        self.assertEqual(list(js.name), ["joint_%d" % i for i in range(1, 7)])
+        tool = self.tool.last()
+        self.assertEqual(tool.header.frame_id, "base")
+        p, q = tool.pose.position, tool.pose.orientation
+        reported = ControllerPose.from_ros((p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
+        dp, da = self.kin.fk_pose(js.position).distance_to(reported)
+        self.assertLess(dp, 1.0)
+        self.assertLess(da, 1.0)
+        diag = self.diag.wait_for(lambda m: any("link" in s.name for s in m.status), 5.0)
+        self.assertIsNotNone(diag, "no link diagnostics")
+        link = [s for s in diag.status if "link" in s.name][0]
+        keys = {kv.key for kv in link.values}
+        self.assertIn("bus retries", keys)
+        self.assertIn("link reconnects", keys)
+
+    def test_02_ptp_lin_circ_goals_execute_once(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        state, result = self.move(MoveToPoseGoal.PTP, (1000, 200, 800, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        self.assertLessEqual(as_pose(result.reached).distance_to(ControllerPose(1000, 200, 800, 0, 45, 0))[0], 1.0)
+        state, result = self.move(MoveToPoseGoal.LIN, (1000, -150, 800, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        state, result = self.move(MoveToPoseGoal.CIRC, (1000, 150, 800, 0, 45, 0),
+                                  via=(1100, 0, 800, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        entries = self.wait_entries(before + 4)[before:]
+        self.assertEqual([(e["move_type"], e["target"], e["outcome"]) for e in entries], [
+            ("PTP", [1000, 200, 800, 0, 45, 0], "executed"),
+            ("LIN", [1000, -150, 800, 0, 45, 0], "executed"),
+            ("CIRC_VIA", [1100, 0, 800, 0, 45, 0], "via_stored"),
+            ("CIRC_END", [1000, 150, 800, 0, 45, 0], "executed"),
+        ])
+        state, result = self.move(MoveToPoseGoal.LIN, (1000, 0, 700, 0, 45, 0), preview_only=True)
+        self.assertEqual(state, GoalStatus.SUCCEEDED)
+        self.assertEqual(len(result.joint_target), 6)
+        self.assertGreater(result.estimated_duration, 0.0)
+
+    def test_03_bad_goals_are_refused_and_nothing_is_sent(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        for target, words in [((1500, 0, 725, 0, 45, 0), "workspace"),
+                              ((1400, 0, 1400, 0, 0, 0), "reach"),
+                              ((1120, 0, float("nan"), 0, 45, 0), "finite")]:
+            state, result = self.move(MoveToPoseGoal.PTP, target)
+            self.assertEqual(state, GoalStatus.ABORTED)
+            self.assertFalse(result.success)
+            self.assertIn(words, result.reason.lower())
+        state, result = self.move(7, HOME)
+        self.assertEqual(state, GoalStatus.ABORTED)
+        self.assertIn("move_type", result.reason)
+        # a good goal afterwards is the only new entry: the refused ones never reached the bus
+        state, result = self.move(MoveToPoseGoal.PTP, (1050, 0, 750, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        entries = self.wait_entries(before + 1)[before:]
+        self.assertEqual([e["target"] for e in entries], [[1050, 0, 750, 0, 45, 0]])
+
+    def test_04_cancel_mid_motion_stops_the_arm(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        target = (1000, 650, 800, 0, 45, 0)                   # LIN at 0.25 m/s: ~2.5 s
+        state, preview = self.move(MoveToPoseGoal.LIN, target, preview_only=True)
+        self.assertEqual(state, GoalStatus.SUCCEEDED, preview.reason)
+        self.assertGreater(preview.estimated_duration, 1.0)   # long enough to cancel half way
+        goal = MoveToPoseGoal(target=cp(target), move_type=MoveToPoseGoal.LIN)
+        moving = threading.Event()
+        self.client.send_goal(goal, feedback_cb=lambda fb: fb.phase == "moving" and moving.set())
+        self.assertTrue(moving.wait(10.0), "never saw the moving phase")
+        self.client.cancel_goal()
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(10.0)))
+        self.assertEqual(self.client.get_state(), GoalStatus.PREEMPTED)
+        (entry,) = self.wait_entries(before + 1)[before:]
+        self.assertEqual(entry["outcome"], "rejected")
+        self.assertIn("stop", entry["reason"])
+        stopped = ControllerPose(*entry["final_pose"])
+        self.assertGreater(stopped.distance_to(ControllerPose(*target))[0], 20.0)
+        # it stays where it stopped
+        self.wait_motion_possible()
+        tool = self.tool.wait_for(lambda m: True, 2.0, after=time.monotonic())
+        p = tool.pose.position
+        self.assertLess(math.dist((p.x * 1000, p.y * 1000, p.z * 1000), stopped.as_tuple()[:3]), 1.5)
+
+    def test_05_joint_path_in_order_and_empty_stops(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        q = list(self.joints.last().position)
+        traj = JointTrajectory(joint_names=["joint_%d" % i for i in range(1, 7)])
+        for k in range(1, 6):
+            point = [q[0] + 0.08 * k, q[1], q[2] - 0.04 * k, 0.0, q[4], 0.1 * k]
+            traj.points.append(JointTrajectoryPoint(positions=point))
+        expected = [self.kin.fk_pose(p.positions) for p in traj.points]
+        self.path_pub.publish(traj)
+        entries = self.wait_entries(before + 5, 40.0)[before:]
+        self.assertEqual([e["move_type"] for e in entries], ["PTP"] * 5)
+        for entry, pose in zip(entries, expected):
+            self.assertTrue(all(abs(a - b) <= 0.5 for a, b in zip(entry["target"], pose.as_tuple())),
+                            (entry["target"], pose))
+            self.assertEqual(entry["outcome"], "executed")
+        # a long path, then an empty one: it stops and the rest never goes out
+        self.wait_motion_possible()
+        before = len(self.entries())
+        q = list(self.joints.last().position)
+        long_path = JointTrajectory(joint_names=traj.joint_names)
+        for k in range(1, 6):
+            long_path.points.append(JointTrajectoryPoint(
+                positions=[q[0] + (0.5 if k % 2 else -0.5), q[1], q[2], q[3], q[4], q[5]]))
+        self.path_pub.publish(long_path)
+        self.status.wait_for(lambda m: m.in_motion.val == TriState.TRUE, 10.0, after=time.monotonic())
+        self.path_pub.publish(JointTrajectory(joint_names=traj.joint_names))
+        self.wait_motion_possible()
+        self.status.wait_for(lambda m: False, 1.0)         # give a wrongly sent target time to show
+        self.assertLess(len(self.entries()) - before, 5)
+
+    def test_06_estop_refuses_goals_until_cleared(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        self.assertTrue(self.set_estop(True).success)
+        msg = self.status.wait_for(lambda m: m.e_stopped.val == TriState.TRUE, 2.0, after=time.monotonic())
+        self.assertIsNotNone(msg, "robot_status.e_stopped never TRUE")
+        self.assertEqual(msg.motion_possible.val, TriState.FALSE)
+        state, result = self.move(MoveToPoseGoal.PTP, (1000, 0, 800, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.ABORTED)
+        self.assertIn("emergency stop", result.reason)
+        self.assertTrue(self.set_estop(False).success)
+        self.assertTrue(self.set_drives(True).success)
+        self.wait_motion_possible()
+        state, result = self.move(MoveToPoseGoal.PTP, (1000, 0, 800, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        self.assertEqual([e["target"] for e in self.wait_entries(before + 1)[before:]],
+                         [[1000, 0, 800, 0, 45, 0]])
+
+    def test_07_stop_motion_service(self):
+        self.wait_motion_possible()
+        self.client.send_goal(MoveToPoseGoal(target=cp((800, 600, 1000, 0, 45, 0)),
+                                             move_type=MoveToPoseGoal.PTP))
+        self.status.wait_for(lambda m: m.in_motion.val == TriState.TRUE, 10.0, after=time.monotonic())
+        response = self.stop_motion()
+        self.assertTrue(response.success)
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(10.0)))
+        self.assertIn(self.client.get_state(), (GoalStatus.PREEMPTED, GoalStatus.ABORTED))
+        msg = self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 3.0, after=time.monotonic())
+        self.assertIsNotNone(msg)
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "driver", DriverTest)
