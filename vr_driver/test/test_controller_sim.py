@@ -19,8 +19,6 @@ from pyprofibus_vendor.fdl import FcbRequester
 from vr_driver.controller_sim import (ControllerProgram, SimError, SimOptions, VirtualController, main,
                                       robot_slave)
 from vr_driver.errors import JointLimitError, MotionError, UnreachableError
-from vr_driver.kinematics import Kinematics
-from vr_driver.motion import MotionPlanner
 from vr_driver.poses import HOME_POSE
 from vr_driver.protocol import (Accepted, Command, ControllerState, Done, Feedback, MasterHandshake, Rejected,
                                 StatusBits, WireMoveType)
@@ -31,16 +29,6 @@ PERIOD = 0.01
 SPEED = 4.0
 UNREACHABLE = (2000, 0, 500, 0, 90, 0)          # 2 m out: beyond the reach
 OUT_OF_LIMITS = (-600, 0, 400, 0, 90, 180)      # behind the robot: only with joint_1 = pi
-
-
-@pytest.fixture(scope="module")
-def kin():
-    return Kinematics.default()
-
-
-@pytest.fixture(scope="module")
-def planner(kin):
-    return MotionPlanner(kin)
 
 
 class Rig:

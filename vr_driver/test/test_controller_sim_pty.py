@@ -27,7 +27,6 @@ from pyprofibus_vendor.phy_serial import SerialLink, open_pty_pair
 
 from vr_driver.controller_sim import VirtualController
 from vr_driver.errors import VrDriverError
-from vr_driver.kinematics import Kinematics
 from vr_driver.motion import MotionPlanner, MoveType
 from vr_driver.poses import ControllerPose, Workspace
 from vr_driver.protocol import (Accepted, Command, ControllerState, Done, Feedback, HandshakeEvent,
@@ -47,11 +46,6 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 REPO = os.path.dirname(os.path.dirname(SRC))
 PYTHONPATH = os.pathsep.join([SRC, os.path.join(REPO, "pyprofibus_vendor", "src"),
                               os.path.join(REPO, "panasonic_vr006l_support", "src")])
-
-
-@pytest.fixture(scope="module")
-def kin():
-    return Kinematics.default()
 
 
 class MasterDriver:

@@ -13,18 +13,12 @@ import pytest
 from vr_driver.controller_sim import VirtualController
 from vr_driver.driver import DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveRequest
 from vr_driver.errors import VrDriverError
-from vr_driver.kinematics import Kinematics
 from vr_driver.motion import MoveType
 from vr_driver.params import DriverParams
 from vr_driver.poses import HOME_POSE, ControllerPose
 from vr_driver.sim_arm import Outcome
 
 BAUD = 187500
-
-
-@pytest.fixture(scope="module")
-def kin():
-    return Kinematics.default()
 
 
 class Rig:

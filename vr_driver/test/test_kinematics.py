@@ -30,11 +30,6 @@ def urdf():
 
 
 @pytest.fixture(scope="module")
-def kin():
-    return Kinematics.default()
-
-
-@pytest.fixture(scope="module")
 def dims():
     with open(default_kinematics_yaml()) as f:
         data = yaml.safe_load(f)

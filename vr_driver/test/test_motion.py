@@ -9,21 +9,10 @@ import pytest
 
 from vr_driver.errors import (JointLimitError, MotionError, NearSingularError, PoseError, UnreachableError,
                               VrDriverError)
-from vr_driver.kinematics import Kinematics
 from vr_driver.motion import MotionPlanner, MotionSettings, MoveType, Trajectory, trapezoid_tau
 from vr_driver.poses import HOME_POSE, ControllerPose
 
 TOL = 1e-3  # 1 mm
-
-
-@pytest.fixture(scope="module")
-def kin():
-    return Kinematics.default()
-
-
-@pytest.fixture(scope="module")
-def planner(kin):
-    return MotionPlanner(kin)
 
 
 @pytest.fixture(scope="module")
