@@ -23,7 +23,7 @@ addresses, FC, SAPs, exact length) are delivered.
 
 The core is :meth:`DpMaster.step` (non-blocking, time injected); the
 blocking API (:meth:`DpMaster.cycle`, :meth:`DpMaster.run_cycles`,
-:meth:`DpMaster.run`) waits in ``link.recv`` or on an Event, never spinning.
+:meth:`DpMaster.run`) waits in ``link.recv``, a sleep or on an Event, never spinning.
 """
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ from .dp import (MASTER_SAP, ChkCfg, DiagStatus1, DiagStatus2, GcCommand, Global
                  PrmStationStatus, Sap, SetPrm, SlaveDiag, cfg_io_lengths, explain_diag,
                  global_control_frame, request_frame, watchdog_factors)
 from .errors import ConfigError, DpError, DpTimeoutError, PhyError, ProfibusError
-from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction,
+from .fdl import (ED, SD2, Deframer, FcbRequester, Frame, FrameControl, RequestFunction,
                   ResponseStatus, Sd1, Sd2, Sd3, ShortAck, StationType)
 from .phy import Link
 
@@ -59,6 +59,7 @@ _SLOT_TABLE = [
     (12_000_000, 1000, 800),
 ]
 _RETRY_TABLE = [(1_500_000, 1), (3_000_000, 2), (6_000_000, 3), (12_000_000, 4)]
+_SHORT_PAUSE = 0.05   # s: run() sleeps plainly up to this long between cycles
 STANDARD_BAUDS = (9600, 19200, 45450, 93750, 187500, 500000, 1500000, 3000000, 6000000,
                   12000000)
 
@@ -185,7 +186,8 @@ class MasterCounters:
     retries: int = 0
     timeouts: int = 0
     invalid_replies: int = 0
-    unexpected_frames: int = 0  # telegrams received while nothing was awaited
+    unexpected_frames: int = 0  # telegrams read while nothing was awaited (bytes still
+    # unread when the next request goes out are flushed uncounted: TSYN, see _transmit)
     reconnects: int = 0
     losses: int = 0
     state_changes: int = 0
@@ -319,6 +321,8 @@ class DpMaster:
         self._gc_queue: List[GlobalControl] = []
         self._sent_in_round = False
         self._round_idle = False
+        self._timeouts: Dict[Tuple[int, int], float] = {}   # by request/reply length, for
+        self._timeouts_for: Optional[Tuple[BusTiming, float]] = None   # these settings
         self._handlers: Dict[MasterSlaveState, Callable[[SlaveHandle, float], bool]] = {
             MasterSlaveState.INIT: self._do_init,
             MasterSlaveState.WAIT_DIAG: self._do_diag,
@@ -436,13 +440,19 @@ class DpMaster:
                          f"{reason}; retry in {delay:.2f} s", now)
 
     def _reply_timeout(self, request_len: int, reply_len: int) -> float:
-        t = self.timing
-        wire = t.chars(request_len + reply_len) + t.bits(t.tsyn_bits) + t.slot_time
-        return max(self.reply_timeout_floor, wire)
+        if self._timeouts_for != (self.timing, self.reply_timeout_floor):  # settings changed
+            self._timeouts.clear()
+            self._timeouts_for = (self.timing, self.reply_timeout_floor)
+        key = (request_len, reply_len)
+        timeout = self._timeouts.get(key)
+        if timeout is None:
+            t = self.timing
+            wire = t.chars(request_len + reply_len) + t.bits(t.tsyn_bits) + t.slot_time
+            timeout = self._timeouts[key] = max(self.reply_timeout_floor, wire)
+        return timeout
 
-    def _send(self, slave: SlaveHandle, kind: str, frame: Frame, reply_len: int,
+    def _send(self, slave: SlaveHandle, kind: str, raw: bytes, reply_len: int,
               now: float, job: Optional[AcyclicRequest] = None) -> None:
-        raw = frame.encode()
         timeout = self._reply_timeout(len(raw), reply_len)
         self._pending = _Pending(slave, kind, raw, now + timeout, timeout, job=job)
         self._transmit(raw)
@@ -486,7 +496,8 @@ class DpMaster:
 
     def _step(self, now: float) -> float:
         turns = self._turns
-        self._poll_rx(now, 0.0)
+        if self._pending is not None:   # otherwise the next request flushes the input anyway
+            self._poll_rx(now, 0.0)
         if self._turns != turns:
             return now  # a reply completed a turn: let the caller see it first
         if self._pending is not None:
@@ -514,7 +525,9 @@ class DpMaster:
             self._end_turn()
             if self._turn == 0 and self._round_idle:
                 return self.next_wakeup(now)
-        return now
+            return now
+        # a request went out: nothing to do before its reply or deadline
+        return self._pending.deadline if self._pending is not None else now
 
     def next_wakeup(self, now: float) -> float:
         """Earliest time something is due (pending deadline, end of a back-off)."""
@@ -532,7 +545,29 @@ class DpMaster:
         if data:
             self._feed(data, now)
 
+    def _dx_reply_data(self, p: _Pending, data: bytes) -> Optional[bytes]:
+        """The inputs if ``data`` is exactly the usual good Data_Exchange reply, else None.
+
+        The usual reply -- SD2 to us from the slave, FC DL (0x08: response, slave, no
+        diag), no SAPs, exactly the configured input length, correct FCS and ED -- is
+        checked on the raw bytes; anything else (other lengths, DH, SD1/SD3/SC, split or
+        merged chunks, errors) takes the general path through the deframer.
+        """
+        n_in = p.slave.spec.input_size or 0
+        if (len(data) != n_in + 9 or n_in == 0 or n_in == 8 or data[0] != SD2 or data[3] != SD2
+                or data[1] != n_in + 3 or data[2] != n_in + 3 or data[4] != self.address
+                or data[5] != p.slave.address or data[6] != 0x08 or data[-1] != ED
+                or (sum(data[4:-2]) & 0xFF) != data[-2]):
+            return None
+        return bytes(data[7:-2])
+
     def _feed(self, data: bytes, now: float) -> None:
+        p = self._pending
+        if p is not None and p.kind == "dx" and not self.deframer.pending:
+            inputs = self._dx_reply_data(p, data)
+            if inputs is not None:
+                self._dx_done(p, inputs, ResponseStatus.DL, now)
+                return
         frames = self.deframer.feed(data)
         self.counters.fcs_errors = self.deframer.counters.fcs_errors
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
@@ -594,7 +629,7 @@ class DpMaster:
     def _do_init(self, slave: SlaveHandle, now: float) -> bool:
         slave.fcb.reset()
         frame = Sd1(slave.address, self.address, FrameControl.req(RequestFunction.FDL_STATUS))
-        self._send(slave, "fdl_status", frame, 6, now)
+        self._send(slave, "fdl_status", frame.encode(), 6, now)
         return True
 
     def _do_backoff(self, slave: SlaveHandle, now: float) -> bool:
@@ -607,7 +642,7 @@ class DpMaster:
                      reply_len: int, now: float, job: Optional[AcyclicRequest] = None) -> bool:
         fcb, fcv = slave.fcb.bits()
         frame = request_frame(slave.address, self.address, fcb, fcv, sap, payload)
-        self._send(slave, kind, frame, reply_len, now, job)
+        self._send(slave, kind, frame.encode(), reply_len, now, job)
         return True
 
     def _do_diag(self, slave: SlaveHandle, now: float) -> bool:
@@ -624,10 +659,26 @@ class DpMaster:
         if slave.jobs:
             job = slave.jobs[0]
             return self._sap_request(slave, "job", job.sap, b"", 255, now, job)
-        fcb, fcv = slave.fcb.bits()
-        frame = request_frame(slave.address, self.address, fcb, fcv, None, slave.outputs)
-        self._send(slave, "dx", frame, (slave.spec.input_size or 0) + 9, now)
+        self._send(slave, "dx", self._dx_request(slave), (slave.spec.input_size or 0) + 9, now)
         return True
+
+    def _dx_request(self, slave: SlaveHandle) -> bytes:
+        """The Data_Exchange request (SRD high, default SAP, the latched outputs) as bytes.
+
+        The SD2 case -- every cycle of the usual slave -- is assembled directly (the same
+        bytes as ``request_frame(...).encode()``, without building frame objects); empty or
+        8-byte outputs (SD1 / SD3) go through :func:`request_frame`.
+        """
+        fcb, fcv = slave.fcb.bits()
+        data = slave.outputs
+        n = len(data)
+        if n == 0 or n == 8:
+            return request_frame(slave.address, self.address, fcb, fcv, None, data).encode()
+        head = (slave.address, self.address,
+                0x40 | RequestFunction.SRD_HIGH | (0x20 if fcb else 0) | (0x10 if fcv else 0))
+        le = n + 3
+        return (bytes((SD2, le, le, SD2) + head) + data
+                + bytes(((sum(head) + sum(data)) & 0xFF, ED)))
 
     # -- reply handlers -------------------------------------------------------------------
     def _on_fdl_status(self, p: _Pending, frame: Frame, now: float) -> None:
@@ -745,6 +796,11 @@ class DpMaster:
             if len(frame.data) != n_in:
                 return self._invalid(p, f"{len(frame.data)} input bytes, expected {n_in}")
             data = frame.data
+        self._dx_done(p, data, status, now)
+
+    def _dx_done(self, p: _Pending, data: bytes, status: ResponseStatus, now: float) -> None:
+        """A good Data_Exchange reply: deliver the inputs, end the turn."""
+        slave = p.slave
         self._pending = None
         slave.fcb.acknowledge()
         slave._store_inputs(data, now)
@@ -814,7 +870,14 @@ class DpMaster:
 
     def run(self, period: float, stop: threading.Event,
             on_cycle: Optional[Callable[["DpMaster"], None]] = None) -> None:
-        """Fixed-rate loop: one cycle every ``period`` seconds until ``stop`` is set."""
+        """Fixed-rate loop: one cycle every ``period`` seconds until ``stop`` is set.
+
+        ``stop`` is checked before every cycle. Pauses of up to 50 ms (typical bus
+        periods) are plain sleeps, so a stop set meanwhile takes effect at the next cycle
+        boundary (Event.wait runs threading.Condition's Python code and allocates a lock
+        on every call, a measurable share of a 100 Hz loop's CPU); longer pauses end as
+        soon as ``stop`` is set.
+        """
         next_start = self.clock()
         while not stop.is_set():
             self.cycle(timeout=max(period, 1.0))
@@ -825,6 +888,8 @@ class DpMaster:
             if next_start < now:
                 self.counters.overruns += 1
                 next_start = now
+            elif next_start - now <= _SHORT_PAUSE:
+                time.sleep(next_start - now)
             else:
                 stop.wait(next_start - now)
 

@@ -167,11 +167,23 @@ class FrameControl:
 
     @classmethod
     def req(cls, function: int, fcb: bool = False, fcv: bool = False) -> "FrameControl":
-        return cls(True, function, fcb=fcb, fcv=fcv)
+        key = (True, function, bool(fcb), bool(fcv))
+        fc = _FC_MADE.get(key) if cls is FrameControl else None
+        if fc is None:
+            fc = cls(True, function, fcb=bool(fcb), fcv=bool(fcv))
+            if cls is FrameControl:
+                _FC_MADE[key] = fc
+        return fc
 
     @classmethod
     def resp(cls, status: int, station_type: int = StationType.SLAVE) -> "FrameControl":
-        return cls(False, status, station_type=StationType(station_type))
+        key = (False, status, station_type)
+        fc = _FC_MADE.get(key) if cls is FrameControl else None
+        if fc is None:
+            fc = cls(False, status, station_type=StationType(station_type))
+            if cls is FrameControl:
+                _FC_MADE[key] = fc
+        return fc
 
     @property
     def function(self) -> RequestFunction:
@@ -186,26 +198,40 @@ class FrameControl:
         return ResponseStatus(self.code)
 
     def encode(self) -> int:
+        # plain ints: IntFlag arithmetic costs microseconds and this runs for every telegram
         if self.request:
-            return (FcBit.REQUEST | (FcBit.FCB if self.fcb else 0)
-                    | (FcBit.FCV if self.fcv else 0) | int(self.code))
+            return (0x40 | (0x20 if self.fcb else 0) | (0x10 if self.fcv else 0)
+                    | int(self.code))
         return (int(self.station_type) << 4) | int(self.code)
 
     @classmethod
     def decode(cls, byte: int) -> "FrameControl":
+        if cls is FrameControl and type(byte) is int:
+            fc = _FC_DECODED.get(byte)
+            if fc is not None:
+                return fc
         if not 0 <= byte <= 0xFF:
             raise FrameError(f"FC {byte!r} is not a byte")
         if byte & FcBit.RESERVED:
             raise FrameError(f"FC 0x{byte:02X}: reserved bit 7 set")
         if byte & FcBit.REQUEST:
-            return cls(True, byte & 0x0F, fcb=bool(byte & FcBit.FCB), fcv=bool(byte & FcBit.FCV))
-        return cls(False, byte & 0x0F, station_type=StationType((byte >> 4) & 0x03))
+            fc = cls(True, byte & 0x0F, fcb=bool(byte & FcBit.FCB), fcv=bool(byte & FcBit.FCV))
+        else:
+            fc = cls(False, byte & 0x0F, station_type=StationType((byte >> 4) & 0x03))
+        if cls is FrameControl and type(byte) is int:
+            _FC_DECODED[byte] = fc
+        return fc
 
     def __str__(self) -> str:
         if self.request:
             return (f"{RequestFunction(self.code).name}"
                     f"(FCB={int(self.fcb)},FCV={int(self.fcv)})")
         return f"{ResponseStatus(self.code).name}({self.station_type.name})"
+
+
+# FrameControl is immutable: the valid ones are made once (decode / req / resp are hot paths)
+_FC_DECODED: Dict[int, FrameControl] = {}
+_FC_MADE: Dict[tuple, FrameControl] = {}
 
 
 # -- frames --------------------------------------------------------------------------

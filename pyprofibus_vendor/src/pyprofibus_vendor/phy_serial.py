@@ -4,7 +4,10 @@
 from 9600 to 12 M, so plain device paths, ``loop://`` and
 ``socket://host:port`` all work. Reads never spin: with a file descriptor the
 link waits in ``select``; URL handlers without one (``loop://``) use
-pyserial's own blocking read with the timeout.
+pyserial's own blocking read with the timeout. On a POSIX tty (device path,
+pty) the link reads, writes and flushes the file descriptor itself after
+pyserial opened and configured it: pyserial's read/write add a ``select`` per
+call, which is most of a PHY's cost per telegram.
 
 Linux pty quirk: the pty driver drops ``PARENB``, and then ``tcsetattr``
 fails with EINVAL whenever the same call does not also change the speed --
@@ -44,6 +47,7 @@ __all__ = ["SerialLink", "FdLink", "PtyPair", "open_pty_pair", "is_pty"]
 log = logging.getLogger(__name__)
 
 _PTY_MAJORS = range(136, 144)   # Unix98 pty slaves (/dev/pts/N)
+_WRITE_STALL = 5.0              # s without any progress before a write counts as failed
 
 
 def is_pty(path: str) -> bool:
@@ -89,6 +93,7 @@ class SerialLink(Link):
         self.is_pty = "://" not in url and is_pty(url)
         self._ser: Optional[serial.SerialBase] = None
         self._fd: Optional[int] = None
+        self._raw = False
         self._timeout: Optional[float] = -1.0
         self._open()
 
@@ -130,6 +135,8 @@ class SerialLink(Link):
             self._fd = ser.fileno()
         except (AttributeError, NotImplementedError, serial.SerialException, OSError):
             self._fd = None
+        # a POSIX tty: read/write the fd directly (pyserial's read/write add selects per call)
+        self._raw = self._fd is not None and getattr(ser, "fd", None) == self._fd
         if self._fd is not None and self.check_parity and ser.parity != serial.PARITY_NONE \
                 and not self.is_pty and hasattr(ser, "fd"):
             try:
@@ -152,8 +159,24 @@ class SerialLink(Link):
         self.close()
         self._open()
 
+    def _send_raw(self, fd: int, data: bytes) -> None:
+        view = memoryview(data)
+        while view:
+            try:
+                n = os.write(fd, view)
+            except (BlockingIOError, InterruptedError):
+                n = 0
+            except OSError as err:
+                raise PhyError(f"{self.url}: write failed: {err}") from err
+            view = view[n:]
+            if view and not select.select([], [fd], [], _WRITE_STALL)[1]:
+                raise PhyError(f"{self.url}: write stalled for {_WRITE_STALL:.0f} s "
+                               f"({len(view)} bytes left)")
+
     def send(self, data: bytes) -> None:
         ser = self.serial
+        if self._raw:
+            return self._send_raw(self._fd, bytes(data))  # type: ignore[arg-type]
         try:
             n = ser.write(data)
         except (serial.SerialException, OSError, termios.error) as err:
@@ -168,7 +191,16 @@ class SerialLink(Link):
                 ready, _, _ = select.select([self._fd], [], [], timeout)
                 if not ready:
                     return b""
-                return bytes(ser.read(max_bytes))
+                if not self._raw:
+                    return bytes(ser.read(max_bytes))
+                try:
+                    data = os.read(self._fd, max_bytes)
+                except (BlockingIOError, InterruptedError):
+                    return b""
+                if not data:   # readable but nothing to read: the device went away
+                    raise PhyError(f"{self.url}: read failed: device reports readiness to "
+                                   f"read but returned no data (disconnected?)")
+                return data
             # no file descriptor (loop://): pyserial blocks for the first byte
             if timeout != self._timeout:
                 ser.timeout = timeout
@@ -183,6 +215,9 @@ class SerialLink(Link):
 
     def flush_input(self) -> None:
         try:
+            if self._raw:
+                termios.tcflush(self._fd, termios.TCIFLUSH)
+                return
             self.serial.reset_input_buffer()
         except (serial.SerialException, OSError, termios.error) as err:
             raise PhyError(f"{self.url}: flush failed: {err}") from err
@@ -190,6 +225,7 @@ class SerialLink(Link):
     def close(self) -> None:
         ser, self._ser = self._ser, None
         self._fd = None
+        self._raw = False
         if ser is not None:
             try:
                 ser.close()

@@ -1,0 +1,94 @@
+"""Smoke runs of the benchmarks: they run to the end and print their figure lines (timings unchecked)."""
+import os
+import re
+import subprocess
+import unittest
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+NUM = r"[0-9]+(?:\.[0-9]+)?"
+
+
+class DpCycleBenchTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.res = subprocess.run([os.path.join(REPO, "scripts", "bench"), "dp_cycle", "--", "--quick"],
+                                 capture_output=True, text=True, timeout=300)
+        cls.out = cls.res.stdout
+
+    def line(self, pattern):
+        self.assertRegex(self.out, re.compile(pattern, re.M),
+                         "missing line /%s/ in:\n%s\n%s" % (pattern, self.out, self.res.stderr[-3000:]))
+
+    def test_exits_0(self):
+        self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
+        self.assertIn("=== bench/dp_cycle.py --quick", self.out)
+        self.assertNotIn("FAILED", self.out)
+
+    def test_every_variant_has_its_figures(self):
+        """cycles/s, master CPU, server CPU and wall time per cycle; pyprofibus is there because
+        scripts/bench sets up the test-peer venv."""
+        for name in ("floor", "slave-only", "ours", "pyprofibus"):
+            self.line(r"^%s\s+%s\s+%s\s+%s\s+%s\s+\S" % (re.escape(name), NUM, NUM, NUM, NUM))
+
+    def test_ratios_100hz_wire_times_and_targets(self):
+        for ratio in ("ours/floor cycles/s", "ours/slave-only cycles/s", "ours/pyprofibus cycles/s",
+                      "ours/pyprofibus CPU per cycle"):
+            self.line(r"^ratio %s:\s+%s$" % (re.escape(ratio), NUM))
+        self.line(r"^100 Hz: DpMaster\.run\(period=0\.01\) for %s s: [0-9]+ cycles .* master %s %% of one core"
+                  % (NUM, NUM))
+        self.line(r"^100 Hz floor: .* %s %% of one core" % NUM)
+        for baud in ("19.2k", "187.5k", "1.5M"):
+            self.line(r"^wire %s\s+TSDR\s+[0-9]+\.\.\s*[0-9]+ bit:\s+%s \.\.\s+%s us" % (re.escape(baud), NUM, NUM))
+        targets = re.findall(r"^(PASS|MISS) ", self.out, re.M)
+        self.assertEqual(len(targets), 4, self.out)
+
+
+class DriverLatencyBenchTest(unittest.TestCase):
+    """bench/driver_latency.py --quick: its own roscore + driver.launch (sim), 3 goals, 2 e-stops, a 2 s
+    idle window (about 15 s); every figure line is there, no timing is checked."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.res = subprocess.run([os.path.join(REPO, "scripts", "bench"), "driver_latency", "--", "--quick"],
+                                 capture_output=True, text=True, timeout=180)
+        cls.out = cls.res.stdout
+
+    def line(self, pattern):
+        self.assertRegex(self.out, re.compile(pattern, re.M),
+                         "missing line /%s/ in:\n%s\n%s" % (pattern, self.out, self.res.stderr[-3000:]))
+
+    def test_exits_0(self):
+        self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
+        self.assertIn("=== bench/driver_latency.py --quick", self.out)
+        self.assertNotIn("FAILED", self.out)
+        self.assertNotIn("had to kill", self.out)
+
+    def test_sections_have_their_figures(self):
+        row = r"\s+%s\s+%s\s+%s\s+[0-9]+$" % (NUM, NUM, NUM)
+        for label in ("send_goal -> controller BUSY (execution-log start_time)",
+                      'send_goal -> client: first feedback phase "moving"',
+                      "send_goal -> client: first robot_status in_motion TRUE",
+                      "press: controller log -> client: e_stopped TRUE",
+                      "press: service return -> client: e_stopped TRUE",
+                      "release: controller log -> client: e_stopped FALSE"):
+            self.line(r"^%s%s" % (re.escape(label), row))
+        for topic in ("joint_states", "robot_status"):
+            self.line(r"^%s\s+[0-9]+\s+%s\s+%s\s+%s" % (topic, NUM, NUM, NUM))
+        self.line(r"^CPU /interface\s+%s %% of one core \(pid [0-9]+, /proc/[0-9]+/stat" % NUM)
+        self.line(r"^clock check: .* for [0-9]+ of [0-9]+ goals")
+
+    def test_summary_table(self):
+        self.line(r"^=== summary: median / p95 / max ms")
+        cell = r"%s / %s / %s \([0-9]+\)" % (NUM, NUM, NUM)
+        for label in ("goal -> controller BUSY", "goal -> feedback moving", "goal -> robot_status in_motion",
+                      "e-stop press (ctrl log) -> robot_status", "e-stop press (svc return) -> robot_status",
+                      "e-stop release (ctrl log) -> robot_status"):
+            self.line(r"^%s\s+%s$" % (re.escape(label), cell))
+        for topic in ("joint_states", "robot_status"):
+            self.line(r"^%s rate, jitter sd, max gap \(ms\)\s+%s Hz, sd %s, max gap %s$" % (topic, NUM, NUM, NUM))
+        self.line(r"^interface CPU idle \(%% of one core\)\s+%s %%$" % NUM)
+        self.line(r"^python .* wall time %s s$" % NUM)
+
+
+if __name__ == "__main__":
+    unittest.main()
