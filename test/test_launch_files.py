@@ -86,5 +86,39 @@ class LaunchFilesTest(unittest.TestCase):
                     os.unlink(f.name)
 
 
+
+class DriverLaunchParamsTest(unittest.TestCase):
+    """The parameters driver.launch gives the node `interface` pass the node's own validation
+    (vr_driver.params), for the virtual controller and for a real port."""
+
+    def check(self, *args):
+        import sys
+        sys.path.insert(0, os.path.join(REPO, "vr_driver", "src"))
+        sys.path.insert(0, os.path.join(REPO, "pyprofibus_vendor", "src"))
+        from vr_driver.params import DriverParams
+        loaded = dump_params(os.path.join(REPO, "vr_driver", "launch", "driver.launch"), args)
+        self.assertTrue(loaded.ok, loaded.stderr)
+        params = yaml.safe_load(loaded.stdout)
+        mine = {k[len("/interface/"):]: v for k, v in params.items() if k.startswith("/interface/")}
+        nested = {}
+        for key, value in mine.items():          # workspace/x -> {"workspace": {"x": ...}}
+            head, _, rest = key.partition("/")
+            if rest:
+                nested.setdefault(head, {})[rest] = value
+            else:
+                nested[key] = value
+        return DriverParams.from_dict(nested), params
+
+    def test_sim_defaults(self):
+        p, params = self.check()
+        self.assertEqual(p.port, params["/virtual_controller/pty_link"])
+        self.assertEqual(p.bus().baud, params["/virtual_controller/baud"])
+
+    def test_real_port(self):
+        p, params = self.check("sim:=false", "port:=/dev/ttyUSB7", "baud:=187500")
+        self.assertEqual((p.port, p.baud), ("/dev/ttyUSB7", 187500))
+        self.assertFalse(any(k.startswith("/virtual_controller/") for k in params))
+
+
 if __name__ == "__main__":
     unittest.main()

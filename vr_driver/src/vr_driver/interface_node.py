@@ -6,7 +6,9 @@ move_to_pose action and the stop_motion service; subscribes joint_path_command. 
 """
 from __future__ import annotations
 
+import faulthandler
 import math
+import signal
 import sys
 import threading
 from typing import List, Optional
@@ -317,6 +319,8 @@ class InterfaceNode:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
+    # `kill -USR1 <pid>` prints every thread's stack to stderr (for a node that seems stuck)
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     rospy.init_node("interface")
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     try:

@@ -1,0 +1,84 @@
+"""The node `interface` as a process: a bad parameter stops it at once with a message that names
+the parameter (exit 2); a missing serial port keeps it running, reporting the reason and retrying."""
+import os
+import select
+import subprocess
+import threading
+import time
+import unittest
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+PORT = 11544
+
+
+def env():
+    e = dict(os.environ)
+    e["ROS_MASTER_URI"] = "http://localhost:%d" % PORT
+    return e
+
+
+class InterfaceNodeTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.core = subprocess.Popen(["roscore", "-p", str(PORT)], stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True, env=env(),
+                                    start_new_session=True)
+        # roscore prints "started core service [/rosout]" once the master and rosout are up
+        end = time.monotonic() + 30
+        while time.monotonic() < end:
+            ready, _, _ = select.select([cls.core.stdout], [], [], 1.0)
+            if ready:
+                line = cls.core.stdout.readline()
+                if not line or "started core service" in line:
+                    break
+        else:
+            raise AssertionError("roscore did not start")
+        # keep reading roscore's output: a full pipe would block the master and every node with it
+        cls.drain = threading.Thread(target=cls.core.stdout.read, daemon=True)
+        cls.drain.start()
+
+    @classmethod
+    def tearDownClass(cls):
+        os.killpg(cls.core.pid, 2)
+        cls.core.wait(20)
+
+    def node(self, *args, timeout=60):
+        return subprocess.run(["rosrun", "vr_driver", "interface", "__name:=interface_%d" % time.monotonic_ns()]
+                              + list(args), capture_output=True, text=True, timeout=timeout, env=env())
+
+    def test_bad_parameters_stop_the_node_naming_the_parameter(self):
+        for arg, words in [("_baud:=12345", "~baud = 12345"),
+                           ("_byte_order:=middle", "~byte_order = 'middle'"),
+                           ("_cycle_rate:=-5.0", "~cycle_rate = -5.0"),
+                           ("_speed:=3", "~speed = 3: unknown parameter")]:
+            res = self.node(arg)
+            self.assertEqual(res.returncode, 2, arg + res.stdout + res.stderr)
+            self.assertIn(words, res.stderr, arg)
+
+    def test_missing_port_is_reported_and_retried_without_exiting(self):
+        proc = subprocess.Popen(["rosrun", "vr_driver", "interface", "__name:=interface_noport",
+                                 "_port:=/dev/vr006l_no_such_port", "_reconnect_period:=0.2"],
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env(),
+                                start_new_session=True)
+        try:
+            seen, end = "", time.monotonic() + 30
+            while "cannot open /dev/vr006l_no_such_port" not in seen and time.monotonic() < end:
+                ready, _, _ = select.select([proc.stdout], [], [], 1.0)
+                if ready:
+                    line = proc.stdout.readline()
+                    if not line:
+                        break
+                    seen += line
+            self.assertIn("cannot open /dev/vr006l_no_such_port", seen)
+            self.assertIsNone(proc.poll(), "the node exited instead of retrying")
+        finally:
+            os.killpg(proc.pid, 2)
+            try:
+                proc.wait(20)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, 9)
+                raise
+
+
+if __name__ == "__main__":
+    unittest.main()
