@@ -1,4 +1,5 @@
 """The user-facing scripts: help, clear errors, and the workspace environment they provide."""
+import io
 import os
 import select
 import signal
@@ -37,6 +38,12 @@ class ScriptsTest(unittest.TestCase):
         self.assertEqual(os.path.realpath(lines[1]), os.path.realpath("/usr/bin/python3"))
         self.assertEqual(os.path.realpath(lines[2]), os.path.realpath(os.path.join(REPO, "vr_driver")))
 
+    def test_env_passes_option_arguments_through(self):
+        """devel/setup.bash must not see the command's own options (it used to choke on --help)."""
+        res = script("env", "python3", "-c", "import sys; print(sys.argv[1:])", "--help", "-x")
+        self.assertEqual(res.returncode, 0, res.stderr)
+        self.assertEqual(res.stdout.strip(), "['--help', '-x']")
+
     def test_env_names_the_independent_profibus_peer(self):
         """scripts/test installs pyprofibus 1.13 into its own venv; our runtime never imports it."""
         res = script("env", "bash", "-c", '"$VR_PEER_PYTHON" -c "import pyprofibus, importlib.metadata as m; print(m.version(\'pyprofibus\'))"; python3 -c "import pyprofibus" 2>/dev/null && echo leaked || echo isolated')
@@ -65,8 +72,8 @@ class ScriptsTest(unittest.TestCase):
         self.assertNotIn("installing", res.stdout)
 
     def test_run_drives_the_virtual_controller_and_stops_cleanly(self):
-        """The README's first command: one call brings up the driver against the virtual controller."""
-        proc = subprocess.Popen([os.path.join(REPO, "scripts", "run"), "--ros-port", "11533",
+        """--no-terminal: the launch alone in the foreground, as before the pose terminal existed."""
+        proc = subprocess.Popen([os.path.join(REPO, "scripts", "run"), "--no-terminal", "--ros-port", "11533",
                                  "sim_port:=/tmp/vr006l_test_run_%d" % os.getpid()],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 start_new_session=True)
@@ -92,6 +99,86 @@ class ScriptsTest(unittest.TestCase):
                 proc.wait()
         self.assertFalse(os.path.exists("/tmp/vr006l_test_run_%d" % os.getpid()))   # pty link removed
 
+    def test_run_opens_the_pose_terminal_and_stops_everything_when_it_is_left(self):
+        """The README's first command, as a person uses it: one call, the driver and the virtual
+        controller come up behind the pose terminal; a move; Ctrl-C during a move stops the arm
+        (and only the move: the driver stays); Ctrl-C at the prompt leaves and stops everything."""
+        import pexpect
+        marker = "/tmp/vr006l_test_run_terminal_%d" % os.getpid()
+        child = pexpect.spawn(os.path.join(REPO, "scripts", "run"),
+                              ["--ros-port", "11536", "sim_port:=" + marker, "baud:=187500", "cycle_rate:=50"],
+                              encoding="utf-8", timeout=120, dimensions=(50, 160))
+        child.logfile_read = io.StringIO()
+
+        def expect(pattern, timeout=60):
+            try:
+                return child.expect(pattern, timeout=timeout)
+            except (pexpect.TIMEOUT, pexpect.EOF) as exc:
+                self.fail("waited for %r (%s); scripts/run showed:\n%s"
+                          % (pattern, type(exc).__name__, child.logfile_read.getvalue()[-3000:]))
+
+        prompt = r"X \[mm, 100\.\.1400\] \([-0-9.]+\): "
+        try:
+            expect(r"\[run\] their output goes to (\S+\.log)", timeout=300)      # after scripts/setup
+            log = child.match.group(1)
+            expect(r"Controller ready: motion possible; the arm is at X 1120  Y 0  Z 725  Rx 0  Ry 45  Rz 0")
+            expect(prompt)
+            child.sendline("1000 200 800 0 45 0 lin")
+            expect(r"Preview: reachable")
+            expect(r"\[y/N\]: ")
+            child.sendline("y")
+            expect(r"moving +distance to go")
+            expect(r"Reached X 1000  Y 200  Z 800  Rx 0  Ry 45  Rz 0")
+            expect(prompt)
+            child.sendline("1000 -600 800 0 45 0 lin")                     # about 3 s
+            expect(r"\[y/N\]: ")
+            child.sendline("y")
+            expect(r"moving +distance to go")
+            child.sendintr()
+            expect(r"Stopped at X ")
+            expect(prompt)
+            child.sendline("status")                                       # the driver survived the Ctrl-C
+            expect(r"motion possible: yes")
+            expect(prompt)
+            child.sendintr()                                               # Ctrl-C at the prompt: leave
+            expect(r"Bye\.")
+            expect(r"\[run\] stopping the driver and the virtual controller")
+            expect(r"\[run\] stopped \(log: ")
+            expect(pexpect.EOF)
+        finally:
+            if child.isalive():
+                child.kill(signal.SIGINT)
+            child.close()
+        self.assertEqual(child.exitstatus, 0, child.logfile_read.getvalue()[-3000:])
+        self.assertFalse(os.path.exists(marker))                           # pty link removed
+        self.assertEqual(processes_mentioning(marker), [])                 # no orphans
+        with open(log) as f:
+            self.assertIn("controller connected: READY", f.read())
+
+    def test_run_says_when_the_driver_does_not_come_up(self):
+        marker = "/tmp/vr006l_test_run_broken_%d.yaml" % os.getpid()
+        res = script("run", "--ros-port", "11537", "--wait", "30", "config:=" + marker, timeout=300)
+        self.assertEqual(res.returncode, 3, res.stdout + res.stderr)
+        self.assertIn("has ended before", res.stderr)
+        self.assertRegex(res.stderr, r"\[run\] ERROR: the driver did not come up .*run-[0-9-]+\.log")
+        self.assertIn(marker, res.stderr)                                   # the log's last lines say why
+        self.assertEqual(processes_mentioning(marker), [])
+
+
+def processes_mentioning(text):
+    """PIDs of the live processes whose command line contains ``text``."""
+    found = []
+    for pid in os.listdir("/proc"):
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            with open("/proc/%s/cmdline" % pid, "rb") as f:
+                cmdline = f.read().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if text in cmdline:
+            found.append(int(pid))
+    return found
 
 if __name__ == "__main__":
     unittest.main()
