@@ -12,12 +12,17 @@
     │   └── JointLimitError      the only solutions (or the given joints) violate a joint limit
     ├── MotionError              a motion cannot be generated (joint jump, bad via point, ...)
     │   └── PathDeviationError   the interpolated path leaves its tolerance
-    └── ProtocolError            a 14-byte controller record cannot be encoded / decoded, or a
-        │                        protocol parameter (byte order, move type) is invalid
-        └── HandshakeError       the request handshake with the controller cannot proceed (not
-            │                    ready, a target already in flight)
-            ├── HandshakeTimeout the controller did not accept / finish / release in time
-            └── TargetRejected   the controller answered REJECTED to a target
+    ├── ProtocolError            a 14-byte controller record cannot be encoded / decoded, or a
+    │   │                        protocol parameter (byte order, move type) is invalid
+    │   └── HandshakeError       the request handshake with the controller cannot proceed (not
+    │       │                    ready, a target already in flight)
+    │       ├── HandshakeTimeout the controller did not accept / finish / release in time
+    │       └── TargetRejected   the controller answered REJECTED to a target
+    ├── CsrError                 a .csr program, or an input of the .csr exporter, is malformed or
+    │                            holds a value the format cannot take (names source, line, field);
+    │                            also a ValueError
+    └── CsrConversionError       valid waypoints that cannot be exported (unreachable, outside the
+                                 joint limits or the workspace box); ``problems`` lists each one
 
 Motion planning re-raises kinematic errors unchanged when a single step fails (the message names
 the step), so callers catch ``VrDriverError`` or one of its direct children. Foreign exceptions
@@ -40,6 +45,8 @@ __all__ = [
     "HandshakeError",
     "HandshakeTimeout",
     "TargetRejected",
+    "CsrError",
+    "CsrConversionError",
 ]
 
 
@@ -118,3 +125,45 @@ class TargetRejected(HandshakeError):
         super().__init__(reason)
         self.reason = reason
         self.target = target
+
+
+class CsrError(VrDriverError, ValueError):
+    """A ``.csr`` program (or an input of the exporter: waypoint YAML / CSV, a trajectory) is
+    malformed, or a value cannot be written in the format (too long, a comma in a text field, a
+    speed out of range). ``source`` is the file name ("" if none), ``line`` the 1-based line
+    (0 = not known), ``field`` what is wrong (e.g. ``"MOVEL speed"``, ``"Comment"``), ``reason`` a
+    sentence naming the allowed values. ``str()`` reads ``source:line: field: reason``."""
+
+    def __init__(self, reason: str, line: int = 0, field: str = "", source: str = ""):
+        self.reason = reason
+        self.line = int(line or 0)
+        self.field = field
+        self.source = source
+        super().__init__(self._text())
+
+    def _text(self) -> str:
+        if self.source and self.line:
+            where = "%s:%d: " % (self.source, self.line)
+        elif self.line:
+            where = "line %d: " % self.line
+        elif self.source:
+            where = "%s: " % self.source
+        else:
+            where = ""
+        return where + ("%s: " % self.field if self.field else "") + self.reason
+
+    def located(self, line: int = 0, source: str = "", field: str = "") -> "CsrError":
+        """The same error with a line / source / field filled in where it had none."""
+        return CsrError(self.reason, self.line or line, self.field or field, self.source or source)
+
+
+class CsrConversionError(VrDriverError):
+    """Waypoints that are well formed but cannot be exported: unreachable poses, joints outside
+    their limits, poses outside the workspace box. ``problems`` holds one located CsrError per
+    refused waypoint, in input order; the message names the first and the count."""
+
+    def __init__(self, problems):
+        self.problems = tuple(problems)
+        first = str(self.problems[0]) if self.problems else "no problems"
+        more = len(self.problems) - 1
+        super().__init__(first + (" (and %d more)" % more if more > 0 else ""))
