@@ -540,6 +540,11 @@ class VirtualController:
                  self.loop_period * 1e3, self.arm.speed_factor)
         return self
 
+    def request_stop(self) -> None:
+        """Ask the threads to end, without waiting (safe from a signal handler / ROS shutdown hook,
+        which may interrupt a thread holding a lock that :meth:`stop` needs)."""
+        self._stop.set()
+
     def stop(self) -> None:
         """Stop the threads, close what this object opened, remove the pty symlink. Idempotent."""
         self._stop.set()

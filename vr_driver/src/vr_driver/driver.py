@@ -71,6 +71,10 @@ ERROR_LINK = 1                     # link to the controller down
 ERROR_CONTROLLER = 2               # the controller reports its error bit
 ERROR_PROTOCOL = 3                 # the controller's feedback cannot be decoded
 
+# a port that cannot be opened is a warning at first (a virtual controller may still be starting),
+# an error once it has been missing this long [s]
+PORT_ERROR_AFTER = 5.0
+
 
 @dataclass(frozen=True)
 class MoveRequest:
@@ -132,6 +136,7 @@ class MoveJob:
         self.seqs: List[int] = []       # handshake sequence numbers of what was sent
         self.created = time.monotonic()
         self._done = threading.Event()
+        self._changed = threading.Condition()
 
     @property
     def done(self) -> bool:
@@ -141,18 +146,28 @@ class MoveJob:
         self._done.wait(timeout)
         return self.result
 
+    def wait_change(self, phase: JobPhase, timeout: float) -> JobPhase:
+        """Wait until the phase differs from ``phase`` (or ``timeout``); return the phase."""
+        with self._changed:
+            self._changed.wait_for(lambda: self.phase is not phase, timeout)
+            return self.phase
+
     def _set_phase(self, phase: JobPhase) -> None:
         if self.phase is not phase:
-            self.phase = phase
+            with self._changed:
+                self.phase = phase
+                self._changed.notify_all()
             self._notify()
 
     def _finish(self, success: bool, phase: JobPhase, reason: str,
                 reached: Optional[ControllerPose]) -> None:
         if self._done.is_set():
             return
-        self.phase = phase
-        self.result = JobResult(success, phase, reason, reached)
-        self._done.set()
+        with self._changed:
+            self.phase = phase
+            self.result = JobResult(success, phase, reason, reached)
+            self._done.set()
+            self._changed.notify_all()
         self._notify()
 
     def _notify(self) -> None:
@@ -274,6 +289,7 @@ class DriverCore:
         self._job: Optional[MoveJob] = None
         self._stop_request: Optional[str] = None
         self._stop = threading.Event()
+        self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
         self._thread: Optional[threading.Thread] = None
         self._link: Optional[Link] = None
         self._master: Optional[DpMaster] = None
@@ -287,6 +303,8 @@ class DriverCore:
         self._joints_valid = False
         self._joints_pose: Optional[Tuple[int, ...]] = None
         self._slave_reason = ""
+        self._port_missing_since = 0.0
+        self._port_error_logged = False
         self._error_code = ERROR_LINK
         self._error_reason = "not started"
         self._cycle_times: Deque[float] = collections.deque(maxlen=50)
@@ -301,8 +319,15 @@ class DriverCore:
         self._thread = threading.Thread(target=self._run, name="vr_driver-bus", daemon=True)
         self._thread.start()
 
+    def request_stop(self) -> None:
+        """Ask the bus thread to end, without waiting (safe from a signal handler or a ROS shutdown
+        hook, which may interrupt a thread that holds a lock :meth:`stop` needs)."""
+        self._stop.set()
+        self._wake.set()
+
     def stop(self, timeout: float = 3.0) -> None:
         self._stop.set()
+        self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout)
             self._thread = None
@@ -350,6 +375,7 @@ class DriverCore:
             start = self._planning_start()
             job = MoveJob(self.preview(request, start), on_update)
             self._queue.append(job)
+        self._wake.set()
         log.info("job %d queued: %s %s", job.id, request.move_type.name,
                  " then ".join(c.describe() for c in job.preview.commands))
         return job
@@ -384,6 +410,7 @@ class DriverCore:
                 start = preview.joint_target
             jobs = [MoveJob(p, on_update) for p in previews]
             self._queue.extend(jobs)
+        self._wake.set()
         log.info("joint path: %d PTP targets queued (jobs %d..%d)", len(jobs), jobs[0].id, jobs[-1].id)
         return jobs
 
@@ -396,6 +423,7 @@ class DriverCore:
                 return
             if job is self._job:
                 self._stop_request = reason
+        self._wake.set()
 
     def stop_motion(self, reason: str = "stop requested") -> int:
         """Drop the queue and give up the target in flight; returns the number of jobs ended."""
@@ -406,6 +434,7 @@ class DriverCore:
             self._queue.clear()
             if self._job is not None:
                 self._stop_request = reason
+        self._wake.set()
         log.info("stop motion: %s (%d job(s) ended)", reason, n)
         return n
 
@@ -449,7 +478,9 @@ class DriverCore:
             now = self.clock()
             if next_start < now:
                 next_start = now
-            self._stop.wait(next_start - now)
+            if self._wake.wait(next_start - now):
+                self._wake.clear()
+                next_start = self.clock()     # an extra cycle now; the rate resumes from here
 
     def _iteration(self) -> None:
         now = self.clock()
@@ -486,7 +517,12 @@ class DriverCore:
             self._next_open = now + self.params.reconnect_period
             reason = "cannot open %s: %s" % (device, exc)
             if reason != self._link_reason:
-                log.error("%s (retrying every %.2g s)", reason, self.params.reconnect_period)
+                self._port_missing_since = now
+                log.warning("%s (retrying every %.2g s)", reason, self.params.reconnect_period)
+            elif now - self._port_missing_since >= PORT_ERROR_AFTER and not self._port_error_logged:
+                log.error("%s for %.0f s now (still retrying every %.2g s)", reason,
+                          now - self._port_missing_since, self.params.reconnect_period)
+            self._port_error_logged = now - self._port_missing_since >= PORT_ERROR_AFTER
             self._link_down(LinkState.PORT_ERROR, reason)
             return
         self.counters.port_opens += 1

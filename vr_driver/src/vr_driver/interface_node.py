@@ -32,7 +32,7 @@ from .motion import MoveType
 from .params import DriverParams, ParamError
 from .poses import ControllerPose
 from .protocol import StatusBits
-from .ros_logging import route_to_rosout
+from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
 
 _MOVE_TYPES = {MoveToPoseGoal.PTP: MoveType.PTP, MoveToPoseGoal.LIN: MoveType.LIN,
                MoveToPoseGoal.CIRC: MoveType.CIRC}
@@ -98,6 +98,7 @@ class InterfaceNode:
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
         self._last_link = None
+        self._last_status_key = None
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -109,7 +110,8 @@ class InterfaceNode:
             rospy.Timer(rospy.Duration(1.0 / self.params.joint_states_rate), self._publish_joints),
             rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.update()),
         ]
-        rospy.on_shutdown(self.shutdown)
+        # a shutdown hook (e.g. rosnode kill) only asks; main() does the real stop
+        rospy.on_shutdown(self.core.request_stop)
         rospy.loginfo("interface: driving slave %d on %s at %d bit/s, %g Hz bus cycle",
                       self.core.slave_config.address, self.core.bus.phy.device, self.core.bus.baud,
                       self.core.bus.cycle_rate_hz)
@@ -121,7 +123,14 @@ class InterfaceNode:
 
     # ------------------------------------------------------------------ publishing
     def _on_status(self, status: DriverStatus) -> None:
-        """Bus thread: log link state changes once, in words."""
+        """Bus thread: publish robot_status at once when it changes (besides the fixed rate), and
+        log link state changes once, in words."""
+        msg = robot_status_msg(status, rospy.Time.now())
+        key = (msg.mode.val, msg.e_stopped.val, msg.drives_powered.val, msg.motion_possible.val,
+               msg.in_motion.val, msg.in_error.val, msg.error_code)
+        if key != self._last_status_key:
+            self._last_status_key = key
+            self.status_pub.publish(msg)
         if status.link is not self._last_link:
             self._last_link = status.link
             if status.link is LinkState.CONNECTED:
@@ -272,6 +281,7 @@ class InterfaceNode:
         rate = rospy.Rate(max(5.0, min(50.0, self.params.joint_states_rate)))
         cancelled = False
         while not job.done:
+            phase = job.phase
             if rospy.is_shutdown():
                 self.core.cancel(job, "driver shutting down")
                 break
@@ -287,7 +297,7 @@ class InterfaceNode:
                 feedback.current = cartesian(s.pose)
                 feedback.distance_to_go, feedback.angle_to_go = s.pose.distance_to(preview.target)
             self.server.publish_feedback(feedback)
-            job.wait(rate.sleep_dur.to_sec())
+            job.wait_change(phase, rate.sleep_dur.to_sec())   # wakes at once on a phase change
         res = job.wait(5.0)
         s = self.core.status()
         reached = res.reached if res is not None and res.reached is not None else s.pose
@@ -321,7 +331,8 @@ class InterfaceNode:
 def main(argv: Optional[List[str]] = None) -> int:
     # `kill -USR1 <pid>` prints every thread's stack to stderr (for a node that seems stuck)
     faulthandler.register(signal.SIGUSR1, all_threads=True)
-    rospy.init_node("interface")
+    stop = stop_on_signals()
+    rospy.init_node("interface", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     try:
         params = DriverParams.from_dict(rospy.get_param("~", {}))
@@ -330,6 +341,11 @@ def main(argv: Optional[List[str]] = None) -> int:
         rospy.logfatal("interface: %s", exc)
         sys.stderr.write("interface: %s\n" % exc)
         return 2
-    node.start()
-    rospy.spin()
+    try:
+        node.start()
+        why = wait_for_shutdown(stop)
+    finally:
+        node.shutdown()
+        rospy.signal_shutdown("interface stopped")
+    rospy.loginfo("interface: stopped (%s)", why)
     return 0

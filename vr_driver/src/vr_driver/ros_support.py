@@ -1,7 +1,16 @@
-"""Route the ROS-free core's Python logging to rosout (for the nodes; imports rospy)."""
+"""Helpers shared by the nodes (they import rospy): logging to rosout, and signal handling.
+
+Signals: rospy's own SIGINT handler runs the whole ROS shutdown (XML-RPC calls to the master) inside
+the handler, on top of whatever the main thread was doing. If that was an XML-RPC call too (e.g.
+``get_param`` while an action server starts), rospy's proxy lock is already held and the node
+deadlocks on Ctrl-C. Our nodes therefore init with ``disable_signals=True``, let
+:func:`stop_on_signals` only set an event, and shut down from the main thread.
+"""
 from __future__ import annotations
 
 import logging
+import signal
+import threading
 
 import rospy
 
@@ -31,3 +40,23 @@ def route_to_rosout(*names: str, level: int = logging.INFO) -> None:
         logger.addHandler(RosoutHandler())
         logger.setLevel(level)
         logger.propagate = False
+
+
+def stop_on_signals(*signums: int) -> threading.Event:
+    """An event set by SIGINT / SIGTERM (or the given signals); the handler does nothing else."""
+    event = threading.Event()
+
+    def handler(signum, _frame):
+        event.set()
+
+    for signum in signums or (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, handler)
+    return event
+
+
+def wait_for_shutdown(stop: threading.Event, poll: float = 0.5) -> str:
+    """Block until ``stop`` is set or ROS is shut down (e.g. by rosnode kill); return why."""
+    while not stop.wait(poll):
+        if rospy.is_shutdown():
+            return "ROS shutdown"
+    return "signal"

@@ -24,7 +24,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES, SimDeviceError,
                              SimError, SimOptions, VirtualController)
-from .ros_logging import route_to_rosout
+from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
 from .sim_arm import LogEntry
 
 #: parameters the node writes itself (not options)
@@ -41,7 +41,8 @@ def split_params(params: Mapping[str, Any]) -> Tuple[Dict[str, Any], Tuple[str, 
 
 
 def main() -> int:
-    rospy.init_node("virtual_controller")
+    stop = stop_on_signals()
+    rospy.init_node("virtual_controller", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     params, unknown = split_params(rospy.get_param("~", {}) or {})
     if unknown:
@@ -72,7 +73,7 @@ def main() -> int:
 
     controller.log.add_listener(publish)
     services = [rospy.Service("~" + name, SetBool, handler(fault)) for name, fault in _SERVICES]
-    rospy.on_shutdown(controller.stop)
+    rospy.on_shutdown(controller.request_stop)     # e.g. rosnode kill; the real stop is below
     controller.start()
     rospy.set_param("~device_path", controller.device_path)
     rospy.loginfo("virtual_controller: DP slave %d on %s%s, speed x%g", options.address, controller.device_path,
@@ -80,7 +81,7 @@ def main() -> int:
     status = EXIT_OK
     rate = rospy.Rate(5.0)
     try:
-        while not rospy.is_shutdown():
+        while not rospy.is_shutdown() and not stop.is_set():
             if controller.server_error is not None:
                 rospy.logfatal("virtual_controller: device error: %s", controller.server_error)
                 status = EXIT_DEVICE
@@ -97,6 +98,5 @@ def main() -> int:
         for service in services:
             service.shutdown()
         controller.stop()
-    if status != EXIT_OK:
-        rospy.signal_shutdown("virtual controller failed")
+    rospy.signal_shutdown("virtual controller stopped" if status == EXIT_OK else "virtual controller failed")
     return status
