@@ -20,6 +20,7 @@ import rostest
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
@@ -93,6 +94,7 @@ class DriverTest(unittest.TestCase):
         cls.joints = Recorder("/joint_states", JointState)
         cls.tool = Recorder("/tool_pose", PoseStamped)
         cls.diag = Recorder("/diagnostics", DiagnosticArray)
+        cls.rosout = Recorder("/rosout", Log)
         cls.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
         cls.started = time.monotonic()
         assert cls.client.wait_for_server(rospy.Duration(20.0)), "move_to_pose server not up"
@@ -106,6 +108,11 @@ class DriverTest(unittest.TestCase):
     def entries(self):
         with self.executed.cond:
             return [json.loads(m.data) for m in self.executed.messages]
+
+    def refusals(self):
+        with self.rosout.cond:
+            return [m for m in self.rosout.messages
+                    if m.name == "/interface" and "joint_path_command refused" in m.msg]
 
     def wait_motion_possible(self, timeout=10.0):
         msg = self.status.wait_for(lambda m: m.motion_possible.val == TriState.TRUE, timeout,
@@ -282,6 +289,54 @@ class DriverTest(unittest.TestCase):
         self.assertIn(self.client.get_state(), (GoalStatus.PREEMPTED, GoalStatus.ABORTED))
         msg = self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 3.0, after=time.monotonic())
         self.assertIsNotNone(msg)
+
+    def test_08_hostile_inputs_are_refused_and_nothing_is_sent(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        inf, nan = float("inf"), float("nan")
+        goals = []
+        for i in range(6):                                  # NaN, inf, -inf, huge in every field
+            for bad in (nan, inf, -inf, 1e308, -1e308):
+                target = list(HOME)
+                target[i] = bad
+                goals.append((MoveToPoseGoal.PTP, target, None))
+        goals += [(0, HOME, None), (4, HOME, None), (255, HOME, None),
+                  (MoveToPoseGoal.LIN, HOME, (1000, 0, 800, 0, 45, 0)),      # via with LIN
+                  (MoveToPoseGoal.CIRC, HOME, None),                          # CIRC without via
+                  (MoveToPoseGoal.CIRC, HOME, (nan, 0, 800, 0, 45, 0))]
+        for kind, target, via in goals:
+            state, result = self.move(kind, target, via=via, timeout=10.0)
+            self.assertEqual(state, GoalStatus.ABORTED, (kind, target, via))
+            self.assertFalse(result.success)
+            self.assertTrue(result.reason, (kind, target, via))
+        names = ["joint_%d" % i for i in range(1, 7)]
+        q = list(self.joints.last().position)
+        for joint_names, points in [
+                (names[:5], [q[:5]]),                                  # a joint missing
+                (names[:5] + ["joint_x"], [q]),                        # a wrong name
+                (names[:5] + ["joint_1"], [q]),                        # a duplicate name
+                (names, [q[:5]]),                                      # a short point
+                (names, [q + [0.0]]),                                  # a long point
+                (names, [q[:2] + [nan] + q[3:]]),
+                (names, [q[:2] + [inf] + q[3:]]),
+                (names, [q[:2] + [1e9] + q[3:]]),                      # far outside the limits
+                ([], [q])]:
+            traj = JointTrajectory(joint_names=joint_names)
+            traj.points = [JointTrajectoryPoint(positions=p) for p in points]
+            seen = len(self.refusals())
+            self.path_pub.publish(traj)
+            # one refusal per bad path, each logged with its reason (the subscriber keeps only the
+            # latest message, so wait for each before sending the next)
+            self.assertTrue(self.rosout.wait_for(lambda m: len(self.refusals()) > seen, 5.0),
+                            "no refusal logged for %s %s" % (joint_names, points))
+        # the node is alive and still works; only the good goal reaches the controller
+        self.wait_motion_possible()
+        state, result = self.move(MoveToPoseGoal.PTP, (1100, 0, 760, 0, 45, 0))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        self.assertEqual([e["target"] for e in self.wait_entries(before + 1)[before:]],
+                         [[1100, 0, 760, 0, 45, 0]])
+        self.status.wait_for(lambda m: False, 0.5)          # a wrongly sent path would show by now
+        self.assertEqual(len(self.entries()), before + 1)
 
 
 if __name__ == "__main__":
