@@ -90,5 +90,20 @@ class DriverLatencyBenchTest(unittest.TestCase):
         self.line(r"^python .* wall time %s s$" % NUM)
 
 
+class FuzzBenchTest(unittest.TestCase):
+    """bench/fuzz.py in small: the deframer, the slave engine and the master take 20 000 random and
+    mutated telegrams each with nothing but typed errors and no data from a damaged telegram."""
+
+    def test_fuzz_passes(self):
+        res = subprocess.run([os.path.join(REPO, "scripts", "bench"), "fuzz", "--", "--frames", "20000"],
+                             capture_output=True, text=True, timeout=300)
+        self.assertEqual(res.returncode, 0, res.stdout + res.stderr[-3000:])
+        for target in ("deframer", "slave", "master"):
+            self.assertRegex(res.stdout, r"--- %s: [0-9]+ telegrams in .* violations 0" % target)
+        self.assertRegex(res.stdout, r"outputs delivered\s+[1-9]")       # it got to Data_Exchange
+        self.assertRegex(res.stdout, r"inputs delivered\s+[1-9]")
+        self.assertIn("RESULT: PASS (violations 0)", res.stdout)
+
+
 if __name__ == "__main__":
     unittest.main()
