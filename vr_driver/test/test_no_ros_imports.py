@@ -11,7 +11,7 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
 CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "sim_arm",
-        "controller_sim", "csr")
+        "controller_sim", "csr", "pose_input")
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")
 

@@ -1,0 +1,791 @@
+"""The pose terminal's logic, ROS-free: parse and validate what an operator types, and run the
+dialogue (prompt, preview, confirm, send, progress, result) against a :class:`Backend`.
+
+The ROS node ``pose_terminal`` (vr_driver.pose_terminal_node) only provides the backend (the
+driver's ``move_to_pose`` action, ``stop_motion``, ``robot_status``, ``tool_pose``); tests use a fake.
+
+What is typed, at the first prompt of an entry (the X prompt)::
+
+    <Enter> or a number       X; then Y, Z, Rx, Ry, Rz and the move type are asked one by one,
+                              Enter keeping the default shown in brackets (the home pose
+                              1120 0 725 0 45 0 and PTP at first, then the last entry's)
+    x y z rx ry rz [type]     a whole pose on one line (type ptp, lin or circ; default ptp)
+    ... circ via x y z [rx ry rz]   a circular move through a via point
+    home stop status history help quit
+
+Every value is checked before anything goes to the driver: a finite number, inside the driver's
+workspace box (also after rounding to the controller's whole mm / deg), then the driver previews the
+move (reachability, joint limits, the path) and only a confirmed, previewed move is sent.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+import time
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional, Sequence, TextIO, Tuple
+
+from .motion import MoveType
+from .poses import HOME_POSE, ControllerPose, Workspace
+
+__all__ = [
+    "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
+    "FIELDS", "COMMANDS", "InputError", "RangeError", "PoseRequest", "PreviewResult", "MoveProgress", "MoveResult",
+    "StatusInfo", "Backend", "MoveHandle", "Terminal", "ProgressPrinter",
+    "fmt_number", "fmt_pose", "fmt_joints_deg", "field_range", "prompt_text", "parse_number",
+    "check_value", "parse_move_type", "check_pose", "parse_pose_line", "parse_command",
+    "build_arg_parser", "request_from_args",
+]
+
+#: exit codes of ``pose_terminal`` (and of Terminal.run_once)
+EXIT_OK = 0            # the target was reached (or, with --preview, it is valid and reachable)
+EXIT_REFUSED = 1       # refused (invalid, unreachable, motion not possible), not confirmed, failed, stopped
+EXIT_USAGE = 2         # bad command line
+EXIT_NO_DRIVER = 3     # no ROS master / driver, or no answer in time
+
+
+@dataclass(frozen=True)
+class Field:
+    name: str          # attribute of ControllerPose
+    label: str         # what the controller calls it
+    unit: str
+
+
+FIELDS = (Field("x", "X", "mm"), Field("y", "Y", "mm"), Field("z", "Z", "mm"),
+          Field("rx", "Rx", "deg"), Field("ry", "Ry", "deg"), Field("rz", "Rz", "deg"))
+
+COMMANDS = ("home", "stop", "status", "history", "help", "quit")
+_COMMAND_ALIASES = {"exit": "quit", "q": "quit", "?": "help", "h": "help"}
+
+_MOVE_TYPE_WORDS = {
+    "ptp": MoveType.PTP, "p": MoveType.PTP, "movep": MoveType.PTP, "1": MoveType.PTP,
+    "lin": MoveType.LIN, "l": MoveType.LIN, "movel": MoveType.LIN, "linear": MoveType.LIN, "2": MoveType.LIN,
+    "circ": MoveType.CIRC, "c": MoveType.CIRC, "movec": MoveType.CIRC, "circular": MoveType.CIRC,
+    "3": MoveType.CIRC,
+}
+_MOVE_TYPE_NAMES = {MoveType.PTP: "PTP (joint interpolated, MOVEP)",
+                    MoveType.LIN: "LIN (straight line, MOVEL)",
+                    MoveType.CIRC: "CIRC (arc through a via point, MOVEC)"}
+
+# a plain decimal number: what an operator types (no hex, no underscores, no 'nan' / 'inf')
+_NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
+_NOT_FINITE = re.compile(r"^[+-]?(nan|inf|infinity)$", re.IGNORECASE)
+
+
+class InputError(ValueError):
+    """Something typed that cannot be used; the message says what is wrong and what is allowed."""
+
+
+class RangeError(InputError):
+    """A proper number outside the driver's workspace (a refusal rather than a typing error)."""
+
+
+# ------------------------------------------------------------------------------------ formatting
+
+def fmt_number(value: float, decimals: int = 3) -> str:
+    """1120.0 -> '1120', 12.5 -> '12.5', -0.0 -> '0'."""
+    text = ("%.*f" % (decimals, value)).rstrip("0").rstrip(".") if decimals else "%.0f" % value
+    return "0" if text in ("-0", "") else text
+
+
+def fmt_pose(pose: ControllerPose) -> str:
+    return "  ".join("%s %s" % (f.label, fmt_number(getattr(pose, f.name), 1)) for f in FIELDS)
+
+
+def fmt_joints_deg(joints_rad: Sequence[float]) -> str:
+    return "  ".join("J%d %.1f" % (i + 1, math.degrees(q)) for i, q in enumerate(joints_rad))
+
+
+def field_range(workspace: Workspace, name: str) -> Tuple[float, float]:
+    return getattr(workspace, name) if len(name) == 1 else workspace.angle
+
+
+def prompt_text(fld: Field, workspace: Workspace, default: Optional[float], prefix: str = "") -> str:
+    """``X [mm, 100..1400] (1120): `` (no default: no brackets)."""
+    lo, hi = field_range(workspace, fld.name)
+    text = "%s%s [%s, %s..%s]" % (prefix, fld.label, fld.unit, fmt_number(lo), fmt_number(hi))
+    if default is not None:
+        text += " (%s)" % fmt_number(default)
+    return text + ": "
+
+
+# ------------------------------------------------------------------------------------ parsing
+
+def _round_half_away(value: float) -> int:
+    """What the controller receives (whole mm / deg, halves away from zero; as protocol.py)."""
+    magnitude = abs(value)
+    whole = math.floor(magnitude)
+    if magnitude - whole >= 0.5:
+        whole += 1
+    return int(-whole if value < 0 else whole)
+
+
+def check_value(value: float, fld: Field, workspace: Workspace, what: str = "") -> float:
+    """``value`` if it is finite and inside the workspace, also once rounded to what is sent."""
+    name = (what + " " if what else "") + fld.label
+    lo, hi = field_range(workspace, fld.name)
+    if not math.isfinite(value):
+        raise InputError("%s: %s is not a position: a finite number in %s..%s %s is needed"
+                         % (name, value, fmt_number(lo), fmt_number(hi), fld.unit))
+    if not lo <= value <= hi:
+        side = "below" if value < lo else "above"
+        raise RangeError("%s = %s %s is %s the workspace: allowed %s..%s %s"
+                         % (name, fmt_number(value), fld.unit, side, fmt_number(lo), fmt_number(hi), fld.unit))
+    sent = _round_half_away(value)
+    if not lo <= sent <= hi:
+        raise RangeError("%s = %s %s is sent as %d %s (the controller takes whole %s), which is outside "
+                         "%s..%s %s" % (name, fmt_number(value), fld.unit, sent, fld.unit, fld.unit,
+                                        fmt_number(lo), fmt_number(hi), fld.unit))
+    return value
+
+
+def parse_number(text: str, fld: Field, workspace: Workspace, default: Optional[float] = None,
+                 what: str = "") -> float:
+    """The value typed for ``fld``: '' takes ``default``; InputError says what is wrong."""
+    name = (what + " " if what else "") + fld.label
+    text = text.strip()
+    if not text:
+        if default is None:
+            raise InputError("%s: a value is needed (there is no default)" % name)
+        return check_value(float(default), fld, workspace, what)
+    if _NOT_FINITE.match(text):
+        lo, hi = field_range(workspace, fld.name)
+        raise InputError("%s: %r is not a position: a finite number in %s..%s %s is needed"
+                         % (name, text, fmt_number(lo), fmt_number(hi), fld.unit))
+    if not _NUMBER.match(text):
+        raise InputError("%s: %r is not a number (type e.g. 1120, -12.5 or 1.2e3)" % (name, text))
+    return check_value(float(text), fld, workspace, what)
+
+
+def parse_move_type(text: str, default: Optional[MoveType] = None) -> MoveType:
+    word = text.strip().lower()
+    if not word:
+        if default is None:
+            raise InputError("move type: a value is needed (ptp, lin or circ)")
+        return default
+    try:
+        return _MOVE_TYPE_WORDS[word]
+    except KeyError:
+        raise InputError("move type: %r is not one of ptp, lin, circ" % text.strip()) from None
+
+
+def check_pose(values: Sequence[object], workspace: Workspace, what: str = "") -> ControllerPose:
+    """Six numbers (or texts of numbers) in the workspace -> ControllerPose; InputError otherwise."""
+    if len(values) != 6:
+        raise InputError("%sa pose is 6 values (X Y Z mm, Rx Ry Rz deg), got %d"
+                         % ((what + ": ") if what else "", len(values)))
+    out = []
+    for value, fld in zip(values, FIELDS):
+        if isinstance(value, str):
+            out.append(parse_number(value, fld, workspace, what=what))
+        else:
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                raise InputError("%s%s: %r is not a number" % ((what + " ") if what else "", fld.label,
+                                                               value)) from None
+            out.append(check_value(number, fld, workspace, what))
+    return ControllerPose(*out)
+
+
+@dataclass(frozen=True)
+class PoseRequest:
+    """A validated move: target (and via for CIRC) inside the workspace."""
+
+    move_type: MoveType
+    target: ControllerPose
+    via: Optional[ControllerPose] = None
+
+    def __post_init__(self) -> None:
+        if (self.move_type is MoveType.CIRC) != (self.via is not None):
+            raise InputError("a via point goes with a circular move (circ) and only with it")
+
+    def describe(self) -> str:
+        text = "%s to %s" % (self.move_type.name, fmt_pose(self.target))
+        if self.via is not None:
+            text += "\n        via %s" % fmt_pose(self.via)
+        return text
+
+    def sent_values(self) -> List[Tuple[int, ...]]:
+        """What the controller receives (whole mm / deg): [via,] target."""
+        poses = ([self.via] if self.via is not None else []) + [self.target]
+        return [tuple(_round_half_away(v) for v in p.as_tuple()) for p in poses]
+
+    def is_rounded(self) -> bool:
+        poses = ([self.via] if self.via is not None else []) + [self.target]
+        return any(tuple(p.as_tuple()) != tuple(float(v) for v in s)
+                   for p, s in zip(poses, self.sent_values()))
+
+
+def _tokens(text: str) -> List[str]:
+    return text.replace(",", " ").replace(";", " ").split()
+
+
+_LINE_SYNTAX = "x y z rx ry rz [ptp|lin|circ] [via x y z [rx ry rz]]"
+
+
+def parse_pose_line(text: str, workspace: Workspace) -> PoseRequest:
+    """``x y z rx ry rz [type] [via x y z [rx ry rz]]`` -> PoseRequest; InputError says what is wrong.
+    A via point given as 3 values takes the target's orientation (the arc does not use it)."""
+    tokens = _tokens(text)
+    via_tokens: Optional[List[str]] = None
+    lowered = [t.lower() for t in tokens]
+    if "via" in lowered:
+        at = lowered.index("via")
+        tokens, via_tokens = tokens[:at], tokens[at + 1:]
+    kind_word = None
+    if len(tokens) == 7:
+        kind_word = tokens[6]
+        tokens = tokens[:6]
+    if len(tokens) != 6:
+        raise InputError("a pose line is %s; got %d value(s) before the move type"
+                         % (_LINE_SYNTAX, len(tokens)))
+    target = check_pose(tokens, workspace)
+    kind = parse_move_type(kind_word or "", default=MoveType.CIRC if via_tokens is not None else MoveType.PTP)
+    if kind is MoveType.CIRC and via_tokens is None:
+        raise InputError("a circular move needs a via point: x y z rx ry rz circ via x y z [rx ry rz]")
+    if kind is not MoveType.CIRC and via_tokens is not None:
+        raise InputError("'via' is only for circular moves (circ), not %s" % kind.name)
+    via = None
+    if via_tokens is not None:
+        if len(via_tokens) == 3:
+            via_tokens = via_tokens + [str(v) for v in target.as_tuple()[3:]]
+        if len(via_tokens) != 6:
+            raise InputError("the via point is 3 or 6 values (x y z [rx ry rz]), got %d" % len(via_tokens))
+        via = check_pose(via_tokens, workspace, what="via")
+    return PoseRequest(kind, target, via)
+
+
+def parse_command(text: str) -> Optional[str]:
+    """The command named by ``text`` (one of COMMANDS), or None when it is not a command."""
+    word = text.strip().lower()
+    word = _COMMAND_ALIASES.get(word, word)
+    return word if word in COMMANDS else None
+
+
+# ------------------------------------------------------------------------------------ backend
+
+@dataclass(frozen=True)
+class PreviewResult:
+    ok: bool
+    reason: str = ""                                  # why not, when not ok
+    joint_target: Tuple[float, ...] = ()              # rad, J1..J6
+    duration: float = 0.0                             # s, the driver's estimate
+    unavailable: bool = False                         # no driver / no answer (not a refusal)
+
+
+@dataclass(frozen=True)
+class MoveProgress:
+    phase: str                                        # validating, preview, sending, moving, stopping
+    distance_to_go: float = 0.0                       # mm
+    angle_to_go: float = 0.0                          # deg
+    current: Optional[ControllerPose] = None
+
+
+@dataclass(frozen=True)
+class MoveResult:
+    outcome: str                                      # "succeeded", "cancelled" or "failed"
+    reason: str = ""
+    reached: Optional[ControllerPose] = None
+
+
+@dataclass(frozen=True)
+class StatusInfo:
+    """What the driver reports (None = unknown)."""
+
+    link: str = ""                                    # e.g. "connected, 50.0 cycles/s"
+    motion_possible: Optional[bool] = None
+    why_no_motion: str = ""
+    mode: str = ""
+    e_stopped: Optional[bool] = None
+    drives_powered: Optional[bool] = None
+    in_motion: Optional[bool] = None
+    in_error: Optional[bool] = None
+    error_code: int = 0
+    pose: Optional[ControllerPose] = None
+    joints: Optional[Tuple[float, ...]] = None
+    age: Optional[float] = None                       # s since the last robot_status
+
+
+class MoveHandle:
+    """A move on its way (returned by Backend.start_move)."""
+
+    def wait(self, timeout: float) -> bool:
+        """Block up to ``timeout`` s; True once the move has ended."""
+        raise NotImplementedError
+
+    def progress(self) -> Optional[MoveProgress]:
+        raise NotImplementedError
+
+    def cancel(self) -> None:
+        """Ask the driver to stop this move (the arm stops)."""
+        raise NotImplementedError
+
+    def result(self) -> MoveResult:
+        raise NotImplementedError
+
+
+class Backend:
+    """What the terminal needs from the driver (the ROS node implements it with the action)."""
+
+    def preview(self, request: PoseRequest) -> PreviewResult:
+        raise NotImplementedError
+
+    def start_move(self, request: PoseRequest) -> MoveHandle:
+        raise NotImplementedError
+
+    def stop(self) -> Tuple[bool, str]:
+        raise NotImplementedError
+
+    def status(self) -> Optional[StatusInfo]:
+        raise NotImplementedError
+
+
+# ------------------------------------------------------------------------------------ progress
+
+class ProgressPrinter:
+    """Shows a move's progress: one line per phase; on a terminal the line is updated in place."""
+
+    def __init__(self, out: TextIO, tty: bool, period: float = 1.0,
+                 clock: Callable[[], float] = time.monotonic):
+        self.out = out
+        self.tty = tty
+        self.period = period
+        self.clock = clock
+        self._phase: Optional[str] = None
+        self._width = 0
+        self._last_print = -math.inf
+        self._open = False
+        self._text = ""
+
+    @staticmethod
+    def line(p: MoveProgress) -> str:
+        if p.phase in ("moving", "stopping", "sending"):
+            return "  %-8s distance to go %7.1f mm, angle to go %5.1f deg" % (p.phase, p.distance_to_go,
+                                                                              p.angle_to_go)
+        return "  %s" % p.phase
+
+    def update(self, p: MoveProgress) -> None:
+        text = self.line(p)
+        now = self.clock()
+        if self.tty:
+            if p.phase != self._phase:
+                self._newline()
+            elif text == self._text:
+                return
+            pad = max(0, self._width - len(text))
+            self.out.write("\r" + text + " " * pad)
+            self._width = len(text)
+            self._text = text
+            self._open = True
+        elif p.phase != self._phase or now - self._last_print >= self.period:
+            self.out.write(text + "\n")
+            self._last_print = now
+        self._phase = p.phase
+        self.out.flush()
+
+    def _newline(self) -> None:
+        if self._open:
+            self.out.write("\n")
+            self._open = False
+            self._width = 0
+            self._text = ""
+
+    def finish(self) -> None:
+        self._newline()
+        self.out.flush()
+
+
+# ------------------------------------------------------------------------------------ terminal
+
+HELP = """\
+Enter a pose field by field (Enter keeps the value in brackets), or a whole line:
+  x y z rx ry rz [ptp|lin|circ]              e.g. 1000 200 800 0 45 0 lin
+  x y z rx ry rz circ via x y z [rx ry rz]   a circular move through a via point
+X Y Z in mm, Rx Ry Rz in degrees (R = Rz*Ry*Rx), the TCP in frame `base`; the controller
+takes whole mm / deg. Every move is previewed by the driver and sent only when you confirm.
+Commands:
+  home      move (PTP) to the home pose 1120 0 725 0 45 0
+  stop      stop the arm now (the driver's stop_motion)
+  status    the driver's and the controller's state, the current pose
+  history   the moves of this session and how they ended
+  help      this text
+  quit      leave (also Ctrl-D, or Ctrl-C at a prompt)
+Ctrl-C during a move stops the arm and returns to the prompt."""
+
+
+@dataclass
+class HistoryEntry:
+    request: PoseRequest
+    outcome: str
+    when: float = field(default_factory=time.time)
+
+
+def _yes(answer: str) -> bool:
+    return answer.strip().lower() in ("y", "yes", "j", "ja")
+
+
+def _tri(value: Optional[bool], yes: str = "yes", no: str = "no") -> str:
+    return "unknown" if value is None else (yes if value else no)
+
+
+class Terminal:
+    """The dialogue. ``input_fn(prompt)`` reads a line (EOFError at the end, KeyboardInterrupt on
+    Ctrl-C), ``out`` gets everything printed. ``assume_yes`` skips the confirmation."""
+
+    def __init__(self, backend: Backend, workspace: Workspace, out: TextIO = sys.stdout,
+                 input_fn: Callable[[str], str] = input, assume_yes: bool = False, tty: Optional[bool] = None,
+                 poll_period: float = 0.1, clock: Callable[[], float] = time.monotonic,
+                 stop_wait: float = 10.0):
+        self.backend = backend
+        self.workspace = workspace
+        self.out = out
+        self.input_fn = input_fn
+        self.assume_yes = assume_yes
+        self.tty = out.isatty() if tty is None else tty
+        self.poll_period = poll_period
+        self.clock = clock
+        self.stop_wait = stop_wait
+        self.history: List[HistoryEntry] = []
+        self.defaults = HOME_POSE
+        self.default_type = MoveType.PTP
+        self._sending = False
+
+    # -------------------------------------------------------------- output helpers
+    def say(self, text: str = "") -> None:
+        self.out.write(text + "\n")
+        self.out.flush()
+
+    def ask(self, prompt: str) -> str:
+        return self.input_fn(prompt)
+
+    # -------------------------------------------------------------- interactive
+    def run_interactive(self) -> int:
+        """Until quit / Ctrl-D / Ctrl-C at a prompt. Returns EXIT_OK."""
+        self.say("Pose terminal: X Y Z in mm, Rx Ry Rz in deg; Enter keeps the value in brackets.")
+        self.say("A whole line works too: x y z rx ry rz ptp|lin|circ. 'help' lists the commands.")
+        while True:
+            try:
+                request = self._read_request()
+            except (EOFError, KeyboardInterrupt):
+                self.say()
+                self.say("Bye.")
+                return EXIT_OK
+            if request is None:
+                continue
+            if request == "quit":
+                self.say("Bye.")
+                return EXIT_OK
+            if isinstance(request, PoseRequest):
+                self.execute_guarded(request)
+
+    def execute_guarded(self, request: PoseRequest, **kwargs) -> int:
+        """:meth:`execute`, with Ctrl-C outside the move loop (during the preview or while the goal
+        is being sent) handled: back to the prompt, and a stop when a goal may have gone out."""
+        try:
+            return self.execute(request, **kwargs)
+        except KeyboardInterrupt:
+            self.say()
+            if self._sending:
+                self.say("Interrupted while sending: calling stop_motion ...")
+                self._call_stop()
+            else:
+                self.say("Interrupted; nothing was sent.")
+            self._record(request, "interrupted")
+            return EXIT_REFUSED
+        finally:
+            self._sending = False
+
+    def _read_request(self):
+        """One entry: a command (its name; already handled unless 'quit'), a PoseRequest, or None
+        after an error (its reason printed)."""
+        first = self.ask(prompt_text(FIELDS[0], self.workspace, self.defaults.x))
+        command = parse_command(first)
+        if command is not None:
+            if command == "quit":
+                return "quit"
+            self.command(command)
+            return command
+        if len(_tokens(first)) > 1:
+            try:
+                request = parse_pose_line(first, self.workspace)
+            except InputError as exc:
+                self.say("  %s" % exc)
+                return None
+            self._remember(request)
+            return request
+        try:
+            x = parse_number(first, FIELDS[0], self.workspace, self.defaults.x)
+        except InputError as exc:
+            self.say("  %s" % exc)
+            return None
+        values = [x]
+        for fld in FIELDS[1:]:
+            values.append(self._ask_number(fld, getattr(self.defaults, fld.name)))
+        target = ControllerPose(*values)
+        kind = self._ask_move_type()
+        via = None
+        if kind is MoveType.CIRC:
+            via_values = []
+            for fld in FIELDS:
+                default = None if len(fld.name) == 1 else getattr(target, fld.name)
+                via_values.append(self._ask_number(fld, default, what="via"))
+            via = ControllerPose(*via_values)
+        request = PoseRequest(kind, target, via)
+        self._remember(request)
+        return request
+
+    def _ask_number(self, fld: Field, default: Optional[float], what: str = "") -> float:
+        prefix = (what.capitalize() + " ") if what else ""
+        while True:
+            text = self.ask(prompt_text(fld, self.workspace, default, prefix))
+            try:
+                return parse_number(text, fld, self.workspace, default, what=what)
+            except InputError as exc:
+                self.say("  %s" % exc)
+
+    def _ask_move_type(self) -> MoveType:
+        while True:
+            text = self.ask("Move type [ptp, lin, circ] (%s): " % self.default_type.value)
+            try:
+                return parse_move_type(text, self.default_type)
+            except InputError as exc:
+                self.say("  %s" % exc)
+
+    def _remember(self, request: PoseRequest) -> None:
+        """The next entry's defaults: this one's target and move type."""
+        self.defaults = request.target
+        self.default_type = request.move_type
+
+    # -------------------------------------------------------------- commands
+    def command(self, name: str) -> int:
+        if name == "help":
+            self.say(HELP)
+        elif name == "history":
+            self.show_history()
+        elif name == "status":
+            self.show_status()
+        elif name == "stop":
+            ok, message = self.backend.stop()
+            self.say(("Stop sent: %s" if ok else "Stop failed: %s") % message)
+            return EXIT_OK if ok else EXIT_REFUSED
+        elif name == "home":
+            return self.execute_guarded(PoseRequest(MoveType.PTP, HOME_POSE))
+        return EXIT_OK
+
+    def show_history(self) -> None:
+        if not self.history:
+            self.say("No moves yet.")
+            return
+        for n, entry in enumerate(self.history, 1):
+            stamp = time.strftime("%H:%M:%S", time.localtime(entry.when))
+            self.say("%3d  %s  %s" % (n, stamp, entry.request.describe()))
+            self.say("               -> %s" % entry.outcome)
+
+    def show_status(self) -> None:
+        s = self.backend.status()
+        if s is None:
+            self.say("No robot_status from the driver yet.")
+            return
+        if s.age is not None and s.age > 2.0:
+            self.say("Warning: the last robot_status is %.1f s old (is the driver running?)" % s.age)
+        self.say("link:            %s" % (s.link or "unknown"))
+        possible = _tri(s.motion_possible)
+        if s.motion_possible is False and s.why_no_motion:
+            possible += " (%s)" % s.why_no_motion
+        self.say("motion possible: %s" % possible)
+        self.say("mode: %s, e-stop: %s, drives: %s, in motion: %s, error: %s%s"
+                 % (s.mode or "unknown", _tri(s.e_stopped, "PRESSED", "released"),
+                    _tri(s.drives_powered, "on", "off"), _tri(s.in_motion), _tri(s.in_error),
+                    " (code %d)" % s.error_code if s.error_code else ""))
+        self.say("pose:            %s" % (fmt_pose(s.pose) if s.pose is not None else "unknown (no feedback)"))
+        if s.joints is not None:
+            self.say("joints [deg]:    %s" % fmt_joints_deg(s.joints))
+
+    # -------------------------------------------------------------- one move
+    def _record(self, request: PoseRequest, outcome: str) -> None:
+        self.history.append(HistoryEntry(request, outcome))
+
+    def execute(self, request: PoseRequest, confirm: bool = True, preview_only: bool = False,
+                move_timeout: Optional[float] = None) -> int:
+        """Preview, confirm, send, show progress, report. Returns an EXIT_* code."""
+        self.say("Checking %s" % request.describe())
+        if request.is_rounded():
+            self.say("  (the controller takes whole mm / deg: sent as %s)"
+                     % " then ".join(" ".join(str(v) for v in s) for s in request.sent_values()))
+        preview = self.backend.preview(request)
+        if not preview.ok:
+            reason = preview.reason
+            self.say("Refused, nothing was sent: %s" % reason)
+            self._record(request, "refused: %s" % reason)
+            return EXIT_NO_DRIVER if preview.unavailable else EXIT_REFUSED
+        self.say("Preview: reachable; estimated duration %.1f s" % preview.duration)
+        self.say("  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target))
+        if preview_only:
+            self._record(request, "previewed (not sent)")
+            return EXIT_OK
+        status = self.backend.status()
+        if status is not None and status.motion_possible is False:
+            why = status.why_no_motion or "the driver says motion is not possible"
+            self.say("Not sent: motion is not possible now: %s" % why)
+            self._record(request, "not sent: motion not possible (%s)" % why)
+            return EXIT_REFUSED
+        if confirm and not self.assume_yes:
+            try:
+                answer = self.ask("Send this %s move to the robot? [y/N]: " % request.move_type.name)
+            except EOFError:
+                answer = ""
+                self.say()
+            except KeyboardInterrupt:
+                self.say()
+                answer = ""
+            if not _yes(answer):
+                self.say("Not sent.")
+                self._record(request, "not sent (not confirmed)")
+                return EXIT_REFUSED
+        return self._run_move(request, preview, move_timeout)
+
+    def _run_move(self, request: PoseRequest, preview: PreviewResult, move_timeout: Optional[float]) -> int:
+        started = self.clock()
+        timeout = move_timeout if move_timeout is not None else 3.0 * preview.duration + 15.0
+        self._sending = True
+        handle = self.backend.start_move(request)
+        self._sending = False
+        self.say("Sent. Ctrl-C stops the arm.")
+        printer = ProgressPrinter(self.out, self.tty, clock=self.clock)
+        timed_out = False
+        try:
+            while not handle.wait(self.poll_period):
+                progress = handle.progress()
+                if progress is not None:
+                    printer.update(progress)
+                if self.clock() - started > timeout:
+                    timed_out = True
+                    break
+            progress = handle.progress()          # the last word: how far it got
+            if progress is not None:
+                printer.update(progress)
+        except KeyboardInterrupt:
+            printer.finish()
+            self.say("Ctrl-C: stopping the arm ...")
+            self._stop_move(handle)
+        printer.finish()
+        if timed_out:
+            self.say("No result from the driver within %.0f s: stopping the move." % timeout)
+            ended = self._stop_move(handle)
+            result = handle.result() if ended else None
+            where = fmt_pose(result.reached) if result is not None and result.reached is not None else "unknown"
+            self.say("The move %s; the arm is at %s." % ("was stopped" if ended else "did not end", where))
+            self._record(request, "no result in time")
+            return EXIT_NO_DRIVER
+        result = handle.result()
+        elapsed = self.clock() - started
+        where = fmt_pose(result.reached) if result.reached is not None else "unknown"
+        if result.outcome == "succeeded":
+            off = ""
+            if result.reached is not None:
+                dp, da = result.reached.distance_to(request.target)
+                off = " (%.1f mm, %.1f deg from the target)" % (dp, da)
+            self.say("Reached %s%s in %.1f s." % (where, off, elapsed))
+            self._record(request, "reached")
+            return EXIT_OK
+        if result.outcome == "cancelled":
+            self.say("Stopped at %s: %s" % (where, result.reason or "cancelled"))
+            self._record(request, "stopped: %s" % (result.reason or "cancelled"))
+            return EXIT_REFUSED
+        self.say("Failed: %s; the arm is at %s" % (result.reason or "no reason given", where))
+        self._record(request, "failed: %s" % (result.reason or "no reason given"))
+        return EXIT_REFUSED
+
+    def _stop_move(self, handle: MoveHandle) -> bool:
+        """Cancel the goal; when the driver has not ended it after half of ``stop_wait`` (or on a
+        second Ctrl-C), call stop_motion as well. True once the move has ended."""
+        handle.cancel()
+        now = self.clock()
+        escalate, end = now + self.stop_wait / 2.0, now + self.stop_wait
+        stop_sent = False
+        while True:
+            try:
+                if handle.wait(self.poll_period):
+                    return True
+            except KeyboardInterrupt:
+                if not stop_sent:
+                    self.say("Ctrl-C again: calling stop_motion ...")
+                    self._call_stop()
+                    stop_sent = True
+                continue
+            now = self.clock()
+            if not stop_sent and now >= escalate:
+                self.say("The move has not ended yet: calling stop_motion ...")
+                self._call_stop()
+                stop_sent = True
+            if now >= end:
+                return False
+
+    def _call_stop(self) -> None:
+        ok, message = self.backend.stop()
+        self.say("  stop_motion: %s" % message if ok else "  stop_motion failed: %s" % message)
+
+    # -------------------------------------------------------------- one shot
+    def run_once(self, request: PoseRequest, preview_only: bool = False) -> int:
+        return self.execute_guarded(request, preview_only=preview_only)
+
+
+# ------------------------------------------------------------------------------------ command line
+
+DESCRIPTION = """\
+Command the VR-006L from the terminal through the driver (node `interface`, action move_to_pose).
+Without --pose: interactive (prompts for X Y Z Rx Ry Rz and the move type; 'help' there).
+With --pose: one move, then exit: 0 reached (or --preview: reachable), 1 refused / not confirmed /
+failed / stopped, 2 usage error, 3 no ROS master or driver, or no answer in time (130: Ctrl-C
+while waiting for the driver)."""
+
+
+class _ArgumentParser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # argparse exits 2 too; keep its one-line form
+        self.print_usage(sys.stderr)
+        self.exit(EXIT_USAGE, "%s: error: %s\n" % (self.prog, message))
+
+
+def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
+    p = _ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--pose", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help="move to this pose (mm, deg) and exit")
+    p.add_argument("--type", dest="move_type", default=None, metavar="ptp|lin|circ",
+                   help="move type for --pose (default ptp)")
+    p.add_argument("--via", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                   help="via point of a circular move (--type circ)")
+    p.add_argument("-y", "--yes", action="store_true", help="send without asking for confirmation")
+    p.add_argument("--preview", action="store_true", help="with --pose: only preview, send nothing")
+    p.add_argument("--wait", type=float, default=10.0, metavar="SEC",
+                   help="how long to wait for the ROS master and the driver (default 10 s)")
+    p.add_argument("--driver", default="interface", metavar="NODE",
+                   help="the driver node whose parameters (workspace) are read (default: interface)")
+    p.add_argument("--launch-pid", type=int, default=None, metavar="PID",
+                   help="stop waiting for the driver when this process (its launch) has ended")
+    return p
+
+
+def request_from_args(args: argparse.Namespace, workspace: Workspace) -> PoseRequest:
+    """The --pose / --type / --via request; InputError (a usage error) when it is not valid."""
+    if args.pose is None:
+        if args.move_type is not None or args.via is not None or args.preview:
+            raise InputError("--type, --via and --preview go with --pose")
+        raise InputError("no --pose given")
+    kind = parse_move_type(args.move_type or "", default=MoveType.CIRC if args.via else MoveType.PTP)
+    if kind is MoveType.CIRC and args.via is None:
+        raise InputError("--type circ needs --via X Y Z RX RY RZ")
+    if kind is not MoveType.CIRC and args.via is not None:
+        raise InputError("--via is only for --type circ")
+    # every value's syntax first (a usage error), then the ranges (a refusal)
+    for values, what in ((args.pose, ""), (args.via, "via")):
+        for text, fld in zip(values or (), FIELDS):
+            try:
+                parse_number(text, fld, workspace, what=what)
+            except RangeError:
+                pass
+    target = check_pose(list(args.pose), workspace)
+    via = check_pose(list(args.via), workspace, what="via") if args.via is not None else None
+    return PoseRequest(kind, target, via)

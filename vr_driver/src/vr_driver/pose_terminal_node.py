@@ -1,0 +1,403 @@
+"""ROS node `pose_terminal`: the thin ROS edge of :mod:`vr_driver.pose_input`.
+
+Talks to the driver node through its public API only: the ``move_to_pose`` action (preview with
+preview_only, then the move; cancel = stop), the ``stop_motion`` service, ``robot_status``,
+``tool_pose``, ``joint_states`` and ``/diagnostics`` (for the driver's "why no motion" in words).
+The workspace is the driver's parameter ``/<driver>/workspace`` (defaults when it is not set).
+
+    rosrun vr_driver pose_terminal                                    interactive
+    rosrun vr_driver pose_terminal --pose 1000 200 800 0 45 0 --type lin --yes
+"""
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+from typing import List, Optional, Tuple
+
+from .errors import VrDriverError
+from .pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_USAGE, Backend, InputError, MoveHandle,
+                         MoveProgress, MoveResult, PoseRequest, PreviewResult, RangeError, StatusInfo, Terminal,
+                         build_arg_parser, fmt_pose, request_from_args)
+from .motion import MoveType
+from .poses import ControllerPose, Workspace
+
+#: exit status after Ctrl-C while waiting for the driver (the shell's convention for SIGINT)
+EXIT_INTERRUPTED = 130
+
+#: how long a preview may take before the driver counts as not answering [s]
+PREVIEW_TIMEOUT = 15.0
+
+
+def _pose_from_msg(msg) -> Optional[ControllerPose]:
+    try:
+        return ControllerPose(msg.x, msg.y, msg.z, msg.rx, msg.ry, msg.rz)
+    except VrDriverError:
+        return None
+
+
+def _pid_alive(pid: Optional[int]) -> bool:
+    if pid is None:
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    # a zombie child of someone else still answers kill(0): look at its state
+    try:
+        with open("/proc/%d/stat" % pid) as f:
+            return f.read().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return True
+
+
+class RosMoveHandle(MoveHandle):
+    """One goal through actionlib's plain ActionClient (its per-goal callbacks carry the goal
+    handle, so a quick answer cannot be missed as with SimpleActionClient's "goal handle that we're
+    not tracking" race)."""
+
+    def __init__(self, client, goal):
+        from actionlib import CommState
+        self._DONE = CommState.DONE
+        self._lock = threading.Lock()
+        self._feedback = None
+        self._done = threading.Event()
+        self._state: Optional[int] = None
+        self._result = None
+        self.gh = client.send_goal(goal, transition_cb=self._on_transition, feedback_cb=self._on_feedback)
+
+    def _on_transition(self, gh) -> None:
+        if gh.get_comm_state() == self._DONE:
+            with self._lock:
+                self._state, self._result = gh.get_goal_status(), gh.get_result()
+            self._done.set()
+
+    def _on_feedback(self, _gh, fb) -> None:
+        with self._lock:
+            self._feedback = fb
+
+    def wait(self, timeout: float) -> bool:
+        return self._done.wait(timeout)
+
+    def progress(self) -> Optional[MoveProgress]:
+        with self._lock:
+            fb = self._feedback
+        if fb is None:
+            return None
+        return MoveProgress(fb.phase, fb.distance_to_go, fb.angle_to_go, _pose_from_msg(fb.current))
+
+    def cancel(self) -> None:
+        self.gh.cancel()
+
+    def outcome(self):
+        """(GoalStatus state, result message) once done, else (None, None)."""
+        with self._lock:
+            return self._state, self._result
+
+    def result(self) -> MoveResult:
+        from actionlib_msgs.msg import GoalStatus
+        with self._lock:
+            state, result = self._state, self._result
+        if state is None:
+            return MoveResult("failed", "no result from the driver")
+        reason = result.reason if result is not None else ""
+        reached = _pose_from_msg(result.reached) if result is not None else None
+        if state == GoalStatus.SUCCEEDED and result is not None and result.success:
+            return MoveResult("succeeded", reason, reached)
+        if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED):
+            return MoveResult("cancelled", reason or "cancelled", reached)
+        return MoveResult("failed", reason or "the driver ended the goal (action state %d)" % state, reached)
+
+
+class RosBackend(Backend):
+    """The driver through ROS. :meth:`connect` first."""
+
+    def __init__(self, driver: str = "interface"):
+        self.driver = driver
+        self._lock = threading.Lock()
+        self._status = None
+        self._status_time: Optional[float] = None
+        self._tool_pose: Optional[ControllerPose] = None
+        self._joints: Optional[Tuple[float, ...]] = None
+        self._diag = {}
+        self.client = None
+        self.workspace = Workspace()
+        self.workspace_source = "defaults"
+
+    # ------------------------------------------------------------------ connection
+    def connect(self, wait: float, launch_pid: Optional[int] = None, say=print) -> Optional[str]:
+        """Init the node and wait for the master and the action server. None, or why not."""
+        import rosgraph
+        import rospy
+        import actionlib
+        from vr_driver.msg import MoveToPoseAction, RobotStatus
+        from geometry_msgs.msg import PoseStamped
+        from sensor_msgs.msg import JointState
+        from diagnostic_msgs.msg import DiagnosticArray
+        from std_srvs.srv import Trigger
+
+        end = time.monotonic() + wait
+        master = rosgraph.Master("/pose_terminal")
+        uri = rosgraph.get_master_uri()
+        announced = False
+        while True:
+            try:
+                master.getPid()
+                break
+            except Exception:  # socket errors of all kinds: the master is not (yet) up
+                pass
+            if not _pid_alive(launch_pid):
+                return "the launch (pid %d) has ended before the ROS master came up" % launch_pid
+            if time.monotonic() >= end:
+                return "no ROS master at %s (waited %.0f s): start the driver first (scripts/run)" % (uri, wait)
+            if not announced:
+                say("Waiting for the ROS master at %s ..." % uri)
+                announced = True
+            time.sleep(0.2)
+        rospy.init_node("pose_terminal", anonymous=True, disable_signals=True)
+        self.driver = rospy.resolve_name(self.driver)
+        rospy.Subscriber("robot_status", RobotStatus, self._on_status, queue_size=1)
+        rospy.Subscriber("tool_pose", PoseStamped, self._on_tool_pose, queue_size=1)
+        rospy.Subscriber("joint_states", JointState, self._on_joints, queue_size=1)
+        rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=10)
+        self.client = actionlib.ActionClient("move_to_pose", MoveToPoseAction)
+        self.stop_proxy = rospy.ServiceProxy("stop_motion", Trigger)
+        announced = False
+        while not self.client.wait_for_server(rospy.Duration(0.5)):
+            if not _pid_alive(launch_pid):
+                return "the launch (pid %d) has ended before the driver came up" % launch_pid
+            if time.monotonic() >= end:
+                return ("no driver: the action %s is not served (waited %.0f s); is the driver "
+                        "(node %s) running?" % (rospy.resolve_name("move_to_pose"), wait, self.driver))
+            if not announced:
+                say("Waiting for the driver (action %s) ..." % rospy.resolve_name("move_to_pose"))
+                announced = True
+        self._read_workspace()
+        return None
+
+    def wait_motion_possible(self, timeout: float) -> Optional[StatusInfo]:
+        """Wait up to ``timeout`` s for a robot_status saying motion is possible; the last status."""
+        end = time.monotonic() + timeout
+        while True:
+            s = self.status()
+            if (s is not None and s.motion_possible) or time.monotonic() >= end:
+                return s
+            time.sleep(0.1)
+
+    def _read_workspace(self) -> None:
+        import rospy
+        name = self.driver.rstrip("/") + "/workspace"
+        try:
+            data = rospy.get_param(name, None)
+        except Exception as exc:  # parameter server trouble: keep the defaults, say so
+            self.workspace_source = "defaults (cannot read %s: %s)" % (name, exc)
+            return
+        if data is None:
+            self.workspace_source = "defaults (%s is not set)" % name
+            return
+        try:
+            self.workspace = Workspace.from_dict(data)
+            self.workspace_source = name
+        except (VrDriverError, TypeError, ValueError) as exc:
+            self.workspace_source = "defaults (%s is invalid: %s)" % (name, exc)
+
+    def shutdown(self) -> None:
+        import rospy
+        if rospy.core.is_initialized():
+            rospy.signal_shutdown("pose_terminal done")
+
+    # ------------------------------------------------------------------ subscriptions
+    def _on_status(self, msg) -> None:
+        with self._lock:
+            self._status, self._status_time = msg, time.monotonic()
+
+    def _on_tool_pose(self, msg) -> None:
+        p, q = msg.pose.position, msg.pose.orientation
+        try:
+            pose = ControllerPose.from_ros((p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
+        except VrDriverError:
+            return
+        with self._lock:
+            self._tool_pose = pose
+
+    def _on_joints(self, msg) -> None:
+        with self._lock:
+            self._joints = tuple(msg.position)
+
+    def _on_diag(self, msg) -> None:
+        prefix = self.driver.strip("/").split("/")[-1] + ": "
+        with self._lock:
+            for st in msg.status:
+                if st.name.startswith(prefix):
+                    self._diag[st.name[len(prefix):]] = (st.message, {kv.key: kv.value for kv in st.values})
+
+    # ------------------------------------------------------------------ Backend
+    def status(self) -> Optional[StatusInfo]:
+        from vr_driver.msg import RobotMode, TriState
+        with self._lock:
+            msg, t = self._status, self._status_time
+            pose, joints, diag = self._tool_pose, self._joints, dict(self._diag)
+        if msg is None:
+            return None
+
+        def tri(v) -> Optional[bool]:
+            return None if v.val == TriState.UNKNOWN else v.val == TriState.TRUE
+
+        modes = {RobotMode.AUTO: "auto (controller program running)", RobotMode.MANUAL: "manual",
+                 RobotMode.UNKNOWN: "unknown"}
+        link_msg, _ = diag.get("link", ("", {}))
+        _, ctrl = diag.get("controller", ("", {}))
+        why = ctrl.get("why no motion", "")
+        possible = tri(msg.motion_possible)
+        if possible is False and (not why or why == "-"):
+            why = self._why_from_fields(msg, tri, link_msg)
+        linked = tri(msg.e_stopped) is not None        # the driver publishes UNKNOWN without a link
+        age = time.monotonic() - t
+        stale = age > 2.0
+        if not link_msg:              # no diagnostics yet: what robot_status tells
+            link_msg = "connected" if linked else "down (no feedback from the controller)"
+        return StatusInfo(
+            link=link_msg, motion_possible=None if stale else possible,
+            why_no_motion="" if why == "-" else why, mode=modes.get(msg.mode.val, str(msg.mode.val)),
+            e_stopped=tri(msg.e_stopped), drives_powered=tri(msg.drives_powered), in_motion=tri(msg.in_motion),
+            in_error=tri(msg.in_error), error_code=msg.error_code,
+            pose=pose if linked else None, joints=joints if linked else None,
+            age=age)
+
+    @staticmethod
+    def _why_from_fields(msg, tri, link_msg: str) -> str:
+        reasons = []
+        if tri(msg.e_stopped) is None:
+            reasons.append("no link to the controller" + (" (%s)" % link_msg if link_msg else ""))
+        if tri(msg.e_stopped):
+            reasons.append("the emergency stop is active")
+        if tri(msg.in_error):
+            reasons.append("the controller reports an error")
+        if tri(msg.drives_powered) is False:
+            reasons.append("the drives are off")
+        return "; ".join(reasons)
+
+    def _goal(self, request: PoseRequest, preview_only: bool):
+        from vr_driver.msg import CartesianPose, MoveToPoseGoal
+        kinds = {MoveType.PTP: MoveToPoseGoal.PTP, MoveType.LIN: MoveToPoseGoal.LIN,
+                 MoveType.CIRC: MoveToPoseGoal.CIRC}
+        goal = MoveToPoseGoal(target=CartesianPose(*request.target.as_tuple()), move_type=kinds[request.move_type],
+                              preview_only=preview_only)
+        if request.via is not None:
+            goal.has_via = True
+            goal.via = CartesianPose(*request.via.as_tuple())
+        return goal
+
+    def preview(self, request: PoseRequest) -> PreviewResult:
+        import rospy
+        from actionlib_msgs.msg import GoalStatus
+        if not self.client.wait_for_server(rospy.Duration(2.0)):
+            return PreviewResult(False, "no answer: the driver's move_to_pose action is gone (is the driver "
+                                 "still running?)", unavailable=True)
+        handle = RosMoveHandle(self.client, self._goal(request, preview_only=True))
+        if not handle.wait(PREVIEW_TIMEOUT):
+            handle.cancel()
+            return PreviewResult(False, "no answer from the driver within %.0f s" % PREVIEW_TIMEOUT,
+                                 unavailable=True)
+        state, result = handle.outcome()
+        if state == GoalStatus.SUCCEEDED and result is not None and result.success:
+            return PreviewResult(True, "", tuple(result.joint_target), result.estimated_duration)
+        reason = result.reason if result is not None and result.reason else "the driver refused the goal"
+        if reason.startswith("refused: "):
+            reason = reason[len("refused: "):]
+        return PreviewResult(False, reason)
+
+    def start_move(self, request: PoseRequest) -> MoveHandle:
+        return RosMoveHandle(self.client, self._goal(request, preview_only=False))
+
+    def stop(self) -> Tuple[bool, str]:
+        import rospy
+        try:
+            self.stop_proxy.wait_for_service(2.0)
+            response = self.stop_proxy()
+        except (rospy.ROSException, rospy.ServiceException) as exc:
+            return False, "stop_motion is not available: %s" % exc
+        return bool(response.success), response.message
+
+
+# ---------------------------------------------------------------------------------------- main
+
+def _readline_input():
+    """input() with line editing and a history of this session (when stdin is a terminal)."""
+    if sys.stdin.isatty():
+        try:
+            import readline  # noqa: F401  (importing it gives input() line editing)
+        except ImportError:
+            pass
+    return input
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    if argv is None:
+        try:
+            import rospy
+            argv = rospy.myargv(sys.argv)[1:]
+        except ImportError:
+            argv = sys.argv[1:]
+    parser = build_arg_parser()
+    args = parser.parse_args(argv)
+    if args.pose is None and (args.move_type is not None or args.via is not None or args.preview):
+        parser.error("--type, --via and --preview go with --pose")
+    # syntax before connecting: a typo is a usage error, whatever the driver's workspace
+    if args.pose is not None:
+        try:
+            request_from_args(args, Workspace())
+        except RangeError:
+            pass                      # judged against the driver's own workspace once connected
+        except InputError as exc:
+            parser.error(str(exc))
+    backend = RosBackend(args.driver)
+    out = sys.stdout
+    try:
+        error = backend.connect(args.wait, args.launch_pid, say=lambda text: print(text, flush=True))
+    except KeyboardInterrupt:
+        print("\nInterrupted while waiting for the driver.", flush=True)
+        backend.shutdown()
+        return EXIT_INTERRUPTED
+    if error is not None:
+        print("pose_terminal: %s" % error, file=sys.stderr, flush=True)
+        backend.shutdown()
+        return EXIT_NO_DRIVER
+    try:
+        terminal = Terminal(backend, backend.workspace, out=out, input_fn=_readline_input(), assume_yes=args.yes)
+        if args.pose is not None:
+            try:
+                request = request_from_args(args, backend.workspace)
+            except RangeError as exc:
+                print("Refused, nothing was sent: %s" % exc, flush=True)
+                return EXIT_REFUSED
+            except InputError as exc:
+                parser.error(str(exc))
+            if not args.preview:
+                backend.wait_motion_possible(min(5.0, args.wait))
+            return terminal.run_once(request, preview_only=args.preview)
+        ws = backend.workspace
+        print("Connected to the driver; workspace X %g..%g, Y %g..%g, Z %g..%g mm, angles %g..%g deg (%s)."
+              % (ws.x + ws.y + ws.z + ws.angle + (backend.workspace_source,)), flush=True)
+        status = backend.wait_motion_possible(min(10.0, max(args.wait, 1.0)))
+        if status is None:
+            print("No robot_status from the driver yet ('status' shows it later).", flush=True)
+        elif status.motion_possible:
+            print("Controller ready: motion possible; the arm is at %s."
+                  % (fmt_pose(status.pose) if status.pose is not None else "(pose unknown)"), flush=True)
+        else:
+            print("Motion is not possible now: %s ('status' shows more)."
+                  % (status.why_no_motion or "see 'status'"), flush=True)
+        return terminal.run_interactive()
+    except KeyboardInterrupt:            # before the dialogue took over Ctrl-C
+        print("\nInterrupted.", flush=True)
+        return EXIT_INTERRUPTED
+    finally:
+        backend.shutdown()
+
+
+__all__ = ["RosBackend", "RosMoveHandle", "main", "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
+           "EXIT_INTERRUPTED"]

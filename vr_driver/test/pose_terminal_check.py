@@ -1,0 +1,401 @@
+#!/usr/bin/python3
+"""rostest of the pose terminal, driven as a person would drive it: `rosrun vr_driver pose_terminal`
+in a pseudo-terminal (pexpect), against the driver and the virtual controller of
+launch/driver.launch (a real pty carrying real PROFIBUS telegrams).
+
+Run by test/pose_terminal.test. What the controller did is read from its execution log on
+/virtual_controller/executed (one JSON object per handled target), so "nothing was sent" is
+checked on the controller's side. Every wait is on a prompt, an output or a message, with a
+deadline (pexpect timeouts); nothing sleeps to synchronise."""
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import threading
+import time
+import unittest
+from typing import Callable, List
+
+import pexpect
+import rospy
+import rostest
+from std_msgs.msg import String
+from std_srvs.srv import SetBool
+
+from vr_driver.msg import RobotStatus, TriState
+from vr_driver.poses import ControllerPose
+
+PKG = "vr_driver"
+FIRST_PROMPT = r"X \[mm, 100\.\.1400\] \([-0-9.]+\): "     # the first prompt of every entry
+CONFIRM = r"Send this (PTP|LIN|CIRC) move to the robot\? \[y/N\]: "
+PROGRESS = r"(sending|moving) +distance to go +[0-9.]+ mm"
+TIMEOUT = 30
+
+
+class Recorder:
+    def __init__(self, topic, kind):
+        self.messages: List = []
+        self.cond = threading.Condition()
+        self.sub = rospy.Subscriber(topic, kind, self._cb, queue_size=100)
+
+    def _cb(self, msg):
+        with self.cond:
+            self.messages.append(msg)
+            self.cond.notify_all()
+
+    def wait_for(self, predicate: Callable[[object], bool], timeout: float, start: int = 0):
+        end = time.monotonic() + timeout
+        with self.cond:
+            while True:
+                for msg in self.messages[start:]:
+                    if predicate(msg):
+                        return msg
+                left = end - time.monotonic()
+                if left <= 0:
+                    return None
+                self.cond.wait(left)
+
+    def wait_count(self, n: int, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        with self.cond:
+            while len(self.messages) < n:
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self.cond.wait(left)
+        return True
+
+
+class PoseTerminalTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("pose_terminal_check")
+        cls.executed = Recorder("/virtual_controller/executed", String)
+        cls.status = Recorder("/robot_status", RobotStatus)
+        rospy.wait_for_service("/virtual_controller/set_estop", 30.0)
+        cls.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
+        cls.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
+
+    def setUp(self):
+        self.children = []
+
+    def tearDown(self):
+        for child in self.children:
+            if child.isalive():
+                child.terminate(force=True)
+
+    # -------------------------------------------------------------- helpers
+    def entries(self):
+        with self.executed.cond:
+            return [json.loads(m.data) for m in self.executed.messages]
+
+    def new_entries(self, before: int, n: int, timeout: float = 15.0):
+        self.assertTrue(self.executed.wait_count(before + n, timeout),
+                        "expected %d new executed entries, have %d" % (n, len(self.executed.messages) - before))
+        return self.entries()[before:]
+
+    def wait_motion_possible(self, timeout=15.0):
+        start = len(self.status.messages)
+        msg = self.status.wait_for(lambda m: m.motion_possible.val == TriState.TRUE, timeout, start)
+        self.assertIsNotNone(msg, "motion_possible never became TRUE")
+
+    def spawn(self, *args, ready=True):
+        """The terminal in a pseudo-terminal; waits for its first prompt when ``ready``."""
+        child = pexpect.spawn("rosrun", ["vr_driver", "pose_terminal"] + list(args), encoding="utf-8",
+                              timeout=TIMEOUT, dimensions=(50, 160), env=dict(os.environ))
+        child.logfile_read = io.StringIO()
+        self.children.append(child)
+        if ready:
+            self.expect(child, r"Controller ready: motion possible")
+            self.expect(child, FIRST_PROMPT)
+        return child
+
+    def expect(self, child, pattern, timeout=TIMEOUT):
+        """child.expect(pattern), failing with the terminal's output so far."""
+        try:
+            return child.expect(pattern, timeout=timeout)
+        except (pexpect.TIMEOUT, pexpect.EOF) as exc:
+            self.fail("waited for %r; the terminal showed:\n%s\n(%s)"
+                      % (pattern, child.logfile_read.getvalue()[-3000:], type(exc).__name__))
+
+    def move(self, child, line, words=r"Reached"):
+        """Type a pose line at the first prompt, confirm, wait for the outcome, then the prompt."""
+        child.sendline(line)
+        self.expect(child, CONFIRM)
+        child.sendline("y")
+        self.expect(child, words)
+        text = child.before + child.after
+        self.expect(child, FIRST_PROMPT)
+        return text + child.before
+
+    def quit(self, child):
+        child.sendline("quit")
+        self.expect(child, r"Bye\.")
+        self.expect(child, pexpect.EOF)
+        child.close()
+        self.assertEqual(child.exitstatus, 0, child.logfile_read.getvalue()[-2000:])
+
+    # -------------------------------------------------------------- tests (run in name order)
+    def test_01_defaults_accepted_with_enter(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        t = self.spawn()
+        t.sendline("")                                   # X: keep 1120
+        self.expect(t, r"Y \[mm, -900\.\.900\] \(0\): ")
+        t.sendline("120")
+        for prompt in (r"Z \[mm, 0\.\.1400\] \(725\): ", r"Rx \[deg, -180\.\.180\] \(0\): ",
+                       r"Ry \[deg, -180\.\.180\] \(45\): ", r"Rz \[deg, -180\.\.180\] \(0\): ",
+                       r"Move type \[ptp, lin, circ\] \(ptp\): "):
+            self.expect(t, prompt)
+            t.sendline("")
+        self.expect(t, r"Preview: reachable; estimated duration [0-9.]+ s")
+        self.expect(t, r"joint target \[deg\]: J1 [-0-9.]+  J2 [-0-9.]+  J3 [-0-9.]+  J4 [-0-9.]+  J5 [-0-9.]+  "
+                       r"J6 [-0-9.]+")
+        self.expect(t, CONFIRM)
+        t.sendline("y")
+        self.expect(t, r"Reached X 1120  Y 120  Z 725  Rx 0  Ry 45  Rz 0 \(0\.0 mm")
+        self.expect(t, r"X \[mm, 100\.\.1400\] \(1120\): ")
+        self.quit(t)
+        (entry,) = self.new_entries(before, 1)
+        self.assertEqual((entry["move_type"], entry["target"], entry["outcome"]),
+                         ("PTP", [1120, 120, 725, 0, 45, 0], "executed"))
+
+    def test_02_bad_values_are_re_prompted_with_the_reason(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        t = self.spawn()
+        steps = [  # (typed, the reason that must follow, the prompt asked again)
+            ("abc", r"X: 'abc' is not a number", FIRST_PROMPT),
+            ("1500", r"X = 1500 mm is above the workspace: allowed 100\.\.1400 mm", FIRST_PROMPT),
+            ("1000", None, r"Y \[mm, -900\.\.900\] \(0\): "),
+            ("nan", r"Y: 'nan' is not a position: a finite number in -900\.\.900 mm is needed", r"Y \[mm"),
+            ("-950", r"Y = -950 mm is below the workspace: allowed -900\.\.900 mm", r"Y \[mm"),
+            ("0", None, r"Z \[mm, 0\.\.1400\] \(725\): "),
+            ("inf", r"Z: 'inf' is not a position", r"Z \[mm"),
+            ("1e999", r"Z: inf is not a position", r"Z \[mm"),
+            ("12,5", r"Z: '12,5' is not a number", r"Z \[mm"),
+            ("800", None, r"Rx \[deg"),
+            ("", None, r"Ry \[deg"),
+            ("200", r"Ry = 200 deg is above the workspace: allowed -180\.\.180 deg", r"Ry \[deg"),
+            ("", None, r"Rz \[deg"),
+            ("", None, r"Move type"),
+            ("spline", r"move type: 'spline' is not one of ptp, lin, circ", r"Move type"),
+            ("lin", None, CONFIRM),
+            ("n", r"Not sent\.", FIRST_PROMPT),
+        ]
+        for typed, reason, prompt in steps:
+            t.sendline(typed)
+            if reason is not None:
+                self.expect(t, reason)
+            self.expect(t, prompt)
+        # the declined move never reached the controller: the next one is the only new entry
+        self.move(t, "1000 0 800 0 45 0 lin")
+        self.quit(t)
+        self.assertEqual([(e["move_type"], e["target"]) for e in self.new_entries(before, 1)],
+                         [("LIN", [1000, 0, 800, 0, 45, 0])])
+
+    def test_03_unreachable_and_invalid_poses_are_refused_before_anything_is_sent(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        t = self.spawn()
+        t.sendline("1400 0 1400 0 0 0 ptp")                      # inside the box, out of reach
+        self.expect(t, r"Refused, nothing was sent: .*unreachable")
+        self.expect(t, FIRST_PROMPT)
+        self.assertNotIn("[y/N]", t.before)
+        t.sendline("1000 150 800 0 45 0 circ")
+        self.expect(t, r"a circular move needs a via point")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("1000 0 1500 0 45 0 lin")
+        self.expect(t, r"Z = 1500 mm is above the workspace")
+        self.expect(t, FIRST_PROMPT)
+        self.move(t, "1050 0 750 0 45 0 ptp")
+        self.quit(t)
+        self.assertEqual([e["target"] for e in self.new_entries(before, 1)], [[1050, 0, 750, 0, 45, 0]])
+
+    def test_04_ptp_lin_and_circ_moves_reach_their_targets_with_progress_shown(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        t = self.spawn()
+        text = self.move(t, "1000 200 800 0 45 0 ptp", r"Reached X 1000  Y 200  Z 800  Rx 0  Ry 45  Rz 0")
+        self.assertRegex(text, PROGRESS)
+        # a linear move entered field by field (the last target is the default)
+        t.sendline("")
+        self.expect(t, r"Y \[mm, -900\.\.900\] \(200\): ")
+        t.sendline("-150")
+        for _ in range(4):
+            self.expect(t, r"(Z|Rx|Ry|Rz) \[")
+            t.sendline("")
+        self.expect(t, r"Move type \[ptp, lin, circ\] \(ptp\): ")
+        t.sendline("lin")
+        self.expect(t, CONFIRM)
+        t.sendline("y")
+        self.expect(t, r"moving +distance to go +[0-9.]+ mm")
+        self.expect(t, r"Reached X 1000  Y -150  Z 800  Rx 0  Ry 45  Rz 0")
+        self.expect(t, FIRST_PROMPT)
+        text = self.move(t, "1000 150 800 0 45 0 circ via 1100 0 800",
+                         r"Reached X 1000  Y 150  Z 800  Rx 0  Ry 45  Rz 0")
+        self.assertRegex(text, r"moving +distance to go +[0-9.]+ mm")
+        self.quit(t)
+        self.assertEqual([(e["move_type"], e["target"], e["outcome"]) for e in self.new_entries(before, 4)], [
+            ("PTP", [1000, 200, 800, 0, 45, 0], "executed"),
+            ("LIN", [1000, -150, 800, 0, 45, 0], "executed"),
+            ("CIRC_VIA", [1100, 0, 800, 0, 45, 0], "via_stored"),
+            ("CIRC_END", [1000, 150, 800, 0, 45, 0], "executed"),
+        ])
+
+    def test_05_ctrl_c_during_a_move_stops_the_arm_and_returns_to_the_prompt(self):
+        self.wait_motion_possible()
+        t = self.spawn()
+        self.move(t, "1000 -600 800 0 45 0 ptp")
+        before = len(self.entries())
+        t.sendline("1000 650 800 0 45 0 lin")                    # ~1250 mm at 0.25 m/s: about 5 s
+        self.expect(t, CONFIRM)
+        t.sendline("y")
+        self.expect(t, r"moving +distance to go +[0-9.]+ mm")
+        t.sendintr()
+        self.expect(t, r"Ctrl-C: stopping the arm")
+        self.expect(t, r"Stopped at X [-0-9.]+  Y ([-0-9.]+) ")
+        stopped_y = float(t.match.group(1))
+        self.expect(t, FIRST_PROMPT)
+        (entry,) = self.new_entries(before, 1)
+        self.assertEqual(entry["outcome"], "rejected")
+        self.assertIn("stop", entry["reason"])
+        self.assertGreater(ControllerPose(*entry["final_pose"]).distance_to(
+            ControllerPose(1000, 650, 800, 0, 45, 0))[0], 20.0)
+        self.assertLess(abs(stopped_y - entry["final_pose"][1]), 2.0)
+        start = len(self.status.messages)
+        self.assertIsNotNone(self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 5.0, start))
+        t.sendline("status")                                     # still usable: the driver is fine
+        self.expect(t, r"motion possible: yes")
+        self.expect(t, FIRST_PROMPT)
+        self.quit(t)
+
+    def test_06_quit_ctrl_d_and_ctrl_c_at_a_prompt_leave_cleanly(self):
+        t = self.spawn()
+        t.sendline("help")
+        for word in ("home", "stop", "status", "history", "help", "quit"):
+            self.expect(t, r"\n  %s " % word)
+        self.expect(t, FIRST_PROMPT)
+        self.quit(t)
+        for key in ("eof", "intr"):
+            t = self.spawn()
+            t.sendline("1000")                                   # in the middle of an entry
+            self.expect(t, r"Y \[mm")
+            t.sendeof() if key == "eof" else t.sendintr()
+            self.expect(t, r"Bye\.")
+            self.expect(t, pexpect.EOF)
+            t.close()
+            self.assertEqual(t.exitstatus, 0, key)
+
+    def test_07_history_status_home_and_stop_commands(self):
+        self.wait_motion_possible()
+        t = self.spawn()
+        t.sendline("home")
+        self.expect(t, CONFIRM)
+        t.sendline("y")
+        self.expect(t, r"Reached X 1120  Y 0  Z 725  Rx 0  Ry 45  Rz 0")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("1400 0 1400 0 0 0")
+        self.expect(t, r"Refused")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("history")
+        self.expect(t, r"  1  [0-9:]{8}  PTP to X 1120  Y 0  Z 725  Rx 0  Ry 45  Rz 0\s+-> reached")
+        self.expect(t, r"  2  [0-9:]{8}  PTP to X 1400  Y 0  Z 1400  Rx 0  Ry 0  Rz 0\s+-> refused: .*unreachable")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("status")
+        self.expect(t, r"link: +connected")
+        self.expect(t, r"pose: +X 1120  Y 0  Z 725  Rx 0  Ry 45  Rz 0")
+        self.expect(t, r"joints \[deg\]: +J1 ")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("stop")
+        self.expect(t, r"Stop sent: stop sent; 0 job\(s\) ended")
+        self.expect(t, FIRST_PROMPT)
+        self.quit(t)
+
+    def test_08_motion_not_possible_is_said_in_words_and_nothing_is_sent(self):
+        self.wait_motion_possible()
+        t = self.spawn()
+        before = len(self.entries())
+        try:
+            self.assertTrue(self.set_estop(True).success)
+            start = len(self.status.messages)
+            self.assertIsNotNone(self.status.wait_for(lambda m: m.e_stopped.val == TriState.TRUE, 5.0, start))
+            t.sendline("1000 0 800 0 45 0 lin")
+            self.expect(t, r"Not sent: motion is not possible now: the emergency stop is active")
+            self.expect(t, FIRST_PROMPT)
+            t.sendline("status")
+            self.expect(t, r"motion possible: no \(the emergency stop is active")
+            self.expect(t, r"e-stop: PRESSED")
+            self.expect(t, FIRST_PROMPT)
+        finally:
+            self.set_estop(False)
+            self.set_drives(True)
+        self.wait_motion_possible()
+        self.move(t, "1000 0 800 0 45 0 lin")
+        self.quit(t)
+        self.assertEqual([e["target"] for e in self.new_entries(before, 1)], [[1000, 0, 800, 0, 45, 0]])
+
+    def test_09_one_shot_command_line_and_its_exit_codes(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+
+        def run(*args, stdin="", env=None):
+            e = dict(os.environ)
+            e.update(env or {})
+            return subprocess.run(["rosrun", "vr_driver", "pose_terminal"] + list(args), input=stdin,
+                                  capture_output=True, text=True, timeout=60, env=e)
+
+        res = run("--pose", "1050", "0", "750", "0", "45", "0", "--type", "lin", "--yes")
+        self.assertEqual(res.returncode, 0, res.stdout + res.stderr)
+        self.assertIn("Reached X 1050  Y 0  Z 750", res.stdout)
+        self.assertRegex(res.stdout, PROGRESS)
+        res = run("--pose", "1000", "0", "800", "0", "45", "0", "--preview")
+        self.assertEqual(res.returncode, 0, res.stdout + res.stderr)
+        self.assertIn("Preview: reachable", res.stdout)
+        res = run("--pose", "1000", "0", "800", "0", "45", "0", stdin="n\n")
+        self.assertEqual(res.returncode, 1, res.stdout + res.stderr)
+        self.assertIn("Not sent.", res.stdout)
+        res = run("--pose", "1500", "0", "800", "0", "45", "0", "--yes")
+        self.assertEqual(res.returncode, 1, res.stdout + res.stderr)
+        self.assertIn("X = 1500 mm is above the workspace", res.stdout)
+        res = run("--pose", "1400", "0", "1400", "0", "0", "0", "--yes")
+        self.assertEqual(res.returncode, 1, res.stdout + res.stderr)
+        self.assertIn("unreachable", res.stdout)
+        for bad in (["--pose", "1000", "0", "nan", "0", "45", "0", "--yes"],
+                    ["--pose", "1000", "0", "800", "0", "45", "0", "--type", "circ", "--yes"],
+                    ["--pose", "1000", "0"], ["--bogus"]):
+            res = run(*bad)
+            self.assertEqual(res.returncode, 2, (bad, res.stdout, res.stderr))
+            self.assertIn("usage: pose_terminal", res.stderr)
+        res = run("--pose", "1000", "0", "800", "0", "45", "0", "--yes", "--wait", "1", "__ns:=/nowhere")
+        self.assertEqual(res.returncode, 3, res.stdout + res.stderr)
+        self.assertIn("no driver: the action /nowhere/move_to_pose is not served", res.stderr)
+        res = run("--pose", "1000", "0", "800", "0", "45", "0", "--yes", "--wait", "1",
+                  env={"ROS_MASTER_URI": "http://localhost:9"})
+        self.assertEqual(res.returncode, 3, res.stdout + res.stderr)
+        self.assertIn("no ROS master at http://localhost:9", res.stderr)
+        # only the one confirmed move reached the controller
+        self.assertEqual([(e["move_type"], e["target"]) for e in self.new_entries(before, 1)],
+                         [("LIN", [1050, 0, 750, 0, 45, 0])])
+        self.assertFalse(self.executed.wait_count(before + 2, 0.5))
+
+    def test_10_the_workspace_comes_from_the_driver_parameters(self):
+        saved = rospy.get_param("/interface/workspace")
+        try:
+            rospy.set_param("/interface/workspace/x", [200.0, 1300.0])
+            t = self.spawn(ready=False)
+            self.expect(t, r"workspace X 200\.\.1300, Y -900\.\.900, Z 0\.\.1400 mm, angles -180\.\.180 deg "
+                           r"\(/interface/workspace\)")
+            self.expect(t, r"X \[mm, 200\.\.1300\] \(1120\): ")
+            t.sendline("1350 0 725 0 45 0")
+            self.expect(t, r"X = 1350 mm is above the workspace: allowed 200\.\.1300 mm")
+            self.expect(t, r"X \[mm, 200\.\.1300\]")
+            self.quit(t)
+        finally:
+            rospy.set_param("/interface/workspace", saved)
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "pose_terminal", PoseTerminalTest)
