@@ -338,6 +338,40 @@ class DriverTest(unittest.TestCase):
         self.status.wait_for(lambda m: False, 0.5)          # a wrongly sent path would show by now
         self.assertEqual(len(self.entries()), before + 1)
 
+    def test_09_preview_beside_a_move_and_preemption_by_a_new_move(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        other = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
+        self.assertTrue(other.wait_for_server(rospy.Duration(10.0)))
+        moving = threading.Event()
+        long_lin = MoveToPoseGoal(target=cp((1000, -600, 800, 0, 45, 0)), move_type=MoveToPoseGoal.LIN)
+        self.client.send_goal(long_lin, feedback_cb=lambda fb: fb.phase == "moving" and moving.set())
+        self.assertTrue(moving.wait(10.0))
+        # another client previews while the arm moves: the move goes on
+        other.send_goal(MoveToPoseGoal(target=cp((1000, 0, 700, 0, 45, 0)), move_type=MoveToPoseGoal.PTP,
+                                       preview_only=True))
+        self.assertTrue(other.wait_for_result(rospy.Duration(10.0)))
+        self.assertEqual(other.get_state(), GoalStatus.SUCCEEDED)
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(20.0)))
+        self.assertEqual(self.client.get_state(), GoalStatus.SUCCEEDED, self.client.get_result().reason)
+        # a new motion goal preempts the running one: that one stops, the new one runs
+        moving.clear()
+        self.client.send_goal(MoveToPoseGoal(target=cp((1000, 600, 800, 0, 45, 0)),
+                                             move_type=MoveToPoseGoal.LIN),
+                              feedback_cb=lambda fb: fb.phase == "moving" and moving.set())
+        self.assertTrue(moving.wait(10.0))
+        other.send_goal(MoveToPoseGoal(target=cp((1050, 0, 800, 0, 45, 0)), move_type=MoveToPoseGoal.PTP))
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(10.0)))
+        self.assertEqual(self.client.get_state(), GoalStatus.PREEMPTED)
+        self.assertIn("preempted", self.client.get_result().reason)
+        self.assertTrue(other.wait_for_result(rospy.Duration(20.0)))
+        self.assertEqual(other.get_state(), GoalStatus.SUCCEEDED, other.get_result().reason)
+        entries = self.wait_entries(before + 3)[before:]
+        self.assertEqual([(e["target"], e["outcome"]) for e in entries],
+                         [([1000, -600, 800, 0, 45, 0], "executed"),
+                          ([1000, 600, 800, 0, 45, 0], "rejected"),
+                          ([1050, 0, 800, 0, 45, 0], "executed")])
+
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "driver", DriverTest)

@@ -147,6 +147,29 @@ def test_cancel_mid_motion_stops_the_arm(tmp_path, kin):
         r.close()
 
 
+def test_a_move_queued_behind_a_cancelled_one_is_planned_again_from_where_the_arm_stopped(tmp_path, kin):
+    r = Rig(tmp_path, kin, speed_factor=1.0)
+    try:
+        r.wait_ready()
+        first = r.core.submit(MoveRequest(MoveType.LIN, (1000, -600, 800, 0, 45, 0)))
+        second = r.core.submit(MoveRequest(MoveType.LIN, (1000, -300, 700, 0, 45, 0)))
+        planned_from = second.preview.trajectory.start
+        r.wait_status(lambda s: s.feedback is not None and s.feedback.state.name == "BUSY"
+                      and s.pose.y < -100, 5.0)
+        r.core.cancel(first, "test cancel")
+        assert first.wait(5.0).phase is JobPhase.CANCELLED
+        result = second.wait(20.0)
+        assert result is not None and result.success, result
+        # it ran from where the first one stopped, not from the first one's planned end
+        assert second.preview.trajectory.start != planned_from
+        stopped = ControllerPose(*r.sim.log.entries()[0].final_pose)
+        start_pose = kin.fk_pose(second.preview.trajectory.start)
+        assert start_pose.distance_to(stopped)[0] <= 1.5
+        assert [e.outcome for e in r.sim.log.entries()] == [Outcome.REJECTED, Outcome.EXECUTED]
+    finally:
+        r.close()
+
+
 def test_joint_path_is_streamed_in_order_and_validated_first(rig, kin):
     rig.wait_ready()
     names = list(rig.core.joint_names)

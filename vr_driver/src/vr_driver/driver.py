@@ -71,6 +71,10 @@ ERROR_LINK = 1                     # link to the controller down
 ERROR_CONTROLLER = 2               # the controller reports its error bit
 ERROR_PROTOCOL = 3                 # the controller's feedback cannot be decoded
 
+# a queued job whose planned start differs from the current joints by more than this [rad] is
+# planned again before it is sent (whole-mm / whole-degree feedback alone stays well below it)
+START_TOLERANCE = 0.02
+
 # a port that cannot be opened is a warning at first (a virtual controller may still be starting),
 # an error once it has been missing this long [s]
 PORT_ERROR_AFTER = 5.0
@@ -126,8 +130,10 @@ class MoveJob:
 
     _ids = itertools.count(1)
 
-    def __init__(self, preview: Preview, on_update: Optional[Callable[["MoveJob"], None]] = None):
+    def __init__(self, preview: Preview, on_update: Optional[Callable[["MoveJob"], None]] = None,
+                 group: Optional[int] = None):
         self.id = next(MoveJob._ids)
+        self.group = self.id if group is None else group   # the jobs of one streamed path share it
         self.preview = preview
         self.on_update = on_update
         self.phase = JobPhase.QUEUED
@@ -216,6 +222,7 @@ class DriverStatus:
     last_diag: str
     error_code: int
     error_reason: str
+    feedback_time: Optional[float] = None     # clock time the feedback record arrived (None: none)
 
     @property
     def connected(self) -> bool:
@@ -298,6 +305,7 @@ class DriverCore:
         self._link_reason = "not started"
         self._next_open = 0.0
         self._feedback: Optional[Feedback] = None
+        self._feedback_time: Optional[float] = None
         self._last_good: Optional[Feedback] = None
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
@@ -409,6 +417,8 @@ class DriverCore:
                 previews.append(preview)
                 start = preview.joint_target
             jobs = [MoveJob(p, on_update) for p in previews]
+            for job in jobs[1:]:
+                job.group = jobs[0].group
             self._queue.extend(jobs)
         self._wake.set()
         log.info("joint path: %d PTP targets queued (jobs %d..%d)", len(jobs), jobs[0].id, jobs[-1].id)
@@ -591,6 +601,7 @@ class DriverCore:
                 self._slave_reason = ""
                 self._link_state, self._link_reason = LinkState.CONNECTED, "Data_Exchange"
                 self._feedback = self._last_good = fb
+                self._feedback_time = slave.inputs_time
                 self._update_joints(fb)
                 event = self.handshake.update(fb, now)
                 self._on_event(event, fb)
@@ -673,13 +684,15 @@ class DriverCore:
             self._stop_request = None
             log.warning("job %d ended: %s", job.id, reason)
             job._finish(False, JobPhase.CANCELLED if cancelled else JobPhase.FAILED, reason, fb.pose)
-            # a failed target ends the rest of a streamed path too: never skip ahead silently
-            self._fail_queue("an earlier target failed (%s)" % reason)
+            # a failed target ends the rest of its streamed path too: never skip ahead silently
+            self._fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
 
-    def _fail_queue(self, reason: str) -> None:
+    def _fail_queue(self, reason: str, group: Optional[int] = None) -> None:
+        """End the queued jobs (of one group only, when given) with ``reason``."""
         for queued in list(self._queue):
-            queued._finish(False, JobPhase.FAILED, reason, None)
-        self._queue.clear()
+            if group is None or queued.group == group:
+                queued._finish(False, JobPhase.FAILED, reason, None)
+                self._queue.remove(queued)
 
     def _advance_jobs(self, now: float, fb: Feedback) -> None:
         if self._stop_request is not None:
@@ -705,6 +718,8 @@ class DriverCore:
         job = self._job
         if job.next_command >= len(job.preview.commands):
             return
+        if job.next_command == 0 and not self._still_valid(job):
+            return
         command = job.preview.commands[job.next_command]
         timeout = (self.params.motion_timeout_factor * job.preview.duration
                    + self.params.motion_timeout_margin)
@@ -718,6 +733,29 @@ class DriverCore:
         self.counters.targets_sent += 1
         log.info("job %d: sent target %d: %s", job.id, seq, command.describe())
         job._set_phase(JobPhase.SENDING)
+
+    def _still_valid(self, job: MoveJob) -> bool:
+        """A job is previewed from where the arm was expected to be when it was queued. If the arm
+        is elsewhere now (an earlier move was stopped or failed), plan it again from here, so the
+        path that was validated is the path that runs; if that fails, the job fails (not sent)."""
+        current = self._joints if self._joints_valid else None
+        start = job.preview.trajectory.start
+        if current is not None and max(abs(a - b) for a, b in zip(current, start)) <= START_TOLERANCE:
+            return True
+        try:
+            if current is None:
+                raise DriverError("no valid joint state to plan from")
+            job.preview = self.preview(job.preview.request, current)
+        except VrDriverError as exc:
+            self._job = None
+            log.warning("job %d not sent: the arm is not where it was planned from, and from "
+                        "here: %s", job.id, exc)
+            job._finish(False, JobPhase.FAILED, "not sent: from the arm's current pose: %s" % exc,
+                        self._last_good.pose if self._last_good else None)
+            self._fail_queue("an earlier target of the same path failed (%s)" % exc, job.group)
+            return False
+        log.info("job %d planned again from the arm's current pose (%.1f s)", job.id, job.preview.duration)
+        return True
 
     # ------------------------------------------------------------------------ snapshots
     def _snapshot(self, now: float) -> DriverStatus:
@@ -735,7 +773,8 @@ class DriverCore:
             counters=replace(self.counters),
             master_counters=dict(vars(master.counters)) if master is not None else {},
             slave_state=slave.state.value if slave is not None else "closed",
-            last_diag=diag, error_code=self._error_code, error_reason=self._error_reason)
+            last_diag=diag, error_code=self._error_code, error_reason=self._error_reason,
+            feedback_time=self._feedback_time if fb is not None else None)
 
     def _publish(self, now: float) -> None:
         with self._lock:

@@ -11,7 +11,8 @@ import math
 import signal
 import sys
 import threading
-from typing import List, Optional
+import threading
+from typing import Dict, List, Optional
 
 import actionlib
 import diagnostic_updater
@@ -73,8 +74,11 @@ def cartesian(pose: Optional[ControllerPose]) -> CartesianPose:
 
 
 def pose_from_msg(msg: CartesianPose, what: str) -> ControllerPose:
-    return ControllerPose.from_sequence((msg.x, msg.y, msg.z, msg.rx, msg.ry, msg.rz)) if msg is not None \
-        else None
+    """A ControllerPose from the message; PoseError names ``what`` (target / via) and the field."""
+    try:
+        return ControllerPose.from_sequence((msg.x, msg.y, msg.z, msg.rx, msg.ry, msg.rz))
+    except VrDriverError as exc:
+        raise type(exc)("%s: %s" % (what, exc)) from None
 
 
 class InterfaceNode:
@@ -92,8 +96,14 @@ class InterfaceNode:
         self.diag.add("link", self._diag_link)
         self.diag.add("controller", self._diag_controller)
         self.diag.period = params.diagnostics_period
-        self.server = actionlib.SimpleActionServer("move_to_pose", MoveToPoseAction,
-                                                   execute_cb=self._execute, auto_start=False)
+        # a plain ActionServer: a preview_only goal runs beside a moving goal and never preempts it
+        # (SimpleActionServer would cancel the running move for any new goal, previews included);
+        # a new motion goal preempts the running one (the arm is stopped first)
+        self.server = actionlib.ActionServer("move_to_pose", MoveToPoseAction, goal_cb=self._on_goal,
+                                             cancel_cb=self._on_cancel, auto_start=False)
+        self._goals_lock = threading.Lock()
+        self._cancel: Dict[str, threading.Event] = {}        # goal id -> cancel requested
+        self._motion_goal: Optional[str] = None
         self.stop_srv = rospy.Service("stop_motion", Trigger, self._stop_motion)
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
@@ -247,18 +257,51 @@ class InterfaceNode:
             raise DriverError("has_via is only allowed with CIRC goals")
         return MoveRequest(kind, target, via, preview_only=goal.preview_only)
 
-    def _execute(self, goal: MoveToPoseGoal) -> None:
+    def _on_goal(self, handle) -> None:
+        """ActionServer thread: accept, then run the goal in its own thread."""
+        goal_id = handle.get_goal_id().id
+        with self._goals_lock:
+            self._cancel[goal_id] = threading.Event()
+        handle.set_accepted()
+        threading.Thread(target=self._run_goal, args=(handle, goal_id), name="goal-" + goal_id[-8:],
+                         daemon=True).start()
+
+    def _on_cancel(self, handle) -> None:
+        with self._goals_lock:
+            event = self._cancel.get(handle.get_goal_id().id)
+        if event is not None:
+            event.set()
+
+    def _run_goal(self, handle, goal_id: str) -> None:
+        try:
+            self._execute(handle, handle.get_goal(), self._cancel[goal_id])
+        except Exception as exc:  # never leave a goal hanging
+            rospy.logerr("move_to_pose: internal error: %s", exc)
+            handle.set_aborted(MoveToPoseResult(success=False, reason="internal error: %s" % exc))
+        finally:
+            with self._goals_lock:
+                self._cancel.pop(goal_id, None)
+                if self._motion_goal == goal_id:
+                    self._motion_goal = None
+
+    def _execute(self, handle, goal: MoveToPoseGoal, cancel: threading.Event) -> None:
         result = MoveToPoseResult()
         feedback = MoveToPoseFeedback(phase=MoveToPoseFeedback.PHASE_VALIDATING)
         status = self.core.status()
         feedback.current = cartesian(status.pose)
-        self.server.publish_feedback(feedback)
+        handle.publish_feedback(feedback)
+        goal_id = handle.get_goal_id().id
         try:
             request = self._request_from_goal(goal)
             if request.preview_only:
                 preview = self.core.preview(request)
                 job = None
             else:
+                with self._goals_lock:           # a new motion goal preempts the running one
+                    previous = self._motion_goal
+                    self._motion_goal = goal_id
+                    if previous is not None and previous in self._cancel:
+                        self._cancel[previous].set()
                 job = self.core.submit(request)
                 preview = job.preview
         except (VrDriverError, ValueError, TypeError) as exc:
@@ -266,28 +309,31 @@ class InterfaceNode:
             result.reason = "refused: %s" % exc
             result.reached = cartesian(status.pose)
             rospy.logwarn("move_to_pose %s", result.reason)
-            self.server.set_aborted(result, result.reason)
+            handle.set_aborted(result, result.reason)
             return
         result.joint_target = list(preview.joint_target)
         result.estimated_duration = preview.duration
         feedback.phase = MoveToPoseFeedback.PHASE_PREVIEW
-        self.server.publish_feedback(feedback)
+        handle.publish_feedback(feedback)
         if job is None:
             result.success = True
             result.reached = cartesian(status.pose)
-            self.server.set_succeeded(result, "preview only: reachable, %.2f s" % preview.duration)
+            handle.set_succeeded(result, "preview only: reachable, %.2f s" % preview.duration)
             return
         self._publish_markers(job)
-        rate = rospy.Rate(max(5.0, min(50.0, self.params.joint_states_rate)))
+        period = 1.0 / max(5.0, min(50.0, self.params.joint_states_rate))
         cancelled = False
         while not job.done:
             phase = job.phase
             if rospy.is_shutdown():
                 self.core.cancel(job, "driver shutting down")
                 break
-            if self.server.is_preempt_requested() and not cancelled:
+            if cancel.is_set() and not cancelled:
                 cancelled = True
-                self.core.cancel(job, "goal cancelled by the client")
+                with self._goals_lock:
+                    preempted = self._motion_goal != goal_id
+                self.core.cancel(job, "preempted by a new goal" if preempted
+                                 else "goal cancelled by the client")
                 feedback.phase = MoveToPoseFeedback.PHASE_STOPPING
             elif not cancelled:
                 feedback.phase = (MoveToPoseFeedback.PHASE_MOVING if job.phase is JobPhase.MOVING
@@ -296,8 +342,8 @@ class InterfaceNode:
             if s.pose is not None:
                 feedback.current = cartesian(s.pose)
                 feedback.distance_to_go, feedback.angle_to_go = s.pose.distance_to(preview.target)
-            self.server.publish_feedback(feedback)
-            job.wait_change(phase, rate.sleep_dur.to_sec())   # wakes at once on a phase change
+            handle.publish_feedback(feedback)
+            job.wait_change(phase, period)          # wakes at once on a phase change
         res = job.wait(5.0)
         s = self.core.status()
         reached = res.reached if res is not None and res.reached is not None else s.pose
@@ -305,12 +351,12 @@ class InterfaceNode:
         result.success = bool(res is not None and res.success)
         result.reason = res.reason if res is not None else "no result"
         if result.success:
-            self.server.set_succeeded(result)
+            handle.set_succeeded(result)
         elif cancelled or (res is not None and res.phase is JobPhase.CANCELLED):
-            self.server.set_preempted(result, result.reason)
+            handle.set_canceled(result, result.reason)
         else:
             rospy.logwarn("move_to_pose failed: %s", result.reason)
-            self.server.set_aborted(result, result.reason)
+            handle.set_aborted(result, result.reason)
 
     def _stop_motion(self, _req) -> TriggerResponse:
         n = self.core.stop_motion("stop_motion service called")
