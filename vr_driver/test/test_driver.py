@@ -192,6 +192,21 @@ def test_joint_path_is_streamed_in_order_and_validated_first(rig, kin):
     assert dp <= 1.0 and da <= 1.0
 
 
+@pytest.mark.parametrize("joints, words", [
+    ((0.0, 1.5, 0.5, 0.0, 0.0, 0.0), "Z = -186 mm is outside the workspace"),     # below the floor
+    ((2.5, 0.6, -0.3, 0.0, 0.4, 0.0), "X = -888 mm is outside the workspace"),    # behind the robot
+    ((0.0, 0.6, -0.3, 0.0, 0.4, 7.0), "joint_6"),                                 # beyond J6's limit
+])
+def test_joint_path_points_inside_the_limits_but_outside_the_workspace_are_refused(rig, joints, words):
+    """The safety envelope holds for joint_path_command too: FK of each point must be in the box."""
+    rig.wait_ready()
+    q = list(rig.core.status().joints)
+    with pytest.raises(DriverError) as err:
+        rig.core.submit_joint_path(list(rig.core.joint_names), [q, list(joints)])
+    assert "point 1" in str(err.value) and words in str(err.value)
+    assert rig.sim.log.entries() == [] and rig.core.status().counters.targets_sent == 0
+
+
 def test_empty_joint_path_stops(tmp_path, kin):
     r = Rig(tmp_path, kin, speed_factor=1.0)
     try:
