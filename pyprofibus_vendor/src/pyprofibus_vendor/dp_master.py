@@ -7,8 +7,30 @@ per-state time limits in ``_state_limits``)::
     CHECK_DIAG ---diag ready (no Prm_Req/Cfg_Fault/Prm_Fault, locked by us)---> DATA_EXCHANGE
     CHECK_DIAG ---not ready yet---> CHECK_DIAG (poll again, bounded by the state limit)
     DATA_EXCHANGE ---DH/RDH reply---> DX_DIAG ---diag ready---> DATA_EXCHANGE
+    DATA_EXCHANGE ---no reply after the retries, within ``dx_tolerance``---> DATA_EXCHANGE
     any state ---no reply after the retries / RS / fault / state limit---> BACKOFF
     BACKOFF ---back-off time over---> INIT
+
+Noisy lines (both options off by default, as the standard master behaves):
+
+* ``dx_tolerance`` (seconds): a Data_Exchange that gets no valid reply after the retries does
+  not end the connection while the last good Data_Exchange reply (or entering Data_Exchange) is
+  less than ``dx_tolerance`` ago: the turn ends without new inputs, and the next request
+  restarts the frame count (FCV=0) -- after a failed transaction the master cannot know whether
+  the slave executed the last request; with FCV=0 the slave executes the next one as new instead
+  of answering a "repetition" from its stored reply (stale inputs, outputs not delivered). A
+  slave that left Data_Exchange answers RS and is re-initialised at once. So one lost telegram
+  no longer drops the slave (and, through the Set_Prm that follows, the application behind it).
+* ``retry_steps``: a Slave_Diag, Set_Prm or Chk_Cfg of the start-up sequence without a reply
+  after the retries is sent again at the slave's next turn (frame count restarted) instead of
+  restarting the whole sequence after a back-off; ``state_limit`` still ends an attempt that
+  makes no progress.
+
+Back-off grows with consecutive failed attempts; it starts again from ``backoff_min`` when a
+station whose last attempt ended in a missing reply (or a state limit) answers FDL_Status again
+-- it is there: a line that comes back is reconnected after a short back-off even after a long
+outage. A reply that arrives garbled, with nothing of it left to complete, is repeated after
+the idle time (TSYN) instead of after the whole slot time.
 
 A *turn* is one transaction with one slave (request, then reply or timeout
 after ``max_retry`` repetitions with the same FCB); slaves take turns in
@@ -163,6 +185,8 @@ class MasterSlaveState(enum.Enum):
 
 
 _CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
+_STEP_STATES = (MasterSlaveState.WAIT_DIAG, MasterSlaveState.SET_PRM, MasterSlaveState.CHK_CFG,
+                MasterSlaveState.CHECK_DIAG, MasterSlaveState.DX_DIAG)
 
 
 @dataclass
@@ -177,6 +201,7 @@ class SlaveCounters:
     reconnects: int = 0         # came back to Data_Exchange after a loss
     state_changes: int = 0
     faults: int = 0             # init attempts ended by a fault or time limit
+    dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
 
 
 @dataclass
@@ -196,6 +221,7 @@ class MasterCounters:
     overruns: int = 0           # fixed-rate loop cycles that started late
     fcs_errors: int = 0         # copied from the deframer
     garbage_bytes: int = 0      # copied from the deframer
+    dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
 
 
 @dataclass
@@ -221,6 +247,8 @@ class SlaveHandle:
         self.last_diag: Optional[SlaveDiag] = None
         self.backoff_until = now
         self.failures = 0           # consecutive failed (re)initialisations
+        self.failed_by_timeout = False   # the last failure was a missing reply
+        self.dx_ok_time = now       # last good Data_Exchange reply (or entering Data_Exchange)
         self.was_connected = False
         self.jobs: List[AcyclicRequest] = []
         self._outputs = bytes(spec.output_size or 0)
@@ -294,7 +322,7 @@ class DpMaster:
                  clock: Clock = time.monotonic, timing: Optional[BusTiming] = None,
                  max_retry: Optional[int] = None, reply_timeout_floor: float = 0.05,
                  backoff_min: float = 0.1, backoff_max: float = 1.0,
-                 state_limit: float = 1.0,
+                 state_limit: float = 1.0, dx_tolerance: float = 0.0, retry_steps: bool = False,
                  on_state_change: Optional[Callable[[SlaveHandle, MasterSlaveState,
                                                      MasterSlaveState, str], None]] = None
                  ) -> None:
@@ -310,6 +338,10 @@ class DpMaster:
         self.reply_timeout_floor = reply_timeout_floor
         self.backoff_min = backoff_min
         self.backoff_max = backoff_max
+        if not dx_tolerance >= 0.0:
+            raise ConfigError(f"dx_tolerance {dx_tolerance!r} must be >= 0 seconds")
+        self.dx_tolerance = dx_tolerance
+        self.retry_steps = retry_steps
         self.on_state_change = on_state_change
         self.counters = MasterCounters()
         self.deframer = Deframer()
@@ -415,6 +447,7 @@ class DpMaster:
             self.counters.losses += 1
             level = logging.WARNING
         if new is MasterSlaveState.DATA_EXCHANGE and old not in _CONNECTED:
+            slave.dx_ok_time = now
             if slave.was_connected:
                 slave.counters.reconnects += 1
                 self.counters.reconnects += 1
@@ -424,9 +457,11 @@ class DpMaster:
         if self.on_state_change is not None:
             self.on_state_change(slave, old, new, reason)
 
-    def _fail(self, slave: SlaveHandle, reason: str, now: float) -> None:
-        """End the current attempt: back off, then start again at INIT."""
+    def _fail(self, slave: SlaveHandle, reason: str, now: float, timeout: bool = False) -> None:
+        """End the current attempt: back off, then start again at INIT. ``timeout``: it ended
+        because a reply was missing (not because the slave refused or reported a fault)."""
         slave.failures += 1
+        slave.failed_by_timeout = timeout
         if slave.state is not MasterSlaveState.INIT:
             slave.counters.faults += 1
         delay = 0.0 if slave.state in _CONNECTED else min(
@@ -517,7 +552,8 @@ class DpMaster:
         slave = self.slaves[self._turn]
         limit = self._state_limits[slave.state]
         if limit is not None and now - slave.state_since > limit:
-            self._fail(slave, f"state {slave.state.value} took longer than {limit} s", now)
+            self._fail(slave, f"state {slave.state.value} took longer than {limit} s", now,
+                       timeout=True)
             self._end_turn()
             return now
         sent = self._handlers[slave.state](slave, now)
@@ -568,6 +604,7 @@ class DpMaster:
             if inputs is not None:
                 self._dx_done(p, inputs, ResponseStatus.DL, now)
                 return
+        garbage = self.deframer.counters.garbage_bytes
         frames = self.deframer.feed(data)
         self.counters.fcs_errors = self.deframer.counters.fcs_errors
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
@@ -587,6 +624,11 @@ class DpMaster:
             if need:  # a reply is arriving: give it time to complete
                 extra = self.timing.chars(need) + self.reply_timeout_floor
                 self._pending.deadline = max(self._pending.deadline, now + extra)
+            elif self.deframer.counters.garbage_bytes != garbage and not self.deframer.pending:
+                # a reply came but was garbled and nothing of it is left to complete: repeat
+                # after the idle time (TSYN), not after the whole slot time
+                idle = max(self.timing.bits(self.timing.tsyn_bits), 0.001)
+                self._pending.deadline = min(self._pending.deadline, now + idle)
 
     def _addressed_to_us(self, pending: _Pending, frame: Frame) -> bool:
         if isinstance(frame, ShortAck):
@@ -615,6 +657,24 @@ class DpMaster:
         p.slave.counters.timeouts += 1
         self.counters.timeouts += 1
         slave = p.slave
+        if (p.kind == "dx" and self.dx_tolerance > 0.0
+                and now - slave.dx_ok_time < self.dx_tolerance):
+            # keep Data_Exchange; restart the frame count (see the module docstring)
+            slave.counters.dx_missed += 1
+            self.counters.dx_missed += 1
+            slave.fcb.reset()
+            log.debug("slave %d: no reply to Data_Exchange after %d retries (tolerated, last "
+                      "good reply %.3f s ago)", slave.address, p.retries, now - slave.dx_ok_time)
+            self._end_turn()
+            return
+        if self.retry_steps and p.kind in ("diag", "set_prm", "chk_cfg") \
+                and slave.state in _STEP_STATES:
+            # the station answered FDL_Status: ask again next turn, bounded by the state limit
+            slave.fcb.reset()
+            log.debug("slave %d: no reply to %s after %d retries; asking again (%s)",
+                      slave.address, p.kind, p.retries, slave.state.value)
+            self._end_turn()
+            return
         if p.job is not None:
             slave.jobs.remove(p.job)
             p.job.done, p.job.error = True, DpTimeoutError(
@@ -622,7 +682,11 @@ class DpMaster:
         self._pending = None
         what = {"fdl_status": "FDL_Status", "diag": "Slave_Diag", "set_prm": "Set_Prm",
                 "chk_cfg": "Chk_Cfg", "dx": "Data_Exchange", "job": "acyclic request"}[p.kind]
-        self._fail(slave, f"no reply to {what} after {p.retries} retries", now)
+        extra = ""
+        if p.kind == "dx" and self.dx_tolerance > 0.0:
+            extra = f" (no good Data_Exchange reply for {now - slave.dx_ok_time:.2f} s)"
+        self._fail(slave, f"no reply to {what} after {p.retries} retries{extra}", now,
+                   timeout=True)
         self._end_turn()
 
     # -- request handlers (one per state) -----------------------------------------------
@@ -689,6 +753,9 @@ class DpMaster:
         if frame.fc.status != ResponseStatus.OK or frame.fc.station_type != StationType.SLAVE:
             self._fail(slave, f"FDL_Status reply {frame.fc} (not a ready slave)", now)
         else:
+            if slave.failed_by_timeout:     # it answers again: back off briefly from now on
+                slave.failures = 0
+                slave.failed_by_timeout = False
             self._transition(slave, MasterSlaveState.WAIT_DIAG, "station answers FDL_Status",
                              now)
         self._end_turn()
@@ -734,10 +801,10 @@ class DpMaster:
         slave.counters.diag_reads += 1
         if diag != slave.last_diag:
             log.info("slave %d diag: %s", slave.address, explain_diag(diag, self.address))
+            if diag.ident != slave.spec.ident:      # once per change, not on every read
+                log.error("slave %d reports ident 0x%04X, configured 0x%04X", slave.address,
+                          diag.ident, slave.spec.ident)
         slave.last_diag = diag
-        if diag.ident != slave.spec.ident:
-            log.error("slave %d reports ident 0x%04X, configured 0x%04X", slave.address,
-                      diag.ident, slave.spec.ident)
         foreign = diag.locked_by not in (None, self.address)
         state = slave.state
         if foreign and not diag.status2 & DiagStatus2.PRM_REQ:
@@ -804,6 +871,7 @@ class DpMaster:
         self._pending = None
         slave.fcb.acknowledge()
         slave._store_inputs(data, now)
+        slave.dx_ok_time = now
         slave.counters.data_exchanges += 1
         if status in (ResponseStatus.DH, ResponseStatus.RDH):
             self._transition(slave, MasterSlaveState.DX_DIAG, "slave signals new diagnosis",

@@ -21,8 +21,16 @@ Rules of the program (also in ``doc/controller_program.md``):
   each time the slave enters Data_Exchange). Outside Data_Exchange, and in a new session before
   the master's first Data_Exchange, there is no command (flag 0); the slave itself replaces its
   outputs by the safe image (all zero) when it leaves Data_Exchange.
+- Two-telegram rule (``confirm_records``, the VirtualController's default): a record counts only
+  once it arrived unchanged in two consecutive Data_Exchange telegrams of the session (the master
+  repeats its record every cycle, so this costs one bus cycle per change). A telegram corrupted
+  on the line in a way the PROFIBUS checks miss (the 8-bit FCS passes about 1 in 256 multi-byte
+  corruptions) is then never acted on; without the rule such a telegram can start a wrong
+  target, re-start the previous one (flag 0 turned into 1), or release a DONE early so that the
+  still raised flag starts the same target again.
 - Disarmed at start and after every link loss: a request counts only after a record with the flag
-  at 0. A flag still raised from before the loss is answered REJECTED (held until the flag drops,
+  at 0 (it arms the program when it arrives, even if the program loop never saw it: the flag may
+  rise in the very next telegram). A flag still raised from before the loss is answered REJECTED (held until the flag drops,
   logged with the reason) and nothing moves, so a motion never starts from a stale request.
 - Link loss (the DP watchdog expired, or the master re-parameterised the slave -- also when it
   did so between two loops): the arm stops at
@@ -224,8 +232,9 @@ class ControllerProgram:
     """
 
     def __init__(self, slave: DpSlave, arm: SimArm, *, byte_order: Any = ByteOrder.LITTLE,
-                 execution_log: Optional[ExecutionLog] = None) -> None:
+                 execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False) -> None:
         self.slave = slave
+        self.confirm_records = confirm_records
         self.arm = arm
         self.byte_order = ByteOrder.parse(byte_order)
         self.log = execution_log if execution_log is not None else ExecutionLog()
@@ -246,6 +255,8 @@ class ControllerProgram:
         self._io_lock = threading.Lock()
         self._session = 1 if slave.state is SlaveState.DATA_EXCH else 0
         self._record_of_session: Optional[bytes] = None
+        self._last_arrival: Optional[bytes] = None     # the session's latest telegram (unconfirmed)
+        self._zero_seen = False                         # a (confirmed) record with flag 0 / 2 came
         self._left_reason = ""
         self._chained_outputs = slave.on_outputs
         self._chained_state = slave.on_state_change
@@ -256,7 +267,13 @@ class ControllerProgram:
     def _on_outputs(self, data: bytes) -> None:
         with self._io_lock:
             if self.slave.state is SlaveState.DATA_EXCH:     # not the safe image of a leaving slave
-                self._record_of_session = bytes(data)
+                record = bytes(data)
+                if not self.confirm_records or record == self._last_arrival:
+                    self._record_of_session = record
+                    if not self._zero_seen and len(record) > 12 and record[12] != 1 \
+                            and self._decodes(record):
+                        self._zero_seen = True      # arms the program, even between two loops
+                self._last_arrival = record
         if self._chained_outputs is not None:
             self._chained_outputs(data)
 
@@ -267,8 +284,17 @@ class ControllerProgram:
             if old is SlaveState.DATA_EXCH:
                 self._left_reason = reason
             self._record_of_session = None
+            self._last_arrival = None
+            self._zero_seen = False
         if self._chained_state is not None:
             self._chained_state(old, new, reason)
+
+    def _decodes(self, record: bytes) -> bool:
+        try:
+            Command.decode(record, self.byte_order)
+        except ProtocolError:
+            return False
+        return True
 
     # ---------------------------------------------------------------------------- read-outs
     @property
@@ -306,8 +332,11 @@ class ControllerProgram:
         connected = self.slave.state is SlaveState.DATA_EXCH
         with self._io_lock:
             session, raw, left_reason = self._session, self._record_of_session, self._left_reason
+            zero_seen = self._zero_seen
         if self._active_session is not None and (not connected or session != self._active_session):
             self._link_lost(now, deadline, left_reason)
+        if connected and zero_seen and not self._armed:
+            self._armed = True          # a flag-0 record of this session arrived (maybe between loops)
         self._active_session = session if connected else None
         self._deadline = self.slave.next_deadline() if connected else None
         command = self._decode(raw) if connected and raw is not None else None
@@ -431,6 +460,8 @@ class VirtualController:
     ``pty_link`` a symlink to it is made there (replacing a stale symlink, never another file) and
     removed by :meth:`stop`. A string serves that existing device (``SerialLink(link, baud)``). A
     :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
+    ``confirm_records`` (default True): the program acts on a master record only once it arrived
+    in two consecutive Data_Exchange telegrams (see the module docstring).
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
     :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
@@ -444,7 +475,7 @@ class VirtualController:
                  loop_period: float = DEFAULT_LOOP_PERIOD, byte_order: Any = ByteOrder.LITTLE,
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
                  kinematics: Optional[Kinematics] = None, arm: Optional[SimArm] = None,
-                 clock: Clock = time.monotonic) -> None:
+                 clock: Clock = time.monotonic, confirm_records: bool = True) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
@@ -464,7 +495,8 @@ class VirtualController:
         self.execution_log = ExecutionLog()
         self.slave = robot_slave(self.options.address, clock)
         self.program = ControllerProgram(self.slave, self.arm, byte_order=self.options.byte_order,
-                                         execution_log=self.execution_log)
+                                         execution_log=self.execution_log,
+                                         confirm_records=confirm_records)
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None

@@ -19,15 +19,18 @@ from __future__ import annotations
 
 import collections
 import enum
+import errno
 import itertools
 import logging
 import math
+import re
 import threading
 import time
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
-from pyprofibus_vendor.dp_master import DpMaster, MasterSlaveState, SlaveSpec
+from pyprofibus_vendor.dp import DiagStatus1
+from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState, SlaveSpec
 from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 
@@ -74,6 +77,12 @@ ERROR_PROTOCOL = 3                 # the controller's feedback cannot be decoded
 # a queued job whose planned start differs from the current joints by more than this [rad] is
 # planned again before it is sent (whole-mm / whole-degree feedback alone stays well below it)
 START_TOLERANCE = 0.02
+
+# the first request of a Data_Exchange session waits for this many replies in the session: the
+# controller then got our record with the flag at 0 in as many telegrams, which arms it (it must
+# see the flag at 0 after a link loss; the virtual controller, like a careful G2 program, acts on
+# a record only once it arrived unchanged in two consecutive telegrams)
+SESSION_RECORDS_BEFORE_REQUEST = 2
 
 # a port that cannot be opened is a warning at first (a virtual controller may still be starting),
 # an error once it has been missing this long [s]
@@ -265,6 +274,25 @@ def why_no_motion(fb: Feedback) -> str:
     return "; ".join(reasons)
 
 
+def _port_hint(exc: BaseException) -> str:
+    """What an error opening the port most likely means, for the errors with a clear remedy."""
+    codes = set()
+    seen: Optional[BaseException] = exc
+    for _ in range(5):
+        if seen is None:
+            break
+        if isinstance(getattr(seen, "errno", None), int):
+            codes.add(seen.errno)
+        seen = seen.__cause__ or seen.__context__
+    text = str(exc)
+    if codes & {errno.EACCES, errno.EPERM} or "Permission denied" in text:
+        return (" (permission denied: the driver's user needs read and write access to the device, "
+                "usually membership of its group, e.g. dialout)")
+    if errno.EBUSY in codes or "Device or resource busy" in text:
+        return " (the device is busy: another program has it open)"
+    return ""
+
+
 def open_serial_link(device: str, baud: int) -> Link:
     """Default link factory: the serial PHY (raises PhyError with the OS reason)."""
     from pyprofibus_vendor.phy_serial import SerialLink
@@ -305,7 +333,14 @@ class DriverCore:
         self._link_reason = "not started"
         self._next_open = 0.0
         self._feedback: Optional[Feedback] = None
-        self._feedback_time: Optional[float] = None
+        self._feedback_time: Optional[float] = None  # when the feedback's record arrived
+        self._record_time: Optional[float] = None    # when the last record (good or bad) arrived
+        self._good_time: Optional[float] = None      # when the last good record arrived
+        self._bad_record = ""                          # why the last record could not be decoded
+        self._session_start = 0.0                      # the slave (re)entered Data_Exchange
+        self._session_records = 0                      # good records received in this session
+        self._logged_slave_reason = ""                 # the last card failure logged (numbers out)
+        self._garbage_seen = 0                         # master's garbled bytes at the last failure
         self._last_good: Optional[Feedback] = None
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
@@ -525,7 +560,7 @@ class DriverCore:
             link = self.open_link(device, baud)
         except (ProfibusError, OSError, ValueError) as exc:
             self._next_open = now + self.params.reconnect_period
-            reason = "cannot open %s: %s" % (device, exc)
+            reason = "cannot open %s: %s%s" % (device, exc, _port_hint(exc))
             if reason != self._link_reason:
                 self._port_missing_since = now
                 log.warning("%s (retrying every %.2g s)", reason, self.params.reconnect_period)
@@ -537,8 +572,17 @@ class DriverCore:
             return
         self.counters.port_opens += 1
         self._slave_reason = ""
+        self._garbage_seen = 0
+        timing = BusTiming.for_baud(self.bus.baud, self.bus.retry_limit)
+        if self.bus.slot_time is not None:
+            timing = replace(timing, slot_bits=self.bus.slot_time)
+        # dx_tolerance: a Data_Exchange without a reply (a corrupted telegram) does not drop the
+        # slave -- and with its Set_Prm the controller's program session -- before the link counts
+        # as lost here anyway (link_timeout without a good record); retry_steps: a lost reply in
+        # the start-up sequence repeats that step instead of restarting it after a back-off
         master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
-                          backoff_max=min(1.0, self.params.reconnect_period),
+                          timing=timing, backoff_max=min(1.0, self.params.reconnect_period),
+                          dx_tolerance=self.params.link_timeout, retry_steps=True,
                           on_state_change=self._on_slave_state)
         sc = self.slave_config
         spec = SlaveSpec(sc.address, sc.ident, sc.cfg, user_prm_data=sc.user_prm_data,
@@ -564,52 +608,114 @@ class DriverCore:
         """The DP master's per-slave state changes: keep the last reason for the status."""
         if new is MasterSlaveState.INIT:
             self.counters.reconnect_attempts += 1
+        connected = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
+        if new in connected and old not in connected:
+            self._session_start = self.clock()    # records from before are of the old session
+            self._session_records = 0
         if new is MasterSlaveState.BACKOFF:
-            diag = "; diag: %s" % _diag_words(slave.last_diag) if slave.last_diag is not None else ""
-            self._slave_reason = "controller's PROFIBUS card (slave %d): %s%s" % (slave.address, reason, diag)
+            self._slave_reason = "controller's PROFIBUS card (slave %d): %s" % (
+                slave.address, self._explain_failure(slave, reason))
+            key = re.sub(r"[0-9]+(\.[0-9]+)?", "#", self._slave_reason)   # not for new numbers
+            if key != self._logged_slave_reason:
+                self._logged_slave_reason = key
+                log.warning("%s", self._slave_reason)
+        elif new in connected:
+            self._logged_slave_reason = ""
+
+    def _explain_failure(self, slave, reason: str) -> str:
+        """The master's reason for ending an attempt, with what it most likely means."""
+        diag = slave.last_diag
+        sc = self.slave_config
+        master = self._master
+        garbage = master.counters.garbage_bytes + master.counters.fcs_errors if master is not None else 0
+        garbled, self._garbage_seen = garbage > self._garbage_seen, garbage
+        if reason.startswith("diag:") and diag is not None:
+            if diag.ident != sc.ident:
+                hint = ("the station at address %d reports ident 0x%04X, the driver expects 0x%04X "
+                        "(another device at this address, or the wrong slave_address?)"
+                        % (slave.address, diag.ident, sc.ident))
+            elif diag.status1 & DiagStatus1.CFG_FAULT:
+                hint = ("the card rejects the configuration %s (%d bytes in / %d out): its modules "
+                        "differ from the bus config" % (sc.cfg.hex(" "), slave.spec.input_size,
+                                                        slave.spec.output_size))
+            elif diag.status1 & DiagStatus1.PRM_FAULT:
+                hint = "the card rejects the parameters (Set_Prm: ident, watchdog, user data)"
+            else:
+                hint = ""
+            return "%s%s (diag bytes %s)" % (hint + "; " if hint else "", reason,
+                                             diag.encode()[:3].hex(" "))
+        if reason.startswith("no reply"):
+            if garbled:
+                hint = ("bytes arrive but form no valid telegram: wrong baud rate or parity at the "
+                        "other end, or a noisy line")
+            else:
+                hint = ("nothing valid received: is the controller on, the cable connected, the card "
+                        "at address %d and %d bit/s?" % (slave.address, self.bus.baud))
+            return "%s; %s" % (reason, hint)
+        extra = "; diag: %s" % _diag_words(diag) if diag is not None else ""
+        return reason + extra
 
     def _after_cycle(self, now: float) -> None:
+        """Take the cycle's record (if a new one arrived), update the link state, the handshake
+        and the jobs. Only a record that arrived since the last cycle is an observation for the
+        handshake; the link counts as up while the last good record of this Data_Exchange session
+        is at most ``link_timeout`` old (a record lost or garbled in between is not a loss)."""
         slave = self._slave
-        fb: Optional[Feedback] = None
+        fresh: Optional[Feedback] = None
         reason = ""
         if slave is None or not slave.connected:
             state = slave.state.value if slave is not None else "none"
             reason = self._slave_reason or "controller's PROFIBUS card not in Data_Exchange (%s)" % state
         else:
-            data, age = slave.inputs, slave.inputs_age(now)
-            if data is None or age is None or age > self.params.link_timeout:
-                reason = "no fresh data from the controller for %.2f s" % (age or 0.0)
-            else:
+            data, at = slave.inputs, slave.inputs_time
+            if data is not None and at is not None and at >= self._session_start \
+                    and at != self._record_time:
+                self._record_time = at
                 try:
-                    fb = Feedback.decode(data, self.params.byte_order)
+                    fresh = Feedback.decode(data, self.params.byte_order)
+                    self._bad_record = ""
                 except ProtocolError as exc:
                     self.counters.protocol_errors += 1
-                    reason = "invalid feedback from the controller: %s" % exc
-                    with self._lock:
-                        self._error_code, self._error_reason = ERROR_PROTOCOL, reason
+                    if not self._bad_record:
+                        log.warning("invalid feedback from the controller (ignored while the link "
+                                    "holds): %s", exc)
+                    self._bad_record = "invalid feedback from the controller: %s" % exc
+            if fresh is not None:
+                self._good_time = at
+                self._session_records += 1
+            last = max(self._session_start, self._good_time or 0.0)
+            if now - last > self.params.link_timeout or self._good_time is None \
+                    or self._good_time < self._session_start:
+                reason = self._bad_record or \
+                    "no fresh data from the controller for %.2f s" % (now - last)
         with self._lock:
-            if fb is None:
+            if reason:
                 was = self._link_state
                 self._link_down(LinkState.LOST if was in (LinkState.CONNECTED, LinkState.LOST)
                                 else LinkState.CONNECTING, reason)
+                if self._bad_record and reason == self._bad_record:
+                    self._error_code, self._error_reason = ERROR_PROTOCOL, reason
                 self.handshake.update(None, now)
             else:
-                if self._link_state is not LinkState.CONNECTED:
-                    if self.counters.losses:
-                        self.counters.reconnects += 1
-                    log.info("link to the controller up: %s", fb.describe())
-                self._slave_reason = ""
-                self._link_state, self._link_reason = LinkState.CONNECTED, "Data_Exchange"
-                self._feedback = self._last_good = fb
-                self._feedback_time = slave.inputs_time
-                self._update_joints(fb)
-                event = self.handshake.update(fb, now)
-                self._on_event(event, fb)
-                self._advance_jobs(now, fb)
-                if fb.status & StatusBits.ERROR:
-                    self._error_code, self._error_reason = ERROR_CONTROLLER, "the controller reports an error"
-                else:
-                    self._error_code, self._error_reason = ERROR_NONE, ""
+                if fresh is not None:
+                    if self._link_state is not LinkState.CONNECTED:
+                        if self.counters.losses:
+                            self.counters.reconnects += 1
+                        log.info("link to the controller up: %s", fresh.describe())
+                    self._slave_reason = ""
+                    self._link_state, self._link_reason = LinkState.CONNECTED, "Data_Exchange"
+                    self._feedback = self._last_good = fresh
+                    self._feedback_time = at
+                    self._update_joints(fresh)
+                fb = self._feedback
+                if fb is not None:
+                    event = self.handshake.update(fresh, now)
+                    self._on_event(event, fb)
+                    self._advance_jobs(now, fb)
+                    if fb.status & StatusBits.ERROR:
+                        self._error_code, self._error_reason = ERROR_CONTROLLER, "the controller reports an error"
+                    else:
+                        self._error_code, self._error_reason = ERROR_NONE, ""
             if self._slave is not None:
                 self._slave.outputs = self.handshake.outputs().encode(self.params.byte_order)
 
@@ -627,6 +733,7 @@ class DriverCore:
                                "not re-sent" % reason)
             self._link_state, self._link_reason = state, reason
             self._feedback = None
+            self._feedback_time = None
             self._joints_valid = False
             self._error_code, self._error_reason = ERROR_LINK, reason
 
@@ -707,6 +814,8 @@ class DriverCore:
             self._stop_request = None
         if not self.handshake.ready:
             return
+        if self._session_records < SESSION_RECORDS_BEFORE_REQUEST:
+            return          # the controller has not surely seen our flag at 0 twice yet
         if self._job is None:
             if not self._queue:
                 return
