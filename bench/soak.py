@@ -65,6 +65,7 @@ import logging
 import math
 import os
 import random
+import re
 import shutil
 import statistics
 import sys
@@ -601,7 +602,7 @@ def _account(result: SoakResult, commanded: List[Commanded], entries: List[LogEn
         res = cmd.result
         failed_reason = res.reason if res is not None and not res.success else ""
         if res is not None and not res.success:
-            short = failed_reason.split(":")[0][:70]
+            short = re.sub(r"[0-9]+(\.[0-9]+)?", "#", failed_reason.split(";")[0])[:110]
             result.reasons[short] = result.reasons.get(short, 0) + 1
         for key in cmd.keys:
             known.add(key)

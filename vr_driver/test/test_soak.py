@@ -110,6 +110,7 @@ class Program:
     def telegram(self, command: Command, loops: int = 1) -> ControllerState:
         """One Data_Exchange carrying ``command``, then ``loops`` program loops of 10 ms."""
         self._call(None, command.encode())
+        state = None
         for _ in range(loops):
             self.t += 0.01
             state = self.prog.step(self.t).state
@@ -156,3 +157,22 @@ def test_a_corrupted_flag_0_while_done_cannot_restart_the_target(kin, confirm, e
         p.telegram(TARGET_A, loops=5)                  # the master still waits for DONE
     done = [e for e in p.prog.log.entries() if e.outcome is Outcome.EXECUTED]
     assert len(done) == executions
+
+
+def test_a_flag_0_record_arms_the_program_even_between_two_loops(kin):
+    """A new session: the master's idle record arrives twice, then its request twice, all before
+    the program loop runs: the request is new (the flag was seen at 0), not a stale one."""
+    p = Program(kin, confirm=True)
+    for command in (TARGET_A.with_request(False),) * 2 + (TARGET_A,) * 2:
+        p.telegram(command, loops=0)
+    assert p.telegram(TARGET_A) is ControllerState.BUSY
+    p.until_done(TARGET_A)
+    assert [e.outcome for e in p.prog.log.entries()] == [Outcome.EXECUTED]
+
+
+def test_a_session_that_starts_with_the_flag_raised_is_still_refused(kin):
+    p = Program(kin, confirm=True)
+    for _ in range(3):
+        p.telegram(TARGET_A, loops=0)
+    assert p.telegram(TARGET_A) is ControllerState.REJECTED
+    assert "already raised" in p.prog.log.entries()[0].reason

@@ -340,7 +340,8 @@ class DriverCore:
         self._session_start = 0.0                      # the slave (re)entered Data_Exchange
         self._session_records = 0                      # good records received in this session
         self._logged_slave_reason = ""                 # the last card failure logged (numbers out)
-        self._garbage_seen = 0                         # master's garbled bytes at the last failure
+        self._garbage_seen = 0                         # master's garbled bytes at the last good
+                                                       # record or failure
         self._last_good: Optional[Feedback] = None
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
@@ -683,6 +684,9 @@ class DriverCore:
             if fresh is not None:
                 self._good_time = at
                 self._session_records += 1
+                master = self._master
+                if master is not None:        # garbled bytes are counted from the last good record
+                    self._garbage_seen = master.counters.garbage_bytes + master.counters.fcs_errors
             last = max(self._session_start, self._good_time or 0.0)
             if now - last > self.params.link_timeout or self._good_time is None \
                     or self._good_time < self._session_start:
