@@ -239,6 +239,22 @@ def test_estop_refuses_goals_until_cleared(rig):
     assert len(rig.sim.log.entries()) == 1
 
 
+@pytest.mark.parametrize("inject, words", [
+    (lambda sim: sim.set_drives_powered(False), "the drives are off"),
+    (lambda sim: sim.set_error(True), "the controller reports an error"),
+])
+def test_drives_off_and_controller_error_refuse_motion(rig, inject, words):
+    rig.wait_ready()
+    inject(rig.sim)
+    status = rig.wait_status(lambda s: s.feedback is not None and not s.motion_possible, 3.0)
+    assert words in status.why_no_motion()
+    with pytest.raises(DriverError, match=words):
+        rig.core.submit(MoveRequest(MoveType.PTP, (1000, 0, 800, 0, 45, 0)))
+    with pytest.raises(DriverError, match=words):
+        rig.core.submit_joint_path(list(rig.core.joint_names), [list(status.joints)])
+    assert rig.sim.log.entries() == [] and rig.core.status().counters.targets_sent == 0
+
+
 def test_controller_restart_loses_then_regains_control(rig):
     rig.wait_ready()
     slow = MoveRequest(MoveType.PTP, (900, -500, 900, 0, 45, 0))
