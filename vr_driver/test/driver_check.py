@@ -49,11 +49,14 @@ class Recorder:
             self.times.append(time.monotonic())
             self.cond.notify_all()
 
-    def wait_for(self, predicate: Callable[[object], bool], timeout: float, after: float = 0.0):
+    def wait_for(self, predicate: Callable[[object], bool], timeout: float, after: float = 0.0,
+                 start: int = 0):
+        """The first message (from index ``start``, arrived at or after ``after``) that satisfies
+        ``predicate``, waiting up to ``timeout``; None if none came."""
         end = time.monotonic() + timeout
         with self.cond:
             while True:
-                for msg, t in zip(self.messages, self.times):
+                for msg, t in zip(self.messages[start:], self.times[start:]):
                     if t >= after and predicate(msg):
                         return msg
                 left = end - time.monotonic()

@@ -16,7 +16,7 @@ import subprocess
 import threading
 import time
 import unittest
-from typing import Callable, List
+
 
 import pexpect
 import rospy
@@ -27,45 +27,13 @@ from std_srvs.srv import SetBool
 from vr_driver.msg import RobotStatus, TriState
 from vr_driver.poses import ControllerPose
 
+from driver_check import Recorder
+
 PKG = "vr_driver"
 FIRST_PROMPT = r"X \[mm, 100\.\.1400\] \([-0-9.]+\): "     # the first prompt of every entry
 CONFIRM = r"Send this (PTP|LIN|CIRC) move to the robot\? \[y/N\]: "
 PROGRESS = r"(sending|moving) +distance to go +[0-9.]+ mm"
 TIMEOUT = 30
-
-
-class Recorder:
-    def __init__(self, topic, kind):
-        self.messages: List = []
-        self.cond = threading.Condition()
-        self.sub = rospy.Subscriber(topic, kind, self._cb, queue_size=100)
-
-    def _cb(self, msg):
-        with self.cond:
-            self.messages.append(msg)
-            self.cond.notify_all()
-
-    def wait_for(self, predicate: Callable[[object], bool], timeout: float, start: int = 0):
-        end = time.monotonic() + timeout
-        with self.cond:
-            while True:
-                for msg in self.messages[start:]:
-                    if predicate(msg):
-                        return msg
-                left = end - time.monotonic()
-                if left <= 0:
-                    return None
-                self.cond.wait(left)
-
-    def wait_count(self, n: int, timeout: float) -> bool:
-        end = time.monotonic() + timeout
-        with self.cond:
-            while len(self.messages) < n:
-                left = end - time.monotonic()
-                if left <= 0:
-                    return False
-                self.cond.wait(left)
-        return True
 
 
 class PoseTerminalTest(unittest.TestCase):
@@ -98,7 +66,7 @@ class PoseTerminalTest(unittest.TestCase):
 
     def wait_motion_possible(self, timeout=15.0):
         start = len(self.status.messages)
-        msg = self.status.wait_for(lambda m: m.motion_possible.val == TriState.TRUE, timeout, start)
+        msg = self.status.wait_for(lambda m: m.motion_possible.val == TriState.TRUE, timeout, start=start)
         self.assertIsNotNone(msg, "motion_possible never became TRUE")
 
     def spawn(self, *args, ready=True):
@@ -266,7 +234,7 @@ class PoseTerminalTest(unittest.TestCase):
             ControllerPose(1000, 650, 800, 0, 45, 0))[0], 20.0)
         self.assertLess(abs(stopped_y - entry["final_pose"][1]), 2.0)
         start = len(self.status.messages)
-        self.assertIsNotNone(self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 5.0, start))
+        self.assertIsNotNone(self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 5.0, start=start))
         t.sendline("status")                                     # still usable: the driver is fine
         self.expect(t, r"motion possible: yes")
         self.expect(t, FIRST_PROMPT)
@@ -321,7 +289,7 @@ class PoseTerminalTest(unittest.TestCase):
         try:
             self.assertTrue(self.set_estop(True).success)
             start = len(self.status.messages)
-            self.assertIsNotNone(self.status.wait_for(lambda m: m.e_stopped.val == TriState.TRUE, 5.0, start))
+            self.assertIsNotNone(self.status.wait_for(lambda m: m.e_stopped.val == TriState.TRUE, 5.0, start=start))
             t.sendline("1000 0 800 0 45 0 lin")
             self.expect(t, r"Not sent: motion is not possible now: the emergency stop is active")
             self.expect(t, FIRST_PROMPT)
