@@ -17,7 +17,6 @@ import threading
 import time
 import unittest
 
-
 import pexpect
 import rospy
 import rostest
