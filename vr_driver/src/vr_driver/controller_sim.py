@@ -69,9 +69,9 @@ from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 
-from .errors import ProtocolError, VrDriverError
+from .errors import PoseError, ProtocolError, VrDriverError
 from .kinematics import Kinematics
-from .poses import HOME_POSE, ControllerPose
+from .poses import HOME_POSE, ControllerPose, finite_number
 from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
 from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
 
@@ -120,13 +120,11 @@ class SimDeviceError(SimError):
 # ------------------------------------------------------------------------------------------- options
 
 def _positive(value: Any, name: str) -> float:
-    number = float("nan")
-    if not isinstance(value, bool):
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            pass
-    if not (math.isfinite(number) and number > 0.0):
+    try:
+        number = finite_number(value, name)
+    except PoseError:
+        number = math.nan
+    if not number > 0.0:
         raise SimError("%s must be a finite number > 0, got %r" % (name, value))
     return number
 

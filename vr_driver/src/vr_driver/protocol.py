@@ -714,13 +714,11 @@ class Aborted(HandshakeEvent):
 
 def _seconds(value: Any, name: str, allow_zero: bool = False) -> float:
     what = "a non-negative" if allow_zero else "a positive"
-    number = float("nan")
-    if not isinstance(value, bool):
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            pass
-    if not (math.isfinite(number) and (number > 0.0 or (allow_zero and number == 0.0))):
+    try:
+        number = finite_number(value, name)
+    except PoseError:
+        number = math.nan
+    if not (number > 0.0 or (allow_zero and number == 0.0)):
         raise HandshakeError("%s must be %s number of seconds, got %r" % (name, what, value))
     return number
 
