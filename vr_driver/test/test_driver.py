@@ -6,19 +6,18 @@ from __future__ import annotations
 import os
 import threading
 import time
-from typing import Callable
 
 import pytest
 
 from vr_driver.controller_sim import VirtualController
-from vr_driver.driver import DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveRequest
+from vr_driver.driver import DriverCore, DriverError, JobPhase, LinkState, MoveRequest
 from vr_driver.errors import VrDriverError
 from vr_driver.motion import MoveType
 from vr_driver.params import DriverParams
 from vr_driver.poses import HOME_POSE, ControllerPose
 from vr_driver.sim_arm import Outcome
 
-BAUD = 187500
+from _rig import BAUD, StatusWaiter, rig_params
 
 
 class Rig:
@@ -29,41 +28,15 @@ class Rig:
         self.kin = kin
         self.speed_factor = speed_factor
         self.sim = self.new_sim()
-        self.params = DriverParams.from_dict({
-            "port": self.path, "baud": BAUD, "cycle_rate": 50.0, "link_timeout": 0.3,
-            "reconnect_period": 0.2, "watchdog_ms": 300, "accept_timeout": 0.5})
+        self.params = rig_params(self.path)
         self.core = DriverCore(self.params, kinematics=kin)
-        self.statuses = []
-        self.core.add_listener(self.statuses.append)
-        self._cond = threading.Condition()
-        self.core.add_listener(self._notify)
+        waiter = StatusWaiter(self.core)
+        self.wait_status, self.wait_ready = waiter.wait_status, waiter.wait_ready
         self.core.start()
 
     def new_sim(self):
         return VirtualController(pty_link=self.path, baud=BAUD, speed_factor=self.speed_factor,
                                  loop_period=0.01, kinematics=self.kin).start()
-
-    def _notify(self, _status):
-        with self._cond:
-            self._cond.notify_all()
-
-    def wait_status(self, predicate: Callable[[DriverStatus], bool], timeout: float) -> DriverStatus:
-        end = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                status = self.core.status()
-                if predicate(status):
-                    return status
-                left = end - time.monotonic()
-                if left <= 0:
-                    raise AssertionError("status condition not met within %.1f s; last: %s %s %s"
-                                         % (timeout, status.link.value, status.link_reason,
-                                            status.feedback))
-                self._cond.wait(left)
-
-    def wait_ready(self, timeout: float = 5.0) -> DriverStatus:
-        return self.wait_status(lambda s: s.motion_possible and s.joints_valid
-                                and self.core.handshake.ready, timeout)
 
     def close(self):
         self.core.stop()

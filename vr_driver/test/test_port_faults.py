@@ -34,9 +34,9 @@ from pyprofibus_vendor.phy_serial import SerialLink
 from vr_driver.controller_sim import VirtualController
 from vr_driver.driver import ERROR_LINK, DriverCore, DriverError, DriverStatus, LinkState, MoveRequest
 from vr_driver.motion import MoveType
-from vr_driver.params import DriverParams
 
-BAUD = 187500
+from _rig import BAUD, StatusWaiter, rig_params
+
 CPU_BOUND = 0.20          # of one core, over a faulted second
 TARGET = (1000, 100, 800, 0, 45, 0)
 
@@ -49,44 +49,24 @@ class Rig:
         self.path = str(tmp_path / "g2_port_faults")
         self.kin = kin
         self.sim: Optional[VirtualController] = None
-        self.params = DriverParams.from_dict({
-            "port": self.path, "baud": BAUD, "cycle_rate": 50.0, "link_timeout": 0.3,
-            "reconnect_period": 0.2, "watchdog_ms": 300, "accept_timeout": 0.5})
+        self.params = rig_params(self.path)
         kwargs = {} if open_link is None else {"open_link": open_link}
         self.core = DriverCore(self.params, kinematics=kin, **kwargs)
         self.reasons: List[str] = []
-        self._cond = threading.Condition()
         self.core.add_listener(self._on_status)
+        waiter = StatusWaiter(self.core)
+        self.wait_status, self.wait_ready = waiter.wait_status, waiter.wait_ready
         if start:
             self.core.start()
 
     def _on_status(self, status: DriverStatus) -> None:
         if not self.reasons or self.reasons[-1] != status.link_reason:
             self.reasons.append(status.link_reason)
-        with self._cond:
-            self._cond.notify_all()
 
     def new_sim(self, **kw) -> VirtualController:
         self.sim = VirtualController(pty_link=self.path, baud=BAUD, speed_factor=20.0,
                                      loop_period=0.01, kinematics=self.kin, **kw)
         return self.sim
-
-    def wait_status(self, predicate: Callable[[DriverStatus], bool], timeout: float) -> DriverStatus:
-        end = time.monotonic() + timeout
-        with self._cond:
-            while True:
-                status = self.core.status()
-                if predicate(status):
-                    return status
-                left = end - time.monotonic()
-                if left <= 0:
-                    raise AssertionError("status condition not met within %.1f s; last: %s: %s"
-                                         % (timeout, status.link.value, status.link_reason))
-                self._cond.wait(left)
-
-    def wait_ready(self, timeout: float = 5.0) -> DriverStatus:
-        return self.wait_status(lambda s: s.motion_possible and s.joints_valid
-                                and self.core.handshake.ready, timeout)
 
     def close(self) -> None:
         self.core.stop()
