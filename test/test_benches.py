@@ -8,16 +8,27 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 NUM = r"[0-9]+(?:\.[0-9]+)?"
 
 
-class DpCycleBenchTest(unittest.TestCase):
+class BenchRun(unittest.TestCase):
+    """Runs ``scripts/bench BENCH -- --quick`` once for the class; ``line`` checks a figure line."""
+
+    BENCH = ""
+    TIMEOUT = 300
+
     @classmethod
     def setUpClass(cls):
-        cls.res = subprocess.run([os.path.join(REPO, "scripts", "bench"), "dp_cycle", "--", "--quick"],
-                                 capture_output=True, text=True, timeout=300)
+        if not cls.BENCH:             # the base class itself has no tests
+            raise unittest.SkipTest("base class")
+        cls.res = subprocess.run([os.path.join(REPO, "scripts", "bench"), cls.BENCH, "--", "--quick"],
+                                 capture_output=True, text=True, timeout=cls.TIMEOUT)
         cls.out = cls.res.stdout
 
     def line(self, pattern):
         self.assertRegex(self.out, re.compile(pattern, re.M),
                          "missing line /%s/ in:\n%s\n%s" % (pattern, self.out, self.res.stderr[-3000:]))
+
+
+class DpCycleBenchTest(BenchRun):
+    BENCH = "dp_cycle"
 
     def test_exits_0(self):
         self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
@@ -43,19 +54,12 @@ class DpCycleBenchTest(unittest.TestCase):
         self.assertEqual(len(targets), 4, self.out)
 
 
-class DriverLatencyBenchTest(unittest.TestCase):
+class DriverLatencyBenchTest(BenchRun):
     """bench/driver_latency.py --quick: its own roscore + driver.launch (sim), 3 goals, 2 e-stops, a 2 s
     idle window (about 15 s); every figure line is there, no timing is checked."""
 
-    @classmethod
-    def setUpClass(cls):
-        cls.res = subprocess.run([os.path.join(REPO, "scripts", "bench"), "driver_latency", "--", "--quick"],
-                                 capture_output=True, text=True, timeout=180)
-        cls.out = cls.res.stdout
-
-    def line(self, pattern):
-        self.assertRegex(self.out, re.compile(pattern, re.M),
-                         "missing line /%s/ in:\n%s\n%s" % (pattern, self.out, self.res.stderr[-3000:]))
+    BENCH = "driver_latency"
+    TIMEOUT = 180
 
     def test_exits_0(self):
         self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
