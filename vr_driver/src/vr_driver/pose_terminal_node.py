@@ -118,6 +118,8 @@ class RosBackend(Backend):
     def __init__(self, driver: str = "interface"):
         self.driver = driver
         self._lock = threading.Lock()
+        self._changed = threading.Condition(self._lock)   # a robot_status or tool_pose arrived
+        self._updates = 0
         self._status = None
         self._status_time: Optional[float] = None
         self._tool_pose: Optional[ControllerPose] = None
@@ -179,13 +181,19 @@ class RosBackend(Backend):
         return None
 
     def wait_motion_possible(self, timeout: float) -> Optional[StatusInfo]:
-        """Wait up to ``timeout`` s for a robot_status saying motion is possible; the last status."""
+        """Wait up to ``timeout`` s for a robot_status saying motion is possible and the arm's pose
+        (tool_pose comes at the joint_states rate; robot_status, published on every change, may
+        come first); the last status."""
         end = time.monotonic() + timeout
         while True:
+            with self._lock:
+                seen = self._updates
             s = self.status()
-            if (s is not None and s.motion_possible) or time.monotonic() >= end:
+            left = end - time.monotonic()
+            if (s is not None and s.motion_possible and s.pose is not None) or left <= 0:
                 return s
-            time.sleep(0.1)
+            with self._changed:
+                self._changed.wait_for(lambda: self._updates != seen, left)
 
     def _read_workspace(self) -> None:
         import rospy
@@ -211,8 +219,10 @@ class RosBackend(Backend):
 
     # ------------------------------------------------------------------ subscriptions
     def _on_status(self, msg) -> None:
-        with self._lock:
+        with self._changed:
             self._status, self._status_time = msg, time.monotonic()
+            self._updates += 1
+            self._changed.notify_all()
 
     def _on_tool_pose(self, msg) -> None:
         p, q = msg.pose.position, msg.pose.orientation
@@ -220,8 +230,10 @@ class RosBackend(Backend):
             pose = ControllerPose.from_ros((p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
         except VrDriverError:
             return
-        with self._lock:
+        with self._changed:
             self._tool_pose = pose
+            self._updates += 1
+            self._changed.notify_all()
 
     def _on_joints(self, msg) -> None:
         with self._lock:
