@@ -35,7 +35,7 @@ def test_config_file_documents_every_parameter():
 
 def test_bus_overrides_reach_the_profibus_config():
     bus = DriverParams.from_dict({"port": "/tmp/vr_pty", "baud": 187500, "cycle_rate": 50.0,
-                                  "watchdog_ms": 0}).bus()
+                                  "watchdog_ms": 0, "allow_no_watchdog": True}).bus()
     assert bus.phy.device == "/tmp/vr_pty"
     assert bus.baud == 187500
     assert bus.cycle_rate_hz == 50.0
@@ -91,3 +91,48 @@ def test_wrong_io_length_is_refused(tmp_path):
     with pytest.raises(ParamError) as err:
         DriverParams.from_dict({"bus_config": str(bus)}).bus()
     assert "14 bytes each way" in str(err.value)
+
+
+@pytest.mark.parametrize("values, words", [
+    ({"watchdog_ms": 10}, "at least two bus cycles (>= 100 ms at cycle_rate 20 Hz)"),
+    ({"watchdog_ms": 30, "cycle_rate": 50.0, "link_timeout": 0.3}, ">= 40 ms"),
+    ({"watchdog_ms": 650000}, "must not exceed link_timeout (500 ms)"),
+    ({"watchdog_ms": 600, "link_timeout": 0.5}, "must not exceed link_timeout"),
+    ({"watchdog_ms": 0}, "allow_no_watchdog: true"),
+])
+def test_watchdog_is_checked_against_the_bus_cycle_and_link_timeout(values, words):
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict(values)
+    assert err.value.name == "watchdog_ms" and words in str(err.value), str(err.value)
+
+
+def test_watchdog_from_the_bus_config_is_checked_too(tmp_path):
+    """A bus config with a watchdog the cycle cannot keep: refused, naming where it came from."""
+    from pyprofibus_vendor.config import default_robot_config
+    data = default_robot_config("/dev/ttyUSB0").to_dict()
+    data["slaves"][0]["watchdog_ms"] = 20
+    import yaml
+    path = tmp_path / "bus.yaml"
+    path.write_text(yaml.safe_dump(data))
+    params = DriverParams.from_dict({"bus_config": str(path)})
+    with pytest.raises(ParamError) as err:
+        params.bus()
+    assert err.value.name == "watchdog_ms" and "bus config" in str(err.value)
+
+
+def test_no_watchdog_only_when_allowed():
+    params = DriverParams.from_dict({"watchdog_ms": 0, "allow_no_watchdog": True})
+    assert params.bus().slaves[0].watchdog_ms is None
+    assert DriverParams.from_dict({"watchdog_ms": 100, "cycle_rate": 20.0}).watchdog_ms == 100
+
+
+@pytest.mark.parametrize("values, name", [
+    ({"stop_settle_time": 0.05}, "stop_settle_time"),          # less than two 20 Hz cycles
+    ({"stop_settle_time": 0.0}, "stop_settle_time"),
+    ({"stop_timeout": 0.2}, "stop_timeout"),                   # not longer than the settle time
+    ({"stop_timeout": float("nan")}, "stop_timeout"),
+])
+def test_stop_settings_are_checked(values, name):
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict(values)
+    assert err.value.name == name

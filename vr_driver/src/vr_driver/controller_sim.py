@@ -37,8 +37,10 @@ Rules of the program (also in ``doc/controller_program.md``):
   once -- at the position of the watchdog deadline, so it never moves longer than the watchdog
   time after the master's last telegram --, the target in flight ends REJECTED in the log, the via
   point is dropped and the handshake restarts at READY. The master must send a new target.
-- Flag 2 (stop, ``Command.stop``) while BUSY halts the arm at once where it is (the simulation has
-  no braking distance); the target ends REJECTED. Outside BUSY flag 2 is "no request".
+- Flag 2 (stop, ``Command.stop``) while BUSY is a controlled stop: the arm decelerates along its
+  path over ``brake_time`` (default 0.3 s of robot time; 0 halts at once) with IN_MOTION set, and
+  the target ends REJECTED once the arm is at rest (the state stays BUSY until then). Outside BUSY
+  flag 2 is "no request".
 - E-stop, drives off or an error during a motion stop the arm at once (sim_arm); the target ends
   REJECTED (state 3, held until the flag drops). While any of them is active a request is
   REJECTED and the status bits say which (ESTOP; DRIVES_POWERED clear; ERROR). The e-stop also
@@ -97,6 +99,8 @@ Clock = Callable[[], float]
 DEFAULT_ADDRESS = 4
 DEFAULT_BAUD = 19200
 DEFAULT_LOOP_PERIOD = 0.01
+#: robot time [s] a controlled stop takes to bring the arm from path speed to rest
+DEFAULT_BRAKE_TIME = 0.3
 
 #: exit codes of the command line
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
@@ -106,7 +110,7 @@ FAULTS = ("estop", "drives_powered", "error")
 #: ROS private parameter name -> SimOptions field
 PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "baud": "baud",
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
-               "byte_order": "byte_order", "log_file": "log_file"}
+               "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time"}
 
 
 class SimError(VrDriverError):
@@ -158,6 +162,7 @@ class SimOptions:
     loop_period: float = DEFAULT_LOOP_PERIOD
     byte_order: str = ByteOrder.LITTLE.value
     log_file: Optional[str] = None
+    brake_time: float = DEFAULT_BRAKE_TIME
 
     def __post_init__(self) -> None:
         for name in ("device", "pty_link", "log_file"):
@@ -176,6 +181,13 @@ class SimOptions:
             raise SimError(str(exc)) from exc
         object.__setattr__(self, "speed_factor", _positive(self.speed_factor, "speed_factor"))
         object.__setattr__(self, "loop_period", _positive(self.loop_period, "loop_period"))
+        try:
+            brake = finite_number(self.brake_time, "brake_time")
+        except PoseError:
+            brake = math.nan
+        if not brake >= 0.0:
+            raise SimError("brake_time must be a finite number >= 0 (seconds), got %r" % (self.brake_time,))
+        object.__setattr__(self, "brake_time", brake)
         try:
             pose = ControllerPose.from_sequence(self.initial_pose)
         except VrDriverError as exc:
@@ -398,14 +410,17 @@ class ControllerProgram:
             self._record(Outcome.REJECTED, reason, now)
 
     def _stop_on_request(self, now: float) -> None:
-        """Flag 2 while BUSY: halt the arm where it is, answer REJECTED (unless it had arrived)."""
+        """Flag 2 while BUSY: a controlled stop -- the arm decelerates along its path (the arm's
+        ``brake_time``) and the target ends REJECTED once it is at rest (DONE if the ramp carried
+        it to the target). The handshake stays BUSY meanwhile; the loop's arm step ends it."""
         why = "stopped by the master (flag 2)"
-        self.arm.stop(why, now=now)
+        if self.arm.brake(why, now=now):
+            log.info("target %d: stop requested, braking", self._pending.seq if self._pending else 0)
         result = self.arm.step(now)
-        ok = result is not None and result.ok
-        self.handshake.finish(ok, "" if ok else why)
-        self._record(Outcome.EXECUTED if ok else Outcome.REJECTED, "" if ok else why,
-                     result.end_time if result is not None else now, result is not None and result.aborted)
+        if result is not None:
+            self.handshake.finish(result.ok, result.reason)
+            self._record(Outcome.EXECUTED if result.ok else Outcome.REJECTED, result.reason,
+                         result.end_time, result.aborted)
 
     def _link_lost(self, now: float, deadline: Optional[float], left_reason: str) -> None:
         self.link_losses += 1
@@ -473,12 +488,14 @@ class VirtualController:
                  loop_period: float = DEFAULT_LOOP_PERIOD, byte_order: Any = ByteOrder.LITTLE,
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
                  kinematics: Optional[Kinematics] = None, arm: Optional[SimArm] = None,
-                 clock: Clock = time.monotonic, confirm_records: bool = True) -> None:
+                 clock: Clock = time.monotonic, confirm_records: bool = True,
+                 brake_time: float = DEFAULT_BRAKE_TIME) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
                                   initial_pose=tuple(pose), loop_period=loop_period,
-                                  byte_order=ByteOrder.parse(byte_order).value, log_file=log_file)
+                                  byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
+                                  brake_time=brake_time)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         self.clock = clock
@@ -486,7 +503,8 @@ class VirtualController:
         if arm is None:
             try:
                 arm = SimArm(kinematics, speed_factor=self.options.speed_factor,
-                             initial_pose=ControllerPose(*self.options.initial_pose), clock=clock)
+                             initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
+                             brake_time=self.options.brake_time)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
         self.arm = arm
@@ -751,6 +769,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="program loop period in seconds (default 0.01)")
     p.add_argument("--byte-order", choices=("little", "big"), default="little",
                    help="byte order of the int16 words (default little)")
+    p.add_argument("--brake-time", type=float, default=DEFAULT_BRAKE_TIME,
+                   help="robot time in seconds a stop takes from path speed to rest (default %g; "
+                        "0 halts at once)" % DEFAULT_BRAKE_TIME)
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -768,7 +789,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
         options = SimOptions(device=args.device, pty_link=args.pty_link, address=args.addr, baud=args.baud,
                              speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
                              loop_period=args.loop_period, byte_order=args.byte_order,
-                             log_file=args.log_file)
+                             log_file=args.log_file, brake_time=args.brake_time)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -787,7 +808,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                            speed_factor=options.speed_factor,
                                            initial_pose=options.initial_pose,
                                            loop_period=options.loop_period, byte_order=options.byte_order,
-                                           pty_link=options.pty_link, log_file=options.log_file)
+                                           pty_link=options.pty_link, log_file=options.log_file,
+                                           brake_time=options.brake_time)
         except SimDeviceError as exc:
             print("%s: device error: %s" % (parser.prog, exc), file=sys.stderr)
             return EXIT_DEVICE

@@ -11,6 +11,7 @@
     │   ├── NearSingularError    the configuration is too close to a singularity
     │   └── JointLimitError      the only solutions (or the given joints) violate a joint limit
     ├── MotionError              a motion cannot be generated (joint jump, bad via point, ...)
+    │   ├── EnvelopeError        a previewed path leaves the workspace box (names the sample)
     │   └── PathDeviationError   the interpolated path leaves its tolerance
     ├── ProtocolError            a 14-byte controller record cannot be encoded / decoded, or a
     │   │                        protocol parameter (byte order, move type) is invalid
@@ -40,6 +41,7 @@ __all__ = [
     "NearSingularError",
     "JointLimitError",
     "MotionError",
+    "EnvelopeError",
     "PathDeviationError",
     "ProtocolError",
     "HandshakeError",
@@ -87,6 +89,10 @@ class JointLimitError(KinematicsError):
 
 class MotionError(VrDriverError):
     """A motion (PTP, LIN, CIRC) cannot be generated: a joint jump, a degenerate circle, ..."""
+
+
+class EnvelopeError(MotionError):
+    """A previewed path leaves the workspace box (the message names the first sample outside)."""
 
 
 class PathDeviationError(MotionError):

@@ -24,33 +24,17 @@ more than ``path_tolerance``).
 """
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass
 from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .errors import KinematicsError, MotionError, NearSingularError, PathDeviationError, PoseError
+from .errors import EnvelopeError, KinematicsError, MotionError, NearSingularError, PathDeviationError, PoseError
 from .kinematics import Kinematics
-from .poses import ControllerPose, matrix_to_quaternion, quaternion_slerp, quaternion_to_matrix
+from .poses import ControllerPose, MoveType, Workspace, matrix_to_quaternion, quaternion_slerp, quaternion_to_matrix
 
-__all__ = ["MoveType", "MotionSettings", "Trajectory", "MotionPlanner", "trapezoid_tau"]
-
-
-class MoveType(enum.Enum):
-    PTP = "ptp"
-    LIN = "lin"
-    CIRC = "circ"
-
-    @classmethod
-    def parse(cls, value: Any) -> "MoveType":
-        if isinstance(value, MoveType):
-            return value
-        try:
-            return cls(str(value).strip().lower())
-        except ValueError as exc:
-            raise MotionError("unknown move type %r (ptp, lin, circ)" % (value,)) from exc
+__all__ = ["MoveType", "MotionSettings", "Trajectory", "MotionPlanner", "trapezoid_tau", "check_envelope"]
 
 
 @dataclass(frozen=True)
@@ -305,9 +289,13 @@ class MotionPlanner:
     def _timed(self, kind: MoveType, s: np.ndarray, positions: np.ndarray, tcp: np.ndarray,
                length: float, turn: float) -> Trajectory:
         cfg = self.settings
-        bad = self.kin.limit_violations(positions.max(axis=0)) + self.kin.limit_violations(positions.min(axis=0))
-        if bad:
-            raise MotionError("%s trajectory leaves the joint limits: %s" % (kind.name, "; ".join(bad)))
+        lower, upper = np.array(self.kin.limits.lower), np.array(self.kin.limits.upper)
+        outside = np.any((positions < lower[None, :] - 1e-9) | (positions > upper[None, :] + 1e-9), axis=1)
+        if np.any(outside):
+            k = int(np.argmax(outside))
+            raise MotionError("%s trajectory leaves the joint limits at sample %d of %d: %s"
+                              % (kind.name, k, len(positions) - 1,
+                                 "; ".join(self.kin.limit_violations(positions[k]))))
         tau = np.array([trapezoid_tau(float(v), cfg.ramp_fraction) for v in s])
         dtau = np.diff(tau)
         dq = np.abs(np.diff(positions, axis=0))
@@ -327,6 +315,40 @@ class MotionPlanner:
         if np.any(vel > self._vmax[None, :] * (1.0 + 1e-9)):  # cannot happen by construction: guard anyway
             raise MotionError("%s trajectory exceeds a joint velocity limit" % kind.name)
         return traj
+
+
+def check_envelope(trajectory: Trajectory, workspace: Workspace) -> None:
+    """Every sample of ``trajectory`` (its TCP in ``base``) inside the workspace box, or
+    EnvelopeError naming the first sample outside, its time and the field. Positions are checked
+    on all samples at once; orientations (Rx, Ry, Rz are always within +-180) only when the box's
+    angle range is narrower than that. The trajectory is piecewise linear in joint space between
+    samples (what the arm follows), so a violation between two samples is bounded by the chord
+    sag between them (well under a millimetre at the planner's sample spacing)."""
+    tcp = trajectory.tcp
+    if len(tcp) == 0:
+        return
+    xyz = tcp[:, :3, 3] * 1e3
+    lo = np.array([workspace.x[0], workspace.y[0], workspace.z[0]])
+    hi = np.array([workspace.x[1], workspace.y[1], workspace.z[1]])
+    bad = np.any((xyz < lo[None, :]) | (xyz > hi[None, :]), axis=1)
+    first = int(np.argmax(bad)) if np.any(bad) else None
+    if workspace.angle[0] > -180.0 or workspace.angle[1] < 180.0:
+        limit = len(tcp) if first is None else first
+        for k in range(limit):
+            if not workspace.contains(ControllerPose.from_matrix(tcp[k])):
+                first = k
+                break
+    if first is None:
+        return
+    pose = ControllerPose.from_matrix(tcp[first])
+    try:
+        workspace.check(pose)
+        why = "outside the workspace"
+    except PoseError as exc:
+        why = str(exc)
+    raise EnvelopeError("%s path leaves the workspace at sample %d of %d (t = %.2f s, %s): %s"
+                        % (trajectory.move_type.name, first, len(tcp) - 1,
+                           float(trajectory.times[first]), _fmt_pose(pose), why))
 
 
 def _circle(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> Tuple[np.ndarray, np.ndarray, float]:

@@ -17,6 +17,8 @@ from .poses import ControllerPose, Workspace
 
 DEFAULT_PORT = "/dev/ttyUSB0"
 DEFAULT_JOINT_NAMES = tuple("joint_%d" % i for i in range(1, 7))
+#: the DP watchdog's largest value: factors 255 x 255 x 10 ms
+WATCHDOG_MAX_MS = 650_250
 
 
 class ParamError(VrDriverError, ValueError):
@@ -91,7 +93,10 @@ class DriverParams:
     baud: Optional[int] = None           # None = the bus config's baud
     master_address: Optional[int] = None
     slave_address: int = 4
-    watchdog_ms: Optional[int] = None    # None = the bus config's value
+    watchdog_ms: Optional[int] = None    # None = the bus config's value; 0 = off (needs
+                                         # allow_no_watchdog)
+    allow_no_watchdog: bool = False      # accept a watchdog of 0 (the arm no longer stops when the
+                                         # master dies); warned at every start
     cycle_rate: float = 20.0             # Data_Exchange cycles per second
     byte_order: str = "little"
     link_timeout: float = 0.5            # no good reply for this long = link lost [s]
@@ -101,6 +106,9 @@ class DriverParams:
     release_timeout: float = 1.0         # flag cleared -> controller ready [s]
     motion_timeout_factor: float = 3.0   # motion timeout = factor * preview duration + margin
     motion_timeout_margin: float = 5.0   # [s]
+    stop_settle_time: float = 0.25       # a stopped arm is at rest: in-motion clear and the pose
+                                         # unchanged this long [s]
+    stop_timeout: float = 10.0           # a stop that does not reach rest this long fails [s]
     # safety and model
     workspace: Workspace = field(default_factory=Workspace)
     controller_joint_names: Tuple[str, ...] = DEFAULT_JOINT_NAMES
@@ -150,7 +158,8 @@ class DriverParams:
             baud=_integer(params, "baud", d.baud, 9600, 12_000_000),
             master_address=_integer(params, "master_address", d.master_address, 0, 125),
             slave_address=_integer(params, "slave_address", d.slave_address, 0, 125),
-            watchdog_ms=_integer(params, "watchdog_ms", d.watchdog_ms, 0, 650_000),
+            watchdog_ms=_integer(params, "watchdog_ms", d.watchdog_ms, 0, WATCHDOG_MAX_MS),
+            allow_no_watchdog=_boolean(params, "allow_no_watchdog", d.allow_no_watchdog),
             cycle_rate=_number(params, "cycle_rate", d.cycle_rate, 0.0, 1000.0, lo_open=True),
             byte_order=_string(params, "byte_order", d.byte_order, ("little", "big")),
             link_timeout=_number(params, "link_timeout", d.link_timeout, 0.0, 10.0, lo_open=True),
@@ -159,6 +168,8 @@ class DriverParams:
             release_timeout=_number(params, "release_timeout", d.release_timeout, 0.0, 60.0, lo_open=True),
             motion_timeout_factor=_number(params, "motion_timeout_factor", d.motion_timeout_factor, 1.0, 100.0),
             motion_timeout_margin=_number(params, "motion_timeout_margin", d.motion_timeout_margin, 0.0, 600.0),
+            stop_settle_time=_number(params, "stop_settle_time", d.stop_settle_time, 0.0, 5.0, lo_open=True),
+            stop_timeout=_number(params, "stop_timeout", d.stop_timeout, 0.0, 600.0, lo_open=True),
             workspace=workspace,
             controller_joint_names=tuple(names),
             tcp_offset=tcp,
@@ -173,7 +184,48 @@ class DriverParams:
             raise ParamError("link_timeout", out.link_timeout,
                              "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz)"
                              % (2.0 / out.cycle_rate, out.cycle_rate))
+        if out.stop_settle_time < 2.0 / out.cycle_rate:
+            raise ParamError("stop_settle_time", out.stop_settle_time,
+                             "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz): the "
+                             "pose must be seen unchanged in two records" % (2.0 / out.cycle_rate, out.cycle_rate))
+        if out.stop_timeout <= out.stop_settle_time:
+            raise ParamError("stop_timeout", out.stop_timeout, "must be longer than stop_settle_time "
+                             "(%g s)" % out.stop_settle_time)
+        if out.watchdog_ms is not None:
+            out.check_watchdog(out.watchdog_ms, "watchdog_ms")
         return out
+
+    def check_watchdog(self, watchdog_ms: Optional[int], source: str) -> None:
+        """The controller card's watchdog against the bus cycle and ``link_timeout``:
+        ParamError naming ``watchdog_ms`` (``source`` says where the value came from).
+
+        - at least two bus cycles: the card drops Data_Exchange (and the controller stops the arm)
+          when the master is silent for the watchdog time, so a shorter one fires between cycles
+          and the link never comes up;
+        - at most ``link_timeout``: when the master dies, the arm is stopped by the card before the
+          driver would call the link lost -- an arm never moves longer than the driver's own limit;
+        - 0 (off) only with ``allow_no_watchdog: true`` (then the arm keeps going when the master
+          dies; the node warns at every start).
+        """
+        value = watchdog_ms or 0
+        if value == 0:
+            if not self.allow_no_watchdog:
+                raise ParamError("watchdog_ms", watchdog_ms,
+                                 "0 switches the card's watchdog off: the arm would no longer stop "
+                                 "when the master dies; set allow_no_watchdog: true to accept that "
+                                 "(from %s)" % source)
+            return
+        low = 2000.0 / self.cycle_rate
+        if value < low:
+            raise ParamError("watchdog_ms", watchdog_ms,
+                             "must be at least two bus cycles (>= %g ms at cycle_rate %g Hz), or the "
+                             "card drops Data_Exchange between cycles and the link never comes up "
+                             "(from %s)" % (math.ceil(low), self.cycle_rate, source))
+        if value > 1000.0 * self.link_timeout:
+            raise ParamError("watchdog_ms", watchdog_ms,
+                             "must not exceed link_timeout (%g ms): when the master dies the card "
+                             "must stop the arm before the driver calls the link lost "
+                             "(from %s)" % (1000.0 * self.link_timeout, source))
 
     def bus(self) -> "Any":
         """The PROFIBUS bus configuration: the bus config file (or the package default) with
@@ -210,6 +262,8 @@ class DriverParams:
             raise ParamError("bus_config", self.bus_config, "the driver needs a serial PHY, not %r"
                              % bus.phy.type)
         slave = bus.slaves[0]
+        self.check_watchdog(slave.watchdog_ms, "the bus config %s" % (self.bus_config or "(built in)")
+                            if self.watchdog_ms is None else "watchdog_ms")
         if slave.input_len != 14 or slave.output_len != 14:
             raise ParamError("bus_config", self.bus_config, "the controller protocol needs 14 bytes "
                              "each way; the configured modules give %d in / %d out"

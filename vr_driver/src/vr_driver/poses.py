@@ -20,13 +20,14 @@ only by the two KDL conversion functions.
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Tuple
 
 import numpy as np
 
-from .errors import PoseError
+from .errors import MotionError, PoseError
 
 __all__ = [
     "CONTROLLER_FIELDS",
@@ -34,6 +35,7 @@ __all__ = [
     "Workspace",
     "FrameConventions",
     "HOME_POSE",
+    "MoveType",
     "wrap_angle",
     "wrap_degrees",
     "rpy_to_matrix",
@@ -53,6 +55,24 @@ __all__ = [
     "matrix_to_kdl_frame",
     "kdl_frame_to_matrix",
 ]
+
+class MoveType(enum.Enum):
+    """The controller's motion kinds: PTP (joint-interpolated), LIN (straight), CIRC (arc through
+    a via point). Lives here, in the vocabulary, so that the wire codec needs no kinematics."""
+
+    PTP = "ptp"
+    LIN = "lin"
+    CIRC = "circ"
+
+    @classmethod
+    def parse(cls, value: Any) -> "MoveType":
+        if isinstance(value, MoveType):
+            return value
+        try:
+            return cls(str(value).strip().lower())
+        except ValueError as exc:
+            raise MotionError("unknown move type %r (ptp, lin, circ)" % (value,)) from exc
+
 
 CONTROLLER_FIELDS = ("x", "y", "z", "rx", "ry", "rz")
 _UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")

@@ -35,8 +35,7 @@ from dataclasses import dataclass, replace
 from typing import Any, Callable, ClassVar, List, Optional, Tuple
 
 from .errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
-from .motion import MoveType
-from .poses import CONTROLLER_FIELDS, ControllerPose, Workspace, finite_number
+from .poses import CONTROLLER_FIELDS, ControllerPose, MoveType, Workspace, finite_number
 
 __all__ = [
     "RECORD_SIZE",
@@ -108,7 +107,7 @@ class WireMoveType(enum.IntEnum):
     @classmethod
     def parse(cls, value: Any) -> "WireMoveType":
         """From a WireMoveType, its number (0-4), its name ("ptp", "circ_via", ...) or a
-        ``motion.MoveType`` PTP/LIN (CIRC is ambiguous: use :meth:`from_move_type`)."""
+        ``poses.MoveType`` PTP/LIN (CIRC is ambiguous: use :meth:`from_move_type`)."""
         if isinstance(value, WireMoveType):
             return value
         if isinstance(value, MoveType):
@@ -128,7 +127,7 @@ class WireMoveType(enum.IntEnum):
 
     @classmethod
     def from_move_type(cls, move_type: Any, via: Optional[bool] = False) -> "WireMoveType":
-        """The wire type of a ``motion.MoveType``: PTP -> PTP, LIN -> LIN, CIRC -> CIRC_END, or
+        """The wire type of a ``poses.MoveType``: PTP -> PTP, LIN -> LIN, CIRC -> CIRC_END, or
         CIRC_VIA with ``via=True``. ``via=None`` refuses CIRC (the caller did not say which)."""
         kind = MoveType.parse(move_type) if not isinstance(move_type, MoveType) else move_type
         if kind is MoveType.PTP:
@@ -485,7 +484,7 @@ def commands_for(move_type: Any, target: Any, via: Any = None,
                  workspace: Optional[Workspace] = None) -> List[Command]:
     """The wire commands of one move, in sending order, each with the flag set: PTP / LIN -> one
     command; CIRC -> [CIRC_VIA at ``via``, CIRC_END at ``target``]. ``move_type`` is a
-    ``motion.MoveType`` (or "ptp" / "lin" / "circ"). A via for PTP / LIN, or none for CIRC, is a
+    ``poses.MoveType`` (or "ptp" / "lin" / "circ"). A via for PTP / LIN, or none for CIRC, is a
     ProtocolError; poses are rounded and checked as in :meth:`Command.from_pose`."""
     if isinstance(move_type, WireMoveType):
         if move_type in (WireMoveType.NONE, WireMoveType.CIRC_VIA):

@@ -22,6 +22,10 @@ Rules (DESIGN.md §5, also ``doc/controller_program.md``):
 - E-stop, drives off or an error *during* a motion stops the arm at once, at the position of that
   moment; the motion ends refused (``aborted``) with the reason. :meth:`SimArm.stop` does the same
   for the program (link loss / watchdog).
+- A *controlled* stop (:meth:`SimArm.brake`, the master's stop flag) is what a real arm does: it
+  keeps following its path while its speed ramps down to zero over ``brake_time`` (robot time,
+  divided by ``speed_factor`` like every motion), so it comes to rest ``brake_time / 2`` of path
+  time further on; ``moving`` stays true until then. ``brake_time`` 0 halts at once.
 - Clearing a fault does not resume an aborted motion: the master must send a new target.
 
 Thread safety: every public method takes the arm's lock, so injections from a ROS service thread
@@ -194,6 +198,9 @@ class _Motion:
     trajectory: Trajectory
     start_time: float
     move_type: MoveType
+    brake_start: Optional[float] = None      # wall time a controlled stop began
+    brake_from: float = 0.0                  # path time [s] at that moment
+    brake_reason: str = ""
 
 
 class SimArm:
@@ -206,10 +213,15 @@ class SimArm:
     def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MotionPlanner] = None, *,
                  speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
                  initial_joints: Optional[Sequence[float]] = None,
-                 settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic) -> None:
+                 settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
+                 brake_time: float = 0.0) -> None:
         if not (isinstance(speed_factor, (int, float)) and not isinstance(speed_factor, bool)
                 and math.isfinite(speed_factor) and speed_factor > 0.0):
             raise MotionError("speed_factor must be a finite number > 0, got %r" % (speed_factor,))
+        if not (isinstance(brake_time, (int, float)) and not isinstance(brake_time, bool)
+                and math.isfinite(brake_time) and brake_time >= 0.0):
+            raise MotionError("brake_time must be a finite number >= 0, got %r" % (brake_time,))
+        self.brake_time = float(brake_time)
         self.kin = kinematics if kinematics is not None else Kinematics.default()
         self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
         self.speed_factor = float(speed_factor)
@@ -294,6 +306,8 @@ class SimArm:
                 return 0.0
             now = self.clock() if now is None else now
             m = self._motion
+            if m.brake_start is not None:
+                return max(0.0, self.brake_time / self.speed_factor - (now - m.brake_start))
             return max(0.0, m.trajectory.duration / self.speed_factor - (now - m.start_time))
 
     # ---------------------------------------------------------------------------- injections
@@ -325,6 +339,30 @@ class SimArm:
         """Stop a motion at once (program-side stop, e.g. the master went silent). True if one ran."""
         with self._lock:
             return self._abort(reason, now)
+
+    @property
+    def braking(self) -> bool:
+        with self._lock:
+            return self._motion is not None and self._motion.brake_start is not None
+
+    def brake(self, reason: str, now: Optional[float] = None) -> bool:
+        """Begin a controlled stop: the arm decelerates along its path and comes to rest
+        ``brake_time / 2`` of path time later (at once with ``brake_time`` 0); the motion then
+        ends refused with ``reason`` (or done, if the ramp carried it to the target). True if a
+        motion was running and was not braking already."""
+        with self._lock:
+            m = self._motion
+            if m is None or m.brake_start is not None:
+                return False
+            now = self.clock() if now is None else now
+            now = max(now, self._last_step)
+            if self.brake_time <= 0.0:
+                return self._abort(reason, now)
+            m.brake_from = (now - m.start_time) * self.speed_factor
+            m.brake_start = now
+            m.brake_reason = reason
+            self._last_step = now
+            return True
 
     # ------------------------------------------------------------------------------- motions
     def plan(self, move_type: Any, target: Any, via: Any = None) -> Trajectory:
@@ -367,15 +405,27 @@ class SimArm:
             self._last_step = max(self._last_step, now)
             if self._motion is not None:
                 m = self._motion
-                elapsed = (now - m.start_time) * self.speed_factor
+                elapsed = self._elapsed(m, now)
                 if elapsed >= m.trajectory.duration:
                     self._finish(now)
+                elif m.brake_start is not None and \
+                        (now - m.brake_start) * self.speed_factor >= self.brake_time:
+                    self._move_to(self._sample(m.trajectory, max(0.0, elapsed)))
+                    self._motion = None
+                    self._result = MotionResult(False, m.brake_reason, True, now)
                 else:
                     self._move_to(self._sample(m.trajectory, max(0.0, elapsed)))
             result, self._result = self._result, None
             return result
 
     # ------------------------------------------------------------------------------- helpers
+    def _elapsed(self, m: _Motion, now: float) -> float:
+        """Path time [s] reached at wall time ``now`` (a controlled stop ramps the rate to 0)."""
+        if m.brake_start is None:
+            return (now - m.start_time) * self.speed_factor
+        tau = min((now - m.brake_start) * self.speed_factor, self.brake_time)
+        return m.brake_from + tau - tau * tau / (2.0 * self.brake_time)
+
     def _finish(self, now: float) -> None:
         m = self._motion
         assert m is not None
@@ -390,10 +440,11 @@ class SimArm:
         now = self.clock() if now is None else now
         now = max(now, self._last_step)                  # never back along the path
         self._last_step = now
-        elapsed = (now - m.start_time) * self.speed_factor
+        elapsed = self._elapsed(m, now)
         if elapsed >= m.trajectory.duration:
             # it had already arrived before the stop: the motion was complete
-            self._finish(min(now, m.start_time + m.trajectory.duration / self.speed_factor))
+            self._finish(now if m.brake_start is not None else
+                         min(now, m.start_time + m.trajectory.duration / self.speed_factor))
             return False
         self._move_to(self._sample(m.trajectory, max(0.0, elapsed)))
         self._motion = None

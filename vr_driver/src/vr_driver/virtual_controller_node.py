@@ -4,7 +4,8 @@ Private parameters (validated by ``controller_sim.SimOptions``; defaults in brac
 ``~pty_link`` [""] create a pty pair and symlink its device end here; ``~device`` [""] serve this
 existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.0];
 ``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
-``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets).
+``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets);
+``~brake_time`` [0.3] s of robot time a stop takes from path speed to rest (0: halts at once).
 
 Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
@@ -52,7 +53,8 @@ def main() -> int:
         controller = VirtualController(options.device, address=options.address, baud=options.baud,
                                        speed_factor=options.speed_factor, initial_pose=options.initial_pose,
                                        loop_period=options.loop_period, byte_order=options.byte_order,
-                                       pty_link=options.pty_link, log_file=options.log_file)
+                                       pty_link=options.pty_link, log_file=options.log_file,
+                                       brake_time=options.brake_time)
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
         return EXIT_DEVICE

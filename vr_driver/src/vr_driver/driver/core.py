@@ -1,0 +1,453 @@
+"""The driver core behind the ROS node `interface` (ROS-free, testable with plain pytest).
+
+:class:`DriverCore` composes two parts stepped by a clock:
+
+- :class:`~vr_driver.driver.link.LinkSupervisor` (port, DP master, session, freshness, counters),
+- :class:`~vr_driver.driver.sequencer.MotionSequencer` (queue, handshake, stops, outcomes),
+
+and one bus iteration (:meth:`DriverCore.spin_once`) only steps them: the link runs a DP cycle and
+returns a sample, the joints of the reported pose are solved, the sequencer decides what to send,
+and an immutable :class:`DriverStatus` snapshot is published. :meth:`DriverCore.start` runs that
+iteration at ``cycle_rate`` in the bus thread; tests call :meth:`spin_once` themselves with a fake
+clock, in one thread.
+
+Requests from other threads (:meth:`submit`, :meth:`submit_joint_path`, :meth:`cancel`,
+:meth:`stop_motion`) validate and plan in the caller's thread -- never on the bus thread, and
+under no lock the bus needs -- and then post the job to the sequencer. A job that must be planned
+again (the arm is not where it was planned from) is planned on the core's planning thread
+(:meth:`run_planning` in stepped tests).
+
+Safety rules enforced here and in the parts (README "Reliability"):
+- nothing reaches the bus that was not validated first: finite values, int16, the workspace box on
+  the rounded values that are sent *and on every sample of the previewed path*, the joint limits
+  on every sample, reachability, and a controller that says motion is possible;
+- each target is requested exactly once; a job whose link is lost, that times out or is stopped
+  is ended with its reason and never re-sent; a stopped job ends when the arm is at rest, with the
+  rest pose;
+- what :meth:`status` returns is never older than ``link_timeout``: a snapshot or a feedback
+  record older than that reads as a lost link (no pose, no joints, in error).
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+import time
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
+
+from pyprofibus_vendor.phy import Link
+
+from ..errors import VrDriverError
+from ..kinematics import Kinematics
+from ..motion import MotionPlanner, check_envelope
+from ..params import DriverParams
+from ..poses import ControllerPose, MoveType
+from ..protocol import Feedback, StatusBits, commands_for
+from .jobs import JobPhase, MoveJob, MoveRequest, Preview, SubmitMode
+from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
+                   LinkSupervisor, open_serial_link)
+from .sequencer import MotionSequencer, why_no_motion
+
+log = logging.getLogger("vr_driver.driver")
+
+Clock = Callable[[], float]
+
+__all__ = ["DriverCore", "DriverError", "DriverStatus"]
+
+
+class DriverError(VrDriverError):
+    """A request the driver refuses (not connected, e-stop, bad input...). The message says why."""
+
+
+@dataclass(frozen=True)
+class DriverStatus:
+    """A consistent snapshot of everything the node publishes."""
+
+    time: float
+    link: LinkState
+    link_reason: str
+    feedback: Optional[Feedback]              # None unless the link is CONNECTED
+    pose: Optional[ControllerPose]
+    joints: Optional[Tuple[float, ...]]
+    joints_valid: bool
+    job: Optional[MoveJob]
+    queue_length: int
+    cycle_rate: float                          # measured DP cycles per second
+    counters: LinkCounters
+    master_counters: Dict[str, int]
+    slave_state: str
+    last_diag: str
+    error_code: int
+    error_reason: str
+    feedback_time: Optional[float] = None     # clock time the feedback record arrived (None: none)
+    settling: bool = False                    # a stopped move is waiting for the arm to be at rest
+
+    @property
+    def connected(self) -> bool:
+        return self.link is LinkState.CONNECTED
+
+    @property
+    def motion_possible(self) -> bool:
+        fb = self.feedback
+        if fb is None or not self.connected:
+            return False
+        return not why_no_motion(fb)
+
+    def why_no_motion(self) -> str:
+        """Why motion is not possible now ("" when it is)."""
+        if not self.connected or self.feedback is None:
+            return "no link to the controller (%s: %s)" % (self.link.value, self.link_reason)
+        return why_no_motion(self.feedback)
+
+    def stale(self, now: float, limit: float) -> "DriverStatus":
+        """This snapshot as it must be read at ``now``: unchanged while it and its feedback are at
+        most ``limit`` seconds old; otherwise a lost link -- no feedback, no pose, no joints, in
+        error -- never a repeat of old good news."""
+        age = now - self.time
+        fb_age = None if self.feedback_time is None else now - self.feedback_time
+        if age <= limit and (fb_age is None or fb_age <= limit):
+            return self
+        if age > limit:
+            reason = "the driver's status is %.2f s old (the bus loop stalled)" % age
+        else:
+            reason = "the controller's last record is %.2f s old" % fb_age
+        return replace(self, link=LinkState.STALE, link_reason=reason, feedback=None, pose=None,
+                       joints_valid=False, error_code=ERROR_LINK, error_reason=reason,
+                       feedback_time=None)
+
+
+class DriverCore:
+    """See the module docstring. ``open_link(device, baud)`` makes the link (tests may pass a
+    factory for an in-memory or fault-injecting link)."""
+
+    def __init__(self, params: DriverParams, kinematics: Optional[Kinematics] = None,
+                 planner: Optional[MotionPlanner] = None, clock: Clock = time.monotonic,
+                 open_link: Callable[[str, int], Link] = open_serial_link) -> None:
+        self.params = params
+        self.bus = params.bus()
+        self.slave_config = self.bus.slaves[0]
+        if kinematics is None:
+            kinematics = Kinematics.default()
+            if any(params.tcp_offset):
+                kinematics.conventions = kinematics.conventions.with_tcp(params.tcp_offset)
+        self.kin = kinematics
+        self.planner = planner or MotionPlanner(self.kin)
+        self.clock = clock
+        self.link = LinkSupervisor(params, self.bus, clock, open_link)
+        self.sequencer = MotionSequencer(params, clock, self._schedule_replan)
+        self._stop = threading.Event()
+        self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
+        self._thread: Optional[threading.Thread] = None
+        self._planning: Deque[Callable[[], None]] = collections.deque()
+        self._planning_cond = threading.Condition()
+        self._planning_thread: Optional[threading.Thread] = None
+        self._last_posted: Optional[MoveJob] = None
+        self._joints: Optional[Tuple[float, ...]] = None
+        self._joints_valid = False
+        self._joints_pose: Optional[Tuple[int, ...]] = None
+        self._listeners: List[Callable[[DriverStatus], None]] = []
+        self._status = self._snapshot(self.clock(), None)
+
+    @property
+    def handshake(self):
+        """The master side of the target handshake (read-only use: ``handshake.ready``)."""
+        return self.sequencer.handshake
+
+    # ------------------------------------------------------------------------ lifecycle
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._planning_thread = threading.Thread(target=self._plan_loop, name="vr_driver-planning",
+                                                 daemon=True)
+        self._planning_thread.start()
+        self._thread = threading.Thread(target=self._run, name="vr_driver-bus", daemon=True)
+        self._thread.start()
+
+    def request_stop(self) -> None:
+        """Ask the bus thread to end, without waiting (safe from a signal handler or a ROS shutdown
+        hook, which may interrupt a thread that holds a lock :meth:`stop` needs)."""
+        self._stop.set()
+        self._wake.set()
+
+    def stop(self, timeout: float = 3.0) -> None:
+        self._stop.set()
+        self._wake.set()
+        with self._planning_cond:
+            self._planning_cond.notify_all()
+        for attr in ("_thread", "_planning_thread"):
+            thread = getattr(self, attr)
+            if thread is not None:
+                thread.join(timeout)
+                setattr(self, attr, None)
+        self.sequencer.shutdown("driver shut down")
+        self.link.close()
+
+    def add_listener(self, callback: Callable[[DriverStatus], None]) -> None:
+        """``callback(status)`` after every bus iteration (bus thread)."""
+        self._listeners.append(callback)
+
+    # ------------------------------------------------------------------------ queries
+    def status(self, now: Optional[float] = None) -> DriverStatus:
+        """The latest snapshot, read at ``now`` (default: the clock): one older than
+        ``link_timeout``, or with feedback older than that, reads as a lost link."""
+        return self._status.stale(self.clock() if now is None else now, self.params.link_timeout)
+
+    @property
+    def joint_names(self) -> Tuple[str, ...]:
+        return self.params.controller_joint_names
+
+    # ------------------------------------------------------------------------ requests
+    def preview(self, request: MoveRequest, start_joints: Optional[Sequence[float]] = None) -> Preview:
+        """Validate and plan ``request`` from the current joints (or ``start_joints``); sends
+        nothing. The whole previewed path must stay inside the joint limits and the workspace box.
+        Raises VrDriverError (PoseError, KinematicsError, MotionError, EnvelopeError,
+        ProtocolError, DriverError) with the reason."""
+        if start_joints is None:
+            start_joints = self._current_joints()
+        commands = tuple(commands_for(request.move_type, request.target, request.via,
+                                      self.params.workspace))
+        # plan to exactly what will be sent (whole mm / deg)
+        target = commands[-1].pose
+        via = commands[0].pose if len(commands) == 2 else None
+        trajectory = self.planner.plan(request.move_type, start_joints, target, via)
+        check_envelope(trajectory, self.params.workspace)
+        return Preview(request, commands, trajectory, tuple(trajectory.goal))
+
+    def claim_ticket(self) -> int:
+        """A ticket in arrival order for a goal that preempts (take it as the goal arrives, pass it
+        to :meth:`submit`): of two goals, the one that arrived later wins, whichever is planned
+        first; an older one submitted after a newer ticket was claimed is superseded."""
+        return self.sequencer.claim_ticket()
+
+    def submit(self, request: MoveRequest, on_update: Optional[Callable[[MoveJob], None]] = None,
+               mode: SubmitMode = SubmitMode.APPEND, ticket: Optional[int] = None) -> MoveJob:
+        """Validate, preview and queue a move. Raises (and queues nothing) when it is invalid,
+        unreachable, leaves the envelope, or the controller cannot move now. ``mode``: APPEND
+        (behind the queue) or PREEMPT (stop the running move, drop the queue; ``ticket`` from
+        :meth:`claim_ticket` keeps arrival order)."""
+        self._require_motion_possible()
+        job = MoveJob(self.preview(request, self._planning_start(mode)), on_update, ticket=ticket)
+        self._last_posted = job
+        self.sequencer.add([job], mode)
+        self._wake.set()
+        log.info("job %d queued (%s): %s %s", job.id, mode.value, request.move_type.name,
+                 " then ".join(c.describe() for c in job.preview.commands))
+        return job
+
+    def submit_joint_path(self, names: Sequence[str], points: Sequence[Sequence[float]],
+                          on_update: Optional[Callable[[MoveJob], None]] = None) -> List[MoveJob]:
+        """Each joint point -> FK -> a PTP target, streamed in order. All points are validated
+        and previewed first (in the caller's thread; the bus keeps cycling); if any is bad,
+        nothing is queued and DriverError names the point. The new path replaces every queued
+        target of an earlier one; the target in flight completes and the new path runs from its
+        end. An empty ``points`` stops the motion."""
+        if not points:
+            self.stop_motion("empty joint path: stop requested")
+            return []
+        order = self._joint_order(names)
+        self._require_motion_possible()
+        start = self._planning_start(SubmitMode.REPLACE)
+        previews = []
+        for index, point in enumerate(points):
+            try:
+                if len(point) != len(order):
+                    raise DriverError("has %d positions for %d joint names" % (len(point), len(order)))
+                q = [0.0] * 6
+                for src, dst in enumerate(order):
+                    q[dst] = float(point[src])
+                q = self.kin.check_limits(self.kin.joint_vector(q))
+                pose = self.kin.fk_pose(q)
+                request = MoveRequest(MoveType.PTP, pose, label="joint path point %d" % index)
+                preview = self.preview(request, start)
+            except (VrDriverError, TypeError, ValueError) as exc:
+                raise DriverError("joint path point %d: %s; nothing was sent" % (index, exc)) from None
+            previews.append(preview)
+            start = preview.joint_target
+        jobs = [MoveJob(p, on_update) for p in previews]
+        for job in jobs[1:]:
+            job.group = jobs[0].group
+        self._last_posted = jobs[-1]
+        self.sequencer.add(jobs, SubmitMode.REPLACE)
+        self._wake.set()
+        log.info("joint path: %d PTP targets queued (jobs %d..%d)", len(jobs), jobs[0].id, jobs[-1].id)
+        return jobs
+
+    def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:
+        """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when
+        the arm is at rest."""
+        self.sequencer.cancel(job, reason)
+        self._wake.set()
+
+    def stop_motion(self, reason: str = "stop requested") -> int:
+        """Drop the queue and stop the target in flight; returns the number of jobs it ends."""
+        view = self.sequencer.view
+        n = view.queue_length + (1 if view.job is not None and not view.settling else 0)
+        self.sequencer.stop_all(reason)
+        self._wake.set()
+        log.info("stop motion: %s (%d job(s) to end)", reason, n)
+        return n
+
+    # ------------------------------------------------------------------------ request helpers
+    def _require_motion_possible(self) -> None:
+        status = self.status()
+        if not status.motion_possible:
+            raise DriverError("motion is not possible: %s" % status.why_no_motion())
+
+    def _current_joints(self) -> Tuple[float, ...]:
+        status = self.status()
+        if status.joints is None or not status.joints_valid:
+            raise DriverError("no valid current joint state to plan from (%s)"
+                              % (status.link_reason or status.link.value))
+        return status.joints
+
+    def _planning_start(self, mode: SubmitMode) -> Tuple[float, ...]:
+        """Where a new job will start: for APPEND the last queued job's target, for REPLACE the
+        target in flight, else (and for PREEMPT) the arm's joints now. A guess when the arm moves
+        meanwhile: the sequencer plans the job again if the arm is elsewhere when it is sent."""
+        if mode is SubmitMode.APPEND:
+            last = self._last_posted
+            if last is not None and not last.done:
+                return last.preview.joint_target
+            tail = self.sequencer.view.tail_joints
+            if tail is not None:
+                return tail
+        elif mode is SubmitMode.REPLACE:
+            inflight = self.sequencer.view.inflight_joints
+            if inflight is not None:
+                return inflight
+        return self._current_joints()
+
+    def _joint_order(self, names: Sequence[str]) -> List[int]:
+        expected = list(self.params.controller_joint_names)
+        names = list(names)
+        if sorted(names) != sorted(expected) or len(names) != len(set(names)):
+            raise DriverError("joint names %s do not match the controller's joints %s"
+                              % (names, expected))
+        return [expected.index(n) for n in names]
+
+    # ------------------------------------------------------------------------ planning thread
+    def _schedule_replan(self, job: MoveJob, joints: Tuple[float, ...]) -> None:
+        """Called by the sequencer (bus thread): plan ``job`` again from ``joints``, off the bus."""
+        def task() -> None:
+            try:
+                preview = self.preview(job.preview.request, joints)
+            except VrDriverError as exc:
+                self.sequencer.replanned(job, None, str(exc))
+            else:
+                self.sequencer.replanned(job, preview)
+            self._wake.set()
+        with self._planning_cond:
+            self._planning.append(task)
+            self._planning_cond.notify_all()
+
+    def run_planning(self) -> int:
+        """Run the planning tasks waiting now, in the caller's thread (stepped tests); returns
+        how many ran."""
+        n = 0
+        while True:
+            with self._planning_cond:
+                if not self._planning:
+                    return n
+                task = self._planning.popleft()
+            task()
+            n += 1
+
+    def _plan_loop(self) -> None:
+        while not self._stop.is_set():
+            with self._planning_cond:
+                self._planning_cond.wait_for(lambda: self._planning or self._stop.is_set())
+                if self._stop.is_set():
+                    return
+                task = self._planning.popleft()
+            try:
+                task()
+            except Exception:  # the planning thread must survive a planner bug
+                log.exception("planning thread: unexpected error")
+
+    # ------------------------------------------------------------------------ bus loop
+    def _run(self) -> None:
+        period = 1.0 / self.bus.cycle_rate_hz
+        next_start = self.clock()
+        while not self._stop.is_set():
+            try:
+                self.spin_once()
+            except Exception:  # never let the bus thread die: log, drop the link, reopen
+                log.exception("bus thread: unexpected error; reopening the link")
+                self.link.fail("internal error (see log)")
+                self._publish(self.clock(), None)
+            next_start += period
+            now = self.clock()
+            if next_start < now:
+                next_start = now
+            if self._wake.wait(next_start - now):
+                self._wake.clear()
+                next_start = self.clock()     # an extra cycle now; the rate resumes from here
+
+    def spin_once(self) -> DriverStatus:
+        """One bus iteration: link step (one DP cycle), joints, sequencer step, snapshot."""
+        sample = self.link.step(self.clock())
+        now = sample.time
+        joints = self._update_joints(sample)
+        command = self.sequencer.step(now, sample, joints)
+        self.link.set_outputs(command.encode(self.params.byte_order))
+        return self._publish(now, sample)
+
+    def _update_joints(self, sample: LinkSample) -> Optional[Tuple[float, ...]]:
+        """The joints of the reported pose (IK seeded by the last solution: continuous, and a few
+        milliseconds at most -- the solver's time budget); None while the link is down."""
+        fb = sample.feedback
+        if fb is None:
+            self._joints_valid = False
+            return None
+        values = fb.values
+        if values == self._joints_pose and self._joints_valid:
+            return self._joints
+        try:
+            self._joints = self.kin.ik_pose(fb.pose, seed=self._joints)
+            self._joints_valid = True
+            self._joints_pose = values
+        except VrDriverError as exc:
+            if self._joints_valid:
+                log.warning("no joint solution for the reported pose %s: %s", values, exc)
+            self._joints_valid = False
+        return self._joints if self._joints_valid else None
+
+    # ------------------------------------------------------------------------ snapshots
+    def _snapshot(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
+        view = self.sequencer.view
+        counters = replace(self.link.counters, targets_sent=view.targets_sent,
+                           targets_done=view.targets_done, targets_rejected=view.targets_rejected,
+                           targets_aborted=view.targets_aborted)
+        fb = sample.feedback if sample is not None else None
+        if sample is None:
+            link, reason = self.link.state, "not started"
+            error_code, error_reason = ERROR_LINK, reason
+        else:
+            link, reason = sample.state, sample.reason
+            error_code, error_reason = sample.error_code, sample.error_reason
+        if fb is not None:
+            if fb.status & StatusBits.ERROR:
+                error_code, error_reason = ERROR_CONTROLLER, "the controller reports an error"
+            else:
+                error_code, error_reason = ERROR_NONE, ""
+        return DriverStatus(
+            time=now, link=link, link_reason=reason, feedback=fb,
+            pose=fb.pose if fb is not None else None,
+            joints=self._joints, joints_valid=self._joints_valid and fb is not None,
+            job=view.job, queue_length=view.queue_length, cycle_rate=self.link.cycle_rate,
+            counters=counters, master_counters=self.link.master_counters(),
+            slave_state=self.link.slave_state, last_diag=self.link.last_diag,
+            error_code=error_code, error_reason=error_reason,
+            feedback_time=sample.feedback_time if sample is not None and fb is not None else None,
+            settling=view.settling)
+
+    def _publish(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
+        status = self._status = self._snapshot(now, sample)
+        for callback in self._listeners:
+            try:
+                callback(status)
+            except Exception:
+                log.exception("status listener failed")
+        return status

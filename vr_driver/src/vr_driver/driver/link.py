@@ -1,0 +1,398 @@
+"""The link supervisor: the serial port, the DP master and the freshness of the controller's
+records, stepped by the bus loop. ROS-free.
+
+:meth:`LinkSupervisor.step` runs one bus iteration at ``now``: it opens (or reopens, every
+``reconnect_period``) the port, runs one DP cycle with the outputs it was given, decodes a record
+that arrived in this cycle, and returns a :class:`LinkSample` -- the link state, the controller's
+latest good feedback (never older than ``link_timeout``) and the counters. It decides nothing
+about motions; the :class:`~vr_driver.driver.sequencer.MotionSequencer` does, from the sample.
+
+Rules:
+- the link is CONNECTED while the slave is in Data_Exchange and the last good record of this
+  Data_Exchange *session* is at most ``link_timeout`` old (a record lost or garbled in between is
+  not a loss); records from before the session started never count;
+- while the link is not CONNECTED the sample carries no feedback at all (the status must not show
+  old good news);
+- the first record of a session starts a new session number: the sequencer learns from it that
+  everything in flight before was lost.
+"""
+from __future__ import annotations
+
+import collections
+import enum
+import errno
+import logging
+import re
+from dataclasses import dataclass, replace
+from typing import Any, Callable, Deque, Dict, Optional
+
+from pyprofibus_vendor.dp import DiagStatus1
+from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState, SlaveSpec
+from pyprofibus_vendor.errors import ProfibusError
+from pyprofibus_vendor.phy import Link
+
+from ..errors import ProtocolError
+from ..params import DriverParams
+from ..protocol import Command, Feedback
+
+log = logging.getLogger("vr_driver.driver")
+
+__all__ = ["LinkState", "LinkCounters", "LinkSample", "LinkSupervisor", "open_serial_link",
+           "ERROR_NONE", "ERROR_LINK", "ERROR_CONTROLLER", "ERROR_PROTOCOL", "PORT_ERROR_AFTER"]
+
+# Error codes in RobotStatus.error_code (documented in doc/README.md).
+ERROR_NONE = 0
+ERROR_LINK = 1                     # link to the controller down (or the driver's status stale)
+ERROR_CONTROLLER = 2               # the controller reports its error bit
+ERROR_PROTOCOL = 3                 # the controller's feedback cannot be decoded
+
+# a port that cannot be opened is a warning at first (a virtual controller may still be starting),
+# an error once it has been missing this long [s]
+PORT_ERROR_AFTER = 5.0
+
+
+class LinkState(enum.Enum):
+    STARTING = "starting"          # port not opened yet
+    CONNECTING = "connecting"      # port open, DP slave not (yet) in Data_Exchange
+    CONNECTED = "connected"        # Data_Exchange with fresh, valid feedback
+    LOST = "lost"                  # was connected; feedback stale, slave silent or invalid data
+    PORT_ERROR = "port_error"      # the port cannot be opened / died; reopening periodically
+    STALE = "stale"                # the bus loop itself produced nothing for link_timeout
+
+
+@dataclass
+class LinkCounters:
+    """Link counters and (filled in by the sequencer) target counters, as one record."""
+
+    cycles: int = 0
+    port_opens: int = 0
+    port_errors: int = 0
+    reconnect_attempts: int = 0
+    losses: int = 0
+    reconnects: int = 0
+    protocol_errors: int = 0
+    targets_sent: int = 0
+    targets_done: int = 0
+    targets_rejected: int = 0
+    targets_aborted: int = 0
+
+
+@dataclass(frozen=True)
+class LinkSample:
+    """What one bus iteration learnt about the link."""
+
+    time: float
+    state: LinkState
+    reason: str
+    fresh: Optional[Feedback]              # a record that arrived in this iteration (decoded)
+    feedback: Optional[Feedback]           # the latest good record while CONNECTED, else None
+    feedback_time: Optional[float]         # when ``feedback`` arrived
+    session: int                           # +1 every time the link becomes CONNECTED
+    session_records: int                   # good records received in this session
+    error_code: int
+    error_reason: str
+    cycled: bool                           # a DP cycle ran in this iteration
+
+    @property
+    def connected(self) -> bool:
+        return self.state is LinkState.CONNECTED
+
+
+def _port_hint(exc: BaseException) -> str:
+    """What an error opening the port most likely means, for the errors with a clear remedy."""
+    codes = set()
+    seen: Optional[BaseException] = exc
+    for _ in range(5):
+        if seen is None:
+            break
+        if isinstance(getattr(seen, "errno", None), int):
+            codes.add(seen.errno)
+        seen = seen.__cause__ or seen.__context__
+    text = str(exc)
+    if codes & {errno.EACCES, errno.EPERM} or "Permission denied" in text:
+        return (" (permission denied: the driver's user needs read and write access to the device, "
+                "usually membership of its group, e.g. dialout)")
+    if errno.EBUSY in codes or "Device or resource busy" in text:
+        return " (the device is busy: another program has it open)"
+    return ""
+
+
+def _diag_words(diag: Any) -> str:
+    from pyprofibus_vendor.dp import explain_diag
+    try:
+        return explain_diag(diag)
+    except Exception:  # a diag we cannot explain is still worth showing raw
+        return repr(diag)
+
+
+def open_serial_link(device: str, baud: int) -> Link:
+    """Default link factory: the serial PHY (raises PhyError with the OS reason)."""
+    from pyprofibus_vendor.phy_serial import SerialLink
+    return SerialLink(device, baud)
+
+
+class LinkSupervisor:
+    """See the module docstring. One thread (the bus loop) calls :meth:`step`; the read-outs
+    (:attr:`counters`, :meth:`master_counters`, :attr:`slave_state`, :attr:`last_diag`) are for
+    the same thread's status snapshot."""
+
+    def __init__(self, params: DriverParams, bus: Any, clock: Callable[[], float],
+                 open_link: Callable[[str, int], Link] = open_serial_link) -> None:
+        self.params = params
+        self.bus = bus
+        self.slave_config = bus.slaves[0]
+        self.clock = clock
+        self.open_link = open_link
+        self.counters = LinkCounters()
+        self._link: Optional[Link] = None
+        self._master: Optional[DpMaster] = None
+        self._slave = None
+        self._state = LinkState.STARTING
+        self._reason = "not started"
+        self._next_open = 0.0
+        self._session = 0
+        self._session_start = 0.0           # the slave (re)entered Data_Exchange
+        self._session_records = 0            # good records received in this DP session
+        self._record_time: Optional[float] = None    # when the last record (good or bad) arrived
+        self._good_time: Optional[float] = None      # when the last good record arrived
+        self._feedback: Optional[Feedback] = None
+        self._bad_record = ""                # why the last record could not be decoded
+        self._slave_reason = ""
+        self._logged_slave_reason = ""
+        self._garbage_seen = 0
+        self._port_missing_since = 0.0
+        self._port_error_logged = False
+        self._error_code = ERROR_LINK
+        self._error_reason = "not started"
+        self._cycle_times: Deque[float] = collections.deque(maxlen=50)
+
+    # ----------------------------------------------------------------------- read-outs
+    @property
+    def state(self) -> LinkState:
+        return self._state
+
+    @property
+    def cycle_rate(self) -> float:
+        times = self._cycle_times
+        if len(times) > 1 and times[-1] > times[0]:
+            return (len(times) - 1) / (times[-1] - times[0])
+        return 0.0
+
+    def master_counters(self) -> Dict[str, int]:
+        return dict(vars(self._master.counters)) if self._master is not None else {}
+
+    @property
+    def slave_state(self) -> str:
+        return self._slave.state.value if self._slave is not None else "closed"
+
+    @property
+    def last_diag(self) -> str:
+        slave = self._slave
+        return _diag_words(slave.last_diag) if slave is not None and slave.last_diag is not None else ""
+
+    def set_outputs(self, record: bytes) -> None:
+        """The record sent in the next DP cycles."""
+        if self._slave is not None:
+            self._slave.outputs = record
+
+    # ----------------------------------------------------------------------- the step
+    def step(self, now: float) -> LinkSample:
+        """One bus iteration: open the port if due, run one DP cycle, judge the record."""
+        if self._master is None:
+            if now >= self._next_open:
+                self._open(now)
+            if self._master is None:
+                return self._sample(now, None, cycled=False)
+        master = self._master
+        try:
+            master.cycle(timeout=max(0.2, 2.0 / self.bus.cycle_rate_hz))
+        except ProfibusError as exc:
+            self.counters.port_errors += 1
+            self.close()
+            now = self.clock()
+            self._next_open = now + self.params.reconnect_period
+            self._down(LinkState.PORT_ERROR, "serial port %s failed: %s" % (self.bus.phy.device, exc))
+            return self._sample(now, None, cycled=False)
+        now = self.clock()
+        self.counters.cycles += 1
+        self._cycle_times.append(now)
+        fresh = self._judge(now)
+        return self._sample(now, fresh, cycled=True)
+
+    def _judge(self, now: float) -> Optional[Feedback]:
+        """Take the cycle's record if a new one arrived; update the link state."""
+        slave = self._slave
+        fresh: Optional[Feedback] = None
+        reason = ""
+        if slave is None or not slave.connected:
+            state = slave.state.value if slave is not None else "none"
+            reason = self._slave_reason or "controller's PROFIBUS card not in Data_Exchange (%s)" % state
+        else:
+            data, at = slave.inputs, slave.inputs_time
+            if data is not None and at is not None and at >= self._session_start \
+                    and at != self._record_time:
+                self._record_time = at
+                try:
+                    fresh = Feedback.decode(data, self.params.byte_order)
+                    self._bad_record = ""
+                except ProtocolError as exc:
+                    self.counters.protocol_errors += 1
+                    if not self._bad_record:
+                        log.warning("invalid feedback from the controller (ignored while the link "
+                                    "holds): %s", exc)
+                    self._bad_record = "invalid feedback from the controller: %s" % exc
+            if fresh is not None:
+                self._good_time = at
+                self._session_records += 1
+                master = self._master
+                if master is not None:        # garbled bytes are counted from the last good record
+                    self._garbage_seen = master.counters.garbage_bytes + master.counters.fcs_errors
+            last = max(self._session_start, self._good_time or 0.0)
+            if self._good_time is None or self._good_time < self._session_start \
+                    or now - last > self.params.link_timeout:
+                reason = self._bad_record or \
+                    "no fresh data from the controller for %.2f s" % (now - last)
+        if reason:
+            was = self._state
+            self._down(LinkState.LOST if was in (LinkState.CONNECTED, LinkState.LOST)
+                       else LinkState.CONNECTING, reason)
+            if self._bad_record and reason == self._bad_record:
+                self._error_code, self._error_reason = ERROR_PROTOCOL, reason
+            return None
+        if fresh is not None:
+            if self._state is not LinkState.CONNECTED:
+                if self.counters.losses:
+                    self.counters.reconnects += 1
+                self._session += 1
+                log.info("link to the controller up: %s", fresh.describe())
+            self._slave_reason = ""
+            self._state, self._reason = LinkState.CONNECTED, "Data_Exchange"
+            self._feedback = fresh
+            self._error_code, self._error_reason = 0, ""
+        return fresh
+
+    def _sample(self, now: float, fresh: Optional[Feedback], cycled: bool) -> LinkSample:
+        connected = self._state is LinkState.CONNECTED and self._feedback is not None
+        return LinkSample(
+            time=now, state=self._state, reason=self._reason, fresh=fresh,
+            feedback=self._feedback if connected else None,
+            feedback_time=self._good_time if connected else None,
+            session=self._session, session_records=self._session_records,
+            error_code=self._error_code, error_reason=self._error_reason, cycled=cycled)
+
+    def _down(self, state: LinkState, reason: str) -> None:
+        if self._state is LinkState.CONNECTED and state is not LinkState.CONNECTED:
+            self.counters.losses += 1
+            log.error("link to the controller lost: %s", reason)
+        self._state, self._reason = state, reason
+        self._feedback = None
+        self._error_code, self._error_reason = ERROR_LINK, reason
+
+    # ----------------------------------------------------------------------- port and master
+    def _open(self, now: float) -> None:
+        device, baud = self.bus.phy.device, self.bus.baud
+        self.counters.reconnect_attempts += 1
+        try:
+            link = self.open_link(device, baud)
+        except (ProfibusError, OSError, ValueError) as exc:
+            self._next_open = now + self.params.reconnect_period
+            reason = "cannot open %s: %s%s" % (device, exc, _port_hint(exc))
+            if reason != self._reason:
+                self._port_missing_since = now
+                log.warning("%s (retrying every %.2g s)", reason, self.params.reconnect_period)
+            elif now - self._port_missing_since >= PORT_ERROR_AFTER and not self._port_error_logged:
+                log.error("%s for %.0f s now (still retrying every %.2g s)", reason,
+                          now - self._port_missing_since, self.params.reconnect_period)
+            self._port_error_logged = now - self._port_missing_since >= PORT_ERROR_AFTER
+            self._down(LinkState.PORT_ERROR, reason)
+            return
+        self.counters.port_opens += 1
+        self._slave_reason = ""
+        self._garbage_seen = 0
+        timing = BusTiming.for_baud(self.bus.baud, self.bus.retry_limit)
+        if self.bus.slot_time is not None:
+            timing = replace(timing, slot_bits=self.bus.slot_time)
+        # dx_tolerance: a Data_Exchange without a reply (a corrupted telegram) does not drop the
+        # slave -- and with its Set_Prm the controller's program session -- before the link counts
+        # as lost here anyway (link_timeout without a good record); retry_steps: a lost reply in
+        # the start-up sequence repeats that step instead of restarting it after a back-off
+        master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
+                          timing=timing, backoff_max=min(1.0, self.params.reconnect_period),
+                          dx_tolerance=self.params.link_timeout, retry_steps=True,
+                          on_state_change=self._on_slave_state)
+        sc = self.slave_config
+        spec = SlaveSpec(sc.address, sc.ident, sc.cfg, user_prm_data=sc.user_prm_data,
+                         group_ident=sc.group_mask,
+                         watchdog=None if not sc.watchdog_ms else sc.watchdog_ms / 1000.0)
+        self._slave = master.add_slave(spec)
+        self._slave.outputs = Command.idle().encode(self.params.byte_order)
+        self._master = master
+        self._link = link
+        log.info("opened %s at %d bit/s; bringing slave %d (ident 0x%04X) to Data_Exchange",
+                 device, baud, sc.address, sc.ident)
+        self._down(LinkState.CONNECTING, "port open, waiting for the controller's PROFIBUS card")
+
+    def close(self) -> None:
+        link, self._link, self._master, self._slave = self._link, None, None, None
+        if link is not None:
+            try:
+                link.close()
+            except Exception:  # closing a dead port may fail; nothing to do about it
+                pass
+
+    def fail(self, reason: str) -> None:
+        """Drop the link after an internal error: close the port, reopen after the period."""
+        self.close()
+        self._next_open = self.clock() + self.params.reconnect_period
+        self._down(LinkState.PORT_ERROR, reason)
+
+    def _on_slave_state(self, slave, old: MasterSlaveState, new: MasterSlaveState, reason: str) -> None:
+        """The DP master's per-slave state changes: keep the last reason for the status."""
+        if new is MasterSlaveState.INIT:
+            self.counters.reconnect_attempts += 1
+        connected = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
+        if new in connected and old not in connected:
+            self._session_start = self.clock()    # records from before are of the old session
+            self._session_records = 0
+        if new is MasterSlaveState.BACKOFF:
+            self._slave_reason = "controller's PROFIBUS card (slave %d): %s" % (
+                slave.address, self._explain_failure(slave, reason))
+            key = re.sub(r"[0-9]+(\.[0-9]+)?", "#", self._slave_reason)   # not for new numbers
+            if key != self._logged_slave_reason:
+                self._logged_slave_reason = key
+                log.warning("%s", self._slave_reason)
+        elif new in connected:
+            self._logged_slave_reason = ""
+
+    def _explain_failure(self, slave, reason: str) -> str:
+        """The master's reason for ending an attempt, with what it most likely means."""
+        diag = slave.last_diag
+        sc = self.slave_config
+        master = self._master
+        garbage = master.counters.garbage_bytes + master.counters.fcs_errors if master is not None else 0
+        garbled, self._garbage_seen = garbage > self._garbage_seen, garbage
+        if reason.startswith("diag:") and diag is not None:
+            if diag.ident != sc.ident:
+                hint = ("the station at address %d reports ident 0x%04X, the driver expects 0x%04X "
+                        "(another device at this address, or the wrong slave_address?)"
+                        % (slave.address, diag.ident, sc.ident))
+            elif diag.status1 & DiagStatus1.CFG_FAULT:
+                hint = ("the card rejects the configuration %s (%d bytes in / %d out): its modules "
+                        "differ from the bus config" % (sc.cfg.hex(" "), slave.spec.input_size,
+                                                        slave.spec.output_size))
+            elif diag.status1 & DiagStatus1.PRM_FAULT:
+                hint = "the card rejects the parameters (Set_Prm: ident, watchdog, user data)"
+            else:
+                hint = ""
+            return "%s%s (diag bytes %s)" % (hint + "; " if hint else "", reason,
+                                             diag.encode()[:3].hex(" "))
+        if reason.startswith("no reply"):
+            if garbled:
+                hint = ("bytes arrive but form no valid telegram: wrong baud rate or parity at the "
+                        "other end, or a noisy line")
+            else:
+                hint = ("nothing valid received: is the controller on, the cable connected, the card "
+                        "at address %d and %d bit/s?" % (slave.address, self.bus.baud))
+            return "%s; %s" % (reason, hint)
+        extra = "; diag: %s" % _diag_words(diag) if diag is not None else ""
+        return reason + extra

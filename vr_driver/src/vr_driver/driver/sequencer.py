@@ -1,0 +1,475 @@
+"""The motion sequencer: the job queue, the exactly-once handshake, stops and outcomes, stepped
+by the bus loop. ROS-free, no I/O, no planning.
+
+:meth:`MotionSequencer.step` is called once per bus iteration with the link's
+:class:`~vr_driver.driver.link.LinkSample` and the arm's current joints; it returns the
+:class:`~vr_driver.protocol.Command` to send next. Other threads never touch its state: they
+:meth:`~MotionSequencer.post` requests (add jobs, cancel one, stop all), which the next step takes
+in the order they were posted. Planning never runs here: a job whose planned start no longer
+matches the arm is handed to ``replan(job, joints)`` (the driver core runs it on its planning
+thread) and waits in REPLANNING until :meth:`~MotionSequencer.post` brings the new preview back.
+
+Rules (README "Reliability", doc/README.md):
+
+- **exactly once**: a target is sent only through :class:`~vr_driver.protocol.MasterHandshake`
+  and never again; a job that fails, is stopped or loses the link is never re-sent;
+- **truth at the end**: a job that is stopped (cancel, stop_motion, preempted), rejected while the
+  arm moved, or timed out ends only when the controller reports the arm at rest -- the in-motion
+  bit clear and the reported pose unchanged for ``stop_settle_time`` -- and its result carries that
+  pose; nothing new is sent before that;
+- **order**: requests take effect in the order they were posted; a PREEMPT job whose ticket is
+  older than the newest ticket claimed (:meth:`claim_ticket`) is superseded, never run; a PREEMPT
+  job stops the move in flight and drops the queue; a REPLACE job (a new joint path) drops every
+  queued target, lets the one in flight complete, and runs from its end;
+- **link loss**: everything in flight or queued fails with the reason (the last pose seen is
+  reported; where the arm came to rest is unknown to the driver then).
+"""
+from __future__ import annotations
+
+import collections
+import logging
+import threading
+from dataclasses import dataclass
+from typing import Callable, Deque, List, Optional, Sequence, Tuple, Union
+
+from ..errors import HandshakeError
+from ..params import DriverParams
+from ..poses import ControllerPose
+from ..protocol import (Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected,
+                        StatusBits, TimedOut)
+from .jobs import JobPhase, MoveJob, Preview, SubmitMode
+from .link import LinkSample
+
+log = logging.getLogger("vr_driver.driver")
+
+__all__ = ["MotionSequencer", "SequencerView", "START_TOLERANCE", "SESSION_RECORDS_BEFORE_REQUEST",
+           "why_no_motion"]
+
+# a queued job whose planned start differs from the current joints by more than this [rad] is
+# planned again before it is sent (whole-mm / whole-degree feedback alone stays well below it)
+START_TOLERANCE = 0.02
+
+# the first request of a Data_Exchange session waits for this many replies in the session: the
+# controller then got our record with the flag at 0 in as many telegrams, which arms it (it must
+# see the flag at 0 after a link loss; the virtual controller, like a careful G2 program, acts on
+# a record only once it arrived unchanged in two consecutive telegrams)
+SESSION_RECORDS_BEFORE_REQUEST = 2
+
+
+def why_no_motion(fb: Feedback) -> str:
+    """What in the controller's status bits forbids motion ("" when nothing does)."""
+    bits = fb.status
+    reasons = []
+    if bits & StatusBits.ESTOP:
+        reasons.append("the emergency stop is active")
+    if bits & StatusBits.ERROR:
+        reasons.append("the controller reports an error")
+    if not bits & StatusBits.DRIVES_POWERED:
+        reasons.append("the drives are off")
+    if not bits & StatusBits.PROGRAM_RUNNING:
+        reasons.append("the controller program is not running (manual mode)")
+    return "; ".join(reasons)
+
+
+@dataclass(frozen=True)
+class SequencerView:
+    """What other threads may read of the sequencer (replaced whole after every step)."""
+
+    job: Optional[MoveJob]                        # the job being sent / executed / stopped
+    queue_length: int
+    tail_joints: Optional[Tuple[float, ...]]      # where a job queued now would start (None: the arm)
+    inflight_joints: Optional[Tuple[float, ...]]  # the target of the job in flight (None: none)
+    settling: bool                                # waiting for the arm to come to rest
+    targets_sent: int = 0
+    targets_done: int = 0
+    targets_rejected: int = 0
+    targets_aborted: int = 0
+
+
+@dataclass(frozen=True)
+class _Add:
+    jobs: Tuple[MoveJob, ...]
+    mode: SubmitMode
+
+
+@dataclass(frozen=True)
+class _Cancel:
+    job: Optional[MoveJob]      # None: stop everything
+    reason: str
+
+
+@dataclass(frozen=True)
+class _Replanned:
+    job: MoveJob
+    preview: Optional[Preview]
+    error: str
+
+
+_Request = Union[_Add, _Cancel, _Replanned]
+
+
+class _Settle:
+    """A job that ends when the arm is at rest."""
+
+    def __init__(self, job: Optional[MoveJob], phase: JobPhase, reason: str, since: float) -> None:
+        self.job = job
+        self.phase = phase
+        self.reason = reason
+        self.since = since
+
+
+class MotionSequencer:
+    """See the module docstring."""
+
+    def __init__(self, params: DriverParams, clock: Callable[[], float],
+                 replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
+        self.params = params
+        self.clock = clock
+        self.replan = replan
+        self.handshake = MasterHandshake(params.accept_timeout, params.release_timeout, clock=clock)
+        self._lock = threading.Lock()            # guards only the inbox and the ticket counter
+        self._inbox: Deque[_Request] = collections.deque()
+        self._claimed = 0                         # newest ticket handed out
+        self._newest = 0                          # newest ticket of a PREEMPT job taken in
+        self._queue: Deque[MoveJob] = collections.deque()
+        self._job: Optional[MoveJob] = None
+        self._settle: Optional[_Settle] = None
+        self._session: Optional[int] = None       # the link session our handshake belongs to
+        self._last_pose: Optional[ControllerPose] = None
+        self._rest_values: Optional[Tuple[int, ...]] = None
+        self._rest_since = 0.0
+        self.targets_sent = self.targets_done = self.targets_rejected = self.targets_aborted = 0
+        self.view = SequencerView(None, 0, None, None, False)
+
+    # ------------------------------------------------------------------ any thread
+    def claim_ticket(self) -> int:
+        """A number in arrival order for a goal that will preempt (take it when the goal arrives;
+        a job carrying an older ticket than the newest claimed one is superseded)."""
+        with self._lock:
+            self._claimed += 1
+            return self._claimed
+
+    def add(self, jobs: Sequence[MoveJob], mode: SubmitMode = SubmitMode.APPEND) -> None:
+        self._post(_Add(tuple(jobs), mode))
+
+    def cancel(self, job: MoveJob, reason: str) -> None:
+        self._post(_Cancel(job, reason))
+
+    def stop_all(self, reason: str) -> None:
+        self._post(_Cancel(None, reason))
+
+    def replanned(self, job: MoveJob, preview: Optional[Preview], error: str = "") -> None:
+        self._post(_Replanned(job, preview, error))
+
+    def _post(self, request: _Request) -> None:
+        with self._lock:
+            self._inbox.append(request)
+
+    # ------------------------------------------------------------------ bus thread
+    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Command:
+        """One bus iteration: take the requests, follow the handshake, end jobs, send the next
+        target when everything allows it. Returns what to send."""
+        fb = sample.feedback
+        if fb is not None:
+            self._last_pose = fb.pose
+        with self._lock:
+            requests = list(self._inbox)
+            self._inbox.clear()
+        for request in requests:
+            self._take(request, now, fb)
+        if not sample.connected or (self._session is not None and sample.session != self._session):
+            if self._session is not None:
+                self._lost(now, sample.reason if not sample.connected else "a new Data_Exchange session")
+            self.handshake.update(None, now)
+            if sample.connected:
+                self._session = sample.session
+            self._publish()
+            return self.handshake.outputs()
+        self._session = sample.session
+        assert fb is not None
+        self._track_rest(now, fb)
+        event = self.handshake.update(sample.fresh, now)
+        self._on_event(event, fb, now)
+        self._check_settle(now, fb)
+        self._advance(now, fb, sample, joints)
+        self._publish()
+        return self.handshake.outputs()
+
+    def shutdown(self, reason: str) -> None:
+        """End every job (after the bus loop stopped): queued, in flight, posted but not taken."""
+        with self._lock:
+            requests = list(self._inbox)
+            self._inbox.clear()
+        jobs: List[MoveJob] = []
+        for request in requests:
+            if isinstance(request, _Add):
+                jobs.extend(request.jobs)
+        if self._settle is not None and self._settle.job is not None:
+            jobs.append(self._settle.job)
+        if self._job is not None:
+            jobs.append(self._job)
+        jobs.extend(self._queue)
+        self._settle, self._job = None, None
+        self._queue.clear()
+        for job in jobs:
+            job.finish(False, JobPhase.CANCELLED, reason, self._last_pose if job.sent else None)
+        self._publish()
+
+    # ------------------------------------------------------------------ requests
+    def _take(self, request: _Request, now: float, fb: Optional[Feedback]) -> None:
+        if isinstance(request, _Add):
+            self._take_add(request, now)
+        elif isinstance(request, _Cancel):
+            if request.job is None:
+                self._stop_everything(request.reason, now)
+            else:
+                self._cancel(request.job, request.reason, now)
+        else:
+            job = request.job
+            if job is not self._job or job.done or job.phase is not JobPhase.REPLANNING:
+                return                                   # cancelled meanwhile
+            if request.preview is None:
+                self._job = None
+                log.warning("job %d not sent: the arm is not where it was planned from, and from "
+                            "here: %s", job.id, request.error)
+                job.finish(False, JobPhase.FAILED, "not sent: from the arm's current pose: %s"
+                           % request.error, None)
+                self._fail_queue("an earlier target of the same path failed (%s)" % request.error,
+                                 job.group)
+            else:
+                job.preview = request.preview
+                log.info("job %d planned again from the arm's current pose (%.1f s)", job.id,
+                         job.preview.duration)
+                job.set_phase(JobPhase.QUEUED)
+
+    def _take_add(self, request: _Add, now: float) -> None:
+        jobs = [j for j in request.jobs if not j.done]
+        if not jobs:
+            return
+        if request.mode is SubmitMode.PREEMPT:
+            ticket = jobs[0].ticket
+            with self._lock:
+                newest_claimed = self._claimed
+            if ticket is not None and (ticket < self._newest or ticket < newest_claimed):
+                for job in jobs:
+                    job.finish(False, JobPhase.CANCELLED, "superseded by a newer goal (received "
+                               "later, it takes precedence); nothing was sent for this one", None)
+                log.info("job %d superseded by a newer goal", jobs[0].id)
+                return
+            if ticket is not None:
+                self._newest = ticket
+            self._stop_everything("preempted by a newer goal", now)
+        elif request.mode is SubmitMode.REPLACE:
+            dropped = len(self._queue)
+            for queued in list(self._queue):
+                queued.finish(False, JobPhase.CANCELLED, "replaced by a newer joint path", None)
+            self._queue.clear()
+            if self._job is not None and not self._job.sent:     # not started: replaced as well
+                job, self._job = self._job, None
+                job.finish(False, JobPhase.CANCELLED, "replaced by a newer joint path", None)
+                dropped += 1
+            if dropped:
+                log.info("joint path: %d queued target(s) of the previous path dropped", dropped)
+        self._queue.extend(jobs)
+
+    def _cancel(self, job: MoveJob, reason: str, now: float) -> None:
+        if job.done:
+            return
+        if job in self._queue:
+            self._queue.remove(job)
+            job.finish(False, JobPhase.CANCELLED, reason, None)
+            return
+        if job is self._job:
+            self._stop_current(reason, now)
+        elif self._settle is not None and self._settle.job is job:
+            self._settle.phase, self._settle.reason = JobPhase.CANCELLED, reason
+        # else: not posted yet (its _Add is behind this request) or already finished
+
+    def _stop_everything(self, reason: str, now: float) -> None:
+        for queued in list(self._queue):
+            queued.finish(False, JobPhase.CANCELLED, reason, None)
+        self._queue.clear()
+        if self._job is not None:
+            self._stop_current(reason, now)
+        elif self.handshake.phase not in (MasterPhase.IDLE, MasterPhase.SYNC):
+            # nothing of ours in flight, but a motion may still run (after a timeout): stop it
+            self.handshake.abort(reason, now, stop=True)
+
+    def _stop_current(self, reason: str, now: float) -> None:
+        job = self._job
+        assert job is not None
+        self._job = None
+        job.stop_reason = reason
+        aborted = self.handshake.abort(reason, now, stop=True)
+        if aborted is not None:
+            self.targets_aborted += 1
+            log.info("job %d: stop sent (%s); waiting for the arm to come to rest", job.id, reason)
+            self._begin_settle(job, JobPhase.CANCELLED, reason, now)
+        elif job.sent:
+            # between the via point and the end point of a CIRC: nothing in flight, the arm is
+            # where the last target left it -- still, report the pose at rest
+            self._begin_settle(job, JobPhase.CANCELLED, reason, now)
+        else:
+            job.finish(False, JobPhase.CANCELLED, reason, None)
+
+    # ------------------------------------------------------------------ handshake events
+    def _on_event(self, event, fb: Feedback, now: float) -> None:
+        if event is None:
+            return
+        job = self._job
+        if isinstance(event, Accepted):
+            if job is not None:
+                job.set_phase(JobPhase.MOVING)
+            return
+        if isinstance(event, Done):
+            self.targets_done += 1
+            if job is None:
+                return
+            if job.next_command < len(job.preview.commands):
+                return                       # the via point of a CIRC: the end point follows
+            self._job = None
+            log.info("job %d done at %s", job.id, fb.values)
+            job.finish(True, JobPhase.SUCCEEDED, "", fb.pose)
+            return
+        if isinstance(event, TimedOut) and not event.final:
+            log.warning("%s", event.reason)
+            return
+        if isinstance(event, Rejected):
+            self.targets_rejected += 1
+        else:
+            self.targets_aborted += 1
+        if job is None:
+            return
+        self._job = None
+        reason = event.reason
+        log.warning("job %d ended: %s", job.id, reason)
+        if isinstance(event, TimedOut):
+            # the controller may still be moving: stop it, and end the job at rest
+            self.handshake.abort(reason, now, stop=True)
+        moved = job.phase is JobPhase.MOVING or bool(fb.status & StatusBits.IN_MOTION)
+        if moved or isinstance(event, TimedOut):
+            self._begin_settle(job, JobPhase.FAILED, reason, now)
+        else:
+            job.finish(False, JobPhase.FAILED, reason, fb.pose)
+        # a failed target ends the rest of its joint path too: never skip ahead silently
+        self._fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
+
+    # ------------------------------------------------------------------ at rest
+    def _track_rest(self, now: float, fb: Feedback) -> None:
+        values = fb.values
+        if values != self._rest_values or fb.status & StatusBits.IN_MOTION:
+            self._rest_values = values
+            self._rest_since = now
+
+    def at_rest(self, now: float, fb: Feedback) -> bool:
+        return not fb.status & StatusBits.IN_MOTION and \
+            now - self._rest_since >= self.params.stop_settle_time
+
+    def _begin_settle(self, job: MoveJob, phase: JobPhase, reason: str, now: float) -> None:
+        job.set_phase(JobPhase.STOPPING)
+        self._settle = _Settle(job, phase, reason, now)
+
+    def _check_settle(self, now: float, fb: Feedback) -> None:
+        settle = self._settle
+        if settle is None:
+            return
+        job = settle.job
+        if self.at_rest(now, fb):
+            self._settle = None
+            if job is not None:
+                log.info("job %d: the arm is at rest at %s", job.id, fb.values)
+                job.finish(False, settle.phase, settle.reason, fb.pose)
+            return
+        if now - settle.since > self.params.stop_timeout:
+            self._settle = None
+            why = ("%s; the arm did not come to rest within %.3g s (stop_timeout); last reported "
+                   "pose %s" % (settle.reason, self.params.stop_timeout, fb.values))
+            log.error("job %s: %s", job.id if job is not None else "-", why)
+            if job is not None:
+                job.finish(False, JobPhase.FAILED, why, fb.pose)
+
+    # ------------------------------------------------------------------ sending
+    def _advance(self, now: float, fb: Feedback, sample: LinkSample,
+                 joints: Optional[Tuple[float, ...]]) -> None:
+        if self._settle is not None or not self.handshake.ready:
+            return
+        if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
+            return          # the controller has not surely seen our flag at 0 twice yet
+        if self._job is None:
+            if not self._queue:
+                return
+            why = why_no_motion(fb)
+            if why:
+                self._fail_queue("motion is no longer possible: %s" % why)
+                return
+            self._job = self._queue.popleft()
+        job = self._job
+        if job.phase is JobPhase.REPLANNING or job.next_command >= len(job.preview.commands):
+            return
+        if job.next_command == 0:
+            if joints is None:
+                self._job = None
+                job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the "
+                           "planned start against", None)
+                self._fail_queue("an earlier target of the same path failed", job.group)
+                return
+            start = job.preview.trajectory.start
+            if max(abs(a - b) for a, b in zip(joints, start)) > START_TOLERANCE:
+                job.set_phase(JobPhase.REPLANNING)
+                self.replan(job, joints)
+                return
+        command = job.preview.commands[job.next_command]
+        timeout = (self.params.motion_timeout_factor * job.preview.duration
+                   + self.params.motion_timeout_margin)
+        try:
+            seq = self.handshake.submit(command, timeout, now)
+        except HandshakeError as exc:   # cannot happen when ready; keep the job
+            log.warning("job %d: %s", job.id, exc)
+            return
+        job.seqs.append(seq)
+        job.next_command += 1
+        self.targets_sent += 1
+        log.info("job %d: sent target %d: %s", job.id, seq, command.describe())
+        job.set_phase(JobPhase.SENDING)
+
+    # ------------------------------------------------------------------ helpers
+    def _fail_queue(self, reason: str, group: Optional[int] = None) -> None:
+        """End the queued jobs (of one group only, when given) with ``reason``."""
+        for queued in list(self._queue):
+            if group is None or queued.group == group:
+                queued.finish(False, JobPhase.FAILED, reason, None)
+                self._queue.remove(queued)
+
+    def _lost(self, now: float, reason: str) -> None:
+        aborted = self.handshake.reset(reason, now)
+        if aborted is not None:
+            self.targets_aborted += 1
+        self._session = None
+        self._rest_values = None
+        why = ("link to the controller lost (%s); the target is not re-sent; the last pose seen is "
+               "reported, where the arm came to rest is unknown" % reason)
+        jobs = []
+        if self._settle is not None and self._settle.job is not None:
+            jobs.append(self._settle.job)
+        if self._job is not None:
+            jobs.append(self._job)
+        jobs.extend(self._queue)
+        self._settle, self._job = None, None
+        self._queue.clear()
+        for job in jobs:
+            job.finish(False, JobPhase.FAILED, why, self._last_pose if job.sent else None)
+
+    def _publish(self) -> None:
+        job = self._job
+        tail = None
+        if self._queue:
+            tail = self._queue[-1].preview.joint_target
+        elif job is not None:
+            tail = job.preview.joint_target
+        settle_job = self._settle.job if self._settle is not None else None
+        self.view = SequencerView(
+            job=job if job is not None else settle_job, queue_length=len(self._queue),
+            tail_joints=tail, inflight_joints=job.preview.joint_target if job is not None else None,
+            settling=self._settle is not None, targets_sent=self.targets_sent,
+            targets_done=self.targets_done, targets_rejected=self.targets_rejected,
+            targets_aborted=self.targets_aborted)

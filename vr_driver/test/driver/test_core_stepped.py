@@ -1,0 +1,266 @@
+"""The driver core stepped with a fake clock, in one thread: DriverCore (link supervisor +
+sequencer), our DP master, the in-memory link, the virtual controller's DP slave, program and arm
+(_world.World). Each case of issue 14 is here as a deterministic test: the same run every time.
+"""
+from __future__ import annotations
+
+import pytest
+
+from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
+from vr_driver.errors import EnvelopeError
+from vr_driver.poses import ControllerPose, MoveType
+from vr_driver.protocol import ControllerState, StatusBits
+
+from _world import World
+
+FAR = ControllerPose(1000, -600, 800, 0, 45, 0)
+
+
+@pytest.fixture
+def world(kin):
+    return World(kin)
+
+
+def lin(target):
+    return MoveRequest(MoveType.LIN, target)
+
+
+def first_rest(job):
+    assert job.done, "the stopped job must have ended (at rest) before anything else is sent"
+    return job.result.reached.as_tuple()
+
+
+def moving_for(world, job, seconds):
+    world.run_until(lambda: job.phase is JobPhase.MOVING, 5.0, "moving")
+    world.run_for(seconds)
+    assert world.arm.moving
+
+
+# ------------------------------------------------------------------------------------- basics
+def test_connects_and_executes_a_move_exactly_once(world):
+    status = world.ready()
+    assert status.link is LinkState.CONNECTED and status.pose == ControllerPose(1120, 0, 725, 0, 45, 0)
+    job = world.core.submit(lin(FAR))
+    result = world.finish(job)
+    assert result.success and result.reached == FAR
+    assert world.executed() == [("LIN", FAR.as_tuple(), "executed")]
+    assert world.status().counters.targets_sent == 1
+
+
+def test_the_world_is_deterministic(kin):
+    """Two runs of the same world see the same statuses at the same times."""
+    def run():
+        w = World(kin)
+        w.ready()
+        job = w.core.submit(lin(FAR))
+        moving_for(w, job, 0.5)
+        w.core.cancel(job, "test")
+        w.finish(job)
+        return [(s.time, s.link, s.pose) for s in w.statuses], job.result.reached
+    assert run() == run()
+
+
+# ------------------------------------------------------------------ 1. the truth about stops
+@pytest.mark.parametrize("how", ["cancel", "stop_motion", "preempt"])
+def test_a_stopped_move_ends_at_rest_and_reports_the_rest_pose(world, how):
+    world.ready()
+    job = world.core.submit(lin(FAR), mode=SubmitMode.PREEMPT, ticket=world.core.claim_ticket())
+    moving_for(world, job, 1.0)
+    at_stop = world.status().pose
+    if how == "cancel":
+        world.core.cancel(job, "cancelled by the test")
+    elif how == "stop_motion":
+        world.core.stop_motion("stop_motion by the test")
+    else:
+        newer = world.core.submit(lin(ControllerPose(1000, 200, 800, 0, 45, 0)),
+                                  mode=SubmitMode.PREEMPT, ticket=world.core.claim_ticket())
+    world.run_until(lambda: job.phase is JobPhase.STOPPING or job.done, 1.0, "stopping")
+    assert not job.done                                   # not at the moment the stop was sent
+    result = world.finish(job, 5.0)
+    assert result.phase is JobPhase.CANCELLED and not result.success
+    fb = world.program.last_feedback
+    # at rest: in-motion clear, and the reported pose is the controller's, exactly
+    assert not fb.status & StatusBits.IN_MOTION and not world.arm.moving
+    assert result.reached.as_tuple() == world.arm.reported_pose()
+    entry = world.log.entries()[0]
+    assert entry.outcome.value == "rejected" and entry.aborted
+    assert result.reached.as_tuple() == entry.final_pose            # the execution log agrees
+    # the arm braked: it went on beyond where it was when the stop was sent
+    assert result.reached.distance_to(at_stop)[0] > 10.0
+    if how == "preempt":
+        assert world.finish(newer).success                # and the newer goal then runs from there
+        assert newer.preview.trajectory.start != job.preview.trajectory.goal
+
+
+def test_nothing_is_sent_while_the_stopped_arm_is_still_braking(world):
+    world.ready()
+    job = world.core.submit(lin(FAR))
+    moving_for(world, job, 1.0)
+    world.core.cancel(job, "test")
+    queued = world.core.submit(lin(ControllerPose(1000, 0, 700, 0, 45, 0)))
+    world.run_until(lambda: world.status().counters.targets_sent == 2, 10.0, "second target sent")
+    assert not world.arm.moving and first_rest(job) == world.arm.reported_pose()
+    assert world.finish(queued).success
+
+
+# ------------------------------------------------- 3. goals take effect in arrival order
+def test_the_newest_goal_wins_whatever_order_their_plans_finish_in(world):
+    world.ready()
+    tickets = [world.core.claim_ticket() for _ in range(20)]
+    targets = [ControllerPose(1000, -500 + 50 * k, 800, 0, 45, 0) for k in range(20)]
+    # the newest goal's plan finishes first, the oldest last (threads racing)
+    jobs = [world.core.submit(lin(t), mode=SubmitMode.PREEMPT, ticket=tk)
+            for t, tk in reversed(list(zip(targets, tickets)))]
+    world.finish(jobs[0])
+    world.run_for(1.0)
+    assert jobs[0].result.success and jobs[0].result.reached == targets[-1]
+    for job in jobs[1:]:
+        assert job.result.phase is JobPhase.CANCELLED and "superseded" in job.result.reason
+    assert world.executed() == [("LIN", targets[-1].as_tuple(), "executed")]
+
+
+def test_goals_sent_back_to_back_end_at_the_last_one(world):
+    world.ready()
+    targets = [ControllerPose(1000, -500 + 50 * k, 800, 0, 45, 0) for k in range(20)]
+    jobs = []
+    for target in targets:
+        jobs.append(world.core.submit(lin(target), mode=SubmitMode.PREEMPT,
+                                      ticket=world.core.claim_ticket()))
+        world.tick()
+    assert world.finish(jobs[-1]).success
+    assert world.status().pose == targets[-1] and world.arm.reported_pose() == targets[-1].as_tuple()
+    assert all(j.result.phase is JobPhase.CANCELLED for j in jobs[:-1])
+    assert world.log.entries()[-1].target == targets[-1].as_tuple()
+
+
+# ------------------------------------------------------------ 4. joint paths replace each other
+def test_a_new_joint_path_replaces_the_queued_targets_of_the_previous_one(world):
+    status = world.ready()
+    names = list(world.core.joint_names)
+    q0 = list(status.joints)
+    paths = []
+    for k in range(200):                      # one-point paths at 100 Hz for 2 s
+        q = list(q0)
+        q[0] = q0[0] + 0.002 * (k + 1)
+        paths.append(world.core.submit_joint_path(names, [q]))
+        world.run_for(0.01)
+    stopped_publishing = world.now
+    last = paths[-1][0]
+    world.finish(last, 20.0)
+    assert last.result.success
+    done_after = world.now - stopped_publishing
+    executed = [e for e in world.log.entries() if e.outcome.value == "executed"]
+    replaced = [p[0] for p in paths if p[0].result.phase is JobPhase.CANCELLED]
+    assert "replaced" in replaced[0].result.reason
+    # at most the one in flight when the publisher stopped, and the last one, after it stopped
+    assert len(executed) < 60 and len(replaced) > 140
+    assert done_after < 2.0, done_after
+    assert tuple(world.log.entries()[-1].target) == last.preview.commands[0].values
+
+
+def test_a_joint_path_lets_the_target_in_flight_complete(world):
+    status = world.ready()
+    names = list(world.core.joint_names)
+    q0 = list(status.joints)
+    first = world.core.submit_joint_path(names, [[q0[0] + 0.5] + q0[1:], [q0[0] + 0.6] + q0[1:]])
+    world.run_until(lambda: first[0].phase is JobPhase.MOVING, 5.0)
+    second = world.core.submit_joint_path(names, [[q0[0] - 0.2] + q0[1:]])
+    world.finish(second[0])
+    assert first[0].result.success                            # completed, not stopped
+    assert first[1].result.phase is JobPhase.CANCELLED and "replaced" in first[1].result.reason
+    assert second[0].result.success
+    assert [e.outcome.value for e in world.log.entries()] == ["executed", "executed"]
+
+
+# ------------------------------------------------------------ 5. the envelope along the path
+def test_an_arc_below_the_floor_is_refused_naming_the_sample(world):
+    world.ready()
+    start = world.core.submit(MoveRequest(MoveType.PTP, (1000, -200, 150, 0, 90, 0)))
+    assert world.finish(start).success
+    sent = world.status().counters.targets_sent
+    with pytest.raises(EnvelopeError) as err:
+        world.core.submit(MoveRequest(MoveType.CIRC, (1000, 200, 150, 0, 90, 0),
+                                      via=(1000, -141, 9, 0, 90, 0)))
+    text = str(err.value)
+    assert "CIRC path leaves the workspace at sample" in text and "Z = -" in text
+    world.run_for(1.0)
+    assert world.status().counters.targets_sent == sent and len(world.log.entries()) == 1
+
+
+# ------------------------------------------------------------------ 8. no stale good news
+def test_a_frozen_driver_never_reports_old_good_news(world):
+    world.ready()
+    job = world.core.submit(lin(FAR))
+    moving_for(world, job, 0.5)
+    assert world.status().motion_possible and world.status().feedback.status & StatusBits.IN_MOTION
+    before = len(world.statuses)
+    world.freeze(2.0)                            # the controller's watchdog stops the arm meanwhile
+    stale = world.status()
+    assert stale.link is LinkState.STALE and not stale.motion_possible and stale.pose is None
+    assert not stale.joints_valid and stale.error_code != 0
+    world.run_for(0.3)
+    after = world.statuses[before:]
+    assert after and all(not s.motion_possible and s.feedback is None for s in after[:3])
+    assert job.done and not job.result.success and "lost" in job.result.reason
+
+
+def test_feedback_older_than_link_timeout_is_not_reported(world):
+    world.ready()
+    world.link.cut = True
+    world.run_until(lambda: not world.status().connected, 2.0)
+    statuses = [s for s in world.statuses if s.feedback_time is not None]
+    assert all(s.time - s.feedback_time <= world.params.link_timeout + 1e-9 for s in statuses)
+
+
+# ---------------------------------------------------------------- link loss and reconnect
+def test_a_link_cut_fails_the_job_without_resending_and_recovers(world):
+    world.ready()
+    job = world.core.submit(lin(FAR))
+    moving_for(world, job, 0.5)
+    world.link.cut = True
+    result = world.finish(job, 3.0)
+    assert not result.success and "lost" in result.reason and "not re-sent" in result.reason
+    world.link.cut = False
+    world.ready(5.0)
+    world.run_for(2.0)
+    assert len(world.log.entries()) == 1                 # nothing re-sent by itself
+    assert world.finish(world.core.submit(lin(ControllerPose(1000, 0, 800, 0, 45, 0)))).success
+
+
+def test_refusals_while_the_link_is_down(world):
+    world.link.cut = True
+    world.run_for(1.0)
+    with pytest.raises(DriverError, match="no link"):
+        world.core.submit(lin(FAR))
+    assert world.log.entries() == []
+
+
+# ------------------------------------------------------------------ replanning off the bus
+def test_a_job_queued_behind_a_stopped_one_is_planned_again_off_the_bus(world):
+    world.ready()
+    first = world.core.submit(lin(FAR))
+    second = world.core.submit(lin(ControllerPose(1000, -300, 700, 0, 45, 0)))
+    planned_from = second.preview.trajectory.start
+    moving_for(world, first, 0.8)
+    world.core.cancel(first, "test")
+    world.run_until(lambda: second.phase is JobPhase.REPLANNING or second.done, 10.0)
+    assert world.finish(second).success
+    assert second.preview.trajectory.start != planned_from
+    start_pose = world.kin.fk_pose(second.preview.trajectory.start)
+    assert start_pose.distance_to(first.result.reached)[0] <= 1.5
+
+
+def test_a_controller_rejection_fails_the_rest_of_the_path(world):
+    status = world.ready()
+    names = list(world.core.joint_names)
+    q0 = list(status.joints)
+    jobs = world.core.submit_joint_path(names, [[q0[0] + 0.3] + q0[1:], [q0[0] + 0.5] + q0[1:]])
+    world.run_until(lambda: jobs[0].phase is JobPhase.MOVING, 5.0)
+    world.arm.set_error("test error", now=world.now)
+    world.finish(jobs[1], 15.0)
+    world.finish(jobs[0], 5.0)                      # ends at rest, with the rest pose
+    assert jobs[0].result.reached.as_tuple() == world.arm.reported_pose()
+    assert jobs[0].result.phase is JobPhase.FAILED and jobs[1].result.phase is JobPhase.FAILED
+    assert "earlier target" in jobs[1].result.reason
+    assert len(world.log.entries()) == 1
+    assert world.program.state in (ControllerState.READY, ControllerState.REJECTED)
