@@ -110,14 +110,44 @@ class DriverLaunchParamsTest(unittest.TestCase):
         return DriverParams.from_dict(nested), params
 
     def test_sim_defaults(self):
+        from vr_driver.controller_sim import SimOptions
         p, params = self.check()
         self.assertEqual(p.port, params["/virtual_controller/pty_link"])
+        # no baud argument: the virtual controller's default is the parameter file's baud
+        self.assertNotIn("/virtual_controller/baud", params)
+        self.assertEqual(p.bus().baud, SimOptions().baud)
+        p, params = self.check("baud:=187500")
         self.assertEqual(p.bus().baud, params["/virtual_controller/baud"])
 
     def test_real_port(self):
         p, params = self.check("sim:=false", "port:=/dev/ttyUSB7", "baud:=187500")
         self.assertEqual((p.port, p.baud), ("/dev/ttyUSB7", 187500))
         self.assertFalse(any(k.startswith("/virtual_controller/") for k in params))
+
+    def test_driver_launch_keeps_the_parameter_file_unless_an_argument_is_given(self):
+        """issue 14: the launch file overrode port, baud and cycle_rate of config:=... silently."""
+        import tempfile
+        launch = os.path.join(REPO, "vr_driver", "launch", "driver.launch")
+        with tempfile.NamedTemporaryFile("w", suffix=".yaml", delete=False) as fh:
+            fh.write("port: /dev/ttyS9\nbaud: 187500\ncycle_rate: 50.0\n")
+        try:
+            cases = [
+                ([], {"baud": 187500, "cycle_rate": 50.0}),                      # the file holds
+                (["sim:=false"], {"port": "/dev/ttyS9", "baud": 187500}),
+                (["sim:=false", "port:=/dev/ttyUSB3", "baud:=500000", "cycle_rate:=25"],
+                 {"port": "/dev/ttyUSB3", "baud": 500000, "cycle_rate": 25.0}),  # arguments win
+            ]
+            for args, expected in cases:
+                with self.subTest(args=args):
+                    res = dump_params(launch, ["config:=" + fh.name] + args)
+                    self.assertTrue(res.ok, res.stderr[-2000:])
+                    params = yaml.safe_load(res.stdout)
+                    for name, value in expected.items():
+                        self.assertEqual(params["/interface/" + name], value, name)
+                    if "sim:=false" not in args:    # the virtual controller's link, whatever the file says
+                        self.assertEqual(params["/interface/port"], params["/virtual_controller/pty_link"])
+        finally:
+            os.unlink(fh.name)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,6 @@ import math
 import signal
 import sys
 import threading
-import threading
 from typing import Dict, List, Optional
 
 import actionlib
@@ -27,11 +26,11 @@ from visualization_msgs.msg import Marker, MarkerArray
 from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, MoveToPoseGoal,
                            MoveToPoseResult, RobotMode, RobotStatus, TriState)
 
-from .driver import DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest
+from .driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
+                     SubmitMode)
 from .errors import VrDriverError
-from .motion import MoveType
 from .params import DriverParams, ParamError
-from .poses import ControllerPose
+from .poses import ControllerPose, MoveType
 from .protocol import StatusBits
 from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
 
@@ -103,6 +102,7 @@ class InterfaceNode:
                                              cancel_cb=self._on_cancel, auto_start=False)
         self._goals_lock = threading.Lock()
         self._cancel: Dict[str, threading.Event] = {}        # goal id -> cancel requested
+        self._tickets: Dict[str, int] = {}                   # motion goal id -> arrival ticket
         self._motion_goal: Optional[str] = None
         self.stop_srv = rospy.Service("stop_motion", Trigger, self._stop_motion)
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
@@ -118,13 +118,21 @@ class InterfaceNode:
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
             rospy.Timer(rospy.Duration(1.0 / self.params.joint_states_rate), self._publish_joints),
-            rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.update()),
+            # force_update: Updater.update() compares against its own period (and re-reads it from
+            # ~diagnostic_period), so a timer of the same period skipped every other call (0.67 Hz)
+            rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.force_update()),
         ]
         # a shutdown hook (e.g. rosnode kill) only asks; main() does the real stop
         rospy.on_shutdown(self.core.request_stop)
-        rospy.loginfo("interface: driving slave %d on %s at %d bit/s, %g Hz bus cycle",
-                      self.core.slave_config.address, self.core.bus.phy.device, self.core.bus.baud,
-                      self.core.bus.cycle_rate_hz)
+        sc = self.core.slave_config
+        rospy.loginfo("interface: driving slave %d on %s at %d bit/s, %g Hz bus cycle, card watchdog %s, "
+                      "link_timeout %g s (effective values: launch arguments > parameter file > defaults)",
+                      sc.address, self.core.bus.phy.device, self.core.bus.baud,
+                      self.core.bus.cycle_rate_hz, "%d ms" % sc.watchdog_ms if sc.watchdog_ms else "OFF",
+                      self.params.link_timeout)
+        if not sc.watchdog_ms:
+            rospy.logwarn("interface: the controller card's watchdog is OFF (watchdog_ms: 0, "
+                          "allow_no_watchdog: true): if this node dies or hangs, the arm does NOT stop")
 
     def shutdown(self) -> None:
         for timer in getattr(self, "timers", []):
@@ -258,10 +266,17 @@ class InterfaceNode:
         return MoveRequest(kind, target, via, preview_only=goal.preview_only)
 
     def _on_goal(self, handle) -> None:
-        """ActionServer thread: accept, then run the goal in its own thread."""
+        """ActionServer thread (goals arrive here in the order the server received them): take a
+        ticket for a motion goal and preempt the previous one now -- the newest goal wins however
+        long each takes to plan --, accept, then run the goal in its own thread."""
         goal_id = handle.get_goal_id().id
         with self._goals_lock:
             self._cancel[goal_id] = threading.Event()
+            if not handle.get_goal().preview_only:
+                self._tickets[goal_id] = self.core.claim_ticket()
+                previous, self._motion_goal = self._motion_goal, goal_id
+                if previous is not None and previous in self._cancel:
+                    self._cancel[previous].set()
         handle.set_accepted()
         threading.Thread(target=self._run_goal, args=(handle, goal_id), name="goal-" + goal_id[-8:],
                          daemon=True).start()
@@ -281,6 +296,7 @@ class InterfaceNode:
         finally:
             with self._goals_lock:
                 self._cancel.pop(goal_id, None)
+                self._tickets.pop(goal_id, None)
                 if self._motion_goal == goal_id:
                     self._motion_goal = None
 
@@ -297,12 +313,11 @@ class InterfaceNode:
                 preview = self.core.preview(request)
                 job = None
             else:
-                with self._goals_lock:           # a new motion goal preempts the running one
-                    previous = self._motion_goal
-                    self._motion_goal = goal_id
-                    if previous is not None and previous in self._cancel:
-                        self._cancel[previous].set()
-                job = self.core.submit(request)
+                with self._goals_lock:
+                    ticket = self._tickets.get(goal_id)
+                # PREEMPT: stops the running move and drops the queue; a goal older than the
+                # newest ticket is superseded by the core, never run
+                job = self.core.submit(request, mode=SubmitMode.PREEMPT, ticket=ticket)
                 preview = job.preview
         except (VrDriverError, ValueError, TypeError) as exc:
             result.success = False
@@ -335,6 +350,8 @@ class InterfaceNode:
                 self.core.cancel(job, "preempted by a new goal" if preempted
                                  else "goal cancelled by the client")
                 feedback.phase = MoveToPoseFeedback.PHASE_STOPPING
+            elif job.phase is JobPhase.STOPPING:
+                feedback.phase = MoveToPoseFeedback.PHASE_STOPPING
             elif not cancelled:
                 feedback.phase = (MoveToPoseFeedback.PHASE_MOVING if job.phase is JobPhase.MOVING
                                   else MoveToPoseFeedback.PHASE_SENDING)
@@ -346,6 +363,7 @@ class InterfaceNode:
             job.wait_change(phase, period)          # wakes at once on a phase change
         res = job.wait(5.0)
         s = self.core.status()
+        # a stopped goal's ``reached`` is where the arm came to rest (the core waits for it)
         reached = res.reached if res is not None and res.reached is not None else s.pose
         result.reached = cartesian(reached)
         result.success = bool(res is not None and res.success)
@@ -377,6 +395,9 @@ class InterfaceNode:
 def main(argv: Optional[List[str]] = None) -> int:
     # `kill -USR1 <pid>` prints every thread's stack to stderr (for a node that seems stuck)
     faulthandler.register(signal.SIGUSR1, all_threads=True)
+    # the bus thread shares the interpreter with planning (goals, joint paths): hand the GIL over
+    # every millisecond instead of every 5 so that a long validation delays a bus cycle less
+    sys.setswitchinterval(0.001)
     stop = stop_on_signals()
     rospy.init_node("interface", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")

@@ -265,6 +265,7 @@ class DriverCore:
                 raise DriverError("joint path point %d: %s; nothing was sent" % (index, exc)) from None
             previews.append(preview)
             start = preview.joint_target
+            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
         jobs = [MoveJob(p, on_update) for p in previews]
         for job in jobs[1:]:
             job.group = jobs[0].group
