@@ -225,6 +225,8 @@ class DriverTest(unittest.TestCase):
         self.assertEqual(entry["outcome"], "rejected")
         self.assertIn("stop", entry["reason"])
         stopped = ControllerPose(*entry["final_pose"])
+        # the result reports where the arm came to rest: the controller's own rest pose, exactly
+        self.assertEqual(as_pose(self.client.get_result().reached), stopped)
         self.assertGreater(stopped.distance_to(ControllerPose(*target))[0], 20.0)
         # it stays where it stopped
         self.wait_motion_possible()
@@ -374,6 +376,100 @@ class DriverTest(unittest.TestCase):
                          [([1000, -600, 800, 0, 45, 0], "executed"),
                           ([1000, 600, 800, 0, 45, 0], "rejected"),
                           ([1050, 0, 800, 0, 45, 0], "executed")])
+
+    def test_10_the_newest_of_twenty_goals_sent_back_to_back_wins(self):
+        """issue 14: each goal ran in its own thread and the last to get there won (1 of 8
+        repeats ended at the newest goal; once the arm went to the first of 20)."""
+        self.wait_motion_possible()
+        before = len(self.entries())
+        client = actionlib.ActionClient("/move_to_pose", MoveToPoseAction)
+        self.assertTrue(client.wait_for_server(rospy.Duration(10.0)))
+        targets = [(1000, -475 + 50 * k, 800, 0, 45, 0) for k in range(20)]
+        done = threading.Event()
+        handles = []
+
+        def transition(handle):
+            if handles and handle == handles[-1] and \
+                    handle.get_comm_state() == actionlib.CommState.DONE:
+                done.set()
+        for target in targets:
+            handles.append(client.send_goal(MoveToPoseGoal(target=cp(target), move_type=MoveToPoseGoal.LIN),
+                                            transition_cb=transition))
+        self.assertTrue(done.wait(60.0), "the newest goal did not finish")
+        last = handles[-1]
+        self.assertEqual(last.get_goal_status(), GoalStatus.SUCCEEDED, last.get_result().reason)
+        self.assertEqual(as_pose(last.get_result().reached), ControllerPose(*targets[-1]))
+        tool = self.tool.wait_for(lambda m: True, 2.0, after=time.monotonic())
+        p = tool.pose.position
+        self.assertLess(math.dist((p.x * 1000, p.y * 1000, p.z * 1000), targets[-1][:3]), 1.5)
+        entries = self.entries()[before:]
+        self.assertEqual(entries[-1]["target"], list(targets[-1]))
+        self.assertEqual(entries[-1]["outcome"], "executed")
+        # an older goal never ran after the newest one started
+        self.assertEqual([e for e in entries if e["target"] == list(targets[-1])], entries[-1:])
+
+    def test_11_joint_paths_at_100_hz_replace_each_other(self):
+        """issue 14: every one-point path was appended (183 of 183 executed, the arm moving for
+        49.5 s after the publisher stopped). Now a new path replaces the queued targets."""
+        self.wait_motion_possible()
+        before = len(self.entries())
+        q0 = list(self.joints.last().position)
+        names = ["joint_%d" % i for i in range(1, 7)]
+        rate = rospy.Rate(100)
+        sent = 0
+        for k in range(200):
+            q = list(q0)
+            q[0] = q0[0] + 0.002 * (k + 1)
+            self.path_pub.publish(JointTrajectory(joint_names=names,
+                                                  points=[JointTrajectoryPoint(positions=q)]))
+            sent += 1
+            rate.sleep()
+        stopped_publishing = time.monotonic()
+        final = self.kin.fk_pose(q)
+        # the arm ends at the last path's point soon after the publisher stopped
+        msg = self.tool.wait_for(
+            lambda m: math.dist((m.pose.position.x * 1000, m.pose.position.y * 1000,
+                                 m.pose.position.z * 1000), final.as_tuple()[:3]) < 1.5,
+            10.0, after=stopped_publishing)
+        self.assertIsNotNone(msg, "the arm did not reach the last path's point")
+        settled = self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 10.0,
+                                       after=time.monotonic())
+        self.assertIsNotNone(settled)
+        moving_after = time.monotonic() - stopped_publishing
+        entries = self.entries()[before:]
+        self.assertLess(len(entries), sent // 2, "paths piled up: %d executed of %d" % (len(entries), sent))
+        self.assertLess(moving_after, 5.0)
+
+    def test_12_a_frozen_driver_reports_no_old_good_news(self):
+        """issue 14: after SIGSTOP / SIGCONT of the driver, one "motion possible, in motion"
+        robot_status went out before in_error. Nothing published after the resume may show the
+        pre-freeze state."""
+        import os
+        import signal
+        import xmlrpc.client
+        import rosgraph
+        self.wait_motion_possible()
+        uri = rosgraph.Master("/driver_check").lookupNode("/interface")
+        pid = xmlrpc.client.ServerProxy(uri).getPid("/driver_check")[2]
+        moving = threading.Event()
+        self.client.send_goal(MoveToPoseGoal(target=cp((1000, 600, 800, 0, 45, 0)),
+                                             move_type=MoveToPoseGoal.LIN),
+                              feedback_cb=lambda fb: fb.phase == "moving" and moving.set())
+        self.assertTrue(moving.wait(10.0))
+        os.kill(pid, signal.SIGSTOP)
+        try:
+            self.status.wait_for(lambda m: False, 1.5)            # frozen; the watchdog stops the arm
+            resumed = time.monotonic()
+        finally:
+            os.kill(pid, signal.SIGCONT)
+        first = self.status.wait_for(lambda m: True, 5.0, after=resumed)
+        self.assertIsNotNone(first)
+        self.assertEqual(first.motion_possible.val, TriState.FALSE)
+        self.assertEqual(first.in_error.val, TriState.TRUE)
+        self.assertTrue(self.client.wait_for_result(rospy.Duration(10.0)))
+        self.assertEqual(self.client.get_state(), GoalStatus.ABORTED)
+        self.assertIn("lost", self.client.get_result().reason)
+        self.wait_motion_possible(10.0)
 
 
 if __name__ == "__main__":

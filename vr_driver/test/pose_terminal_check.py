@@ -231,7 +231,7 @@ class PoseTerminalTest(unittest.TestCase):
         self.assertIn("stop", entry["reason"])
         self.assertGreater(ControllerPose(*entry["final_pose"]).distance_to(
             ControllerPose(1000, 650, 800, 0, 45, 0))[0], 20.0)
-        self.assertLess(abs(stopped_y - entry["final_pose"][1]), 2.0)
+        self.assertLessEqual(abs(stopped_y - entry["final_pose"][1]), 0.5)      # the rest pose
         start = len(self.status.messages)
         self.assertIsNotNone(self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 5.0, start=start))
         t.sendline("status")                                     # still usable: the driver is fine

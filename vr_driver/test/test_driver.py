@@ -313,3 +313,31 @@ def test_missing_port_is_reported_and_retried(tmp_path, kin):
             core.submit(MoveRequest(MoveType.PTP, HOME_POSE))
     finally:
         core.stop()
+
+
+def test_planning_never_runs_on_the_bus_thread(tmp_path, kin):
+    """Every plan -- submit, joint path, the replan of a job queued behind a stopped one -- runs in
+    the caller's thread or the planning thread, never in the bus thread."""
+    from vr_driver.motion import MotionPlanner
+
+    threads = []
+
+    class Recording(MotionPlanner):
+        def plan(self, *args, **kwargs):
+            threads.append(threading.current_thread().name)
+            return super().plan(*args, **kwargs)
+
+    r = Rig(tmp_path, kin, speed_factor=1.0)
+    try:
+        r.core.planner = Recording(kin)
+        r.wait_ready()
+        first = r.core.submit(MoveRequest(MoveType.LIN, (1000, -600, 800, 0, 45, 0)))
+        second = r.core.submit(MoveRequest(MoveType.LIN, (1000, -300, 700, 0, 45, 0)))
+        assert first.wait_change(JobPhase.QUEUED, 5.0) is not JobPhase.QUEUED
+        assert first.wait_change(JobPhase.SENDING, 5.0) is JobPhase.MOVING
+        r.core.cancel(first, "test")
+        assert second.wait(30.0).success
+        assert "vr_driver-planning" in threads            # the replan ran there
+        assert "vr_driver-bus" not in threads, threads
+    finally:
+        r.close()

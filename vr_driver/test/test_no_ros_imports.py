@@ -10,7 +10,8 @@ import pytest
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
-CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "sim_arm",
+CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "driver.link",
+        "driver.sequencer", "driver.jobs", "driver.core", "sim_arm",
         "controller_sim", "csr", "pose_input")
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")
@@ -54,3 +55,15 @@ def test_rospy_blocked_in_process_too():
             if k.startswith("vr_driver"):
                 del sys.modules[k]
         sys.modules.update(saved)
+
+
+@pytest.mark.parametrize("module", ["protocol", "poses", "params"])
+def test_the_wire_codec_and_the_vocabulary_need_no_kinematics(module):
+    """The 14-byte codec, the pose vocabulary (MoveType lives there) and the parameters import
+    neither PyKDL nor the kinematics or planning modules."""
+    paths = [SRC, os.path.join(REPO, "pyprofibus_vendor", "src")]
+    script = ("import sys; sys.path[:0] = %r; import vr_driver.%s; "
+              "bad = [m for m in ('PyKDL', 'vr_driver.kinematics', 'vr_driver.motion') if m in sys.modules]; "
+              "assert not bad, bad; print('ok')" % (paths, module))
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr
