@@ -1,14 +1,23 @@
 """The node `interface` as a process: a bad parameter stops it at once with a message that names
 the parameter (exit 2); a missing serial port keeps it running, reporting the reason and retrying."""
 import os
-import select
+import socket
 import subprocess
 import threading
 import time
 import unittest
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-PORT = 11544
+
+
+def _free_port():
+    """A TCP port nobody listens on now (a fixed one collided with another checkout's run)."""
+    with socket.socket() as sock:
+        sock.bind(("localhost", 0))
+        return sock.getsockname()[1]
+
+
+PORT = _free_port()
 
 
 def env():
@@ -23,19 +32,22 @@ class InterfaceNodeTest(unittest.TestCase):
         cls.core = subprocess.Popen(["roscore", "-p", str(PORT)], stdout=subprocess.PIPE,
                                     stderr=subprocess.STDOUT, text=True, env=env(),
                                     start_new_session=True)
-        # roscore prints "started core service [/rosout]" once the master and rosout are up
-        end = time.monotonic() + 30
-        while time.monotonic() < end:
-            ready, _, _ = select.select([cls.core.stdout], [], [], 1.0)
-            if ready:
-                line = cls.core.stdout.readline()
-                if not line or "started core service" in line:
-                    break
-        else:
-            raise AssertionError("roscore did not start")
-        # keep reading roscore's output: a full pipe would block the master and every node with it
-        cls.drain = threading.Thread(target=cls.core.stdout.read, daemon=True)
+        # roscore prints "started core service [/rosout]" once the master and rosout are up. One
+        # thread reads its output for the whole run (a full pipe would block the master and every
+        # node with it) and signals that line. (select() on the pipe beside readline() missed lines
+        # already in the reader's buffer and waited the whole 30 s: the old flake.)
+        started = threading.Event()
+
+        def read():
+            for line in cls.core.stdout:
+                if "started core service" in line:
+                    started.set()
+        cls.drain = threading.Thread(target=read, daemon=True)
         cls.drain.start()
+        if not started.wait(30.0):
+            os.killpg(cls.core.pid, 2)
+            cls.core.wait(20)
+            raise AssertionError("roscore did not start within 30 s")
 
     @classmethod
     def tearDownClass(cls):
@@ -60,16 +72,17 @@ class InterfaceNodeTest(unittest.TestCase):
                                  "_port:=/dev/vr006l_no_such_port", "_reconnect_period:=0.2"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env(),
                                 start_new_session=True)
+        seen = []
+        reported = threading.Event()
+
+        def read():
+            for line in proc.stdout:
+                seen.append(line)
+                if "cannot open /dev/vr006l_no_such_port" in line:
+                    reported.set()
+        threading.Thread(target=read, daemon=True).start()
         try:
-            seen, end = "", time.monotonic() + 30
-            while "cannot open /dev/vr006l_no_such_port" not in seen and time.monotonic() < end:
-                ready, _, _ = select.select([proc.stdout], [], [], 1.0)
-                if ready:
-                    line = proc.stdout.readline()
-                    if not line:
-                        break
-                    seen += line
-            self.assertIn("cannot open /dev/vr006l_no_such_port", seen)
+            self.assertTrue(reported.wait(30.0), "".join(seen))
             self.assertIsNone(proc.poll(), "the node exited instead of retrying")
         finally:
             os.killpg(proc.pid, 2)
