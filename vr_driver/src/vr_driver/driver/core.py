@@ -34,7 +34,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.phy import Link
 
@@ -44,7 +44,7 @@ from ..motion import MotionPlanner, check_envelope
 from ..params import DriverParams
 from ..poses import ControllerPose, MoveType
 from ..protocol import Feedback, StatusBits, commands_for
-from .jobs import JobPhase, MoveJob, MoveRequest, Preview, SubmitMode
+from .jobs import MoveJob, MoveRequest, Preview, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
 from .sequencer import MotionSequencer, why_no_motion
