@@ -200,19 +200,8 @@ class MotionSequencer:
         with self._lock:
             requests = list(self._inbox)
             self._inbox.clear()
-        jobs: List[MoveJob] = []
-        for request in requests:
-            if isinstance(request, _Add):
-                jobs.extend(request.jobs)
-        if self._settle is not None and self._settle.job is not None:
-            jobs.append(self._settle.job)
-        if self._job is not None:
-            jobs.append(self._job)
-        jobs.extend(self._queue)
-        self._settle, self._job = None, None
-        self._queue.clear()
-        for job in jobs:
-            job.finish(False, JobPhase.CANCELLED, reason, self._last_pose if job.sent else None)
+        posted = [job for request in requests if isinstance(request, _Add) for job in request.jobs]
+        self._end_all(JobPhase.CANCELLED, reason, posted)
         self._publish()
 
     # ------------------------------------------------------------------ requests
@@ -446,9 +435,13 @@ class MotionSequencer:
             self.targets_aborted += 1
         self._session = None
         self._rest_values = None
-        why = ("link to the controller lost (%s); the target is not re-sent; the last pose seen is "
-               "reported, where the arm came to rest is unknown" % reason)
-        jobs = []
+        self._end_all(JobPhase.FAILED, "link to the controller lost (%s); the target is not re-sent; "
+                      "the last pose seen is reported, where the arm came to rest is unknown" % reason)
+
+    def _end_all(self, phase: JobPhase, reason: str, extra: Sequence[MoveJob] = ()) -> None:
+        """End every job: settling, in flight, queued (and ``extra``); a job that was sent
+        reports the last pose seen."""
+        jobs: List[MoveJob] = list(extra)
         if self._settle is not None and self._settle.job is not None:
             jobs.append(self._settle.job)
         if self._job is not None:
@@ -457,7 +450,7 @@ class MotionSequencer:
         self._settle, self._job = None, None
         self._queue.clear()
         for job in jobs:
-            job.finish(False, JobPhase.FAILED, why, self._last_pose if job.sent else None)
+            job.finish(False, phase, reason, self._last_pose if job.sent else None)
 
     def _publish(self) -> None:
         job = self._job
