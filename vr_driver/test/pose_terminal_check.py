@@ -237,6 +237,10 @@ class PoseTerminalTest(unittest.TestCase):
         t.sendline("status")                                     # still usable: the driver is fine
         self.expect(t, r"motion possible: yes")
         self.expect(t, FIRST_PROMPT)
+        t.sendline("history")                                    # history keeps the rest pose too
+        self.expect(t, r"stopped at X [-0-9.]+  Y ([-0-9.]+) .*\(at rest\)")
+        self.assertLessEqual(abs(float(t.match.group(1)) - entry["final_pose"][1]), 0.5)
+        self.expect(t, FIRST_PROMPT)
         self.quit(t)
 
     def test_06_quit_ctrl_d_and_ctrl_c_at_a_prompt_leave_cleanly(self):

@@ -406,7 +406,8 @@ def test_ctrl_c_during_a_move_stops_it_and_returns_to_the_prompt():
     assert "Stopped at X 1050  Y 0  Z 750  Rx 0  Ry 45  Rz 0: goal cancelled by the client" in text
     assert backend.calls == ["cancel"]
     assert prompts[-1].startswith("X [mm")
-    assert term.history[-1].outcome == "stopped: goal cancelled by the client"
+    assert term.history[-1].outcome == \
+        "stopped at X 1050  Y 0  Z 750  Rx 0  Ry 45  Rz 0 (at rest): goal cancelled by the client"
 
 
 def test_a_cancel_the_driver_ignores_is_followed_by_stop_motion():

@@ -693,10 +693,10 @@ class Terminal:
             return EXIT_OK
         if result.outcome == "cancelled":
             self.say("Stopped at %s: %s" % (where, result.reason or "cancelled"))
-            self._record(request, "stopped: %s" % (result.reason or "cancelled"))
+            self._record(request, "stopped at %s (at rest): %s" % (where, result.reason or "cancelled"))
             return EXIT_REFUSED
         self.say("Failed: %s; the arm is at %s" % (result.reason or "no reason given", where))
-        self._record(request, "failed: %s" % (result.reason or "no reason given"))
+        self._record(request, "failed at %s: %s" % (where, result.reason or "no reason given"))
         return EXIT_REFUSED
 
     def _stop_move(self, handle: MoveHandle) -> bool:
