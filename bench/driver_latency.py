@@ -431,6 +431,7 @@ class Measure:
                              keep=lambda m: any(s.name.endswith("link") for s in m.status))
         self.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
         self.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
+        self.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
 
     def mono(self, stamp: Any) -> float:
         """A rospy wall-clock stamp on this process's time.monotonic()."""
@@ -607,6 +608,9 @@ class Measure:
             recs[True].append(self.estop_once(True))
             time.sleep(self.rng.uniform(0.05, 0.15))
             recs[False].append(self.estop_once(False))
+            resp = self.set_drives(True)          # released, the drives stay off (as on a G2)
+            if not resp.success:
+                raise Failure("set_drives_powered(True) failed: %s" % resp.message)
         out: Dict[str, Any] = {"n": self.cfg["estops"]}
         for pressed, key in ((True, "set"), (False, "clear")):
             for field in ("call", "from_ret", "from_call", "from_log", "pub_from_log"):

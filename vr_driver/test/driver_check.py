@@ -164,6 +164,13 @@ class DriverTest(unittest.TestCase):
         keys = {kv.key for kv in link.values}
         self.assertIn("bus retries", keys)
         self.assertIn("link reconnects", keys)
+        # /diagnostics at its period (1 s): it alternated 1 s and 2 s (0.67 Hz) before
+        start = len(self.diag.messages)
+        self.assertTrue(self.diag.wait_count(start + 5, 10.0), "fewer than 5 diagnostics in 10 s")
+        with self.diag.cond:
+            times = self.diag.times[start:start + 5]
+        gaps = [b - a for a, b in zip(times, times[1:])]
+        self.assertLess(max(gaps), 1.6, gaps)
 
     def test_02_ptp_lin_circ_goals_execute_once(self):
         self.wait_motion_possible()

@@ -220,16 +220,17 @@ def test_arm_fault_during_motion_stops_at_that_instant(kin, fault):
     assert arm.begin("ptp", HOME_POSE, now=t_stop + 7)[0]
 
 
-def test_estop_cuts_the_drive_power(kin):
+def test_estop_cuts_the_drive_power_and_they_stay_off_until_switched_on(kin):
+    """issue 15: the virtual controller powered the drives back on when the e-stop was released;
+    a real G2 needs the drives switched on again."""
     arm = SimArm(kin, clock=lambda: 0.0)
     arm.set_estop(True)
     assert not arm.drives_powered and arm.blocked_reason() == "e-stop pressed"
-    arm.set_estop(False)
-    assert arm.drives_powered
-    arm.set_drives_powered(False)
-    arm.set_estop(True)
+    assert arm.set_drives_powered(True) is False and not arm.drives_powered   # not under e-stop
     arm.set_estop(False)
     assert not arm.drives_powered and arm.blocked_reason() == "drives not powered"
+    assert arm.set_drives_powered(True) is True
+    assert arm.drives_powered and arm.blocked_reason() is None
 
 
 # ------------------------------------------------------------------------- program loop + handshake
@@ -354,7 +355,8 @@ def test_via_serves_only_the_next_request(rig):
     ("error", StatusBits.ERROR, StatusBits(0), "controller error"),
 ])
 def test_requests_rejected_while_a_fault_is_active(rig, fault, bit_set, bit_clear, words):
-    setter = {"estop": lambda on: rig.arm.set_estop(on),
+    setter = {"estop": lambda on: rig.arm.set_estop(True) if on else
+              (rig.arm.set_estop(False), rig.arm.set_drives_powered(True)),
               "drives_powered": lambda on: rig.arm.set_drives_powered(not on),
               "error": lambda on: rig.arm.set_error(on)}[fault]
     setter(True)
@@ -540,8 +542,10 @@ def test_set_fault_service_logic(kin, tmp_path):
         assert (tmp_path / "tty").is_symlink()
         assert vc.set_fault("estop", True)[0] and vc.arm.estop
         ok, msg = vc.set_fault("drives_powered", True)
-        assert ok and "e-stop" in msg
-        assert vc.set_fault("estop", False)[0] and vc.arm.drives_powered
+        assert not ok and "e-stop" in msg and not vc.arm.drives_powered
+        ok, msg = vc.set_fault("estop", False)
+        assert ok and "stay off" in msg and not vc.arm.drives_powered
+        assert vc.set_fault("drives_powered", True)[0] and vc.arm.drives_powered
         assert vc.set_fault("error", True)[0] and vc.arm.error
         assert vc.set_fault("error", False)[0] and vc.arm.error is None
         assert not vc.set_fault("overheat", True)[0]

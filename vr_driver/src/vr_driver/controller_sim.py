@@ -43,8 +43,9 @@ Rules of the program (also in ``doc/controller_program.md``):
   flag 2 is "no request".
 - E-stop, drives off or an error during a motion stop the arm at once (sim_arm); the target ends
   REJECTED (state 3, held until the flag drops). While any of them is active a request is
-  REJECTED and the status bits say which (ESTOP; DRIVES_POWERED clear; ERROR). The e-stop also
-  clears DRIVES_POWERED while it is pressed.
+  REJECTED and the status bits say which (ESTOP; DRIVES_POWERED clear; ERROR). The e-stop switches
+  the drives off; after it is released they stay off until switched on again (``set_fault
+  ("drives_powered", True)``, the node's ``~set_drives_powered`` service), as on a real G2.
 - A target the arm cannot reach or plan (outside the reach, joint limits, joint jump, singular,
   degenerate circle) is REJECTED without motion; a CIRC_END without a stored via as well.
 - A record the program cannot decode (flag byte not 0/1/2, unknown move type) is treated as flag 0
@@ -713,9 +714,13 @@ class VirtualController:
         log.warning("e-stop %s", "pressed" if pressed else "released")
         self.arm.set_estop(pressed)
 
-    def set_drives_powered(self, powered: bool) -> None:
-        log.warning("drives %s", "on" if powered else "off")
-        self.arm.set_drives_powered(powered)
+    def set_drives_powered(self, powered: bool) -> bool:
+        ok = self.arm.set_drives_powered(powered)
+        if ok:
+            log.warning("drives %s", "on" if powered else "off")
+        else:
+            log.warning("drives not switched on: the e-stop is pressed")
+        return ok
 
     def set_error(self, error: Any = True) -> None:
         log.warning("controller error %s", "cleared" if not error else "set: %s" % (error,))
@@ -732,12 +737,12 @@ class VirtualController:
         ``drives_powered``, ``error``. Returns (success, message)."""
         if fault == "estop":
             self.set_estop(active)
-            return True, "e-stop %s" % ("pressed" if active else "released")
+            return True, "e-stop %s" % ("pressed (drives off)" if active else
+                                        "released; the drives stay off until switched on")
         if fault == "drives_powered":
-            self.set_drives_powered(active)
-            return True, "drives %s%s" % ("on" if active else "off",
-                                          " (no power while the e-stop is pressed)"
-                                          if active and self.arm.estop else "")
+            if not self.set_drives_powered(active):
+                return False, "drives stay off: release the e-stop first"
+            return True, "drives %s" % ("on" if active else "off")
         if fault == "error":
             self.set_error("injected error" if active else None)
             return True, "error %s" % ("set" if active else "cleared")

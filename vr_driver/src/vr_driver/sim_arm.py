@@ -17,8 +17,9 @@ Rules (DESIGN.md §5, also ``doc/controller_program.md``):
   message and nothing moves.
 - Nothing starts while the e-stop is pressed, the drives are off or an error is set; the refusal
   names the first of these.
-- The e-stop cuts the drive power: while it is pressed the drives read "off" whatever the drives
-  switch says; releasing it restores the switch's state (no separate re-power needed in the sim).
+- The e-stop cuts the drive power, as on a real G2: pressing it switches the drives off, and
+  releasing it leaves them off -- they must be switched on again (:meth:`SimArm.set_drives_powered`,
+  the node's ``~set_drives_powered`` service); that is refused while the e-stop is pressed.
 - E-stop, drives off or an error *during* a motion stops the arm at once, at the position of that
   moment; the motion ends refused (``aborted``) with the reason. :meth:`SimArm.stop` does the same
   for the program (link loss / watchdog).
@@ -312,18 +313,25 @@ class SimArm:
 
     # ---------------------------------------------------------------------------- injections
     def set_estop(self, pressed: bool, now: Optional[float] = None) -> None:
-        """Press (True) or release (False) the e-stop. Pressing stops a motion at once."""
+        """Press (True) or release (False) the e-stop. Pressing stops a motion at once and
+        switches the drives off; releasing leaves them off (switch them on again)."""
         with self._lock:
             self._estop = bool(pressed)
             if self._estop:
+                self._drives = False
                 self._abort("e-stop pressed during the motion", now)
 
-    def set_drives_powered(self, powered: bool, now: Optional[float] = None) -> None:
-        """Switch the drives on or off. Switching off stops a motion at once."""
+    def set_drives_powered(self, powered: bool, now: Optional[float] = None) -> bool:
+        """Switch the drives on or off; returns whether they are in the state asked for.
+        Switching off stops a motion at once; switching on is refused while the e-stop is
+        pressed (False)."""
         with self._lock:
+            if powered and self._estop:
+                return False
             self._drives = bool(powered)
             if not self._drives:
                 self._abort("drives switched off during the motion", now)
+            return True
 
     def set_error(self, error: Any, now: Optional[float] = None) -> None:
         """Set (a truthy value; a string is kept as the error text) or clear (False / None) the
