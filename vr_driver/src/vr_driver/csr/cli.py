@@ -11,11 +11,12 @@ from typing import Any, Dict, Mapping, Optional, Sequence
 from ..errors import CsrConversionError, CsrError, VrDriverError
 from .conventions import JointConvention
 from .export import ExportSettings, check_program, export_program, kinematics_for, summarize
-from .fields import COMMENT_MAX, CREATOR_MAX, NEWLINES, _date, _integer
+from .fields import COMMENT_MAX, CREATOR_MAX, NEWLINES, _date, _integer, clip
+from .inputs import load_yaml, read_bounded
 from .model import Description
 from .parser import decode_csr, parse_program
 from .waypoints import WaypointFile, _line, _move_type, load_waypoints, trajectory_waypoints
-from .writer import _atomic_write, program_bytes
+from .writer import program_bytes, write_file
 
 
 _EPILOG = """\
@@ -66,8 +67,13 @@ def _build_parser(prog: str) -> argparse.ArgumentParser:
     src.add_argument("--timeout", type=float, default=10.0, metavar="S",
                      help="--from-topic: seconds to wait (default 10)")
     out = p.add_argument_group("output")
-    out.add_argument("-o", "--output", metavar="FILE", help="the .csr to write (default: standard output; "
-                                                            "with --from-csr: write nothing)")
+    out.add_argument("-o", "--output", metavar="FILE", help="the .csr to write, '-' = standard output (default: "
+                                                            "standard output; with --from-csr: write nothing). "
+                                                            "An existing file is replaced atomically and keeps "
+                                                            "its mode")
+    out.add_argument("--force", action="store_true",
+                     help="write to an -o that is not a regular file: follow a symbolic link, write into a FIFO "
+                          "or a device (refused without --force)")
     out.add_argument("--newline", choices=sorted(NEWLINES), default="crlf",
                      help="line ends (default crlf, as Windows tools such as DTPS expect)")
     out.add_argument("--decimals", type=int, default=None, metavar="N",
@@ -101,20 +107,27 @@ def _load_params(path: Optional[str]):
     from ..params import DriverParams, ParamError
     if not path:
         return DriverParams()
-    import yaml
     try:
-        with open(path) as f:
-            data = yaml.safe_load(f) or {}
-    except OSError as exc:
-        raise CsrError("cannot read: %s" % (exc.strerror or exc), 0, "--driver-config", path) from None
-    except yaml.YAMLError as exc:
-        raise CsrError("not valid YAML: %s" % exc, 0, "--driver-config", path) from None
+        text = read_bounded(path, "--driver-config").decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise CsrError("not UTF-8 text (byte %d)" % exc.start, 0, "--driver-config", path) from None
+    docs = load_yaml(text, path, "--driver-config")
+    data = docs[0] if docs else {}
     if not isinstance(data, dict):
         raise CsrError("must be a mapping of parameters", 0, "--driver-config", path)
     try:
         return DriverParams.from_dict(data)
     except ParamError as exc:
-        raise CsrError(str(exc), 0, "--driver-config", path) from None
+        raise CsrError(clip(str(exc)), 0, "--driver-config", path) from None
+
+
+def _as_text(value: Any) -> Any:
+    """A scalar of the program block as text (YAML reads ``comment: 12`` as a number); lists,
+    mappings and huge integers stay as they are, so the field check refuses them with a short
+    quote instead of formatting them whole."""
+    if isinstance(value, (str, list, tuple, dict, set)) or (isinstance(value, int) and value.bit_length() > 128):
+        return value
+    return str(value)
 
 
 def _description(args: argparse.Namespace, program: Mapping[str, Any], source: str) -> Description:
@@ -129,11 +142,11 @@ def _description(args: argparse.Namespace, program: Mapping[str, Any], source: s
 
     try:
         date = pick("date", None)
-        return Description(robot=str(pick("robot", "VR-006L")), comment=str(pick("comment", "ros_export")),
-                           sub_comment1=str(program.get("sub_comment1", "")),
-                           sub_comment2=str(program.get("sub_comment2", "")),
-                           mechanism=str(pick("mechanism", "1(0001)")), tool=str(pick("tool", "1:TOOL01")),
-                           creator=str(pick("creator", "ROS")),
+        return Description(robot=_as_text(pick("robot", "VR-006L")), comment=_as_text(pick("comment", "ros_export")),
+                           sub_comment1=_as_text(program.get("sub_comment1", "")),
+                           sub_comment2=_as_text(program.get("sub_comment2", "")),
+                           mechanism=_as_text(pick("mechanism", "1(0001)")), tool=_as_text(pick("tool", "1:TOOL01")),
+                           creator=_as_text(pick("creator", "ROS")),
                            created=_date(date, "date") if date is not None else None,
                            edit=_integer(program.get("edit", 0), "edit", 0, 2))
     except CsrError as exc:
@@ -162,14 +175,15 @@ def _from_topic(topic: str, timeout: float) -> Dict[str, Any]:
             "points": [{"positions": list(pt.positions)} for pt in msg.points]}
 
 
-def _output(data: bytes, path: Optional[str]) -> None:
+def _output(data: bytes, path: Optional[str], force: bool = False) -> None:
+    """The program to standard output (no -o, or -o -) or to a file through write_file."""
     if not path or path == "-":
         sys.stdout.flush()
         sys.stdout.buffer.write(data)
         sys.stdout.buffer.flush()
         return
     try:
-        _atomic_write(data, path)
+        write_file(data, path, force)
     except OSError as exc:
         raise CsrError("cannot write: %s" % (exc.strerror or exc), 0, "output", path) from None
 
@@ -200,7 +214,7 @@ def _run_export(args: argparse.Namespace, prog: str) -> int:
     except CsrError as exc:
         raise exc.located(field="option") from None
     program = export_program(wfile.waypoints, settings, kin)
-    _output(program_bytes(program, NEWLINES[args.newline]), args.output)
+    _output(program_bytes(program, NEWLINES[args.newline]), args.output, args.force)
     if args.output and args.output != "-":
         print("%s: wrote %s: %d poses, %d commands (%s)" % (prog, args.output, len(program.poses),
                                                            len(program.commands), convention.describe()),
@@ -210,11 +224,7 @@ def _run_export(args: argparse.Namespace, prog: str) -> int:
 
 def _run_from_csr(args: argparse.Namespace, prog: str) -> int:
     path = args.from_csr
-    try:
-        with open(path, "rb") as f:
-            text, encoding = decode_csr(f.read(), path)
-    except OSError as exc:
-        raise CsrError("cannot read: %s" % (exc.strerror or exc), 0, "file", path) from None
+    text, encoding = decode_csr(read_bounded(path, "file"), path)
     program = parse_program(text, path)
     if args.decimals is not None:
         program = replace(program, decimals=_integer(args.decimals, "--decimals", 0, 15))
@@ -228,7 +238,7 @@ def _run_from_csr(args: argparse.Namespace, prog: str) -> int:
             for problem in problems:
                 print("%s: refused: %s" % (prog, problem), file=sys.stderr)
             return 1
-        _output(program_bytes(program, NEWLINES[args.newline], encoding), args.output)
+        _output(program_bytes(program, NEWLINES[args.newline], encoding), args.output, args.force)
         return 0
     print(summarize(program, rows, args.from_csr))
     print("check (%s): %s" % (convention.describe(),

@@ -3,9 +3,10 @@ dates). ROS-free; every message quotes at most a short prefix of the value (:fun
 from __future__ import annotations
 
 import datetime as _dt
+import itertools
 import math
 import re
-from typing import Any, List, Optional
+from typing import Any, List, Mapping, Optional
 
 from ..errors import CsrError
 
@@ -36,9 +37,43 @@ NEWLINES = {"crlf": "\r\n", "lf": "\n"}
 DEFAULT_DATE = _dt.datetime(2000, 1, 1, 0, 0, 0)
 
 
-def show(value: Any) -> str:
-    """How a value is quoted in a message."""
-    return repr(value)
+SHOW_MAX = 40                 # characters of a value quoted in a message
+
+
+def show(value: Any, limit: int = SHOW_MAX) -> str:
+    """How a value is quoted in a message: its repr, cut to at most ``limit`` characters (then
+    ending in "..."). Lists and mappings are summarised (3 items, 2 levels) without walking them
+    whole, so a huge or alias-expanded input value costs nothing to quote."""
+    text = _short_repr(value, 2, limit)
+    return text if len(text) <= limit else text[:max(limit - 3, 1)] + "..."
+
+
+def _short_repr(value: Any, levels: int, limit: int) -> str:
+    if isinstance(value, (str, bytes, bytearray)):
+        return repr(value[:limit + 1])
+    if isinstance(value, Mapping):
+        if levels <= 0:
+            return "{...}"
+        items = ["%s: %s" % (_short_repr(k, levels - 1, limit), _short_repr(v, levels - 1, limit))
+                 for k, v in itertools.islice(value.items(), 3)]
+        return "{%s%s}" % (", ".join(items), ", ..." if len(value) > 3 else "")
+    if isinstance(value, (list, tuple, set, frozenset)):
+        if levels <= 0:
+            return "[...]"
+        items = [_short_repr(v, levels - 1, limit) for v in itertools.islice(value, 3)]
+        return "[%s%s]" % (", ".join(items), ", ..." if len(value) > 3 else "")
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
+        return "<an integer of %d bits>" % value.bit_length()   # str() of a huge int is slow or refused
+    try:
+        text = repr(value)
+    except Exception:          # an object whose repr fails must not hide the real error
+        text = "<%s>" % type(value).__name__
+    return text
+
+
+def clip(text: str, limit: int = 200) -> str:
+    """A message (e.g. of a library error that may quote input) cut to ``limit`` characters."""
+    return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
 def _text(value: Any, what: str, max_len: Optional[int] = None, allow_empty: bool = True) -> str:

@@ -209,8 +209,8 @@ class Move:
         if op == "MOVEP" and self.cl:
             raise CsrError("MOVEP has no CL number", field="MOVEP CL no.")
         if self.option and (op != "MOVEC" or self.option not in CIRCLE_OPTIONS):
-            raise CsrError("%s is not allowed here (only MOVEC takes %s)" % (show(self.option), " / ".join(CIRCLE_OPTIONS)),
-                           field=op + " option")
+            raise CsrError("%s is not allowed here (only MOVEC takes %s)"
+                           % (show(self.option), " / ".join(CIRCLE_OPTIONS)), field=op + " option")
 
     def line_text(self) -> str:
         fields = [self.opcode, self.point, "%.2f" % self.speed, self.unit]
@@ -233,7 +233,8 @@ class RawCommand:
         _raw_line(self.text, "command")
         op = _split(self.text)[0]
         if op in MOVE_OPCODES + ("TOOL",):
-            raise CsrError("%s would be read back as a %s command, not verbatim" % (show(self.text), op), field="command")
+            raise CsrError("%s would be read back as a %s command, not verbatim" % (show(self.text), op),
+                           field="command")
 
     def line_text(self) -> str:
         return self.text

@@ -8,6 +8,7 @@ from typing import Any, Dict, List, Optional, Tuple
 from ..errors import CsrError
 from .fields import (_MECHANISM_RE, COMMENT_MAX, CREATOR_MAX, DEFAULT_DATE, MOVE_OPCODES, POSE_COLUMNS,
                      SECTION_ORDER, _decimals, _integer, _number, _split, _text, _token, _tool_text, show)
+from .inputs import read_bounded
 from .model import (Command, CsrProgram, Description, Move, Pose, RawCommand, RawSection, Tool, Variable,
                     check_structure)
 
@@ -229,11 +230,6 @@ def decode_csr(data: bytes, source: str = "") -> Tuple[str, str]:
 
 def read_program(path: str) -> CsrProgram:
     """Read a .csr file (UTF-8 / ASCII, else Shift-JIS); CsrError (naming the file) on unreadable
-    or malformed content."""
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
-        raise CsrError("cannot read: %s" % (exc.strerror or exc), 0, "file", path) from None
-    text, _ = decode_csr(data, path)
+    or malformed content, or a file longer than MAX_INPUT_BYTES."""
+    text, _ = decode_csr(read_bounded(path, "file"), path)
     return parse_program(text, path)

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import csv
 import math
-import sys
 from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
@@ -13,6 +12,7 @@ from ..errors import CsrError, MotionError, PoseError
 from ..motion import MoveType
 from ..poses import ControllerPose
 from .fields import SMOOTH_RANGE, _integer, _number, _speed, show
+from .inputs import load_yaml, read_bounded
 
 
 @dataclass(frozen=True)
@@ -42,25 +42,19 @@ class _LineList(list):
     line = 0
 
 
-def _make_loader():
-    import yaml
+def _line_mapping(loader: Any, node: Any) -> _LineDict:
+    out = _LineDict(loader.construct_mapping(node, deep=True))
+    out.line = node.start_mark.line + 1
+    return out
 
-    class Loader(yaml.SafeLoader):
-        pass
 
-    def mapping(loader, node):
-        out = _LineDict(loader.construct_mapping(node, deep=True))
-        out.line = node.start_mark.line + 1
-        return out
+def _line_sequence(loader: Any, node: Any) -> _LineList:
+    out = _LineList(loader.construct_sequence(node, deep=True))
+    out.line = node.start_mark.line + 1
+    return out
 
-    def sequence(loader, node):
-        out = _LineList(loader.construct_sequence(node, deep=True))
-        out.line = node.start_mark.line + 1
-        return out
 
-    Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, mapping)
-    Loader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_SEQUENCE_TAG, sequence)
-    return Loader
+_LINE_CONSTRUCTORS = {"tag:yaml.org,2002:map": _line_mapping, "tag:yaml.org,2002:seq": _line_sequence}
 
 
 def _line(value: Any, default: int = 0) -> int:
@@ -104,7 +98,7 @@ def _waypoint_from_mapping(item: Any, index: int, source: str, line: int) -> Way
     try:
         if not isinstance(item, Mapping):
             raise CsrError("expected a mapping with joints / joints_deg / pose, got %s" % show(item))
-        unknown = sorted(str(k) for k in item if k not in _WAYPOINT_KEYS)
+        unknown = [k for k in item if k not in _WAYPOINT_KEYS]
         if unknown:
             raise CsrError("unknown key %s (allowed: %s)" % (show(unknown[0]), ", ".join(_WAYPOINT_KEYS)))
         given = [k for k in ("joints", "joints_deg", "pose") if k in item]
@@ -138,13 +132,7 @@ def parse_waypoints(text: str, source: str = "", joint_names: Sequence[str] = ()
     ends in ``.csv``. ``joint_names``: the controller joint names (trajectory column order)."""
     if source.lower().endswith(".csv"):
         return _parse_csv(text, source)
-    import yaml
-    try:
-        docs = [d for d in yaml.load_all(text, Loader=_make_loader()) if d is not None]
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        reason = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise CsrError("not valid YAML: %s" % reason, mark.line + 1 if mark else 0, "input", source) from None
+    docs = load_yaml(text, source, "input", _LINE_CONSTRUCTORS)
     if not docs:
         raise CsrError("no waypoints (the file is empty)", 0, "input", source)
     data = docs[0]
@@ -166,17 +154,17 @@ def _default_joint_names() -> Tuple[str, ...]:
 
 
 def _parse_waypoint_mapping(data: Mapping[str, Any], source: str) -> WaypointFile:
-    unknown = sorted(str(k) for k in data if k not in ("waypoints", "program", "defaults"))
+    unknown = [k for k in data if k not in ("waypoints", "program", "defaults")]
     if unknown:
-        raise CsrError("unknown key %s (allowed: waypoints, program, defaults)" % show(unknown[0]), _line(data), "input",
-                       source)
+        raise CsrError("unknown key %s (allowed: waypoints, program, defaults)" % show(unknown[0]), _line(data),
+                       "input", source)
     program = data.get("program") or {}
     defaults = data.get("defaults") or {}
     for block, allowed in (("program", _PROGRAM_KEYS), ("defaults", _DEFAULT_KEYS)):
         value = data.get(block) or {}
         if not isinstance(value, Mapping):
             raise CsrError("must be a mapping", _line(data), block, source)
-        bad = sorted(str(k) for k in value if k not in allowed)
+        bad = [k for k in value if k not in allowed]
         if bad:
             raise CsrError("unknown key %s (allowed: %s)" % (show(bad[0]), ", ".join(allowed)), _line(value), block,
                            source)
@@ -307,16 +295,11 @@ def _parse_csv(text: str, source: str) -> WaypointFile:
 
 
 def load_waypoints(path: str, joint_names: Sequence[str] = ()) -> WaypointFile:
-    """:func:`parse_waypoints` on a file (``-`` = standard input)."""
-    if path == "-":
-        return parse_waypoints(sys.stdin.read(), "<stdin>", joint_names)
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
-        raise CsrError("cannot read: %s" % (exc.strerror or exc), 0, "input", path) from None
+    """:func:`parse_waypoints` on a file (``-`` = standard input), at most MAX_INPUT_BYTES long."""
+    data = read_bounded(path, "input")
+    source = "<stdin>" if path == "-" else path
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise CsrError("not UTF-8 text (byte %d)" % exc.start, 0, "input", path) from None
-    return parse_waypoints(text, path, joint_names)
+        raise CsrError("not UTF-8 text (byte %d)" % exc.start, 0, "input", source) from None
+    return parse_waypoints(text, source, joint_names)
