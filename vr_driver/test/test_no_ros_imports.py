@@ -10,7 +10,7 @@ import pytest
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
-CSR_MODULES = ("fields", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
+CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
 CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "sim_arm",
         "controller_sim", "csr", "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",

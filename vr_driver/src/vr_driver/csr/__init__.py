@@ -13,12 +13,15 @@ comma separated, in sections::
 
 One module per job; this package exports the public names of all of them:
 
-- :mod:`.fields`: the format's constants and single-field checks.
+- :mod:`.fields`: the format's constants and single-field checks; :func:`~.fields.show` quotes
+  a value in a message by a short prefix.
+- :mod:`.inputs`: bounded input -- file size, and YAML aliases, nesting depth and alias expansion.
 - :mod:`.model`: :class:`Description`, :class:`Pose`, :class:`Variable`, :class:`Tool`,
   :class:`Move`, :class:`RawCommand`, :class:`RawSection`, :class:`CsrProgram` (frozen
   dataclasses, equal when their text is equal).
 - :mod:`.writer`: :func:`format_program` / :func:`program_bytes` / :func:`write_program` (validated
-  first, CsrError names the field). :mod:`.parser`: :func:`parse_program` / :func:`read_program`
+  first, CsrError names the field; a file is replaced atomically, keeping its mode, and only if it
+  is a regular file). :mod:`.parser`: :func:`parse_program` / :func:`read_program`
   (CsrError names the line and field). ``format_program(parse_program(text)) == text`` for every
   text the writer writes.
 - :mod:`.conventions`: :class:`JointConvention` maps URDF joint angles to the AJ columns RT UA FA
