@@ -7,7 +7,7 @@ from pyprofibus_vendor.errors import FcsError, FdlError, FrameError, TruncatedFr
 from pyprofibus_vendor.fdl import (Deframer, FcbRequester, FcbResponder, FrameControl,
                                    RequestFunction, ResponseStatus, Sd1, Sd2, Sd3, Sd4,
                                    ShortAck, StationType, data_frame, decode_frame, fcs,
-                                   frame_length)
+                                   frame_length, sd2_body, sd2_data, sd2_encode)
 
 # the real start-up from PROFIBUS.md (slave 8, master 2, ident 0x4D14)
 FDL_STATUS_REQ = bytes.fromhex("10 08 02 49 53 16")
@@ -350,3 +350,42 @@ class FcbTest(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class Sd2CodecTest(unittest.TestCase):
+    """The bytes-level SD2 codec that Sd2 and the master's Data_Exchange fast path share."""
+
+    def test_encode_gives_the_golden_bytes(self):
+        self.assertEqual(sd2_encode(8, 2, 0x7D, bytes(range(1, 15))), DX_REQ)
+        self.assertEqual(sd2_encode(0x88, 0x82, 0x6D, bytes.fromhex("3C 3E")), DIAG_REQ)
+        self.assertEqual(Sd2(8, 2, FrameControl.req(RequestFunction.SRD_HIGH, True, True),
+                             bytes(range(1, 15))).encode(), DX_REQ)
+
+    def test_data_accepts_exactly_the_expected_reply(self):
+        self.assertEqual(sd2_data(DX_REPLY, 2, 8, 0x08), bytes(range(1, 15)))
+        self.assertEqual(sd2_data(bytearray(DX_REPLY), 2, 8, 0x08), bytes(range(1, 15)))
+        for da, sa, fc in ((3, 8, 0x08), (2, 9, 0x08), (2, 8, 0x0A), (0x82, 8, 0x08)):
+            self.assertIsNone(sd2_data(DX_REPLY, da, sa, fc))
+        for i in range(len(DX_REPLY)):          # any one byte changed: framing, header or FCS fails
+            for delta in (1, 0x80):
+                bad = bytearray(DX_REPLY)
+                bad[i] = (bad[i] + delta) & 0xFF
+                self.assertIsNone(sd2_data(bytes(bad), 2, 8, 0x08), (i, delta))
+        self.assertIsNone(sd2_data(DX_REPLY[:-1], 2, 8, 0x08))
+        self.assertIsNone(sd2_data(DX_REPLY + b"\x16", 2, 8, 0x08))
+        self.assertIsNone(sd2_data(b"", 2, 8, 0x08))
+        self.assertIsNone(sd2_data(bytes.fromhex("68 03 03 68 02 08 08 12 16"), 2, 8, 0x08))  # LE 3: no DU
+
+    def test_body_checks_the_framing_with_typed_errors(self):
+        self.assertEqual(sd2_body(DX_REPLY), DX_REPLY[4:-2])
+        with self.assertRaises(TruncatedFrameError):
+            sd2_body(DX_REPLY[:3])
+        with self.assertRaises(TruncatedFrameError):
+            sd2_body(DX_REPLY[:-1])
+        with self.assertRaises(FcsError):
+            sd2_body(DX_REPLY[:-2] + bytes(((DX_REPLY[-2] + 1) & 0xFF,)) + b"\x16")
+        for i, value in ((1, 0x12), (3, 0x69), (-1, 0x17), (0, 0x10)):
+            bad = bytearray(DX_REPLY)
+            bad[i] = value
+            with self.assertRaises(FrameError):
+                sd2_body(bytes(bad))

@@ -21,7 +21,7 @@ from vr_driver.csr import (CsrProgram, Description, ExportSettings, JointConvent
                            RawSection, Tool, Variable)
 from vr_driver.errors import CsrConversionError, CsrError
 from vr_driver.params import DriverParams
-from vr_driver.poses import Workspace
+from vr_driver.poses import ControllerPose, Workspace
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 PKG = os.path.dirname(HERE)
@@ -39,7 +39,7 @@ def read(path):
 
 
 def kin():
-    return csr._kinematics(DriverParams())
+    return csr.kinematics_for(DriverParams())
 
 
 def raises(exc_type, func, *args, **kwargs):
@@ -394,7 +394,7 @@ def test_export_joint_and_cartesian_waypoints():
     assert program.poses[0].values == pytest.approx((0, 36.983, -16.045, 0, 24.063, 0))
     for pose, target in zip(program.poses[1:], ((1000, -300, 450, 0, 80, 0), (1000, -300, 300, 0, 80, 0))):
         q = JointConvention().from_aj([round(v, 3) for v in pose.values])
-        dp, da = k.fk_pose(q).distance_to(csr.ControllerPose(*target))
+        dp, da = k.fk_pose(q).distance_to(ControllerPose(*target))
         assert dp < 0.05 and da < 0.01                 # mm, deg: 3 printed decimals of a degree
     # seeded point to point: no configuration flip between neighbours
     assert max(abs(a - b) for a, b in zip(program.poses[1].values, program.poses[2].values)) < 20

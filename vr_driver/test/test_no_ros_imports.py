@@ -10,9 +10,10 @@ import pytest
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
+CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
 CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "driver.link",
         "driver.sequencer", "driver.jobs", "driver.core", "sim_arm",
-        "controller_sim", "csr", "pose_input")
+        "controller_sim", "csr", "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")
 
@@ -47,7 +48,8 @@ def test_rospy_blocked_in_process_too():
         sys.modules["rospy"] = None
         import importlib
         for module in CORE:
-            if os.path.exists(os.path.join(SRC, "vr_driver", module + ".py")):
+            path = os.path.join(SRC, "vr_driver", *module.split("."))
+            if os.path.exists(path + ".py") or os.path.exists(os.path.join(path, "__init__.py")):
                 importlib.import_module("vr_driver." + module)
     finally:
         sys.modules.pop("rospy", None)
@@ -67,3 +69,31 @@ def test_the_wire_codec_and_the_vocabulary_need_no_kinematics(module):
               "assert not bad, bad; print('ok')" % (paths, module))
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr
+
+
+def test_only_the_csr_command_line_mentions_ros():
+    """vr_driver.csr: cli.py is the one module that may import ROS (lazily, for --from-topic); every
+    other module of the package names no ROS package in any import statement."""
+    import ast
+    folder = os.path.join(SRC, "vr_driver", "csr")
+    names = sorted(n for n in os.listdir(folder) if n.endswith(".py"))
+    assert {m + ".py" for m in CSR_MODULES} <= set(names), names
+    ros = ("rospy", "rosgraph", "rospkg", "roslib", "actionlib")
+    for name in names:
+        with open(os.path.join(folder, name)) as f:
+            tree = ast.parse(f.read(), name)
+        imported = []
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import):
+                imported += [(a.name, node) for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                imported.append((node.module, node))
+        found = [(mod, node.lineno) for mod, node in imported
+                 if mod.split(".")[0] in ros or mod.split(".")[0].endswith("_msgs")]
+        if name != "cli.py":
+            assert not found, (name, found)
+        else:
+            assert found, "cli.py should import rospy for --from-topic"
+            top_level = {id(n) for n in tree.body}
+            assert not [f for f in found if any(id(n) in top_level and n.lineno == f[1] for n in tree.body)], \
+                ("cli.py imports ROS at module level", found)

@@ -60,14 +60,18 @@ from .dp import (MASTER_SAP, ChkCfg, DiagStatus1, DiagStatus2, GcCommand, Global
                  PrmStationStatus, Sap, SetPrm, SlaveDiag, cfg_io_lengths, explain_diag,
                  global_control_frame, request_frame, watchdog_factors)
 from .errors import ConfigError, DpError, DpTimeoutError, PhyError, ProfibusError
-from .fdl import (ED, SD2, Deframer, FcbRequester, Frame, FrameControl, RequestFunction,
-                  ResponseStatus, Sd1, Sd2, Sd3, ShortAck, StationType)
+from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction, ResponseStatus, Sd1,
+                  Sd2, Sd3, ShortAck, StationType, sd2_data, sd2_encode)
 from .phy import Link
 
 __all__ = ["BusTiming", "SlaveSpec", "MasterSlaveState", "SlaveCounters", "MasterCounters",
            "SlaveHandle", "AcyclicRequest", "DpMaster"]
 
 log = logging.getLogger(__name__)
+
+# FC bytes of the Data_Exchange fast path (request: SRD high, FCB/FCV added per request; reply: DL)
+_FC_SRD_HIGH = FrameControl.req(RequestFunction.SRD_HIGH).encode()
+_FC_DL = FrameControl.resp(ResponseStatus.DL).encode()
 
 Clock = Callable[[], float]
 
@@ -581,27 +585,15 @@ class DpMaster:
         if data:
             self._feed(data, now)
 
-    def _dx_reply_data(self, p: _Pending, data: bytes) -> Optional[bytes]:
-        """The inputs if ``data`` is exactly the usual good Data_Exchange reply, else None.
-
-        The usual reply -- SD2 to us from the slave, FC DL (0x08: response, slave, no
-        diag), no SAPs, exactly the configured input length, correct FCS and ED -- is
-        checked on the raw bytes; anything else (other lengths, DH, SD1/SD3/SC, split or
-        merged chunks, errors) takes the general path through the deframer.
-        """
-        n_in = p.slave.spec.input_size or 0
-        if (len(data) != n_in + 9 or n_in == 0 or n_in == 8 or data[0] != SD2 or data[3] != SD2
-                or data[1] != n_in + 3 or data[2] != n_in + 3 or data[4] != self.address
-                or data[5] != p.slave.address or data[6] != 0x08 or data[-1] != ED
-                or (sum(data[4:-2]) & 0xFF) != data[-2]):
-            return None
-        return bytes(data[7:-2])
-
     def _feed(self, data: bytes, now: float) -> None:
         p = self._pending
         if p is not None and p.kind == "dx" and not self.deframer.pending:
-            inputs = self._dx_reply_data(p, data)
-            if inputs is not None:
+            # the usual good Data_Exchange reply, checked on the raw bytes: SD2 to us from the
+            # slave, FC DL (response, slave, no diagnosis), no SAPs, correct framing, FCS and ED;
+            # its length is checked on delivery. Anything else -- other lengths, DH, SD1 / SD3 / SC,
+            # split or merged chunks, errors -- takes the general path through the deframer.
+            inputs = sd2_data(data, self.address, p.slave.address, _FC_DL)
+            if inputs is not None and len(inputs) == (p.slave.spec.input_size or 0):
                 self._dx_done(p, inputs, ResponseStatus.DL, now)
                 return
         garbage = self.deframer.counters.garbage_bytes
@@ -729,20 +721,17 @@ class DpMaster:
     def _dx_request(self, slave: SlaveHandle) -> bytes:
         """The Data_Exchange request (SRD high, default SAP, the latched outputs) as bytes.
 
-        The SD2 case -- every cycle of the usual slave -- is assembled directly (the same
-        bytes as ``request_frame(...).encode()``, without building frame objects); empty or
-        8-byte outputs (SD1 / SD3) go through :func:`request_frame`.
+        The SD2 case -- every cycle of the usual slave -- goes straight to the codec
+        (:func:`~.fdl.sd2_encode`, the same bytes as ``request_frame(...).encode()`` without
+        building frame objects); empty or 8-byte outputs (SD1 / SD3) go through :func:`request_frame`.
         """
         fcb, fcv = slave.fcb.bits()
         data = slave.outputs
         n = len(data)
         if n == 0 or n == 8:
             return request_frame(slave.address, self.address, fcb, fcv, None, data).encode()
-        head = (slave.address, self.address,
-                0x40 | RequestFunction.SRD_HIGH | (0x20 if fcb else 0) | (0x10 if fcv else 0))
-        le = n + 3
-        return (bytes((SD2, le, le, SD2) + head) + data
-                + bytes(((sum(head) + sum(data)) & 0xFF, ED)))
+        return sd2_encode(slave.address, self.address,
+                          _FC_SRD_HIGH | (0x20 if fcb else 0) | (0x10 if fcv else 0), data)
 
     # -- reply handlers -------------------------------------------------------------------
     def _on_fdl_status(self, p: _Pending, frame: Frame, now: float) -> None:

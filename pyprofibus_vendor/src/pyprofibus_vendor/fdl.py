@@ -46,7 +46,7 @@ __all__ = [
     "SD1", "SD2", "SD3", "SD4", "SC", "ED", "BROADCAST", "MAX_STATION", "DEFAULT_SLAVE_ADDRESS",
     "MAX_DU_LEN", "StartDelimiter", "FcBit", "RequestFunction", "ResponseStatus", "StationType",
     "FrameControl", "Sd1", "Sd2", "Sd3", "Sd4", "ShortAck", "Frame", "data_frame",
-    "decode_frame", "frame_length", "fcs", "Deframer", "DeframerCounters",
+    "decode_frame", "frame_length", "fcs", "sd2_encode", "sd2_body", "sd2_data", "Deframer", "DeframerCounters",
     "FcbRequester", "FcbResponder", "RespondingLink",
 ]
 
@@ -329,6 +329,52 @@ class _DataFrame:
         return da & 0x7F, sa & 0x7F, FrameControl.decode(fcb), du[pos:], dsap, ssap
 
 
+# -- the SD2 codec: bytes level, shared by Sd2 and the DP master's Data_Exchange fast path --------
+
+def sd2_encode(da: int, sa: int, fc: int, du: bytes) -> bytes:
+    """The SD2 telegram ``68 LE LE 68 DA SA FC DU FCS 16`` from its raw header bytes (DA and SA
+    with their extension bits, the FC byte) and data unit (DAE / SAE included).
+
+    No checks: :class:`Sd2` validated the fields, the master built them; a data unit of 1..246
+    bytes and header bytes 0..255 give a valid telegram."""
+    le = len(du) + 3
+    return bytes((0x68, le, le, 0x68, da, sa, fc)) + du + bytes(((da + sa + fc + sum(du)) & 0xFF, 0x16))
+
+
+def sd2_body(data: bytes) -> bytes:
+    """The body ``DA SA FC DU`` of ``data``, one complete SD2 telegram, after checking its framing
+    (start delimiters, LE = LEr within 4..249, exact length, FCS, ED). Raises
+    :class:`TruncatedFrameError`, :class:`FcsError` or :class:`FrameError`."""
+    _expect_sd(data, SD2)
+    if len(data) < 4:
+        raise TruncatedFrameError(f"SD2 header needs 4 bytes, got {len(data)}")
+    le, ler = data[1], data[2]
+    if le != ler:
+        raise FrameError(f"SD2 LE 0x{le:02X} != LEr 0x{ler:02X}")
+    if not _MIN_LE <= le <= _MAX_LE:
+        raise FrameError(f"SD2 LE {le} not in {_MIN_LE}..{_MAX_LE}")
+    if data[3] != SD2:
+        raise FrameError(f"SD2 repeated start delimiter is 0x{data[3]:02X}, not 0x68")
+    _expect_len(data, le + 6)
+    _check_tail(data, 4, 4 + le)
+    return data[4:4 + le]
+
+
+def sd2_data(data: bytes, da: int, sa: int, fc: int) -> Optional[bytes]:
+    """The data unit of ``data`` if it is exactly one valid SD2 telegram (the framing checks of
+    :func:`sd2_body`) whose raw DA, SA and FC bytes are ``da``, ``sa`` and ``fc``; else None.
+
+    The receive fast path: one pass of comparisons, no exception and no objects, for a caller
+    that knows which reply it expects (e.g. the master's Data_Exchange: no SAPs, FC DL). Anything
+    else -- None -- goes through the :class:`Deframer` and :class:`Sd2` with their errors."""
+    le = len(data) - 6        # 0x68 = SD2, 0x16 = ED as plain ints: cheaper to compare than the enum
+    if (not _MIN_LE <= le <= _MAX_LE or data[1] != le or data[2] != le or data[4] != da or data[5] != sa
+            or data[6] != fc or data[0] != 0x68 or data[3] != 0x68 or data[-1] != 0x16
+            or (sum(data[4:-2]) & 0xFF) != data[-2]):
+        return None
+    return bytes(data[7:-2])
+
+
 @dataclass(frozen=True)
 class Sd2(_DataFrame):
     """Variable length telegram: ``68 LE LEr 68 DA SA FC [DAE][SAE] data FCS 16``."""
@@ -342,26 +388,13 @@ class Sd2(_DataFrame):
             raise FrameError(f"SD2 data unit length {n} not in 1..{MAX_DU_LEN}")
 
     def encode(self) -> bytes:
-        body = self._body()
-        le = len(body)
-        return bytes((SD2, le, le, SD2)) + body + bytes((fcs(body), ED))
+        da = self.da | (_EXT if self.dsap is not None else 0)
+        sa = self.sa | (_EXT if self.ssap is not None else 0)
+        return sd2_encode(da, sa, self.fc.encode(), self.du)
 
     @classmethod
     def decode(cls, data: bytes) -> "Sd2":
-        data = bytes(data)
-        _expect_sd(data, SD2)
-        if len(data) < 4:
-            raise TruncatedFrameError(f"SD2 header needs 4 bytes, got {len(data)}")
-        le, ler = data[1], data[2]
-        if le != ler:
-            raise FrameError(f"SD2 LE 0x{le:02X} != LEr 0x{ler:02X}")
-        if not _MIN_LE <= le <= _MAX_LE:
-            raise FrameError(f"SD2 LE {le} not in {_MIN_LE}..{_MAX_LE}")
-        if data[3] != SD2:
-            raise FrameError(f"SD2 repeated start delimiter is 0x{data[3]:02X}, not 0x68")
-        _expect_len(data, le + 6)
-        _check_tail(data, 4, 4 + le)
-        return cls(*cls._parse_body(data[4:4 + le]))
+        return cls(*cls._parse_body(sd2_body(bytes(data))))
 
 
 @dataclass(frozen=True)
