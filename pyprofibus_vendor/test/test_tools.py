@@ -512,7 +512,8 @@ def test_sniff_reports_bad_input_and_unmet_count(tmp_path):
 
 
 def test_sniff_survives_random_bytes():
-    noise = random.Random(7).randbytes(20000) + b"".join(startup_bytes())
+    rng = random.Random(7)
+    noise = bytes(rng.getrandbits(8) for _ in range(20000)) + b"".join(startup_bytes())
     result = run_tool("sniff", "--file", "-", "--format", "raw", "--json", stdin=noise)
     assert result.returncode == 0, result.err
     events = [json.loads(line) for line in result.out.splitlines()]

@@ -12,7 +12,7 @@ import math
 import threading
 import time
 import unittest
-from typing import Callable, List, Optional
+from typing import Callable, List
 
 import actionlib
 import rospy

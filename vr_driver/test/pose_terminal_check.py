@@ -13,8 +13,6 @@ import io
 import json
 import os
 import subprocess
-import threading
-import time
 import unittest
 
 import pexpect

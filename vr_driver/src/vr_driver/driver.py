@@ -22,11 +22,10 @@ import enum
 import errno
 import itertools
 import logging
-import math
 import re
 import threading
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.dp import DiagStatus1
@@ -39,7 +38,7 @@ from .kinematics import Kinematics
 from .motion import MotionPlanner, MoveType, Trajectory
 from .params import DriverParams
 from .poses import ControllerPose
-from .protocol import (Aborted, Accepted, Command, ControllerState, Done, Feedback, MasterHandshake,
+from .protocol import (Aborted, Accepted, Command, Done, Feedback, MasterHandshake,
                        Rejected, StatusBits, TimedOut, commands_for)
 
 log = logging.getLogger("vr_driver.driver")

@@ -7,10 +7,8 @@ move_to_pose action and the stop_motion service; subscribes joint_path_command. 
 from __future__ import annotations
 
 import faulthandler
-import math
 import signal
 import sys
-import threading
 import threading
 from typing import Dict, List, Optional
 

@@ -24,7 +24,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES, SimDeviceError,
                              SimError, SimOptions, VirtualController)
-from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
+from .ros_support import route_to_rosout, stop_on_signals
 from .sim_arm import LogEntry
 
 #: parameters the node writes itself (not options)
