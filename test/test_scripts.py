@@ -1,6 +1,7 @@
 """The user-facing scripts: help, clear errors, and the workspace environment they provide."""
 import io
 import os
+import re
 import select
 import signal
 import subprocess
@@ -163,6 +164,29 @@ class ScriptsTest(unittest.TestCase):
         self.assertRegex(res.stderr, r"\[run\] ERROR: the driver did not come up .*run-[0-9-]+\.log")
         self.assertIn(marker, res.stderr)                                   # the log's last lines say why
         self.assertEqual(processes_mentioning(marker), [])
+
+
+class TfToolsTest(unittest.TestCase):
+    """The README names the tf tools (rosrun tf tf_echo ...); scripts/setup installs them (Debian tf-tools)."""
+
+    def test_every_tf_tool_the_readme_names_runs(self):
+        with open(os.path.join(REPO, "README.md")) as f:
+            tools = sorted(set(re.findall(r"rosrun tf (\w+)", f.read())))
+        self.assertIn("tf_echo", tools)
+        for name in tools:
+            res = script("env", "bash", "-c", 'p=$(catkin_find --libexec tf "$1" | head -n 1); '
+                         'test -x "$p" && echo "$p" && rospack find tf', "-", name)
+            self.assertEqual(res.returncode, 0, "rosrun tf %s: not installed (scripts/setup installs tf-tools)\n%s"
+                             % (name, res.stderr))
+        res = script("env", "rosrun", "tf", "tf_echo", timeout=60)          # no frames given: its usage
+        self.assertIn("Usage: tf_echo source_frame target_frame", res.stdout + res.stderr)
+
+    def test_setup_installs_the_tf_tools(self):
+        res = script("setup", "--check", env={"VR_SETUP_EXTRA_APT": ""})
+        with open(os.path.join(REPO, "scripts", "setup")) as f:
+            text = f.read()
+        self.assertRegex(text, r"\btf-tools\b")
+        self.assertNotIn("tf-tools", res.stdout)                              # present after setup
 
 
 def processes_mentioning(text):

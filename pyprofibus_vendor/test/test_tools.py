@@ -373,7 +373,7 @@ def test_master_reports_no_answer():
 # ---------------------------------------------------------------------------------------------
 
 def startup_bytes() -> List[bytes]:
-    """The start-up of PROFIBUS.md, byte for byte (master 2, slave 8, ident 0x4D14)."""
+    """The recorded real start-up (as in pyprofibus_vendor/README.md), byte for byte (master 2, slave 8, ident 0x4D14)."""
     return [bytes.fromhex(h) for h in (
         "10 08 02 49 53 16",
         "10 02 08 00 0A 16",

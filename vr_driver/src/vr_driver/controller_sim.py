@@ -1,4 +1,4 @@
-"""The virtual G2 controller: a DP slave running the robot-side program of DESIGN.md §4 against a
+"""The virtual G2 controller: a DP slave running the robot-side program of doc/controller_program.md against a
 simulated arm. ROS-free.
 
 Pieces:
@@ -214,7 +214,7 @@ class _Pending:
 
 
 class ControllerProgram:
-    """The robot-side program loop (DESIGN.md §4) on one DP slave and one simulated arm.
+    """The robot-side program loop (doc/controller_program.md) on one DP slave and one simulated arm.
 
     Call :meth:`step` once per loop with the clock time; it returns the Feedback it wrote. Not
     thread-safe by itself: one thread runs it (the arm and the log are thread-safe, so faults can be

@@ -1,7 +1,7 @@
 """Offline export and import of Panasonic DTPS ``.csr`` programs. ROS-free (rospy is imported only
 by the ``--from-topic`` mode of the command line).
 
-The format (facts and sources: CSR_FORMAT.md; usage and conventions: doc/csr.md) is plain text,
+The format (usage, conventions and the details chosen: doc/csr.md) is plain text,
 comma separated, in sections::
 
     [Description]   Key, value lines: Robot, Comment (<= 30 chars), SubComment1/2, Mechanism,
@@ -87,7 +87,7 @@ CARTESIAN_COLUMNS = ("X", "Y", "Z", "U", "V", "W")
 POSE_COLUMNS = {"AJ": JOINT_COLUMNS, "AU": CARTESIAN_COLUMNS}
 SECTION_ORDER = ("Description", "Pose", "Variable", "Command")
 
-COMMENT_MAX = 30              # CSR_FORMAT.md: Comment <= 30 chars
+COMMENT_MAX = 30              # DTPS: Comment <= 30 chars
 CREATOR_MAX = 16              # Creator <= 16 chars
 VARIABLE_NAME_MAX = 8         # variable name <= 8 chars
 VARIABLE_COMMENT_MAX = 32     # variable comment <= 32 chars
