@@ -111,7 +111,11 @@ class DriverLaunchParamsTest(unittest.TestCase):
 
     def test_sim_defaults(self):
         p, params = self.check()
-        self.assertEqual(p.port, params["/virtual_controller/pty_link"])
+        from vr_driver.controller_sim import auto_pty_link
+        # one value for both nodes (sim_port, default auto), which both resolve to the same link
+        self.assertEqual(params["/virtual_controller/pty_link"], "auto")
+        self.assertEqual(params["/interface/port"], "auto")
+        self.assertEqual(p.port, auto_pty_link())
         self.assertEqual(p.bus().baud, params["/virtual_controller/baud"])
 
     def test_real_port(self):

@@ -103,7 +103,8 @@ class ScriptsTest(unittest.TestCase):
     def test_run_opens_the_pose_terminal_and_stops_everything_when_it_is_left(self):
         """The README's first command, as a person uses it: one call, the driver and the virtual
         controller come up behind the pose terminal; a move; Ctrl-C during a move stops the arm
-        (and only the move: the driver stays); Ctrl-C at the prompt leaves and stops everything."""
+        (and only the move: the driver stays); Ctrl-C at a prompt abandons the entry, not the session;
+        quit leaves and stops everything."""
         import pexpect
         marker = "/tmp/vr006l_test_run_terminal_%d" % os.getpid()
         child = pexpect.spawn(os.path.join(REPO, "scripts", "run"),
@@ -141,7 +142,12 @@ class ScriptsTest(unittest.TestCase):
             child.sendline("status")                                       # the driver survived the Ctrl-C
             expect(r"motion possible: yes")
             expect(prompt)
-            child.sendintr()                                               # Ctrl-C at the prompt: leave
+            child.sendline("1000")
+            expect(r"Y \[mm")
+            child.sendintr()                                               # Ctrl-C at a prompt: the entry only
+            expect(r"Entry abandoned")
+            expect(prompt)
+            child.sendline("quit")                                         # leave
             expect(r"Bye\.")
             expect(r"\[run\] stopping the driver and the virtual controller")
             expect(r"\[run\] stopped \(log: ")
