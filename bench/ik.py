@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The standard IK benchmark of vr_driver.kinematics (issue 6; DESIGN.md §9: printed, never asserted).
+"""The standard IK benchmark of vr_driver.kinematics (issue 6; like every benchmark: printed, never asserted).
 
     scripts/env python3 bench/ik.py [--n 10000] [--seed 1] [--budget 0.005] [--noise 0.05] [--no-numeric]
 

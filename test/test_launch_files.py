@@ -112,7 +112,11 @@ class DriverLaunchParamsTest(unittest.TestCase):
     def test_sim_defaults(self):
         from vr_driver.controller_sim import SimOptions
         p, params = self.check()
-        self.assertEqual(p.port, params["/virtual_controller/pty_link"])
+        from vr_driver.controller_sim import auto_pty_link
+        # one value for both nodes (sim_port, default auto), which both resolve to the same link
+        self.assertEqual(params["/virtual_controller/pty_link"], "auto")
+        self.assertEqual(params["/interface/port"], "auto")
+        self.assertEqual(p.port, auto_pty_link())
         # no baud argument: the virtual controller's default is the parameter file's baud
         self.assertNotIn("/virtual_controller/baud", params)
         self.assertEqual(p.bus().baud, SimOptions().baud)

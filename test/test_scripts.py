@@ -1,6 +1,7 @@
 """The user-facing scripts: help, clear errors, and the workspace environment they provide."""
 import io
 import os
+import re
 import select
 import signal
 import subprocess
@@ -102,7 +103,8 @@ class ScriptsTest(unittest.TestCase):
     def test_run_opens_the_pose_terminal_and_stops_everything_when_it_is_left(self):
         """The README's first command, as a person uses it: one call, the driver and the virtual
         controller come up behind the pose terminal; a move; Ctrl-C during a move stops the arm
-        (and only the move: the driver stays); Ctrl-C at the prompt leaves and stops everything."""
+        (and only the move: the driver stays); Ctrl-C at a prompt abandons the entry, not the session;
+        quit leaves and stops everything."""
         import pexpect
         marker = "/tmp/vr006l_test_run_terminal_%d" % os.getpid()
         child = pexpect.spawn(os.path.join(REPO, "scripts", "run"),
@@ -140,7 +142,12 @@ class ScriptsTest(unittest.TestCase):
             child.sendline("status")                                       # the driver survived the Ctrl-C
             expect(r"motion possible: yes")
             expect(prompt)
-            child.sendintr()                                               # Ctrl-C at the prompt: leave
+            child.sendline("1000")
+            expect(r"Y \[mm")
+            child.sendintr()                                               # Ctrl-C at a prompt: the entry only
+            expect(r"Entry abandoned")
+            expect(prompt)
+            child.sendline("quit")                                         # leave
             expect(r"Bye\.")
             expect(r"\[run\] stopping the driver and the virtual controller")
             expect(r"\[run\] stopped \(log: ")
@@ -163,6 +170,29 @@ class ScriptsTest(unittest.TestCase):
         self.assertRegex(res.stderr, r"\[run\] ERROR: the driver did not come up .*run-[0-9-]+\.log")
         self.assertIn(marker, res.stderr)                                   # the log's last lines say why
         self.assertEqual(processes_mentioning(marker), [])
+
+
+class TfToolsTest(unittest.TestCase):
+    """The README names the tf tools (rosrun tf tf_echo ...); scripts/setup installs them (Debian tf-tools)."""
+
+    def test_every_tf_tool_the_readme_names_runs(self):
+        with open(os.path.join(REPO, "README.md")) as f:
+            tools = sorted(set(re.findall(r"rosrun tf (\w+)", f.read())))
+        self.assertIn("tf_echo", tools)
+        for name in tools:
+            res = script("env", "bash", "-c", 'p=$(catkin_find --libexec tf "$1" | head -n 1); '
+                         'test -x "$p" && echo "$p" && rospack find tf', "-", name)
+            self.assertEqual(res.returncode, 0, "rosrun tf %s: not installed (scripts/setup installs tf-tools)\n%s"
+                             % (name, res.stderr))
+        res = script("env", "rosrun", "tf", "tf_echo", timeout=60)          # no frames given: its usage
+        self.assertIn("Usage: tf_echo source_frame target_frame", res.stdout + res.stderr)
+
+    def test_setup_installs_the_tf_tools(self):
+        res = script("setup", "--check", env={"VR_SETUP_EXTRA_APT": ""})
+        with open(os.path.join(REPO, "scripts", "setup")) as f:
+            text = f.read()
+        self.assertRegex(text, r"\btf-tools\b")
+        self.assertNotIn("tf-tools", res.stdout)                              # present after setup
 
 
 def processes_mentioning(text):

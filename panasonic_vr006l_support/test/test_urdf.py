@@ -1,6 +1,7 @@
 """The VR-006L model: the xacro renders, check_urdf accepts it, and it matches its YAML source."""
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -13,6 +14,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(
 
 from panasonic_vr006l_support.description import (  # noqa: E402
     DescriptionError, default_kinematics_yaml, main as xacro_compat_main, render_urdf)
+from panasonic_vr006l_support import calibration  # noqa: E402
 from panasonic_vr006l_support.model import ModelError, RobotModel, rpy_matrix  # noqa: E402
 
 PKG_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -162,6 +164,60 @@ class ModelTest(unittest.TestCase):
     def test_default_yaml_path_is_the_package_file(self):
         self.assertEqual(os.path.realpath(default_kinematics_yaml()),
                          os.path.realpath(os.path.join(PKG_DIR, "config", "kinematics_vr006l.yaml")))
+
+
+def canonical(urdf_text):
+    """The URDF without comments and layout whitespace, for comparing two renderings."""
+    from lxml import etree
+
+    root = etree.fromstring(urdf_text.encode(), etree.XMLParser(remove_comments=True, remove_blank_text=True))
+    return etree.tostring(root, method="c14n")
+
+
+class StockXacroTest(unittest.TestCase):
+    """Plain ``xacro`` (PyPI's 1.13.3 on Debian 12, whose load_yaml fails under PyYAML 6) renders the
+    model, identical to the model rendered from the YAML itself."""
+
+    def test_the_xacro_command_renders_the_model(self):
+        xacro = shutil.which("xacro")
+        self.assertIsNotNone(xacro, "xacro is not on PATH: run scripts/setup")
+        res = subprocess.run([xacro, os.path.join(PKG_DIR, "urdf", "vr006l.xacro")],
+                             capture_output=True, text=True, timeout=60)
+        self.assertEqual(res.returncode, 0, res.stderr)
+        self.assertNotIn("Loader", res.stderr)
+        from_yaml = render_urdf(mappings={"kinematics_config": default_kinematics_yaml()})
+        self.assertEqual(canonical(res.stdout), canonical(from_yaml))
+        model = RobotModel.from_urdf_string(res.stdout)
+        self.assertEqual(sorted(model.links), sorted(LINKS))
+
+    def test_the_generated_calibration_matches_the_yaml(self):
+        with open(calibration.XACRO_PATH) as f:
+            self.assertEqual(f.read(), calibration.xacro_text(load_yaml("kinematics_vr006l.yaml")),
+                             "urdf/vr006l_calibration.xacro is out of date: "
+                             "run scripts/env python3 -m panasonic_vr006l_support.calibration")
+        self.assertEqual(calibration.main(["--check"]), 0)
+
+    def test_a_changed_yaml_makes_the_check_fail_and_the_writer_follow(self):
+        cfg = load_yaml("kinematics_vr006l.yaml")
+        cfg["geometry"]["upper_arm"]["value"] = 0.7
+        with tempfile.TemporaryDirectory() as d:
+            src, out = os.path.join(d, "k.yaml"), os.path.join(d, "c.xacro")
+            with open(src, "w") as f:
+                yaml.safe_dump(cfg, f)
+            with open(out, "w") as f:
+                f.write(calibration.xacro_text(load_yaml("kinematics_vr006l.yaml")))
+            self.assertEqual(calibration.main(["--check", "--yaml", src, "-o", out]), 1)
+            self.assertEqual(calibration.main(["--yaml", src, "-o", out]), 0)
+            self.assertEqual(calibration.main(["--check", "--yaml", src, "-o", out]), 0)
+            with open(out) as f:
+                self.assertRegex(f.read(), r"upper_arm=dict\([^)]*value=0\.7\b")
+
+    def test_text_notes_are_left_out_and_odd_values_refused(self):
+        self.assertEqual(calibration.numbers_only({"a": {"value": 1.5, "source": "x", "calibrate": False}}),
+                         {"a": {"value": 1.5, "calibrate": False}})
+        for bad in ({"a": [1, 2]}, {"a": float("nan")}, {"a b": 1}, {"a": None}):
+            with self.assertRaises(calibration.CalibrationError):
+                calibration.numbers_only(bad)
 
 
 class DescriptionErrorsTest(unittest.TestCase):

@@ -131,7 +131,7 @@ class StartupTest(unittest.TestCase):
         self.assertEqual(rig.master.counters.reconnects, 0)
 
     def test_reproduces_the_recorded_startup_byte_for_byte(self):
-        """Master 2, slave 8, ident 0x4D14, cfg 3D, WD 300 ms, group 1 (PROFIBUS.md)."""
+        """Master 2, slave 8, ident 0x4D14, cfg 3D, WD 300 ms, group 1 (a recorded real start-up, as in pyprofibus_vendor/README.md)."""
         script = {FDL_STATUS_REQ: FDL_STATUS_REPLY, DIAG_REQ: DIAG_REPLY_1,
                   SET_PRM_REQ: b"\xE5", CHK_CFG_REQ: b"\xE5"}
         tx: List[bytes] = []

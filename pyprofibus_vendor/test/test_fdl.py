@@ -9,7 +9,7 @@ from pyprofibus_vendor.fdl import (Deframer, FcbRequester, FcbResponder, FrameCo
                                    ShortAck, StationType, data_frame, decode_frame, fcs,
                                    frame_length, sd2_body, sd2_data, sd2_encode)
 
-# the real start-up from PROFIBUS.md (slave 8, master 2, ident 0x4D14)
+# a recorded real start-up (pyprofibus_vendor/README.md: slave 8, master 2, ident 0x4D14)
 FDL_STATUS_REQ = bytes.fromhex("10 08 02 49 53 16")
 FDL_STATUS_REPLY = bytes.fromhex("10 02 08 00 0A 16")
 DIAG_REQ = bytes.fromhex("68 05 05 68 88 82 6D 3C 3E F1 16")

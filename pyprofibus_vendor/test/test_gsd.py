@@ -193,7 +193,7 @@ def test_test_gsd_special_format_modules():
 
 
 # ---------------------------------------------------------------------------------------------
-# Cfg identifier decoding (golden vectors from PROFIBUS.md)
+# Cfg identifier decoding (golden vectors from the PROFIBUS-DP standard's Cfg byte layout)
 # ---------------------------------------------------------------------------------------------
 
 def test_decode_cfg_general_format():

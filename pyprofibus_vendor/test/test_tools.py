@@ -373,7 +373,7 @@ def test_master_reports_no_answer():
 # ---------------------------------------------------------------------------------------------
 
 def startup_bytes() -> List[bytes]:
-    """The start-up of PROFIBUS.md, byte for byte (master 2, slave 8, ident 0x4D14)."""
+    """The recorded real start-up (as in pyprofibus_vendor/README.md), byte for byte (master 2, slave 8, ident 0x4D14)."""
     return [bytes.fromhex(h) for h in (
         "10 08 02 49 53 16",
         "10 02 08 00 0A 16",
@@ -512,7 +512,8 @@ def test_sniff_reports_bad_input_and_unmet_count(tmp_path):
 
 
 def test_sniff_survives_random_bytes():
-    noise = random.Random(7).randbytes(20000) + b"".join(startup_bytes())
+    rng = random.Random(7)
+    noise = bytes(rng.getrandbits(8) for _ in range(20000)) + b"".join(startup_bytes())
     result = run_tool("sniff", "--file", "-", "--format", "raw", "--json", stdin=noise)
     assert result.returncode == 0, result.err
     events = [json.loads(line) for line in result.out.splitlines()]

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import threading
 import time
 import unittest
-from typing import Callable, List, Optional
+from typing import Callable, List
 
 import actionlib
+import rosgraph
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
@@ -26,6 +28,7 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from vr_driver.controller_sim import SimDeviceError, VirtualController, auto_pty_link
 from vr_driver.kinematics import Kinematics
 from vr_driver.msg import CartesianPose, MoveToPoseAction, MoveToPoseGoal, RobotStatus, TriState
 from vr_driver.poses import ControllerPose
@@ -477,6 +480,23 @@ class DriverTest(unittest.TestCase):
         self.assertEqual(self.client.get_state(), GoalStatus.ABORTED)
         self.assertIn("lost", self.client.get_result().reason)
         self.wait_motion_possible(10.0)
+
+    def test_13_the_default_sim_port_is_this_launchs_own_locked_link(self):
+        """driver.test leaves sim_port at its default (auto): both nodes found
+        <ROS log dir>/vr006l_virtual_g2_<master port>, and the controller holds it against a second one."""
+        link = auto_pty_link()
+        port = rosgraph.get_master_uri().rstrip("/").rsplit(":", 1)[-1]
+        self.assertTrue(link.endswith("vr006l_virtual_g2_" + port), link)
+        self.assertTrue(os.path.islink(link), link)
+        self.assertEqual(os.path.realpath(link), os.path.realpath(rospy.get_param("/virtual_controller/device_path")))
+        with open(link + ".lock") as f:
+            holder = int(f.read())
+        self.assertNotEqual(holder, os.getpid())
+        with self.assertRaises(SimDeviceError) as ctx:
+            VirtualController(pty_link=link)
+        self.assertIn("in use by the live process %d" % holder, str(ctx.exception))
+        self.assertEqual(os.path.realpath(link), os.path.realpath(rospy.get_param("/virtual_controller/device_path")))
+        self.wait_motion_possible()                       # the driver's link is untouched
 
 
 if __name__ == "__main__":

@@ -13,8 +13,6 @@ import io
 import json
 import os
 import subprocess
-import threading
-import time
 import unittest
 
 import pexpect
@@ -144,6 +142,7 @@ class PoseTerminalTest(unittest.TestCase):
             ("1e999", r"Z: inf is not a position", r"Z \[mm"),
             ("12,5", r"Z: '12,5' is not a number", r"Z \[mm"),
             ("800", None, r"Rx \[deg"),
+            ("inf", r"Rx: 'inf' is not an angle: a finite number in -180\.\.180 deg is needed", r"Rx \[deg"),
             ("", None, r"Ry \[deg"),
             ("200", r"Ry = 200 deg is above the workspace: allowed -180\.\.180 deg", r"Ry \[deg"),
             ("", None, r"Rz \[deg"),
@@ -171,6 +170,7 @@ class PoseTerminalTest(unittest.TestCase):
         self.expect(t, r"Refused, nothing was sent: .*unreachable")
         self.expect(t, FIRST_PROMPT)
         self.assertNotIn("[y/N]", t.before)
+        self.assertNotIn("(1400)", t.after)                     # a refused entry is not the next default
         t.sendline("1000 150 800 0 45 0 circ")
         self.expect(t, r"a circular move needs a via point")
         self.expect(t, FIRST_PROMPT)
@@ -243,22 +243,45 @@ class PoseTerminalTest(unittest.TestCase):
         self.expect(t, FIRST_PROMPT)
         self.quit(t)
 
-    def test_06_quit_ctrl_d_and_ctrl_c_at_a_prompt_leave_cleanly(self):
+    def test_06_ctrl_c_and_cancel_abandon_an_entry_quit_and_ctrl_d_leave(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
         t = self.spawn()
         t.sendline("help")
-        for word in ("home", "stop", "status", "history", "help", "quit"):
+        for word in ("home", "stop", "status", "history", "help", "cancel", "quit"):
             self.expect(t, r"\n  %s " % word)
         self.expect(t, FIRST_PROMPT)
-        self.quit(t)
-        for key in ("eof", "intr"):
-            t = self.spawn()
-            t.sendline("1000")                                   # in the middle of an entry
-            self.expect(t, r"Y \[mm")
-            t.sendeof() if key == "eof" else t.sendintr()
-            self.expect(t, r"Bye\.")
-            self.expect(t, pexpect.EOF)
-            t.close()
-            self.assertEqual(t.exitstatus, 0, key)
+        t.sendline("1000")                                       # half an entry, then Ctrl-C
+        self.expect(t, r"Y \[mm")
+        t.sendintr()
+        self.expect(t, r"Entry abandoned")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("1000")                                       # half an entry, then 'cancel'
+        self.expect(t, r"Y \[mm")
+        t.sendline("200")
+        self.expect(t, r"Z \[mm")
+        t.sendline("cancel")
+        self.expect(t, r"Entry abandoned\.")
+        self.expect(t, FIRST_PROMPT)
+        t.sendintr()                                             # Ctrl-C at the first prompt: still here
+        self.expect(t, r"Entry abandoned \(Ctrl-C\)")
+        self.expect(t, FIRST_PROMPT)
+        t.sendline("1000")
+        self.expect(t, r"Y \[mm")
+        t.sendline("quit")                                       # quit inside an entry
+        self.expect(t, r"Bye\.")
+        self.expect(t, pexpect.EOF)
+        t.close()
+        self.assertEqual(t.exitstatus, 0)
+        self.assertEqual(self.entries()[before:], [])            # nothing abandoned was sent
+        t = self.spawn()
+        t.sendline("1000")
+        self.expect(t, r"Y \[mm")
+        t.sendeof()
+        self.expect(t, r"Bye\.")
+        self.expect(t, pexpect.EOF)
+        t.close()
+        self.assertEqual(t.exitstatus, 0)
 
     def test_07_history_status_home_and_stop_commands(self):
         self.wait_motion_possible()

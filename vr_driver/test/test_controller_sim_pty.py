@@ -25,7 +25,7 @@ from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
 from pyprofibus_vendor.dp_slave import SlaveState
 from pyprofibus_vendor.phy_serial import SerialLink, open_pty_pair
 
-from vr_driver.controller_sim import VirtualController
+from vr_driver.controller_sim import SimDeviceError, SimError, VirtualController, auto_pty_link
 from vr_driver.errors import VrDriverError
 from vr_driver.motion import MotionPlanner, MoveType
 from vr_driver.poses import ControllerPose, Workspace
@@ -342,3 +342,59 @@ def test_cli_serves_a_pty_link_and_exits_cleanly(tmp_path, sig):
         (5, "CIRC_END", "executed")]
     assert lines[1]["final_pose"] == [1000, 100, 700, 0, 60, 0]
     assert lines[4]["via"] == [1080, 80, 720, 0, 50, 0]
+
+
+# ------------------------------------------------------------------ the pty link: per launch, locked
+
+def test_auto_pty_link_is_per_master_port_under_the_ros_log_dir():
+    assert (auto_pty_link({"ROS_MASTER_URI": "http://localhost:11400/", "ROS_LOG_DIR": "/x/log"})
+            == "/x/log/vr006l_virtual_g2_11400")
+    assert (auto_pty_link({"ROS_MASTER_URI": "http://host:11401", "ROS_HOME": "/h"})
+            == "/h/log/vr006l_virtual_g2_11401")
+    assert auto_pty_link({"ROS_HOME": "/h"}) == "/h/log/vr006l_virtual_g2_11311"      # ROS' default master
+    with pytest.raises(SimError, match="ROS_MASTER_URI"):
+        auto_pty_link({"ROS_MASTER_URI": "http://host/"})
+
+
+def _lock_of(link):
+    with open(link + ".lock") as f:
+        return int(f.read())
+
+
+def test_a_link_held_by_a_live_controller_is_refused_and_released_on_stop(tmp_path):
+    link = str(tmp_path / "g2")
+    first = VirtualController(pty_link=link)
+    try:
+        assert os.readlink(link) == first.device_path
+        assert _lock_of(link) == os.getpid()
+        with pytest.raises(SimDeviceError, match="in use by the live process %d" % os.getpid()):
+            VirtualController(pty_link=link)
+        assert os.readlink(link) == first.device_path           # the first one's link is untouched
+    finally:
+        first.stop()
+    assert not os.path.lexists(link) and not os.path.exists(link + ".lock")
+    again = VirtualController(pty_link=link)
+    again.stop()
+
+
+def test_a_link_locked_by_another_live_process_is_refused_until_that_process_ends(tmp_path):
+    link = str(tmp_path / "g2")
+    holder = subprocess.Popen([sys.executable, "-c", "import sys; sys.stdin.read()"], stdin=subprocess.PIPE)
+    try:
+        os.symlink("/dev/null", link)
+        with open(link + ".lock", "w") as f:
+            f.write("%d\n" % holder.pid)
+        with pytest.raises(SimDeviceError) as err:
+            VirtualController(pty_link=link)
+        assert "in use by the live process %d" % holder.pid in str(err.value)
+        assert "sim_port" in str(err.value)                      # says what to do
+        assert os.readlink(link) == "/dev/null"
+    finally:
+        holder.stdin.close()
+        holder.wait(10)
+    taken = VirtualController(pty_link=link)                    # its process is gone: a stale lock
+    try:
+        assert os.readlink(link) == taken.device_path
+        assert _lock_of(link) == os.getpid()
+    finally:
+        taken.stop()

@@ -14,10 +14,10 @@ import yaml
 from panasonic_vr006l_support.description import default_kinematics_yaml, render_urdf
 from panasonic_vr006l_support.model import RobotModel
 from vr_driver import kinematics as kin_mod
-from vr_driver.errors import (IkTimeoutError, JointLimitError, KinematicsError, ModelError, NearSingularError,
+from vr_driver.errors import (IkTimeoutError, JointLimitError, ModelError, NearSingularError,
                               PoseError, UnreachableError)
 from vr_driver.kinematics import IkSettings, Kinematics, UrdfModel, read_ik_settings, read_srdf
-from vr_driver.poses import HOME_POSE, ControllerPose, rpy_to_matrix
+from vr_driver.poses import HOME_POSE, rpy_to_matrix
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MOVEIT = os.path.join(REPO, "panasonic_vr006l_moveit_config", "config")

@@ -1,4 +1,4 @@
-"""The core modules of vr_driver import without ROS (STYLE.md §5 rule 1): rospy, rospkg and every
+"""The core modules of vr_driver import without ROS (vr_driver/__init__.py): rospy, rospkg and every
 *_msgs package are blocked, then each core module that exists is imported afresh in a subprocess."""
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ def test_core_module_imports_without_ros(module):
 
 
 def test_rospy_blocked_in_process_too():
-    """The same check in this process (what STYLE.md describes): block rospy, re-import the modules."""
+    """The same check in this process (as a user's process would): block rospy, re-import the modules."""
     saved = {k: v for k, v in sys.modules.items() if k == "rospy" or k.startswith("vr_driver")}
     try:
         for k in list(sys.modules):

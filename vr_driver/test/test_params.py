@@ -25,6 +25,21 @@ def test_config_file_is_valid_and_equals_the_built_in_defaults():
                                                                    "watchdog_ms": 300})
 
 
+def test_port_auto_is_the_virtual_controllers_link_of_this_launch(monkeypatch):
+    """driver.launch passes sim_port (default auto) as both the controller's pty_link and the driver's
+    port: both resolve it to <ROS log dir>/vr006l_virtual_g2_<master port>."""
+    from vr_driver.controller_sim import auto_pty_link
+    monkeypatch.setenv("ROS_MASTER_URI", "http://localhost:11517/")
+    monkeypatch.setenv("ROS_LOG_DIR", "/var/tmp/roslogs")
+    params = DriverParams.from_dict({"port": "auto"})
+    assert params.port == "/var/tmp/roslogs/vr006l_virtual_g2_11517" == auto_pty_link()
+    assert params.bus().phy.device == params.port
+    monkeypatch.setenv("ROS_MASTER_URI", "http://localhost/")
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"port": "auto"})
+    assert "ROS_MASTER_URI" in str(err.value)
+
+
 def test_config_file_documents_every_parameter():
     assert set(load()) == set(DriverParams.__dataclass_fields__)
     with open(CONFIG) as f:

@@ -16,7 +16,7 @@ from vr_driver.motion import MoveType
 from vr_driver.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, FIELDS, Backend, InputError,
                                   MoveHandle, MoveProgress, MoveResult, PoseRequest, PreviewResult,
                                   ProgressPrinter, RangeError, StatusInfo, Terminal, build_arg_parser,
-                                  check_pose, fmt_number, parse_command, parse_move_type, parse_number,
+                                  check_pose, check_value, fmt_number, parse_command, parse_move_type, parse_number,
                                   parse_pose_line, prompt_text, request_from_args)
 from vr_driver.poses import HOME_POSE, ControllerPose, Workspace
 
@@ -343,7 +343,7 @@ def test_bad_values_are_re_prompted_with_the_reason():
     assert "  X: 'abc' is not a number" in text
     assert "  Y: 'nan' is not a position: a finite number in -900..900 mm is needed" in text
     assert "  Y = 1000 mm is above the workspace: allowed -900..900 mm" in text
-    assert "  Rz: inf is not a position" in text
+    assert "  Rz: inf is not an angle: a finite number in -180..180 deg is needed" in text
     assert [p for p in prompts if p.startswith("Y ")] == ["Y [mm, -900..900] (0): "] * 3
     assert backend.sent == [PoseRequest(MoveType.LIN, ControllerPose(1000, -200, 725, 0, 45, -30))]
 
@@ -417,12 +417,109 @@ def test_a_cancel_the_driver_ignores_is_followed_by_stop_motion():
     assert "calling stop_motion" in text and "Stopped at" in text
 
 
-def test_ctrl_c_and_ctrl_d_at_a_prompt_quit_cleanly():
-    for key in (KeyboardInterrupt, EOFError):
-        code, text, _, _ = session(FakeBackend(), [key])
-        assert code == EXIT_OK and text.rstrip().endswith("Bye.")
-        code, text, _, _ = session(FakeBackend(), ["1000", "0", key])     # in the middle of an entry
-        assert code == EXIT_OK and text.rstrip().endswith("Bye.")
+def test_ctrl_d_at_a_prompt_quits_cleanly():
+    code, text, _, _ = session(FakeBackend(), [EOFError])
+    assert code == EXIT_OK and text.rstrip().endswith("Bye.")
+    code, text, _, _ = session(FakeBackend(), ["1000", "0", EOFError])     # in the middle of an entry
+    assert code == EXIT_OK and text.rstrip().endswith("Bye.")
+
+
+FIRST_PROMPT = "X [mm, 100..1400] (1120): "
+# the answers that reach each later prompt of a field-by-field entry: Y, Z, Rx, Ry, Rz, move type, confirm
+LATER_PROMPTS = [("Y [", ["1000"]), ("Z [", ["1000", "0"]), ("Rx [", ["1000", "0", "800"]),
+                 ("Ry [", ["1000", "0", "800", ""]), ("Rz [", ["1000", "0", "800", "", ""]),
+                 ("Move type", ["1000", "0", "800", "", "", ""]),
+                 ("Send this", ["1000", "0", "800", "", "", "", "lin"])]
+
+
+@pytest.mark.parametrize("key", ["cancel", "CANCEL ", KeyboardInterrupt])
+@pytest.mark.parametrize("at,typed", LATER_PROMPTS, ids=[p for p, _ in LATER_PROMPTS])
+def test_cancel_or_ctrl_c_at_any_later_prompt_abandons_the_entry_not_the_session(at, typed, key):
+    backend = FakeBackend()
+    code, text, prompts, term = session(backend, typed + [key, "1000 200 800 0 45 0 lin", "y", "quit"])
+    assert code == EXIT_OK
+    n = len(typed)
+    assert prompts[n].startswith(at)
+    assert prompts[n + 1] == FIRST_PROMPT                    # back to the first prompt, defaults unchanged
+    assert ("Not sent." if at == "Send this" else "Entry abandoned") in text
+    assert backend.sent == [PoseRequest(MoveType.LIN, ControllerPose(1000, 200, 800, 0, 45, 0))]
+    assert prompts[-1] == "X [mm, 100..1400] (1000): "        # the session went on: the sent move is the default
+
+
+def test_ctrl_c_at_the_first_prompt_does_not_leave():
+    backend = FakeBackend()
+    code, text, prompts, _ = session(backend, [KeyboardInterrupt, "home", "y", "quit"])
+    assert code == EXIT_OK
+    assert "Entry abandoned (Ctrl-C); 'quit' or Ctrl-D leaves." in text
+    assert prompts[:2] == [FIRST_PROMPT, FIRST_PROMPT]
+    assert backend.sent == [PoseRequest(MoveType.PTP, HOME_POSE)]
+
+
+@pytest.mark.parametrize("at,typed", LATER_PROMPTS, ids=[p for p, _ in LATER_PROMPTS])
+def test_quit_at_any_prompt_leaves_and_sends_nothing(at, typed):
+    backend = FakeBackend()
+    code, text, prompts, _ = session(backend, typed + ["quit", "1000 0 800 0 45 0", "y"])
+    assert code == EXIT_OK
+    assert prompts[-1].startswith(at) and len(prompts) == len(typed) + 1
+    assert text.rstrip().endswith("Bye.")
+    assert backend.previews == ([] if at != "Send this" else backend.previews) and backend.sent == []
+
+
+@pytest.mark.parametrize("at,typed", LATER_PROMPTS, ids=[p for p, _ in LATER_PROMPTS])
+def test_home_at_any_prompt_abandons_the_entry_and_moves_home(at, typed):
+    backend = FakeBackend()
+    code, text, prompts, _ = session(backend, typed + ["home", "y", "quit"])
+    assert code == EXIT_OK
+    assert backend.sent == [PoseRequest(MoveType.PTP, HOME_POSE)]
+    assert prompts[len(typed) + 1] == "Send this PTP move to the robot? [y/N]: "
+    assert "Reached X 1120  Y 0  Z 725" in text
+
+
+def test_quit_and_cancel_at_the_confirmation_of_home_typed_inside_an_entry():
+    code, text, prompts, _ = session(FakeBackend(), ["1000", "home", "quit", "1000 0 800 0 45 0", "y"])
+    assert code == EXIT_OK and text.rstrip().endswith("Bye.") and prompts[-1].startswith("Send this PTP")
+    backend = FakeBackend()
+    code, text, prompts, _ = session(backend, ["1000", "home", "cancel", "quit"])
+    assert code == EXIT_OK and backend.sent == [] and prompts[-1] == FIRST_PROMPT
+
+
+def test_other_commands_at_a_later_prompt_run_and_ask_the_same_again():
+    backend = FakeBackend()
+    code, text, prompts, _ = session(backend, ["1000", "status", "help", "200", "", "", "", "stop", "", "lin",
+                                               "y", "quit"])
+    assert prompts[1] == prompts[2] == prompts[3] == "Y [mm, -900..900] (0): "
+    assert "link:            connected, 50.0 cycles/s" in text and "\n  cancel " in text
+    assert prompts[7] == prompts[8] == "Rz [deg, -180..180] (0): "
+    assert backend.calls[0] == "stop"
+    assert backend.sent == [PoseRequest(MoveType.LIN, ControllerPose(1000, 200, 725, 0, 45, 0))]
+
+
+def test_only_a_sent_move_becomes_the_default():
+    """A refused, declined or abandoned entry leaves the defaults as they were."""
+    backend = FakeBackend(refuse="pose unreachable")
+    code, text, prompts, term = session(backend, ["1400 0 1400 0 0 0 ptp", "1300", "100", "1000", "", "", "", "lin",
+                                                  "quit"])
+    assert "Refused, nothing was sent: pose unreachable" in text
+    assert prompts[1] == FIRST_PROMPT                          # not (1400) after the refusal
+    assert prompts[2] == "Y [mm, -900..900] (0): "
+    assert prompts[-1] == FIRST_PROMPT and term.default_type is MoveType.PTP
+    backend = FakeBackend()
+    code, text, prompts, term = session(backend, ["1000 0 800 0 45 0 lin", "n", "1000 0 800 0 45 0 lin", "y", "quit"])
+    assert prompts[2] == FIRST_PROMPT                          # declined: still the home pose
+    assert prompts[-1] == "X [mm, 100..1400] (1000): " and term.default_type is MoveType.LIN
+    backend = FakeBackend(motion_possible=False)
+    code, text, prompts, _ = session(backend, ["1000 0 800 0 45 0 lin", "quit"])
+    assert "Not sent: motion is not possible now" in text and prompts[-1] == FIRST_PROMPT
+
+
+def test_messages_name_the_quantity():
+    for fld, word in zip(FIELDS, ["a position"] * 3 + ["an angle"] * 3):
+        with pytest.raises(InputError) as err:
+            parse_number("inf", fld, WS)
+        assert "%s: 'inf' is not %s" % (fld.label, word) in str(err.value)
+        with pytest.raises(InputError) as err:
+            check_value(float("nan"), fld, WS)
+        assert "%s: nan is not %s" % (fld.label, word) in str(err.value)
 
 
 def test_ctrl_c_at_the_confirmation_declines():

@@ -1,4 +1,4 @@
-"""vr_driver.protocol: the 14-byte records of DESIGN.md §4 and both sides of the request handshake."""
+"""vr_driver.protocol: the 14-byte records of doc/controller_program.md and both sides of the request handshake."""
 from __future__ import annotations
 
 import math

@@ -2,10 +2,12 @@
 
 Why this exists: on Debian 12 the only ROS 1 xacro is PyPI's ``xacro==1.13.3``, whose ``load_yaml``
 calls ``yaml.load(f)`` without a Loader, which PyYAML 6 (Debian 12) rejects with
-``load() missing 1 required positional argument: 'Loader'``. Our macro reads every dimension from
-``config/kinematics_vr006l.yaml`` with ``load_yaml``, so we render through this module, which swaps in
-a safe YAML loader inside xacro's expression namespace (nothing else in the process changes). On a
-ROS distribution whose xacro already works with PyYAML 6 the swap changes nothing.
+``load() missing 1 required positional argument: 'Loader'``. The package's own calibration reaches the
+macro without ``load_yaml`` (``urdf/vr006l_calibration.xacro``, see ``calibration``), so the stock
+``xacro`` renders the model; another YAML (``kinematics_config:=FILE``) is read with ``load_yaml``, and
+this module swaps in a safe YAML loader inside xacro's expression namespace for it (nothing else in
+the process changes). On a ROS distribution whose xacro already works with PyYAML 6 the swap changes
+nothing.
 
 Command line (what the launch files call)::
 

@@ -41,7 +41,7 @@ from typing import Callable, Dict, Iterable, List, Optional, Sequence, Union
 from .dp import (MAX_DIAG_LEN, ChkCfg, DiagStatus1, DiagStatus2, DiagStatus3, GcCommand,
                  GlobalControl, PrmStationStatus, Sap, SetPrm, SetSlaveAdd, SlaveDiag,
                  cfg_io_lengths, reply_frame)
-from .errors import DpError, PhyError, ProfibusError
+from .errors import DpError, ProfibusError
 from .fdl import (BROADCAST, Deframer, FcbResponder, Frame, FrameControl, RequestFunction,
                   RespondingLink, ResponseStatus, Sd1, Sd4, ShortAck)
 from .phy import Link

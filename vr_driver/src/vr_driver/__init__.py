@@ -1,7 +1,8 @@
 """vr_driver: ROS driver stack for the Panasonic VR-006L on a G2 controller over PROFIBUS-DP.
 
-Core modules (protocol, controller_sim, kinematics, motion, pose_input, csr) import no rospy;
-node.py, terminal.py, conversions.py and params.py are the ROS edge.
+The core modules import no rospy (test/test_no_ros_imports.py): protocol, driver, controller_sim,
+sim_arm, kinematics, motion, poses, params, pose_input, csr and errors. The ROS edge: interface_node
+(the driver node), virtual_controller_node, pose_terminal_node and ros_support.
 """
 
 # The generated messages (vr_driver.msg) live in the catkin devel/install space, the code here:

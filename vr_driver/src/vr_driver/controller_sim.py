@@ -1,4 +1,4 @@
-"""The virtual G2 controller: a DP slave running the robot-side program of DESIGN.md §4 against a
+"""The virtual G2 controller: a DP slave running the robot-side program of doc/controller_program.md against a
 simulated arm. ROS-free.
 
 Pieces:
@@ -227,7 +227,7 @@ class _Pending:
 
 
 class ControllerProgram:
-    """The robot-side program loop (DESIGN.md §4) on one DP slave and one simulated arm.
+    """The robot-side program loop (doc/controller_program.md) on one DP slave and one simulated arm.
 
     Call :meth:`step` once per loop with the clock time; it returns the Feedback it wrote. Not
     thread-safe by itself: one thread runs it (the arm and the log are thread-safe, so faults can be
@@ -465,6 +465,77 @@ class ControllerProgram:
         self.log.append(entry)
 
 
+# -------------------------------------------------------------------------------- the pty link
+
+#: the value of ``pty_link`` (and of the driver's ``port``) that means "this launch's own link"
+AUTO_LINK = "auto"
+
+
+def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
+    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_g2_<master port>``.
+
+    Both the virtual controller and the driver resolve ``auto`` with this function from the
+    environment roslaunch gives its nodes (ROS_MASTER_URI; ROS_LOG_DIR, else ROS_HOME/log, else
+    ~/.ros/log), so they agree on the path, and launches on different masters never share one."""
+    env = os.environ if environ is None else environ
+    uri = env.get("ROS_MASTER_URI", "") or "http://localhost:11311"
+    port = uri.rstrip("/").rsplit(":", 1)[-1]
+    if not port.isdigit():
+        raise SimError("cannot take a port from ROS_MASTER_URI=%r for pty_link %r" % (uri, AUTO_LINK))
+    log_dir = env.get("ROS_LOG_DIR") or os.path.join(
+        env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros"), "log")
+    return os.path.join(log_dir, "vr006l_virtual_g2_%s" % port)
+
+
+def _remove_quietly(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:          # another user's live process
+        return True
+    return True
+
+
+def _take_link_lock(path: str) -> str:
+    """Create ``path.lock`` holding our pid; refuse (SimDeviceError) while another live process
+    holds it. A lock whose process is gone is stale and taken over. Returns the lock's path."""
+    lock = path + ".lock"
+    for _ in range(3):
+        try:
+            fd = os.open(lock, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+        except FileExistsError:
+            try:
+                with open(lock) as f:
+                    text = f.read().strip()
+            except FileNotFoundError:
+                continue                 # released meanwhile: try again
+            except OSError as exc:
+                raise SimDeviceError("cannot read the pty link lock %s: %s" % (lock, exc)) from exc
+            if text.isdigit() and _pid_alive(int(text)):
+                raise SimDeviceError(
+                    "pty link %s is in use by the live process %s (lock %s): another virtual controller "
+                    "serves it; give this one another link (sim_port:=..., --pty-link)" % (path, text, lock))
+            try:
+                os.unlink(lock)          # stale (its process is gone) or unreadable: take it over
+            except FileNotFoundError:
+                pass
+            continue
+        except OSError as exc:
+            raise SimDeviceError("cannot create the pty link lock %s: %s" % (lock, exc)) from exc
+        with os.fdopen(fd, "w") as f:
+            f.write("%d\n" % os.getpid())
+        return lock
+    raise SimDeviceError("cannot take the pty link lock %s: it keeps changing" % lock)
+
+
 # -------------------------------------------------------------------------------- the whole device
 
 class VirtualController:
@@ -566,6 +637,7 @@ class VirtualController:
     def _make_symlink(self, path: str, target: str) -> None:
         if os.path.lexists(path) and not os.path.islink(path):
             raise SimDeviceError("pty link %s exists and is not a symlink: not replacing it" % path)
+        lock = _take_link_lock(path)
         tmp = "%s.%d.tmp" % (path, os.getpid())
         try:
             if os.path.lexists(tmp):
@@ -573,6 +645,7 @@ class VirtualController:
             os.symlink(target, tmp)
             os.replace(tmp, path)
         except OSError as exc:
+            _remove_quietly(lock)
             raise SimDeviceError("cannot create the pty link %s -> %s: %s" % (path, target, exc)) from exc
         self.symlink = path
 
@@ -613,6 +686,7 @@ class VirtualController:
                     os.unlink(self.symlink)
             except OSError as exc:
                 log.warning("cannot remove the pty link %s: %s", self.symlink, exc)
+            _remove_quietly(self.symlink + ".lock")
             self.symlink = None
         self._close_log()
 

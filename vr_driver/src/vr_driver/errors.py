@@ -100,7 +100,7 @@ class PathDeviationError(MotionError):
 
 
 class ProtocolError(VrDriverError):
-    """A controller record (DESIGN.md §4) cannot be encoded or decoded (wrong length, a flag byte not
+    """A controller record (doc/controller_program.md) cannot be encoded or decoded (wrong length, a flag byte not
     0/1, an unknown move type / state / status bit, a value outside int16), or a protocol parameter
     such as the byte order is invalid. The message names the byte or field and the allowed values."""
 

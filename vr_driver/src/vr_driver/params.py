@@ -63,6 +63,19 @@ def _string(params: Mapping[str, Any], name: str, default: str, allowed: Tuple[s
     return value
 
 
+def _port(params: Mapping[str, Any], default: str) -> str:
+    """``port``; ``auto`` becomes the link the virtual controller of this launch makes (the same
+    resolution as its ``pty_link: auto``, from ROS_MASTER_URI and the ROS log directory)."""
+    value = _string(params, "port", default)
+    if value != "auto":
+        return value
+    from .controller_sim import SimError, auto_pty_link
+    try:
+        return auto_pty_link()
+    except SimError as exc:
+        raise ParamError("port", value, str(exc)) from None
+
+
 def _boolean(params: Mapping[str, Any], name: str, default: bool) -> bool:
     value = params.get(name, default)
     if not isinstance(value, bool):
@@ -89,7 +102,8 @@ class DriverParams:
 
     # link to the controller
     bus_config: str = ""                 # "" = pyprofibus_vendor's default robot bus (vr006l_bus.yaml)
-    port: str = ""                       # "" = the bus config's phy.device (default /dev/ttyUSB0)
+    port: str = ""                       # "" = the bus config's phy.device (default /dev/ttyUSB0);
+    #                                      "auto" = this launch's virtual controller link (resolved)
     baud: Optional[int] = None           # None = the bus config's baud
     master_address: Optional[int] = None
     slave_address: int = 4
@@ -154,7 +168,7 @@ class DriverParams:
             raise ParamError("base_frame", base_frame, "must not be empty")
         out = cls(
             bus_config=bus_config,
-            port=_string(params, "port", d.port),
+            port=_port(params, d.port),
             baud=_integer(params, "baud", d.baud, 9600, 12_000_000),
             master_address=_integer(params, "master_address", d.master_address, 0, 125),
             slave_address=_integer(params, "slave_address", d.slave_address, 0, 125),

@@ -13,6 +13,11 @@ What is typed, at the first prompt of an entry (the X prompt)::
     ... circ via x y z [rx ry rz]   a circular move through a via point
     home stop status history help quit
 
+At every later prompt of the entry (Y ... Rz, move type, via point, the confirmation) ``cancel`` or
+Ctrl-C abandons the half-typed entry and returns to the first prompt; ``home`` abandons it and moves
+home, ``quit`` leaves; ``stop``, ``status``, ``history`` and ``help`` run and ask the same again. Only
+a move that was sent becomes the next entry's defaults (a refused or abandoned one does not).
+
 Every value is checked before anything goes to the driver: a finite number, inside the driver's
 workspace box (also after rounding to the controller's whole mm / deg), then the driver previews the
 move (reachability, joint limits, the path) and only a confirmed, previewed move is sent.
@@ -52,11 +57,16 @@ class Field:
     label: str         # what the controller calls it
     unit: str
 
+    @property
+    def quantity(self) -> str:
+        """What a value of this field is, with its article: 'a position' (mm) or 'an angle' (deg)."""
+        return "an angle" if self.unit == "deg" else "a position"
+
 
 FIELDS = (Field("x", "X", "mm"), Field("y", "Y", "mm"), Field("z", "Z", "mm"),
           Field("rx", "Rx", "deg"), Field("ry", "Ry", "deg"), Field("rz", "Rz", "deg"))
 
-COMMANDS = ("home", "stop", "status", "history", "help", "quit")
+COMMANDS = ("home", "stop", "status", "history", "help", "quit", "cancel")
 _COMMAND_ALIASES = {"exit": "quit", "q": "quit", "?": "help", "h": "help"}
 
 _MOVE_TYPE_WORDS = {
@@ -127,8 +137,8 @@ def check_value(value: float, fld: Field, workspace: Workspace, what: str = "") 
     name = (what + " " if what else "") + fld.label
     lo, hi = field_range(workspace, fld.name)
     if not math.isfinite(value):
-        raise InputError("%s: %s is not a position: a finite number in %s..%s %s is needed"
-                         % (name, value, fmt_number(lo), fmt_number(hi), fld.unit))
+        raise InputError("%s: %s is not %s: a finite number in %s..%s %s is needed"
+                         % (name, value, fld.quantity, fmt_number(lo), fmt_number(hi), fld.unit))
     if not lo <= value <= hi:
         side = "below" if value < lo else "above"
         raise RangeError("%s = %s %s is %s the workspace: allowed %s..%s %s"
@@ -152,8 +162,8 @@ def parse_number(text: str, fld: Field, workspace: Workspace, default: Optional[
         return check_value(float(default), fld, workspace, what)
     if _NOT_FINITE.match(text):
         lo, hi = field_range(workspace, fld.name)
-        raise InputError("%s: %r is not a position: a finite number in %s..%s %s is needed"
-                         % (name, text, fmt_number(lo), fmt_number(hi), fld.unit))
+        raise InputError("%s: %r is not %s: a finite number in %s..%s %s is needed"
+                         % (name, text, fld.quantity, fmt_number(lo), fmt_number(hi), fld.unit))
     if not _NUMBER.match(text):
         raise InputError("%s: %r is not a number (type e.g. 1120, -12.5 or 1.2e3)" % (name, text))
     return check_value(float(text), fld, workspace, what)
@@ -412,8 +422,20 @@ Commands:
   status    the driver's and the controller's state, the current pose
   history   the moves of this session and how they ended
   help      this text
-  quit      leave (also Ctrl-D, or Ctrl-C at a prompt)
-Ctrl-C during a move stops the arm and returns to the prompt."""
+  cancel    abandon the entry being typed and return to the first prompt (also Ctrl-C)
+  quit      leave (also Ctrl-D)
+Every command works at every prompt: cancel, home and quit abandon the entry being typed (home
+then moves home); stop, status, history and help run and ask the same question again. Only a
+move that was sent becomes the next defaults. Ctrl-C during a move stops the arm and returns to
+the prompt."""
+
+
+class _EntryEnd(Exception):
+    """Leaves the entry being typed: ``then`` is 'cancel' (back to the first prompt), 'home' or 'quit'."""
+
+    def __init__(self, then: str) -> None:
+        super().__init__(then)
+        self.then = then
 
 
 @dataclass
@@ -466,20 +488,34 @@ class Terminal:
         """Until quit / Ctrl-D / Ctrl-C at a prompt. Returns EXIT_OK."""
         self.say("Pose terminal: X Y Z in mm, Rx Ry Rz in deg; Enter keeps the value in brackets.")
         self.say("A whole line works too: x y z rx ry rz ptp|lin|circ. 'help' lists the commands.")
+        self.say("'cancel' or Ctrl-C at any prompt abandons the entry; 'quit' or Ctrl-D leaves.")
+        go_home = False
         while True:
             try:
+                if go_home:                        # 'home' typed inside an entry
+                    go_home = False
+                    self.command("home")
+                    continue
                 request = self._read_request()
-            except (EOFError, KeyboardInterrupt):
+                if isinstance(request, PoseRequest):
+                    self.execute_guarded(request)
+                elif request == "quit":
+                    raise _EntryEnd("quit")
+            except EOFError:
                 self.say()
                 self.say("Bye.")
                 return EXIT_OK
-            if request is None:
-                continue
-            if request == "quit":
-                self.say("Bye.")
-                return EXIT_OK
-            if isinstance(request, PoseRequest):
-                self.execute_guarded(request)
+            except KeyboardInterrupt:
+                self.say()
+                self.say("Entry abandoned (Ctrl-C); 'quit' or Ctrl-D leaves.")
+            except _EntryEnd as end:
+                if end.then == "quit":
+                    self.say("Bye.")
+                    return EXIT_OK
+                if end.then == "home":
+                    go_home = True
+                else:
+                    self.say("Entry abandoned.")
 
     def execute_guarded(self, request: PoseRequest, **kwargs) -> int:
         """:meth:`execute`, with Ctrl-C outside the move loop (during the preview or while the goal
@@ -506,16 +542,17 @@ class Terminal:
         if command is not None:
             if command == "quit":
                 return "quit"
+            if command == "cancel":
+                self.say("  Nothing to abandon: this is the first prompt.")
+                return None
             self.command(command)
             return command
         if len(_tokens(first)) > 1:
             try:
-                request = parse_pose_line(first, self.workspace)
+                return parse_pose_line(first, self.workspace)
             except InputError as exc:
                 self.say("  %s" % exc)
                 return None
-            self._remember(request)
-            return request
         try:
             x = parse_number(first, FIELDS[0], self.workspace, self.defaults.x)
         except InputError as exc:
@@ -533,14 +570,28 @@ class Terminal:
                 default = None if len(fld.name) == 1 else getattr(target, fld.name)
                 via_values.append(self._ask_number(fld, default, what="via"))
             via = ControllerPose(*via_values)
-        request = PoseRequest(kind, target, via)
-        self._remember(request)
-        return request
+        return PoseRequest(kind, target, via)
+
+    def _ask_in_entry(self, prompt: str) -> str:
+        """A later prompt of an entry: the answer, once no command was typed. cancel, home and quit
+        (and Ctrl-C) end the entry (:class:`_EntryEnd`); the other commands run, then ask again."""
+        while True:
+            try:
+                text = self.ask(prompt)
+            except KeyboardInterrupt:
+                self.say()
+                raise _EntryEnd("cancel") from None
+            command = parse_command(text)
+            if command is None:
+                return text
+            if command in ("cancel", "home", "quit"):
+                raise _EntryEnd(command)
+            self.command(command)
 
     def _ask_number(self, fld: Field, default: Optional[float], what: str = "") -> float:
         prefix = (what.capitalize() + " ") if what else ""
         while True:
-            text = self.ask(prompt_text(fld, self.workspace, default, prefix))
+            text = self._ask_in_entry(prompt_text(fld, self.workspace, default, prefix))
             try:
                 return parse_number(text, fld, self.workspace, default, what=what)
             except InputError as exc:
@@ -548,14 +599,14 @@ class Terminal:
 
     def _ask_move_type(self) -> MoveType:
         while True:
-            text = self.ask("Move type [ptp, lin, circ] (%s): " % self.default_type.value)
+            text = self._ask_in_entry("Move type [ptp, lin, circ] (%s): " % self.default_type.value)
             try:
                 return parse_move_type(text, self.default_type)
             except InputError as exc:
                 self.say("  %s" % exc)
 
     def _remember(self, request: PoseRequest) -> None:
-        """The next entry's defaults: this one's target and move type."""
+        """The next entry's defaults: this one's target and move type (called once it was sent)."""
         self.defaults = request.target
         self.default_type = request.move_type
 
@@ -633,17 +684,19 @@ class Terminal:
             self._record(request, "not sent: motion not possible (%s)" % why)
             return EXIT_REFUSED
         if confirm and not self.assume_yes:
+            then = None
             try:
-                answer = self.ask("Send this %s move to the robot? [y/N]: " % request.move_type.name)
+                answer = self._ask_in_entry("Send this %s move to the robot? [y/N]: " % request.move_type.name)
             except EOFError:
                 answer = ""
                 self.say()
-            except KeyboardInterrupt:
-                self.say()
-                answer = ""
+            except _EntryEnd as end:
+                answer, then = "", end
             if not _yes(answer):
                 self.say("Not sent.")
                 self._record(request, "not sent (not confirmed)")
+                if then is not None and then.then != "cancel":
+                    raise then                    # home / quit: the dialogue acts on it
                 return EXIT_REFUSED
         return self._run_move(request, preview, move_timeout)
 
@@ -653,6 +706,7 @@ class Terminal:
         self._sending = True
         handle = self.backend.start_move(request)
         self._sending = False
+        self._remember(request)
         self.say("Sent. Ctrl-C stops the arm.")
         printer = ProgressPrinter(self.out, self.tty, clock=self.clock)
         timed_out = False
@@ -730,7 +784,10 @@ class Terminal:
 
     # -------------------------------------------------------------- one shot
     def run_once(self, request: PoseRequest, preview_only: bool = False) -> int:
-        return self.execute_guarded(request, preview_only=preview_only)
+        try:
+            return self.execute_guarded(request, preview_only=preview_only)
+        except _EntryEnd:                          # home / quit at the confirmation: not sent, done
+            return EXIT_REFUSED
 
 
 # ------------------------------------------------------------------------------------ command line

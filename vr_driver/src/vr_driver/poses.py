@@ -340,7 +340,7 @@ class ControllerPose:
         return dp, math.degrees(angle)
 
 
-#: the controller's home pose (DESIGN.md §8; SRDF group_state ``home``)
+#: the controller's home pose (README.md; SRDF group_state ``home``)
 HOME_POSE = ControllerPose(1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
 
 
@@ -398,7 +398,7 @@ def kdl_frame_to_matrix(frame: Any) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Workspace:
-    """The allowed box of controller poses (DESIGN.md §7): mm and degrees, bounds inclusive."""
+    """The allowed box of controller poses (``workspace`` in config/vr_driver.yaml): mm and degrees, bounds inclusive."""
 
     x: Tuple[float, float] = (100.0, 1400.0)
     y: Tuple[float, float] = (-900.0, 900.0)

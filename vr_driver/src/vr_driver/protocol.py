@@ -1,4 +1,4 @@
-"""The 14-byte controller protocol of DESIGN.md §4 and its request handshake. ROS-free, no I/O.
+"""The 14-byte controller protocol of doc/controller_program.md and its request handshake. ROS-free, no I/O.
 
 Records (one PROFIBUS-DP data telegram each way, six signed 16-bit words then two single bytes)::
 
@@ -18,7 +18,7 @@ feedback record with either set is refused with ProtocolError. Our controller pr
 them, so a set bit means the output mapping on the controller is wrong (shifted bytes, swapped
 words) and nothing else in that record can be trusted either.
 
-Handshake (DESIGN.md §4): the controller starts a motion only when its state is READY and the flag
+Handshake (doc/controller_program.md): the controller starts a motion only when its state is READY and the flag
 is 1, reports BUSY, then DONE or REJECTED, holds that until the flag is 0, then returns to READY.
 :class:`ControllerHandshake` is the robot-side logic (what ``doc/controller_program.md`` asks the
 real program to do, and what the virtual controller runs); :class:`MasterHandshake` is the driver
@@ -193,7 +193,7 @@ _STATUS_WORDS = {
 
 
 class ByteOrder(str, enum.Enum):
-    """Order of the two bytes of each int16 word: ``little`` (DESIGN.md §4 default) or ``big``."""
+    """Order of the two bytes of each int16 word: ``little`` (the default of doc/controller_program.md) or ``big``."""
 
     LITTLE = "little"
     BIG = "big"

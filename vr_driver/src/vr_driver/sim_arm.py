@@ -10,7 +10,7 @@ the exact position of the moment it was injected.
 It reports what a real G2 reports: the TCP pose rounded to whole mm and degrees
 (:meth:`SimArm.reported_pose`), angles wrapped into (-180, 180].
 
-Rules (DESIGN.md §5, also ``doc/controller_program.md``):
+Rules (``doc/controller_program.md``):
 
 - A target is planned when it is started; a target outside the reach or the joint limits, or any
   planning failure (joint jump, singularity, degenerate circle), is refused with the planner's

@@ -1,7 +1,8 @@
 """ROS node `virtual_controller`: the thin ROS edge of :class:`vr_driver.controller_sim.VirtualController`.
 
 Private parameters (validated by ``controller_sim.SimOptions``; defaults in brackets):
-``~pty_link`` [""] create a pty pair and symlink its device end here; ``~device`` [""] serve this
+``~pty_link`` [""] create a pty pair and symlink its device end here (``auto``: this launch's own
+link, ``controller_sim.auto_pty_link``; a link another live controller holds is refused); ``~device`` [""] serve this
 existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.0];
 ``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
 ``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets);
@@ -17,15 +18,16 @@ Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
 from __future__ import annotations
 
+import os
 from typing import Any, Dict, Mapping, Tuple
 
 import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES, SimDeviceError,
-                             SimError, SimOptions, VirtualController)
-from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
+from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
+                             SimDeviceError, SimError, SimOptions, VirtualController, auto_pty_link)
+from .ros_support import route_to_rosout, stop_on_signals
 from .sim_arm import LogEntry
 
 #: parameters the node writes itself (not options)
@@ -49,6 +51,9 @@ def main() -> int:
     if unknown:
         rospy.logwarn("virtual_controller: ignoring unknown parameter(s) %s", ", ".join(unknown))
     try:
+        if params.get("pty_link") == AUTO_LINK:
+            params["pty_link"] = auto_pty_link()
+            os.makedirs(os.path.dirname(params["pty_link"]), exist_ok=True)
         options = SimOptions.from_mapping(params)
         controller = VirtualController(options.device, address=options.address, baud=options.baud,
                                        speed_factor=options.speed_factor, initial_pose=options.initial_pose,

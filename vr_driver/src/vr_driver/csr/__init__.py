@@ -1,7 +1,7 @@
 """Offline export and import of Panasonic DTPS ``.csr`` programs. ROS-free: only the ``--from-topic``
 mode of the command line (:mod:`.cli`) imports rospy, when it runs.
 
-The format (facts and sources: CSR_FORMAT.md; usage and conventions: doc/csr.md) is plain text,
+The format (usage, conventions and the details chosen: doc/csr.md) is plain text,
 comma separated, in sections::
 
     [Description]   Key, value lines: Robot, Comment (<= 30 chars), SubComment1/2, Mechanism,

@@ -16,7 +16,7 @@ CARTESIAN_COLUMNS = ("X", "Y", "Z", "U", "V", "W")
 POSE_COLUMNS = {"AJ": JOINT_COLUMNS, "AU": CARTESIAN_COLUMNS}
 SECTION_ORDER = ("Description", "Pose", "Variable", "Command")
 
-COMMENT_MAX = 30              # CSR_FORMAT.md: Comment <= 30 chars
+COMMENT_MAX = 30              # DTPS: Comment <= 30 chars
 CREATOR_MAX = 16              # Creator <= 16 chars
 VARIABLE_NAME_MAX = 8         # variable name <= 8 chars
 VARIABLE_COMMENT_MAX = 32     # variable comment <= 32 chars
