@@ -11,7 +11,7 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
-CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "driver.link",
+CORE = ("errors", "poses", "kinematics", "motion", "protocol", "protocol_v2", "params", "driver", "driver.link",
         "driver.sequencer", "driver.jobs", "driver.core", "sim_arm",
         "controller_sim", "csr", "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
@@ -59,7 +59,7 @@ def test_rospy_blocked_in_process_too():
         sys.modules.update(saved)
 
 
-@pytest.mark.parametrize("module", ["protocol", "poses", "params"])
+@pytest.mark.parametrize("module", ["protocol", "protocol_v2", "poses", "params"])
 def test_the_wire_codec_and_the_vocabulary_need_no_kinematics(module):
     """The 14-byte codec, the pose vocabulary (MoveType lives there) and the parameters import
     neither PyKDL nor the kinematics or planning modules."""

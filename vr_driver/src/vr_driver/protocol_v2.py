@@ -1,0 +1,373 @@
+"""Controller protocol v2: joint targets with sequence numbers and a look-ahead slot, joint feedback.
+ROS-free, no I/O, no kinematics. The byte layouts, units and the controller program's rules are in
+``doc/controller_program.md`` ("Protocol v2"); v1 (the thesis' 14 bytes, :mod:`vr_driver.protocol`)
+stays the default for an unchanged robot program. One parameter chooses the version on both ends;
+the frames differ in length (72 bytes each way), so a v1 card configuration refuses a v2 master at
+Chk_Cfg (Cfg_Fault) before a single record is exchanged.
+
+Records (little-endian; one PROFIBUS-DP data telegram each way)::
+
+    master -> controller  CommandV2   version | control | reserved | slot 0 | slot 1 | reserved | CRC
+    controller -> master  FeedbackV2  version | state | status | reject code | accepted / done /
+                                      active / rejected seq | joints | pose | heartbeat | CRC
+
+A slot (:class:`TargetSlot`) carries one joint target: its sequence number (1..65535, 0 = empty),
+the move kind, the smooth (blending) level, the speed (0.1 % of the joint speed limits) and the six
+joint angles in 0.001 degree (int32: J6's +-360 deg and every other range fit with room to spare).
+Slot 0 is the next target the controller has not taken yet; slot 1 the one after it (look-ahead),
+so that the controller can blend into it. The controller takes a target exactly once: only the
+sequence number that follows the last one it took (or, with the START bit, the first of a new
+stream), and it reports the newest one taken (``accepted_seq``), the one it moves to
+(``active_seq``) and the newest one passed or reached (``done_seq``).
+
+Every record ends in a CRC-16 (CCITT, polynomial 0x1021, initial value 0xFFFF) over the bytes
+before it: a record corrupted on the line in a way the 8-bit PROFIBUS checksum misses, or torn
+between the card's modules, is refused (ProtocolError) instead of being acted on.
+"""
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from dataclasses import dataclass
+from typing import Any, Sequence, Tuple
+
+from .errors import PoseError, ProtocolError
+from .protocol import StatusBits, round_half_away
+
+__all__ = [
+    "VERSION",
+    "RECORD_SIZE_V2",
+    "SEQ_MAX",
+    "JOINT_UNIT_DEG",
+    "POSITION_UNIT_MM",
+    "SPEED_UNIT",
+    "SMOOTH_MAX",
+    "Control",
+    "TargetKind",
+    "StreamState",
+    "RejectCode",
+    "crc16",
+    "next_seq",
+    "seq_after",
+    "joints_to_wire",
+    "joints_from_wire",
+    "TargetSlot",
+    "EMPTY",
+    "CommandV2",
+    "FeedbackV2",
+    "GSD_MODULES_V2",
+]
+
+VERSION = 2
+#: bytes per record, each direction
+RECORD_SIZE_V2 = 72
+#: sequence numbers run 1..SEQ_MAX and wrap to 1 (0 marks an empty slot / "none yet")
+SEQ_MAX = 0xFFFF
+#: joint angles on the wire: int32 in this many degrees (0.001 deg)
+JOINT_UNIT_DEG = 0.001
+#: Cartesian feedback: X, Y, Z in 0.01 mm; Rx, Ry, Rz in 0.001 deg
+POSITION_UNIT_MM = 0.01
+#: speed on the wire: 0.1 % of the joint speed limits (1..1000)
+SPEED_UNIT = 0.001
+SMOOTH_MAX = 10
+#: Chk_Cfg modules of a v2 card configuration, inputs first like v1: 32 + 32 + 8 bytes each way
+#: (general identifier format: 0x5F = 16 words in, 0x17 = 8 bytes in, 0x6F / 0x27 the outputs)
+GSD_MODULES_V2 = ("32 Bytes In", "32 Bytes In", "8 Bytes In", "32 Bytes Out", "32 Bytes Out",
+                  "8 Bytes Out")
+
+_INT32 = (-(2 ** 31), 2 ** 31 - 1)
+_HEADER = struct.Struct("<BBH")                  # version, control, reserved
+_SLOT = struct.Struct("<HBBHH6i")                # seq, kind, smooth, speed, reserved, joints
+_COMMAND = struct.Struct("<BBH32s32sHH")         # header, slot 0, slot 1, reserved, CRC
+_FEEDBACK = struct.Struct("<BBBBHHHH6i6iH8sH")   # see FeedbackV2
+assert _SLOT.size == 32 and _COMMAND.size == RECORD_SIZE_V2 and _FEEDBACK.size == RECORD_SIZE_V2
+
+
+class Control(enum.IntFlag):
+    """Byte 2 (index 1) of a command."""
+
+    STOP = 1       # decelerate to rest now and drop every target taken but not yet moved to
+    START = 2      # slot 0 starts a new stream (taken only when the controller is idle, queue empty)
+
+
+class TargetKind(enum.IntEnum):
+    NONE = 0
+    JOINT = 1      # MOVEP to the six joint angles (joint-interpolated)
+
+
+class StreamState(enum.IntEnum):
+    """Byte 2 (index 1) of the feedback."""
+
+    IDLE = 0       # at rest, nothing queued
+    MOVING = 1     # moving to active_seq (a look-ahead target may be queued)
+    STOPPING = 2   # decelerating after STOP, a fault or a link loss
+    WAITING = 3    # at rest at done_seq's point: the next target did not come in time (a gap)
+
+
+class RejectCode(enum.IntEnum):
+    """Byte 4 (index 3) of the feedback: why ``rejected_seq`` was refused."""
+
+    NONE = 0
+    OUT_OF_ORDER = 1    # not the sequence number after accepted_seq (a gap or a stale repeat)
+    NOT_ARMED = 2       # raised before the controller saw an empty record after (re)start / loss
+    FAULT = 3           # e-stop, drives off or an error
+    UNREACHABLE = 4     # outside the joint limits or the reach; the controller's own check
+    BAD_SLOT = 5        # unknown kind, speed 0 or above 100 %, smooth above SMOOTH_MAX
+
+
+# ---------------------------------------------------------------------------------------- helpers
+
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE: polynomial 0x1021, initial 0xFFFF, no reflection, no final XOR
+    (check value of b"123456789": 0x29B1)."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
+
+
+def next_seq(seq: int) -> int:
+    """The sequence number after ``seq`` (1..SEQ_MAX, wrapping to 1; after 0 comes 1)."""
+    return 1 if seq >= SEQ_MAX else seq + 1
+
+
+def seq_after(a: int, b: int) -> bool:
+    """True if ``a`` comes after ``b`` in the wrapping sequence (within half the range)."""
+    if a == 0:
+        return False
+    if b == 0:
+        return True
+    return 0 < (a - b) % SEQ_MAX < SEQ_MAX // 2
+
+
+def joints_to_wire(joints: Sequence[float]) -> Tuple[int, ...]:
+    """Six joint angles [rad] as int32 in 0.001 deg (rounded half away from zero); PoseError
+    naming the joint for a value that is not a finite number or does not fit int32."""
+    values = tuple(joints)
+    if len(values) != 6:
+        raise PoseError("a joint target has 6 angles, got %d" % len(values))
+    out = []
+    for i, value in enumerate(values):
+        name = "joint_%d" % (i + 1)
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise PoseError("%s must be a finite number of radians, got %r" % (name, value))
+        wire = round_half_away(math.degrees(value) / JOINT_UNIT_DEG)
+        if not _INT32[0] <= wire <= _INT32[1]:
+            raise PoseError("%s = %g rad does not fit the wire's int32 of 0.001 deg" % (name, value))
+        out.append(wire)
+    return tuple(out)
+
+
+def joints_from_wire(values: Sequence[int]) -> Tuple[float, ...]:
+    """int32 0.001 deg -> radians."""
+    return tuple(math.radians(v * JOINT_UNIT_DEG) for v in values)
+
+
+def _check_crc(raw: bytes, what: str) -> None:
+    want = struct.unpack_from("<H", raw, RECORD_SIZE_V2 - 2)[0]
+    got = crc16(raw[:RECORD_SIZE_V2 - 2])
+    if want != got:
+        raise ProtocolError("%s record: CRC 0x%04X does not match its bytes (0x%04X): corrupted "
+                            "or torn; ignored" % (what, want, got))
+
+
+def _as_record(data: Any, what: str) -> bytes:
+    try:
+        raw = bytes(data)
+    except (TypeError, ValueError) as exc:
+        raise ProtocolError("%s record must be bytes, got %r" % (what, type(data).__name__)) from exc
+    if len(raw) != RECORD_SIZE_V2:
+        raise ProtocolError("%s record must be %d bytes, got %d" % (what, RECORD_SIZE_V2, len(raw)))
+    if raw[0] != VERSION:
+        raise ProtocolError("%s record: version byte %d, expected %d (is the other end running "
+                            "protocol v1?)" % (what, raw[0], VERSION))
+    _check_crc(raw, what)
+    return raw
+
+
+def _seq(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= SEQ_MAX:
+        raise ProtocolError("%s must be an integer 0..%d, got %r" % (name, SEQ_MAX, value))
+    return value
+
+
+# ------------------------------------------------------------------------------------------ records
+
+@dataclass(frozen=True)
+class TargetSlot:
+    """One joint target of a command (or an empty slot: seq 0)."""
+
+    seq: int = 0
+    kind: TargetKind = TargetKind.NONE
+    smooth: int = 0
+    speed: int = 0                               # 0.1 % of the joint speed limits, 1..1000
+    joints: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)  # 0.001 deg
+
+    def __post_init__(self) -> None:
+        _seq(self.seq, "slot seq")
+        try:
+            object.__setattr__(self, "kind", TargetKind(self.kind))
+        except ValueError:
+            raise ProtocolError("slot kind %r is unknown (0 none, 1 joint)" % (self.kind,)) from None
+        joints = tuple(self.joints)
+        if len(joints) != 6 or not all(isinstance(v, int) and not isinstance(v, bool)
+                                       and _INT32[0] <= v <= _INT32[1] for v in joints):
+            raise ProtocolError("slot joints must be 6 int32 values (0.001 deg), got %r" % (joints,))
+        object.__setattr__(self, "joints", joints)
+        if self.seq == 0:
+            if self.kind is not TargetKind.NONE or any(joints) or self.speed or self.smooth:
+                raise ProtocolError("an empty slot (seq 0) carries nothing")
+            return
+        if self.kind is TargetKind.NONE:
+            raise ProtocolError("slot %d has no kind" % self.seq)
+        if isinstance(self.speed, bool) or not isinstance(self.speed, int) or not 1 <= self.speed <= 1000:
+            raise ProtocolError("slot %d: speed must be 1..1000 (0.1 %% of the joint speed limits), "
+                                "got %r" % (self.seq, self.speed))
+        if isinstance(self.smooth, bool) or not isinstance(self.smooth, int) \
+                or not 0 <= self.smooth <= SMOOTH_MAX:
+            raise ProtocolError("slot %d: smooth must be 0..%d, got %r" % (self.seq, SMOOTH_MAX, self.smooth))
+
+    @classmethod
+    def joint_target(cls, seq: int, joints_rad: Sequence[float], speed_fraction: float,
+                     smooth: int = 0) -> "TargetSlot":
+        """A joint target from radians and a speed as a fraction (0, 1] of the joint speed limits
+        (rounded up to the next 0.1 %: the arm is never asked to be slower than planned)."""
+        if not (isinstance(speed_fraction, (int, float)) and math.isfinite(speed_fraction)
+                and 0.0 < speed_fraction <= 1.0):
+            raise ProtocolError("speed fraction must be in (0, 1], got %r" % (speed_fraction,))
+        speed = min(1000, max(1, int(math.ceil(speed_fraction / SPEED_UNIT - 1e-9))))
+        return cls(seq, TargetKind.JOINT, smooth, speed, joints_to_wire(joints_rad))
+
+    @property
+    def empty(self) -> bool:
+        return self.seq == 0
+
+    @property
+    def joints_rad(self) -> Tuple[float, ...]:
+        return joints_from_wire(self.joints)
+
+    def describe(self) -> str:
+        if self.empty:
+            return "(empty)"
+        return "#%d %s speed %.1f %% smooth %d joints %s deg" % (
+            self.seq, self.kind.name, self.speed / 10.0, self.smooth,
+            " ".join("%.3f" % (v * JOINT_UNIT_DEG) for v in self.joints))
+
+    def pack(self) -> bytes:
+        return _SLOT.pack(self.seq, int(self.kind), self.smooth, self.speed, 0, *self.joints)
+
+    @classmethod
+    def unpack(cls, raw: bytes) -> "TargetSlot":
+        seq, kind, smooth, speed, _reserved, *joints = _SLOT.unpack(raw)
+        return cls(seq, kind, smooth, speed, tuple(joints))
+
+
+EMPTY = TargetSlot()
+
+
+@dataclass(frozen=True)
+class CommandV2:
+    """Master -> controller: control bits and two target slots (next, look-ahead)."""
+
+    control: Control = Control(0)
+    slot0: TargetSlot = EMPTY
+    slot1: TargetSlot = EMPTY
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "control", Control(int(self.control)))
+        except ValueError:
+            raise ProtocolError("control bits %r: only STOP (1) and START (2) are defined"
+                                % (self.control,)) from None
+        if int(self.control) & ~0x03:
+            raise ProtocolError("control bits 0x%02X: only STOP (1) and START (2) are defined"
+                                % int(self.control))
+        if self.slot0.empty and not self.slot1.empty:
+            raise ProtocolError("slot 1 (look-ahead) without slot 0")
+        if not self.slot1.empty and self.slot1.seq != next_seq(self.slot0.seq):
+            raise ProtocolError("slot 1 must carry the sequence number after slot 0's (%d), got %d"
+                                % (next_seq(self.slot0.seq), self.slot1.seq))
+        if Control.START in self.control and self.slot0.empty:
+            raise ProtocolError("START needs a target in slot 0")
+        if Control.STOP in self.control and not self.slot0.empty:
+            raise ProtocolError("STOP carries no target")
+
+    def encode(self) -> bytes:
+        body = _COMMAND.pack(VERSION, int(self.control), 0, self.slot0.pack(), self.slot1.pack(), 0, 0)
+        return body[:-2] + struct.pack("<H", crc16(body[:-2]))
+
+    @classmethod
+    def decode(cls, data: Any) -> "CommandV2":
+        raw = _as_record(data, "v2 command")
+        _version, control, reserved, s0, s1, reserved2, _crc = _COMMAND.unpack(raw)
+        if reserved or reserved2:
+            raise ProtocolError("v2 command: reserved bytes must be 0")
+        return cls(control, TargetSlot.unpack(s0), TargetSlot.unpack(s1))
+
+
+@dataclass(frozen=True)
+class FeedbackV2:
+    """Controller -> master: the stream's progress, the joints and the pose."""
+
+    state: StreamState = StreamState.IDLE
+    status: StatusBits = StatusBits(0)
+    reject_code: RejectCode = RejectCode.NONE
+    accepted_seq: int = 0
+    done_seq: int = 0
+    active_seq: int = 0
+    rejected_seq: int = 0
+    joints: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)   # 0.001 deg
+    pose: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)     # X Y Z 0.01 mm, Rx Ry Rz 0.001 deg
+    heartbeat: int = 0                              # +1 every program loop (mod 65536)
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "state", StreamState(self.state))
+            object.__setattr__(self, "reject_code", RejectCode(self.reject_code))
+        except ValueError as exc:
+            raise ProtocolError("v2 feedback: %s" % exc) from None
+        status = int(self.status)
+        if status & ~0x3F or status < 0:
+            raise ProtocolError("v2 feedback: reserved status bits set (0x%02X)" % status)
+        object.__setattr__(self, "status", StatusBits(status))
+        for name in ("accepted_seq", "done_seq", "active_seq", "rejected_seq", "heartbeat"):
+            _seq(getattr(self, name), name)
+        for name in ("joints", "pose"):
+            values = tuple(getattr(self, name))
+            if len(values) != 6 or not all(isinstance(v, int) and _INT32[0] <= v <= _INT32[1]
+                                           for v in values):
+                raise ProtocolError("v2 feedback: %s must be 6 int32 values" % name)
+            object.__setattr__(self, name, values)
+
+    @property
+    def joints_rad(self) -> Tuple[float, ...]:
+        return joints_from_wire(self.joints)
+
+    def encode(self) -> bytes:
+        body = _FEEDBACK.pack(VERSION, int(self.state), int(self.status), int(self.reject_code),
+                              self.accepted_seq, self.done_seq, self.active_seq, self.rejected_seq,
+                              *self.joints, *self.pose, self.heartbeat, bytes(8), 0)
+        return body[:-2] + struct.pack("<H", crc16(body[:-2]))
+
+    @classmethod
+    def decode(cls, data: Any) -> "FeedbackV2":
+        raw = _as_record(data, "v2 feedback")
+        fields = _FEEDBACK.unpack(raw)
+        (_version, state, status, reject, accepted, done, active, rejected) = fields[:8]
+        joints, pose = fields[8:14], fields[14:20]
+        heartbeat, reserved = fields[20], fields[21]
+        if any(reserved):
+            raise ProtocolError("v2 feedback: reserved bytes must be 0")
+        return cls(state, status, reject, accepted, done, active, rejected, tuple(joints),
+                   tuple(pose), heartbeat)
+
+    def describe(self) -> str:
+        text = "%s, taken %d, at %d, done %d; status: %s" % (
+            self.state.name, self.accepted_seq, self.active_seq, self.done_seq, self.status.describe())
+        if self.rejected_seq:
+            text += "; refused %d (%s)" % (self.rejected_seq, self.reject_code.name)
+        return text
+
