@@ -141,7 +141,9 @@ class InterfaceNode:
     # ------------------------------------------------------------------ publishing
     def _on_status(self, status: DriverStatus) -> None:
         """Bus thread: publish robot_status at once when it changes (besides the fixed rate), and
-        log link state changes once, in words."""
+        log link state changes once, in words. The snapshot is read as of now (a stop of the
+        process between the snapshot and this call must not publish old good news)."""
+        status = status.stale(self.core.clock(), self.params.link_timeout)
         msg = robot_status_msg(status, rospy.Time.now())
         key = (msg.mode.val, msg.e_stopped.val, msg.drives_powered.val, msg.motion_possible.val,
                msg.in_motion.val, msg.in_error.val, msg.error_code)

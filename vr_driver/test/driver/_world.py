@@ -45,6 +45,7 @@ class SteppedLink(SlaveLink):
         self.clock = clock
         self.cut = False
         self.telegrams = 0
+        self.stall_next_read = 0.0     # the next read with data returns this much later (a freeze)
 
     def send(self, data: bytes) -> None:
         self.telegrams += 1
@@ -55,6 +56,9 @@ class SteppedLink(SlaveLink):
         data = super().recv(max_bytes, 0.0)
         if not data and timeout:
             self.clock.advance(timeout)
+        if data and self.stall_next_read:
+            self.clock.advance(self.stall_next_read)     # the reply waited in the buffer
+            self.stall_next_read = 0.0
         return data
 
 

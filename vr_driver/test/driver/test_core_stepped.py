@@ -204,6 +204,23 @@ def test_a_frozen_driver_never_reports_old_good_news(world):
     assert job.done and not job.result.success and "lost" in job.result.reason
 
 
+def test_a_reply_that_waited_out_a_freeze_is_not_fresh_news(world):
+    """The driver stopped right after sending a request; the controller answered at once (moving,
+    motion possible); the driver resumed 1.5 s later and read that answer. It is 1.5 s old: the
+    status must not report it (seen in the SIGSTOP rostest as one "motion possible, in motion")."""
+    world.ready()
+    job = world.core.submit(lin(FAR))
+    moving_for(world, job, 0.5)
+    before = len(world.statuses)
+    world.link.stall_next_read = 1.5
+    world.tick()
+    while len(world.statuses) == before:
+        world.tick()
+    first = world.statuses[before]
+    assert not first.motion_possible and first.feedback is None, first
+    assert first.counters.stalled_cycles == 1
+
+
 def test_feedback_older_than_link_timeout_is_not_reported(world):
     world.ready()
     world.link.cut = True

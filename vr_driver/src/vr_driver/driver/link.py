@@ -71,6 +71,7 @@ class LinkCounters:
     losses: int = 0
     reconnects: int = 0
     protocol_errors: int = 0
+    stalled_cycles: int = 0          # cycles longer than link_timeout: their record was dropped
     targets_sent: int = 0
     targets_done: int = 0
     targets_rejected: int = 0
@@ -204,6 +205,7 @@ class LinkSupervisor:
             if self._master is None:
                 return self._sample(now, None, cycled=False)
         master = self._master
+        begin = now
         try:
             master.cycle(timeout=max(0.2, 2.0 / self.bus.cycle_rate_hz))
         except ProfibusError as exc:
@@ -216,11 +218,18 @@ class LinkSupervisor:
         now = self.clock()
         self.counters.cycles += 1
         self._cycle_times.append(now)
-        fresh = self._judge(now)
+        stalled = now - begin > self.params.link_timeout
+        if stalled:
+            self.counters.stalled_cycles += 1
+            log.warning("a bus cycle took %.2f s (the process was stopped or starved): the record "
+                        "it brought may be that old and is not used", now - begin)
+        fresh = self._judge(now, stalled)
         return self._sample(now, fresh, cycled=True)
 
-    def _judge(self, now: float) -> Optional[Feedback]:
-        """Take the cycle's record if a new one arrived; update the link state."""
+    def _judge(self, now: float, stalled: bool = False) -> Optional[Feedback]:
+        """Take the cycle's record if a new one arrived; update the link state. ``stalled``: the
+        cycle took longer than ``link_timeout`` -- its reply may have waited in the port's buffer
+        all that time (a process stopped and resumed), so it is not fresh news and is dropped."""
         slave = self._slave
         fresh: Optional[Feedback] = None
         reason = ""
@@ -230,6 +239,9 @@ class LinkSupervisor:
         else:
             data, at = slave.inputs, slave.inputs_time
             if data is not None and at is not None and at >= self._session_start \
+                    and at != self._record_time and stalled:
+                self._record_time = at               # consumed, not believed
+            elif data is not None and at is not None and at >= self._session_start \
                     and at != self._record_time:
                 self._record_time = at
                 try:
