@@ -57,6 +57,7 @@ __all__ = [
     "CommandV2",
     "FeedbackV2",
     "GSD_MODULES_V2",
+    "CHK_CFG_V2",
 ]
 
 VERSION = 2
@@ -75,6 +76,8 @@ SMOOTH_MAX = 10
 #: (general identifier format: 0x5F = 16 words in, 0x17 = 8 bytes in, 0x6F / 0x27 the outputs)
 GSD_MODULES_V2 = ("32 Bytes In", "32 Bytes In", "8 Bytes In", "32 Bytes Out", "32 Bytes Out",
                   "8 Bytes Out")
+#: the Chk_Cfg bytes of those modules
+CHK_CFG_V2 = bytes([0x5F, 0x5F, 0x17, 0x6F, 0x6F, 0x27])
 
 _INT32 = (-(2 ** 31), 2 ** 31 - 1)
 _HEADER = struct.Struct("<BBH")                  # version, control, reserved
