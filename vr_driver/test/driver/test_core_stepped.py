@@ -281,3 +281,41 @@ def test_a_controller_rejection_fails_the_rest_of_the_path(world):
     assert "earlier target" in jobs[1].result.reason
     assert len(world.log.entries()) == 1
     assert world.program.state in (ControllerState.READY, ControllerState.REJECTED)
+
+
+# ------------------------------------------------------------ planner trajectories (v1)
+def test_a_planner_trajectory_runs_through_its_thinned_points_each_once(world):
+    """v1: a 30-point trajectory becomes the fewest PTP stops that keep the path within the path
+    tolerance; each is executed once; the arm stays near the planned path all along."""
+    import math
+    from vr_driver.driver.trajectories import TrajectoryGoal, path_deviation, validate
+    status = world.ready()
+    q0 = status.joints
+    points, times = [], []
+    for k in range(1, 31):
+        s = k / 30.0
+        points.append((q0[0] + 0.6 * s, q0[1] + 0.25 * math.sin(math.pi * s), q0[2], q0[3],
+                       q0[4] + 0.2 * s, q0[5]))
+        times.append(0.1 * k)
+    names = world.core.joint_names
+    tol = {n: math.radians(3.0) for n in names}
+    goal = TrajectoryGoal(tuple(names), tuple(points), tuple(times), path_tolerance=tol,
+                          goal_tolerance=tol)
+    lim = world.kin.limits
+    traj = validate(goal, names, q0, lim.lower, lim.upper, world.now)
+    run = world.core.submit_trajectory(traj)
+    assert 2 <= len(run.jobs) < 15
+    worst = [0.0]
+
+    def track():
+        s = world.status()
+        if s.joints_valid:
+            worst[0] = max(worst[0], path_deviation(traj, s.joints)[0])
+        return run.done
+    world.run_until(track, 60.0, "trajectory done")
+    assert run.success and run.points_done() == 30
+    logged = [tuple(e.target) for e in world.log.entries()]
+    assert logged == [job.preview.commands[0].values for job in run.jobs]     # each once, in order
+    assert worst[0] <= 1.0, worst[0]                     # within the path tolerance throughout
+    final = world.status().joints
+    assert max(abs(a - b) for a, b in zip(final, points[-1])) <= math.radians(3.0)

@@ -48,12 +48,13 @@ from .jobs import MoveJob, MoveRequest, Preview, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
 from .sequencer import MotionSequencer, why_no_motion
+from .trajectories import ValidTrajectory, thin
 
 log = logging.getLogger("vr_driver.driver")
 
 Clock = Callable[[], float]
 
-__all__ = ["DriverCore", "DriverError", "DriverStatus"]
+__all__ = ["DriverCore", "DriverError", "DriverStatus", "TrajectoryRun"]
 
 
 class DriverError(VrDriverError):
@@ -115,6 +116,40 @@ class DriverStatus:
         return replace(self, link=LinkState.STALE, link_reason=reason, feedback=None, pose=None,
                        joints_valid=False, error_code=ERROR_LINK, error_reason=reason,
                        feedback_time=None)
+
+
+class TrajectoryRun:
+    """A planner trajectory on its way (v1: a joint path of its thinned points). ``jobs[i]``
+    goes to ``traj.positions[kept[i + 1]]``."""
+
+    def __init__(self, traj: ValidTrajectory, kept: List[int], jobs: List[MoveJob], started: float) -> None:
+        self.traj = traj
+        self.kept = kept
+        self.jobs = jobs
+        self.started = started
+
+    @property
+    def done(self) -> bool:
+        return all(job.done for job in self.jobs)
+
+    @property
+    def success(self) -> bool:
+        return self.done and all(job.result is not None and job.result.success for job in self.jobs)
+
+    def failure(self) -> Optional[MoveJob]:
+        """The first job that ended without success (None: none so far)."""
+        for job in self.jobs:
+            if job.done and job.result is not None and not job.result.success:
+                return job
+        return None
+
+    def points_done(self) -> int:
+        """How many planned points have been reached (kept points passed, dropped ones between)."""
+        n = 0
+        for job, index in zip(self.jobs, self.kept[1:]):
+            if job.done and job.result is not None and job.result.success:
+                n = index
+        return n
 
 
 class DriverCore:
@@ -274,6 +309,22 @@ class DriverCore:
         self._wake.set()
         log.info("joint path: %d PTP targets queued (jobs %d..%d)", len(jobs), jobs[0].id, jobs[-1].id)
         return jobs
+
+    def submit_trajectory(self, traj: ValidTrajectory,
+                          on_update: Optional[Callable[[MoveJob], None]] = None) -> "TrajectoryRun":
+        """Run a validated planner trajectory (protocol v1): thinned to the fewest stop points
+        that keep the path within its path tolerance (:func:`trajectories.thin`), each kept point
+        a PTP target of a joint path (it replaces the queued targets of an earlier path). The v1
+        program stops at every point and moves at its own speed: the result says how much slower
+        than planned it ran. Raises DriverError (nothing queued) as :meth:`submit_joint_path`."""
+        kept = thin(traj)
+        points = [traj.positions[k] for k in kept[1:]]
+        if not points:                      # only the start, where the arm is: nothing to move
+            return TrajectoryRun(traj, kept, [], self.clock())
+        jobs = self.submit_joint_path(self.joint_names, points, on_update)
+        log.info("trajectory: %d points planned over %.2f s, %d stop points after thinning",
+                 len(traj.positions) - 1, traj.duration, len(points))
+        return TrajectoryRun(traj, kept, jobs, self.clock())
 
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:
         """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when

@@ -23,6 +23,7 @@ __all__ = [
     "SUCCESSFUL", "INVALID_GOAL", "INVALID_JOINTS", "OLD_HEADER_TIMESTAMP",
     "PATH_TOLERANCE_VIOLATED", "GOAL_TOLERANCE_VIOLATED",
     "TrajectoryError", "TrajectoryGoal", "ValidTrajectory", "validate", "segment_speeds", "thin",
+    "path_deviation",
     "DEFAULT_PATH_TOLERANCE", "V1_WIRE_ERROR",
 ]
 
@@ -259,3 +260,18 @@ def _deviation(a: Sequence[float], b: Sequence[float], p: Sequence[float], tol: 
     dd = sum(x * x for x in d)
     f = 0.0 if dd == 0.0 else min(1.0, max(0.0, sum(x * y for x, y in zip(d, v)) / dd))
     return max(abs(y - f * x) for x, y in zip(d, v))
+
+
+def path_deviation(traj: ValidTrajectory, q: Sequence[float]) -> Tuple[float, int]:
+    """How far the joints ``q`` are from the planned path (anywhere along it, not at a given
+    time), in units of each joint's path tolerance (> 1: outside), and the index of the nearest
+    segment. Used where the timing is not kept (v1): the path, not the schedule, is checked."""
+    pts = traj.positions
+    if len(pts) == 1:
+        return _deviation(pts[0], pts[0], q, traj.path_tolerance), 0
+    best, where = math.inf, 0
+    for k in range(1, len(pts)):
+        d = _deviation(pts[k - 1], pts[k], q, traj.path_tolerance)
+        if d < best:
+            best, where = d, k
+    return best, where
