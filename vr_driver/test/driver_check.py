@@ -102,8 +102,10 @@ class DriverTest(unittest.TestCase):
         cls.diag = Recorder("/diagnostics", DiagnosticArray)
         cls.rosout = Recorder("/rosout", Log)
         cls.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
+        cls.raw_client = actionlib.ActionClient("/move_to_pose", MoveToPoseAction)
         cls.started = time.monotonic()
         assert cls.client.wait_for_server(rospy.Duration(20.0)), "move_to_pose server not up"
+        assert cls.raw_client.wait_for_server(rospy.Duration(20.0)), "move_to_pose server not up"
         rospy.wait_for_service("/virtual_controller/set_estop", 20.0)
         cls.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
         cls.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
@@ -129,9 +131,18 @@ class DriverTest(unittest.TestCase):
         goal = MoveToPoseGoal(target=cp(target), move_type=kind, has_via=via is not None,
                               via=cp(via) if via is not None else CartesianPose(),
                               preview_only=preview_only)
-        self.client.send_goal(goal)
-        self.assertTrue(self.client.wait_for_result(rospy.Duration(timeout)), "no result in time")
-        return self.client.get_state(), self.client.get_result()
+        # a plain ActionClient: SimpleActionClient drops a transition that arrives before its
+        # send_goal() has returned (ros/actionlib#206, "Got a transition callback on a goal handle
+        # that we're not tracking"), and the driver refuses a bad goal that fast: the test then
+        # waited for a result it had already been sent (about 1 run in 10 under load)
+        done = threading.Event()
+
+        def transition(handle):
+            if handle.get_comm_state() == actionlib.CommState.DONE:
+                done.set()
+        handle = self.raw_client.send_goal(goal, transition_cb=transition)
+        self.assertTrue(done.wait(timeout), "no result in time")
+        return handle.get_goal_status(), handle.get_result()
 
     def wait_entries(self, n, timeout=10.0):
         self.assertTrue(self.executed.wait_count(n, timeout), "expected %d executed entries, have %d"
