@@ -48,7 +48,7 @@ class CodeChecksTest(unittest.TestCase):
         cls.files = python_files()
 
     def test_the_file_list_has_the_packages_and_the_scripts(self):
-        for path in ("vr_driver/src/vr_driver/driver.py", "vr_driver/nodes/interface", "scripts/junit_summary",
+        for path in ("vr_driver/src/vr_driver/driver/core.py", "vr_driver/nodes/interface", "scripts/junit_summary",
                      "bench/driver_latency.py", "test/test_code_checks.py",
                      "pyprofibus_vendor/src/pyprofibus_vendor/dp_slave.py"):
             self.assertIn(path, self.files)
