@@ -1,5 +1,7 @@
 """The generated messages: RobotStatus, RobotMode and TriState must stay wire-identical to
-industrial_msgs (same MD5 sums), so ROS-Industrial tools subscribe to our robot_status unchanged.
+industrial_msgs (same MD5 sums), so ROS-Industrial tools subscribe to our robot_status unchanged;
+FollowJointTrajectory and JointTolerance to control_msgs of ROS Noetic, so MoveIt's controller manager
+can use our joint_trajectory_action.
 
 Needs the catkin devel space (run through `make run_tests` or `scripts/env`); under plain pytest
 without a built workspace the module is skipped with that reason."""
@@ -44,3 +46,93 @@ def test_move_to_pose_action_round_trips():
     assert (back.target.x, back.via.y, back.move_type, back.has_via, back.preview_only) == \
         (1120, 200, 3, True, True)
     assert msg.MoveToPoseFeedback.PHASE_MOVING == "moving"
+
+
+# MD5 sums of control_msgs/FollowJointTrajectory and control_msgs/JointTolerance as ROS Noetic ships
+# them (control_msgs 1.5.x; unchanged since Melodic, when FollowJointTrajectoryResult gained
+# error_string). Source: the `getMD5()` strings that rosserial writes into its generated ros_lib
+# headers `control_msgs/<Type>.h` (the Noetic-era generator, `virtual ... override` style), found
+# identical in the generated ROS 1 bindings of other client libraries (C#, Elixir, JavaScript) that
+# embed the same sums. genmsg's MD5 of a message covers its constants and field types/names, with a
+# nested message replaced by that message's own MD5, never by its package name, so our
+# vr_driver/... copies carry the same sums when (and only when) every field, type and constant agrees.
+CONTROL_MSGS_MD5 = {
+    "FollowJointTrajectoryAction": "bc4f9b743838566551c0390c65f1a248",
+    "FollowJointTrajectoryGoal": "69636787b6ecbde4d61d711979bc7ecb",
+    "FollowJointTrajectoryActionGoal": "cff5c1d533bf2f82dd0138d57f4304bb",
+    "FollowJointTrajectoryResult": "493383b18409bfb604b4e26c676401d2",
+    "FollowJointTrajectoryActionResult": "c4fb3b000dc9da4fd99699380efcc5d9",
+    "FollowJointTrajectoryFeedback": "10817c60c2486ef6b33e97dcd87f4474",
+    "FollowJointTrajectoryActionFeedback": "d8920dc4eae9fc107e00999cce4be641",
+    "JointTolerance": "f544fe9c16cf04547e135dd6063ff5be",
+}
+# control_msgs before error_string (ROS Indigo); a server with this sum would not talk to Noetic MoveIt
+OLD_RESULT_WITHOUT_ERROR_STRING_MD5 = "6243274b5d629dc838814109754410d5"
+
+
+@pytest.mark.parametrize("name", sorted(CONTROL_MSGS_MD5))
+def test_follow_joint_trajectory_types_have_the_control_msgs_noetic_md5(name):
+    assert getattr(msg, name)._md5sum == CONTROL_MSGS_MD5[name]
+
+
+def test_the_result_is_the_noetic_one_with_error_string():
+    assert msg.FollowJointTrajectoryResult._md5sum != OLD_RESULT_WITHOUT_ERROR_STRING_MD5
+    assert msg.FollowJointTrajectoryResult.__slots__ == ["error_code", "error_string"]
+
+
+def test_follow_joint_trajectory_fields_in_control_msgs_order():
+    assert msg.FollowJointTrajectoryGoal.__slots__ == ["trajectory", "path_tolerance", "goal_tolerance",
+                                                       "goal_time_tolerance"]
+    assert msg.FollowJointTrajectoryGoal._slot_types == [
+        "trajectory_msgs/JointTrajectory", "vr_driver/JointTolerance[]", "vr_driver/JointTolerance[]", "duration"]
+    assert msg.FollowJointTrajectoryResult._slot_types == ["int32", "string"]
+    assert msg.FollowJointTrajectoryFeedback.__slots__ == ["header", "joint_names", "desired", "actual", "error"]
+    assert msg.FollowJointTrajectoryFeedback._slot_types == [
+        "std_msgs/Header", "string[]"] + ["trajectory_msgs/JointTrajectoryPoint"] * 3
+    assert msg.JointTolerance.__slots__ == ["name", "position", "velocity", "acceleration"]
+    assert msg.JointTolerance._slot_types == ["string", "float64", "float64", "float64"]
+
+
+def test_follow_joint_trajectory_error_codes():
+    r = msg.FollowJointTrajectoryResult
+    assert (r.SUCCESSFUL, r.INVALID_GOAL, r.INVALID_JOINTS, r.OLD_HEADER_TIMESTAMP, r.PATH_TOLERANCE_VIOLATED,
+            r.GOAL_TOLERANCE_VIOLATED) == (0, -1, -2, -3, -4, -5)
+
+
+def test_the_md5_ignores_the_package_name_but_not_a_field():
+    """What makes the mirror work, shown with genmsg itself: the same text under another package has
+    the same MD5; one changed field name does not."""
+    import genmsg
+    import genmsg.gentools
+    import genmsg.msg_loader
+
+    text = "string name\nfloat64 position\nfloat64 velocity\nfloat64 acceleration\n"
+
+    def md5(package, body):
+        ctx = genmsg.msg_loader.MsgContext.create_default()
+        spec = genmsg.msg_loader.load_msg_from_string(ctx, body, package + "/JointTolerance")
+        return genmsg.gentools.compute_md5(ctx, spec)
+
+    assert md5("control_msgs", text) == md5("vr_driver", text) == CONTROL_MSGS_MD5["JointTolerance"]
+    assert md5("control_msgs", text.replace("velocity", "speed")) != CONTROL_MSGS_MD5["JointTolerance"]
+
+
+def test_follow_joint_trajectory_goal_round_trips():
+    from io import BytesIO
+
+    import genpy
+    from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+    goal = msg.FollowJointTrajectoryGoal(
+        trajectory=JointTrajectory(joint_names=["joint_%d" % i for i in range(1, 7)],
+                                   points=[JointTrajectoryPoint(positions=[0.1] * 6,
+                                                                time_from_start=genpy.Duration(1.5))]),
+        path_tolerance=[msg.JointTolerance("joint_1", 0.01, -1.0, 0.0)],
+        goal_time_tolerance=genpy.Duration(0.5))
+    buf = BytesIO()
+    goal.serialize(buf)
+    back = msg.FollowJointTrajectoryGoal()
+    back.deserialize(buf.getvalue())
+    assert back.trajectory.joint_names[5] == "joint_6"
+    assert back.trajectory.points[0].time_from_start == genpy.Duration(1.5)
+    assert (back.path_tolerance[0].name, back.path_tolerance[0].velocity) == ("joint_1", -1.0)
+    assert back.goal_time_tolerance == genpy.Duration(0.5)
