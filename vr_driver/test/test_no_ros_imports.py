@@ -11,7 +11,7 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
-CORE = ("errors", "poses", "kinematics", "motion", "protocol", "params", "driver", "driver.link",
+CORE = ("errors", "validate", "poses", "kinematics", "motion", "protocol", "params", "driver", "driver.link",
         "driver.sequencer", "driver.jobs", "driver.core", "sim_arm",
         "controller_sim", "csr", "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",

@@ -49,6 +49,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import PyKDL as kdl
 
+from . import validate
 from .errors import (IkTimeoutError, JointLimitError, KinematicsError, ModelError, NearSingularError, PoseError,
                      UnreachableError)
 from .poses import (ControllerPose, FrameConventions, check_transform, finite_number, make_transform, rpy_to_matrix,
@@ -259,8 +260,8 @@ class IkSettings:
     nr_eps: float = 1e-9
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.timeout) and self.timeout > 0):
-            raise ModelError("IK timeout must be a positive number of seconds, got %r" % self.timeout)
+        validate.number(self.timeout, lambda _: ModelError("IK timeout must be a positive number of seconds, got %r"
+                                                           % (self.timeout,)), 0.0, lo_open=True, text=False)
         if int(self.attempts) < 1:
             raise ModelError("IK attempts must be >= 1, got %r" % self.attempts)
 
