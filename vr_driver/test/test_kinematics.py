@@ -328,3 +328,19 @@ def test_cli_usage_errors_exit_2(capsys):
     assert _run(capsys, "ik", "1120", "0", "725", "0", "nan", "0")[0] == 2
     assert kin_mod.main([]) == 2
     assert kin_mod.main(["bogus"]) == 2
+
+
+def test_kinematics_reads_the_urdf_with_the_support_packages_reader(urdf):
+    """One URDF reader: UrdfModel is panasonic_vr006l_support's RobotModel with our ModelError."""
+    from panasonic_vr006l_support import model as support_model
+    import vr_driver.kinematics as kinematics
+    assert issubclass(UrdfModel, support_model.RobotModel) and kinematics.UrdfJoint is support_model.Joint
+    assert not hasattr(kinematics, "_floats")
+    model = UrdfModel.from_string(urdf)
+    assert [j.name for j in model.chain("base_link", "tool0")] == [
+        j.name for j in support_model.RobotModel.from_urdf_string(urdf).chain("base_link", "tool0")]
+    mimic = urdf.replace('<joint name="joint_6" type="revolute">',
+                         '<joint name="joint_6" type="revolute"><mimic joint="joint_5"/>', 1)
+    assert mimic != urdf
+    with pytest.raises(ModelError, match="joint_6: mimic joints are not supported"):
+        UrdfModel.from_string(mimic)

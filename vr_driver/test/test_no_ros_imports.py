@@ -11,8 +11,8 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
-CORE = ("errors", "poses", "kinematics", "motion", "protocol", "protocol_v2", "params", "driver", "driver.link",
-        "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories", "sim_arm",
+CORE = ("errors", "validate", "poses", "kinematics", "motion", "protocol", "protocol_v2", "params", "driver",
+        "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories", "sim_arm",
         "controller_sim", "csr", "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")

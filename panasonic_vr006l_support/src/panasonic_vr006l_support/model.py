@@ -1,5 +1,7 @@
-"""A small read-only view of a URDF robot model: the joint tree, forward kinematics of every link
-(batched, numpy) and the reach. ROS-free. Used by the model tests and the picture renderer.
+"""The stack's one URDF reader and a small read-only view of the model: the joint tree, the shapes,
+forward kinematics of every link (batched, numpy) and the reach. ROS-free, our own small parser on
+ElementTree (urdf_parser_py is not needed). Used by the model tests, the picture renderer and
+``vr_driver.kinematics`` (which builds its KDL chain from :meth:`RobotModel.chain`).
 
 Kinematics for control (IK, Jacobians) lives in ``vr_driver.kinematics`` on PyKDL; this module
 only answers questions about the model's geometry.
@@ -7,14 +9,61 @@ only answers questions about the model's geometry.
 from __future__ import annotations
 
 import math
+import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
-from typing import Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
 
 class ModelError(Exception):
     """The URDF is not what the question needs (unknown link, no chain, unsupported joint...)."""
+
+
+MOVABLE_TYPES = ("revolute", "continuous", "prismatic")
+_ZERO3 = (0.0, 0.0, 0.0)
+
+
+def _floats(text: Optional[str], count: int, default: Tuple[float, ...], what: str) -> Tuple[float, ...]:
+    if text is None:
+        return default
+    try:
+        values = tuple(float(v) for v in text.split())
+    except ValueError as exc:
+        raise ModelError("%s: %r is not %d numbers" % (what, text, count)) from exc
+    if len(values) != count or not all(math.isfinite(v) for v in values):
+        raise ModelError("%s: %r is not %d finite numbers" % (what, text, count))
+    return values
+
+
+def _origin(elem: Optional[Any], what: str) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
+    """(xyz, rpy) of the ``<origin>`` child of ``elem`` (zeros where absent)."""
+    origin = elem.find("origin") if elem is not None else None
+    if origin is None:
+        return _ZERO3, _ZERO3
+    return (_floats(origin.get("xyz"), 3, _ZERO3, what + " origin xyz"),
+            _floats(origin.get("rpy"), 3, _ZERO3, what + " origin rpy"))
+
+
+def _limit(elem: Any, jtype: str, what: str) -> Tuple[Optional[float], ...]:
+    """(lower, upper, velocity, effort) of a joint's ``<limit>``; lower and upper None for a
+    continuous joint, all None without a limit (where the joint type allows that)."""
+    limit = elem.find("limit")
+    if limit is None:
+        if jtype in ("revolute", "prismatic"):
+            raise ModelError("%s: a %s joint needs a <limit>" % (what, jtype))
+        return None, None, None, None
+    try:
+        velocity = float(limit.get("velocity", "inf"))
+        effort = float(limit.get("effort", "0"))
+        lower = upper = None
+        if jtype != "continuous":
+            lower, upper = float(limit.get("lower", "0")), float(limit.get("upper", "0"))
+    except ValueError as exc:
+        raise ModelError("%s: bad <limit>: %s" % (what, exc)) from exc
+    if lower is not None and upper is not None and lower > upper:
+        raise ModelError("%s: lower limit %g above upper limit %g" % (what, lower, upper))
+    return lower, upper, velocity, effort
 
 
 def rpy_matrix(rpy: Sequence[float]) -> np.ndarray:
@@ -55,10 +104,13 @@ class Joint:
     upper: Optional[float] = None
     velocity: Optional[float] = None
     effort: Optional[float] = None
+    xyz: Tuple[float, float, float] = (0.0, 0.0, 0.0)   # the origin as written in the URDF
+    rpy: Tuple[float, float, float] = (0.0, 0.0, 0.0)
+    mimic: bool = False                                  # has a <mimic> element
 
     @property
     def movable(self) -> bool:
-        return self.type in ("revolute", "continuous", "prismatic")
+        return self.type in MOVABLE_TYPES
 
 
 @dataclass(frozen=True)
@@ -74,84 +126,121 @@ class RobotModel:
     """The joint tree of a URDF, with forward kinematics."""
 
     def __init__(self, name: str, root: str, joints: Sequence[Joint], visuals: Mapping[str, List[Shape]],
-                 collisions: Mapping[str, List[Shape]]):
+                 collisions: Mapping[str, List[Shape]], links: Optional[Sequence[str]] = None):
         self.name = name
         self.root = root
         self.joints: Dict[str, Joint] = {j.name: j for j in joints}
         self.visuals = dict(visuals)
         self.collisions = dict(collisions)
-        self.links = [root] + [j.child for j in joints]
-        self._parent_joint = {j.child: j for j in joints}
+        self.links = list(links) if links is not None else [root] + [j.child for j in joints]
+        self._parent_joint: Dict[str, Joint] = {}
+        for j in joints:
+            if j.child in self._parent_joint:
+                raise ModelError("link %s has two parent joints (%s, %s)" % (j.child, self._parent_joint[j.child].name,
+                                                                            j.name))
+            self._parent_joint[j.child] = j
 
     @classmethod
     def from_urdf_string(cls, xml: str) -> "RobotModel":
+        """Read a URDF (ModelError says what is wrong: not XML, a joint without parent / child /
+        limit, numbers that are not finite, a zero axis, not one root link)."""
         try:
-            from urdf_parser_py.urdf import URDF
-        except ImportError as exc:  # pragma: no cover - environment problem
-            raise ModelError("urdf_parser_py is missing: run scripts/setup (urdfdom-py from PyPI)") from exc
-        try:
-            robot = URDF.from_xml_string(xml)
-        except Exception as exc:
-            raise ModelError("URDF does not parse: %s" % exc) from exc
-        materials = {m.name: m for m in (robot.materials or [])}
-        joints = []
-        for j in robot.joints:
-            o = j.origin
-            origin = transform(o.xyz if o is not None and o.xyz else (0, 0, 0),
-                               o.rpy if o is not None and o.rpy else (0, 0, 0))
-            axis = np.array(j.axis if j.axis is not None else (1.0, 0.0, 0.0), dtype=float)
-            norm = np.linalg.norm(axis)
-            if norm == 0.0:
-                raise ModelError("joint %s has a zero axis" % j.name)
-            lim = j.limit
-            joints.append(Joint(
-                name=j.name, type=j.type, parent=j.parent, child=j.child, origin=origin, axis=axis / norm,
-                lower=getattr(lim, "lower", None), upper=getattr(lim, "upper", None),
-                velocity=getattr(lim, "velocity", None), effort=getattr(lim, "effort", None)))
-        visuals, collisions = {}, {}
-        for link in robot.links:
-            visuals[link.name] = [cls._shape(v, materials) for v in link.visuals]
-            collisions[link.name] = [cls._shape(c, materials) for c in link.collisions]
-        return cls(robot.name, robot.get_root(), joints, visuals, collisions)
+            root = ET.fromstring(xml)
+        except ET.ParseError as exc:
+            raise ModelError("the URDF is not valid XML: %s" % exc) from exc
+        if root.tag != "robot":
+            raise ModelError("the URDF's root element is <%s>, not <robot>" % root.tag)
+        materials = {m.get("name"): m for m in root.findall("material")}
+        joints = [cls._joint(elem) for elem in root.findall("joint")]
+        links = [link.get("name") for link in root.findall("link")]
+        children = {j.child for j in joints}
+        roots = [name for name in links if name not in children]
+        if len(roots) != 1:
+            raise ModelError("the URDF needs exactly one root link, it has %s" % (", ".join(roots) or "none"))
+        visuals = {link.get("name"): [cls._shape(v, materials, "link %s visual" % link.get("name"))
+                                      for v in link.findall("visual")] for link in root.findall("link")}
+        collisions = {link.get("name"): [cls._shape(c, materials, "link %s collision" % link.get("name"))
+                                         for c in link.findall("collision")] for link in root.findall("link")}
+        return cls(root.get("name", ""), roots[0], joints, visuals, collisions, links=links)
 
     @staticmethod
-    def _shape(elem, materials) -> Shape:
-        o = elem.origin
-        origin = transform(o.xyz if o is not None and o.xyz else (0, 0, 0),
-                           o.rpy if o is not None and o.rpy else (0, 0, 0))
-        g = elem.geometry
-        kind = type(g).__name__.lower()
+    def _joint(elem: Any) -> Joint:
+        name, jtype = elem.get("name"), elem.get("type")
+        what = "URDF joint %s" % name
+        parent, child = elem.find("parent"), elem.find("child")
+        if parent is None or child is None:
+            raise ModelError("%s: missing <parent> or <child>" % what)
+        xyz, rpy = _origin(elem, what)
+        axis_elem = elem.find("axis")
+        axis = np.array(_floats(axis_elem.get("xyz") if axis_elem is not None else None, 3, (1.0, 0.0, 0.0),
+                                what + " axis"), dtype=float)
+        norm = float(np.linalg.norm(axis))
+        if jtype != "fixed" and norm < 1e-12:
+            raise ModelError("%s: zero axis" % what)
+        lower, upper, velocity, effort = _limit(elem, jtype, what)
+        return Joint(name=name, type=jtype, parent=parent.get("link"), child=child.get("link"),
+                     origin=transform(xyz, rpy), axis=axis / norm if norm > 0 else axis, lower=lower, upper=upper,
+                     velocity=velocity, effort=effort, xyz=xyz, rpy=rpy, mimic=elem.find("mimic") is not None)
+
+    @staticmethod
+    def _shape(elem: Any, materials: Mapping[str, Any], what: str) -> Shape:
+        origin = transform(*_origin(elem, what))
+        geometry = elem.find("geometry")
+        g = geometry[0] if geometry is not None and len(geometry) else None
+        kind = g.tag if g is not None else ""
         if kind == "box":
-            size = tuple(g.size)
+            size = _floats(g.get("size"), 3, _ZERO3, what + " box size")
         elif kind == "cylinder":
-            size = (g.radius, g.length)
+            size = _floats(g.get("radius"), 1, (0.0,), what + " radius") + _floats(g.get("length"), 1, (0.0,),
+                                                                                   what + " length")
         elif kind == "sphere":
-            size = (g.radius,)
+            size = _floats(g.get("radius"), 1, (0.0,), what + " radius")
         else:
             size = ()
         rgba = None
-        mat = getattr(elem, "material", None)
+        mat = elem.find("material")
         if mat is not None:
-            color = mat.color if mat.color is not None else getattr(materials.get(mat.name), "color", None)
+            color = mat.find("color")
+            if color is None and mat.get("name") in materials:
+                color = materials[mat.get("name")].find("color")
             if color is not None:
-                rgba = tuple(color.rgba)
+                rgba = _floats(color.get("rgba"), 4, (0.0, 0.0, 0.0, 0.0), what + " colour")
         return Shape(kind=kind, size=size, origin=origin, rgba=rgba)
 
     # --- structure -------------------------------------------------------------------------------
     def chain(self, base: str, tip: str) -> List[Joint]:
-        """Joints from ``base`` down to ``tip`` (tip must be a descendant of base)."""
-        for name in (base, tip):
-            if name not in self.links:
-                raise ModelError("no link named %r in model %s" % (name, self.name))
+        """The joints from ``base`` down to ``tip`` (fixed ones included), in order; ModelError if
+        ``tip`` is not below ``base``."""
+        return self._chain(base, tip)
+
+    def _chain(self, base: str, tip: str) -> List[Joint]:
+        for link in (base, tip):
+            if link not in self.links:
+                raise ModelError("link %r is not in the URDF (links: %s)" % (link, ", ".join(self.links)))
         joints = []
         link = tip
         while link != base:
             joint = self._parent_joint.get(link)
             if joint is None:
-                raise ModelError("%s is not below %s" % (tip, base))
+                raise ModelError("no kinematic chain from %s to %s (%s is not below %s)" % (base, tip, tip, base))
             joints.append(joint)
             link = joint.parent
         return list(reversed(joints))
+
+    def fixed_transform(self, frm: str, to: str) -> np.ndarray:
+        """Pose of link ``to`` in link ``frm`` when they are joined by fixed joints only (either way)."""
+        try:
+            joints = self._chain(frm, to)
+            inverse = False
+        except ModelError:
+            joints = self._chain(to, frm)
+            inverse = True
+        t = np.eye(4)
+        for j in joints:
+            if j.movable:
+                raise ModelError("%s and %s are not rigidly connected (joint %s moves)" % (frm, to, j.name))
+            t = t @ j.origin
+        return np.linalg.inv(t) if inverse else t
 
     def movable_joints(self, base: str, tip: str) -> List[Joint]:
         return [j for j in self.chain(base, tip) if j.movable]

@@ -197,16 +197,30 @@ def setup_logging(verbosity: int) -> None:
 # --------------------------------------------------------------------------------------------------
 
 _INT_RE = re.compile(r"\A(?:0[xX][0-9A-Fa-f]+|[0-9]+)\Z")
+_SIGNED_INT_RE = re.compile(r"\A-?(?:0[xX][0-9A-Fa-f]+|[0-9]+)\Z")
 _HEX_SPLIT_RE = re.compile(r"[\s,:;]+")
 _HEX_TOKEN_RE = re.compile(r"\A(?:0[xX])?([0-9A-Fa-f]*)\Z")
 
 
+def int_or_none(text: str, signed: bool = False) -> Optional[int]:
+    """A decimal or ``0x`` hexadecimal integer (ASCII digits only; ``-`` first with ``signed``),
+    or None when ``text`` is not one. The package's one reader of integers in text (command line,
+    GSD files, INI configurations)."""
+    text = text.strip()
+    if not (_SIGNED_INT_RE if signed else _INT_RE).match(text):
+        return None
+    negative = text.startswith("-")
+    body = text[1:] if negative else text
+    value = int(body, 16) if body[:2] in ("0x", "0X") else int(body, 10)
+    return -value if negative else value
+
+
 def parse_int(text: str) -> int:
     """A decimal or ``0x`` hexadecimal integer; ArgumentTypeError otherwise."""
-    text = text.strip()
-    if not _INT_RE.match(text):
-        raise argparse.ArgumentTypeError("%r is not a number (decimal or 0x hex)" % text)
-    return int(text, 16) if text[:2] in ("0x", "0X") else int(text, 10)
+    value = int_or_none(text)
+    if value is None:
+        raise argparse.ArgumentTypeError("%r is not a number (decimal or 0x hex)" % text.strip())
+    return value
 
 
 def parse_hex(text: str) -> bytes:

@@ -47,6 +47,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import yaml
 
+from . import _cli
 from .errors import ConfigError, GsdError
 from .gsd import (
     DP_MAX_USER_PRM_DATA_LEN,
@@ -589,9 +590,8 @@ def _ini_value(key: str, text: str) -> Any:
     if value == "" or value.lower() in ("none", "null"):
         return None
     if key in _INI_INT:
-        if re.match(r"(?:0[xX][0-9A-Fa-f]+|-?[0-9]+)\Z", value):
-            return int(value, 0) if value[:2].lower() == "0x" else int(value)
-        return value
+        number = _cli.int_or_none(value, signed=True)
+        return value if number is None else number
     if key in _INI_FLOAT:
         try:
             return float(value)

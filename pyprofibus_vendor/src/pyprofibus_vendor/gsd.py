@@ -89,8 +89,6 @@ _BAUD_KEYS: Dict[str, int] = {
 _SUPP_RE = re.compile(r"([0-9.]+m?)_supp\Z")
 _TSDR_RE = re.compile(r"maxtsdr_([0-9.]+m?)\Z")
 
-_INT_RE = re.compile(r"(?:0[xX][0-9A-Fa-f]+|[0-9]+)\Z")
-_SIGNED_INT_RE = re.compile(r"-?(?:0[xX][0-9A-Fa-f]+|[0-9]+)\Z")
 # Keyword, optional "(index)", "=", value. ASCII only on purpose: GSD keywords are ASCII.
 _KEYWORD_RE = re.compile(r"([A-Za-z0-9_.!]+)[ \t]*(?:\([ \t]*([0-9]+)[ \t]*\))?[ \t]*=[ \t]*(.*)\Z")
 _BARE_WORD_RE = re.compile(r"[A-Za-z0-9_.!]+\Z")
@@ -142,15 +140,8 @@ def baud_name(baud: int) -> str:
     return text + unit
 
 
-def _parse_int(text: str, signed: bool = False) -> Optional[int]:
-    """A decimal or 0x-hex integer, or None when ``text`` is not one (ASCII digits only)."""
-    text = text.strip()
-    if not (_SIGNED_INT_RE if signed else _INT_RE).match(text):
-        return None
-    negative = text.startswith("-")
-    body = text[1:] if negative else text
-    value = int(body, 16) if body[:2] in ("0x", "0X") else int(body, 10)
-    return -value if negative else value
+#: a decimal or 0x-hex integer, or None (the package's one integer reader, in _cli)
+_parse_int = _cli.int_or_none
 
 
 def _parse_int_list(text: str) -> Optional[List[int]]:

@@ -1,7 +1,7 @@
 """vr_driver: ROS driver stack for the Panasonic VR-006L on a G2 controller over PROFIBUS-DP.
 
 The core modules import no rospy (test/test_no_ros_imports.py): protocol, driver, controller_sim,
-sim_arm, kinematics, motion, poses, params, pose_input, csr and errors. The ROS edge: interface_node
+sim_arm, kinematics, motion, poses, validate, params, pose_input, csr and errors. The ROS edge: interface_node
 (the driver node), virtual_controller_node, pose_terminal_node and ros_support.
 """
 

@@ -57,7 +57,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import math
 import os
 import signal
 import sys
@@ -72,9 +71,10 @@ from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 
-from .errors import PoseError, ProtocolError, VrDriverError
+from . import validate
+from .errors import ProtocolError, VrDriverError
 from .kinematics import Kinematics
-from .poses import HOME_POSE, ControllerPose, finite_number
+from .poses import HOME_POSE, ControllerPose
 from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
 from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
 
@@ -125,27 +125,16 @@ class SimDeviceError(SimError):
 # ------------------------------------------------------------------------------------------- options
 
 def _positive(value: Any, name: str) -> float:
-    try:
-        number = finite_number(value, name)
-    except PoseError:
-        number = math.nan
-    if not number > 0.0:
-        raise SimError("%s must be a finite number > 0, got %r" % (name, value))
-    return number
+    return validate.number(value, lambda _: SimError("%s must be a finite number > 0, got %r" % (name, value)),
+                           0.0, lo_open=True)
 
 
 def _int_option(value: Any, name: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool):
-        raise SimError("%s must be an integer in %d..%d, got %r" % (name, lo, hi, value))
-    try:
-        number = int(value)
-        if number != float(value):
-            raise ValueError(value)
-    except (TypeError, ValueError):
-        raise SimError("%s must be an integer in %d..%d, got %r" % (name, lo, hi, value)) from None
-    if not lo <= number <= hi:
-        raise SimError("%s = %d is outside %d..%d" % (name, number, lo, hi))
-    return number
+    def fail(got: Optional[float]) -> SimError:
+        if got is None:
+            return SimError("%s must be an integer in %d..%d, got %r" % (name, lo, hi, value))
+        return SimError("%s = %d is outside %d..%d" % (name, got, lo, hi))
+    return validate.integer(value, fail, lo, hi, text=True, integral=True)
 
 
 @dataclass(frozen=True)
@@ -182,13 +171,8 @@ class SimOptions:
             raise SimError(str(exc)) from exc
         object.__setattr__(self, "speed_factor", _positive(self.speed_factor, "speed_factor"))
         object.__setattr__(self, "loop_period", _positive(self.loop_period, "loop_period"))
-        try:
-            brake = finite_number(self.brake_time, "brake_time")
-        except PoseError:
-            brake = math.nan
-        if not brake >= 0.0:
-            raise SimError("brake_time must be a finite number >= 0 (seconds), got %r" % (self.brake_time,))
-        object.__setattr__(self, "brake_time", brake)
+        object.__setattr__(self, "brake_time", validate.number(self.brake_time, lambda _: SimError(
+            "brake_time must be a finite number >= 0 (seconds), got %r" % (self.brake_time,)), 0.0))
         try:
             pose = ControllerPose.from_sequence(self.initial_pose)
         except VrDriverError as exc:

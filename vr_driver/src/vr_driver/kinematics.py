@@ -36,6 +36,7 @@ prints JSON ``{"joints", "pose", "reachable", "error"}``; exit 0 solved, 3 unrea
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -44,14 +45,16 @@ import sys
 import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import PyKDL as kdl
+from panasonic_vr006l_support import model as _support_model
 
+from . import validate
 from .errors import (IkTimeoutError, JointLimitError, KinematicsError, ModelError, NearSingularError, PoseError,
                      UnreachableError)
-from .poses import (ControllerPose, FrameConventions, check_transform, finite_number, make_transform, rpy_to_matrix,
+from .poses import (ControllerPose, FrameConventions, check_transform, finite_number, rpy_to_matrix,
                     wrap_angle)
 
 __all__ = [
@@ -73,132 +76,44 @@ _GEOM_EPS = 1e-9           # tolerance of the structure detection (m, or unit-ve
 
 # =========================================================================================== the URDF
 
-@dataclass(frozen=True)
-class UrdfJoint:
-    """One URDF joint, as far as kinematics needs it."""
-
-    name: str
-    type: str                                    # revolute | continuous | prismatic | fixed
-    parent: str
-    child: str
-    xyz: Tuple[float, float, float]
-    rpy: Tuple[float, float, float]
-    axis: Tuple[float, float, float]             # unit vector in the joint frame
-    lower: float = -math.inf
-    upper: float = math.inf
-    velocity: float = math.inf
-
-    @property
-    def movable(self) -> bool:
-        return self.type in _MOVABLE
-
-    def origin(self) -> np.ndarray:
-        return make_transform(rpy_to_matrix(*self.rpy), self.xyz)
+#: one joint of the URDF (the support package's reader: origin 4x4, xyz, rpy, unit axis, limits)
+UrdfJoint = _support_model.Joint
 
 
-def _floats(text: Optional[str], count: int, default: Tuple[float, ...], what: str) -> Tuple[float, ...]:
-    if text is None:
-        return default
+@contextlib.contextmanager
+def _model_errors() -> Iterator[None]:
+    """The support package's ModelError as ours (a VrDriverError), same message."""
     try:
-        values = tuple(float(v) for v in text.split())
-    except ValueError as exc:
-        raise ModelError("%s: %r is not %d numbers" % (what, text, count)) from exc
-    if len(values) != count or not all(math.isfinite(v) for v in values):
-        raise ModelError("%s: %r is not %d finite numbers" % (what, text, count))
-    return values
+        yield
+    except _support_model.ModelError as exc:
+        raise ModelError(str(exc)) from exc
 
 
-class UrdfModel:
-    """The joints and links of a URDF (our own small parser; urdf_parser_py is not needed)."""
-
-    def __init__(self, name: str, links: Sequence[str], joints: Sequence[UrdfJoint]):
-        self.name = name
-        self.links = list(links)
-        self.joints: Dict[str, UrdfJoint] = {j.name: j for j in joints}
-        self._by_child: Dict[str, UrdfJoint] = {}
-        for j in joints:
-            if j.child in self._by_child:
-                raise ModelError("link %s has two parent joints (%s, %s)"
-                                 % (j.child, self._by_child[j.child].name, j.name))
-            self._by_child[j.child] = j
+class UrdfModel(_support_model.RobotModel):
+    """The URDF as kinematics reads it: the support package's reader (:class:`RobotModel`), with
+    vr_driver's ModelError and the joints KDL can chain (revolute, continuous, prismatic, fixed;
+    no mimic joints)."""
 
     @classmethod
     def from_string(cls, xml: str) -> "UrdfModel":
-        try:
-            root = ET.fromstring(xml)
-        except ET.ParseError as exc:
-            raise ModelError("the URDF is not valid XML: %s" % exc) from exc
-        if root.tag != "robot":
-            raise ModelError("the URDF's root element is <%s>, not <robot>" % root.tag)
-        links = [link.get("name") for link in root.findall("link")]
-        joints = []
-        for elem in root.findall("joint"):
-            name = elem.get("name")
-            jtype = elem.get("type")
-            what = "URDF joint %s" % name
-            if jtype not in _MOVABLE + ("fixed",):
+        with _model_errors():
+            model = cls.from_urdf_string(xml)
+        for j in model.joints.values():
+            what = "URDF joint %s" % j.name
+            if j.type not in _MOVABLE + ("fixed",):
                 raise ModelError("%s: joint type %r is not supported (revolute, continuous, prismatic, fixed)"
-                                 % (what, jtype))
-            if elem.find("mimic") is not None:
+                                 % (what, j.type))
+            if j.mimic:
                 raise ModelError("%s: mimic joints are not supported" % what)
-            parent, child = elem.find("parent"), elem.find("child")
-            if parent is None or child is None:
-                raise ModelError("%s: missing <parent> or <child>" % what)
-            origin = elem.find("origin")
-            xyz = _floats(origin.get("xyz") if origin is not None else None, 3, (0.0, 0.0, 0.0), what + " origin xyz")
-            rpy = _floats(origin.get("rpy") if origin is not None else None, 3, (0.0, 0.0, 0.0), what + " origin rpy")
-            axis_elem = elem.find("axis")
-            axis = _floats(axis_elem.get("xyz") if axis_elem is not None else None, 3, (1.0, 0.0, 0.0),
-                           what + " axis")
-            norm = math.sqrt(sum(a * a for a in axis))
-            if jtype != "fixed" and norm < 1e-12:
-                raise ModelError("%s: zero axis" % what)
-            axis = tuple(a / norm for a in axis) if norm > 0 else axis
-            lower, upper, velocity = -math.inf, math.inf, math.inf
-            limit = elem.find("limit")
-            if limit is not None:
-                velocity = float(limit.get("velocity", "inf"))
-                if jtype != "continuous":
-                    lower = float(limit.get("lower", "0"))
-                    upper = float(limit.get("upper", "0"))
-            elif jtype in ("revolute", "prismatic"):
-                raise ModelError("%s: a %s joint needs a <limit>" % (what, jtype))
-            if lower > upper:
-                raise ModelError("%s: lower limit %g above upper limit %g" % (what, lower, upper))
-            joints.append(UrdfJoint(name, jtype, parent.get("link"), child.get("link"), xyz, rpy, axis,
-                                    lower, upper, velocity))
-        return cls(root.get("name", ""), links, joints)
+        return model
 
     def chain(self, base: str, tip: str) -> List[UrdfJoint]:
-        """The joints from ``base`` to ``tip`` (fixed ones included), in order; ModelError if none."""
-        for link in (base, tip):
-            if link not in self.links:
-                raise ModelError("link %r is not in the URDF (links: %s)" % (link, ", ".join(self.links)))
-        out: List[UrdfJoint] = []
-        link = tip
-        while link != base:
-            joint = self._by_child.get(link)
-            if joint is None:
-                raise ModelError("no kinematic chain from %s to %s (%s is not below %s)" % (base, tip, tip, base))
-            out.append(joint)
-            link = joint.parent
-        out.reverse()
-        return out
+        with _model_errors():
+            return super().chain(base, tip)
 
     def fixed_transform(self, frm: str, to: str) -> np.ndarray:
-        """Pose of link ``to`` in link ``frm`` when they are joined by fixed joints only (either way)."""
-        try:
-            joints = self.chain(frm, to)
-            inverse = False
-        except ModelError:
-            joints = self.chain(to, frm)
-            inverse = True
-        t = np.eye(4)
-        for j in joints:
-            if j.movable:
-                raise ModelError("%s and %s are not rigidly connected (joint %s moves)" % (frm, to, j.name))
-            t = t @ j.origin()
-        return np.linalg.inv(t) if inverse else t
+        with _model_errors():
+            return super().fixed_transform(frm, to)
 
 
 def build_kdl_chain(joints: Sequence[UrdfJoint]) -> "kdl.Chain":
@@ -259,8 +174,8 @@ class IkSettings:
     nr_eps: float = 1e-9
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.timeout) and self.timeout > 0):
-            raise ModelError("IK timeout must be a positive number of seconds, got %r" % self.timeout)
+        validate.number(self.timeout, lambda _: ModelError("IK timeout must be a positive number of seconds, got %r"
+                                                           % (self.timeout,)), 0.0, lo_open=True, text=False)
         if int(self.attempts) < 1:
             raise ModelError("IK attempts must be >= 1, got %r" % self.attempts)
 
@@ -567,8 +482,9 @@ class Kinematics:
             raise ModelError("the chain %s -> %s has no movable joint" % (base, tip))
         self.limits = JointLimits(
             names=tuple(j.name for j in movable),
-            lower=tuple(j.lower for j in movable), upper=tuple(j.upper for j in movable),
-            velocity=tuple(j.velocity for j in movable),
+            lower=tuple(-math.inf if j.lower is None else j.lower for j in movable),
+            upper=tuple(math.inf if j.upper is None else j.upper for j in movable),
+            velocity=tuple(math.inf if j.velocity is None else j.velocity for j in movable),
             revolute=tuple(j.type != "prismatic" for j in movable))
         self.joint_names = self.limits.names
         self.dof = len(movable)
@@ -587,7 +503,7 @@ class Kinematics:
         axes, points, t = [], [], np.eye(4)
         reach = 0.0
         for j in self.chain_joints:
-            o = j.origin()
+            o = j.origin
             reach += float(np.linalg.norm(o[:3, 3]))
             t = t @ o
             if j.movable:

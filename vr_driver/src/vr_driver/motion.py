@@ -30,6 +30,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from . import validate
 from .errors import EnvelopeError, KinematicsError, MotionError, NearSingularError, PathDeviationError, PoseError
 from .kinematics import Kinematics
 from .poses import ControllerPose, MoveType, Workspace, matrix_to_quaternion, quaternion_slerp, quaternion_to_matrix
@@ -67,7 +68,7 @@ class MotionSettings:
         }
         for name, ok in checks.items():
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and ok):
+            if not (validate.as_finite(value, text=False) is not None and ok):
                 raise MotionError("motion setting %s = %r is out of range" % (name, value))
 
 

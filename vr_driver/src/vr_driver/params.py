@@ -12,6 +12,7 @@ import os
 from dataclasses import dataclass, field
 from typing import Any, Dict, Mapping, Optional, Tuple
 
+from . import validate
 from .errors import VrDriverError
 from .poses import ControllerPose, Workspace
 
@@ -34,11 +35,12 @@ class ParamError(VrDriverError, ValueError):
 def _number(params: Mapping[str, Any], name: str, default: float, lo: float, hi: float,
             lo_open: bool = False) -> float:
     value = params.get(name, default)
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ParamError(name, value, "expected a finite number")
-    if value < lo or value > hi or (lo_open and value == lo):
-        raise ParamError(name, value, "must be in %s%g, %g]" % ("(" if lo_open else "[", lo, hi))
-    return float(value)
+
+    def fail(got: Optional[float]) -> ParamError:
+        if got is None:
+            return ParamError(name, value, "expected a finite number")
+        return ParamError(name, value, "must be in %s%g, %g]" % ("(" if lo_open else "[", lo, hi))
+    return validate.number(value, fail, lo, hi, lo_open=lo_open, text=False)
 
 
 def _integer(params: Mapping[str, Any], name: str, default: Optional[int], lo: int, hi: int
@@ -46,11 +48,8 @@ def _integer(params: Mapping[str, Any], name: str, default: Optional[int], lo: i
     value = params.get(name, default)
     if value is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise ParamError(name, value, "expected an integer")
-    if not lo <= value <= hi:
-        raise ParamError(name, value, "must be in [%d, %d]" % (lo, hi))
-    return value
+    return validate.integer(value, lambda got: ParamError(
+        name, value, "expected an integer" if got is None else "must be in [%d, %d]" % (lo, hi)), lo, hi)
 
 
 def _string(params: Mapping[str, Any], name: str, default: str, allowed: Tuple[str, ...] = ()
@@ -88,12 +87,8 @@ def _vector(params: Mapping[str, Any], name: str, default: Tuple[float, ...], le
     value = params.get(name, default)
     if not isinstance(value, (list, tuple)) or len(value) != length:
         raise ParamError(name, value, "expected a list of %d numbers" % length)
-    out = []
-    for item in value:
-        if isinstance(item, bool) or not isinstance(item, (int, float)) or not math.isfinite(item):
-            raise ParamError(name, value, "expected a list of %d finite numbers" % length)
-        out.append(float(item))
-    return tuple(out)
+    return tuple(validate.number(item, lambda _: ParamError(name, value, "expected a list of %d finite numbers"
+                                                            % length), text=False) for item in value)
 
 
 @dataclass(frozen=True)

@@ -34,6 +34,7 @@ from typing import Callable, List, Optional, Sequence, TextIO, Tuple
 
 from .motion import MoveType
 from .poses import HOME_POSE, ControllerPose, Workspace
+from .protocol import round_half_away
 
 __all__ = [
     "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
@@ -123,15 +124,6 @@ def prompt_text(fld: Field, workspace: Workspace, default: Optional[float], pref
 
 # ------------------------------------------------------------------------------------ parsing
 
-def _round_half_away(value: float) -> int:
-    """What the controller receives (whole mm / deg, halves away from zero; as protocol.py)."""
-    magnitude = abs(value)
-    whole = math.floor(magnitude)
-    if magnitude - whole >= 0.5:
-        whole += 1
-    return int(-whole if value < 0 else whole)
-
-
 def check_value(value: float, fld: Field, workspace: Workspace, what: str = "") -> float:
     """``value`` if it is finite and inside the workspace, also once rounded to what is sent."""
     name = (what + " " if what else "") + fld.label
@@ -143,7 +135,7 @@ def check_value(value: float, fld: Field, workspace: Workspace, what: str = "") 
         side = "below" if value < lo else "above"
         raise RangeError("%s = %s %s is %s the workspace: allowed %s..%s %s"
                          % (name, fmt_number(value), fld.unit, side, fmt_number(lo), fmt_number(hi), fld.unit))
-    sent = _round_half_away(value)
+    sent = round_half_away(value)
     if not lo <= sent <= hi:
         raise RangeError("%s = %s %s is sent as %d %s (the controller takes whole %s), which is outside "
                          "%s..%s %s" % (name, fmt_number(value), fld.unit, sent, fld.unit, fld.unit,
@@ -221,7 +213,7 @@ class PoseRequest:
     def sent_values(self) -> List[Tuple[int, ...]]:
         """What the controller receives (whole mm / deg): [via,] target."""
         poses = ([self.via] if self.via is not None else []) + [self.target]
-        return [tuple(_round_half_away(v) for v in p.as_tuple()) for p in poses]
+        return [tuple(round_half_away(v) for v in p.as_tuple()) for p in poses]
 
     def is_rounded(self) -> bool:
         poses = ([self.via] if self.via is not None else []) + [self.target]

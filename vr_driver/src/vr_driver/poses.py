@@ -27,6 +27,7 @@ from typing import Any, Mapping, Tuple
 
 import numpy as np
 
+from . import validate
 from .errors import MotionError, PoseError
 
 __all__ = [
@@ -84,16 +85,9 @@ GIMBAL_EPS = 1e-9
 # --------------------------------------------------------------------------------------------- scalars
 
 def finite_number(value: Any, name: str) -> float:
-    """``value`` as a float, or PoseError naming ``name`` when it is not a finite real number."""
-    if isinstance(value, (bool, np.bool_)) or value is None:
-        raise PoseError("%s must be a finite number, got %r" % (name, value))
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        raise PoseError("%s must be a finite number, got %r" % (name, value)) from exc
-    if not math.isfinite(number):
-        raise PoseError("%s must be a finite number, got %r" % (name, number))
-    return number
+    """``value`` as a float, or PoseError naming ``name`` when it is not a finite real number
+    (:func:`vr_driver.validate.as_finite`: numeric strings count, bools and None do not)."""
+    return validate.number(value, lambda _: PoseError("%s must be a finite number, got %r" % (name, value)))
 
 
 def _vector(values: Any, length: int, name: str) -> Tuple[float, ...]:

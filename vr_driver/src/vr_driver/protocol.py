@@ -28,12 +28,12 @@ from __future__ import annotations
 
 import enum
 import math
-import operator
 import struct
 import time
 from dataclasses import dataclass, replace
 from typing import Any, Callable, ClassVar, List, Optional, Tuple
 
+from . import validate
 from .errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
 from .poses import CONTROLLER_FIELDS, ControllerPose, MoveType, Workspace, finite_number
 
@@ -247,21 +247,14 @@ def to_wire_int(value: Any, name: str) -> int:
 
 
 def _check_word(value: Any, name: str) -> int:
-    """An int16 field of a record: a true integer in range, ProtocolError otherwise."""
-    if isinstance(value, bool) or not _is_integer(value):
+    """An int16 field of a record: a true integer in range, ProtocolError otherwise. (Per record on
+    the bus cycle: the range check is inline rather than through validate.integer's ``fail``.)"""
+    number = validate.as_integer(value)
+    if number is None:
         raise ProtocolError("%s must be an integer (the wire carries whole mm / deg), got %r" % (name, value))
-    number = int(value)
     if not INT16_MIN <= number <= INT16_MAX:
         raise ProtocolError("%s = %d is outside the int16 range [%d, %d]" % (name, number, INT16_MIN, INT16_MAX))
     return number
-
-
-def _is_integer(value: Any) -> bool:
-    try:
-        operator.index(value)
-    except TypeError:
-        return False
-    return True
 
 
 def _as_bytes(data: Any, what: str) -> bytes:
@@ -305,7 +298,7 @@ class Command:
         request = self.request
         if isinstance(request, bool):
             flag = request
-        elif _is_integer(request) and int(request) in (0, 1):
+        elif validate.as_integer(request) in (0, 1):
             flag = bool(int(request))
         else:
             raise ProtocolError("command request flag must be True/False (1/0), got %r" % (request,))
@@ -421,7 +414,7 @@ class Feedback:
         for name, label in zip(CONTROLLER_FIELDS, _LABELS):
             object.__setattr__(self, name, _check_word(getattr(self, name), "feedback %s" % label))
         state = self.state
-        if isinstance(state, bool) or not _is_integer(state):
+        if validate.as_integer(state) is None:
             raise ProtocolError("feedback state must be a ControllerState (0-3), got %r" % (state,))
         try:
             state = ControllerState(int(state))
@@ -430,7 +423,8 @@ class Feedback:
                                 % int(state)) from None
         object.__setattr__(self, "state", state)
         status = self.status
-        if isinstance(status, bool) or not _is_integer(status) or not 0 <= int(status) <= 0xFF:
+        byte = validate.as_integer(status)
+        if byte is None or not 0 <= byte <= 0xFF:
             raise ProtocolError("feedback status must be a byte of StatusBits, got %r" % (status,))
         if int(status) & STATUS_RESERVED_MASK:
             raise ProtocolError("feedback status 0x%02X has reserved bit(s) 6-7 set (0x%02X): the "
@@ -713,13 +707,8 @@ class Aborted(HandshakeEvent):
 
 def _seconds(value: Any, name: str, allow_zero: bool = False) -> float:
     what = "a non-negative" if allow_zero else "a positive"
-    try:
-        number = finite_number(value, name)
-    except PoseError:
-        number = math.nan
-    if not (number > 0.0 or (allow_zero and number == 0.0)):
-        raise HandshakeError("%s must be %s number of seconds, got %r" % (name, what, value))
-    return number
+    return validate.number(value, lambda _: HandshakeError("%s must be %s number of seconds, got %r"
+                                                           % (name, what, value)), 0.0, lo_open=not allow_zero)
 
 
 class MasterHandshake:

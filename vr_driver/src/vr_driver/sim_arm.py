@@ -44,6 +44,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from . import validate
 from .errors import MotionError, VrDriverError
 from .kinematics import Kinematics
 from .motion import MotionPlanner, MotionSettings, MoveType, Trajectory
@@ -216,13 +217,10 @@ class SimArm:
                  initial_joints: Optional[Sequence[float]] = None,
                  settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
                  brake_time: float = 0.0) -> None:
-        if not (isinstance(speed_factor, (int, float)) and not isinstance(speed_factor, bool)
-                and math.isfinite(speed_factor) and speed_factor > 0.0):
-            raise MotionError("speed_factor must be a finite number > 0, got %r" % (speed_factor,))
-        if not (isinstance(brake_time, (int, float)) and not isinstance(brake_time, bool)
-                and math.isfinite(brake_time) and brake_time >= 0.0):
-            raise MotionError("brake_time must be a finite number >= 0, got %r" % (brake_time,))
-        self.brake_time = float(brake_time)
+        speed_factor = validate.number(speed_factor, lambda _: MotionError(
+            "speed_factor must be a finite number > 0, got %r" % (speed_factor,)), 0.0, lo_open=True, text=False)
+        self.brake_time = validate.number(brake_time, lambda _: MotionError(
+            "brake_time must be a finite number >= 0, got %r" % (brake_time,)), 0.0, text=False)
         self.kin = kinematics if kinematics is not None else Kinematics.default()
         self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
         self.speed_factor = float(speed_factor)

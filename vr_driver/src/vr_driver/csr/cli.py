@@ -3,11 +3,11 @@ of the package that imports ROS, and only in ``--from-topic`` mode."""
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from dataclasses import replace
 from typing import Any, Dict, Mapping, Optional, Sequence
 
+from .. import validate
 from ..errors import CsrConversionError, CsrError, VrDriverError
 from .conventions import JointConvention
 from .export import ExportSettings, check_program, export_program, kinematics_for, summarize
@@ -192,8 +192,8 @@ def _run_export(args: argparse.Namespace, prog: str) -> int:
     params = _load_params(args.driver_config)
     joint_names = params.controller_joint_names
     if args.from_topic:
-        if not (math.isfinite(args.timeout) and args.timeout > 0):
-            raise CsrError("must be a positive number of seconds, got %g" % args.timeout, field="--timeout")
+        validate.number(args.timeout, lambda _: CsrError("must be a positive number of seconds, got %g" % args.timeout,
+                                                         field="--timeout"), 0.0, lo_open=True)
         trajectory = _from_topic(args.from_topic, args.timeout)
         wfile = WaypointFile(tuple(trajectory_waypoints(trajectory, joint_names, args.from_topic)),
                              kind="trajectory", source=args.from_topic)

@@ -69,7 +69,7 @@ class JointConvention:
         t = np.eye(4)
         axes = []
         for j in kinematics.chain_joints:
-            t = t @ j.origin()
+            t = t @ j.origin
             if j.movable:
                 axes.append(t[:3, :3] @ np.array(j.axis))
         if len(axes) < 3:

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import datetime as _dt
 import itertools
-import math
 import re
 from typing import Any, List, Mapping, Optional
 
+from .. import validate
 from ..errors import CsrError
 
 
@@ -104,29 +104,15 @@ def _token(value: Any, what: str) -> str:
 
 
 def _number(value: Any, what: str) -> float:
-    if isinstance(value, bool) or value is None:
-        raise CsrError("must be a finite number, got %s" % show(value), field=what)
-    try:
-        number = float(value.strip()) if isinstance(value, str) else float(value)
-    except (TypeError, ValueError):
-        raise CsrError("must be a finite number, got %s" % show(value), field=what) from None
-    if not math.isfinite(number):
-        raise CsrError("must be a finite number, got %s" % show(value), field=what)
-    return number
+    return validate.number(value, lambda _: CsrError("must be a finite number, got %s" % show(value), field=what))
 
 
 def _integer(value: Any, what: str, lo: Optional[int] = None, hi: Optional[int] = None) -> int:
-    if isinstance(value, bool):
-        raise CsrError("must be an integer, got %s" % show(value), field=what)
-    if isinstance(value, int):
-        number = value
-    elif isinstance(value, str) and re.match(r"^\s*[-+]?\d+\s*$", value):
-        number = int(value)
-    else:
-        raise CsrError("must be an integer, got %s" % show(value), field=what)
-    if (lo is not None and number < lo) or (hi is not None and number > hi):
-        raise CsrError("%d is outside [%s, %s]" % (number, lo, hi), field=what)
-    return number
+    def fail(got: Optional[float]) -> CsrError:
+        if got is None:
+            return CsrError("must be an integer, got %s" % show(value), field=what)
+        return CsrError("%d is outside [%s, %s]" % (got, lo, hi), field=what)
+    return validate.integer(value, fail, lo, hi, text=True)
 
 
 def _raw_line(text: Any, what: str) -> str:
