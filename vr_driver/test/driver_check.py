@@ -30,7 +30,9 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from vr_driver.controller_sim import SimDeviceError, VirtualController, auto_pty_link
 from vr_driver.kinematics import Kinematics
-from vr_driver.msg import CartesianPose, MoveToPoseAction, MoveToPoseGoal, RobotStatus, TriState
+from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJointTrajectoryGoal,
+                           FollowJointTrajectoryResult, JointTolerance, MoveToPoseAction, MoveToPoseGoal,
+                           RobotStatus, TriState)
 from vr_driver.poses import ControllerPose
 
 PKG = "vr_driver"
@@ -103,9 +105,11 @@ class DriverTest(unittest.TestCase):
         cls.rosout = Recorder("/rosout", Log)
         cls.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
         cls.raw_client = actionlib.ActionClient("/move_to_pose", MoveToPoseAction)
+        cls.trajectory_client = actionlib.ActionClient("/joint_trajectory_action", FollowJointTrajectoryAction)
         cls.started = time.monotonic()
         assert cls.client.wait_for_server(rospy.Duration(20.0)), "move_to_pose server not up"
         assert cls.raw_client.wait_for_server(rospy.Duration(20.0)), "move_to_pose server not up"
+        assert cls.trajectory_client.wait_for_server(rospy.Duration(20.0)), "joint_trajectory_action not up"
         rospy.wait_for_service("/virtual_controller/set_estop", 20.0)
         cls.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
         cls.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
@@ -508,6 +512,93 @@ class DriverTest(unittest.TestCase):
         self.assertIn("in use by the live process %d" % holder, str(ctx.exception))
         self.assertEqual(os.path.realpath(link), os.path.realpath(rospy.get_param("/virtual_controller/device_path")))
         self.wait_motion_possible()                       # the driver's link is untouched
+
+    # ------------------------------------------------------------ joint_trajectory_action (v1)
+    def trajectory_goal(self, points, times, names=None, tol=None):
+        goal = FollowJointTrajectoryGoal()
+        goal.trajectory.joint_names = list(names or ["joint_%d" % i for i in range(1, 7)])
+        goal.trajectory.points = [JointTrajectoryPoint(positions=list(p), time_from_start=rospy.Duration(t))
+                                  for p, t in zip(points, times)]
+        if tol is not None:
+            goal.path_tolerance = [JointTolerance(name=n, position=tol) for n in goal.trajectory.joint_names]
+            goal.goal_tolerance = [JointTolerance(name=n, position=tol) for n in goal.trajectory.joint_names]
+        return goal
+
+    def follow(self, goal, timeout=60.0):
+        done = threading.Event()
+
+        def transition(handle):
+            if handle.get_comm_state() == actionlib.CommState.DONE:
+                done.set()
+        handle = self.trajectory_client.send_goal(goal, transition_cb=transition)
+        self.assertTrue(done.wait(timeout), "no result from joint_trajectory_action")
+        return handle.get_goal_status(), handle.get_result()
+
+    def test_14_joint_trajectory_action_runs_a_30_point_trajectory(self):
+        """issue 16: an actionlib client of joint_trajectory_action, as MoveIt's controller manager
+        uses it: SUCCESSFUL, joint_states within the path tolerance throughout, each target once."""
+        from vr_driver.driver.trajectories import TrajectoryGoal, path_deviation, validate
+        self.wait_motion_possible()
+        state, result = self.move(MoveToPoseGoal.PTP, HOME)         # a known start, whatever ran before
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        before = len(self.entries())
+        q0 = list(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
+        points, times = [], []
+        for k in range(1, 31):
+            f = k / 30.0
+            points.append([q0[0] + 0.6 * f, q0[1] + 0.25 * math.sin(math.pi * f), q0[2], q0[3],
+                           q0[4] + 0.2 * f, q0[5]])
+            times.append(0.12 * k)
+        # v1 sends whole mm / degree Cartesian targets, solved again by the controller's IK: the
+        # wrist joints can end a few degrees from the plan (v2 carries the joints themselves)
+        tol = math.radians(5.0)
+        start = len(self.joints.messages)
+        state, result = self.follow(self.trajectory_goal(points, times, tol=tol))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.error_string)
+        self.assertEqual(result.error_code, FollowJointTrajectoryResult.SUCCESSFUL)
+        self.assertIn("planned", result.error_string)                 # how much slower, in words
+        names = tuple("joint_%d" % i for i in range(1, 7))
+        lim = self.kin.limits
+        plan = validate(TrajectoryGoal(names, tuple(map(tuple, points)), tuple(times),
+                                       path_tolerance={n: tol for n in names}), names, q0,
+                        lim.lower, lim.upper, 0.0)
+        with self.joints.cond:
+            seen = [m.position for m in self.joints.messages[start:]]
+        self.assertGreater(len(seen), 10)
+        worst = max(path_deviation(plan, q)[0] for q in seen)
+        self.assertLessEqual(worst, 1.0, "left the path tolerance (%.2f x)" % worst)
+        entries = self.entries()[before:]
+        targets = [tuple(e["target"]) for e in entries]
+        self.assertEqual(len(targets), len(set(targets)), "a target executed twice")
+        self.assertTrue(all(e["outcome"] == "executed" for e in entries), entries)
+        final = self.joints.last().position
+        self.assertLessEqual(max(abs(a - b) for a, b in zip(final, points[-1])), tol)
+
+    def test_15_joint_trajectory_action_refusals_send_nothing(self):
+        self.wait_motion_possible()
+        before = len(self.entries())
+        q0 = list(self.joints.last().position)
+        q1 = [q0[0] + 0.2] + q0[1:]
+        nan = float("nan")
+        names = ["joint_%d" % i for i in range(1, 7)]
+        cases = [
+            (self.trajectory_goal([q1], [1.0], names=names[:5] + ["joint_x"]),
+             FollowJointTrajectoryResult.INVALID_JOINTS),
+            (self.trajectory_goal([q1], [1.0], names=names[:5]), FollowJointTrajectoryResult.INVALID_JOINTS),
+            (self.trajectory_goal([q1, q1], [1.0, 1.0]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([q1, q0], [1.0, 0.5]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([[q0[0] + 2.0] + q0[1:]], [0.1]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([q0[:2] + [nan] + q0[3:]], [1.0]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([[0.0, 1.5, 0.5, 0.0, 0.0, 0.0]], [5.0]),     # below the floor
+             FollowJointTrajectoryResult.INVALID_GOAL),
+        ]
+        for goal, code in cases:
+            state, result = self.follow(goal, 20.0)
+            self.assertIn(state, (GoalStatus.REJECTED, GoalStatus.ABORTED))
+            self.assertEqual(result.error_code, code, result.error_string)
+            self.assertTrue(result.error_string)
+        self.status.wait_for(lambda m: False, 0.5)
+        self.assertEqual(len(self.entries()), before)
 
 
 if __name__ == "__main__":

@@ -31,6 +31,7 @@ from .errors import VrDriverError
 from .params import DriverParams, ParamError
 from .poses import ControllerPose, MoveType
 from .protocol import StatusBits
+from .trajectory_server import TrajectoryServer
 from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
 
 _MOVE_TYPES = {MoveToPoseGoal.PTP: MoveType.PTP, MoveToPoseGoal.LIN: MoveType.LIN,
@@ -104,6 +105,8 @@ class InterfaceNode:
         self._tickets: Dict[str, int] = {}                   # motion goal id -> arrival ticket
         self._motion_goal: Optional[str] = None
         self.stop_srv = rospy.Service("stop_motion", Trigger, self._stop_motion)
+        # FollowJointTrajectory under the ROS-Industrial name (MoveIt's controller manager)
+        self.trajectory_server = TrajectoryServer(self.core, params.joint_states_rate)
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
         self._last_link = None
@@ -114,6 +117,7 @@ class InterfaceNode:
         self.core.add_listener(self._on_status)
         self.core.start()
         self.server.start()
+        self.trajectory_server.start()
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
             rospy.Timer(rospy.Duration(1.0 / self.params.joint_states_rate), self._publish_joints),
