@@ -27,6 +27,7 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import MarkerArray
 
 from vr_driver.controller_sim import SimDeviceError, VirtualController, auto_pty_link
 from vr_driver.kinematics import Kinematics
@@ -103,6 +104,7 @@ class DriverTest(unittest.TestCase):
         cls.tool = Recorder("/tool_pose", PoseStamped)
         cls.diag = Recorder("/diagnostics", DiagnosticArray)
         cls.rosout = Recorder("/rosout", Log)
+        cls.markers = Recorder("/interface/markers", MarkerArray)
         cls.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
         cls.raw_client = actionlib.ActionClient("/move_to_pose", MoveToPoseAction)
         cls.trajectory_client = actionlib.ActionClient("/joint_trajectory_action", FollowJointTrajectoryAction)
@@ -482,12 +484,14 @@ class DriverTest(unittest.TestCase):
                               feedback_cb=lambda fb: fb.phase == "moving" and moving.set())
         self.assertTrue(moving.wait(10.0))
         os.kill(pid, signal.SIGSTOP)
+        stopped = rospy.get_time()
         try:
             self.status.wait_for(lambda m: False, 1.5)            # frozen; the watchdog stops the arm
-            resumed = time.monotonic()
         finally:
             os.kill(pid, signal.SIGCONT)
-        first = self.status.wait_for(lambda m: True, 5.0, after=resumed)
+        # the first status the node made after the resume (by its stamp: messages it had queued
+        # before the stop are delivered after the resume too, and are not what this is about)
+        first = self.status.wait_for(lambda m: m.header.stamp.to_sec() > stopped + 0.05, 5.0)
         self.assertIsNotNone(first)
         self.assertEqual(first.motion_possible.val, TriState.FALSE)
         self.assertEqual(first.in_error.val, TriState.TRUE)
@@ -573,6 +577,10 @@ class DriverTest(unittest.TestCase):
         self.assertTrue(all(e["outcome"] == "executed" for e in entries), entries)
         final = self.joints.last().position
         self.assertLessEqual(max(abs(a - b) for a, b in zip(final, points[-1])), tol)
+        # RViz: the planned and the executed TCP path on ~markers
+        for ns in ("trajectory_plan", "trajectory_executed"):
+            shown = self.markers.wait_for(lambda m: any(k.ns == ns and len(k.points) > 10 for k in m.markers), 5.0)
+            self.assertIsNotNone(shown, "no %s marker" % ns)
 
     def test_15_joint_trajectory_action_refusals_send_nothing(self):
         self.wait_motion_possible()

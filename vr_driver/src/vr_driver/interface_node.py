@@ -106,7 +106,8 @@ class InterfaceNode:
         self._motion_goal: Optional[str] = None
         self.stop_srv = rospy.Service("stop_motion", Trigger, self._stop_motion)
         # FollowJointTrajectory under the ROS-Industrial name (MoveIt's controller manager)
-        self.trajectory_server = TrajectoryServer(self.core, params.joint_states_rate)
+        self.trajectory_server = TrajectoryServer(self.core, params.joint_states_rate,
+                                                  show=self._line_marker if params.publish_markers else None)
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
         self._last_link = None
@@ -147,8 +148,9 @@ class InterfaceNode:
         """Bus thread: publish robot_status at once when it changes (besides the fixed rate), and
         log link state changes once, in words. The snapshot is read as of now (a stop of the
         process between the snapshot and this call must not publish old good news)."""
+        stamp = rospy.Time.now()                 # first: the status is then at least this new
         status = status.stale(self.core.clock(), self.params.link_timeout)
-        msg = robot_status_msg(status, rospy.Time.now())
+        msg = robot_status_msg(status, stamp)
         key = (msg.mode.val, msg.e_stopped.val, msg.drives_powered.val, msg.motion_possible.val,
                msg.in_motion.val, msg.in_error.val, msg.error_code)
         if key != self._last_status_key:
@@ -162,7 +164,8 @@ class InterfaceNode:
                 rospy.logwarn("controller link %s: %s", status.link.value, status.link_reason)
 
     def _publish_status(self, _event=None) -> None:
-        self.status_pub.publish(robot_status_msg(self.core.status(), rospy.Time.now()))
+        stamp = rospy.Time.now()                 # first: the status is then at least this new
+        self.status_pub.publish(robot_status_msg(self.core.status(), stamp))
 
     def _publish_joints(self, _event=None) -> None:
         status = self.core.status()
@@ -233,6 +236,18 @@ class InterfaceNode:
             self.marker_pub.publish(self._markers(job))
         except Exception as exc:  # markers are a display aid only
             rospy.logwarn("could not publish the preview markers: %s", exc)
+
+    def _line_marker(self, ns, points, rgb) -> None:
+        """A TCP line strip on ~markers (namespace ``ns``): the planned and the executed path of
+        a joint_trajectory_action goal."""
+        line = Marker()
+        line.header.stamp, line.header.frame_id = rospy.Time.now(), self.params.base_frame
+        line.ns, line.id, line.type, line.action = ns, 0, Marker.LINE_STRIP, Marker.ADD
+        line.pose.orientation.w = 1.0
+        line.scale.x = 0.004
+        line.color.r, line.color.g, line.color.b, line.color.a = rgb[0], rgb[1], rgb[2], 1.0
+        line.points = [Point(x, y, z) for x, y, z in points]
+        self.marker_pub.publish(MarkerArray(markers=[line]))
 
     def _markers(self, job: MoveJob) -> MarkerArray:
         stamp = rospy.Time.now()

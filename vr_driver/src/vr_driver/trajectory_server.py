@@ -20,7 +20,7 @@ checks are in :mod:`vr_driver.driver.trajectories`, the execution in
 from __future__ import annotations
 
 import threading
-from typing import Dict, Optional
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 import actionlib
 import rospy
@@ -49,7 +49,11 @@ def goal_from_msg(goal) -> TrajectoryGoal:
 
 
 class TrajectoryServer:
-    def __init__(self, core: DriverCore, feedback_rate: float, name: str = "joint_trajectory_action"):
+    def __init__(self, core: DriverCore, feedback_rate: float, name: str = "joint_trajectory_action",
+                 show: Optional[Callable[[str, Sequence[Tuple[float, float, float]], Tuple[float, float, float]],
+                                         None]] = None):
+        """``show(ns, points_m, rgb)``: draw a TCP line strip (the plan, the executed path)."""
+        self.show = show
         self.core = core
         self.names = list(core.joint_names)
         self.period = 1.0 / max(1.0, feedback_rate)
@@ -97,6 +101,25 @@ class TrajectoryServer:
         segment_speeds(traj, lim.velocity, self.names)
         return traj
 
+    def _dense(self, traj) -> List[Tuple[float, ...]]:
+        """The plan sampled every 0.05 rad of the largest joint motion (a smooth line in RViz)."""
+        out = [traj.positions[0]]
+        for a, b in zip(traj.positions, traj.positions[1:]):
+            n = max(1, int(max(abs(x - y) for x, y in zip(a, b)) / 0.05))
+            out.extend(tuple(x + (y - x) * k / n for x, y in zip(a, b)) for k in range(1, n + 1))
+        return out
+
+    def _tcp(self, q: Sequence[float]) -> Tuple[float, float, float]:
+        x, y, z = self.core.kin.fk_pose(q).as_tuple()[:3]
+        return x / 1000.0, y / 1000.0, z / 1000.0
+
+    def _draw(self, ns: str, points: Sequence[Tuple[float, float, float]], rgb: Tuple[float, float, float]) -> None:
+        if self.show is not None and len(points) > 1:
+            try:
+                self.show(ns, points, rgb)
+            except Exception as exc:  # a display aid only
+                rospy.logwarn("could not draw %s: %s", ns, exc)
+
     def _refuse(self, handle, code: int, reason: str) -> None:
         rospy.logwarn("joint_trajectory_action refused (%d): %s", code, reason)
         handle.set_rejected(FollowJointTrajectoryResult(error_code=code, error_string=reason), reason)
@@ -125,6 +148,9 @@ class TrajectoryServer:
             handle.set_aborted(result, str(exc))
             return
         started = rospy.get_time()
+        self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
+        executed: List[Tuple[float, float, float]] = []
+        last_draw = started
         fb = FollowJointTrajectoryFeedback(joint_names=self.names)
         why_stop = ""
         preempted = False
@@ -148,6 +174,11 @@ class TrajectoryServer:
                 fb.actual = JointTrajectoryPoint(positions=actual)
                 fb.error = JointTrajectoryPoint(positions=[a - d for a, d in zip(actual, desired)])
                 handle.publish_feedback(fb)
+                if status.pose is not None:
+                    executed.append(tuple(v / 1000.0 for v in status.pose.as_tuple()[:3]))
+                    if rospy.get_time() - last_draw > 0.5:
+                        last_draw = rospy.get_time()
+                        self._draw("trajectory_executed", executed, (0.2, 1.0, 0.2))
                 deviation, segment = path_deviation(traj, actual)
                 if deviation > 1.0:
                     code = PATH_TOLERANCE_VIOLATED
@@ -165,6 +196,7 @@ class TrajectoryServer:
                 self.core.stop_motion(why_stop)
             for job in run.jobs:
                 job.wait(self.core.params.stop_timeout + 5.0)
+        self._draw("trajectory_executed", executed, (0.2, 1.0, 0.2))
         elapsed = rospy.get_time() - started
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
         note = "ran %.2f x the planned %.2f s (protocol v1 stops at each of %d points)" % (
