@@ -201,6 +201,7 @@ class TrajectoryServer:
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
         note = "ran %.2f x the planned %.2f s (protocol v1 stops at each of %d points)" % (
             slower, traj.duration, len(run.jobs))
+        rospy.loginfo("joint_trajectory_action: %s", note)
         failed = run.failure()
         if why_stop and code != PATH_TOLERANCE_VIOLATED:
             handle.set_canceled(FollowJointTrajectoryResult(error_code=SUCCESSFUL,
