@@ -75,6 +75,7 @@ from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 from .errors import PoseError, ProtocolError, VrDriverError
 from .kinematics import Kinematics
 from .poses import HOME_POSE, ControllerPose, finite_number
+from .controller_session import SessionProgram, arm_status_bits
 from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
 from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
 
@@ -226,139 +227,53 @@ class _Pending:
     start_time: float
 
 
-class ControllerProgram:
+class ControllerProgram(SessionProgram):
     """The robot-side program loop (doc/controller_program.md) on one DP slave and one simulated arm.
 
     Call :meth:`step` once per loop with the clock time; it returns the Feedback it wrote. Not
     thread-safe by itself: one thread runs it (the arm and the log are thread-safe, so faults can be
     injected from anywhere).
 
-    The program hooks the slave's ``on_outputs`` / ``on_state_change`` (chaining hooks already set)
-    to tell the master's records of the current Data_Exchange session from the safe image: a
-    *session* starts each time the slave enters Data_Exchange; until the master's first
-    Data_Exchange of that session there is no command at all. A session that ended (or was
-    replaced by a new one between two loops) is a link loss. After a link loss, and at start, the
-    program is *disarmed*: a request only counts after a record with the flag at 0 -- a flag still
-    raised from before is answered REJECTED (held until the flag drops) and nothing moves.
+    The session, the two-telegram rule, arming and link-loss detection are
+    :class:`~vr_driver.controller_session.SessionProgram`'s (shared with protocol v2): a *session*
+    starts each time the slave enters Data_Exchange; until the master's first Data_Exchange of that
+    session there is no command at all. A session that ended (or was replaced by a new one between
+    two loops) is a link loss. After a link loss, and at start, the program is *disarmed*: a request
+    only counts after a record with the flag at 0 -- a flag still raised from before is answered
+    REJECTED (held until the flag drops) and nothing moves.
     """
 
     def __init__(self, slave: DpSlave, arm: SimArm, *, byte_order: Any = ByteOrder.LITTLE,
                  execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False) -> None:
-        self.slave = slave
-        self.confirm_records = confirm_records
-        self.arm = arm
         self.byte_order = ByteOrder.parse(byte_order)
+        super().__init__(slave, arm, confirm_records=confirm_records)
+        self.arm: SimArm = arm
         self.log = execution_log if execution_log is not None else ExecutionLog()
         self.handshake = ControllerHandshake()
-        self.loops = 0
-        self.bad_records = 0
-        self.link_losses = 0
         self.last_feedback: Optional[Feedback] = None
         self.last_command: Optional[Command] = None
         self._seq = 0
         self._pending: Optional[_Pending] = None
-        self._armed = False
-        self._active_session: Optional[int] = None   # the session the last loop ran in
-        self._deadline: Optional[float] = None      # watchdog deadline seen at the last loop
-        self._expiries = slave.counters.watchdog_expiries
-        self._bad_raw: Optional[bytes] = None
-        # written by the slave's hooks (the server thread), read by step()
-        self._io_lock = threading.Lock()
-        self._session = 1 if slave.state is SlaveState.DATA_EXCH else 0
-        self._record_of_session: Optional[bytes] = None
-        self._last_arrival: Optional[bytes] = None     # the session's latest telegram (unconfirmed)
-        self._zero_seen = False                         # a (confirmed) record with flag 0 / 2 came
-        self._left_reason = ""
-        self._chained_outputs = slave.on_outputs
-        self._chained_state = slave.on_state_change
-        slave.on_outputs = self._on_outputs
-        slave.on_state_change = self._on_state_change
 
-    # ------------------------------------------------------------------------- slave hooks
-    def _on_outputs(self, data: bytes) -> None:
-        with self._io_lock:
-            if self.slave.state is SlaveState.DATA_EXCH:     # not the safe image of a leaving slave
-                record = bytes(data)
-                if not self.confirm_records or record == self._last_arrival:
-                    self._record_of_session = record
-                    if not self._zero_seen and len(record) > 12 and record[12] != 1 \
-                            and self._decodes(record):
-                        self._zero_seen = True      # arms the program, even between two loops
-                self._last_arrival = record
-        if self._chained_outputs is not None:
-            self._chained_outputs(data)
+    # ------------------------------------------------------------------- SessionProgram hooks
+    def decode_record(self, raw: bytes) -> Command:
+        return Command.decode(raw, self.byte_order)
 
-    def _on_state_change(self, old: SlaveState, new: SlaveState, reason: str) -> None:
-        with self._io_lock:
-            if new is SlaveState.DATA_EXCH:
-                self._session += 1
-            if old is SlaveState.DATA_EXCH:
-                self._left_reason = reason
-            self._record_of_session = None
-            self._last_arrival = None
-            self._zero_seen = False
-        if self._chained_state is not None:
-            self._chained_state(old, new, reason)
-
-    def _decodes(self, record: bytes) -> bool:
-        try:
-            Command.decode(record, self.byte_order)
-        except ProtocolError:
-            return False
-        return True
+    def is_idle_command(self, command: Command) -> bool:
+        return not command.request
 
     # ---------------------------------------------------------------------------- read-outs
     @property
     def state(self) -> ControllerState:
         return self.handshake.state
 
-    @property
-    def connected(self) -> bool:
-        """True while the slave was in Data_Exchange at the last loop."""
-        return self._active_session is not None
-
-    @property
-    def armed(self) -> bool:
-        """True once a record with the flag at 0 was seen in the current session."""
-        return self._armed
-
     def status_bits(self) -> StatusBits:
-        bits = StatusBits.PROGRAM_RUNNING
-        if self.arm.drives_powered:
-            bits |= StatusBits.DRIVES_POWERED
-        if self.arm.estop:
-            bits |= StatusBits.ESTOP
-        if self.arm.error is not None:
-            bits |= StatusBits.ERROR
-        if self.arm.moving:
-            bits |= StatusBits.IN_MOTION
-        return bits | self.handshake.status_bits()
+        return arm_status_bits(self.arm) | self.handshake.status_bits()
 
     # ------------------------------------------------------------------------------- the loop
     def step(self, now: float) -> Feedback:
         """One program loop at clock time ``now``."""
-        self.loops += 1
-        deadline = self.slave.next_deadline()
-        self.slave.step(now)                        # expire the watchdog here, not a poll later
-        connected = self.slave.state is SlaveState.DATA_EXCH
-        with self._io_lock:
-            session, raw, left_reason = self._session, self._record_of_session, self._left_reason
-            zero_seen = self._zero_seen
-        if self._active_session is not None and (not connected or session != self._active_session):
-            self._link_lost(now, deadline, left_reason)
-        if connected and zero_seen and not self._armed:
-            self._armed = True          # a flag-0 record of this session arrived (maybe between loops)
-        self._active_session = session if connected else None
-        self._deadline = self.slave.next_deadline() if connected else None
-        command = self._decode(raw) if connected and raw is not None else None
-        self.last_command = command
-        stale = False
-        if command is not None and not self._armed:
-            if command.request:
-                stale = True                        # raised before we saw it at 0: not a new request
-            else:
-                self._armed = True
-
+        command, stale = self.read_command(now)
         result = self.arm.step(now)
         if result is not None and self._pending is not None:
             self.handshake.finish(result.ok, result.reason)
@@ -391,18 +306,6 @@ class ControllerProgram:
         return feedback
 
     # ------------------------------------------------------------------------------- helpers
-    def _decode(self, raw: bytes) -> Optional[Command]:
-        try:
-            command = Command.decode(raw, self.byte_order)
-        except ProtocolError as exc:
-            self.bad_records += 1
-            if raw != self._bad_raw:               # once per distinct record, not every loop
-                log.warning("ignoring the master's record %s: %s", raw.hex(" "), exc)
-            self._bad_raw = raw
-            return None
-        self._bad_raw = None
-        return command
-
     def _begin(self, command: Command, via: Optional[Command], now: float) -> None:
         ok, reason = self.arm.begin(command.move_type.to_move_type(), command.pose,
                                     via=None if via is None else via.pose, now=now)
@@ -423,20 +326,7 @@ class ControllerProgram:
             self._record(Outcome.EXECUTED if result.ok else Outcome.REJECTED, result.reason,
                          result.end_time, result.aborted)
 
-    def _link_lost(self, now: float, deadline: Optional[float], left_reason: str) -> None:
-        self.link_losses += 1
-        self._armed = False
-        expired = self.slave.counters.watchdog_expiries != self._expiries
-        self._expiries = self.slave.counters.watchdog_expiries
-        # the deadline seen now, or the one of the last loop if the server thread expired it first
-        if deadline is None:
-            deadline = self._deadline
-        stop_time = now
-        if expired and deadline is not None:
-            stop_time = min(now, max(deadline, self.arm.last_step_time))
-        why = "DP watchdog expired (master silent)" if expired else \
-            "link to the master lost (slave left Data_Exchange: %s)" % (left_reason or "unknown reason")
-        log.warning("%s: stopping the arm, resetting the program", why)
+    def on_link_lost(self, why: str, stop_time: float) -> None:
         self.arm.stop(why, now=stop_time)
         result = self.arm.step(stop_time)
         if self._pending is not None and self.handshake.state is ControllerState.BUSY:

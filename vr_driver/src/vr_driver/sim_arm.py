@@ -57,6 +57,8 @@ __all__ = [
     "MotionResult",
     "LogEntry",
     "ExecutionLog",
+    "brake_progress",
+    "ArmFaults",
     "SimArm",
 ]
 
@@ -87,6 +89,8 @@ class Outcome(enum.Enum):
     EXECUTED = "executed"        # the motion ran to its end
     REJECTED = "rejected"        # refused before it started (nothing moved) or aborted while moving
     VIA_STORED = "via_stored"    # a circular via point, acknowledged without motion
+    BLENDED = "blended"          # v2: passed through the point without stopping (a blend began)
+    STOPPED = "stopped"          # v2: taken, but a stop / fault / link loss ended it before its point
 
 
 @dataclass(frozen=True)
@@ -194,6 +198,88 @@ class ExecutionLog:
             self._entries.clear()
 
 
+def brake_progress(elapsed: float, brake_time: float) -> float:
+    """Path time [s] a controlled stop still covers ``elapsed`` robot seconds after it began: the
+    rate of progress along the path ramps linearly from 1 to 0 over ``brake_time``, so the arm comes
+    to rest ``brake_time / 2`` of path time after the stop began."""
+    tau = min(max(elapsed, 0.0), brake_time)
+    return tau - tau * tau / (2.0 * brake_time) if brake_time > 0.0 else 0.0
+
+
+class ArmFaults:
+    """E-stop, drives and error of a simulated arm (SimArm, the v2 SimStreamArm), as on a real G2:
+    the e-stop cuts the drive power, and releasing it leaves the drives off until they are switched
+    on again (refused while the e-stop is pressed); setting any fault stops a motion at once
+    (``self._abort(reason, now)``, the arm's). The arm provides ``_lock`` (an RLock) and ``_abort``."""
+
+    _lock: Any
+    _estop = False
+    _drives = True
+    _error: Optional[str] = None
+
+    def _abort(self, reason: str, now: Optional[float]) -> bool:
+        raise NotImplementedError
+
+    @property
+    def estop(self) -> bool:
+        with self._lock:
+            return self._estop
+
+    @property
+    def drives_powered(self) -> bool:
+        """True when the drives carry power: the drives switch is on and the e-stop is released."""
+        with self._lock:
+            return self._drives and not self._estop
+
+    @property
+    def error(self) -> Optional[str]:
+        """The injected error text, or None."""
+        with self._lock:
+            return self._error
+
+    def blocked_reason(self) -> Optional[str]:
+        """Why no motion may start now (e-stop, drives off, error), or None."""
+        with self._lock:
+            if self._estop:
+                return "e-stop pressed"
+            if not self._drives:
+                return "drives not powered"
+            if self._error is not None:
+                return "controller error: %s" % self._error
+            return None
+
+    def set_estop(self, pressed: bool, now: Optional[float] = None) -> None:
+        """Press (True) or release (False) the e-stop. Pressing stops a motion at once and
+        switches the drives off; releasing leaves them off (switch them on again)."""
+        with self._lock:
+            self._estop = bool(pressed)
+            if self._estop:
+                self._drives = False
+                self._abort("e-stop pressed during the motion", now)
+
+    def set_drives_powered(self, powered: bool, now: Optional[float] = None) -> bool:
+        """Switch the drives on or off; returns whether they are in the state asked for.
+        Switching off stops a motion at once; switching on is refused while the e-stop is
+        pressed (False)."""
+        with self._lock:
+            if powered and self._estop:
+                return False
+            self._drives = bool(powered)
+            if not self._drives:
+                self._abort("drives switched off during the motion", now)
+            return True
+
+    def set_error(self, error: Any, now: Optional[float] = None) -> None:
+        """Set (a truthy value; a string is kept as the error text) or clear (False / None) the
+        controller error. Setting it stops a motion at once."""
+        with self._lock:
+            if not error:
+                self._error = None
+                return
+            self._error = error if isinstance(error, str) else "injected error"
+            self._abort("controller error during the motion: %s" % self._error, now)
+
+
 @dataclass
 class _Motion:
     trajectory: Trajectory
@@ -204,7 +290,7 @@ class _Motion:
     brake_reason: str = ""
 
 
-class SimArm:
+class SimArm(ArmFaults):
     """A simulated VR-006L: joints, planned motions played back ``speed_factor`` times faster, faults.
 
     ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
@@ -272,34 +358,6 @@ class SimArm:
         with self._lock:
             return self._motion is not None
 
-    @property
-    def estop(self) -> bool:
-        with self._lock:
-            return self._estop
-
-    @property
-    def drives_powered(self) -> bool:
-        """True when the drives carry power: the drives switch is on and the e-stop is released."""
-        with self._lock:
-            return self._drives and not self._estop
-
-    @property
-    def error(self) -> Optional[str]:
-        """The injected error text, or None."""
-        with self._lock:
-            return self._error
-
-    def blocked_reason(self) -> Optional[str]:
-        """Why no motion may start now (e-stop, drives off, error), or None."""
-        with self._lock:
-            if self._estop:
-                return "e-stop pressed"
-            if not self._drives:
-                return "drives not powered"
-            if self._error is not None:
-                return "controller error: %s" % self._error
-            return None
-
     def motion_remaining(self, now: Optional[float] = None) -> float:
         """Wall time [s] until the current motion ends (0 when idle)."""
         with self._lock:
@@ -312,37 +370,6 @@ class SimArm:
             return max(0.0, m.trajectory.duration / self.speed_factor - (now - m.start_time))
 
     # ---------------------------------------------------------------------------- injections
-    def set_estop(self, pressed: bool, now: Optional[float] = None) -> None:
-        """Press (True) or release (False) the e-stop. Pressing stops a motion at once and
-        switches the drives off; releasing leaves them off (switch them on again)."""
-        with self._lock:
-            self._estop = bool(pressed)
-            if self._estop:
-                self._drives = False
-                self._abort("e-stop pressed during the motion", now)
-
-    def set_drives_powered(self, powered: bool, now: Optional[float] = None) -> bool:
-        """Switch the drives on or off; returns whether they are in the state asked for.
-        Switching off stops a motion at once; switching on is refused while the e-stop is
-        pressed (False)."""
-        with self._lock:
-            if powered and self._estop:
-                return False
-            self._drives = bool(powered)
-            if not self._drives:
-                self._abort("drives switched off during the motion", now)
-            return True
-
-    def set_error(self, error: Any, now: Optional[float] = None) -> None:
-        """Set (a truthy value; a string is kept as the error text) or clear (False / None) the
-        controller error. Setting it stops a motion at once."""
-        with self._lock:
-            if not error:
-                self._error = None
-                return
-            self._error = error if isinstance(error, str) else "injected error"
-            self._abort("controller error during the motion: %s" % self._error, now)
-
     def stop(self, reason: str, now: Optional[float] = None) -> bool:
         """Stop a motion at once (program-side stop, e.g. the master went silent). True if one ran."""
         with self._lock:
@@ -431,8 +458,7 @@ class SimArm:
         """Path time [s] reached at wall time ``now`` (a controlled stop ramps the rate to 0)."""
         if m.brake_start is None:
             return (now - m.start_time) * self.speed_factor
-        tau = min((now - m.brake_start) * self.speed_factor, self.brake_time)
-        return m.brake_from + tau - tau * tau / (2.0 * self.brake_time)
+        return m.brake_from + brake_progress((now - m.brake_start) * self.speed_factor, self.brake_time)
 
     def _finish(self, now: float) -> None:
         m = self._motion
