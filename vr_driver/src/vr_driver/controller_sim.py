@@ -76,8 +76,11 @@ from .errors import PoseError, ProtocolError, VrDriverError
 from .kinematics import Kinematics
 from .poses import HOME_POSE, ControllerPose, finite_number
 from .controller_session import SessionProgram, arm_status_bits
+from .controller_v2 import ControllerProgramV2
 from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
+from .protocol_v2 import CHK_CFG_V2, FeedbackV2, StreamState
 from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
+from .sim_stream import SimStreamArm, StreamLogEntry
 
 __all__ = [
     "DEFAULT_ADDRESS",
@@ -85,6 +88,7 @@ __all__ = [
     "DEFAULT_LOOP_PERIOD",
     "FAULTS",
     "PARAM_NAMES",
+    "PROTOCOLS",
     "SimError",
     "SimDeviceError",
     "SimOptions",
@@ -112,7 +116,11 @@ FAULTS = ("estop", "drives_powered", "error")
 #: ROS private parameter name -> SimOptions field
 PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "baud": "baud",
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
-               "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time"}
+               "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
+               "protocol": "protocol"}
+
+#: the controller programs: v1 the thesis' 14-byte handshake (default), v2 streamed joint targets
+PROTOCOLS = ("v1", "v2")
 
 
 class SimError(VrDriverError):
@@ -165,8 +173,11 @@ class SimOptions:
     byte_order: str = ByteOrder.LITTLE.value
     log_file: Optional[str] = None
     brake_time: float = DEFAULT_BRAKE_TIME
+    protocol: str = "v1"
 
     def __post_init__(self) -> None:
+        if self.protocol not in PROTOCOLS:
+            raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), self.protocol))
         for name in ("device", "pty_link", "log_file"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, str):
@@ -203,7 +214,8 @@ class SimOptions:
     @classmethod
     def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
-        initial_pose (6 numbers), loop_period, byte_order, log_file. Unknown keys are refused."""
+        initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2).
+        Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
         if unknown:
             raise SimError("unknown parameter(s) %s (known: %s)"
@@ -211,10 +223,14 @@ class SimOptions:
         return cls(**{PARAM_NAMES[k]: v for k, v in params.items()})
 
 
-def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic) -> DpSlave:
-    """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()``."""
+def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic, protocol: str = "v1") -> DpSlave:
+    """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()`` (v1,
+    14 bytes each way) or ``protocol_v2.CHK_CFG_V2`` (v2, 72 bytes each way)."""
+    if protocol not in PROTOCOLS:
+        raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), protocol))
     slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
-    return DpSlave(address, slave_cfg.ident, slave_cfg.cfg, clock=clock)
+    cfg = CHK_CFG_V2 if protocol == "v2" else slave_cfg.cfg
+    return DpSlave(address, slave_cfg.ident, cfg, clock=clock)
 
 
 # -------------------------------------------------------------------------------------- the program
@@ -437,6 +453,10 @@ class VirtualController:
     :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
     ``confirm_records`` (default True): the program acts on a master record only once it arrived
     in two consecutive Data_Exchange telegrams (see the module docstring).
+    ``protocol``: ``"v1"`` (default) runs :class:`ControllerProgram` on a 14-byte slave and a
+    :class:`~vr_driver.sim_arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller_v2.
+    ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.sim_stream.
+    SimStreamArm` (streamed joint targets, look-ahead blending); its feedback is a FeedbackV2.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
     :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
@@ -449,32 +469,42 @@ class VirtualController:
                  baud: int = DEFAULT_BAUD, speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
                  loop_period: float = DEFAULT_LOOP_PERIOD, byte_order: Any = ByteOrder.LITTLE,
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
-                 kinematics: Optional[Kinematics] = None, arm: Optional[SimArm] = None,
+                 kinematics: Optional[Kinematics] = None, arm: Union[None, SimArm, SimStreamArm] = None,
                  clock: Clock = time.monotonic, confirm_records: bool = True,
-                 brake_time: float = DEFAULT_BRAKE_TIME) -> None:
+                 brake_time: float = DEFAULT_BRAKE_TIME, protocol: str = "v1") -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
                                   initial_pose=tuple(pose), loop_period=loop_period,
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
-                                  brake_time=brake_time)
+                                  brake_time=brake_time, protocol=protocol)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         self.clock = clock
         self.loop_period = self.options.loop_period
+        self.protocol = self.options.protocol
+        v2 = self.protocol == "v2"
         if arm is None:
             try:
-                arm = SimArm(kinematics, speed_factor=self.options.speed_factor,
-                             initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
-                             brake_time=self.options.brake_time)
+                arm = (SimStreamArm if v2 else SimArm)(
+                    kinematics, speed_factor=self.options.speed_factor,
+                    initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
+                    brake_time=self.options.brake_time)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
-        self.arm = arm
+        if isinstance(arm, SimStreamArm) != v2:
+            raise SimError("protocol %s needs a %s" % (self.protocol, "SimStreamArm" if v2 else "SimArm"))
+        self.arm: Any = arm
         self.execution_log = ExecutionLog()
-        self.slave = robot_slave(self.options.address, clock)
-        self.program = ControllerProgram(self.slave, self.arm, byte_order=self.options.byte_order,
-                                         execution_log=self.execution_log,
-                                         confirm_records=confirm_records)
+        self.slave = robot_slave(self.options.address, clock, self.protocol)
+        self.program: Union[ControllerProgram, ControllerProgramV2]
+        if v2:
+            self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
+                                               confirm_records=confirm_records)
+        else:
+            self.program = ControllerProgram(self.slave, arm, byte_order=self.options.byte_order,
+                                             execution_log=self.execution_log,
+                                             confirm_records=confirm_records)
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -547,9 +577,9 @@ class VirtualController:
         self.server.start()
         self._thread = threading.Thread(target=self._run, name="vr-sim-program", daemon=True)
         self._thread.start()
-        log.info("virtual G2 controller on %s: DP slave %d (ident 0x%04X), loop %.0f ms, speed x%g",
-                 self.device_path or self.link, self.slave.address, self.slave.ident,
-                 self.loop_period * 1e3, self.arm.speed_factor)
+        log.info("virtual G2 controller (protocol %s) on %s: DP slave %d (ident 0x%04X), loop %.0f ms, "
+                 "speed x%g", self.protocol, self.device_path or self.link, self.slave.address,
+                 self.slave.ident, self.loop_period * 1e3, self.arm.speed_factor)
         return self
 
     def request_stop(self) -> None:
@@ -594,7 +624,7 @@ class VirtualController:
             self.execution_log.remove_listener(self._write_log_line)
             fh.close()
 
-    def _write_log_line(self, entry: LogEntry) -> None:
+    def _write_log_line(self, entry: Union[LogEntry, StreamLogEntry]) -> None:
         fh = self._log_fh
         if fh is not None:
             fh.write(entry.to_json() + "\n")
@@ -621,14 +651,14 @@ class VirtualController:
                 next_time = now
             self._stop.wait(next_time - now)
 
-    def step(self, now: Optional[float] = None) -> Feedback:
+    def step(self, now: Optional[float] = None) -> Union[Feedback, FeedbackV2]:
         """One program loop (at ``now``, default the clock)."""
         feedback = self.program.step(self.clock() if now is None else now)
         with self._cond:
             self._cond.notify_all()
         return feedback
 
-    def wait_until(self, predicate: Callable[[Feedback], bool], timeout: float) -> bool:
+    def wait_until(self, predicate: Callable[[Any], bool], timeout: float) -> bool:
         """Block until ``predicate(feedback)`` holds after a program loop (True) or ``timeout``."""
         def check() -> bool:
             if self.error is not None:
@@ -649,11 +679,11 @@ class VirtualController:
 
     # ---------------------------------------------------------------------------- read-outs
     @property
-    def state(self) -> ControllerState:
+    def state(self) -> Union[ControllerState, StreamState]:
         return self.program.state
 
     @property
-    def feedback(self) -> Optional[Feedback]:
+    def feedback(self) -> Union[None, Feedback, FeedbackV2]:
         return self.program.last_feedback
 
     @property
@@ -741,6 +771,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--brake-time", type=float, default=DEFAULT_BRAKE_TIME,
                    help="robot time in seconds a stop takes from path speed to rest (default %g; "
                         "0 halts at once)" % DEFAULT_BRAKE_TIME)
+    p.add_argument("--protocol", choices=PROTOCOLS, default="v1",
+                   help="the robot program: v1 the 14-byte Cartesian handshake (default), v2 streamed "
+                        "joint targets with look-ahead (72 bytes each way, doc/controller_program.md §9)")
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -758,7 +791,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
         options = SimOptions(device=args.device, pty_link=args.pty_link, address=args.addr, baud=args.baud,
                              speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
                              loop_period=args.loop_period, byte_order=args.byte_order,
-                             log_file=args.log_file, brake_time=args.brake_time)
+                             log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -778,7 +811,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                            initial_pose=options.initial_pose,
                                            loop_period=options.loop_period, byte_order=options.byte_order,
                                            pty_link=options.pty_link, log_file=options.log_file,
-                                           brake_time=options.brake_time)
+                                           brake_time=options.brake_time, protocol=options.protocol)
         except SimDeviceError as exc:
             print("%s: device error: %s" % (parser.prog, exc), file=sys.stderr)
             return EXIT_DEVICE

@@ -58,7 +58,7 @@ __all__ = [
     "LogEntry",
     "ExecutionLog",
     "brake_progress",
-    "ArmFaults",
+    "ArmBase",
     "SimArm",
 ]
 
@@ -206,19 +206,65 @@ def brake_progress(elapsed: float, brake_time: float) -> float:
     return tau - tau * tau / (2.0 * brake_time) if brake_time > 0.0 else 0.0
 
 
-class ArmFaults:
-    """E-stop, drives and error of a simulated arm (SimArm, the v2 SimStreamArm), as on a real G2:
+class ArmBase:
+    """What both simulated arms (SimArm, the v2 SimStreamArm) share: the start (validated options,
+    the initial joints: ``initial_joints`` wins over ``initial_pose``, which is solved by IK seeded
+    from the SRDF's ``home`` state), the read-outs, and e-stop, drives and error as on a real G2:
     the e-stop cuts the drive power, and releasing it leaves the drives off until they are switched
     on again (refused while the e-stop is pressed); setting any fault stops a motion at once
-    (``self._abort(reason, now)``, the arm's). The arm provides ``_lock`` (an RLock) and ``_abort``."""
+    (``self._abort(reason, now)``, the arm's)."""
 
-    _lock: Any
-    _estop = False
-    _drives = True
-    _error: Optional[str] = None
+    def _init_arm(self, kinematics: Optional[Kinematics], speed_factor: float, brake_time: float,
+                  initial_pose: Any, initial_joints: Optional[Sequence[float]], clock: Clock) -> None:
+        if not (isinstance(speed_factor, (int, float)) and not isinstance(speed_factor, bool)
+                and math.isfinite(speed_factor) and speed_factor > 0.0):
+            raise MotionError("speed_factor must be a finite number > 0, got %r" % (speed_factor,))
+        if not (isinstance(brake_time, (int, float)) and not isinstance(brake_time, bool)
+                and math.isfinite(brake_time) and brake_time >= 0.0):
+            raise MotionError("brake_time must be a finite number >= 0, got %r" % (brake_time,))
+        self.brake_time = float(brake_time)
+        self.kin = kinematics if kinematics is not None else Kinematics.default()
+        self.speed_factor = float(speed_factor)
+        self.clock = clock
+        self._lock = threading.RLock()
+        if initial_joints is not None:
+            joints = self.kin.check_limits(initial_joints)
+        else:
+            pose = initial_pose if isinstance(initial_pose, ControllerPose) else \
+                ControllerPose.from_sequence(initial_pose)
+            joints = self.kin.ik_pose(pose, seed=self.kin.named_states.get("home"))
+        self._joints: Tuple[float, ...] = tuple(float(v) for v in joints)
+        self._pose = self.kin.fk_pose(self._joints)
+        self._estop = False
+        self._drives = True
+        self._error: Optional[str] = None
+        self._last_step = -math.inf                       # clock time of the last position update
 
     def _abort(self, reason: str, now: Optional[float]) -> bool:
         raise NotImplementedError
+
+    @property
+    def joints(self) -> Tuple[float, ...]:
+        """The exact joints [rad] at the last step."""
+        with self._lock:
+            return self._joints
+
+    @property
+    def pose(self) -> ControllerPose:
+        """The exact TCP pose (float mm / deg) at the last step."""
+        with self._lock:
+            return self._pose
+
+    def reported_pose(self) -> IntPose:
+        """The pose as the v1 controller reports it (whole mm / degrees)."""
+        with self._lock:
+            return round_pose(self._pose)
+
+    @property
+    def last_step_time(self) -> float:
+        """Clock time the position was last brought up to date (-inf before any)."""
+        with self._lock:
+            return self._last_step
 
     @property
     def estop(self) -> bool:
@@ -290,7 +336,7 @@ class _Motion:
     brake_reason: str = ""
 
 
-class SimArm(ArmFaults):
+class SimArm(ArmBase):
     """A simulated VR-006L: joints, planned motions played back ``speed_factor`` times faster, faults.
 
     ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
@@ -302,57 +348,12 @@ class SimArm(ArmFaults):
                  initial_joints: Optional[Sequence[float]] = None,
                  settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
                  brake_time: float = 0.0) -> None:
-        if not (isinstance(speed_factor, (int, float)) and not isinstance(speed_factor, bool)
-                and math.isfinite(speed_factor) and speed_factor > 0.0):
-            raise MotionError("speed_factor must be a finite number > 0, got %r" % (speed_factor,))
-        if not (isinstance(brake_time, (int, float)) and not isinstance(brake_time, bool)
-                and math.isfinite(brake_time) and brake_time >= 0.0):
-            raise MotionError("brake_time must be a finite number >= 0, got %r" % (brake_time,))
-        self.brake_time = float(brake_time)
-        self.kin = kinematics if kinematics is not None else Kinematics.default()
+        self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock)
         self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
-        self.speed_factor = float(speed_factor)
-        self.clock = clock
-        self._lock = threading.RLock()
-        if initial_joints is not None:
-            joints = self.kin.check_limits(initial_joints)
-        else:
-            pose = initial_pose if isinstance(initial_pose, ControllerPose) else \
-                ControllerPose.from_sequence(initial_pose)
-            seed = self.kin.named_states.get("home")
-            joints = self.kin.ik_pose(pose, seed=seed)
-        self._joints: Tuple[float, ...] = tuple(float(v) for v in joints)
-        self._pose = self.kin.fk_pose(self._joints)
         self._motion: Optional[_Motion] = None
         self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
-        self._estop = False
-        self._drives = True
-        self._error: Optional[str] = None
-        self._last_step = -math.inf                       # clock time of the last position update
 
     # ------------------------------------------------------------------------------- read-outs
-    @property
-    def joints(self) -> Tuple[float, ...]:
-        with self._lock:
-            return self._joints
-
-    @property
-    def pose(self) -> ControllerPose:
-        """The exact TCP pose (float mm / deg) at the last step."""
-        with self._lock:
-            return self._pose
-
-    def reported_pose(self) -> IntPose:
-        """The pose as the controller reports it (whole mm / degrees)."""
-        with self._lock:
-            return round_pose(self._pose)
-
-    @property
-    def last_step_time(self) -> float:
-        """Clock time the position was last brought up to date (-inf before any)."""
-        with self._lock:
-            return self._last_step
-
     @property
     def moving(self) -> bool:
         with self._lock:
