@@ -13,6 +13,10 @@ Pieces:
 - :class:`VirtualController`: a :class:`~pyprofibus_vendor.DpSlave` (ident 0x06C6, address 4, the
   default Chk_Cfg ``13 13 13 11 23 23 23 21``) served on a pty pair it creates (optionally
   symlinked), on a device, or on any link, plus the program loop in a thread at a fixed period.
+- Protocol v2 (``protocol="v2"``, ``--protocol v2``): the slave takes ``CHK_CFG_V2`` (72 bytes each
+  way) and runs :class:`~vr_driver.controller_v2.ControllerProgramV2` on a
+  :class:`~vr_driver.sim_stream.SimStreamArm` (streamed joint targets, look-ahead blending); the
+  link-side rules below are shared (:mod:`vr_driver.controller_session`).
 - :func:`main`: ``python3 -m vr_driver.controller_sim`` (see ``--help``).
 
 Rules of the program (also in ``doc/controller_program.md``):
@@ -749,7 +753,8 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python3 -m vr_driver.controller_sim",
         description="Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
-                    "robot-side program of the 14-byte protocol against a simulated VR-006L. Without "
+                    "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
+                    "joint-target streaming protocol) against a simulated VR-006L. Without "
                     "--device it creates a pty pair; the first line on stdout is the device path "
                     "for the master. Stops cleanly on SIGINT / SIGTERM.",
         epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")

@@ -13,7 +13,7 @@ Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBo
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
 ``~set_error`` (True sets a controller error). Publishes ``~executed`` (std_msgs/String, latched):
 one JSON object per handled target (``sim_arm.LogEntry.to_json``: seq, move_type, target, outcome
-executed / rejected / via_stored, reason, times, final_pose).
+executed / rejected / via_stored, reason, times, final_pose; v2: ``sim_stream.StreamLogEntry``).
 
 Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
