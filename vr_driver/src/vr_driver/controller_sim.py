@@ -581,9 +581,9 @@ class VirtualController:
         self.server.start()
         self._thread = threading.Thread(target=self._run, name="vr-sim-program", daemon=True)
         self._thread.start()
-        log.info("virtual G2 controller (protocol %s) on %s: DP slave %d (ident 0x%04X), loop %.0f ms, "
-                 "speed x%g", self.protocol, self.device_path or self.link, self.slave.address,
-                 self.slave.ident, self.loop_period * 1e3, self.arm.speed_factor)
+        log.info("virtual G2 controller on %s: DP slave %d (ident 0x%04X), protocol %s, loop %.0f ms, "
+                 "speed x%g", self.device_path or self.link, self.slave.address, self.slave.ident,
+                 self.protocol, self.loop_period * 1e3, self.arm.speed_factor)
         return self
 
     def request_stop(self) -> None:

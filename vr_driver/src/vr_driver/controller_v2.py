@@ -142,6 +142,7 @@ class ControllerProgramV2(SessionProgram):
             self.arm.push(target, now)
             self.accepted_seq = slot.seq
             self.need_start = False
+            self._refused = None            # a later refusal of a reused number is logged again
             log.debug("taken: %s", slot.describe())
 
     def _refuse(self, slot: TargetSlot, code: RejectCode, now: float, reason: str) -> None:
