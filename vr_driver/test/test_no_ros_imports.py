@@ -13,7 +13,8 @@ REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
 CORE = ("errors", "validate", "poses", "kinematics", "motion", "protocol", "protocol_v2", "params", "driver",
         "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories", "sim_arm",
-        "controller_sim", "csr", "pose_input") + tuple("csr." + m for m in CSR_MODULES)
+        "controller_sim", "controller_session", "controller_v2", "sim_stream", "csr",
+        "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")
 

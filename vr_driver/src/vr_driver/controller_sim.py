@@ -13,6 +13,10 @@ Pieces:
 - :class:`VirtualController`: a :class:`~pyprofibus_vendor.DpSlave` (ident 0x06C6, address 4, the
   default Chk_Cfg ``13 13 13 11 23 23 23 21``) served on a pty pair it creates (optionally
   symlinked), on a device, or on any link, plus the program loop in a thread at a fixed period.
+- Protocol v2 (``protocol="v2"``, ``--protocol v2``): the slave takes ``CHK_CFG_V2`` (72 bytes each
+  way) and runs :class:`~vr_driver.controller_v2.ControllerProgramV2` on a
+  :class:`~vr_driver.sim_stream.SimStreamArm` (streamed joint targets, look-ahead blending); the
+  link-side rules below are shared (:mod:`vr_driver.controller_session`).
 - :func:`main`: ``python3 -m vr_driver.controller_sim`` (see ``--help``).
 
 Rules of the program (also in ``doc/controller_program.md``):
@@ -75,8 +79,12 @@ from . import validate
 from .errors import ProtocolError, VrDriverError
 from .kinematics import Kinematics
 from .poses import HOME_POSE, ControllerPose
+from .controller_session import SessionProgram, arm_status_bits
+from .controller_v2 import ControllerProgramV2
 from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
+from .protocol_v2 import CHK_CFG_V2, FeedbackV2, StreamState
 from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
+from .sim_stream import SimStreamArm, StreamLogEntry
 
 __all__ = [
     "DEFAULT_ADDRESS",
@@ -84,6 +92,7 @@ __all__ = [
     "DEFAULT_LOOP_PERIOD",
     "FAULTS",
     "PARAM_NAMES",
+    "PROTOCOLS",
     "SimError",
     "SimDeviceError",
     "SimOptions",
@@ -111,7 +120,11 @@ FAULTS = ("estop", "drives_powered", "error")
 #: ROS private parameter name -> SimOptions field
 PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "baud": "baud",
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
-               "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time"}
+               "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
+               "protocol": "protocol"}
+
+#: the controller programs: v1 the thesis' 14-byte handshake (default), v2 streamed joint targets
+PROTOCOLS = ("v1", "v2")
 
 
 class SimError(VrDriverError):
@@ -153,8 +166,11 @@ class SimOptions:
     byte_order: str = ByteOrder.LITTLE.value
     log_file: Optional[str] = None
     brake_time: float = DEFAULT_BRAKE_TIME
+    protocol: str = "v1"
 
     def __post_init__(self) -> None:
+        if self.protocol not in PROTOCOLS:
+            raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), self.protocol))
         for name in ("device", "pty_link", "log_file"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, str):
@@ -186,7 +202,8 @@ class SimOptions:
     @classmethod
     def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
-        initial_pose (6 numbers), loop_period, byte_order, log_file. Unknown keys are refused."""
+        initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2).
+        Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
         if unknown:
             raise SimError("unknown parameter(s) %s (known: %s)"
@@ -194,10 +211,14 @@ class SimOptions:
         return cls(**{PARAM_NAMES[k]: v for k, v in params.items()})
 
 
-def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic) -> DpSlave:
-    """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()``."""
+def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic, protocol: str = "v1") -> DpSlave:
+    """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()`` (v1,
+    14 bytes each way) or ``protocol_v2.CHK_CFG_V2`` (v2, 72 bytes each way)."""
+    if protocol not in PROTOCOLS:
+        raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), protocol))
     slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
-    return DpSlave(address, slave_cfg.ident, slave_cfg.cfg, clock=clock)
+    cfg = CHK_CFG_V2 if protocol == "v2" else slave_cfg.cfg
+    return DpSlave(address, slave_cfg.ident, cfg, clock=clock)
 
 
 # -------------------------------------------------------------------------------------- the program
@@ -210,139 +231,53 @@ class _Pending:
     start_time: float
 
 
-class ControllerProgram:
+class ControllerProgram(SessionProgram):
     """The robot-side program loop (doc/controller_program.md) on one DP slave and one simulated arm.
 
     Call :meth:`step` once per loop with the clock time; it returns the Feedback it wrote. Not
     thread-safe by itself: one thread runs it (the arm and the log are thread-safe, so faults can be
     injected from anywhere).
 
-    The program hooks the slave's ``on_outputs`` / ``on_state_change`` (chaining hooks already set)
-    to tell the master's records of the current Data_Exchange session from the safe image: a
-    *session* starts each time the slave enters Data_Exchange; until the master's first
-    Data_Exchange of that session there is no command at all. A session that ended (or was
-    replaced by a new one between two loops) is a link loss. After a link loss, and at start, the
-    program is *disarmed*: a request only counts after a record with the flag at 0 -- a flag still
-    raised from before is answered REJECTED (held until the flag drops) and nothing moves.
+    The session, the two-telegram rule, arming and link-loss detection are
+    :class:`~vr_driver.controller_session.SessionProgram`'s (shared with protocol v2): a *session*
+    starts each time the slave enters Data_Exchange; until the master's first Data_Exchange of that
+    session there is no command at all. A session that ended (or was replaced by a new one between
+    two loops) is a link loss. After a link loss, and at start, the program is *disarmed*: a request
+    only counts after a record with the flag at 0 -- a flag still raised from before is answered
+    REJECTED (held until the flag drops) and nothing moves.
     """
 
     def __init__(self, slave: DpSlave, arm: SimArm, *, byte_order: Any = ByteOrder.LITTLE,
                  execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False) -> None:
-        self.slave = slave
-        self.confirm_records = confirm_records
-        self.arm = arm
         self.byte_order = ByteOrder.parse(byte_order)
+        super().__init__(slave, arm, confirm_records=confirm_records)
+        self.arm: SimArm = arm
         self.log = execution_log if execution_log is not None else ExecutionLog()
         self.handshake = ControllerHandshake()
-        self.loops = 0
-        self.bad_records = 0
-        self.link_losses = 0
         self.last_feedback: Optional[Feedback] = None
         self.last_command: Optional[Command] = None
         self._seq = 0
         self._pending: Optional[_Pending] = None
-        self._armed = False
-        self._active_session: Optional[int] = None   # the session the last loop ran in
-        self._deadline: Optional[float] = None      # watchdog deadline seen at the last loop
-        self._expiries = slave.counters.watchdog_expiries
-        self._bad_raw: Optional[bytes] = None
-        # written by the slave's hooks (the server thread), read by step()
-        self._io_lock = threading.Lock()
-        self._session = 1 if slave.state is SlaveState.DATA_EXCH else 0
-        self._record_of_session: Optional[bytes] = None
-        self._last_arrival: Optional[bytes] = None     # the session's latest telegram (unconfirmed)
-        self._zero_seen = False                         # a (confirmed) record with flag 0 / 2 came
-        self._left_reason = ""
-        self._chained_outputs = slave.on_outputs
-        self._chained_state = slave.on_state_change
-        slave.on_outputs = self._on_outputs
-        slave.on_state_change = self._on_state_change
 
-    # ------------------------------------------------------------------------- slave hooks
-    def _on_outputs(self, data: bytes) -> None:
-        with self._io_lock:
-            if self.slave.state is SlaveState.DATA_EXCH:     # not the safe image of a leaving slave
-                record = bytes(data)
-                if not self.confirm_records or record == self._last_arrival:
-                    self._record_of_session = record
-                    if not self._zero_seen and len(record) > 12 and record[12] != 1 \
-                            and self._decodes(record):
-                        self._zero_seen = True      # arms the program, even between two loops
-                self._last_arrival = record
-        if self._chained_outputs is not None:
-            self._chained_outputs(data)
+    # ------------------------------------------------------------------- SessionProgram hooks
+    def decode_record(self, raw: bytes) -> Command:
+        return Command.decode(raw, self.byte_order)
 
-    def _on_state_change(self, old: SlaveState, new: SlaveState, reason: str) -> None:
-        with self._io_lock:
-            if new is SlaveState.DATA_EXCH:
-                self._session += 1
-            if old is SlaveState.DATA_EXCH:
-                self._left_reason = reason
-            self._record_of_session = None
-            self._last_arrival = None
-            self._zero_seen = False
-        if self._chained_state is not None:
-            self._chained_state(old, new, reason)
-
-    def _decodes(self, record: bytes) -> bool:
-        try:
-            Command.decode(record, self.byte_order)
-        except ProtocolError:
-            return False
-        return True
+    def is_idle_command(self, command: Command) -> bool:
+        return not command.request
 
     # ---------------------------------------------------------------------------- read-outs
     @property
     def state(self) -> ControllerState:
         return self.handshake.state
 
-    @property
-    def connected(self) -> bool:
-        """True while the slave was in Data_Exchange at the last loop."""
-        return self._active_session is not None
-
-    @property
-    def armed(self) -> bool:
-        """True once a record with the flag at 0 was seen in the current session."""
-        return self._armed
-
     def status_bits(self) -> StatusBits:
-        bits = StatusBits.PROGRAM_RUNNING
-        if self.arm.drives_powered:
-            bits |= StatusBits.DRIVES_POWERED
-        if self.arm.estop:
-            bits |= StatusBits.ESTOP
-        if self.arm.error is not None:
-            bits |= StatusBits.ERROR
-        if self.arm.moving:
-            bits |= StatusBits.IN_MOTION
-        return bits | self.handshake.status_bits()
+        return arm_status_bits(self.arm) | self.handshake.status_bits()
 
     # ------------------------------------------------------------------------------- the loop
     def step(self, now: float) -> Feedback:
         """One program loop at clock time ``now``."""
-        self.loops += 1
-        deadline = self.slave.next_deadline()
-        self.slave.step(now)                        # expire the watchdog here, not a poll later
-        connected = self.slave.state is SlaveState.DATA_EXCH
-        with self._io_lock:
-            session, raw, left_reason = self._session, self._record_of_session, self._left_reason
-            zero_seen = self._zero_seen
-        if self._active_session is not None and (not connected or session != self._active_session):
-            self._link_lost(now, deadline, left_reason)
-        if connected and zero_seen and not self._armed:
-            self._armed = True          # a flag-0 record of this session arrived (maybe between loops)
-        self._active_session = session if connected else None
-        self._deadline = self.slave.next_deadline() if connected else None
-        command = self._decode(raw) if connected and raw is not None else None
-        self.last_command = command
-        stale = False
-        if command is not None and not self._armed:
-            if command.request:
-                stale = True                        # raised before we saw it at 0: not a new request
-            else:
-                self._armed = True
-
+        command, stale = self.read_command(now)
         result = self.arm.step(now)
         if result is not None and self._pending is not None:
             self.handshake.finish(result.ok, result.reason)
@@ -375,18 +310,6 @@ class ControllerProgram:
         return feedback
 
     # ------------------------------------------------------------------------------- helpers
-    def _decode(self, raw: bytes) -> Optional[Command]:
-        try:
-            command = Command.decode(raw, self.byte_order)
-        except ProtocolError as exc:
-            self.bad_records += 1
-            if raw != self._bad_raw:               # once per distinct record, not every loop
-                log.warning("ignoring the master's record %s: %s", raw.hex(" "), exc)
-            self._bad_raw = raw
-            return None
-        self._bad_raw = None
-        return command
-
     def _begin(self, command: Command, via: Optional[Command], now: float) -> None:
         ok, reason = self.arm.begin(command.move_type.to_move_type(), command.pose,
                                     via=None if via is None else via.pose, now=now)
@@ -407,20 +330,7 @@ class ControllerProgram:
             self._record(Outcome.EXECUTED if result.ok else Outcome.REJECTED, result.reason,
                          result.end_time, result.aborted)
 
-    def _link_lost(self, now: float, deadline: Optional[float], left_reason: str) -> None:
-        self.link_losses += 1
-        self._armed = False
-        expired = self.slave.counters.watchdog_expiries != self._expiries
-        self._expiries = self.slave.counters.watchdog_expiries
-        # the deadline seen now, or the one of the last loop if the server thread expired it first
-        if deadline is None:
-            deadline = self._deadline
-        stop_time = now
-        if expired and deadline is not None:
-            stop_time = min(now, max(deadline, self.arm.last_step_time))
-        why = "DP watchdog expired (master silent)" if expired else \
-            "link to the master lost (slave left Data_Exchange: %s)" % (left_reason or "unknown reason")
-        log.warning("%s: stopping the arm, resetting the program", why)
+    def on_link_lost(self, why: str, stop_time: float) -> None:
         self.arm.stop(why, now=stop_time)
         result = self.arm.step(stop_time)
         if self._pending is not None and self.handshake.state is ControllerState.BUSY:
@@ -531,6 +441,10 @@ class VirtualController:
     :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
     ``confirm_records`` (default True): the program acts on a master record only once it arrived
     in two consecutive Data_Exchange telegrams (see the module docstring).
+    ``protocol``: ``"v1"`` (default) runs :class:`ControllerProgram` on a 14-byte slave and a
+    :class:`~vr_driver.sim_arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller_v2.
+    ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.sim_stream.
+    SimStreamArm` (streamed joint targets, look-ahead blending); its feedback is a FeedbackV2.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
     :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
@@ -543,32 +457,42 @@ class VirtualController:
                  baud: int = DEFAULT_BAUD, speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
                  loop_period: float = DEFAULT_LOOP_PERIOD, byte_order: Any = ByteOrder.LITTLE,
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
-                 kinematics: Optional[Kinematics] = None, arm: Optional[SimArm] = None,
+                 kinematics: Optional[Kinematics] = None, arm: Union[None, SimArm, SimStreamArm] = None,
                  clock: Clock = time.monotonic, confirm_records: bool = True,
-                 brake_time: float = DEFAULT_BRAKE_TIME) -> None:
+                 brake_time: float = DEFAULT_BRAKE_TIME, protocol: str = "v1") -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
                                   initial_pose=tuple(pose), loop_period=loop_period,
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
-                                  brake_time=brake_time)
+                                  brake_time=brake_time, protocol=protocol)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         self.clock = clock
         self.loop_period = self.options.loop_period
+        self.protocol = self.options.protocol
+        v2 = self.protocol == "v2"
         if arm is None:
             try:
-                arm = SimArm(kinematics, speed_factor=self.options.speed_factor,
-                             initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
-                             brake_time=self.options.brake_time)
+                arm = (SimStreamArm if v2 else SimArm)(
+                    kinematics, speed_factor=self.options.speed_factor,
+                    initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
+                    brake_time=self.options.brake_time)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
-        self.arm = arm
+        if isinstance(arm, SimStreamArm) != v2:
+            raise SimError("protocol %s needs a %s" % (self.protocol, "SimStreamArm" if v2 else "SimArm"))
+        self.arm: Any = arm
         self.execution_log = ExecutionLog()
-        self.slave = robot_slave(self.options.address, clock)
-        self.program = ControllerProgram(self.slave, self.arm, byte_order=self.options.byte_order,
-                                         execution_log=self.execution_log,
-                                         confirm_records=confirm_records)
+        self.slave = robot_slave(self.options.address, clock, self.protocol)
+        self.program: Union[ControllerProgram, ControllerProgramV2]
+        if v2:
+            self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
+                                               confirm_records=confirm_records)
+        else:
+            self.program = ControllerProgram(self.slave, arm, byte_order=self.options.byte_order,
+                                             execution_log=self.execution_log,
+                                             confirm_records=confirm_records)
         self._cond = threading.Condition()
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
@@ -641,9 +565,9 @@ class VirtualController:
         self.server.start()
         self._thread = threading.Thread(target=self._run, name="vr-sim-program", daemon=True)
         self._thread.start()
-        log.info("virtual G2 controller on %s: DP slave %d (ident 0x%04X), loop %.0f ms, speed x%g",
-                 self.device_path or self.link, self.slave.address, self.slave.ident,
-                 self.loop_period * 1e3, self.arm.speed_factor)
+        log.info("virtual G2 controller on %s: DP slave %d (ident 0x%04X), protocol %s, loop %.0f ms, "
+                 "speed x%g", self.device_path or self.link, self.slave.address, self.slave.ident,
+                 self.protocol, self.loop_period * 1e3, self.arm.speed_factor)
         return self
 
     def request_stop(self) -> None:
@@ -688,7 +612,7 @@ class VirtualController:
             self.execution_log.remove_listener(self._write_log_line)
             fh.close()
 
-    def _write_log_line(self, entry: LogEntry) -> None:
+    def _write_log_line(self, entry: Union[LogEntry, StreamLogEntry]) -> None:
         fh = self._log_fh
         if fh is not None:
             fh.write(entry.to_json() + "\n")
@@ -715,14 +639,14 @@ class VirtualController:
                 next_time = now
             self._stop.wait(next_time - now)
 
-    def step(self, now: Optional[float] = None) -> Feedback:
+    def step(self, now: Optional[float] = None) -> Union[Feedback, FeedbackV2]:
         """One program loop (at ``now``, default the clock)."""
         feedback = self.program.step(self.clock() if now is None else now)
         with self._cond:
             self._cond.notify_all()
         return feedback
 
-    def wait_until(self, predicate: Callable[[Feedback], bool], timeout: float) -> bool:
+    def wait_until(self, predicate: Callable[[Any], bool], timeout: float) -> bool:
         """Block until ``predicate(feedback)`` holds after a program loop (True) or ``timeout``."""
         def check() -> bool:
             if self.error is not None:
@@ -743,11 +667,11 @@ class VirtualController:
 
     # ---------------------------------------------------------------------------- read-outs
     @property
-    def state(self) -> ControllerState:
+    def state(self) -> Union[ControllerState, StreamState]:
         return self.program.state
 
     @property
-    def feedback(self) -> Optional[Feedback]:
+    def feedback(self) -> Union[None, Feedback, FeedbackV2]:
         return self.program.last_feedback
 
     @property
@@ -813,7 +737,8 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python3 -m vr_driver.controller_sim",
         description="Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
-                    "robot-side program of the 14-byte protocol against a simulated VR-006L. Without "
+                    "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
+                    "joint-target streaming protocol) against a simulated VR-006L. Without "
                     "--device it creates a pty pair; the first line on stdout is the device path "
                     "for the master. Stops cleanly on SIGINT / SIGTERM.",
         epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")
@@ -835,6 +760,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--brake-time", type=float, default=DEFAULT_BRAKE_TIME,
                    help="robot time in seconds a stop takes from path speed to rest (default %g; "
                         "0 halts at once)" % DEFAULT_BRAKE_TIME)
+    p.add_argument("--protocol", choices=PROTOCOLS, default="v1",
+                   help="the robot program: v1 the 14-byte Cartesian handshake (default), v2 streamed "
+                        "joint targets with look-ahead (72 bytes each way, doc/controller_program.md §9)")
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -852,7 +780,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
         options = SimOptions(device=args.device, pty_link=args.pty_link, address=args.addr, baud=args.baud,
                              speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
                              loop_period=args.loop_period, byte_order=args.byte_order,
-                             log_file=args.log_file, brake_time=args.brake_time)
+                             log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -872,7 +800,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                            initial_pose=options.initial_pose,
                                            loop_period=options.loop_period, byte_order=options.byte_order,
                                            pty_link=options.pty_link, log_file=options.log_file,
-                                           brake_time=options.brake_time)
+                                           brake_time=options.brake_time, protocol=options.protocol)
         except SimDeviceError as exc:
             print("%s: device error: %s" % (parser.prog, exc), file=sys.stderr)
             return EXIT_DEVICE

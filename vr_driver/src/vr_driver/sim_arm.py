@@ -58,6 +58,8 @@ __all__ = [
     "MotionResult",
     "LogEntry",
     "ExecutionLog",
+    "brake_progress",
+    "ArmBase",
     "SimArm",
 ]
 
@@ -88,6 +90,8 @@ class Outcome(enum.Enum):
     EXECUTED = "executed"        # the motion ran to its end
     REJECTED = "rejected"        # refused before it started (nothing moved) or aborted while moving
     VIA_STORED = "via_stored"    # a circular via point, acknowledged without motion
+    BLENDED = "blended"          # v2: passed through the point without stopping (a blend began)
+    STOPPED = "stopped"          # v2: taken, but a stop / fault / link loss ended it before its point
 
 
 @dataclass(frozen=True)
@@ -195,34 +199,29 @@ class ExecutionLog:
             self._entries.clear()
 
 
-@dataclass
-class _Motion:
-    trajectory: Trajectory
-    start_time: float
-    move_type: MoveType
-    brake_start: Optional[float] = None      # wall time a controlled stop began
-    brake_from: float = 0.0                  # path time [s] at that moment
-    brake_reason: str = ""
+def brake_progress(elapsed: float, brake_time: float) -> float:
+    """Path time [s] a controlled stop still covers ``elapsed`` robot seconds after it began: the
+    rate of progress along the path ramps linearly from 1 to 0 over ``brake_time``, so the arm comes
+    to rest ``brake_time / 2`` of path time after the stop began."""
+    tau = min(max(elapsed, 0.0), brake_time)
+    return tau - tau * tau / (2.0 * brake_time) if brake_time > 0.0 else 0.0
 
 
-class SimArm:
-    """A simulated VR-006L: joints, planned motions played back ``speed_factor`` times faster, faults.
+class ArmBase:
+    """What both simulated arms (SimArm, the v2 SimStreamArm) share: the start (validated options,
+    the initial joints: ``initial_joints`` wins over ``initial_pose``, which is solved by IK seeded
+    from the SRDF's ``home`` state), the read-outs, and e-stop, drives and error as on a real G2:
+    the e-stop cuts the drive power, and releasing it leaves the drives off until they are switched
+    on again (refused while the e-stop is pressed); setting any fault stops a motion at once
+    (``self._abort(reason, now)``, the arm's)."""
 
-    ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
-    SRDF's ``home`` state (PoseError / a KinematicsError if it is not reachable).
-    """
-
-    def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MotionPlanner] = None, *,
-                 speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
-                 initial_joints: Optional[Sequence[float]] = None,
-                 settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
-                 brake_time: float = 0.0) -> None:
+    def _init_arm(self, kinematics: Optional[Kinematics], speed_factor: float, brake_time: float,
+                  initial_pose: Any, initial_joints: Optional[Sequence[float]], clock: Clock) -> None:
         speed_factor = validate.number(speed_factor, lambda _: MotionError(
             "speed_factor must be a finite number > 0, got %r" % (speed_factor,)), 0.0, lo_open=True, text=False)
         self.brake_time = validate.number(brake_time, lambda _: MotionError(
             "brake_time must be a finite number >= 0, got %r" % (brake_time,)), 0.0, text=False)
         self.kin = kinematics if kinematics is not None else Kinematics.default()
-        self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
         self.speed_factor = float(speed_factor)
         self.clock = clock
         self._lock = threading.RLock()
@@ -231,20 +230,20 @@ class SimArm:
         else:
             pose = initial_pose if isinstance(initial_pose, ControllerPose) else \
                 ControllerPose.from_sequence(initial_pose)
-            seed = self.kin.named_states.get("home")
-            joints = self.kin.ik_pose(pose, seed=seed)
+            joints = self.kin.ik_pose(pose, seed=self.kin.named_states.get("home"))
         self._joints: Tuple[float, ...] = tuple(float(v) for v in joints)
         self._pose = self.kin.fk_pose(self._joints)
-        self._motion: Optional[_Motion] = None
-        self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
         self._estop = False
         self._drives = True
         self._error: Optional[str] = None
         self._last_step = -math.inf                       # clock time of the last position update
 
-    # ------------------------------------------------------------------------------- read-outs
+    def _abort(self, reason: str, now: Optional[float]) -> bool:
+        raise NotImplementedError
+
     @property
     def joints(self) -> Tuple[float, ...]:
+        """The exact joints [rad] at the last step."""
         with self._lock:
             return self._joints
 
@@ -255,7 +254,7 @@ class SimArm:
             return self._pose
 
     def reported_pose(self) -> IntPose:
-        """The pose as the controller reports it (whole mm / degrees)."""
+        """The pose as the v1 controller reports it (whole mm / degrees)."""
         with self._lock:
             return round_pose(self._pose)
 
@@ -264,11 +263,6 @@ class SimArm:
         """Clock time the position was last brought up to date (-inf before any)."""
         with self._lock:
             return self._last_step
-
-    @property
-    def moving(self) -> bool:
-        with self._lock:
-            return self._motion is not None
 
     @property
     def estop(self) -> bool:
@@ -298,18 +292,6 @@ class SimArm:
                 return "controller error: %s" % self._error
             return None
 
-    def motion_remaining(self, now: Optional[float] = None) -> float:
-        """Wall time [s] until the current motion ends (0 when idle)."""
-        with self._lock:
-            if self._motion is None:
-                return 0.0
-            now = self.clock() if now is None else now
-            m = self._motion
-            if m.brake_start is not None:
-                return max(0.0, self.brake_time / self.speed_factor - (now - m.brake_start))
-            return max(0.0, m.trajectory.duration / self.speed_factor - (now - m.start_time))
-
-    # ---------------------------------------------------------------------------- injections
     def set_estop(self, pressed: bool, now: Optional[float] = None) -> None:
         """Press (True) or release (False) the e-stop. Pressing stops a motion at once and
         switches the drives off; releasing leaves them off (switch them on again)."""
@@ -341,6 +323,52 @@ class SimArm:
             self._error = error if isinstance(error, str) else "injected error"
             self._abort("controller error during the motion: %s" % self._error, now)
 
+
+@dataclass
+class _Motion:
+    trajectory: Trajectory
+    start_time: float
+    move_type: MoveType
+    brake_start: Optional[float] = None      # wall time a controlled stop began
+    brake_from: float = 0.0                  # path time [s] at that moment
+    brake_reason: str = ""
+
+
+class SimArm(ArmBase):
+    """A simulated VR-006L: joints, planned motions played back ``speed_factor`` times faster, faults.
+
+    ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
+    SRDF's ``home`` state (PoseError / a KinematicsError if it is not reachable).
+    """
+
+    def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MotionPlanner] = None, *,
+                 speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
+                 initial_joints: Optional[Sequence[float]] = None,
+                 settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
+                 brake_time: float = 0.0) -> None:
+        self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock)
+        self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
+        self._motion: Optional[_Motion] = None
+        self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
+
+    # ------------------------------------------------------------------------------- read-outs
+    @property
+    def moving(self) -> bool:
+        with self._lock:
+            return self._motion is not None
+
+    def motion_remaining(self, now: Optional[float] = None) -> float:
+        """Wall time [s] until the current motion ends (0 when idle)."""
+        with self._lock:
+            if self._motion is None:
+                return 0.0
+            now = self.clock() if now is None else now
+            m = self._motion
+            if m.brake_start is not None:
+                return max(0.0, self.brake_time / self.speed_factor - (now - m.brake_start))
+            return max(0.0, m.trajectory.duration / self.speed_factor - (now - m.start_time))
+
+    # ---------------------------------------------------------------------------- injections
     def stop(self, reason: str, now: Optional[float] = None) -> bool:
         """Stop a motion at once (program-side stop, e.g. the master went silent). True if one ran."""
         with self._lock:
@@ -429,8 +457,7 @@ class SimArm:
         """Path time [s] reached at wall time ``now`` (a controlled stop ramps the rate to 0)."""
         if m.brake_start is None:
             return (now - m.start_time) * self.speed_factor
-        tau = min((now - m.brake_start) * self.speed_factor, self.brake_time)
-        return m.brake_from + tau - tau * tau / (2.0 * self.brake_time)
+        return m.brake_from + brake_progress((now - m.brake_start) * self.speed_factor, self.brake_time)
 
     def _finish(self, now: float) -> None:
         m = self._motion

@@ -6,13 +6,14 @@ link, ``controller_sim.auto_pty_link``; a link another live controller holds is 
 existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.0];
 ``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
 ``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets);
-``~brake_time`` [0.3] s of robot time a stop takes from path speed to rest (0: halts at once).
+``~brake_time`` [0.3] s of robot time a stop takes from path speed to rest (0: halts at once);
+``~protocol`` ["v1"] the robot program: v1 (14-byte handshake) or v2 (streamed joint targets).
 
 Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
 ``~set_error`` (True sets a controller error). Publishes ``~executed`` (std_msgs/String, latched):
 one JSON object per handled target (``sim_arm.LogEntry.to_json``: seq, move_type, target, outcome
-executed / rejected / via_stored, reason, times, final_pose).
+executed / rejected / via_stored, reason, times, final_pose; v2: ``sim_stream.StreamLogEntry``).
 
 Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
@@ -59,7 +60,7 @@ def main() -> int:
                                        speed_factor=options.speed_factor, initial_pose=options.initial_pose,
                                        loop_period=options.loop_period, byte_order=options.byte_order,
                                        pty_link=options.pty_link, log_file=options.log_file,
-                                       brake_time=options.brake_time)
+                                       brake_time=options.brake_time, protocol=options.protocol)
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
         return EXIT_DEVICE

@@ -1,0 +1,195 @@
+"""The link side of a virtual G2 program, shared by protocol v1 (:class:`~vr_driver.controller_sim.
+ControllerProgram`) and v2 (:class:`~vr_driver.controller_v2.ControllerProgramV2`). ROS-free.
+
+:class:`SessionProgram` hooks a :class:`~pyprofibus_vendor.DpSlave` and gives each program loop the
+master's command of the current Data_Exchange session (``None``: no command), with the rules both
+protocols share (doc/controller_program.md, §4 rule 9 and §9.3 rules 5 and 7):
+
+- A *session* starts each time the slave enters Data_Exchange. Only a record the master sent in the
+  current session counts; outside Data_Exchange, and in a new session before the master's first
+  Data_Exchange, there is no command.
+- Two-telegram rule (``confirm_records``): a record counts only once it arrived unchanged in two
+  consecutive Data_Exchange telegrams of the session.
+- Disarmed at start and after every link loss: a request counts only after an *idle* record
+  (v1: the flag not 1; v2: both slots empty) of the session arrived -- it arms the program when it
+  arrives, even between two loops. A request seen while disarmed is *stale*.
+- Link loss (the DP watchdog expired, or the slave left Data_Exchange / was re-parameterised, also
+  between two loops): the subclass stops the arm, at the watchdog deadline when the watchdog
+  expired, so the arm never moves longer than the watchdog time after the master's last telegram.
+- A record that does not decode is no command, counted in :attr:`bad_records` (a warning once per
+  distinct record).
+"""
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Any, Optional, Tuple
+
+from pyprofibus_vendor.dp_slave import DpSlave, SlaveState
+
+from .errors import ProtocolError
+from .protocol import StatusBits
+
+__all__ = ["SessionProgram", "arm_status_bits"]
+
+log = logging.getLogger(__name__)
+
+
+def arm_status_bits(arm: Any) -> StatusBits:
+    """Status bits 0-4 of an arm (SimArm or SimStreamArm): drives, e-stop, error, in motion, and
+    PROGRAM_RUNNING (the program writes every record it sends)."""
+    bits = StatusBits.PROGRAM_RUNNING
+    if arm.drives_powered:
+        bits |= StatusBits.DRIVES_POWERED
+    if arm.estop:
+        bits |= StatusBits.ESTOP
+    if arm.error is not None:
+        bits |= StatusBits.ERROR
+    if arm.moving:
+        bits |= StatusBits.IN_MOTION
+    return bits
+
+
+class SessionProgram:
+    """Session, two-telegram rule, arming and link loss on one DP slave (see the module docstring),
+    for a program moving ``arm`` (it needs ``last_step_time``: a stop never goes back in time).
+
+    Subclasses define :meth:`decode_record` (raw bytes -> command, ProtocolError when it does not
+    decode), :meth:`is_idle_command` (the command arms the program) and :meth:`on_link_lost` (stop
+    the arm; called from :meth:`read_command`), and call :meth:`read_command` at the start of each
+    program loop.
+    """
+
+    def __init__(self, slave: DpSlave, arm: Any, *, confirm_records: bool = False) -> None:
+        self.slave = slave
+        self.arm = arm
+        self.confirm_records = confirm_records
+        self.loops = 0
+        self.bad_records = 0
+        self.link_losses = 0
+        self.last_command: Any = None
+        self._armed = False
+        self._active_session: Optional[int] = None   # the session the last loop ran in
+        self._deadline: Optional[float] = None      # watchdog deadline seen at the last loop
+        self._expiries = slave.counters.watchdog_expiries
+        self._bad_raw: Optional[bytes] = None
+        # written by the slave's hooks (the server thread), read by read_command()
+        self._io_lock = threading.Lock()
+        self._session = 1 if slave.state is SlaveState.DATA_EXCH else 0
+        self._record_of_session: Optional[bytes] = None
+        self._last_arrival: Optional[bytes] = None     # the session's latest telegram (unconfirmed)
+        self._zero_seen = False                         # a (confirmed) idle record came
+        self._left_reason = ""
+        self._chained_outputs = slave.on_outputs
+        self._chained_state = slave.on_state_change
+        slave.on_outputs = self._on_outputs
+        slave.on_state_change = self._on_state_change
+
+    # ------------------------------------------------------------------- subclass interface
+    def decode_record(self, raw: bytes) -> Any:
+        raise NotImplementedError
+
+    def is_idle_command(self, command: Any) -> bool:
+        raise NotImplementedError
+
+    def on_link_lost(self, why: str, stop_time: float) -> None:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------------- slave hooks
+    def _on_outputs(self, data: bytes) -> None:
+        with self._io_lock:
+            if self.slave.state is SlaveState.DATA_EXCH:     # not the safe image of a leaving slave
+                record = bytes(data)
+                if not self.confirm_records or record == self._last_arrival:
+                    self._record_of_session = record
+                    if not self._zero_seen and self._idle_record(record):
+                        self._zero_seen = True      # arms the program, even between two loops
+                self._last_arrival = record
+        if self._chained_outputs is not None:
+            self._chained_outputs(data)
+
+    def _on_state_change(self, old: SlaveState, new: SlaveState, reason: str) -> None:
+        with self._io_lock:
+            if new is SlaveState.DATA_EXCH:
+                self._session += 1
+            if old is SlaveState.DATA_EXCH:
+                self._left_reason = reason
+            self._record_of_session = None
+            self._last_arrival = None
+            self._zero_seen = False
+        if self._chained_state is not None:
+            self._chained_state(old, new, reason)
+
+    def _idle_record(self, record: bytes) -> bool:
+        try:
+            return self.is_idle_command(self.decode_record(record))
+        except ProtocolError:
+            return False
+
+    # ---------------------------------------------------------------------------- read-outs
+    @property
+    def connected(self) -> bool:
+        """True while the slave was in Data_Exchange at the last loop."""
+        return self._active_session is not None
+
+    @property
+    def armed(self) -> bool:
+        """True once an idle record was seen in the current session."""
+        return self._armed
+
+    # ------------------------------------------------------------------------------ the loop
+    def read_command(self, now: float) -> Tuple[Any, bool]:
+        """The start of a program loop at ``now``: expire the watchdog, handle a link loss (calls
+        :meth:`on_link_lost`), arm, and decode the session's record. Returns ``(command, stale)``:
+        the command (None: none, or it did not decode) and whether it is a request that came while
+        the program was disarmed."""
+        self.loops += 1
+        deadline = self.slave.next_deadline()
+        self.slave.step(now)                        # expire the watchdog here, not a poll later
+        connected = self.slave.state is SlaveState.DATA_EXCH
+        with self._io_lock:
+            session, raw, left_reason = self._session, self._record_of_session, self._left_reason
+            zero_seen = self._zero_seen
+        if self._active_session is not None and (not connected or session != self._active_session):
+            self._link_lost(now, deadline, left_reason)
+        if connected and zero_seen and not self._armed:
+            self._armed = True          # an idle record of this session arrived (maybe between loops)
+        self._active_session = session if connected else None
+        self._deadline = self.slave.next_deadline() if connected else None
+        command = self._decode(raw) if connected and raw is not None else None
+        self.last_command = command
+        stale = False
+        if command is not None and not self._armed:
+            if self.is_idle_command(command):
+                self._armed = True
+            else:
+                stale = True                        # raised before we saw an idle record
+        return command, stale
+
+    def _decode(self, raw: bytes) -> Any:
+        try:
+            command = self.decode_record(raw)
+        except ProtocolError as exc:
+            self.bad_records += 1
+            if raw != self._bad_raw:               # once per distinct record, not every loop
+                log.warning("ignoring the master's record %s: %s", raw.hex(" "), exc)
+            self._bad_raw = raw
+            return None
+        self._bad_raw = None
+        return command
+
+    def _link_lost(self, now: float, deadline: Optional[float], left_reason: str) -> None:
+        self.link_losses += 1
+        self._armed = False
+        expired = self.slave.counters.watchdog_expiries != self._expiries
+        self._expiries = self.slave.counters.watchdog_expiries
+        # the deadline seen now, or the one of the last loop if the server thread expired it first
+        if deadline is None:
+            deadline = self._deadline
+        stop_time = now
+        if expired and deadline is not None:
+            stop_time = min(now, max(deadline, self.arm.last_step_time))
+        why = "DP watchdog expired (master silent)" if expired else \
+            "link to the master lost (slave left Data_Exchange: %s)" % (left_reason or "unknown reason")
+        log.warning("%s: stopping the arm, resetting the program", why)
+        self.on_link_lost(why, stop_time)

@@ -1,0 +1,162 @@
+"""The virtual G2 controller's program for protocol v2 (doc/controller_program.md §9): streamed
+joint targets with sequence numbers and a look-ahead slot, on a DP slave configured with
+``CHK_CFG_V2`` (72 bytes each way), moving a :class:`~vr_driver.sim_stream.SimStreamArm`. ROS-free.
+
+Each :meth:`ControllerProgramV2.step` (``now`` injected):
+
+1. the link side shared with v1 (:class:`~vr_driver.controller_session.SessionProgram`): watchdog,
+   session, the two-telegram rule, disarmed at start and after a link loss until a record with
+   both slots empty arrived; a link loss brakes the arm along its path (rule 9.3.5), drops the
+   queue, and the next stream needs START. A record whose CRC or version is wrong does not decode:
+   counted in ``bad_records`` and ignored;
+2. the arm advances to ``now`` (targets passed, reached or stopped go to the execution log);
+3. STOP brakes the arm and drops the queue; otherwise the slots are taken by rules 9.3:
+
+   - ``seq`` 0: an empty slot; a ``seq`` not after ``accepted_seq`` is a repeat and is ignored;
+   - while disarmed: refused NOT_ARMED (2);
+   - slot 0 with START while the arm is IDLE with nothing queued begins a new stream (needed at
+     start and after a link loss); otherwise only ``accepted_seq + 1`` is taken. Any other new
+     ``seq`` is refused OUT_OF_ORDER (1); the arm then stops at the last point it was given;
+   - no room in the queue of two (or the arm is stopping): the slot waits (neither taken nor
+     refused); the master repeats it;
+   - a fault active: refused FAULT (3); joints outside the limits: refused UNREACHABLE (4);
+   - else taken: ``accepted_seq`` = its seq. Slot 1 is looked at only if slot 0 was taken or a
+     repeat.
+
+   A refusal is logged once per (seq, code), however often the master repeats the record;
+4. the :class:`~vr_driver.protocol_v2.FeedbackV2` goes into the slave's input image: the arm's
+   state, status bits, accepted / done / active / rejected seq and the reject code, the exact joints
+   and the TCP pose in the wire's units, and a heartbeat that grows by one every loop.
+
+Every target taken ends in exactly one :class:`~vr_driver.sim_stream.StreamLogEntry` (executed,
+blended or stopped), every refusal in one entry with outcome ``rejected``.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Optional, Tuple
+
+from pyprofibus_vendor.dp_slave import DpSlave
+
+from .controller_session import SessionProgram, arm_status_bits
+from .protocol_v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState, TargetSlot,
+                          joints_to_wire, next_seq, seq_after)
+from .sim_arm import ExecutionLog, Outcome
+from .sim_stream import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
+
+__all__ = ["ControllerProgramV2"]
+
+log = logging.getLogger(__name__)
+
+
+class ControllerProgramV2(SessionProgram):
+    """The v2 program loop on one DP slave (``CHK_CFG_V2``) and one :class:`SimStreamArm`.
+
+    Call :meth:`step` once per loop with the clock time; it returns the FeedbackV2 it wrote. One
+    thread runs it (the arm and the log are thread-safe, so faults can be injected from anywhere).
+    """
+
+    def __init__(self, slave: DpSlave, arm: SimStreamArm, *, execution_log: Optional[ExecutionLog] = None,
+                 confirm_records: bool = False) -> None:
+        super().__init__(slave, arm, confirm_records=confirm_records)
+        self.arm: SimStreamArm = arm
+        self.log = execution_log if execution_log is not None else ExecutionLog()
+        self.last_feedback: Optional[FeedbackV2] = None
+        self.last_command: Optional[CommandV2] = None
+        self.accepted_seq = 0
+        self.rejected_seq = 0
+        self.reject_code = RejectCode.NONE
+        self.need_start = True              # a stream begins with START (at start, after a link loss)
+        self._refused: Optional[Tuple[int, RejectCode]] = None
+
+    # ------------------------------------------------------------------- SessionProgram hooks
+    def decode_record(self, raw: bytes) -> CommandV2:
+        return CommandV2.decode(raw)
+
+    def is_idle_command(self, command: CommandV2) -> bool:
+        return command.slot0.empty and command.slot1.empty
+
+    def on_link_lost(self, why: str, stop_time: float) -> None:
+        self.arm.brake(why, now=stop_time)
+        self._log_entries(self.arm.collect())
+        self.need_start = True
+
+    # ---------------------------------------------------------------------------- read-outs
+    @property
+    def state(self) -> StreamState:
+        return self.arm.state
+
+    # ------------------------------------------------------------------------------ the loop
+    def step(self, now: float) -> FeedbackV2:
+        """One program loop at clock time ``now``."""
+        command, stale = self.read_command(now)
+        self._log_entries(self.arm.step(now))
+        if command is not None:
+            if Control.STOP in command.control:
+                if self.arm.brake("STOP from the master", now=now):
+                    log.info("STOP: braking, queue dropped")
+            else:
+                self._take(command, now, stale)
+            self._log_entries(self.arm.collect())
+        feedback = FeedbackV2(
+            state=self.arm.state, status=arm_status_bits(self.arm), reject_code=self.reject_code,
+            accepted_seq=self.accepted_seq, done_seq=self.arm.done_seq, active_seq=self.arm.active_seq,
+            rejected_seq=self.rejected_seq, joints=joints_to_wire(self.arm.joints),
+            pose=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1))
+        self.slave.inputs = feedback.encode()
+        self.last_feedback = feedback
+        return feedback
+
+    # ------------------------------------------------------------------------------- helpers
+    def _take(self, command: CommandV2, now: float, stale: bool) -> None:
+        for index, slot in enumerate((command.slot0, command.slot1)):
+            if slot.empty:
+                return
+            if not seq_after(slot.seq, self.accepted_seq):
+                continue                                    # taken already: a repeat
+            if stale:
+                self._refuse(slot, RejectCode.NOT_ARMED, now,
+                             "raised before the controller saw a record with both slots empty "
+                             "after (re)start / link loss")
+                return
+            start = index == 0 and Control.START in command.control
+            idle = self.arm.state is StreamState.IDLE and not self.arm.queued
+            if start and not idle and self.need_start:
+                return                                      # wait until the arm is at rest
+            if not (start and idle) and (self.need_start or slot.seq != next_seq(self.accepted_seq)):
+                why = "a new stream (at start, after a link loss) begins with START" if self.need_start \
+                    else "expected %d (after %d)" % (next_seq(self.accepted_seq), self.accepted_seq)
+                self._refuse(slot, RejectCode.OUT_OF_ORDER, now, why)
+                return
+            if self.arm.room() <= 0:
+                return                                      # the queue is full: it waits
+            blocked = self.arm.blocked_reason()
+            if blocked is not None:
+                self._refuse(slot, RejectCode.FAULT, now, blocked)
+                return
+            target = StreamTarget(slot.seq, slot.joints, slot.speed, slot.smooth, now)
+            bad = self.arm.limit_violation(target.joints)
+            if bad is not None:
+                self._refuse(slot, RejectCode.UNREACHABLE, now, bad)
+                return
+            self.arm.push(target, now)
+            self.accepted_seq = slot.seq
+            self.need_start = False
+            self._refused = None            # a later refusal of a reused number is logged again
+            log.debug("taken: %s", slot.describe())
+
+    def _refuse(self, slot: TargetSlot, code: RejectCode, now: float, reason: str) -> None:
+        self.rejected_seq, self.reject_code = slot.seq, code
+        if self._refused == (slot.seq, code):
+            return                                          # the master repeats its record
+        self._refused = (slot.seq, code)
+        log.info("target %d refused (%s): %s", slot.seq, code.name, reason)
+        self.log.append(StreamLogEntry(
+            slot.seq, slot.joints, slot.speed, slot.smooth, Outcome.REJECTED, reason, now, None, now,
+            joints_to_wire(self.arm.joints), reject_code=int(code)))
+
+    def _log_entries(self, entries) -> None:
+        for entry in entries:
+            if entry.outcome is Outcome.STOPPED:
+                log.info("target %d stopped: %s", entry.seq, entry.reason)
+            self.log.append(entry)
