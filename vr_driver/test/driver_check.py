@@ -568,7 +568,9 @@ class DriverTest(unittest.TestCase):
                         lim.lower, lim.upper, 0.0)
         with self.joints.cond:
             seen = [m.position for m in self.joints.messages[start:]]
-        self.assertGreater(len(seen), 10)
+        # the tolerance check below saw the arm on its way, not only at its ends
+        travel = [(q[0] - q0[0]) / (points[-1][0] - q0[0]) for q in seen]
+        self.assertTrue(any(0.2 < f < 0.8 for f in travel), "no joint_states during the motion")
         worst = max(path_deviation(plan, q)[0] for q in seen)
         self.assertLessEqual(worst, 1.0, "left the path tolerance (%.2f x)" % worst)
         entries = self.entries()[before:]
