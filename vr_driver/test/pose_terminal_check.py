@@ -13,6 +13,7 @@ import io
 import json
 import os
 import subprocess
+import time
 import unittest
 
 import pexpect
@@ -45,6 +46,9 @@ class PoseTerminalTest(unittest.TestCase):
 
     def setUp(self):
         self.children = []
+        # the virtual controller stamps its entries with the system's monotonic clock (shared by
+        # every process): an entry of an earlier test that arrives late is told apart by it
+        self.t0 = time.monotonic()
 
     def tearDown(self):
         for child in self.children:
@@ -57,9 +61,18 @@ class PoseTerminalTest(unittest.TestCase):
             return [json.loads(m.data) for m in self.executed.messages]
 
     def new_entries(self, before: int, n: int, timeout: float = 15.0):
-        self.assertTrue(self.executed.wait_count(before + n, timeout),
-                        "expected %d new executed entries, have %d" % (n, len(self.executed.messages) - before))
-        return self.entries()[before:]
+        """The entries of targets this test started after entry number ``before``, once there are
+        at least ``n`` (an entry is on its way a little after the terminal says "Reached")."""
+        def mine():
+            return [e for e in self.entries()[before:] if e["start_time"] >= self.t0]
+        end = time.monotonic() + timeout
+        with self.executed.cond:
+            while len(mine()) < n:
+                left = end - time.monotonic()
+                self.assertGreater(left, 0.0, "expected %d new executed entries, have %d: %s"
+                                   % (n, len(mine()), self.entries()[before:]))
+                self.executed.cond.wait(left)
+        return mine()
 
     def wait_motion_possible(self, timeout=15.0):
         start = len(self.status.messages)
@@ -215,8 +228,12 @@ class PoseTerminalTest(unittest.TestCase):
     def test_05_ctrl_c_during_a_move_stops_the_arm_and_returns_to_the_prompt(self):
         self.wait_motion_possible()
         t = self.spawn()
+        first = len(self.entries())
         self.move(t, "1000 -600 800 0 45 0 ptp")
-        before = len(self.entries())
+        # the controller's entry for that move may still be on its way when the terminal already
+        # says "Reached": wait for it, or it is counted as the stopped move's (a loaded run did)
+        self.new_entries(first, 1)
+        before = first + 1
         t.sendline("1000 650 800 0 45 0 lin")                    # ~1250 mm at 0.25 m/s: about 5 s
         self.expect(t, CONFIRM)
         t.sendline("y")
