@@ -238,12 +238,11 @@ class LinkSupervisor:
             reason = self._slave_reason or "controller's PROFIBUS card not in Data_Exchange (%s)" % state
         else:
             data, at = slave.inputs, slave.inputs_time
-            if data is not None and at is not None and at >= self._session_start \
-                    and at != self._record_time and stalled:
-                self._record_time = at               # consumed, not believed
-            elif data is not None and at is not None and at >= self._session_start \
-                    and at != self._record_time:
-                self._record_time = at
+            new = data is not None and at is not None and at >= self._session_start \
+                and at != self._record_time
+            if new:
+                self._record_time = at               # consumed (a stalled cycle's: not believed)
+            if new and not stalled:
                 try:
                     fresh = Feedback.decode(data, self.params.byte_order)
                     self._bad_record = ""
