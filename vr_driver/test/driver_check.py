@@ -137,17 +137,21 @@ class DriverTest(unittest.TestCase):
         goal = MoveToPoseGoal(target=cp(target), move_type=kind, has_via=via is not None,
                               via=cp(via) if via is not None else CartesianPose(),
                               preview_only=preview_only)
-        # a plain ActionClient: SimpleActionClient drops a transition that arrives before its
-        # send_goal() has returned (ros/actionlib#206, "Got a transition callback on a goal handle
-        # that we're not tracking"), and the driver refuses a bad goal that fast: the test then
-        # waited for a result it had already been sent (about 1 run in 10 under load)
+        return self.send_and_wait(self.raw_client, goal, timeout, "no result in time")
+
+    def send_and_wait(self, client, goal, timeout, message):
+        """(status, result) of one goal sent on a plain ActionClient. SimpleActionClient drops a
+        transition that arrives before its send_goal() has returned (ros/actionlib#206, "Got a
+        transition callback on a goal handle that we're not tracking"), and the driver refuses a
+        bad goal that fast: the test then waited for a result it had already been sent (about 1
+        run in 10 under load)."""
         done = threading.Event()
 
         def transition(handle):
             if handle.get_comm_state() == actionlib.CommState.DONE:
                 done.set()
-        handle = self.raw_client.send_goal(goal, transition_cb=transition)
-        self.assertTrue(done.wait(timeout), "no result in time")
+        handle = client.send_goal(goal, transition_cb=transition)
+        self.assertTrue(done.wait(timeout), message)
         return handle.get_goal_status(), handle.get_result()
 
     def wait_entries(self, n, timeout=10.0):
@@ -529,14 +533,8 @@ class DriverTest(unittest.TestCase):
         return goal
 
     def follow(self, goal, timeout=60.0):
-        done = threading.Event()
-
-        def transition(handle):
-            if handle.get_comm_state() == actionlib.CommState.DONE:
-                done.set()
-        handle = self.trajectory_client.send_goal(goal, transition_cb=transition)
-        self.assertTrue(done.wait(timeout), "no result from joint_trajectory_action")
-        return handle.get_goal_status(), handle.get_result()
+        return self.send_and_wait(self.trajectory_client, goal, timeout,
+                                  "no result from joint_trajectory_action")
 
     def test_14_joint_trajectory_action_runs_a_30_point_trajectory(self):
         """issue 16: an actionlib client of joint_trajectory_action, as MoveIt's controller manager
