@@ -14,16 +14,15 @@ import select
 import signal
 import subprocess
 import sys
-import threading
 import time
-from typing import Callable, Deque, List, Optional, Tuple
+from typing import Deque, List, Optional, Tuple
 
 import pytest
 
-from pyprofibus_vendor.config import ROBOT_IDENT, default_robot_config
-from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
+from pyprofibus_vendor.config import default_robot_config
+from pyprofibus_vendor.dp_master import DpMaster
 from pyprofibus_vendor.dp_slave import SlaveState
-from pyprofibus_vendor.phy_serial import SerialLink, open_pty_pair
+from pyprofibus_vendor.phy_serial import open_pty_pair
 
 from vr_driver.controller_sim import SimDeviceError, SimError, VirtualController, auto_pty_link
 from vr_driver.errors import VrDriverError
@@ -32,6 +31,8 @@ from vr_driver.poses import ControllerPose, Workspace
 from vr_driver.protocol import (Accepted, Command, ControllerState, Done, Feedback, HandshakeEvent,
                                 MasterHandshake, Rejected, commands_for)
 from vr_driver.sim_arm import Outcome
+
+from _pty_master import ThreadedMaster
 
 BAUD = 187500
 SPEED = 60.0                     # motions 60x faster than the real arm
@@ -48,36 +49,22 @@ PYTHONPATH = os.pathsep.join([SRC, os.path.join(REPO, "pyprofibus_vendor", "src"
                               os.path.join(REPO, "panasonic_vr006l_support", "src")])
 
 
-class MasterDriver:
+class MasterDriver(ThreadedMaster):
     """Our DP master on the pty, running MasterHandshake in its bus thread: commands queued with
     :meth:`send` go out one at a time; events and every decoded feedback are recorded."""
 
     def __init__(self, path, watchdog: float = 0.3, motion_timeout: float = 20.0) -> None:
-        self.link = SerialLink(path, BAUD) if isinstance(path, str) else path
-        self.master = DpMaster(self.link, 2, BAUD, reply_timeout_floor=0.2)
-        self.handle = self.master.add_slave(SlaveSpec(4, ROBOT_IDENT, ROBOT_CFG, watchdog=watchdog))
+        super().__init__(path, BAUD, ROBOT_CFG, watchdog=watchdog, cycle=CYCLE)
         self.hs = MasterHandshake(accept_timeout=2.0, release_timeout=2.0)
         self.motion_timeout = motion_timeout
         self.queue: Deque[Command] = collections.deque()
         self.sent: List[Command] = []
         self.events: List[HandshakeEvent] = []
         self.feedback: List[Tuple[float, Feedback]] = []
-        self.cond = threading.Condition()
-        self.stop_event = threading.Event()
-        self.error: Optional[BaseException] = None
         self.last_cycle: Optional[float] = None
         self.cycles = 0
         self._inputs_time: Optional[float] = None
-        self._thread = threading.Thread(target=self._run, name="test-master", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        try:
-            self.master.run(CYCLE, self.stop_event, self._on_cycle)
-        except BaseException as exc:  # noqa: BLE001 - reported by wait()
-            self.error = exc
-            with self.cond:
-                self.cond.notify_all()
+        self.start("test-master")
 
     def _on_cycle(self, master: DpMaster) -> None:
         now = time.monotonic()
@@ -105,20 +92,8 @@ class MasterDriver:
         with self.cond:
             self.queue.extend(commands)
 
-    def wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
-        with self.cond:
-            ok = self.cond.wait_for(lambda: self.error is not None or predicate(), timeout)
-        if self.error is not None:
-            raise self.error
-        return ok
-
     def finals(self) -> List[HandshakeEvent]:
         return [e for e in self.events if e.final]
-
-    def stop(self) -> None:
-        self.stop_event.set()
-        self._thread.join(5.0)
-        self.master.close()
 
 
 def _rounded(pose: ControllerPose) -> Tuple[int, ...]:

@@ -4,12 +4,9 @@ taken and executed exactly once. The master thread paces its bus cycles; the tes
 conditions with deadlines, nothing sleeps to synchronise."""
 from __future__ import annotations
 
-import threading
 from typing import List, Optional, Set
 
-from pyprofibus_vendor.config import ROBOT_IDENT
-from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
-from pyprofibus_vendor.phy_serial import SerialLink
+from pyprofibus_vendor.dp_master import DpMaster
 
 from vr_driver.controller_sim import VirtualController
 from vr_driver.errors import ProtocolError
@@ -17,36 +14,24 @@ from vr_driver.protocol_v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Contro
                                    TargetSlot, joints_to_wire)
 from vr_driver.sim_arm import Outcome
 
+from _pty_master import ThreadedMaster
+
 BAUD = 187500
 CYCLE = 0.002
 LOOP = 0.005
 
 
-class StreamingMaster:
+class StreamingMaster(ThreadedMaster):
     """DpMaster in a thread; each cycle it puts the first target the controller has not taken into
     slot 0 and the next into slot 1 (START on the first), by the accepted_seq it last read."""
 
     def __init__(self, path: str, targets: List[TargetSlot]) -> None:
-        self.link = SerialLink(path, BAUD)
-        self.master = DpMaster(self.link, 2, BAUD, reply_timeout_floor=0.2)
-        self.handle = self.master.add_slave(SlaveSpec(4, ROBOT_IDENT, CHK_CFG_V2, watchdog=1.0))
+        super().__init__(path, BAUD, CHK_CFG_V2, watchdog=1.0, cycle=CYCLE)
         self.targets = targets
         self.feedback: Optional[FeedbackV2] = None
         self.beats: Set[int] = set()                   # heartbeats seen while connected
         self.sent: List[CommandV2] = []
-        self.cond = threading.Condition()
-        self.stop_event = threading.Event()
-        self.error: Optional[BaseException] = None
-        self._thread = threading.Thread(target=self._run, name="test-v2-master", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        try:
-            self.master.run(CYCLE, self.stop_event, self._on_cycle)
-        except BaseException as exc:  # noqa: BLE001 - reported by wait()
-            self.error = exc
-            with self.cond:
-                self.cond.notify_all()
+        self.start("test-v2-master")
 
     def _on_cycle(self, master: DpMaster) -> None:
         h = self.handle
@@ -69,17 +54,6 @@ class StreamingMaster:
             self.cond.notify_all()
         h.outputs = record.encode()
 
-    def wait(self, predicate, timeout: float) -> bool:
-        with self.cond:
-            ok = self.cond.wait_for(lambda: self.error is not None or predicate(), timeout)
-        if self.error is not None:
-            raise self.error
-        return ok
-
-    def stop(self) -> None:
-        self.stop_event.set()
-        self._thread.join(5.0)
-        self.master.close()
 
 
 def test_dp_master_streams_five_targets_to_the_v2_controller_each_once(kin):
