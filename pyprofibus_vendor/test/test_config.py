@@ -154,8 +154,8 @@ def test_raw_cfg_checked_against_gsd():
     data = changed("slaves.0.modules", ...)
     data["slaves"][0]["cfg"] = "0x13, 0x13, 0x13, 0x11, 0x23, 0x23, 0x23, 0x21"
     assert BusConfig.from_dict(data).slaves[0].cfg == THESIS_CFG
-    data["slaves"][0]["cfg"] = "1F"                      # 16 inputs
-    assert str(config_error(data)) == "slaves[0].cfg: 16 bytes exceed Max_Input_Len = 14 in PAN06C6.gsd"
+    data["slaves"][0]["cfg"] = "5F 5F 5F"                # 96 inputs
+    assert str(config_error(data)) == "slaves[0].cfg: 96 bytes exceed Max_Input_Len = 72 in PAN06C6.gsd"
 
 
 def test_optional_overrides_and_flags():
@@ -286,10 +286,10 @@ def test_error_unknown_module_name():
 
 
 def test_error_modules_over_gsd_limits():
-    data = changed("slaves.0.modules", ["4 Bytes In"] * 4)
-    assert str(config_error(data)) == ("slaves[0].modules: PAN06C6.gsd: 16 input bytes exceed "
-                                       "Max_Input_Len = 14 (selection: 4 Bytes In, 4 Bytes In, "
-                                       "4 Bytes In, 4 Bytes In)")
+    data = changed("slaves.0.modules", ["32 Bytes In"] * 3)
+    assert str(config_error(data)) == ("slaves[0].modules: PAN06C6.gsd: 96 input bytes exceed "
+                                       "Max_Input_Len = 72 (selection: 32 Bytes In, 32 Bytes In, "
+                                       "32 Bytes In)")
     data = changed("slaves.0.modules", list(ROBOT_MODULES) + ["1 Byte In"])
     assert "slaves[0].modules: PAN06C6.gsd: 9 modules exceed Max_Module = 8" in str(config_error(data))
 

@@ -78,7 +78,7 @@ def test_robot_gsd_bauds_and_limits():
     assert gsd.baud_rates == STANDARD_BAUDRATES
     assert gsd.max_tsdr[19200] == 60 and gsd.max_tsdr[12000000] == 800
     assert gsd.modular_station is True
-    assert (gsd.max_input_len, gsd.max_output_len, gsd.max_data_len) == (14, 14, 28)
+    assert (gsd.max_input_len, gsd.max_output_len, gsd.max_data_len) == (72, 72, 144)   # v2: 72 each way
     assert gsd.max_module == 8
     assert gsd.user_prm_data == b"" and gsd.user_prm_data_len == 0
     assert not gsd.freeze_supported and not gsd.sync_supported and not gsd.fail_safe
@@ -91,7 +91,8 @@ def test_robot_gsd_modules():
                 "4 Bytes Out": (b"\x23", 0, 4), "2 Bytes Out": (b"\x21", 0, 2),
                 "1 Byte In": (b"\x10", 1, 0), "8 Bytes Out": (b"\x27", 0, 8),
                 "14 Bytes In/Out": (b"\x3D", 14, 14), "14 Bytes In/Out consistent": (b"\xBD", 14, 14),
-                "7 Words In/Out consistent": (b"\xF6", 14, 14)}
+                "7 Words In/Out consistent": (b"\xF6", 14, 14),
+                "32 Bytes In": (b"\x5F", 32, 0), "32 Bytes Out": (b"\x6F", 0, 32)}
     for name, (cfg, in_len, out_len) in expected.items():
         mod = gsd.module(name)
         assert (mod.cfg, mod.input_len, mod.output_len) == (cfg, in_len, out_len), name
@@ -360,10 +361,10 @@ def test_error_chk_cfg_over_limits():
     gsd = load_gsd(ROBOT_GSD)
     assert chk_cfg_error(gsd, THESIS_MODULES + ["1 Byte In"]).startswith(
         ROBOT_GSD + ": Max_Module: 9 modules exceed Max_Module = 8")
-    assert chk_cfg_error(gsd, ["4 Bytes In"] * 4).startswith(
-        ROBOT_GSD + ": Max_Input_Len: 16 input bytes exceed Max_Input_Len = 14")
-    assert chk_cfg_error(gsd, ["8 Bytes Out", "8 Bytes Out"]).startswith(
-        ROBOT_GSD + ": Max_Output_Len: 16 output bytes exceed Max_Output_Len = 14")
+    assert chk_cfg_error(gsd, ["32 Bytes In"] * 2 + ["8 Bytes In", "1 Byte In"]).startswith(
+        ROBOT_GSD + ": Max_Input_Len: 73 input bytes exceed Max_Input_Len = 72")
+    assert chk_cfg_error(gsd, ["32 Bytes Out"] * 2 + ["8 Bytes Out", "1 Byte Out"]).startswith(
+        ROBOT_GSD + ": Max_Output_Len: 73 output bytes exceed Max_Output_Len = 72")
     text = MINIMAL + ("Modular_Station = 1\nMax_Module = 4\nMax_Input_Len = 8\nMax_Output_Len = 8\n"
                       "Max_Data_Len = 10\nModule = \"6 in\" 0x15\nEndModule\n"
                       "Module = \"6 out\" 0x25\nEndModule\n")
@@ -470,7 +471,7 @@ def test_cli_summary():
     assert result.returncode == 0, result.stderr
     assert "Ident_Number      0x06C6" in result.stdout
     assert "9.6k" in result.stdout and "12M" in result.stdout
-    assert "input 14, output 14, data 28" in result.stdout
+    assert "input 72, output 72, data 144" in result.stdout
     assert '"4 Bytes In"' in result.stdout and "Cfg 13" in result.stdout
 
 
@@ -504,8 +505,8 @@ def test_cli_parse_error_names_file_and_line():
 
 
 def test_cli_bad_selection_and_missing_file():
-    result = run_cli(ROBOT_GSD, "--modules", "4 Bytes In,4 Bytes In,4 Bytes In,4 Bytes In")
-    assert result.returncode == 1 and "exceed Max_Input_Len = 14" in result.stderr
+    result = run_cli(ROBOT_GSD, "--modules", "32 Bytes In,32 Bytes In,32 Bytes In")
+    assert result.returncode == 1 and "exceed Max_Input_Len = 72" in result.stderr
     result = run_cli(ROBOT_GSD, "--modules", "nope")
     assert result.returncode == 1 and "unknown module 'nope'" in result.stderr
     result = run_cli("/nonexistent.gsd")

@@ -105,7 +105,7 @@ def test_wrong_io_length_is_refused(tmp_path):
                    "slaves:\n  - {name: r, address: 4, gsd: PAN06C6.gsd, cfg: '13 23'}\n")
     with pytest.raises(ParamError) as err:
         DriverParams.from_dict({"bus_config": str(bus)}).bus()
-    assert "14 bytes each way" in str(err.value)
+    assert "protocol v1 needs 14 bytes each way" in str(err.value)
 
 
 @pytest.mark.parametrize("values, words", [
@@ -148,6 +148,36 @@ def test_no_watchdog_only_when_allowed():
     ({"stop_timeout": float("nan")}, "stop_timeout"),
 ])
 def test_stop_settings_are_checked(values, name):
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict(values)
+    assert err.value.name == name
+
+
+def test_protocol_v2_uses_the_v2_modules_of_the_built_in_bus():
+    bus = DriverParams.from_dict({"protocol": "v2", "port": "/dev/x"}).bus()
+    slave = bus.slaves[0]
+    assert (slave.input_len, slave.output_len) == (72, 72)
+    assert slave.cfg == bytes([0x5F, 0x5F, 0x17, 0x6F, 0x6F, 0x27])
+    v1 = DriverParams.from_dict({"port": "/dev/x"}).bus().slaves[0]
+    assert (v1.input_len, v1.output_len) == (14, 14)
+
+
+def test_protocol_v2_refuses_a_14_byte_bus_config(tmp_path):
+    bus = tmp_path / "bus.yaml"
+    bus.write_text("master_address: 2\nbaud: 19200\nphy: {type: serial, device: /dev/x}\n"
+                   "slaves:\n  - {name: r, address: 4, gsd: PAN06C6.gsd, "
+                   "cfg: '13 13 13 11 23 23 23 21'}\n")
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"bus_config": str(bus), "protocol": "v2"}).bus()
+    assert err.value.name == "bus_config"
+    assert "protocol v2 needs 72 bytes each way; the configured modules give 14 in / 14 out" in str(err.value)
+
+
+@pytest.mark.parametrize("values, name", [
+    ({"protocol": "v3"}, "protocol"), ({"stream_smooth": 11}, "stream_smooth"),
+    ({"stream_smooth": 1.5}, "stream_smooth"), ({"stream_path_tolerance": -0.1}, "stream_path_tolerance"),
+])
+def test_stream_params_checked(values, name):
     with pytest.raises(ParamError) as err:
         DriverParams.from_dict(values)
     assert err.value.name == name

@@ -18,6 +18,11 @@ from .poses import ControllerPose, Workspace
 
 DEFAULT_PORT = "/dev/ttyUSB0"
 DEFAULT_JOINT_NAMES = tuple("joint_%d" % i for i in range(1, 7))
+#: the controller protocols (doc/controller_program.md): v1 the thesis' 14-byte Cartesian targets,
+#: v2 streamed joint targets with a look-ahead (72 bytes each way)
+PROTOCOLS = ("v1", "v2")
+#: record length of each protocol, each way
+RECORD_LENGTHS = {"v1": 14, "v2": 72}
 #: the DP watchdog's largest value: factors 255 x 255 x 10 ms
 WATCHDOG_MAX_MS = 650_250
 
@@ -96,6 +101,7 @@ class DriverParams:
     """Everything the driver reads at start (see config/vr_driver.yaml for the documentation)."""
 
     # link to the controller
+    protocol: str = "v1"                 # the robot program's protocol: v1 | v2 (both ends alike)
     bus_config: str = ""                 # "" = pyprofibus_vendor's default robot bus (vr006l_bus.yaml)
     port: str = ""                       # "" = the bus config's phy.device (default /dev/ttyUSB0);
     #                                      "auto" = this launch's virtual controller link (resolved)
@@ -118,6 +124,11 @@ class DriverParams:
     stop_settle_time: float = 0.25       # a stopped arm is at rest: in-motion clear and the pose
                                          # unchanged this long [s]
     stop_timeout: float = 10.0           # a stop that does not reach rest this long fails [s]
+    # streaming (protocol v2)
+    stream_smooth: int = 3               # smooth level of the points a stream passes through
+                                         # (0 = stop at each; the last point always stops exactly)
+    stream_path_tolerance: float = 0.1   # [deg] a v2 stream drops planned points whose removal keeps
+                                         # the path within this (a straight joint-space chord)
     # safety and model
     workspace: Workspace = field(default_factory=Workspace)
     controller_joint_names: Tuple[str, ...] = DEFAULT_JOINT_NAMES
@@ -162,6 +173,7 @@ class DriverParams:
         if not base_frame:
             raise ParamError("base_frame", base_frame, "must not be empty")
         out = cls(
+            protocol=_string(params, "protocol", d.protocol, PROTOCOLS),
             bus_config=bus_config,
             port=_port(params, d.port),
             baud=_integer(params, "baud", d.baud, 9600, 12_000_000),
@@ -179,6 +191,9 @@ class DriverParams:
             motion_timeout_margin=_number(params, "motion_timeout_margin", d.motion_timeout_margin, 0.0, 600.0),
             stop_settle_time=_number(params, "stop_settle_time", d.stop_settle_time, 0.0, 5.0, lo_open=True),
             stop_timeout=_number(params, "stop_timeout", d.stop_timeout, 0.0, 600.0, lo_open=True),
+            stream_smooth=_integer(params, "stream_smooth", d.stream_smooth, 0, 10),
+            stream_path_tolerance=_number(params, "stream_path_tolerance", d.stream_path_tolerance,
+                                          0.0, 5.0),
             workspace=workspace,
             controller_joint_names=tuple(names),
             tcp_offset=tcp,
@@ -246,6 +261,12 @@ class DriverParams:
         except ConfigError as exc:
             raise ParamError("bus_config", self.bus_config, str(exc)) from None
         data: Dict[str, Any] = base.to_dict()
+        if not self.bus_config and self.protocol == "v2":
+            from .protocol_v2 import GSD_MODULES_V2, RECORD_SIZE_V2
+            for slave in data["slaves"]:
+                slave.pop("cfg", None)
+                slave["modules"] = list(GSD_MODULES_V2)
+                slave["input_len"] = slave["output_len"] = RECORD_SIZE_V2
         data["cycle_rate_hz"] = self.cycle_rate
         if self.port:
             data["phy"]["device"] = self.port
@@ -273,8 +294,9 @@ class DriverParams:
         slave = bus.slaves[0]
         self.check_watchdog(slave.watchdog_ms, "the bus config %s" % (self.bus_config or "(built in)")
                             if self.watchdog_ms is None else "watchdog_ms")
-        if slave.input_len != 14 or slave.output_len != 14:
-            raise ParamError("bus_config", self.bus_config, "the controller protocol needs 14 bytes "
+        need = RECORD_LENGTHS[self.protocol]
+        if slave.input_len != need or slave.output_len != need:
+            raise ParamError("bus_config", self.bus_config, "the controller protocol %s needs %d bytes "
                              "each way; the configured modules give %d in / %d out"
-                             % (slave.input_len, slave.output_len))
+                             % (self.protocol, need, slave.input_len, slave.output_len))
         return bus
