@@ -471,10 +471,10 @@ def test_feedback_joints_pose_and_heartbeat(rig, kin):
     assert [rig.loop().heartbeat for _ in range(3)] == [65535, 0, 1]
     fb = rig.trace[-1][1]
     assert fb.joints == joints_to_wire(START_JOINTS)
-    assert fb.pose == wire_pose(kin.fk_pose(START_JOINTS))
+    assert fb.tcp == wire_pose(kin.fk_pose(START_JOINTS))
     assert len(fb.encode()) == RECORD_SIZE_V2
     x_mm = kin.fk_pose(START_JOINTS).x
-    assert abs(fb.pose[0] * 0.01 - x_mm) <= 0.005
+    assert abs(fb.tcp[0] * 0.01 - x_mm) <= 0.005 and abs(fb.pose.x - x_mm) <= 0.005
 
 
 # ------------------------------------------------------------------------- options, slave, CLI

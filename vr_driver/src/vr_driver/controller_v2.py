@@ -102,7 +102,7 @@ class ControllerProgramV2(SessionProgram):
             state=self.arm.state, status=arm_status_bits(self.arm), reject_code=self.reject_code,
             accepted_seq=self.accepted_seq, done_seq=self.arm.done_seq, active_seq=self.arm.active_seq,
             rejected_seq=self.rejected_seq, joints=joints_to_wire(self.arm.joints),
-            pose=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1))
+            tcp=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1))
         self.slave.inputs = feedback.encode()
         self.last_feedback = feedback
         return feedback

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Any, Sequence, Tuple
 
 from .errors import PoseError, ProtocolError
+from .poses import ControllerPose
 from .protocol import StatusBits, round_half_away
 
 __all__ = [
@@ -323,7 +324,7 @@ class FeedbackV2:
     active_seq: int = 0
     rejected_seq: int = 0
     joints: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)   # 0.001 deg
-    pose: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)     # X Y Z 0.01 mm, Rx Ry Rz 0.001 deg
+    tcp: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)      # X Y Z 0.01 mm, Rx Ry Rz 0.001 deg
     heartbeat: int = 0                              # +1 every program loop (mod 65536)
 
     def __post_init__(self) -> None:
@@ -338,7 +339,7 @@ class FeedbackV2:
         object.__setattr__(self, "status", StatusBits(status))
         for name in ("accepted_seq", "done_seq", "active_seq", "rejected_seq", "heartbeat"):
             _seq(getattr(self, name), name)
-        for name in ("joints", "pose"):
+        for name in ("joints", "tcp"):
             values = tuple(getattr(self, name))
             if len(values) != 6 or not all(isinstance(v, int) and _INT32[0] <= v <= _INT32[1]
                                            for v in values):
@@ -349,10 +350,23 @@ class FeedbackV2:
     def joints_rad(self) -> Tuple[float, ...]:
         return joints_from_wire(self.joints)
 
+    @property
+    def values(self) -> Tuple[int, ...]:
+        """The TCP pose as on the wire (X Y Z 0.01 mm, Rx Ry Rz 0.001 deg); as v1's ``values``, a
+        tuple that changes exactly when the reported pose changes."""
+        return self.tcp
+
+    @property
+    def pose(self) -> ControllerPose:
+        """The reported TCP pose in controller units (mm, deg)."""
+        x, y, z, rx, ry, rz = self.tcp
+        return ControllerPose(x * POSITION_UNIT_MM, y * POSITION_UNIT_MM, z * POSITION_UNIT_MM,
+                              rx * JOINT_UNIT_DEG, ry * JOINT_UNIT_DEG, rz * JOINT_UNIT_DEG)
+
     def encode(self) -> bytes:
         body = _FEEDBACK.pack(VERSION, int(self.state), int(self.status), int(self.reject_code),
                               self.accepted_seq, self.done_seq, self.active_seq, self.rejected_seq,
-                              *self.joints, *self.pose, self.heartbeat, bytes(8), 0)
+                              *self.joints, *self.tcp, self.heartbeat, bytes(8), 0)
         return body[:-2] + struct.pack("<H", crc16(body[:-2]))
 
     @classmethod

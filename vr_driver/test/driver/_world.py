@@ -19,6 +19,8 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 from pyprofibus_vendor.dp_slave import SlaveLink
 
 from vr_driver.controller_sim import ControllerProgram, robot_slave
+from vr_driver.controller_v2 import ControllerProgramV2
+from vr_driver.sim_stream import SimStreamArm
 from vr_driver.driver import DriverCore, DriverStatus, MoveJob
 from vr_driver.params import DriverParams
 from vr_driver.poses import HOME_POSE
@@ -72,17 +74,24 @@ WORLD_PARAMS: Dict[str, Any] = {
 class World:
     def __init__(self, kin, params: Optional[Dict[str, Any]] = None, *, speed_factor: float = 1.0,
                  brake_time: float = 0.3, initial_pose: Any = HOME_POSE, loop_period: float = 0.01,
-                 planner=None) -> None:
+                 planner=None, protocol: str = "v1") -> None:
         self.clock = FakeClock()
         self.kin = kin
-        self.arm = SimArm(kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
-                          clock=self.clock, brake_time=brake_time)
-        self.slave = robot_slave(clock=self.clock)
+        self.protocol = protocol
+        self.slave = robot_slave(clock=self.clock, protocol=protocol)
         self.log = ExecutionLog()
-        self.program = ControllerProgram(self.slave, self.arm, execution_log=self.log,
-                                         confirm_records=True)
+        if protocol == "v2":
+            self.arm = SimStreamArm(kin, speed_factor=speed_factor, initial_pose=initial_pose,
+                                    clock=self.clock, brake_time=brake_time)
+            self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log,
+                                               confirm_records=True)
+        else:
+            self.arm = SimArm(kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
+                              clock=self.clock, brake_time=brake_time)
+            self.program = ControllerProgram(self.slave, self.arm, execution_log=self.log,
+                                             confirm_records=True)
         self.link = SteppedLink(self.slave, self.clock)
-        self.params = DriverParams.from_dict(dict(WORLD_PARAMS, **(params or {})))
+        self.params = DriverParams.from_dict(dict(WORLD_PARAMS, protocol=protocol, **(params or {})))
         self.opened = 0
         self.open_error: Optional[Exception] = None
         self.core = DriverCore(self.params, kinematics=kin, planner=planner, clock=self.clock,
@@ -152,7 +161,7 @@ class World:
 
     def ready(self, timeout: float = 5.0) -> DriverStatus:
         self.run_until(lambda: self.status().motion_possible and self.status().joints_valid
-                       and self.core.handshake.ready, timeout, "driver ready")
+                       and (self.protocol == "v2" or self.core.handshake.ready), timeout, "driver ready")
         return self.status()
 
     def finish(self, job: MoveJob, timeout: float = 30.0):

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import collections
 import logging
+import math
 import threading
 import time
 from dataclasses import dataclass, replace
@@ -44,10 +45,11 @@ from ..motion import MotionPlanner, check_envelope
 from ..params import DriverParams
 from ..poses import ControllerPose, MoveType
 from ..protocol import Feedback, StatusBits, commands_for
-from .jobs import MoveJob, MoveRequest, Preview, SubmitMode
+from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
 from .sequencer import MotionSequencer, why_no_motion
+from .streaming import MIN_SEGMENT_CYCLES, StreamSequencer, stream_points, stream_speeds
 from .trajectories import ValidTrajectory, thin
 
 log = logging.getLogger("vr_driver.driver")
@@ -145,6 +147,9 @@ class TrajectoryRun:
 
     def points_done(self) -> int:
         """How many planned points have been reached (kept points passed, dropped ones between)."""
+        if len(self.jobs) == 1 and self.jobs[0].points:          # a v2 stream
+            job = self.jobs[0]
+            return job.points[job.points_done - 1].index if job.points_done else 0
         n = 0
         for job, index in zip(self.jobs, self.kept[1:]):
             if job.done and job.result is not None and job.result.success:
@@ -170,7 +175,9 @@ class DriverCore:
         self.planner = planner or MotionPlanner(self.kin)
         self.clock = clock
         self.link = LinkSupervisor(params, self.bus, clock, open_link)
-        self.sequencer = MotionSequencer(params, clock, self._schedule_replan)
+        self.streaming = params.protocol == "v2"
+        self.sequencer = (StreamSequencer if self.streaming else MotionSequencer)(
+            params, clock, self._schedule_replan)
         self._stop = threading.Event()
         self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
         self._thread: Optional[threading.Thread] = None
@@ -263,7 +270,11 @@ class DriverCore:
         (behind the queue) or PREEMPT (stop the running move, drop the queue; ``ticket`` from
         :meth:`claim_ticket` keeps arrival order)."""
         self._require_motion_possible()
-        job = MoveJob(self.preview(request, self._planning_start(mode)), on_update, ticket=ticket)
+        preview = self.preview(request, self._planning_start(mode))
+        if self.streaming:
+            job = MoveJob(preview, on_update, ticket=ticket, points=self._preview_stream(preview))
+        else:
+            job = MoveJob(preview, on_update, ticket=ticket)
         self._last_posted = job
         self.sequencer.add([job], mode)
         self._wake.set()
@@ -281,6 +292,9 @@ class DriverCore:
         if not points:
             self.stop_motion("empty joint path: stop requested")
             return []
+        if self.streaming:
+            raise DriverError("protocol v2 runs a joint path with its timing: give each point a "
+                              "time_from_start (see submit_trajectory); nothing was sent")
         order = self._joint_order(names)
         self._require_motion_possible()
         start = self._planning_start(SubmitMode.REPLACE)
@@ -311,12 +325,23 @@ class DriverCore:
         return jobs
 
     def submit_trajectory(self, traj: ValidTrajectory,
-                          on_update: Optional[Callable[[MoveJob], None]] = None) -> "TrajectoryRun":
-        """Run a validated planner trajectory (protocol v1): thinned to the fewest stop points
+                          on_update: Optional[Callable[[MoveJob], None]] = None,
+                          mode: SubmitMode = SubmitMode.REPLACE) -> "TrajectoryRun":
+        """Run a validated planner trajectory.
+
+        Protocol v2: one streamed job (:func:`streaming.stream_points`: thinned with its timing to
+        ``stream_path_tolerance``, each segment's speed from its planned duration, blended through
+        with ``stream_smooth``); every segment between the stream's points is checked against the
+        joint limits and the workspace box before anything is queued. ``mode`` as :meth:`submit`
+        (REPLACE, the default: the points the controller already took complete, then this one).
+
+        Protocol v1: thinned to the fewest stop points
         that keep the path within its path tolerance (:func:`trajectories.thin`), each kept point
         a PTP target of a joint path (it replaces the queued targets of an earlier path). The v1
         program stops at every point and moves at its own speed: the result says how much slower
         than planned it ran. Raises DriverError (nothing queued) as :meth:`submit_joint_path`."""
+        if self.streaming:
+            return self._submit_stream(traj, on_update, mode)
         kept = thin(traj)
         points = [traj.positions[k] for k in kept[1:]]
         if not points:                      # only the start, where the arm is: nothing to move
@@ -325,6 +350,69 @@ class DriverCore:
         log.info("trajectory: %d points planned over %.2f s, %d stop points after thinning",
                  len(traj.positions) - 1, traj.duration, len(points))
         return TrajectoryRun(traj, kept, jobs, self.clock())
+
+    # ------------------------------------------------------------------------ protocol v2
+    def _min_segment(self) -> float:
+        return MIN_SEGMENT_CYCLES / self.bus.cycle_rate_hz
+
+    def _stream(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float
+                ) -> Tuple[StreamPoint, ...]:
+        return stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
+                             tolerance, self._min_segment())
+
+    def _preview_stream(self, preview: Preview) -> Tuple[StreamPoint, ...]:
+        """A validated move as a stream: its planned samples (a PTP's joint line with its speed
+        ramps, a LIN / CIRC's Cartesian path) thinned to 0.01 deg at their planned times; the last
+        point is exactly the previewed target."""
+        traj = preview.trajectory
+        positions = [tuple(float(v) for v in q) for q in traj.positions]
+        positions[-1] = tuple(preview.joint_target)
+        points = self._stream([float(t) for t in traj.times], positions, math.radians(0.01))
+        if not points:      # already there: one target at the goal
+            points = (StreamPoint(tuple(preview.joint_target), 1000, 0, 0.0, len(positions) - 1),)
+        return points
+
+    def check_segments(self, start: Sequence[float], points: Sequence[StreamPoint]) -> None:
+        """Every straight joint move of the stream (from ``start``) inside the joint limits and the
+        workspace box, sampled as a PTP preview; raises (EnvelopeError, KinematicsError...) naming
+        the segment."""
+        prev = tuple(start)
+        for i, point in enumerate(points):
+            try:
+                check_envelope(self.planner.ptp_joints(prev, point.joints), self.params.workspace)
+            except VrDriverError as exc:
+                raise type(exc)("segment %d of %d (to planned point %d): %s"
+                                % (i + 1, len(points), point.index, exc)) from None
+            prev = point.joints
+            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
+
+    def _submit_stream(self, traj: ValidTrajectory, on_update: Optional[Callable[[MoveJob], None]],
+                       mode: SubmitMode) -> "TrajectoryRun":
+        self._require_motion_possible()
+        points = self._stream(traj.times, traj.positions, math.radians(self.params.stream_path_tolerance))
+        if not points:
+            return TrajectoryRun(traj, [0], [], self.clock())
+        try:
+            self.check_segments(traj.positions[0], points)
+        except VrDriverError as exc:
+            raise DriverError("%s; nothing was sent" % exc) from None
+        job = MoveJob(None, on_update, points=points, start=tuple(traj.positions[0]))
+        self._last_posted = job
+        self.sequencer.add([job], mode)
+        self._wake.set()
+        log.info("trajectory: %d points planned over %.2f s streamed as %d targets (job %d)",
+                 len(traj.positions) - 1, traj.duration, len(points), job.id)
+        return TrajectoryRun(traj, [0] + [p.index for p in points], [job], self.clock())
+
+    def _restream(self, job: MoveJob, joints: Tuple[float, ...]) -> Tuple[Tuple[StreamPoint, ...], Tuple[float, ...]]:
+        """A stream job's points from ``joints`` (the arm is not where the stream was planned to
+        start): the first segment is checked again and its speed set for its planned arrival (no
+        faster than the limits)."""
+        points = job.points
+        self.check_segments(joints, points[:1])
+        first = points[0]
+        speed = stream_speeds(joints, [first.joints], [first.time], self.kin.limits.velocity)[0]
+        return (replace(first, speed=speed),) + tuple(points[1:]), tuple(joints)
 
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:
         """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when
@@ -361,7 +449,7 @@ class DriverCore:
         if mode is SubmitMode.APPEND:
             last = self._last_posted
             if last is not None and not last.done:
-                return last.preview.joint_target
+                return last.joint_target
             tail = self.sequencer.view.tail_joints
             if tail is not None:
                 return tail
@@ -384,7 +472,10 @@ class DriverCore:
         """Called by the sequencer (bus thread): plan ``job`` again from ``joints``, off the bus."""
         def task() -> None:
             try:
-                preview = self.preview(job.preview.request, joints)
+                if job.points:
+                    preview = self._restream(job, joints)
+                else:
+                    preview = self.preview(job.preview.request, joints)
             except VrDriverError as exc:
                 self.sequencer.replanned(job, None, str(exc))
             else:
@@ -443,7 +534,7 @@ class DriverCore:
         now = sample.time
         joints = self._update_joints(sample)
         command = self.sequencer.step(now, sample, joints)
-        self.link.set_outputs(command.encode(self.params.byte_order))
+        self.link.set_outputs(command.encode() if self.streaming else command.encode(self.params.byte_order))
         return self._publish(now, sample)
 
     def _update_joints(self, sample: LinkSample) -> Optional[Tuple[float, ...]]:
@@ -453,6 +544,9 @@ class DriverCore:
         if fb is None:
             self._joints_valid = False
             return None
+        if self.streaming:                  # v2 reports the joints themselves (0.001 deg)
+            self._joints, self._joints_valid = fb.joints_rad, True
+            return self._joints
         values = fb.values
         if values == self._joints_pose and self._joints_valid:
             return self._joints

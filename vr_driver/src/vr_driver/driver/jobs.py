@@ -21,7 +21,7 @@ from ..protocol import Command
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["MoveRequest", "Preview", "JobPhase", "JobResult", "MoveJob", "SubmitMode"]
+__all__ = ["MoveRequest", "Preview", "JobPhase", "JobResult", "MoveJob", "SubmitMode", "StreamPoint"]
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,19 @@ class Preview:
     @property
     def target(self) -> ControllerPose:
         return self.commands[-1].pose
+
+
+@dataclass(frozen=True)
+class StreamPoint:
+    """One joint target of a protocol v2 stream: where (controller joint order, rad), how fast
+    (speed in 0.1 % of the joint speed limits, 1..1000, as on the wire) and whether the arm may
+    blend through it (smooth level; 0 = stop exactly there)."""
+
+    joints: Tuple[float, ...]
+    speed: int
+    smooth: int
+    time: float                  # planned arrival, seconds from the stream's start
+    index: int                   # the planned point it is (index into the trajectory's points)
 
 
 class JobPhase(enum.Enum):
@@ -100,8 +113,9 @@ class MoveJob:
 
     _ids = itertools.count(1)
 
-    def __init__(self, preview: Preview, on_update: Optional[Callable[["MoveJob"], None]] = None,
-                 group: Optional[int] = None, ticket: Optional[int] = None) -> None:
+    def __init__(self, preview: Optional[Preview], on_update: Optional[Callable[["MoveJob"], None]] = None,
+                 group: Optional[int] = None, ticket: Optional[int] = None,
+                 points: Tuple[StreamPoint, ...] = (), start: Optional[Tuple[float, ...]] = None) -> None:
         self.id = next(MoveJob._ids)
         self.group = self.id if group is None else group   # the jobs of one joint path share it
         self.ticket = ticket                                # arrival order of the goal (or None)
@@ -112,6 +126,15 @@ class MoveJob:
         self.next_command = 0           # index into preview.commands of the next one to send
         self.seqs: List[int] = []       # handshake sequence numbers of what was sent
         self.stop_reason = ""           # set when a stop was requested for it
+        # protocol v2: the stream of joint targets (empty for a v1 job), where it was planned to
+        # start, and how many of its points the controller took / reached so far
+        self.points = tuple(points)
+        self.start = start if start is not None else (
+            preview.trajectory.start if preview is not None else None)
+        self.points_taken = 0
+        self.points_done = 0
+        if preview is None and not self.points:
+            raise ValueError("a job needs a preview (v1) or stream points (v2)")
         self._done = threading.Event()
         self._changed = threading.Condition()
 
@@ -123,6 +146,22 @@ class MoveJob:
     def sent(self) -> bool:
         """True once any of its commands went to the controller."""
         return self.next_command > 0
+
+    @property
+    def joint_target(self) -> Tuple[float, ...]:
+        """Where the arm ends when the job succeeds."""
+        if self.points:
+            return self.points[-1].joints
+        assert self.preview is not None
+        return self.preview.joint_target
+
+    @property
+    def duration(self) -> float:
+        """The planned duration [s]."""
+        if self.points:
+            return self.points[-1].time
+        assert self.preview is not None
+        return self.preview.duration
 
     def wait(self, timeout: Optional[float] = None) -> Optional[JobResult]:
         self._done.wait(timeout)
@@ -162,4 +201,6 @@ class MoveJob:
                 log.exception("job %d: update callback failed", self.id)
 
     def __repr__(self) -> str:
-        return "MoveJob(%d, %s, %s)" % (self.id, self.preview.request.move_type.name, self.phase.value)
+        kind = self.preview.request.move_type.name if self.preview is not None else \
+            "stream of %d" % len(self.points)
+        return "MoveJob(%d, %s, %s)" % (self.id, kind, self.phase.value)

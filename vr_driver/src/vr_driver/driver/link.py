@@ -34,6 +34,7 @@ from pyprofibus_vendor.phy import Link
 from ..errors import ProtocolError
 from ..params import DriverParams
 from ..protocol import Command, Feedback
+from ..protocol_v2 import CommandV2, FeedbackV2
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -126,6 +127,13 @@ def _diag_words(diag: Any) -> str:
         return repr(diag)
 
 
+def idle_record(params: DriverParams) -> bytes:
+    """The record that asks nothing of the controller (the flag at 0 / both slots empty)."""
+    if params.protocol == "v2":
+        return CommandV2().encode()
+    return Command.idle().encode(params.byte_order)
+
+
 def open_serial_link(device: str, baud: int) -> Link:
     """Default link factory: the serial PHY (raises PhyError with the OS reason)."""
     from pyprofibus_vendor.phy_serial import SerialLink
@@ -145,6 +153,10 @@ class LinkSupervisor:
         self.clock = clock
         self.open_link = open_link
         self.counters = LinkCounters()
+        # the controller's records: v1 Feedback (14 bytes) or v2 FeedbackV2 (72 bytes, CRC)
+        self._decode: Callable[[bytes], Any] = (
+            FeedbackV2.decode if params.protocol == "v2"
+            else (lambda data: Feedback.decode(data, params.byte_order)))
         self._link: Optional[Link] = None
         self._master: Optional[DpMaster] = None
         self._slave = None
@@ -244,7 +256,7 @@ class LinkSupervisor:
                 self._record_time = at               # consumed (a stalled cycle's: not believed)
             if new and not stalled:
                 try:
-                    fresh = Feedback.decode(data, self.params.byte_order)
+                    fresh = self._decode(data)
                     self._bad_record = ""
                 except ProtocolError as exc:
                     self.counters.protocol_errors += 1
@@ -336,7 +348,7 @@ class LinkSupervisor:
                          group_ident=sc.group_mask,
                          watchdog=None if not sc.watchdog_ms else sc.watchdog_ms / 1000.0)
         self._slave = master.add_slave(spec)
-        self._slave.outputs = Command.idle().encode(self.params.byte_order)
+        self._slave.outputs = idle_record(self.params)
         self._master = master
         self._link = link
         log.info("opened %s at %d bit/s; bringing slave %d (ident 0x%04X) to Data_Exchange",

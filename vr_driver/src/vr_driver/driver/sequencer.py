@@ -30,14 +30,14 @@ import collections
 import logging
 import threading
 from dataclasses import dataclass
-from typing import Callable, Deque, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple, Union
 
 from ..errors import HandshakeError
 from ..params import DriverParams
 from ..poses import ControllerPose
 from ..protocol import (Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected,
                         StatusBits, TimedOut)
-from .jobs import JobPhase, MoveJob, Preview, SubmitMode
+from .jobs import JobPhase, MoveJob, SubmitMode
 from .link import LinkSample
 
 log = logging.getLogger("vr_driver.driver")
@@ -101,7 +101,7 @@ class _Cancel:
 @dataclass(frozen=True)
 class _Replanned:
     job: MoveJob
-    preview: Optional[Preview]
+    preview: Optional[Any]          # v1: a Preview; v2: the job's new stream points (None: failed)
     error: str
 
 
@@ -158,7 +158,7 @@ class MotionSequencer:
     def stop_all(self, reason: str) -> None:
         self._post(_Cancel(None, reason))
 
-    def replanned(self, job: MoveJob, preview: Optional[Preview], error: str = "") -> None:
+    def replanned(self, job: MoveJob, preview: Optional[Any], error: str = "") -> None:
         self._post(_Replanned(job, preview, error))
 
     def _post(self, request: _Request) -> None:
@@ -226,10 +226,14 @@ class MotionSequencer:
                 self._fail_queue("an earlier target of the same path failed (%s)" % request.error,
                                  job.group)
             else:
-                job.preview = request.preview
+                self._apply_replan(job, request.preview)
                 log.info("job %d planned again from the arm's current pose (%.1f s)", job.id,
-                         job.preview.duration)
+                         job.duration)
                 job.set_phase(JobPhase.QUEUED)
+
+    def _apply_replan(self, job: MoveJob, plan) -> None:
+        """Put the new plan into the job (v1: its preview)."""
+        job.preview = plan
 
     def _take_add(self, request: _Add, now: float) -> None:
         jobs = [j for j in request.jobs if not j.done]
@@ -456,13 +460,13 @@ class MotionSequencer:
         job = self._job
         tail = None
         if self._queue:
-            tail = self._queue[-1].preview.joint_target
+            tail = self._queue[-1].joint_target
         elif job is not None:
-            tail = job.preview.joint_target
+            tail = job.joint_target
         settle_job = self._settle.job if self._settle is not None else None
         self.view = SequencerView(
             job=job if job is not None else settle_job, queue_length=len(self._queue),
-            tail_joints=tail, inflight_joints=job.preview.joint_target if job is not None else None,
+            tail_joints=tail, inflight_joints=job.joint_target if job is not None else None,
             settling=self._settle is not None, targets_sent=self.targets_sent,
             targets_done=self.targets_done, targets_rejected=self.targets_rejected,
             targets_aborted=self.targets_aborted)

@@ -1,0 +1,361 @@
+"""Protocol v2 on the driver side: a planned trajectory becomes a stream of timed joint targets,
+and :class:`StreamSequencer` hands them to the controller with a look-ahead, exactly once.
+ROS-free, no I/O, no planning on the bus thread.
+
+**From a plan to a stream** (:func:`stream_points`, in the caller's thread): the planned points are
+thinned with their timing (:func:`thin_timed`: a point is dropped only where the straight
+joint-space move between its neighbours, run at constant speed, passes it at its planned time
+within ``tolerance``, and no kept segment is shorter than the bus can feed); each kept point gets
+the speed that makes the controller's synchronous joint move end at its planned time (rounded up
+to the wire's 0.1 %, the rounding carried into the next segment so that the arrivals do not drift),
+and the smooth level ``stream_smooth`` (the last point: 0, an exact stop).
+
+**On the wire** (:class:`StreamSequencer`, one step per bus cycle; doc/controller_program.md §9):
+the job's points get consecutive sequence numbers from the one after the controller's
+``accepted_seq``; the record offers the first point the controller has not taken in slot 0 (with
+START for the stream's first point) and the one after it in slot 1. The controller takes a slot when
+it has room (the target it moves to and one look-ahead) and reports ``accepted_seq``; the record
+then moves on. A number the controller took is never offered again, and after a link loss nothing
+of the stream is re-sent: the job fails with the reason.
+
+- done: every point reached (``done_seq`` = the last, the arm at rest) -> SUCCEEDED at that pose;
+- a point refused (``rejected_seq`` one of ours): STOP, the job FAILED when the arm is at rest;
+- cancel / stop / preempt / timeout: STOP (the controller brakes along its path and drops what it
+  took but did not start), the job ends when the arm is at rest, with that pose;
+- a new joint path (REPLACE): the points the controller already took complete, the rest of the old
+  stream is not offered any more; the new one starts from where the old one ended;
+- the arm not where the stream was planned from (after a stop): the first segment is planned
+  again from the arm's joints (on the core's planning thread) before anything is sent.
+"""
+from __future__ import annotations
+
+import logging
+import math
+from typing import Callable, List, Optional, Sequence, Tuple
+
+from ..params import DriverParams
+from ..protocol import StatusBits
+from ..protocol_v2 import (EMPTY, SEQ_MAX, CommandV2, Control, FeedbackV2, StreamState, TargetKind,
+                           TargetSlot, joints_to_wire, next_seq)
+from .jobs import JobPhase, MoveJob, StreamPoint, SubmitMode
+from .link import LinkSample
+from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer, _Add,
+                        _Settle, why_no_motion)
+
+log = logging.getLogger("vr_driver.driver")
+
+__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "seq_offset"]
+
+#: a kept segment lasts at least this many bus cycles (the record moves on at most once a cycle,
+#: and the controller acts on a record seen twice: shorter segments would starve the look-ahead)
+MIN_SEGMENT_CYCLES = 2.0
+
+
+def seq_offset(seq: int, base: int) -> int:
+    """How many numbers ``seq`` lies after ``base`` in the wrapping sequence 1..SEQ_MAX (0 for
+    ``base`` itself; SEQ_MAX - 1 for the number just before it)."""
+    return ((seq - 1) - (base - 1)) % SEQ_MAX
+
+
+def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
+               min_dt: float = 0.0) -> List[int]:
+    """Indices of the points to keep (always the first and the last): a point is dropped where the
+    constant-speed straight joint move between the kept points around it is within ``tolerance``
+    [rad, every joint] of it *at its planned time*; then points closer than ``min_dt`` in time to
+    the previous kept one are dropped too (never the last)."""
+    n = len(times)
+    if n <= 2:
+        return list(range(n))
+    keep = {0, n - 1}
+    stack = [(0, n - 1)]
+    while stack:
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        span = times[b] - times[a]
+        worst, worst_dev = -1, tolerance
+        for k in range(a + 1, b):
+            f = (times[k] - times[a]) / span
+            dev = max(abs(pa + f * (pb - pa) - pk)
+                      for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
+            if dev > worst_dev:
+                worst, worst_dev = k, dev
+        if worst >= 0:
+            keep.add(worst)
+            stack.append((a, worst))
+            stack.append((worst, b))
+    kept = sorted(keep)
+    if min_dt > 0.0:
+        out = [kept[0]]
+        for k in kept[1:-1]:
+            if times[k] - times[out[-1]] >= min_dt and times[kept[-1]] - times[k] >= min_dt:
+                out.append(k)
+        out.append(kept[-1])
+        kept = out
+    return kept
+
+
+def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], times: Sequence[float],
+                  vmax: Sequence[float]) -> List[int]:
+    """The wire speed (0.1 % of the joint speed limits, 1..1000) of each segment so that the
+    synchronous joint move to ``points[k]`` ends at ``times[k]`` (seconds from the start at
+    ``start``). Each speed is rounded up (the arm is never slower than planned) and the time that
+    rounding gains is carried into the next segment, so the arrivals do not drift. A segment that
+    would need more than the limits gets 1000 (full speed): the caller validates the plan first."""
+    speeds = []
+    elapsed = 0.0
+    prev = start
+    for q, t in zip(points, times):
+        full = max(abs(b - a) / v for a, b, v in zip(prev, q, vmax))   # its time at 100 %
+        want = t - elapsed
+        if full <= 0.0:
+            permille = 1000                      # no motion: nothing to time (a pause is not kept)
+        elif want <= 0.0:
+            permille = 1000
+        else:
+            permille = min(1000, max(1, int(math.ceil(1000.0 * full / want - 1e-9))))
+        if full > 0.0:
+            elapsed += full * 1000.0 / permille
+        speeds.append(permille)
+        prev = q
+    return speeds
+
+
+def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
+                  smooth: int, tolerance: float, min_dt: float) -> Tuple[StreamPoint, ...]:
+    """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
+    thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point ``smooth`` but the
+    last (0: the stream ends with an exact stop)."""
+    kept = thin_timed(times, positions, tolerance, min_dt)[1:]
+    if not kept:
+        return ()
+    pts = [tuple(float(v) for v in positions[k]) for k in kept]
+    ts = [float(times[k]) for k in kept]
+    speeds = stream_speeds(positions[0], pts, ts, vmax)
+    last = len(kept) - 1
+    return tuple(StreamPoint(q, speed, 0 if i == last else smooth, t, k)
+                 for i, (q, speed, t, k) in enumerate(zip(pts, speeds, ts, kept)))
+
+
+class StreamSequencer(MotionSequencer):
+    """The v2 counterpart of :class:`MotionSequencer` (same requests, queue, tickets, settle and
+    outcome rules; see the module docstring for the stream). :meth:`step` returns a
+    :class:`~vr_driver.protocol_v2.CommandV2`."""
+
+    def __init__(self, params: DriverParams, clock: Callable[[], float],
+                 replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
+        super().__init__(params, clock, replan)
+        self._base = 0                     # sequence number of the current job's point 0 (0: not started)
+        self._limit = 0                    # points of the current job still offered up to (REPLACE cuts it)
+        self._rejected_before = 0          # the controller's rejected_seq when the job started
+        self._started = 0.0
+        self._stopping = False             # send STOP until the arm is at rest
+        self._last_state: Optional[StreamState] = None
+
+    # ------------------------------------------------------------------ bus thread
+    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> CommandV2:
+        fb = sample.feedback
+        if fb is not None:
+            self._last_pose = fb.pose
+        with self._lock:
+            requests = list(self._inbox)
+            self._inbox.clear()
+        for request in requests:
+            self._take(request, now, fb)
+        if not sample.connected or (self._session is not None and sample.session != self._session):
+            if self._session is not None:
+                self._lost(now, sample.reason if not sample.connected else "a new Data_Exchange session")
+            if sample.connected:
+                self._session = sample.session
+            self._publish()
+            return CommandV2()
+        self._session = sample.session
+        assert isinstance(fb, FeedbackV2)
+        self._track_rest(now, fb)
+        self._follow(now, fb)
+        self._check_settle(now, fb)
+        if self._settle is None:
+            self._stopping = False
+        self._advance(now, fb, sample, joints)
+        self._publish()
+        return self._record()
+
+    def at_rest(self, now: float, fb) -> bool:
+        return fb.state in (StreamState.IDLE, StreamState.WAITING) and super().at_rest(now, fb)
+
+    # ------------------------------------------------------------------ requests
+    def _apply_replan(self, job: MoveJob, plan) -> None:
+        job.points, job.start = plan
+
+    def _take_add(self, request: _Add, now: float) -> None:
+        super()._take_add(request, now)
+        job = self._job
+        if request.mode is SubmitMode.REPLACE and job is not None and job.sent and not self._stopping:
+            # the points the controller took run to their end; the rest of the old stream is dropped
+            self._limit = min(self._limit, max(job.points_taken, 1))
+            job.stop_reason = "replaced by a newer joint path"
+            log.info("job %d: replaced by a newer joint path after %d of its %d points", job.id,
+                     self._limit, len(job.points))
+
+    def _stop_everything(self, reason: str, now: float) -> None:
+        for queued in list(self._queue):
+            queued.finish(False, JobPhase.CANCELLED, reason, None)
+        self._queue.clear()
+        if self._job is not None:
+            self._stop_current(reason, now)
+        elif self._last_state in (StreamState.MOVING, StreamState.STOPPING):
+            self._stopping = True                 # not ours (an earlier stream's end): stop it too
+            self._begin_settle_none(reason, now)
+
+    def _begin_settle_none(self, reason: str, now: float) -> None:
+        if self._settle is None:
+            self._settle = _Settle(None, JobPhase.CANCELLED, reason, now)
+
+    def _stop_current(self, reason: str, now: float) -> None:
+        job = self._job
+        assert job is not None
+        self._end_current()
+        job.stop_reason = reason
+        if job.sent:
+            self._stopping = True
+            if job.points_taken > job.points_done:
+                self.targets_aborted += 1
+            log.info("job %d: STOP sent (%s); waiting for the arm to come to rest", job.id, reason)
+            self._begin_settle(job, JobPhase.CANCELLED, reason, now)
+        else:
+            job.finish(False, JobPhase.CANCELLED, reason, None)
+
+    # ------------------------------------------------------------------ the stream
+    def _follow(self, now: float, fb: FeedbackV2) -> None:
+        """Read the controller's progress on the current job; end it when it is over."""
+        self._last_state = fb.state
+        job = self._job
+        if job is None or not self._base:
+            return
+        n = len(job.points)
+        taken = seq_offset(fb.accepted_seq, self._base) + 1 if fb.accepted_seq else 0
+        taken = taken if taken <= n else 0
+        done = seq_offset(fb.done_seq, self._base) + 1 if fb.done_seq else 0
+        done = done if done <= n else 0
+        if taken > job.points_taken:
+            self.targets_sent += taken - job.points_taken
+            job.points_taken = taken
+            if job.phase is JobPhase.SENDING:
+                job.set_phase(JobPhase.MOVING)
+        if done > job.points_done:
+            self.targets_done += done - job.points_done
+            job.points_done = done
+            job._notify()
+        if fb.rejected_seq and fb.rejected_seq != self._rejected_before \
+                and seq_offset(fb.rejected_seq, self._base) < n:
+            k = seq_offset(fb.rejected_seq, self._base)
+            self.targets_rejected += 1
+            reason = ("the controller refused point %d of %d (target #%d): %s" % (
+                k + 1, n, fb.rejected_seq, fb.reject_code.name))
+            self._fail_current(job, reason, now, fb)
+            return
+        resting = fb.state in (StreamState.IDLE, StreamState.WAITING) and \
+            not fb.status & StatusBits.IN_MOTION
+        if done >= n and resting:
+            self._end_current()
+            log.info("job %d done: %d points, at %s", job.id, n, fb.describe())
+            job.finish(True, JobPhase.SUCCEEDED, "", fb.pose)
+            return
+        if self._limit < n and done >= max(job.points_taken, 1) and resting:
+            self._end_current()
+            job.finish(False, JobPhase.CANCELLED, "%s after %d of its %d points" % (
+                job.stop_reason or "replaced", done, n), fb.pose)
+            return
+        if taken == 0 and now - self._started > self.params.accept_timeout:
+            self._fail_current(job, "the controller did not take the stream's first target within "
+                               "%.3g s (accept_timeout; %s)" % (self.params.accept_timeout,
+                                                                fb.describe()), now, fb)
+            return
+        timeout = self.params.motion_timeout_factor * job.duration + self.params.motion_timeout_margin
+        if now - self._started > timeout:
+            self._fail_current(job, "the stream did not end within %.3g s (motion timeout: %g x the "
+                               "planned %.3g s + %g s)" % (timeout, self.params.motion_timeout_factor,
+                                                           job.duration, self.params.motion_timeout_margin),
+                               now, fb)
+
+    def _end_current(self) -> None:
+        self._job = None
+        self._base = 0
+        self._limit = 0
+
+    def _fail_current(self, job: MoveJob, reason: str, now: float, fb: FeedbackV2) -> None:
+        log.warning("job %d ended: %s", job.id, reason)
+        self._end_current()
+        self._stopping = True
+        self._begin_settle(job, JobPhase.FAILED, reason, now)
+        self._fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
+
+    def _advance(self, now: float, fb, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> None:
+        """Start the next job when nothing runs and the arm is at rest."""
+        if self._settle is not None or self._stopping:
+            return
+        if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
+            return          # the controller has not surely seen our empty record twice yet
+        if self._job is None:
+            if not self._queue:
+                return
+            why = why_no_motion(fb)
+            if why:
+                self._fail_queue("motion is no longer possible: %s" % why)
+                return
+            self._job = self._queue.popleft()
+        job = self._job
+        if self._base or job.phase is JobPhase.REPLANNING:
+            return
+        if fb.state not in (StreamState.IDLE, StreamState.WAITING) or fb.status & StatusBits.IN_MOTION:
+            return          # an earlier stream still ends
+        if joints is None:
+            self._job = None
+            job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the planned "
+                       "start against", None)
+            self._fail_queue("an earlier target of the same path failed", job.group)
+            return
+        if job.start is not None and max(abs(a - b) for a, b in zip(joints, job.start)) > START_TOLERANCE:
+            job.set_phase(JobPhase.REPLANNING)
+            self.replan(job, joints)
+            return
+        self._base = next_seq(fb.accepted_seq)
+        self._limit = len(job.points)
+        self._rejected_before = fb.rejected_seq
+        self._started = now
+        job.next_command = 1                    # sent (MoveJob.sent): it may move from now on
+        job.seqs = [self._seq(k) for k in range(len(job.points))]
+        job.set_phase(JobPhase.SENDING)
+        log.info("job %d: streaming %d targets #%d..#%d over %.2f s", job.id, len(job.points),
+                 self._base, job.seqs[-1], job.duration)
+
+    def _seq(self, k: int) -> int:
+        return (self._base - 1 + k) % SEQ_MAX + 1
+
+    def _slot(self, job: MoveJob, k: int) -> TargetSlot:
+        point = job.points[k]
+        return TargetSlot(self._seq(k), TargetKind.JOINT, point.smooth, point.speed,
+                          joints_to_wire(point.joints))
+
+    def _record(self) -> CommandV2:
+        if self._stopping:
+            return CommandV2(Control.STOP)
+        job = self._job
+        if job is None or not self._base:
+            return CommandV2()
+        k = job.points_taken
+        if k >= self._limit:
+            return CommandV2()
+        slot1 = self._slot(job, k + 1) if k + 1 < self._limit else EMPTY
+        return CommandV2(Control.START if k == 0 else Control(0), self._slot(job, k), slot1)
+
+    def _lost(self, now: float, reason: str) -> None:
+        job = self._job
+        if job is not None and job.points_taken > job.points_done:
+            self.targets_aborted += 1
+        self._stopping = False
+        self._session = None
+        self._rest_values = None
+        self._end_all(JobPhase.FAILED, "link to the controller lost (%s); the stream is not re-sent; "
+                      "the last pose seen is reported, where the arm came to rest is unknown" % reason)
+        self._end_current()

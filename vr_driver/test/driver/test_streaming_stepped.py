@@ -1,0 +1,278 @@
+"""Protocol v2 streaming stepped with a fake clock, in one thread: DriverCore with the
+StreamSequencer, our DP master, the in-memory link, the virtual controller's v2 slave, program and
+streaming arm (_world.World(protocol="v2")). A planned trajectory runs as planned: on time, on
+path, without stops, each target exactly once -- and stops, cuts and replacements keep the rules.
+"""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from vr_driver.driver import JobPhase, LinkState, MoveRequest, SubmitMode
+from vr_driver.driver.streaming import seq_offset, stream_points, stream_speeds, thin_timed
+from vr_driver.driver.trajectories import TrajectoryGoal, validate
+from vr_driver.poses import ControllerPose, MoveType
+from vr_driver.protocol_v2 import SEQ_MAX, StreamState
+from vr_driver.sim_arm import Outcome
+
+from _world import World
+
+FAR = ControllerPose(1000, -600, 800, 0, 45, 0)
+DEG = math.pi / 180.0
+
+
+@pytest.fixture
+def world(kin):
+    w = World(kin, protocol="v2")
+    w.ready()
+    return w
+
+
+def smooth_path(q0, n=30, duration=3.0, amp=(0.5, 0.25, -0.3, 0.6, 0.4, 0.8)):
+    """A curved planner-like path of ``n`` points after ``q0``: each joint on its own curve, timed
+    with a smooth start and stop (zero speed at both ends)."""
+    times, points = [], []
+    for k in range(1, n + 1):
+        u = k / n
+        s = u * u * (3.0 - 2.0 * u)                       # smoothstep: a planner's ramp up and down
+        points.append(tuple(q + a * (math.sin(0.5 * math.pi * s) + 0.3 * math.sin(3 * math.pi * s))
+                            / 1.0 for q, a in zip(q0, amp)))
+        times.append(duration * u)
+    return times, points
+
+
+def trajectory(world, times, points, **kw):
+    names = world.core.joint_names
+    lim = world.kin.limits
+    goal = TrajectoryGoal(tuple(names), tuple(points), tuple(times), **kw)
+    return validate(goal, names, world.status().joints, lim.lower, lim.upper, world.now)
+
+
+def taken_seqs(world):
+    return [e.seq for e in world.log.entries()]
+
+
+def record(world, job, timeout=30.0):
+    """Run until ``job`` is done, sampling the arm every tick: [(t, joints, state)]."""
+    samples = []
+
+    def done():
+        samples.append((world.now, tuple(world.arm.joints), world.arm.state))
+        return job.done
+    world.run_until(done, timeout, "job %d done" % job.id)
+    return samples
+
+
+# ------------------------------------------------------------------------------ pure functions
+def test_thin_timed_keeps_ends_and_timing():
+    times = [0.0, 1.0, 2.0, 3.0, 4.0]
+    line = [(0.1 * k,) * 6 for k in range(5)]                  # constant speed: nothing in between
+    assert thin_timed(times, line, 1e-6) == [0, 4]
+    accel = [(0.1 * k * k,) * 6 for k in range(5)]             # speeding up: the timing needs points
+    assert thin_timed(times, accel, 1e-6) == [0, 1, 2, 3, 4]
+    assert thin_timed(times, accel, 0.5) == [0, 4]
+    assert thin_timed([0.0, 0.01, 0.02, 1.0], [(0.0,) * 6, (0.2,) * 6, (0.0,) * 6, (1.0,) * 6],
+                      1e-6, min_dt=0.05) == [0, 3]
+
+
+def test_stream_speeds_round_up_and_do_not_drift():
+    vmax = (1.0,) * 6
+    start = (0.0,) * 6
+    # 100 segments of 0.0123 rad in 0.1 s: 12.3 % each; rounding up alone would arrive early
+    points = [(0.0123 * k,) * 6 for k in range(1, 101)]
+    times = [0.1 * k for k in range(1, 101)]
+    speeds = stream_speeds(start, points, times, vmax)
+    assert all(1 <= s <= 1000 for s in speeds) and set(speeds) <= {123, 124}
+    arrival = sum(0.0123 / (s / 1000.0) for s in speeds)
+    assert abs(arrival - 10.0) < 0.01                   # on time at the end, not 0.8 % early
+    assert stream_speeds(start, [(1.0,) * 6], [1.0], vmax) == [1000]
+
+
+def test_stream_points_smooth_all_but_the_last():
+    times = [0.0, 1.0, 2.0, 3.0]
+    pts = [(0.0,) * 6, (0.3,) * 6, (0.5,) * 6, (0.6,) * 6]
+    stream = stream_points(times, pts, (1.0,) * 6, 4, 1e-6, 0.0)
+    assert [p.index for p in stream] == [1, 2, 3]
+    assert [p.smooth for p in stream] == [4, 4, 0]
+    assert [p.speed for p in stream] == [300, 200, 100]
+
+
+def test_seq_offset_wraps():
+    assert seq_offset(5, 5) == 0 and seq_offset(7, 5) == 2
+    assert seq_offset(1, SEQ_MAX) == 1 and seq_offset(SEQ_MAX - 1, SEQ_MAX) == SEQ_MAX - 1
+
+
+# ------------------------------------------------------------------------------ a trajectory
+def test_a_planned_trajectory_runs_as_planned(world):
+    """30 points over 4 s: on time (<= 1.10 of the plan), never standing still between start and
+    end, on the planned path at the same time, each target taken and passed exactly once, the end
+    exactly where planned."""
+    q0 = tuple(world.arm.joints)
+    times, points = smooth_path(q0, duration=4.0)
+    traj = trajectory(world, times, points)
+    t_submit = world.now
+    run = world.core.submit_trajectory(traj)
+    job = run.jobs[0]
+    samples = record(world, job)
+    assert job.result.success, job.result.reason
+    assert run.success and run.points_done() == len(traj.positions) - 1
+    elapsed = world.now - t_submit
+    assert elapsed <= 1.10 * traj.duration, elapsed
+    # motion from the first sample that left the start to the last that arrived
+    moving = [i for i, (_t, q, _s) in enumerate(samples) if max(abs(a - b) for a, b in zip(q, q0)) > 1e-6]
+    t0 = samples[moving[0]][0]
+    still = 0.0
+    for (ta, qa, _sa), (tb, qb, _sb) in zip(samples[moving[0]:], samples[moving[0] + 1:]):
+        if qa == qb and tb <= samples[-1][0] and max(abs(a - b) for a, b in zip(qb, traj.positions[-1])) > 1e-6:
+            still += tb - ta
+    assert still <= 0.05 * traj.duration, "stood still %.3f s mid-path" % still
+    assert all(s is not StreamState.WAITING for _t, _q, s in samples), "a gap in the stream"
+    worst = max(max(abs(a - b) for a, b in zip(q, traj.sample(t - t0))) for t, q, _s in samples[moving[0]:])
+    assert worst <= 0.5 * DEG * 6, "%.2f deg from the plan at the same time" % (worst / DEG)
+    final = world.arm.joints
+    assert max(abs(a - b) for a, b in zip(final, traj.positions[-1])) <= 0.001 * DEG
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs)) == len(job.points)
+    assert seqs == job.seqs
+    outcomes = [e.outcome for e in world.log.entries()]
+    assert outcomes[-1] is Outcome.EXECUTED and set(outcomes[:-1]) <= {Outcome.BLENDED}
+    s = world.status()
+    assert s.counters.targets_sent == s.counters.targets_done == len(job.points)
+
+
+def test_joints_and_pose_come_from_the_v2_feedback(world):
+    s = world.status()
+    assert s.joints_valid and max(abs(a - b) for a, b in zip(s.joints, world.arm.joints)) <= 0.0006 * DEG
+    assert abs(s.pose.x - world.arm.pose.x) <= 0.006
+
+
+def test_a_cartesian_move_is_streamed_and_ends_exactly(world):
+    job = world.core.submit(MoveRequest(MoveType.PTP, FAR))
+    result = world.finish(job)
+    assert result.success, result.reason
+    assert max(abs(a - b) for a, b in zip(world.arm.joints, job.preview.joint_target)) <= 0.001 * DEG
+    assert abs(result.reached.x - FAR.x) < 0.05 and abs(result.reached.z - FAR.z) < 0.05
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs)) == len(job.points) >= 1
+
+
+def test_a_lin_move_stays_straight(world):
+    job = world.core.submit(MoveRequest(MoveType.LIN, FAR))
+    start = world.arm.pose
+    samples = []
+    world.run_until(lambda: samples.append(world.arm.pose) or job.done, 30.0, "LIN done")
+    assert job.result.success, job.result.reason
+    a = [start.x, start.y, start.z]
+    b = [FAR.x, FAR.y, FAR.z]
+    d = [q - p for p, q in zip(a, b)]
+    dd = sum(x * x for x in d)
+    worst = 0.0
+    for p in samples:
+        v = [p.x - a[0], p.y - a[1], p.z - a[2]]
+        f = max(0.0, min(1.0, sum(x * y for x, y in zip(v, d)) / dd))
+        worst = max(worst, math.sqrt(sum((vi - f * di) ** 2 for vi, di in zip(v, d))))
+    assert worst < 2.0, "%.2f mm off the line" % worst
+
+
+# ------------------------------------------------------------------------------ stops and faults
+def test_cancel_stops_the_stream_at_rest_and_sends_nothing_more(world):
+    times, points = smooth_path(world.status().joints)
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    job = run.jobs[0]
+    world.run_until(lambda: job.points_done >= 5, 10.0, "5 points done")
+    world.core.cancel(job, "test cancel")
+    t_cancel = world.now
+    world.finish(job)
+    assert job.result.phase is JobPhase.CANCELLED and job.result.reason == "test cancel"
+    assert not world.arm.moving and job.result.reached is not None
+    assert abs(job.result.reached.x - world.arm.pose.x) < 0.01
+    n = len(world.log.entries())
+    world.run_for(2.0)
+    assert len(world.log.entries()) == n, "nothing after the stop"
+    late = [e for e in world.log.entries() if e.outcome is not Outcome.STOPPED and e.end_time > t_cancel + 0.5]
+    assert not late
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs))
+
+
+def test_stop_motion_then_a_new_trajectory_from_the_rest_pose(world):
+    q0 = world.status().joints
+    times, points = smooth_path(q0)
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    world.run_until(lambda: run.jobs[0].points_done >= 8, 10.0, "8 points")
+    world.core.stop_motion("test stop")
+    world.finish(run.jobs[0])
+    rest = world.status().joints
+    back_times = [1.0, 2.0]
+    back = [tuple(0.5 * (a + b) for a, b in zip(rest, q0)), tuple(q0)]
+    run2 = world.core.submit_trajectory(trajectory(world, back_times, back))
+    result = world.finish(run2.jobs[0])
+    assert result.success, result.reason
+    assert max(abs(a - b) for a, b in zip(world.arm.joints, q0)) <= 0.001 * DEG
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs))
+
+
+def test_a_link_cut_fails_the_stream_and_nothing_is_resent(world):
+    times, points = smooth_path(world.status().joints)
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    job = run.jobs[0]
+    world.run_until(lambda: job.points_done >= 5, 10.0, "5 points done")
+    world.link.cut = True
+    world.finish(job, 5.0)
+    assert job.result.phase is JobPhase.FAILED and "link to the controller lost" in job.result.reason
+    assert "not re-sent" in job.result.reason
+    world.link.cut = False
+    world.run_until(lambda: world.status().link is LinkState.CONNECTED, 10.0, "link back")
+    world.run_for(2.0)
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs))
+    assert not [e for e in world.log.entries() if e.outcome is Outcome.REJECTED]
+    assert world.program.accepted_seq == max(seqs)       # nothing taken after the cut
+    # the next stream starts (START after the loss) and runs
+    q = world.status().joints
+    run2 = world.core.submit_trajectory(trajectory(world, [1.0], [tuple(v + 0.05 for v in q)]))
+    assert world.finish(run2.jobs[0]).success
+
+
+def test_a_new_path_replaces_the_rest_of_the_running_one(world):
+    q0 = world.status().joints
+    times, points = smooth_path(q0)
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    world.run_until(lambda: run.jobs[0].points_done >= 6, 10.0, "6 points")
+    here = world.status().joints
+    run2 = world.core.submit_trajectory(trajectory(world, [1.5, 3.0], [
+        tuple(0.5 * (a + b) for a, b in zip(here, q0)), tuple(q0)]))
+    first = world.finish(run.jobs[0])
+    assert first.phase is JobPhase.CANCELLED and "replaced" in first.reason
+    result = world.finish(run2.jobs[0])
+    assert result.success, result.reason
+    assert max(abs(a - b) for a, b in zip(world.arm.joints, q0)) <= 0.001 * DEG
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs))
+    old = [e for e in world.log.entries() if e.seq in run.jobs[0].seqs]
+    assert len(old) < len(run.jobs[0].points)      # the rest of the old stream was never sent
+
+
+def test_an_estop_mid_stream_fails_at_rest(world):
+    times, points = smooth_path(world.status().joints)
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    job = run.jobs[0]
+    world.run_until(lambda: job.points_done >= 3, 10.0, "3 points")
+    world.arm.set_estop(True)
+    world.finish(job, 10.0)
+    assert not job.result.success and job.result.phase is JobPhase.FAILED, job.result
+    world.arm.set_estop(False)
+    seqs = taken_seqs(world)
+    assert len(set(seqs)) == len([s for s in seqs if s])
+
+
+def test_a_queued_move_waits_for_the_stream_and_appends(world):
+    job1 = world.core.submit(MoveRequest(MoveType.PTP, FAR))
+    job2 = world.core.submit(MoveRequest(MoveType.PTP, ControllerPose(1120, 0, 725, 0, 45, 0)),
+                             mode=SubmitMode.APPEND)
+    assert world.finish(job1).success
+    assert world.finish(job2).success
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs)) == len(job1.points) + len(job2.points)
