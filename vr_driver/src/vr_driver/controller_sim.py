@@ -366,11 +366,15 @@ AUTO_LINK = "auto"
 
 
 def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
-    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_g2_<master port>``.
+    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_g2_<master port>``, followed by
+    ``_<namespace>`` for nodes in a namespace (``/arm1`` -> ``..._11311_arm1``, ``/cell/arm1`` ->
+    ``..._11311_cell_arm1``).
 
     Both the virtual controller and the driver resolve ``auto`` with this function from the
-    environment roslaunch gives its nodes (ROS_MASTER_URI; ROS_LOG_DIR, else ROS_HOME/log, else
-    ~/.ros/log), so they agree on the path, and launches on different masters never share one."""
+    environment roslaunch gives its nodes (ROS_MASTER_URI; ROS_NAMESPACE, set for the nodes of a
+    ``<group ns>``; ROS_LOG_DIR, else ROS_HOME/log, else ~/.ros/log), so they agree on the path,
+    launches on different masters never share one, and two drivers in two namespaces of one launch
+    get one each."""
     env = os.environ if environ is None else environ
     uri = env.get("ROS_MASTER_URI", "") or "http://localhost:11311"
     port = uri.rstrip("/").rsplit(":", 1)[-1]
@@ -378,7 +382,8 @@ def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
         raise SimError("cannot take a port from ROS_MASTER_URI=%r for pty_link %r" % (uri, AUTO_LINK))
     log_dir = env.get("ROS_LOG_DIR") or os.path.join(
         env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros"), "log")
-    return os.path.join(log_dir, "vr006l_virtual_g2_%s" % port)
+    ns = "_".join(part for part in (env.get("ROS_NAMESPACE") or "").split("/") if part)
+    return os.path.join(log_dir, "vr006l_virtual_g2_%s" % port + ("_" + ns if ns else ""))
 
 
 def _remove_quietly(path: str) -> None:

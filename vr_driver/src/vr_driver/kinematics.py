@@ -472,8 +472,10 @@ class Kinematics:
 
     def __init__(self, model: UrdfModel, base: str, tip: str, settings: Optional[IkSettings] = None,
                  named_states: Optional[Mapping[str, Mapping[str, float]]] = None,
-                 conventions: Optional[FrameConventions] = None, analytic: bool = True):
+                 conventions: Optional[FrameConventions] = None, analytic: bool = True,
+                 prefix: str = ""):
         self.model = model
+        self.prefix = prefix          # of every link and joint name (the URDF's xacro prefix)
         self.base, self.tip = base, tip
         self.settings = settings or IkSettings()
         self.chain_joints = model.chain(base, tip)
@@ -520,23 +522,32 @@ class Kinematics:
     @classmethod
     def from_urdf_string(cls, xml: str, srdf_xml: Optional[str] = None, kinematics_yaml: Optional[str] = None,
                          group: str = "manipulator", base: Optional[str] = None, tip: Optional[str] = None,
-                         **kwargs: Any) -> "Kinematics":
+                         prefix: str = "", **kwargs: Any) -> "Kinematics":
         """From URDF text; base/tip from the SRDF group (else ``base``/``tip``, else base_link/tool0);
-        IK settings from kinematics.yaml text (else defaults)."""
+        IK settings from kinematics.yaml text (else defaults).
+
+        ``prefix``: the URDF's names carry this prefix (several robots in one cell) while the SRDF
+        names the plain ones: the chain runs ``<prefix>base_link`` -> ``<prefix>tool0``, the SRDF's
+        named states and the ``base`` / ``flange`` frames are looked up with the prefix too.
+        ``base`` / ``tip`` given explicitly are used as they are."""
         model = UrdfModel.from_string(xml)
         states: Dict[str, Dict[str, float]] = {}
         if srdf_xml is not None:
-            s_base, s_tip, states = read_srdf(srdf_xml, group)
-            base, tip = base or s_base, tip or s_tip
+            s_base, s_tip, s_states = read_srdf(srdf_xml, group)
+            base, tip = base or prefix + s_base, tip or prefix + s_tip
+            states = {name: {prefix + joint: value for joint, value in values.items()}
+                      for name, values in s_states.items()}
         settings = kwargs.pop("settings", None)
         if settings is None and kinematics_yaml is not None:
             settings = read_ik_settings(kinematics_yaml, group)
-        return cls(model, base or "base_link", tip or "tool0", settings, states, **kwargs)
+        return cls(model, base or prefix + "base_link", tip or prefix + "tool0", settings, states,
+                   prefix=prefix, **kwargs)
 
     @classmethod
     def from_files(cls, urdf_path: str, srdf_path: Optional[str] = None, kinematics_yaml_path: Optional[str] = None,
                    **kwargs: Any) -> "Kinematics":
-        """From files; a ``.xacro`` URDF is rendered with panasonic_vr006l_support's xacro wrapper."""
+        """From files; a ``.xacro`` URDF is rendered with panasonic_vr006l_support's xacro wrapper
+        (with the xacro argument ``prefix`` when ``prefix=`` is given: see :meth:`from_urdf_string`)."""
         def read(path: Optional[str]) -> Optional[str]:
             if path is None:
                 return None
@@ -549,7 +560,7 @@ class Kinematics:
         if urdf_path.endswith(".xacro"):
             from panasonic_vr006l_support.description import DescriptionError, render_urdf
             try:
-                xml = render_urdf(urdf_path)
+                xml = render_urdf(urdf_path, {"prefix": kwargs["prefix"]} if kwargs.get("prefix") else None)
             except DescriptionError as exc:
                 raise ModelError(str(exc)) from exc
         else:
@@ -558,7 +569,9 @@ class Kinematics:
 
     @classmethod
     def default(cls, **kwargs: Any) -> "Kinematics":
-        """The VR-006L: the support package's xacro, the moveit_config's SRDF and kinematics.yaml."""
+        """The VR-006L: the support package's xacro, the moveit_config's SRDF and kinematics.yaml
+        (``prefix="left_"``: the xacro rendered with that prefix, the chain and limits read from
+        ``left_base_link`` -> ``left_tool0``)."""
         from panasonic_vr006l_support.description import default_xacro_path, package_dir
         moveit = os.path.join(os.path.dirname(package_dir()), "panasonic_vr006l_moveit_config", "config")
         return cls.from_files(default_xacro_path(), os.path.join(moveit, "panasonic_vr006l.srdf"),
@@ -567,8 +580,9 @@ class Kinematics:
     def _default_conventions(self) -> FrameConventions:
         """``base`` in the chain root and ``flange`` in the chain tip, from the URDF when present."""
         links = self.model.links
-        base_in_root = self.model.fixed_transform(self.base, "base") if "base" in links else np.eye(4)
-        flange_in_tip = self.model.fixed_transform(self.tip, "flange") if "flange" in links else np.eye(4)
+        base, flange = self.prefix + "base", self.prefix + "flange"
+        base_in_root = self.model.fixed_transform(self.base, base) if base in links else np.eye(4)
+        flange_in_tip = self.model.fixed_transform(self.tip, flange) if flange in links else np.eye(4)
         return FrameConventions(base_in_root, flange_in_tip)
 
     @property

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from typing import Any, Dict, Mapping, Optional, Tuple
 
@@ -25,6 +26,9 @@ PROTOCOLS = ("v1", "v2")
 RECORD_LENGTHS = {"v1": 14, "v2": 72}
 #: the DP watchdog's largest value: factors 255 x 255 x 10 ms
 WATCHDOG_MAX_MS = 650_250
+#: a name prefix (``left_``, ``arm1_``): empty, or a letter then letters, digits and underscores --
+#: the characters a TF frame, a URDF link and a ROS name fragment all accept
+PREFIX_PATTERN = re.compile(r"\A(?:[A-Za-z][A-Za-z0-9_]*)?\Z")
 
 
 class ParamError(VrDriverError, ValueError):
@@ -80,6 +84,19 @@ def _port(params: Mapping[str, Any], default: str) -> str:
         raise ParamError("port", value, str(exc)) from None
 
 
+def _prefix(params: Mapping[str, Any], default: str) -> str:
+    value = _string(params, "prefix", default)
+    if not PREFIX_PATTERN.match(value):
+        raise ParamError("prefix", value, "expected empty or a letter followed by letters, digits "
+                         "and underscores (e.g. left_)")
+    return value
+
+
+def prefixed(prefix: str, names: "Tuple[str, ...]") -> Tuple[str, ...]:
+    """``names`` with ``prefix`` in front of each (the empty prefix leaves them as they are)."""
+    return tuple(prefix + name for name in names)
+
+
 def _boolean(params: Mapping[str, Any], name: str, default: bool) -> bool:
     value = params.get(name, default)
     if not isinstance(value, bool):
@@ -130,6 +147,9 @@ class DriverParams:
     stream_path_tolerance: float = 0.1   # [deg] a v2 stream drops planned points whose removal keeps
                                          # the path within this (a straight joint-space chord)
     # safety and model
+    prefix: str = ""                     # of every link, joint and frame name of this robot (the
+    #                                      URDF's xacro prefix); from_dict puts it in front of
+    #                                      controller_joint_names and base_frame below
     workspace: Workspace = field(default_factory=Workspace)
     controller_joint_names: Tuple[str, ...] = DEFAULT_JOINT_NAMES
     tcp_offset: Tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)   # mm, deg in the flange frame
@@ -142,7 +162,11 @@ class DriverParams:
 
     @classmethod
     def from_dict(cls, params: Optional[Mapping[str, Any]] = None) -> "DriverParams":
-        """Validate ``params`` (missing keys take the defaults; unknown keys are errors)."""
+        """Validate ``params`` (missing keys take the defaults; unknown keys are errors).
+
+        ``prefix`` is applied here, once: the record's ``controller_joint_names`` and
+        ``base_frame`` are the prefixed names the rest of the driver publishes and checks
+        (``controller_joint_names`` and ``base_frame`` in ``params`` are the plain ones)."""
         params = dict(params or {})
         known = set(cls.__dataclass_fields__)
         unknown = sorted(set(params) - known)
@@ -172,6 +196,7 @@ class DriverParams:
         base_frame = _string(params, "base_frame", d.base_frame)
         if not base_frame:
             raise ParamError("base_frame", base_frame, "must not be empty")
+        prefix = _prefix(params, d.prefix)
         out = cls(
             protocol=_string(params, "protocol", d.protocol, PROTOCOLS),
             bus_config=bus_config,
@@ -194,10 +219,11 @@ class DriverParams:
             stream_smooth=_integer(params, "stream_smooth", d.stream_smooth, 0, 10),
             stream_path_tolerance=_number(params, "stream_path_tolerance", d.stream_path_tolerance,
                                           0.0, 5.0),
+            prefix=prefix,
             workspace=workspace,
-            controller_joint_names=tuple(names),
+            controller_joint_names=prefixed(prefix, tuple(names)),
             tcp_offset=tcp,
-            base_frame=base_frame,
+            base_frame=prefix + base_frame,
             status_rate=_number(params, "status_rate", d.status_rate, 0.0, 1000.0, lo_open=True),
             joint_states_rate=_number(params, "joint_states_rate", d.joint_states_rate, 0.0, 1000.0,
                                       lo_open=True),

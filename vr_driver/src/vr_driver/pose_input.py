@@ -798,6 +798,26 @@ class _ArgumentParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, "%s: error: %s\n" % (self.prog, message))
 
 
+_NAMESPACE = re.compile(r"\A/?(?:[A-Za-z][A-Za-z0-9_]*(?:/[A-Za-z][A-Za-z0-9_]*)*/?)?\Z")
+
+
+def _namespace(text: str) -> str:
+    """``--ns``: a ROS namespace (``arm1``, ``/cell/arm1``) or empty; argparse reports the error."""
+    if not _NAMESPACE.match(text):
+        raise argparse.ArgumentTypeError("%r is not a ROS namespace (names of a letter followed by "
+                                         "letters, digits and underscores, separated by /)" % text)
+    return text
+
+
+def in_namespace(ns: str, name: str) -> str:
+    """``name`` (a topic, action, service or node of the driver) inside the namespace ``ns``: an
+    absolute name and an empty ``ns`` leave it as it is (then resolved in the terminal's own
+    namespace, as before ``--ns``)."""
+    if not ns or name.startswith("/"):
+        return name
+    return ns.rstrip("/") + "/" + name
+
+
 def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
     p = _ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--pose", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
@@ -812,6 +832,10 @@ def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
                    help="how long to wait for the ROS master and the driver (default 10 s)")
     p.add_argument("--driver", default="interface", metavar="NODE",
                    help="the driver node whose parameters (workspace) are read (default: interface)")
+    p.add_argument("--ns", default="", metavar="NS", type=_namespace,
+                   help="the driver's namespace (two_arms.launch: arm1 or arm2): its move_to_pose, "
+                        "stop_motion, robot_status, tool_pose, joint_states and the node NS/NODE "
+                        "(default: this terminal's own namespace)")
     p.add_argument("--launch-pid", type=int, default=None, metavar="PID",
                    help="stop waiting for the driver when this process (its launch) has ended")
     return p

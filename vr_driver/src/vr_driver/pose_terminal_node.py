@@ -7,6 +7,7 @@ The workspace is the driver's parameter ``/<driver>/workspace`` (defaults when i
 
     rosrun vr_driver pose_terminal                                    interactive
     rosrun vr_driver pose_terminal --pose 1000 200 800 0 45 0 --type lin --yes
+    rosrun vr_driver pose_terminal --ns arm1                          the driver in /arm1 (two_arms.launch)
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from typing import List, Optional, Tuple
 from .errors import VrDriverError
 from .pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_USAGE, Backend, InputError, MoveHandle,
                          MoveProgress, MoveResult, PoseRequest, PreviewResult, RangeError, StatusInfo, Terminal,
-                         build_arg_parser, fmt_pose, request_from_args)
+                         build_arg_parser, fmt_pose, in_namespace, request_from_args)
 from .motion import MoveType
 from .poses import ControllerPose, Workspace
 
@@ -115,8 +116,9 @@ class RosMoveHandle(MoveHandle):
 class RosBackend(Backend):
     """The driver through ROS. :meth:`connect` first."""
 
-    def __init__(self, driver: str = "interface"):
+    def __init__(self, driver: str = "interface", ns: str = ""):
         self.driver = driver
+        self.ns = ns                     # the driver's namespace ("" = the terminal's own)
         self._lock = threading.Lock()
         self._changed = threading.Condition(self._lock)   # a robot_status or tool_pose arrived
         self._updates = 0
@@ -160,22 +162,25 @@ class RosBackend(Backend):
                 announced = True
             time.sleep(0.2)
         rospy.init_node("pose_terminal", anonymous=True, disable_signals=True)
-        self.driver = rospy.resolve_name(self.driver)
-        rospy.Subscriber("robot_status", RobotStatus, self._on_status, queue_size=1)
-        rospy.Subscriber("tool_pose", PoseStamped, self._on_tool_pose, queue_size=1)
-        rospy.Subscriber("joint_states", JointState, self._on_joints, queue_size=1)
+
+        def name(relative: str) -> str:
+            return rospy.resolve_name(in_namespace(self.ns, relative))
+        self.driver = name(self.driver)
+        rospy.Subscriber(name("robot_status"), RobotStatus, self._on_status, queue_size=1)
+        rospy.Subscriber(name("tool_pose"), PoseStamped, self._on_tool_pose, queue_size=1)
+        rospy.Subscriber(name("joint_states"), JointState, self._on_joints, queue_size=1)
         rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=10)
-        self.client = actionlib.ActionClient("move_to_pose", MoveToPoseAction)
-        self.stop_proxy = rospy.ServiceProxy("stop_motion", Trigger)
+        self.client = actionlib.ActionClient(name("move_to_pose"), MoveToPoseAction)
+        self.stop_proxy = rospy.ServiceProxy(name("stop_motion"), Trigger)
         announced = False
         while not self.client.wait_for_server(rospy.Duration(0.5)):
             if not _pid_alive(launch_pid):
                 return "the launch (pid %d) has ended before the driver came up" % launch_pid
             if time.monotonic() >= end:
                 return ("no driver: the action %s is not served (waited %.0f s); is the driver "
-                        "(node %s) running?" % (rospy.resolve_name("move_to_pose"), wait, self.driver))
+                        "(node %s) running?" % (name("move_to_pose"), wait, self.driver))
             if not announced:
-                say("Waiting for the driver (action %s) ..." % rospy.resolve_name("move_to_pose"))
+                say("Waiting for the driver (action %s) ..." % name("move_to_pose"))
                 announced = True
         self._read_workspace()
         return None
@@ -240,7 +245,8 @@ class RosBackend(Backend):
             self._joints = tuple(msg.position)
 
     def _on_diag(self, msg) -> None:
-        prefix = self.driver.strip("/").split("/")[-1] + ": "
+        # the driver's diagnostic_updater names its entries "<node name without the leading />: ..."
+        prefix = self.driver.strip("/") + ": "
         with self._lock:
             for st in msg.status:
                 if st.name.startswith(prefix):
@@ -366,7 +372,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             pass                      # judged against the driver's own workspace once connected
         except InputError as exc:
             parser.error(str(exc))
-    backend = RosBackend(args.driver)
+    backend = RosBackend(args.driver, args.ns)
     out = sys.stdout
     try:
         error = backend.connect(args.wait, args.launch_pid, say=lambda text: print(text, flush=True))

@@ -217,16 +217,17 @@ def summarize(program: CsrProgram, rows: Sequence[str] = (), source: str = "") -
     return "\n".join(lines)
 
 
-_KIN_CACHE: Dict[Tuple[float, ...], Any] = {}
+_KIN_CACHE: Dict[Tuple[Any, ...], Any] = {}
 
 
 def kinematics_for(params: Any) -> Any:
-    """Kinematics.default() with the driver's TCP offset (cached per process)."""
-    key = tuple(params.tcp_offset)
+    """Kinematics.default() with the driver's prefix and TCP offset (cached per process)."""
+    tcp = tuple(params.tcp_offset)
+    key = (params.prefix,) + tcp
     if key not in _KIN_CACHE:
         from ..kinematics import Kinematics
-        kin = Kinematics.default()
-        if any(key):
-            kin.conventions = kin.conventions.with_tcp(key)
+        kin = Kinematics.default(prefix=params.prefix)
+        if any(tcp):
+            kin.conventions = kin.conventions.with_tcp(tcp)
         _KIN_CACHE[key] = kin
     return _KIN_CACHE[key]

@@ -168,7 +168,7 @@ class DriverCore:
         self.bus = params.bus()
         self.slave_config = self.bus.slaves[0]
         if kinematics is None:
-            kinematics = Kinematics.default()
+            kinematics = Kinematics.default(prefix=params.prefix)
             if any(params.tcp_offset):
                 kinematics.conventions = kinematics.conventions.with_tcp(params.tcp_offset)
         self.kin = kinematics
