@@ -46,6 +46,7 @@ import json
 import math
 import os
 import random
+import re
 import shutil
 import signal
 import subprocess
@@ -363,12 +364,27 @@ class Run:
         except (ValueError, IndexError):
             return None
 
+    def crash(self) -> Optional[str]:
+        """The exception line of the first traceback in the launch log (a node's thread died: the
+        driver will not become ready), else None."""
+        lines = self.stack.log_tail("launch.log", 400).splitlines()
+        seen = False
+        for line in lines:
+            if line.startswith("Traceback"):
+                seen = True
+            elif seen and re.match(r"^[A-Za-z_][\w.]*(Error|Exception|Exit)\b.*", line):
+                return line.strip()
+        return None
+
     def alive(self, end: float, what: str) -> None:
         if not self.stack.launch_alive():
-            raise Failure("driver.launch exited (%s) %s:\n%s" % (self.stack.launch.returncode, what,
-                                                                 self.stack.log_tail("launch.log")))
+            raise Failure("driver.launch exited (%s) %s: %s\n%s" % (
+                self.stack.launch.returncode, what, self.crash() or "", self.stack.log_tail("launch.log")))
+        crash = self.crash()
+        if crash is not None:
+            raise Failure("%s: a node failed: %s\n%s" % (what, crash, self.stack.log_tail("launch.log", 12)))
         if time.monotonic() > end:
-            raise Failure("%s: timed out; launch log tail:\n%s" % (what, self.stack.log_tail("launch.log", 12)))
+            raise Failure("%s: timed out\n%s" % (what, self.stack.log_tail("launch.log", 12)))
 
     def wait_ready(self, timeout: float) -> float:
         t0 = time.monotonic()
