@@ -16,18 +16,21 @@ targets would solve to joints far from the plan.
 Each leg is timed at one random fraction in [0.5, 1.0] of the joint speed limits: every segment's
 limiting joint moves at that fraction (times are whole nanoseconds, rounded up, so the fraction is
 never exceeded). The trajectories chain: each starts where the previous one ends, the first at the
-virtual controller's home pose.
+virtual controller's home pose. The bench makes trajectory i from where the arm really is, with the
+same random source (:func:`rng_for`): an arm that ended where planned runs exactly the set printed in
+the header; one that ended a little off (v1) a nearly identical one.
 
 Configurations: protocol v1 / v2 (``driver.launch protocol:=``, both ends) at 19 200 bit/s, 20 Hz
 bus cycle ("slow") and 187 500 bit/s, 50 Hz ("fast"); each in a worker process with its own roscore
 and driver.launch (sim:=true). A goal is a FollowJointTrajectory (vr_driver's md5-identical copy of
 control_msgs) sent by an actionlib client with header.stamp 0 (start now) and the path / goal
-tolerances of --path-tolerance / --goal-tolerance (default: none given, the driver's defaults, as
-MoveIt sends them). If the arm is not at a trajectory's start (an earlier goal failed), a slow
-two-point goal takes it there first (not counted).
+tolerances of --path-tolerance / --goal-tolerance; by default v2 goals give none (the driver's
+defaults, 1 deg, as MoveIt sends them) and v1 goals 5 deg (``V1_TOLERANCE``: v1's rounded Cartesian
+targets land up to ~1.5 deg off, so with 1 deg no v1 goal would run to the end).
 
-Figures per configuration, over the goals that ran (t = 0 is send_goal at this client; joint_states
-by their header stamps, the same wall clock):
+Figures per goal and, in the summary, median / max per configuration over the goals run to the end
+(succeeded, or missed only the goal tolerance). t = 0 is send_goal at this client; joint_states by
+their header stamps (the driver's wall clock, the same as this process's):
   time ratio     (result received - send_goal) / planned duration;
   still          the share of that time the arm stood still: joint_states samples that did not move
                  more than 0.01 deg in any joint over at least 3 bus cycles (and 0.1 s);

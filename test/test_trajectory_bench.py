@@ -93,5 +93,46 @@ class TrajectoryGeneratorTest(unittest.TestCase):
         self.assertGreater(len(sizes), 3, "the number of points varies")
 
 
+class FiguresTest(unittest.TestCase):
+    """analyse(): the figures of one goal from joint_states samples, on a made-up run."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.bench = load_bench()
+
+    def test_a_run_that_stops_once_on_the_way(self):
+        b = self.bench
+        plan = b.Planned(((0.0,) * 6, (1.0,) + (0.0,) * 5), (0, 1_000_000_000), (0.5,), ("straight",))
+        samples = []
+        t = 0.0
+        while t <= 2.0 + 1e-9:            # 20 Hz: still 0-0.3 s, moving, still 0.8-1.2 s, moving, at the end
+            if t < 0.3:
+                x = 0.0
+            elif t < 0.8:
+                x = (t - 0.3)
+            elif t < 1.2:
+                x = 0.5
+            elif t < 1.7:
+                x = 0.5 + (t - 1.2)
+            else:
+                x = 1.0
+            samples.append((t, (x,) + (0.0,) * 5))
+            t += 0.05
+        r = b.analyse(plan, samples, 2.0, (1.0001,) + (0.0,) * 5, 20.0)
+        self.assertAlmostEqual(r["ratio"], 2.0)
+        self.assertEqual(r["stops"], 1)                      # the one on the way, not start and end
+        self.assertAlmostEqual(r["still_pct"], 100.0 * (0.25 + 0.35 + 0.3) / 2.0, delta=3.0)
+        self.assertAlmostEqual(r["dev_deg"], math.degrees(0.5), delta=0.01)  # t = 1.0-1.2: at 0.5, plan 1.0
+        self.assertEqual(r["dev_joint"], 1)
+        self.assertAlmostEqual(r["path_deg"], 0.0, places=6)  # always on the planned line
+        self.assertAlmostEqual(r["final_deg"], math.degrees(0.0001), places=6)
+
+    def test_a_moving_arm_whose_feedback_repeats_once_is_not_standing_still(self):
+        b = self.bench
+        runs = b.still_runs([(0.0, (0.0,) * 6), (0.05, (0.1,) + (0.0,) * 5), (0.1, (0.1,) + (0.0,) * 5),
+                             (0.15, (0.2,) + (0.0,) * 5)], 0.15)
+        self.assertEqual(runs, [])
+
+
 if __name__ == "__main__":
     unittest.main()
