@@ -32,9 +32,12 @@ Figures per goal and, in the summary, median / max per configuration over the go
 (succeeded, or missed only the goal tolerance). t = 0 is send_goal at this client; joint_states by
 their header stamps (the driver's wall clock, the same as this process's):
   time ratio     (result received - send_goal) / planned duration;
-  still          the share of that time the arm stood still: joint_states samples that did not move
-                 more than 0.01 deg in any joint over at least 3 bus cycles (and 0.1 s);
+  still          the share of that time the arm stood still: runs of joint_states samples in which no
+                 joint moved more than 0.01 deg, spanning at least two bus cycles and two joint_states
+                 periods (so one feedback record published twice is not a stop; ``min_still``), from
+                 the run's first to its last sample (a lower bound: 50 ms more per stop at most);
   stops          standing-still episodes between the first and the last motion of the arm;
+  start          send_goal -> the first joint_states sample that moved (part of "still");
   path dev       the largest |joint_states - plan(t)| of any joint, the plan interpolated (linearly,
                  as the driver does) at the sample's time since send_goal (also: the distance to
                  the planned path at any time, "path-only");
@@ -324,23 +327,32 @@ def still_runs(samples: Sequence[Tuple[float, Sequence[float]]], min_still: floa
     return runs
 
 
+def min_still(cycle_rate: float, joint_states_rate: float) -> float:
+    """The shortest standing still counted [s]: unchanged over two bus cycles and two joint_states
+    periods (less 10 ms of stamp jitter): at 20 Hz / 20 Hz three equal samples in a row, at 50 Hz
+    / 20 Hz two."""
+    return max(2.0 / cycle_rate, 1.0 / joint_states_rate) - 0.01
+
+
 def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_result: float,
-            final: Optional[Sequence[float]], cycle_rate: float) -> Dict[str, Any]:
+            final: Optional[Sequence[float]], shortest_still: float) -> Dict[str, Any]:
     """The figures of one goal from joint_states ``samples`` (time since send_goal, joints in the
-    controller's order), the result's time and the first joints after it."""
+    controller's order), the result's time, the first joints after it and :func:`min_still`."""
     from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
     inside = [(t, q) for t, q in samples if 0.0 <= t <= t_result]
     out: Dict[str, Any] = {"planned": plan.duration, "elapsed": t_result, "ratio": t_result / plan.duration,
                            "samples": len(inside)}
-    runs = still_runs(inside, max(3.0 / cycle_rate, 0.1))
+    runs = still_runs(inside, shortest_still)
     still = sum(b - a for a, b in runs)
     out["still_pct"] = 100.0 * still / t_result if t_result > 0 else 0.0
     moving = [t for (t, q), (_t0, q0) in zip(inside[1:], inside) if max(abs(a - b) for a, b in zip(q, q0)) > STILL_EPS]
     if moving:
         first, last = moving[0], moving[-1]
         out["stops"] = sum(1 for a, b in runs if a > first and b < last)
+        out["start_s"] = first
     else:
         out["stops"] = 0
+        out["start_s"] = None
     worst, joint = 0.0, 0
     for t, q in inside:
         want = plan.sample(t)
@@ -493,7 +505,12 @@ class Run:
         with self.joints.cond:
             msgs = [m for _t, m in self.joints.messages[mark:]]
         samples = [(m.header.stamp.to_sec() - t_send, self.q_of(m)) for m in msgs if self.q_of(m) is not None]
-        rec = analyse(plan, samples, t_done - t_send, final, cfg["cycle_rate"])
+        rec = analyse(plan, samples, t_done - t_send, final,
+                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate))
+        if cfg.get("dump"):
+            with open(cfg["dump"], "a") as fh:
+                fh.write(json.dumps({"config": cfg["name"], "index": index, "plan": plan.to_json(),
+                                     "samples": samples, "t_result": t_done - t_send, "final": final}) + "\n")
         rec.update(index=index, points=len(plan.points), legs=list(plan.legs),
                    state=status, state_name=GoalStatus.to_string(status) if status is not None else "NO RESULT",
                    code=result.error_code if result is not None else None,
@@ -511,15 +528,16 @@ class Run:
         ready = self.wait_ready(cfg["ready_timeout"])
         print("ready %.1f s after roslaunch (joint_trajectory_action up, motion_possible TRUE)" % ready, flush=True)
         recs = []
-        print("%3s %4s %7s %-10s %6s %7s %5s %10s %8s %9s  %s" % ("#", "pts", "plan s", "state", "ratio", "still%",
-                                                              "stops", "dev deg(J)", "path deg", "final deg",
-                                                              "result"), flush=True)
+        print("%3s %4s %7s %-10s %6s %7s %7s %5s %10s %8s %9s  %s" % (
+            "#", "pts", "plan s", "state", "ratio", "still%", "start s", "stops", "dev deg(J)", "path deg",
+            "final deg", "result"), flush=True)
         refused_in_a_row = 0
         for i in range(cfg["n"]):
             rec = self.one(i + 1)
             recs.append(rec)
-            print("%3d %4d %7.2f %-10s %6.2f %7.1f %5d %7.2f(%d) %8.2f %9s  %s%s"
+            print("%3d %4d %7.2f %-10s %6.2f %7.1f %7s %5d %7.2f(%d) %8.2f %9s  %s%s"
                   % (rec["index"], rec["points"], rec["planned"], rec["state_name"], rec["ratio"], rec["still_pct"],
+                     "n/a" if rec["start_s"] is None else "%.2f" % rec["start_s"],
                      rec["stops"], rec["dev_deg"], rec["dev_joint"], rec["path_deg"],
                      "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
                      rec["error_string"][:110], " [%s]" % rec["note"] if rec["note"] else ""), flush=True)
@@ -602,6 +620,7 @@ def summary(results: List[Dict[str, Any]]) -> None:
     for label, _key, _limit in TARGETS:
         cells[label] = []
     cells["stops"] = []
+    cells["start [s]"] = []
     cells["path-only dev [deg]"] = []
     for r in results:
         if "failed" in r:
@@ -613,7 +632,8 @@ def summary(results: List[Dict[str, Any]]) -> None:
         cells["goals succeeded"].append("%d / %d" % (sum(1 for g in goals if g["ok"]), len(goals)))
         cells["run to the end"].append("%d / %d" % (len(ran), len(goals)))
         cells["tolerances [deg]"].append(r["tolerances"])
-        for label, key, _limit in TARGETS + (("stops", "stops", None), ("path-only dev [deg]", "path_deg", None)):
+        for label, key, _limit in TARGETS + (("stops", "stops", None), ("start [s]", "start_s", None),
+                                             ("path-only dev [deg]", "path_deg", None)):
             vals = [g[key] for g in ran if g.get(key) is not None]
             if not vals:
                 cells[label].append("n/a")
@@ -686,6 +706,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     p.add_argument("--ready-timeout", type=float, default=60.0, help="driver ready within [s] (default 60)")
     p.add_argument("--ros-port", type=int, default=0, help="ROS master port (default: a free one from 11700)")
     p.add_argument("--keep-logs", action="store_true", help="keep the ROS logs and print where")
+    p.add_argument("--dump", default="", help="append each goal's plan and joint_states samples to this file "
+                                               "(JSON lines: config, index, plan, samples [t, joints], t_result)")
     p.add_argument("--quick", action="store_true", help="smoke run: 1 trajectory per configuration")
     args = p.parse_args(argv)
     if args.quick:
@@ -716,7 +738,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         cfg = {"name": name, "protocol": protocol, "baud": baud, "cycle_rate": rate, "n": args.n, "seed": args.seed,
                "speed_factor": args.speed_factor, "path_tol": tol(args.path_tolerance, protocol),
                "goal_tol": tol(args.goal_tolerance, protocol), "ready_timeout": args.ready_timeout,
-               "ros_port": args.ros_port, "keep_logs": args.keep_logs}
+               "ros_port": args.ros_port, "keep_logs": args.keep_logs,
+               "dump": os.path.abspath(args.dump) if args.dump else ""}
         cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
         code, result = run_worker(cfg)
         if code == 130:

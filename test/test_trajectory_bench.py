@@ -118,7 +118,7 @@ class FiguresTest(unittest.TestCase):
                 x = 1.0
             samples.append((t, (x,) + (0.0,) * 5))
             t += 0.05
-        r = b.analyse(plan, samples, 2.0, (1.0001,) + (0.0,) * 5, 20.0)
+        r = b.analyse(plan, samples, 2.0, (1.0001,) + (0.0,) * 5, b.min_still(20.0, 20.0))
         self.assertAlmostEqual(r["ratio"], 2.0)
         self.assertEqual(r["stops"], 1)                      # the one on the way, not start and end
         self.assertAlmostEqual(r["still_pct"], 100.0 * (0.25 + 0.35 + 0.3) / 2.0, delta=3.0)
@@ -126,12 +126,14 @@ class FiguresTest(unittest.TestCase):
         self.assertEqual(r["dev_joint"], 1)
         self.assertAlmostEqual(r["path_deg"], 0.0, places=6)  # always on the planned line
         self.assertAlmostEqual(r["final_deg"], math.degrees(0.0001), places=6)
+        self.assertAlmostEqual(r["start_s"], 0.3, delta=0.06)
 
     def test_a_moving_arm_whose_feedback_repeats_once_is_not_standing_still(self):
         b = self.bench
-        runs = b.still_runs([(0.0, (0.0,) * 6), (0.05, (0.1,) + (0.0,) * 5), (0.1, (0.1,) + (0.0,) * 5),
-                             (0.15, (0.2,) + (0.0,) * 5)], 0.15)
-        self.assertEqual(runs, [])
+        moving = [(0.0, (0.0,) * 6), (0.05, (0.1,) + (0.0,) * 5), (0.1, (0.1,) + (0.0,) * 5),
+                  (0.15, (0.2,) + (0.0,) * 5)]
+        self.assertEqual(b.still_runs(moving, b.min_still(20.0, 20.0)), [])     # 20 Hz bus: one repeat
+        self.assertEqual(len(b.still_runs(moving, b.min_still(50.0, 20.0))), 1)  # 50 Hz: 2.5 cycles still
 
 
 if __name__ == "__main__":
