@@ -1,0 +1,761 @@
+#!/usr/bin/python3
+"""Planner-like trajectories through joint_trajectory_action on the virtual controller (printed, never asserted).
+
+    scripts/bench trajectory [-- --n 3 --seed 1 --configs v1-slow,v1-fast,v2-slow,v2-fast --speed-factor 1]
+
+Trajectories (:func:`generate`, deterministic for a seed; the same set for every configuration):
+random joint paths as a sampling planner returns them -- 1 to 3 legs between random waypoints, each
+leg straight or bent (a sine bump in one or two joints) in joint space, 10 to 100 points in all
+(point 0 = the start, at time 0), the points spread over the legs by length. Every point lies inside
+the joint limits and its TCP inside the driver's workspace box (vr_driver.yaml, shrunk by a margin
+for the controller's whole-mm rounding), and so does every sample of the straight joint-space chord
+between two consecutive points (the driver's own PTP preview and ``check_envelope``). The waypoints
+keep one arm configuration (elbow, wrist) and the joints off their limits (``SAMPLE_BOX``); every
+point keeps off singularities (``MIN_MANIPULABILITY``), where the v1 program's rounded Cartesian
+targets would solve to joints far from the plan.
+Each leg is timed at one random fraction in [0.5, 1.0] of the joint speed limits: every segment's
+limiting joint moves at that fraction (times are whole nanoseconds, rounded up, so the fraction is
+never exceeded). The trajectories chain: each starts where the previous one ends, the first at the
+virtual controller's home pose. The bench makes trajectory i from where the arm really is, with the
+same random source (:func:`rng_for`): an arm that ended where planned runs exactly the set printed in
+the header; one that ended a little off (v1) a nearly identical one.
+
+Configurations: protocol v1 / v2 (``driver.launch protocol:=``, both ends) at 19 200 bit/s, 20 Hz
+bus cycle ("slow") and 187 500 bit/s, 50 Hz ("fast"); each in a worker process with its own roscore
+and driver.launch (sim:=true). A goal is a FollowJointTrajectory (vr_driver's md5-identical copy of
+control_msgs) sent by an actionlib client with header.stamp 0 (start now) and the path / goal
+tolerances of --path-tolerance / --goal-tolerance; by default v2 goals give none (the driver's
+defaults, 1 deg, as MoveIt sends them) and v1 goals 5 deg (``V1_TOLERANCE``: v1's rounded Cartesian
+targets land up to ~1.5 deg off, so with 1 deg no v1 goal would run to the end).
+
+Figures per goal and, in the summary, median / max per configuration over the goals run to the end
+(succeeded, or missed only the goal tolerance). t = 0 is send_goal at this client; joint_states by
+their header stamps (the driver's wall clock, the same as this process's):
+  time ratio     (result received - send_goal) / planned duration;
+  still          the share of that time the arm stood still: runs of joint_states samples in which no
+                 joint moved more than 0.01 deg, spanning at least two bus cycles and two joint_states
+                 periods (so one feedback record published twice is not a stop; ``min_still``), from
+                 the run's first to its last sample (a lower bound: 50 ms more per stop at most);
+  stops          standing-still episodes between the first and the last motion of the arm;
+  start          send_goal -> the first joint_states sample that moved (part of "still");
+  path dev       the largest |joint_states - plan(t)| of any joint, the plan interpolated (linearly,
+                 as the driver does) at the sample's time since send_goal (also: the distance to
+                 the planned path at any time, "path-only");
+  final error    the largest joint error of the first joint_states after the result vs the last point;
+  succeeded      goals with state SUCCEEDED and error_code SUCCESSFUL.
+The v2 targets (issue 16) are printed next to them. A configuration the stack does not support
+(no ready driver, every goal refused) is reported with the reason; the bench then goes on with the
+next one. Exit status 1 when a configuration failed.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import random
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+for _pkg in ("vr_driver", "pyprofibus_vendor", "panasonic_vr006l_support"):
+    _src = os.path.join(REPO, _pkg, "src")
+    if _src not in sys.path:
+        sys.path.insert(0, _src)
+
+RESULT_TAG = "@@TRAJECTORY_RESULT "
+CONFIG_FILE = os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")
+#: the virtual controller's initial pose (controller_sim's default, mm / deg)
+HOME_POSE = (1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
+#: name -> (protocol, baud, bus cycles per second)
+CONFIGS = {
+    "v1-slow": ("v1", 19200, 20.0),
+    "v1-fast": ("v1", 187500, 50.0),
+    "v2-slow": ("v2", 19200, 20.0),
+    "v2-fast": ("v2", 187500, 50.0),
+}
+#: issue 16's targets for v2: (label, key, limit)
+TARGETS = (("time ratio", "ratio", 1.10), ("still [%]", "still_pct", 5.0),
+           ("path dev [deg]", "dev_deg", 0.5), ("final error [deg]", "final_deg", 0.01))
+
+# --------------------------------------------------------------------------------- the generator
+#: where waypoints are drawn [deg]: inside the limits with room to spare, one arm configuration as a
+#: collision-checked plan keeps it: J3 on one side of the elbow singularity (J3 ~ -80), J5 on one
+#: side of the wrist singularity (J5 = 0) -- the v1 program solves each (rounded, Cartesian) target
+#: nearest to the previous one and would switch configuration near them
+SAMPLE_BOX = ((-120.0, 120.0), (-40.0, 90.0), (-50.0, 40.0), (-150.0, 150.0), (15.0, 120.0), (-180.0, 180.0))
+#: the largest change of each joint from one waypoint to the next [deg]
+LEG_SPAN = (90.0, 60.0, 60.0, 90.0, 60.0, 120.0)
+MIN_LEG = math.radians(20.0)          # a leg moves some joint at least this much
+MIN_STEP = 0.02                       # s: points at most every 20 ms at full speed (as a planner spaces them)
+BUMP = (5.0, 20.0)                    # bent legs: sine bump amplitude [deg]
+POINTS = (10, 100)
+SPEED = (0.5, 1.0)                    # fraction of the joint speed limits per leg
+#: every point this far from a singularity (Yoshikawa's measure; the median of random joints is ~0.06):
+#: near one, the v1 program's whole mm / degree poses solve to joints degrees away from the plan
+MIN_MANIPULABILITY = 0.03
+WORKSPACE_MARGIN = 5.0                # mm: the box shrunk by this (the v1 program rounds to whole mm)
+#: v1's default path and goal tolerance [deg]: its whole mm / degree Cartesian targets, solved again by
+#: the controller's IK, land the wrist up to ~1.5 deg off (trajectories.V1_WIRE_ERROR); with the
+#: driver's default 1 deg every goal would end early, with no figures of a whole run
+V1_TOLERANCE = 5.0
+
+
+@dataclass(frozen=True)
+class Planned:
+    """One trajectory: ``points[0]`` is the start (time 0); ``times_ns`` time_from_start in whole
+    nanoseconds (exact in a ROS Duration); ``fractions`` the planned speed of each segment as a
+    fraction of the joint speed limits (its limiting joint's); ``legs`` how it was made."""
+
+    points: Tuple[Tuple[float, ...], ...]
+    times_ns: Tuple[int, ...]
+    fractions: Tuple[float, ...]
+    legs: Tuple[str, ...]
+
+    @property
+    def times(self) -> Tuple[float, ...]:
+        return tuple(t * 1e-9 for t in self.times_ns)
+
+    @property
+    def duration(self) -> float:
+        return self.times_ns[-1] * 1e-9
+
+    def sample(self, t: float) -> Tuple[float, ...]:
+        """The planned joints at ``t`` s (linear between points, held before / after)."""
+        times = self.times
+        if t <= 0.0:
+            return self.points[0]
+        if t >= times[-1]:
+            return self.points[-1]
+        k = 1
+        while times[k] < t:
+            k += 1
+        f = (t - times[k - 1]) / (times[k] - times[k - 1])
+        return tuple(a + f * (b - a) for a, b in zip(self.points[k - 1], self.points[k]))
+
+    def to_json(self) -> Dict[str, Any]:
+        return {"points": [list(p) for p in self.points], "times_ns": list(self.times_ns),
+                "fractions": list(self.fractions), "legs": list(self.legs)}
+
+    @classmethod
+    def from_json(cls, d: Dict[str, Any]) -> "Planned":
+        return cls(tuple(tuple(p) for p in d["points"]), tuple(d["times_ns"]), tuple(d["fractions"]),
+                   tuple(d["legs"]))
+
+
+class Checker:
+    """The driver's kinematics (Kinematics.default(), the config's TCP offset) and its workspace
+    box (vr_driver.yaml), shrunk by ``margin`` mm: is a joint point, a chord, inside?"""
+
+    def __init__(self, margin: float = WORKSPACE_MARGIN, config: str = CONFIG_FILE):
+        import yaml
+
+        from vr_driver.kinematics import Kinematics
+        from vr_driver.motion import MotionPlanner
+        from vr_driver.params import DriverParams
+        from vr_driver.poses import Workspace
+        with open(config) as fh:
+            self.params = DriverParams.from_dict(yaml.safe_load(fh) or {})
+        self.kin = Kinematics.default()
+        if any(self.params.tcp_offset):
+            self.kin.conventions = self.kin.conventions.with_tcp(self.params.tcp_offset)
+        self.planner = MotionPlanner(self.kin)
+        ws = self.params.workspace
+        self.workspace = Workspace(x=(ws.x[0] + margin, ws.x[1] - margin), y=(ws.y[0] + margin, ws.y[1] - margin),
+                                   z=(ws.z[0] + margin, ws.z[1] - margin), angle=ws.angle)
+        self.lower, self.upper = self.kin.limits.lower, self.kin.limits.upper
+        self.vmax = self.kin.limits.velocity
+
+    def home(self) -> Tuple[float, ...]:
+        return self.kin.ik_pose(HOME_POSE)
+
+    def point_ok(self, q: Sequence[float]) -> bool:
+        if any(not lo <= v <= hi for v, lo, hi in zip(q, self.lower, self.upper)):
+            return False
+        return self.workspace.contains(self.kin.fk_pose(q)) and self.kin.manipulability(q) >= MIN_MANIPULABILITY
+
+    def chord_ok(self, a: Sequence[float], b: Sequence[float]) -> bool:
+        """Every sample (0.02 rad apart) of the straight joint-space move a -> b in the box."""
+        from vr_driver.errors import VrDriverError
+        from vr_driver.motion import check_envelope
+        try:
+            check_envelope(self.planner.ptp_joints(a, b), self.workspace)
+        except VrDriverError:
+            return False
+        return True
+
+
+def _leg_points(a: Sequence[float], b: Sequence[float], bump: Sequence[float], n: int) -> List[Tuple[float, ...]]:
+    """``n`` points after ``a`` on the leg a -> b (the last one is b), bent by ``bump`` * sin(pi s)."""
+    out = []
+    for j in range(1, n + 1):
+        s = j / n
+        w = math.sin(math.pi * s)
+        out.append(tuple(x + s * (y - x) + w * d for x, y, d in zip(a, b, bump)))
+    return out
+
+
+def _waypoint(rng: random.Random, prev: Sequence[float], chk: Checker) -> Optional[Tuple[float, ...]]:
+    for _ in range(200):
+        q = []
+        for v, (lo, hi), span in zip(prev, SAMPLE_BOX, LEG_SPAN):
+            lo, hi = math.radians(lo), math.radians(hi)
+            lo2, hi2 = max(lo, v - math.radians(span)), min(hi, v + math.radians(span))
+            q.append(rng.uniform(lo2, hi2) if lo2 < hi2 else min(max(v, lo), hi))
+        if max(abs(x - y) for x, y in zip(q, prev)) < MIN_LEG:
+            continue
+        if chk.point_ok(q):
+            return tuple(q)
+    return None
+
+
+def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_points: Optional[int] = None,
+                 speed: Tuple[float, float] = SPEED) -> Planned:
+    """One planner-like trajectory from ``start`` (see the module doc). Raises RuntimeError when no
+    valid one is found in many attempts (cannot happen from a valid start in practice)."""
+    start = tuple(float(v) for v in start)
+    for _attempt in range(200):
+        n_legs = rng.randint(1, 3)
+        ways, prev = [], start
+        for _ in range(n_legs):
+            w = _waypoint(rng, prev, chk)
+            if w is None:
+                break
+            ways.append(w)
+            prev = w
+        if len(ways) != n_legs:
+            continue
+        # bends and segment counts: by length (the largest joint change in units of its speed limit)
+        bumps, kinds = [], []
+        for _ in ways:
+            bump = [0.0] * 6
+            if rng.random() < 0.5:
+                for i in rng.sample(range(6), rng.randint(1, 2)):
+                    bump[i] = math.radians(rng.uniform(*BUMP)) * rng.choice((-1.0, 1.0))
+                kinds.append("bent")
+            else:
+                kinds.append("straight")
+            bumps.append(bump)
+        starts = [start] + ways[:-1]
+        lengths = [max(abs(y - x) / v for x, y, v in zip(a, b, chk.vmax)) for a, b in zip(starts, ways)]
+        if n_points is not None:
+            n = n_points
+        else:
+            n = rng.randint(POINTS[0], min(POINTS[1], max(POINTS[0], int(sum(lengths) / MIN_STEP) + 1)))
+        segments = n - 1
+        counts = [max(3 if k == "bent" else 1, int(round(segments * ln / sum(lengths))))
+                  for ln, k in zip(lengths, kinds)]
+        while sum(counts) > segments:                 # take back from the longest allocation
+            i = max(range(len(counts)), key=lambda j: counts[j])
+            if counts[i] <= (3 if kinds[i] == "bent" else 1):
+                break
+            counts[i] -= 1
+        while sum(counts) < segments:
+            counts[max(range(len(counts)), key=lambda j: lengths[j] / counts[j])] += 1
+        if sum(counts) != segments:
+            continue
+        points: List[Tuple[float, ...]] = [start]
+        fractions: List[float] = []
+        times_ns = [0]
+        ok = True
+        for a, b, bump, count in zip(starts, ways, bumps, counts):
+            f = rng.uniform(*speed)
+            for q in _leg_points(a, b, bump, count):
+                if not (chk.point_ok(q) and chk.chord_ok(points[-1], q)):
+                    ok = False
+                    break
+                need = max(abs(y - x) / v for x, y, v in zip(points[-1], q, chk.vmax))
+                if need <= 0.0:
+                    ok = False
+                    break
+                dt_ns = int(math.ceil(need / f * 1e9))
+                fractions.append(need / (dt_ns * 1e-9))
+                times_ns.append(times_ns[-1] + dt_ns)
+                points.append(q)
+            if not ok:
+                break
+        if ok:
+            return Planned(tuple(points), tuple(times_ns), tuple(fractions), tuple(kinds))
+    raise RuntimeError("no valid trajectory found from %s" % (start,))
+
+
+def rng_for(seed: int, index: int) -> random.Random:
+    """The random source of trajectory ``index`` (0-based) of a set."""
+    return random.Random(seed * 1000003 + index)
+
+
+def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[Sequence[float]] = None
+             ) -> List[Planned]:
+    """``n`` chained trajectories (each from the previous one's end), from ``start`` (default home).
+    The bench makes trajectory ``i`` the same way from where the arm really is (:func:`rng_for`):
+    from the planned end, it is this one."""
+    chk = chk or Checker()
+    q = tuple(start) if start is not None else chk.home()
+    out = []
+    for i in range(n):
+        traj = generate_one(rng_for(seed, i), q, chk)
+        out.append(traj)
+        q = traj.points[-1]
+    return out
+
+
+# ------------------------------------------------------------------------------------ the figures
+STILL_EPS = math.radians(0.01)        # a joint that moved less than this did not move
+
+
+def still_runs(samples: Sequence[Tuple[float, Sequence[float]]], min_still: float) -> List[Tuple[float, float]]:
+    """(start, end) of every run of samples (time, joints) in which no joint moved more than
+    STILL_EPS from the run's first sample, lasting at least ``min_still`` s."""
+    runs = []
+    i = 0
+    while i < len(samples):
+        t0, q0 = samples[i]
+        j = i
+        while j + 1 < len(samples) and max(abs(a - b) for a, b in zip(samples[j + 1][1], q0)) <= STILL_EPS:
+            j += 1
+        if samples[j][0] - t0 >= min_still:
+            runs.append((t0, samples[j][0]))
+        i = j + 1
+    return runs
+
+
+def min_still(cycle_rate: float, joint_states_rate: float) -> float:
+    """The shortest standing still counted [s]: unchanged over two bus cycles and two joint_states
+    periods (less 10 ms of stamp jitter): at 20 Hz / 20 Hz three equal samples in a row, at 50 Hz
+    / 20 Hz two."""
+    return max(2.0 / cycle_rate, 1.0 / joint_states_rate) - 0.01
+
+
+def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_result: float,
+            final: Optional[Sequence[float]], shortest_still: float) -> Dict[str, Any]:
+    """The figures of one goal from joint_states ``samples`` (time since send_goal, joints in the
+    controller's order), the result's time, the first joints after it and :func:`min_still`."""
+    from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
+    inside = [(t, q) for t, q in samples if 0.0 <= t <= t_result]
+    out: Dict[str, Any] = {"planned": plan.duration, "elapsed": t_result, "ratio": t_result / plan.duration,
+                           "samples": len(inside)}
+    runs = still_runs(inside, shortest_still)
+    still = sum(b - a for a, b in runs)
+    out["still_pct"] = 100.0 * still / t_result if t_result > 0 else 0.0
+    moving = [t for (t, q), (_t0, q0) in zip(inside[1:], inside) if max(abs(a - b) for a, b in zip(q, q0)) > STILL_EPS]
+    if moving:
+        first, last = moving[0], moving[-1]
+        out["stops"] = sum(1 for a, b in runs if a > first and b < last)
+        out["start_s"] = first
+    else:
+        out["stops"] = 0
+        out["start_s"] = None
+    worst, joint = 0.0, 0
+    for t, q in inside:
+        want = plan.sample(t)
+        for i, (a, b) in enumerate(zip(q, want)):
+            if abs(a - b) > worst:
+                worst, joint = abs(a - b), i
+    out["dev_deg"], out["dev_joint"] = math.degrees(worst), joint + 1
+    path = ValidTrajectory(positions=plan.points, times=plan.times, path_tolerance=(1.0,) * 6,
+                           goal_tolerance=(1.0,) * 6, goal_time_tolerance=0.0, delay=0.0)
+    out["path_deg"] = math.degrees(max((path_deviation(path, q)[0] for _t, q in inside), default=0.0))
+    out["final_deg"] = (math.degrees(max(abs(a - b) for a, b in zip(final, plan.points[-1])))
+                        if final is not None else None)
+    return out
+
+
+# ------------------------------------------------------------------------------------------ worker
+class Failure(Exception):
+    """A configuration that cannot be measured (the message says why)."""
+
+
+class Run:
+    """One configuration: the stack is up; send the goals, collect joint_states, compute figures."""
+
+    def __init__(self, rospy: Any, stack: Any, cfg: Dict[str, Any]):
+        import actionlib
+        from sensor_msgs.msg import JointState
+
+        from driver_latency import Recorder
+        from vr_driver.msg import FollowJointTrajectoryAction, RobotStatus, TriState
+        self.rospy, self.stack, self.cfg = rospy, stack, cfg
+        self.TRUE, self.FALSE = TriState.TRUE, TriState.FALSE
+        self.chk = Checker()
+        self.names = list(self.chk.params.controller_joint_names)
+        self.status = Recorder(rospy, "/robot_status", RobotStatus)
+        self.joints = Recorder(rospy, "/joint_states", JointState)
+        self.client = actionlib.ActionClient("/joint_trajectory_action", FollowJointTrajectoryAction)
+
+    def q_of(self, msg: Any) -> Optional[Tuple[float, ...]]:
+        try:
+            return tuple(msg.position[list(msg.name).index(n)] for n in self.names)
+        except (ValueError, IndexError):
+            return None
+
+    def crash(self) -> Optional[str]:
+        """The exception line of the first traceback in the launch log (a node's thread died: the
+        driver will not become ready), else None."""
+        lines = self.stack.log_tail("launch.log", 400).splitlines()
+        seen = False
+        for line in lines:
+            if line.startswith("Traceback"):
+                seen = True
+            elif seen and re.match(r"^[A-Za-z_][\w.]*(Error|Exception|Exit)\b.*", line):
+                return line.strip()
+        return None
+
+    def alive(self, end: float, what: str) -> None:
+        if not self.stack.launch_alive():
+            raise Failure("driver.launch exited (%s) %s: %s\n%s" % (
+                self.stack.launch.returncode, what, self.crash() or "", self.stack.log_tail("launch.log")))
+        crash = self.crash()
+        if crash is not None:
+            raise Failure("%s: a node failed: %s\n%s" % (what, crash, self.stack.log_tail("launch.log", 12)))
+        if time.monotonic() > end:
+            raise Failure("%s: timed out\n%s" % (what, self.stack.log_tail("launch.log", 12)))
+
+    def wait_ready(self, timeout: float) -> float:
+        t0 = time.monotonic()
+        end = t0 + timeout
+        while not self.client.wait_for_server(self.rospy.Duration(0.5)):
+            self.alive(end, "no joint_trajectory_action server")
+        self.wait_idle(end, "motion_possible never TRUE")
+        return time.monotonic() - t0
+
+    def wait_idle(self, end: float, what: str) -> None:
+        while self.status.wait_for(lambda m: m.motion_possible.val == self.TRUE and m.in_motion.val == self.FALSE,
+                                   0.5, max(0, self.status.mark() - 1)) is None:
+            self.alive(end, what)
+
+    def current(self) -> Tuple[float, ...]:
+        hit = self.joints.wait_for(lambda m: self.q_of(m) is not None, 5.0, max(0, self.joints.mark() - 1))
+        if hit is None:
+            raise Failure("no joint_states")
+        return self.q_of(hit[1])
+
+    def goal(self, plan: Planned, path_tol: float, goal_tol: float) -> Any:
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+        from vr_driver.msg import FollowJointTrajectoryGoal, JointTolerance
+        traj = JointTrajectory(joint_names=self.names)           # header.stamp 0: start now
+        for q, t in zip(plan.points, plan.times_ns):
+            traj.points.append(JointTrajectoryPoint(positions=list(q),
+                                                    time_from_start=self.rospy.Duration(0, t)))
+        goal = FollowJointTrajectoryGoal(trajectory=traj)
+        if path_tol:
+            goal.path_tolerance = [JointTolerance(name=n, position=path_tol) for n in self.names]
+        if goal_tol:
+            goal.goal_tolerance = [JointTolerance(name=n, position=goal_tol) for n in self.names]
+        return goal
+
+    def send(self, goal: Any, timeout: float) -> Tuple[Optional[int], Any, float, float]:
+        """(status or None on timeout, result, send wall time, result wall time). A plain
+        ActionClient: SimpleActionClient can miss a fast refusal (ros/actionlib#206)."""
+        import actionlib
+        done = threading.Event()
+        stamp: List[float] = []
+
+        def transition(handle: Any) -> None:
+            if handle.get_comm_state() == actionlib.CommState.DONE and not done.is_set():
+                stamp.append(time.time())
+                done.set()
+        t_send = time.time()
+        handle = self.client.send_goal(goal, transition_cb=transition)
+        if not done.wait(timeout):
+            handle.cancel()
+            done.wait(15.0)
+            return None, None, t_send, time.time()
+        return handle.get_goal_status(), handle.get_result(), t_send, stamp[0]
+
+    def reposition(self, target: Sequence[float]) -> str:
+        """Take the arm to ``target`` with a slow two-point goal (not measured)."""
+        q = self.current()
+        need = max(abs(a - b) / v for a, b, v in zip(q, target, self.chk.vmax))
+        plan = Planned((tuple(q), tuple(target)), (0, int(math.ceil(need / 0.3 * 1e9)) + 1), (0.3,), ("reposition",))
+        status, result, _t0, _t1 = self.send(self.goal(plan, -1.0, math.radians(1.0)), 60.0 + 3 * plan.duration)
+        return "reposition: state %s %s" % (status, result.error_string if result is not None else "no result")
+
+    def one(self, index: int) -> Dict[str, Any]:
+        """Trajectory ``index`` (1-based) of the set, made from where the arm is (an arm that
+        ended exactly at the previous planned end gets the very trajectory :func:`generate` makes)."""
+        from actionlib_msgs.msg import GoalStatus
+        rospy = self.rospy
+        cfg = self.cfg
+        self.wait_idle(time.monotonic() + 30.0, "the arm not idle before trajectory %d" % index)
+        q = self.current()
+        note = ""
+        try:
+            plan = generate_one(rng_for(cfg["seed"], index - 1), q, self.chk)
+        except RuntimeError:                  # the arm stopped somewhere odd: from home
+            note = self.reposition(self.chk.home())
+            self.wait_idle(time.monotonic() + 30.0, "the arm not idle after going home")
+            plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk)
+        mark = self.joints.mark()
+        timeout = 30.0 + 4.0 * plan.duration + 1.5 * len(plan.points)
+        status, result, t_send, t_done = self.send(self.goal(plan, cfg["path_tol"], cfg["goal_tol"]), timeout)
+        final = None
+        hit = self.joints.wait_for(lambda m: m.header.stamp.to_sec() >= t_done and self.q_of(m) is not None,
+                                   2.0, mark)
+        if hit is not None:
+            final = self.q_of(hit[1])
+        with self.joints.cond:
+            msgs = [m for _t, m in self.joints.messages[mark:]]
+        samples = [(m.header.stamp.to_sec() - t_send, self.q_of(m)) for m in msgs if self.q_of(m) is not None]
+        rec = analyse(plan, samples, t_done - t_send, final,
+                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate))
+        if cfg.get("dump"):
+            with open(cfg["dump"], "a") as fh:
+                fh.write(json.dumps({"config": cfg["name"], "index": index, "plan": plan.to_json(),
+                                     "samples": samples, "t_result": t_done - t_send, "final": final}) + "\n")
+        rec.update(index=index, points=len(plan.points), legs=list(plan.legs),
+                   state=status, state_name=GoalStatus.to_string(status) if status is not None else "NO RESULT",
+                   code=result.error_code if result is not None else None,
+                   error_string=result.error_string if result is not None else "no result within %.0f s" % timeout,
+                   note=note)
+        rec["ok"] = status == GoalStatus.SUCCEEDED and result is not None and result.error_code == 0
+        rec["ran"] = status not in (None, GoalStatus.REJECTED)
+        # to the end: succeeded, or only the goal tolerance missed (the figures are of a whole run)
+        rec["completed"] = rec["ok"] or (status == GoalStatus.ABORTED and rec["code"] == -5)
+        rospy.sleep(3.0 / cfg["cycle_rate"])
+        return rec
+
+    def run(self) -> Dict[str, Any]:
+        cfg = self.cfg
+        ready = self.wait_ready(cfg["ready_timeout"])
+        print("ready %.1f s after roslaunch (joint_trajectory_action up, motion_possible TRUE)" % ready, flush=True)
+        recs = []
+        print("%3s %4s %7s %-10s %6s %7s %7s %5s %10s %8s %9s  %s" % (
+            "#", "pts", "plan s", "state", "ratio", "still%", "start s", "stops", "dev deg(J)", "path deg",
+            "final deg", "result"), flush=True)
+        refused_in_a_row = 0
+        for i in range(cfg["n"]):
+            rec = self.one(i + 1)
+            recs.append(rec)
+            print("%3d %4d %7.2f %-10s %6.2f %7.1f %7s %5d %7.2f(%d) %8.2f %9s  %s%s"
+                  % (rec["index"], rec["points"], rec["planned"], rec["state_name"], rec["ratio"], rec["still_pct"],
+                     "n/a" if rec["start_s"] is None else "%.2f" % rec["start_s"],
+                     rec["stops"], rec["dev_deg"], rec["dev_joint"], rec["path_deg"],
+                     "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
+                     rec["error_string"][:110], " [%s]" % rec["note"] if rec["note"] else ""), flush=True)
+            refused_in_a_row = 0 if rec["ran"] else refused_in_a_row + 1
+            if refused_in_a_row >= 2 and not any(r["ran"] for r in recs):
+                raise Failure("unsupported: the first goals were refused (%s)" % rec["error_string"])
+            if rec["state"] is None and not any(r["ok"] for r in recs):
+                raise Failure("unsupported: no result for trajectory %d within the timeout" % rec["index"])
+        return {"name": cfg["name"], "protocol": cfg["protocol"], "baud": cfg["baud"], "cycle_rate": cfg["cycle_rate"],
+                "goals": recs, "tolerances": cfg["tolerances"]}
+
+
+def worker(cfg: Dict[str, Any]) -> int:
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from driver_latency import Stack, interrupt_once, pick_port
+    tmp = tempfile.mkdtemp(prefix="vr_traj_bench_")
+    port = cfg["ros_port"] or pick_port(11700 + (os.getpid() % 150) * 2)
+    stack = Stack(tmp, port)
+    os.environ["ROS_MASTER_URI"] = stack.master_uri
+    os.environ["ROS_LOG_DIR"] = stack.env["ROS_LOG_DIR"]
+    interrupt_once((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))
+    rospy = None
+    status = 1
+    keep = False
+    print("--- %s: protocol %s, %d bit/s, %g Hz bus cycle (ROS master port %d, speed_factor %g; tolerances %s)"
+          % (cfg["name"], cfg["protocol"], cfg["baud"], cfg["cycle_rate"], port, cfg["speed_factor"],
+             cfg["tolerances"]), flush=True)
+    try:
+        stack.start_roscore()
+        import rospy as _rospy
+        rospy = _rospy
+        rospy.init_node("trajectory_bench", anonymous=True, disable_signals=True)
+        stack.start_launch(["sim:=true", "sim_port:=%s/g2" % tmp, "baud:=%d" % cfg["baud"],
+                            "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
+                            "protocol:=%s" % cfg["protocol"]])
+        result = Run(rospy, stack, cfg).run()
+        print(RESULT_TAG + json.dumps(result), flush=True)
+        status = 0
+    except KeyboardInterrupt:
+        print("interrupted: stopping what was started", flush=True)
+        status = 130
+    except Failure as exc:
+        print("FAILED %s: %s" % (cfg["name"], exc), flush=True)
+        print(RESULT_TAG + json.dumps({"name": cfg["name"], "failed": str(exc).split("\n")[0]}), flush=True)
+        keep = cfg.get("keep_logs", False)
+    except Exception as exc:  # noqa: BLE001 - report, clean up, exit 1
+        import traceback
+        traceback.print_exc()
+        print("FAILED %s: %s: %s" % (cfg["name"], type(exc).__name__, exc), flush=True)
+        print(RESULT_TAG + json.dumps({"name": cfg["name"], "failed": "%s: %s" % (type(exc).__name__, exc)}),
+              flush=True)
+        keep = True
+    finally:
+        if rospy is not None:
+            rospy.signal_shutdown("benchmark done")
+        left = stack.stop()
+        if left:
+            print("had to kill: %s" % ", ".join(left), flush=True)
+        if keep or cfg.get("keep_logs"):
+            print("logs kept in %s" % tmp, flush=True)
+        else:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return status
+
+
+# ------------------------------------------------------------------------------------------ parent
+def _median(values: Sequence[float]) -> float:
+    v = sorted(values)
+    n = len(v)
+    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+
+
+def summary(results: List[Dict[str, Any]]) -> None:
+    print("=== summary: median / max over the goals run to the end (succeeded, or missed only the goal tolerance); "
+          "v2 targets of issue 16 in the last column")
+    width = 17
+    names = [r["name"] for r in results]
+    print("%-22s" % "" + "".join(" %-*s" % (width, n) for n in names) + "  v2 target")
+    cells: Dict[str, List[str]] = {"goals succeeded": [], "run to the end": [], "tolerances [deg]": []}
+    for label, _key, _limit in TARGETS:
+        cells[label] = []
+    cells["stops"] = []
+    cells["start [s]"] = []
+    cells["path-only dev [deg]"] = []
+    for r in results:
+        if "failed" in r:
+            for k in cells:
+                cells[k].append("FAILED" if k == "goals succeeded" else "-")
+            continue
+        goals = r["goals"]
+        ran = [g for g in goals if g["completed"]]
+        cells["goals succeeded"].append("%d / %d" % (sum(1 for g in goals if g["ok"]), len(goals)))
+        cells["run to the end"].append("%d / %d" % (len(ran), len(goals)))
+        cells["tolerances [deg]"].append(r["tolerances"])
+        for label, key, _limit in TARGETS + (("stops", "stops", None), ("start [s]", "start_s", None),
+                                             ("path-only dev [deg]", "path_deg", None)):
+            vals = [g[key] for g in ran if g.get(key) is not None]
+            if not vals:
+                cells[label].append("n/a")
+            elif key == "stops":
+                cells[label].append("%g / %d" % (_median(vals), max(vals)))
+            else:
+                cells[label].append("%.3g / %.3g" % (_median(vals), max(vals)))
+    targets = {label: "<= %g" % limit for label, _key, limit in TARGETS}
+    for label, row in cells.items():
+        print("%-22s" % label + "".join(" %-*s" % (width, c) for c in row) + "  " + targets.get(label, ""))
+    for r in results:
+        if "failed" in r:
+            print("%s: FAILED / unsupported: %s" % (r["name"], r["failed"]))
+        elif r["name"].startswith("v2"):
+            ran = [g for g in r["goals"] if g["completed"]]
+            verdict = []
+            for label, key, limit in TARGETS:
+                vals = [g[key] for g in ran if g.get(key) is not None]
+                verdict.append("%s %s" % (label, "MEET" if vals and max(vals) <= limit else "MISS"))
+            print("%s against the v2 targets (every goal): %s" % (r["name"], ", ".join(verdict)))
+
+
+def run_worker(cfg: Dict[str, Any]) -> Tuple[int, Optional[Dict[str, Any]]]:
+    """One configuration in a worker process of its own session (a Ctrl-C reaches this process,
+    which passes it on once); its output relayed; (exit status, result)."""
+    proc = subprocess.Popen([sys.executable, os.path.abspath(__file__), "--worker", json.dumps(cfg)],
+                            stdout=subprocess.PIPE, text=True, bufsize=1, start_new_session=True)
+    result = None
+    forwarded = False
+    while True:
+        try:
+            for text in proc.stdout:
+                if text.startswith(RESULT_TAG):
+                    result = json.loads(text[len(RESULT_TAG):])
+                else:
+                    sys.stdout.write(text)
+                    sys.stdout.flush()
+            return proc.wait(), result
+        except KeyboardInterrupt:
+            if not forwarded and proc.poll() is None:
+                forwarded = True
+                try:
+                    proc.send_signal(signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ["--worker"]:
+        return worker(json.loads(argv[1]))
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from driver_latency import interrupt_once
+    sigs = [signal.SIGTERM, signal.SIGHUP]
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        sigs.append(signal.SIGINT)
+    interrupt_once(sigs)
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--n", type=int, default=3, help="trajectories per configuration (default 3)")
+    p.add_argument("--seed", type=int, default=1, help="the trajectories' seed (default 1)")
+    p.add_argument("--configs", default=",".join(CONFIGS),
+                   help="comma-separated subset of %s (default: all)" % ", ".join(CONFIGS))
+    p.add_argument("--speed-factor", type=float, default=1.0,
+                   help="virtual controller motion time divisor (default 1: real time)")
+    p.add_argument("--path-tolerance", type=float, default=None,
+                   help="path tolerance per joint in the goals [deg]; 0: none given (the driver's default, "
+                        "as MoveIt sends them), negative: no limit (default: v1 %g, v2 none given)" % V1_TOLERANCE)
+    p.add_argument("--goal-tolerance", type=float, default=None,
+                   help="goal tolerance per joint [deg]; 0: none given (default: v1 %g, v2 none given)" % V1_TOLERANCE)
+    p.add_argument("--ready-timeout", type=float, default=60.0, help="driver ready within [s] (default 60)")
+    p.add_argument("--ros-port", type=int, default=0, help="ROS master port (default: a free one from 11700)")
+    p.add_argument("--keep-logs", action="store_true", help="keep the ROS logs and print where")
+    p.add_argument("--dump", default="", help="append each goal's plan and joint_states samples to this file "
+                                               "(JSON lines: config, index, plan, samples [t, joints], t_result)")
+    p.add_argument("--quick", action="store_true", help="smoke run: 1 trajectory per configuration")
+    args = p.parse_args(argv)
+    if args.quick:
+        args.n = 1
+    names = [c.strip() for c in args.configs.split(",") if c.strip()]
+    bad = [c for c in names if c not in CONFIGS]
+    if bad or not names:
+        p.error("unknown configuration(s) %s (known: %s)" % (", ".join(bad), ", ".join(CONFIGS)))
+    if args.n < 1:
+        p.error("--n must be >= 1")
+
+    def tol(deg: Optional[float], protocol: str) -> float:
+        if deg is None:
+            deg = V1_TOLERANCE if protocol == "v1" else 0.0
+        return -1.0 if deg < 0 else math.radians(deg)
+
+    def shown(value: float) -> str:
+        return "none" if value < 0 else "default" if value == 0 else "%g" % math.degrees(value)
+    started = time.perf_counter()
+    plans = generate(args.seed, args.n)
+    print("trajectory benchmark: %d trajectories per configuration (seed %d: %s points, %s s planned), "
+          "configurations %s; each with its own roscore + driver.launch sim:=true"
+          % (args.n, args.seed, "/".join(str(len(t.points)) for t in plans),
+             "/".join("%.2f" % t.duration for t in plans), ", ".join(names)), flush=True)
+    results, status = [], 0
+    for name in names:
+        protocol, baud, rate = CONFIGS[name]
+        cfg = {"name": name, "protocol": protocol, "baud": baud, "cycle_rate": rate, "n": args.n, "seed": args.seed,
+               "speed_factor": args.speed_factor, "path_tol": tol(args.path_tolerance, protocol),
+               "goal_tol": tol(args.goal_tolerance, protocol), "ready_timeout": args.ready_timeout,
+               "ros_port": args.ros_port, "keep_logs": args.keep_logs,
+               "dump": os.path.abspath(args.dump) if args.dump else ""}
+        cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
+        code, result = run_worker(cfg)
+        if code == 130:
+            print("interrupted")
+            return 130
+        if result is None:
+            result = {"name": name, "failed": "the worker exited with status %d and no result" % code}
+        if code != 0 or "failed" in result:
+            status = 1
+        results.append(result)
+    summary(results)
+    print("python %s, %d CPUs, load %.2f, wall time %.1f s%s"
+          % (sys.version.split()[0], os.cpu_count() or 0, os.getloadavg()[0], time.perf_counter() - started,
+             "; a configuration FAILED (see above)" if status else ""))
+    return status
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,140 @@
+"""bench/trajectory.py's generator makes what the bench claims: valid planner-like trajectories.
+
+Checked with the driver's own code, not the generator's: the driver's validate() and
+segment_speeds() accept each one (joint limits, increasing times, within the speed limits); every
+point's TCP and every sample of the joint-space chords between points lie in the workspace box of
+vr_driver.yaml (check_envelope); 10-100 points; each segment's limiting joint at 50-100 % of its
+speed limit; chained (each starts where the previous ended); the same for the same seed.
+"""
+import importlib.util
+import math
+import os
+import sys
+import unittest
+
+import yaml
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def load_bench():
+    spec = importlib.util.spec_from_file_location("bench_trajectory", os.path.join(REPO, "bench", "trajectory.py"))
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module            # dataclasses look the module up while it loads
+    spec.loader.exec_module(module)
+    return module
+
+
+class TrajectoryGeneratorTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.bench = load_bench()
+        from vr_driver.kinematics import Kinematics
+        from vr_driver.motion import MotionPlanner
+        from vr_driver.params import DriverParams
+        with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
+            cls.params = DriverParams.from_dict(yaml.safe_load(fh))
+        cls.kin = Kinematics.default()
+        cls.planner = MotionPlanner(cls.kin)
+        cls.trajs = cls.bench.generate(7, 12)
+
+    def test_same_seed_same_trajectories(self):
+        again = self.bench.generate(7, 12)
+        self.assertEqual([t.to_json() for t in again], [t.to_json() for t in self.trajs])
+        other = self.bench.generate(8, 2)
+        self.assertNotEqual(other[0].to_json(), self.trajs[0].to_json())
+
+    def test_the_driver_accepts_them_and_speeds_are_50_to_100_percent(self):
+        from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+        names = self.params.controller_joint_names
+        lim = self.kin.limits
+        for k, t in enumerate(self.trajs):
+            with self.subTest(trajectory=k):
+                self.assertGreaterEqual(len(t.points), 10)
+                self.assertLessEqual(len(t.points), 100)
+                self.assertEqual(t.times_ns[0], 0)
+                goal = TrajectoryGoal(names, t.points, t.times)
+                traj = validate(goal, names, t.points[0], lim.lower, lim.upper, 0.0)
+                speeds = segment_speeds(traj, lim.velocity, names)
+                self.assertEqual(len(speeds), len(t.points) - 1)
+                for s in speeds:
+                    self.assertGreaterEqual(s, 0.5 - 1e-6)
+                    self.assertLessEqual(s, 1.0)
+                self.assertEqual(len(t.fractions), len(speeds))
+                for a, b in zip(t.fractions, speeds):
+                    self.assertAlmostEqual(a, b, places=6)
+
+    def test_points_and_chords_inside_the_limits_and_the_workspace(self):
+        from vr_driver.motion import check_envelope
+        ws = self.params.workspace
+        lim = self.kin.limits
+        for k, t in enumerate(self.trajs):
+            for i, q in enumerate(t.points):
+                with self.subTest(trajectory=k, point=i):
+                    self.assertEqual(self.kin.limit_violations(q), [])
+                    self.assertTrue(ws.contains(self.kin.fk_pose(q)), self.kin.fk_pose(q))
+                    self.assertTrue(all(lo < v < hi for v, lo, hi in zip(q, lim.lower, lim.upper)))
+                    if i:
+                        check_envelope(self.planner.ptp_joints(t.points[i - 1], q), ws)   # raises if not
+
+    def test_chained_from_home_and_planner_like(self):
+        home = self.kin.ik_pose(self.bench.HOME_POSE)
+        self.assertEqual(self.trajs[0].points[0], tuple(home))
+        for a, b in zip(self.trajs, self.trajs[1:]):
+            self.assertEqual(a.points[-1], b.points[0])
+        for t in self.trajs:
+            self.assertGreater(max(abs(x - y) for x, y in zip(t.points[0], t.points[-1]))
+                               + max(abs(x - y) for p in t.points for x, y in zip(p, t.points[0])),
+                               math.radians(20.0))              # it goes somewhere
+            mid = t.times_ns[-1] // 2
+            self.assertEqual(len(t.sample(mid * 1e-9)), 6)
+            self.assertEqual(t.sample(t.duration + 1.0), t.points[-1])
+        sizes = {len(t.points) for t in self.trajs}
+        self.assertGreater(len(sizes), 3, "the number of points varies")
+
+
+class FiguresTest(unittest.TestCase):
+    """analyse(): the figures of one goal from joint_states samples, on a made-up run."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.bench = load_bench()
+
+    def test_a_run_that_stops_once_on_the_way(self):
+        b = self.bench
+        plan = b.Planned(((0.0,) * 6, (1.0,) + (0.0,) * 5), (0, 1_000_000_000), (0.5,), ("straight",))
+        samples = []
+        t = 0.0
+        while t <= 2.0 + 1e-9:            # 20 Hz: still 0-0.3 s, moving, still 0.8-1.2 s, moving, at the end
+            if t < 0.3:
+                x = 0.0
+            elif t < 0.8:
+                x = (t - 0.3)
+            elif t < 1.2:
+                x = 0.5
+            elif t < 1.7:
+                x = 0.5 + (t - 1.2)
+            else:
+                x = 1.0
+            samples.append((t, (x,) + (0.0,) * 5))
+            t += 0.05
+        r = b.analyse(plan, samples, 2.0, (1.0001,) + (0.0,) * 5, b.min_still(20.0, 20.0))
+        self.assertAlmostEqual(r["ratio"], 2.0)
+        self.assertEqual(r["stops"], 1)                      # the one on the way, not start and end
+        self.assertAlmostEqual(r["still_pct"], 100.0 * (0.25 + 0.35 + 0.3) / 2.0, delta=3.0)
+        self.assertAlmostEqual(r["dev_deg"], math.degrees(0.5), delta=0.01)  # t = 1.0-1.2: at 0.5, plan 1.0
+        self.assertEqual(r["dev_joint"], 1)
+        self.assertAlmostEqual(r["path_deg"], 0.0, places=6)  # always on the planned line
+        self.assertAlmostEqual(r["final_deg"], math.degrees(0.0001), places=6)
+        self.assertAlmostEqual(r["start_s"], 0.3, delta=0.06)
+
+    def test_a_moving_arm_whose_feedback_repeats_once_is_not_standing_still(self):
+        b = self.bench
+        moving = [(0.0, (0.0,) * 6), (0.05, (0.1,) + (0.0,) * 5), (0.1, (0.1,) + (0.0,) * 5),
+                  (0.15, (0.2,) + (0.0,) * 5)]
+        self.assertEqual(b.still_runs(moving, b.min_still(20.0, 20.0)), [])     # 20 Hz bus: one repeat
+        self.assertEqual(len(b.still_runs(moving, b.min_still(50.0, 20.0))), 1)  # 50 Hz: 2.5 cycles still
+
+
+if __name__ == "__main__":
+    unittest.main()
