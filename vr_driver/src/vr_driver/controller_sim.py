@@ -62,6 +62,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -366,8 +367,10 @@ class ControllerProgram(SessionProgram):
 AUTO_LINK = "auto"
 
 
-def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
-    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_g2_<master port>``.
+def auto_pty_link(environ: Optional[Mapping[str, str]] = None, station: str = "g2") -> str:
+    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_<station>_<master port>`` (``station``
+    ``g2`` the virtual controller, ``io_island`` the virtual I/O island, ``line`` the line hub's
+    master end, :mod:`vr_driver.sim_line`).
 
     Both the virtual controller and the driver resolve ``auto`` with this function from the
     environment roslaunch gives its nodes (ROS_MASTER_URI; ROS_LOG_DIR, else ROS_HOME/log, else
@@ -379,7 +382,19 @@ def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
         raise SimError("cannot take a port from ROS_MASTER_URI=%r for pty_link %r" % (uri, AUTO_LINK))
     log_dir = env.get("ROS_LOG_DIR") or os.path.join(
         env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros"), "log")
-    return os.path.join(log_dir, "vr006l_virtual_g2_%s" % port)
+    if not re.match(r"[A-Za-z0-9_]+\Z", station):
+        raise SimError("bad station name %r for an auto pty link" % (station,))
+    return os.path.join(log_dir, "vr006l_virtual_%s_%s" % (station, port))
+
+
+def resolve_link(value: str, station: str = "g2") -> str:
+    """A pty link given as a parameter: ``auto`` is this launch's link of ``station``, ``auto:NAME``
+    this launch's link of station NAME (:func:`auto_pty_link`); anything else is a path."""
+    if value == AUTO_LINK:
+        return auto_pty_link(station=station)
+    if value.startswith(AUTO_LINK + ":"):
+        return auto_pty_link(station=value[len(AUTO_LINK) + 1:])
+    return value
 
 
 def _remove_quietly(path: str) -> None:
