@@ -88,7 +88,7 @@ class IslandProgram:
             if command != self.command:
                 log.info("island: gripper_close %d", command)
             self.command, self.command_since = command, now
-        if self.closed != self.command and now - self.command_since >= self.delay:
+        if self.closed != self.command and now - self.command_since >= self.delay - 1e-9:   # float times
             self.closed = self.command
         return self._write_inputs()
 
