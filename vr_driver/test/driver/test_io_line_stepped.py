@@ -260,3 +260,39 @@ def test_detach_is_offline_and_attach_checks_lengths(line):
 def test_input_timeout_must_be_positive():
     with pytest.raises(SignalMapError, match="input_timeout"):
         IoLine(SIGNALS, 0.0)
+
+
+@pytest.mark.parametrize("fault, words", [
+    ("ident", ["reports ident 0x0F1B", "expects 0x0F1A"]),
+    ("cfg", ["rejects the configuration 11 21"]),
+    ("absent", ["no reply", "set to address 8"]),
+])
+def test_a_misconfigured_or_absent_island_never_comes_online_nor_disturbs_the_arm(fault, words):
+    line = Line()
+    if fault == "ident":
+        line.island.ident = 0x0F1B                   # another device at address 8
+    elif fault == "cfg":
+        from pyprofibus_vendor.dp import ChkCfg
+        line.island.cfg = ChkCfg(bytes([0x10, 0x20])).cfg   # an island with 1 byte each way
+    else:
+        line.link.unplugged.add(8)
+    line.run_until(lambda: line.robot_handle.connected, 3.0, "the arm's station")
+    for _ in range(40):                              # 2 s of bus cycles
+        line.tick()
+        assert not line.online() and line.value("gripper_closed") is None
+        assert not line.io.write("gripper_close", "1").success
+    assert line.robot_handle.connected and line.robot_handle.counters.losses == 0
+    reason = line.snap.station("io_island").reason
+    for word in words:
+        assert word in reason, reason
+
+
+def test_snapshots_compare_equal_until_something_shown_changes(line):
+    first = line.snap
+    line.tick()
+    assert line.snap == first and line.snap.time > first.time
+    line.program.set_part_present(True)
+    line.tick()
+    assert line.snap != first
+    with pytest.raises(Exception):
+        line.snap.signals[0].value = 5                # immutable

@@ -29,10 +29,10 @@ from __future__ import annotations
 
 import logging
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Optional, Tuple
 
-from pyprofibus_vendor.dp import explain_diag
+from pyprofibus_vendor.dp import DiagStatus1, explain_diag
 from pyprofibus_vendor.dp_master import DpMaster, MasterSlaveState, SlaveHandle, SlaveSpec
 
 from ..errors import SignalMapError
@@ -80,7 +80,10 @@ class StationState:
 
 @dataclass(frozen=True)
 class IoSnapshot:
-    time: float
+    """Every station and signal after a bus cycle. Equality ignores ``time``: ``snap != last`` means
+    something the interface shows changed (``io_states`` is published on every change)."""
+
+    time: float = field(compare=False)
     stations: Tuple[StationState, ...]
     signals: Tuple[SignalState, ...]
 
@@ -105,6 +108,24 @@ class IoResult:
     success: bool
     message: str
     value: str = ""
+
+
+def _explain(handle: SlaveHandle, reason: str) -> str:
+    """The master's reason for ending an attempt with a station, with what it most likely means."""
+    diag = handle.last_diag
+    spec = handle.spec
+    if reason.startswith("diag:") and diag is not None:
+        if diag.ident != spec.ident:
+            return ("the station at address %d reports ident 0x%04X, the bus configuration expects 0x%04X "
+                    "(another device at this address?): %s" % (handle.address, diag.ident, spec.ident, reason))
+        if diag.status1 & DiagStatus1.CFG_FAULT:
+            return ("the station rejects the configuration %s (%s bytes in / %s out): its modules differ from "
+                    "the bus configuration: %s" % (spec.cfg.hex(" "), spec.input_size, spec.output_size, reason))
+        if diag.status1 & DiagStatus1.PRM_FAULT:
+            return "the station rejects the parameters (Set_Prm): %s" % reason
+    if reason.startswith("no reply"):
+        return "%s: is the station powered, connected and set to address %d?" % (reason, handle.address)
+    return reason
 
 
 class _Station:
@@ -199,7 +220,7 @@ class IoLine:
                         st.session_start = None
                         self._offline(st, "left Data_Exchange: %s" % reason)
                     if new is MasterSlaveState.BACKOFF:
-                        st.dp_reason = reason
+                        st.dp_reason = _explain(handle, reason)
         finally:
             if self._chained is not None:
                 self._chained(handle, old, new, reason)
