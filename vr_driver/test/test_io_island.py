@@ -193,3 +193,28 @@ def test_the_hub_paces_the_line_and_joins_a_station_that_appears_late(tmp_path):
         os.close(other)
     finally:
         hub.stop()
+
+
+def test_the_line_command_prints_the_master_end_and_stops_on_sigterm(tmp_path):
+    link = str(tmp_path / "line")
+    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.sim_line", "--pty-link", link, str(tmp_path / "none")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONPATH=PYTHONPATH))
+    try:
+        ready, _, _ = select.select([proc.stdout], [], [], 20.0)
+        assert ready
+        assert os.path.realpath(link) == proc.stdout.readline().strip()
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(10) == 0
+        assert not os.path.lexists(link)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def test_the_line_needs_a_station_and_a_bit_rate_in_range():
+    with pytest.raises(SimError, match="at least one station"):
+        LineHub([])
+    with pytest.raises(SimError, match="baud"):
+        LineHub(["/dev/null"], baud=100)
