@@ -342,7 +342,9 @@ def load_signal_map(path: str, lengths: Mapping[int, Tuple[int, int]]) -> Signal
     try:
         with open(path, encoding="utf-8") as fh:
             data, _lines = _read_yaml(fh.read(), path)
-    except (OSError, ConfigError) as exc:
+    except ConfigError as exc:                 # its message names the file and line already
+        raise SignalMapError("signal map %s" % exc) from exc
+    except OSError as exc:
         raise SignalMapError("signal map %s: %s" % (path, exc)) from exc
     try:
         return SignalMap.from_dict(data, lengths)
