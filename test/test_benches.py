@@ -54,6 +54,19 @@ class DpCycleBenchTest(BenchRun):
         self.assertEqual(len(targets), 4, self.out)
 
 
+class DpLineBenchTest(BenchRun):
+    """bench/dp_line.py --quick: our master with 1, 2 and 4 stations on the paced virtual line at 19.2 and
+    187.5 kbit/s; a figure line per configuration, every station exchanged every cycle."""
+    BENCH = "dp_line"
+
+    def test_exits_0_with_a_line_per_configuration(self):
+        self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
+        self.assertNotIn("FAILED", self.out)
+        for baud in ("19200", "187500"):
+            for n in ("1", "2", "4"):
+                self.line(r"^%s\s+%s\s+%s\s+%s\s+%s\s+every station every cycle$" % (n, baud, NUM, NUM, NUM))
+
+
 class DriverLatencyBenchTest(BenchRun):
     """bench/driver_latency.py --quick: its own roscore + driver.launch (sim), 3 goals, 2 e-stops, a 2 s
     idle window (about 15 s); every figure line is there, no timing is checked."""

@@ -51,10 +51,11 @@ class PeerRun:
         return f"exit {self.rc}; output:\n" + "\n".join(self.lines[-40:])
 
 
-def run_peer(*args: str, deadline: float = DEADLINE) -> PeerRun:
-    """Run the peer script, collecting its output lines until it exits or ``deadline`` s."""
+def run_peer(*args: str, deadline: float = DEADLINE, script: str = PEER) -> PeerRun:
+    """Run the peer script (default ``peers/pyprofibus_master.py``), collecting its output lines
+    until it exits or ``deadline`` s."""
     assert PEER_PYTHON
-    proc = subprocess.Popen([PEER_PYTHON, PEER, *args], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([PEER_PYTHON, script, *args], stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL)
     end = time.monotonic() + deadline
     lines: List[str] = []

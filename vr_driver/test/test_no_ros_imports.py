@@ -12,7 +12,8 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
 CORE = ("errors", "validate", "poses", "kinematics", "motion", "protocol", "protocol_v2", "params", "driver",
-        "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories", "sim_arm",
+        "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
+        "driver.stations", "io_signals", "io_island", "sim_arm",
         "controller_sim", "controller_session", "controller_v2", "sim_stream", "csr",
         "pose_input") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",

@@ -54,7 +54,7 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from .dp import (MASTER_SAP, ChkCfg, DiagStatus1, DiagStatus2, GcCommand, GlobalControl,
                  PrmStationStatus, Sap, SetPrm, SlaveDiag, cfg_io_lengths, explain_diag,
@@ -162,6 +162,16 @@ class SlaveSpec:
             object.__setattr__(self, "output_size", n_out)
         if self.watchdog is not None:
             watchdog_factors(self.watchdog)  # validates the range
+
+    @classmethod
+    def from_config(cls, slave: "Any") -> "SlaveSpec":
+        """The spec of a :class:`~.config.SlaveConfig` (its Cfg, lengths, watchdog, Set_Prm
+        settings); ``watchdog_ms`` None or 0 = watchdog off."""
+        return cls(slave.address, slave.ident, slave.cfg, input_size=slave.input_len,
+                   output_size=slave.output_len,
+                   watchdog=slave.watchdog_ms / 1000.0 if slave.watchdog_ms else None,
+                   user_prm_data=slave.user_prm_data, group_ident=slave.group_mask,
+                   sync_req=slave.sync, freeze_req=slave.freeze)
 
     def set_prm(self) -> SetPrm:
         status = PrmStationStatus.LOCK_REQ

@@ -62,6 +62,7 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -98,6 +99,7 @@ __all__ = [
     "SimOptions",
     "ControllerProgram",
     "VirtualController",
+    "SimPort",
     "robot_slave",
     "main",
 ]
@@ -365,10 +367,11 @@ class ControllerProgram(SessionProgram):
 AUTO_LINK = "auto"
 
 
-def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
-    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_g2_<master port>``, followed by
-    ``_<namespace>`` for nodes in a namespace (``/arm1`` -> ``..._11311_arm1``, ``/cell/arm1`` ->
-    ``..._11311_cell_arm1``).
+def auto_pty_link(environ: Optional[Mapping[str, str]] = None, station: str = "g2") -> str:
+    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_<station>_<master port>`` (``station``
+    ``g2`` the virtual controller, ``io_island`` the virtual I/O island, ``line`` the line hub's
+    master end, :mod:`vr_driver.sim_line`), followed by ``_<namespace>`` for nodes in a namespace
+    (``/arm1`` -> ``..._11311_arm1``, ``/cell/arm1`` -> ``..._11311_cell_arm1``).
 
     Both the virtual controller and the driver resolve ``auto`` with this function from the
     environment roslaunch gives its nodes (ROS_MASTER_URI; ROS_NAMESPACE, set for the nodes of a
@@ -382,8 +385,20 @@ def auto_pty_link(environ: Optional[Mapping[str, str]] = None) -> str:
         raise SimError("cannot take a port from ROS_MASTER_URI=%r for pty_link %r" % (uri, AUTO_LINK))
     log_dir = env.get("ROS_LOG_DIR") or os.path.join(
         env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros"), "log")
+    if not re.match(r"[A-Za-z0-9_]+\Z", station):
+        raise SimError("bad station name %r for an auto pty link" % (station,))
     ns = "_".join(part for part in (env.get("ROS_NAMESPACE") or "").split("/") if part)
-    return os.path.join(log_dir, "vr006l_virtual_g2_%s" % port + ("_" + ns if ns else ""))
+    return os.path.join(log_dir, "vr006l_virtual_%s_%s" % (station, port) + ("_" + ns if ns else ""))
+
+
+def resolve_link(value: str, station: str = "g2") -> str:
+    """A pty link given as a parameter: ``auto`` is this launch's link of ``station``, ``auto:NAME``
+    this launch's link of station NAME (:func:`auto_pty_link`); anything else is a path."""
+    if value == AUTO_LINK:
+        return auto_pty_link(station=station)
+    if value.startswith(AUTO_LINK + ":"):
+        return auto_pty_link(station=value[len(AUTO_LINK) + 1:])
+    return value
 
 
 def _remove_quietly(path: str) -> None:
@@ -436,6 +451,85 @@ def _take_link_lock(path: str) -> str:
 
 
 # -------------------------------------------------------------------------------- the whole device
+
+class SimPort:
+    """Where a simulated DP station serves the bus (shared by the virtual controller and the virtual
+    I/O island, :mod:`vr_driver.io_island`).
+
+    ``link``: None creates a raw pty pair -- masters (or the line hub, :mod:`pyprofibus_vendor.line`)
+    open :attr:`device_path`; with ``pty_link`` a symlink to it is made there (replacing a stale
+    symlink, never another file; guarded by ``<pty_link>.lock`` holding our pid) and removed by
+    :meth:`close`. A string serves that existing device (``SerialLink(link, baud)``). A
+    :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
+    SimDeviceError when the pty, device or symlink cannot be made."""
+
+    def __init__(self, link: Union[None, str, Link], baud: int, pty_link: Optional[str] = None) -> None:
+        if pty_link is not None and link is not None:
+            raise SimError("pty_link is only for a pty the station creates (link=None)")
+        self.pty: Optional[PtyPair] = None
+        self.symlink: Optional[str] = None
+        self.device_path = ""                     # what a master opens (pty slave path or the device)
+        self._owns_link = False
+        self.link = self._open(link, baud, pty_link)
+
+    def _open(self, link: Union[None, str, Link], baud: int, pty_link: Optional[str]) -> Link:
+        if isinstance(link, Link):
+            return link
+        if isinstance(link, str):
+            try:
+                made = SerialLink(link, baud)
+            except ProfibusError as exc:
+                raise SimDeviceError(str(exc)) from exc
+            self._owns_link = True
+            self.device_path = link
+            return made
+        try:
+            self.pty = open_pty_pair()
+        except ProfibusError as exc:
+            raise SimDeviceError(str(exc)) from exc
+        self.device_path = self.pty.slave_path
+        if pty_link:
+            try:
+                self._make_symlink(pty_link, self.pty.slave_path)
+            except SimDeviceError:
+                self.pty.close()
+                raise
+        self._owns_link = True
+        return self.pty.master_link()
+
+    def _make_symlink(self, path: str, target: str) -> None:
+        if os.path.lexists(path) and not os.path.islink(path):
+            raise SimDeviceError("pty link %s exists and is not a symlink: not replacing it" % path)
+        lock = _take_link_lock(path)
+        tmp = "%s.%d.tmp" % (path, os.getpid())
+        try:
+            if os.path.lexists(tmp):
+                os.unlink(tmp)
+            os.symlink(target, tmp)
+            os.replace(tmp, path)
+        except OSError as exc:
+            _remove_quietly(lock)
+            raise SimDeviceError("cannot create the pty link %s -> %s: %s" % (path, target, exc)) from exc
+        self.symlink = path
+
+    def close(self) -> None:
+        """Close what this object opened, remove the pty symlink and its lock. Idempotent."""
+        if self._owns_link:
+            self.link.close()
+            self._owns_link = False
+        if self.pty is not None:
+            self.pty.close()
+            self.pty = None
+        if self.symlink is not None:
+            try:
+                if os.path.islink(self.symlink):
+                    os.unlink(self.symlink)
+            except OSError as exc:
+                log.warning("cannot remove the pty link %s: %s", self.symlink, exc)
+            _remove_quietly(self.symlink + ".lock")
+            self.symlink = None
+
+
 
 class VirtualController:
     """The virtual G2: DP slave + program loop + simulated arm, on a link.
@@ -503,10 +597,6 @@ class VirtualController:
         self._thread: Optional[threading.Thread] = None
         self.error: Optional[BaseException] = None
         self.overruns = 0
-        self.pty: Optional[PtyPair] = None
-        self.symlink: Optional[str] = None
-        self.device_path = ""                     # what a master opens (pty slave path or the device)
-        self._owns_link = False
         self._log_fh: Optional[IO[str]] = None
         if self.options.log_file:
             try:
@@ -515,52 +605,29 @@ class VirtualController:
                 raise SimError("cannot open the log file %s: %s" % (self.options.log_file, exc)) from exc
             self.execution_log.add_listener(self._write_log_line)
         try:
-            self.link = self._open_link(link)
+            self.port = SimPort(link, self.options.baud, self.options.pty_link)
         except BaseException:
             self._close_log()
             raise
         self.server = SlaveServer(self.link, self.slave, clock=clock)
 
     # ----------------------------------------------------------------------- set-up / tear-down
-    def _open_link(self, link: Union[None, str, Link]) -> Link:
-        if isinstance(link, Link):
-            return link
-        if isinstance(link, str):
-            try:
-                made = SerialLink(link, self.options.baud)
-            except ProfibusError as exc:
-                raise SimDeviceError(str(exc)) from exc
-            self._owns_link = True
-            self.device_path = link
-            return made
-        try:
-            self.pty = open_pty_pair()
-        except ProfibusError as exc:
-            raise SimDeviceError(str(exc)) from exc
-        self.device_path = self.pty.slave_path
-        if self.options.pty_link:
-            try:
-                self._make_symlink(self.options.pty_link, self.pty.slave_path)
-            except SimDeviceError:
-                self.pty.close()
-                raise
-        self._owns_link = True
-        return self.pty.master_link()
+    @property
+    def link(self) -> Link:
+        return self.port.link
 
-    def _make_symlink(self, path: str, target: str) -> None:
-        if os.path.lexists(path) and not os.path.islink(path):
-            raise SimDeviceError("pty link %s exists and is not a symlink: not replacing it" % path)
-        lock = _take_link_lock(path)
-        tmp = "%s.%d.tmp" % (path, os.getpid())
-        try:
-            if os.path.lexists(tmp):
-                os.unlink(tmp)
-            os.symlink(target, tmp)
-            os.replace(tmp, path)
-        except OSError as exc:
-            _remove_quietly(lock)
-            raise SimDeviceError("cannot create the pty link %s -> %s: %s" % (path, target, exc)) from exc
-        self.symlink = path
+    @property
+    def pty(self) -> Optional[PtyPair]:
+        return self.port.pty
+
+    @property
+    def symlink(self) -> Optional[str]:
+        return self.port.symlink
+
+    @property
+    def device_path(self) -> str:
+        """What a master opens (pty slave path or the device)."""
+        return self.port.device_path
 
     def start(self) -> "VirtualController":
         """Serve the bus and run the program loop in background threads."""
@@ -587,20 +654,7 @@ class VirtualController:
         if thread is not None:
             thread.join(5.0)
         self.server.stop()
-        if self._owns_link:
-            self.link.close()
-            self._owns_link = False
-        if self.pty is not None:
-            self.pty.close()
-            self.pty = None
-        if self.symlink is not None:
-            try:
-                if os.path.islink(self.symlink):
-                    os.unlink(self.symlink)
-            except OSError as exc:
-                log.warning("cannot remove the pty link %s: %s", self.symlink, exc)
-            _remove_quietly(self.symlink + ".lock")
-            self.symlink = None
+        self.port.close()
         self._close_log()
 
     close = stop

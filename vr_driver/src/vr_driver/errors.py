@@ -22,8 +22,11 @@
     ├── CsrError                 a .csr program, or an input of the .csr exporter, is malformed or
     │                            holds a value the format cannot take (names source, line, field);
     │                            also a ValueError
-    └── CsrConversionError       valid waypoints that cannot be exported (unreachable, outside the
-                                 joint limits or the workspace box); ``problems`` lists each one
+    ├── CsrConversionError       valid waypoints that cannot be exported (unreachable, outside the
+    │                            joint limits or the workspace box); ``problems`` lists each one
+    └── SignalMapError           an I/O signal map (io_signals) entry is invalid, or a value does
+                                 not fit a signal's type (names the station and key); also a
+                                 ValueError
 
 Motion planning re-raises kinematic errors unchanged when a single step fails (the message names
 the step), so callers catch ``VrDriverError`` or one of its direct children. Foreign exceptions
@@ -49,6 +52,7 @@ __all__ = [
     "TargetRejected",
     "CsrError",
     "CsrConversionError",
+    "SignalMapError",
 ]
 
 
@@ -173,3 +177,9 @@ class CsrConversionError(VrDriverError):
         first = str(self.problems[0]) if self.problems else "no problems"
         more = len(self.problems) - 1
         super().__init__(first + (" (and %d more)" % more if more > 0 else ""))
+
+
+class SignalMapError(VrDriverError, ValueError):
+    """An I/O signal map is invalid (unknown key or type, overlap, offset past the station's image,
+    duplicate name, safe value that does not fit), or a value does not fit a signal's type. The
+    message names the station and the key."""

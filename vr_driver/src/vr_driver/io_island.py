@@ -1,0 +1,231 @@
+"""The virtual I/O island: a DP slave (station 8, ident 0x0F1A, GSD ``VRIO0F1A.gsd``, 2 bytes in /
+2 bytes out, Chk_Cfg ``11 21`` = modules "16 DI", "16 DO") with a simulated gripper and part sensor.
+ROS-free.
+
+Process image (the signal map ``config/io_island_signals.yaml`` names exactly these):
+
+- output byte 0 bit 0 ``gripper_close``: the valve; 1 closes the gripper;
+- input byte 0 bit 0 ``gripper_closed``: follows ``gripper_close`` :data:`GRIPPER_DELAY` (0.3 s)
+  later (a command that does not last that long never shows);
+- input byte 0 bit 1 ``part_present``: set by :meth:`IslandProgram.set_part_present` (tests, the
+  node's ``~set_part_present`` service).
+
+Outside Data_Exchange the island acts on its safe outputs (all 0: the gripper opens): the DP slave
+replaces its outputs by the safe image when it leaves Data_Exchange -- the DP watchdog expired (the
+master fell silent) or the master re-parameterised it -- and :class:`IslandProgram` takes no output
+image as a command unless the slave is in Data_Exchange.
+
+:class:`VirtualIoIsland` serves the slave on its own pty (:class:`~vr_driver.controller_sim.SimPort`)
+with the program loop in a thread; on the virtual line the hub (:mod:`pyprofibus_vendor.line`)
+joins its pty with the controller's. ``python3 -m vr_driver.io_island`` runs it from the shell
+(:func:`main`); the ROS node is ``virtual_io_island`` (:mod:`vr_driver.io_island_node`).
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+import threading
+import time
+from typing import IO, Any, Callable, Optional, Sequence, Union
+
+from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
+from pyprofibus_vendor.phy import Link
+
+from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError,
+                             SimPort, _int_option, _positive)
+
+__all__ = ["ISLAND_ADDRESS", "ISLAND_IDENT", "ISLAND_CFG", "ISLAND_GSD", "GRIPPER_DELAY", "island_slave",
+           "IslandProgram", "VirtualIoIsland", "main"]
+
+log = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+
+ISLAND_ADDRESS = 8
+ISLAND_IDENT = 0x0F1A
+ISLAND_CFG = bytes([0x11, 0x21])          # "16 DI", "16 DO" of VRIO0F1A.gsd: 2 bytes in, 2 out
+ISLAND_GSD = "VRIO0F1A.gsd"
+GRIPPER_DELAY = 0.3                        # s from gripper_close to gripper_closed
+DEFAULT_LOOP_PERIOD = 0.01
+
+
+def island_slave(address: int = ISLAND_ADDRESS, clock: Clock = time.monotonic) -> DpSlave:
+    """The island's DP slave (safe outputs: all 0)."""
+    return DpSlave(address, ISLAND_IDENT, ISLAND_CFG, clock=clock)
+
+
+class IslandProgram:
+    """The island's application, stepped: :meth:`step` (``now`` injected) checks the DP watchdog,
+    takes the valve command from the output image (only in Data_Exchange), moves the gripper and
+    writes the input image. Thread-safe: :meth:`set_part_present` may be called from anywhere."""
+
+    def __init__(self, slave: DpSlave, delay: float = GRIPPER_DELAY) -> None:
+        self.slave = slave
+        self.delay = delay
+        self.command = 0                  # gripper_close as the island acts on it
+        self.command_since: Optional[float] = None
+        self.closed = 0                   # gripper_closed
+        self._part_present = 0
+        self._lock = threading.Lock()
+
+    def set_part_present(self, present: bool) -> None:
+        with self._lock:
+            self._part_present = 1 if present else 0
+        self._write_inputs()
+
+    @property
+    def part_present(self) -> int:
+        return self._part_present
+
+    def step(self, now: float) -> bytes:
+        """One program loop; returns the input image written."""
+        self.slave.step(now)              # the DP watchdog: outputs safe when the master is silent
+        outputs = self.slave.outputs if self.slave.state is SlaveState.DATA_EXCH else self.slave.safe_outputs
+        command = outputs[0] & 1
+        if command != self.command or self.command_since is None:
+            if command != self.command:
+                log.info("island: gripper_close %d", command)
+            self.command, self.command_since = command, now
+        if self.closed != self.command and now - self.command_since >= self.delay - 1e-9:   # float times
+            self.closed = self.command
+        return self._write_inputs()
+
+    def _write_inputs(self) -> bytes:
+        with self._lock:
+            image = bytes([self.closed | self._part_present << 1, 0])
+        self.slave.inputs = image
+        return image
+
+
+class VirtualIoIsland:
+    """The virtual I/O island: DP slave + program loop, on its own port (see
+    :class:`~vr_driver.controller_sim.SimPort`: ``link`` None creates a pty, symlinked at
+    ``pty_link``; a string serves that device; a Link is used as it is). :meth:`step` runs one
+    program loop by hand (stepped tests; do not mix with :meth:`start`)."""
+
+    def __init__(self, link: Union[None, str, Link] = None, *, address: int = ISLAND_ADDRESS,
+                 baud: int = 19200, pty_link: Optional[str] = None,
+                 loop_period: float = DEFAULT_LOOP_PERIOD, clock: Clock = time.monotonic) -> None:
+        self.address = _int_option(address, "addr", 0, 125)
+        self.loop_period = _positive(loop_period, "loop_period")
+        self.clock = clock
+        self.slave = island_slave(self.address, clock)
+        self.program = IslandProgram(self.slave)
+        self.port = SimPort(link, _int_option(baud, "baud", 9600, 12_000_000), pty_link or None)
+        self.server = SlaveServer(self.port.link, self.slave, clock=clock)
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.error: Optional[BaseException] = None
+
+    @property
+    def device_path(self) -> str:
+        return self.port.device_path
+
+    @property
+    def symlink(self) -> Optional[str]:
+        return self.port.symlink
+
+    @property
+    def server_error(self) -> Optional[BaseException]:
+        return self.server.error
+
+    def set_part_present(self, present: bool) -> None:
+        log.info("island: part_present %d", 1 if present else 0)
+        self.program.set_part_present(present)
+
+    def step(self, now: Optional[float] = None) -> bytes:
+        return self.program.step(self.clock() if now is None else now)
+
+    def start(self) -> "VirtualIoIsland":
+        if self._thread is None:
+            self._stop.clear()
+            self.server.start()
+            self._thread = threading.Thread(target=self._run, name="io-island", daemon=True)
+            self._thread.start()
+            log.info("virtual I/O island: DP slave %d (ident 0x%04X) on %s", self.address, ISLAND_IDENT,
+                     self.device_path or self.port.link)
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.step()
+            except Exception as exc:  # noqa: BLE001 - record, report, end the loop
+                self.error = exc
+                log.exception("island program loop failed")
+                return
+            self._stop.wait(self.loop_period)
+
+    def request_stop(self) -> None:
+        self._stop.set()
+
+    def stop(self) -> None:
+        """Stop the threads, close the port (removes the pty symlink). Idempotent."""
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(5.0)
+        self.server.stop()
+        self.port.close()
+
+    close = stop
+
+    def __enter__(self) -> "VirtualIoIsland":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+
+def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python3 -m vr_driver.io_island",
+        description="Virtual I/O island: a PROFIBUS-DP slave (ident 0x0F1A, 2 bytes in / 2 out, GSD "
+                    "VRIO0F1A.gsd) with a simulated gripper. Without --device it creates a pty pair; the "
+                    "first line on stdout is the device path. Stops cleanly on SIGINT / SIGTERM.",
+        epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--pty-link", metavar="PATH", help="symlink the pty's device end at PATH (removed on exit)")
+    where.add_argument("--device", metavar="DEV", help="serve an existing serial device")
+    p.add_argument("--addr", type=int, default=ISLAND_ADDRESS, help="DP slave address (default 8)")
+    p.add_argument("--baud", type=int, default=19200, help="DP bit rate (default 19200)")
+    p.add_argument("--part-present", action="store_true", help="start with a part present")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
+    args = p.parse_args(argv)
+    out = stdout if stdout is not None else sys.stdout
+    logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    island: Optional[VirtualIoIsland] = None
+    try:
+        try:
+            island = VirtualIoIsland(args.device, address=args.addr, baud=args.baud, pty_link=args.pty_link)
+        except SimDeviceError as exc:
+            print("%s: device error: %s" % (p.prog, exc), file=sys.stderr)
+            return EXIT_DEVICE
+        except SimError as exc:
+            print("%s: error: %s" % (p.prog, exc), file=sys.stderr)
+            return EXIT_USAGE
+        island.set_part_present(args.part_present)
+        island.start()
+        print(island.device_path, file=out, flush=True)
+        while not stop.wait(0.2):
+            if island.server_error is not None:
+                print("%s: device error: %s" % (p.prog, island.server_error), file=sys.stderr)
+                return EXIT_DEVICE
+            if island.error is not None:
+                print("%s: internal error: %s" % (p.prog, island.error), file=sys.stderr)
+                return EXIT_FAILURE
+        return EXIT_OK
+    finally:
+        if island is not None:
+            island.stop()
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,82 @@
+"""ROS node `virtual_io_island`: the thin ROS edge of :class:`vr_driver.io_island.VirtualIoIsland`.
+
+Private parameters (defaults in brackets): ``~pty_link`` ["auto"] create a pty pair and symlink its
+device end here (``auto``: this launch's own island link, ``controller_sim.resolve_link``; "" no symlink); ``~device`` [""] serve this existing device instead; ``~addr`` [8];
+``~baud`` [19200]; ``~part_present`` [false] the part sensor at start.
+
+Sets ``~device_path`` to the pty the line hub (or a master) opens. Service (std_srvs/SetBool)
+``~set_part_present``: True puts a part in front of the sensor (input ``part_present`` = 1).
+
+Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import rospy
+from std_srvs.srv import SetBool, SetBoolResponse
+
+from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, SimDeviceError,
+                             SimError, resolve_link)
+from .io_island import ISLAND_ADDRESS, VirtualIoIsland
+from .ros_support import route_to_rosout, stop_on_signals
+
+PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path")
+
+
+def main() -> int:
+    stop = stop_on_signals()
+    rospy.init_node("virtual_io_island", disable_signals=True)
+    route_to_rosout("vr_driver", "pyprofibus_vendor")
+    params = rospy.get_param("~", {}) or {}
+    unknown = sorted(k for k in params if k not in PARAMS)
+    if unknown:
+        rospy.logwarn("virtual_io_island: ignoring unknown parameter(s) %s", ", ".join(unknown))
+    device = params.get("device") or None
+    pty_link = None if device else params.get("pty_link", AUTO_LINK) or None
+    try:
+        if pty_link is not None and pty_link.startswith(AUTO_LINK):
+            pty_link = resolve_link(pty_link, "io_island")
+            os.makedirs(os.path.dirname(pty_link), exist_ok=True)
+        island = VirtualIoIsland(device, address=params.get("addr", ISLAND_ADDRESS),
+                                 baud=params.get("baud", 19200), pty_link=pty_link)
+    except SimDeviceError as exc:
+        rospy.logfatal("virtual_io_island: device error: %s", exc)
+        return EXIT_DEVICE
+    except SimError as exc:
+        rospy.logfatal("virtual_io_island: %s", exc)
+        return EXIT_USAGE
+    island.set_part_present(bool(params.get("part_present", False)))
+
+    def set_part_present(request: Any) -> Any:
+        island.set_part_present(bool(request.data))
+        return SetBoolResponse(success=True, message="part_present %d" % (1 if request.data else 0))
+
+    service = rospy.Service("~set_part_present", SetBool, set_part_present)
+    rospy.on_shutdown(island.request_stop)
+    island.start()
+    rospy.set_param("~device_path", island.device_path)
+    rospy.loginfo("virtual_io_island: DP slave %d on %s%s", island.address, island.device_path,
+                  " (linked at %s)" % island.symlink if island.symlink else "")
+    status = EXIT_OK
+    rate = rospy.Rate(5.0)
+    try:
+        while not rospy.is_shutdown() and not stop.is_set():
+            if island.server_error is not None:
+                rospy.logfatal("virtual_io_island: device error: %s", island.server_error)
+                status = EXIT_DEVICE
+                break
+            if island.error is not None:
+                rospy.logfatal("virtual_io_island: program loop failed: %s", island.error)
+                status = EXIT_FAILURE
+                break
+            try:
+                rate.sleep()
+            except rospy.ROSInterruptException:
+                break
+    finally:
+        service.shutdown()
+        island.stop()
+    rospy.signal_shutdown("virtual I/O island stopped")
+    return status

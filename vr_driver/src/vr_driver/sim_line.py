@@ -1,0 +1,277 @@
+"""The virtual RS-485 line: a hub that joins the ptys of several simulated DP stations into one
+multi-drop line. ROS-free.
+
+RS-485 is multi-drop: every station hears every telegram and only the addressed one answers. Each
+simulated station (the virtual controller, the virtual I/O island) serves its own pty in its own
+process, so that one can be killed on its own; :class:`LineHub` opens every station's pty as a
+client would, creates one more pty for the master (:attr:`LineHub.device_path`, optionally
+symlinked at ``pty_link``) and copies bytes:
+
+- master -> every connected station (each station's DP slave ignores telegrams not for it);
+- any station -> master.
+
+A station whose pty fails (its process died: EIO / end of file) is dropped at once -- the master
+then sees its telegrams unanswered, as on a line whose station was unplugged -- and its path is
+tried again every ``reopen_period`` seconds, so a restarted station (same ``--pty-link`` path)
+joins the line again. A path whose ``<path>.lock`` names a process that is gone (a station killed
+before it could remove its symlink) is not opened: its pty number may already belong to someone else.
+
+``baud`` (optional) paces the line: each chunk is delivered only after its bytes would have been
+on a real line at that bit rate (11 bits per character, one direction at a time), so cycle rates
+measured through the hub show the bus time. Without it the ptys move bytes as fast as they can.
+
+``python3 -m vr_driver.sim_line [--pty-link PATH] [--baud B] STATION_PATH...`` runs it from the
+shell (:func:`main`; the first line on stdout is the master's device path).
+"""
+from __future__ import annotations
+
+import argparse
+import heapq
+import logging
+import os
+import select
+import signal
+import sys
+import threading
+import time
+import tty
+from dataclasses import dataclass
+from typing import IO, Any, Callable, List, Optional, Sequence, Tuple
+
+from pyprofibus_vendor.errors import PhyError
+from pyprofibus_vendor.phy_serial import FdLink
+
+from .controller_sim import (EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, SimPort,
+                             _pid_alive)
+
+__all__ = ["LineCounters", "LineHub", "main"]
+
+log = logging.getLogger(__name__)
+
+Clock = Callable[[], float]
+
+
+@dataclass
+class LineCounters:
+    to_stations: int = 0          # bytes from the master copied to the stations (per station)
+    to_master: int = 0            # bytes from the stations copied to the master
+    station_opens: int = 0
+    station_drops: int = 0
+
+
+class _Station:
+    def __init__(self, path: str) -> None:
+        self.path = path
+        self.link: Optional[FdLink] = None
+        self.next_open = 0.0
+        self.why = "not opened yet"
+
+
+def _lock_owner_gone(path: str) -> bool:
+    """``path.lock`` names a process that no longer runs (its symlink is stale)."""
+    try:
+        with open(path + ".lock") as f:
+            text = f.read().strip()
+    except OSError:
+        return False
+    return text.isdigit() and not _pid_alive(int(text))
+
+
+class LineHub:
+    """See the module docstring. :meth:`start` serves in a thread; :meth:`serve` in the caller's."""
+
+    def __init__(self, stations: Sequence[str], *, pty_link: Optional[str] = None, baud: Optional[int] = None,
+                 reopen_period: float = 0.2, clock: Clock = time.monotonic) -> None:
+        if not stations:
+            raise SimError("the line needs at least one station path")
+        if baud is not None and not 9600 <= baud <= 12_000_000:
+            raise SimError("baud %r outside 9600..12000000" % (baud,))
+        self.stations = [_Station(p) for p in stations]
+        self.baud = baud
+        self.reopen_period = reopen_period
+        self.clock = clock
+        self.counters = LineCounters()
+        self.port = SimPort(None, baud or 19200, pty_link)
+        self.master = self.port.link
+        self._queue: List[Tuple[float, int, int, bytes]] = []     # (due, seq, target (-1 master), bytes)
+        self._seq = 0
+        self._line_free = 0.0
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.error: Optional[BaseException] = None
+
+    @property
+    def device_path(self) -> str:
+        """The pty the master opens."""
+        return self.port.device_path
+
+    @property
+    def symlink(self) -> Optional[str]:
+        return self.port.symlink
+
+    def connected(self) -> List[str]:
+        """The station paths joined to the line now."""
+        return [s.path for s in self.stations if s.link is not None]
+
+    # ------------------------------------------------------------------------ stations
+    def _open(self, st: _Station, now: float) -> None:
+        st.next_open = now + self.reopen_period
+        if not os.path.exists(st.path) or _lock_owner_gone(st.path):
+            st.why = "no station at %s" % st.path
+            return
+        try:
+            fd = os.open(st.path, os.O_RDWR | os.O_NOCTTY | os.O_NONBLOCK)
+        except OSError as exc:
+            st.why = "cannot open %s: %s" % (st.path, exc)
+            return
+        try:
+            tty.setraw(fd)
+        except Exception:  # noqa: BLE001 - not a tty (a FIFO in tests): raw bytes anyway
+            pass
+        st.link = FdLink(fd, owns_fd=True, name="station(%s)" % st.path)
+        st.link.flush_input()
+        self.counters.station_opens += 1
+        log.info("line: station %s joined", st.path)
+
+    def _drop(self, st: _Station, why: str, now: float) -> None:
+        if st.link is not None:
+            st.link.close()
+            st.link = None
+            self.counters.station_drops += 1
+            log.warning("line: station %s dropped (%s); retrying every %.2g s", st.path, why, self.reopen_period)
+        st.why = why
+        st.next_open = now + self.reopen_period
+
+    # ------------------------------------------------------------------------ the loop
+    def _deliver(self, target: int, data: bytes, now: float) -> None:
+        if target < 0:
+            self.master.send(data)
+            self.counters.to_master += len(data)
+            return
+        for i, st in enumerate(self.stations):
+            if st.link is None or (target != len(self.stations) and target != i):
+                continue
+            try:
+                st.link.send(data)
+                self.counters.to_stations += len(data)
+            except PhyError as exc:
+                self._drop(st, str(exc), now)
+
+    def _forward(self, target: int, data: bytes, now: float) -> None:
+        if self.baud is None:
+            return self._deliver(target, data, now)
+        self._line_free = max(now, self._line_free) + len(data) * 11.0 / self.baud
+        self._seq += 1
+        heapq.heappush(self._queue, (self._line_free, self._seq, target, data))
+
+    def step(self, timeout: float) -> None:
+        """Wait up to ``timeout`` for bytes, copy them; reopen stations that are due."""
+        now = self.clock()
+        for st in self.stations:
+            if st.link is None and now >= st.next_open:
+                self._open(st, now)
+        while self._queue and self._queue[0][0] <= now:
+            _, _, target, data = heapq.heappop(self._queue)
+            self._deliver(target, data, now)
+        if self._queue:
+            timeout = min(timeout, max(0.0, self._queue[0][0] - now))
+        fds = {self.master.fd: None}
+        fds.update({st.link.fd: st for st in self.stations if st.link is not None})
+        ready, _, _ = select.select(list(fds), [], [], timeout)
+        now = self.clock()
+        for fd in ready:
+            st = fds[fd]
+            if st is None:
+                data = self.master.recv(4096, 0.0)      # PhyError: the hub's own pty failed
+                if data:
+                    self._forward(len(self.stations), data, now)
+                continue
+            try:
+                data = st.link.recv(4096, 0.0) if st.link is not None else b""
+            except PhyError as exc:
+                self._drop(st, str(exc), now)
+                continue
+            if data:
+                self._forward(-1, data, now)
+
+    def serve(self, stop: Optional[threading.Event] = None) -> None:
+        stop = stop or self._stop
+        while not stop.is_set():
+            self.step(min(0.05, self.reopen_period))
+
+    def start(self) -> "LineHub":
+        def run() -> None:
+            try:
+                self.serve(self._stop)
+            except Exception as exc:  # noqa: BLE001 - record, report
+                self.error = exc
+                log.exception("line hub stopped")
+        if self._thread is None:
+            self._stop.clear()
+            self._thread = threading.Thread(target=run, name="line-hub", daemon=True)
+            self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(5.0)
+        for st in self.stations:
+            if st.link is not None:
+                st.link.close()
+                st.link = None
+        self.port.close()
+
+    close = stop
+
+    def __enter__(self) -> "LineHub":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+
+def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python3 -m vr_driver.sim_line",
+        description="The virtual RS-485 line: joins the ptys of simulated DP stations (virtual controller, "
+                    "virtual I/O island) into one multi-drop line. The first line on stdout is the device "
+                    "path the master opens. Stops cleanly on SIGINT / SIGTERM.",
+        epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem")
+    p.add_argument("stations", nargs="+", metavar="STATION_PATH", help="a station's pty (or its symlink)")
+    p.add_argument("--pty-link", metavar="PATH", help="symlink the master's pty at PATH (removed on exit)")
+    p.add_argument("--baud", type=int, help="pace the line at this bit rate (default: as fast as the ptys)")
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
+    args = p.parse_args(argv)
+    out = stdout if stdout is not None else sys.stdout
+    logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    hub: Optional[LineHub] = None
+    try:
+        try:
+            hub = LineHub(args.stations, pty_link=args.pty_link, baud=args.baud)
+        except SimDeviceError as exc:
+            print("%s: device error: %s" % (p.prog, exc), file=sys.stderr)
+            return EXIT_DEVICE
+        except SimError as exc:
+            print("%s: error: %s" % (p.prog, exc), file=sys.stderr)
+            return EXIT_USAGE
+        print(hub.device_path, file=out, flush=True)
+        try:
+            hub.serve(stop)
+        except PhyError as exc:
+            print("%s: device error: %s" % (p.prog, exc), file=sys.stderr)
+            return EXIT_DEVICE
+        return EXIT_OK
+    finally:
+        if hub is not None:
+            hub.stop()
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

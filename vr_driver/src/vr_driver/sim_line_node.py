@@ -1,0 +1,65 @@
+"""ROS node `virtual_line`: the thin ROS edge of :class:`vr_driver.sim_line.LineHub`, the hub that
+joins the ptys of the simulated stations into one multi-drop PROFIBUS line.
+
+Private parameters: ``~stations`` [["auto", "auto:io_island"]] the stations' pty paths; ``auto`` is this
+launch's virtual controller link, ``auto:NAME`` this launch's link of station NAME
+(``controller_sim.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
+linked (``auto``: ``<ROS log dir>/vr006l_virtual_line_<master port>``; the driver's ``port``);
+``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys).
+
+Sets ``~device_path`` (the master's pty). Exit status: 0 on shutdown, 2 bad parameter, 3 device problem.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from typing import List
+
+import rospy
+
+from pyprofibus_vendor.errors import PhyError
+
+from .controller_sim import AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, resolve_link
+from .ros_support import route_to_rosout, stop_on_signals
+from .sim_line import LineHub
+
+
+def main() -> int:
+    stop = stop_on_signals()
+    rospy.init_node("virtual_line", disable_signals=True)
+    route_to_rosout("vr_driver", "pyprofibus_vendor")
+    try:
+        raw = rospy.get_param("~stations", [AUTO_LINK, AUTO_LINK + ":io_island"])
+        if not isinstance(raw, list):
+            raise SimError("~stations must be a list of pty paths, got %r" % (raw,))
+        if not all(isinstance(p, str) and p for p in raw):
+            raise SimError("~stations must be a list of pty paths, got %r" % (raw,))
+        stations: List[str] = [resolve_link(p) for p in raw]
+        link = rospy.get_param("~pty_link", AUTO_LINK) or None
+        if link is not None and link.startswith(AUTO_LINK):
+            link = resolve_link(link, "line")
+            os.makedirs(os.path.dirname(link), exist_ok=True)
+        baud = int(rospy.get_param("~baud", 0)) or None
+        hub = LineHub(stations, pty_link=link, baud=baud)
+    except SimDeviceError as exc:
+        rospy.logfatal("virtual_line: device error: %s", exc)
+        return EXIT_DEVICE
+    except (SimError, ValueError) as exc:
+        rospy.logfatal("virtual_line: %s", exc)
+        return EXIT_USAGE
+    rospy.set_param("~device_path", hub.device_path)
+    rospy.loginfo("virtual_line: master end %s%s; stations %s", hub.device_path,
+                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(stations))
+    halt = threading.Event()
+    rospy.on_shutdown(halt.set)
+    status = EXIT_OK
+    try:
+        while not rospy.is_shutdown() and not stop.is_set() and not halt.is_set():
+            hub.step(0.05)
+    except PhyError as exc:
+        rospy.logfatal("virtual_line: device error: %s", exc)
+        status = EXIT_DEVICE
+    finally:
+        hub.stop()
+    rospy.signal_shutdown("virtual line stopped")
+    return status
