@@ -93,7 +93,9 @@ def as_pose(msg: CartesianPose) -> ControllerPose:
     return ControllerPose(msg.x, msg.y, msg.z, msg.rx, msg.ry, msg.rz)
 
 
-class DriverTest(unittest.TestCase):
+class DriverTestBase(unittest.TestCase):
+    """The recorders, clients and helpers of the driver rostests (no tests)."""
+
     @classmethod
     def setUpClass(cls):
         rospy.init_node("driver_check")
@@ -159,6 +161,51 @@ class DriverTest(unittest.TestCase):
                         % (n, len(self.executed.messages)))
         return self.entries()
 
+    def trajectory_goal(self, points, times, names=None, tol=None):
+        goal = FollowJointTrajectoryGoal()
+        goal.trajectory.joint_names = list(names or ["joint_%d" % i for i in range(1, 7)])
+        goal.trajectory.points = [JointTrajectoryPoint(positions=list(p), time_from_start=rospy.Duration(t))
+                                  for p, t in zip(points, times)]
+        if tol is not None:
+            goal.path_tolerance = [JointTolerance(name=n, position=tol) for n in goal.trajectory.joint_names]
+            goal.goal_tolerance = [JointTolerance(name=n, position=tol) for n in goal.trajectory.joint_names]
+        return goal
+
+    def follow(self, goal, timeout=60.0):
+        return self.send_and_wait(self.trajectory_client, goal, timeout,
+                                  "no result from joint_trajectory_action")
+
+    def check_trajectory_refusals(self):
+        """Each bad goal of joint_trajectory_action is refused with its control_msgs code, a reason,
+        and nothing reaches the controller."""
+        self.wait_motion_possible()
+        before = len(self.entries())
+        q0 = list(self.joints.last().position)
+        q1 = [q0[0] + 0.2] + q0[1:]
+        nan = float("nan")
+        names = ["joint_%d" % i for i in range(1, 7)]
+        cases = [
+            (self.trajectory_goal([q1], [1.0], names=names[:5] + ["joint_x"]),
+             FollowJointTrajectoryResult.INVALID_JOINTS),
+            (self.trajectory_goal([q1], [1.0], names=names[:5]), FollowJointTrajectoryResult.INVALID_JOINTS),
+            (self.trajectory_goal([q1, q1], [1.0, 1.0]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([q1, q0], [1.0, 0.5]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([[q0[0] + 2.0] + q0[1:]], [0.1]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([q0[:2] + [nan] + q0[3:]], [1.0]), FollowJointTrajectoryResult.INVALID_GOAL),
+            (self.trajectory_goal([[0.0, 1.5, 0.5, 0.0, 0.0, 0.0]], [5.0]),     # below the floor
+             FollowJointTrajectoryResult.INVALID_GOAL),
+        ]
+        for goal, code in cases:
+            state, result = self.follow(goal, 20.0)
+            self.assertIn(state, (GoalStatus.REJECTED, GoalStatus.ABORTED))
+            self.assertEqual(result.error_code, code, result.error_string)
+            self.assertTrue(result.error_string)
+        self.status.wait_for(lambda m: False, 0.5)
+        self.assertEqual(len(self.entries()), before)
+
+
+
+class DriverTest(DriverTestBase):
     # -------------------------------------------------------------------- tests (run in name order)
     def test_01_status_and_joint_states_at_their_rates(self):
         first = self.status.wait_for(lambda m: True, 5.0)
@@ -521,21 +568,6 @@ class DriverTest(unittest.TestCase):
         self.assertEqual(os.path.realpath(link), os.path.realpath(rospy.get_param("/virtual_controller/device_path")))
         self.wait_motion_possible()                       # the driver's link is untouched
 
-    # ------------------------------------------------------------ joint_trajectory_action (v1)
-    def trajectory_goal(self, points, times, names=None, tol=None):
-        goal = FollowJointTrajectoryGoal()
-        goal.trajectory.joint_names = list(names or ["joint_%d" % i for i in range(1, 7)])
-        goal.trajectory.points = [JointTrajectoryPoint(positions=list(p), time_from_start=rospy.Duration(t))
-                                  for p, t in zip(points, times)]
-        if tol is not None:
-            goal.path_tolerance = [JointTolerance(name=n, position=tol) for n in goal.trajectory.joint_names]
-            goal.goal_tolerance = [JointTolerance(name=n, position=tol) for n in goal.trajectory.joint_names]
-        return goal
-
-    def follow(self, goal, timeout=60.0):
-        return self.send_and_wait(self.trajectory_client, goal, timeout,
-                                  "no result from joint_trajectory_action")
-
     def test_14_joint_trajectory_action_runs_a_30_point_trajectory(self):
         """issue 16: an actionlib client of joint_trajectory_action, as MoveIt's controller manager
         uses it: SUCCESSFUL, joint_states within the path tolerance throughout, each target once."""
@@ -583,31 +615,7 @@ class DriverTest(unittest.TestCase):
             self.assertIsNotNone(shown, "no %s marker" % ns)
 
     def test_15_joint_trajectory_action_refusals_send_nothing(self):
-        self.wait_motion_possible()
-        before = len(self.entries())
-        q0 = list(self.joints.last().position)
-        q1 = [q0[0] + 0.2] + q0[1:]
-        nan = float("nan")
-        names = ["joint_%d" % i for i in range(1, 7)]
-        cases = [
-            (self.trajectory_goal([q1], [1.0], names=names[:5] + ["joint_x"]),
-             FollowJointTrajectoryResult.INVALID_JOINTS),
-            (self.trajectory_goal([q1], [1.0], names=names[:5]), FollowJointTrajectoryResult.INVALID_JOINTS),
-            (self.trajectory_goal([q1, q1], [1.0, 1.0]), FollowJointTrajectoryResult.INVALID_GOAL),
-            (self.trajectory_goal([q1, q0], [1.0, 0.5]), FollowJointTrajectoryResult.INVALID_GOAL),
-            (self.trajectory_goal([[q0[0] + 2.0] + q0[1:]], [0.1]), FollowJointTrajectoryResult.INVALID_GOAL),
-            (self.trajectory_goal([q0[:2] + [nan] + q0[3:]], [1.0]), FollowJointTrajectoryResult.INVALID_GOAL),
-            (self.trajectory_goal([[0.0, 1.5, 0.5, 0.0, 0.0, 0.0]], [5.0]),     # below the floor
-             FollowJointTrajectoryResult.INVALID_GOAL),
-        ]
-        for goal, code in cases:
-            state, result = self.follow(goal, 20.0)
-            self.assertIn(state, (GoalStatus.REJECTED, GoalStatus.ABORTED))
-            self.assertEqual(result.error_code, code, result.error_string)
-            self.assertTrue(result.error_string)
-        self.status.wait_for(lambda m: False, 0.5)
-        self.assertEqual(len(self.entries()), before)
-
+        self.check_trajectory_refusals()
 
 if __name__ == "__main__":
     rostest.rosrun(PKG, "driver", DriverTest)

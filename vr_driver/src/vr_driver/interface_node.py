@@ -31,7 +31,7 @@ from .errors import VrDriverError
 from .params import DriverParams, ParamError
 from .poses import ControllerPose, MoveType
 from .protocol import StatusBits
-from .trajectory_server import TrajectoryServer
+from .trajectory_server import TrajectoryServer, trajectory_from_msg
 from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
 
 _MOVE_TYPES = {MoveToPoseGoal.PTP: MoveType.PTP, MoveToPoseGoal.LIN: MoveType.LIN,
@@ -401,6 +401,21 @@ class InterfaceNode:
         return TriggerResponse(success=True, message="stop sent; %d job(s) ended" % n)
 
     def _joint_path(self, msg: JointTrajectory) -> None:
+        if self.core.streaming:
+            # protocol v2: the same path as joint_trajectory_action (validated with its timing,
+            # streamed; it replaces the rest of a running path)
+            try:
+                if not msg.points:
+                    self.core.stop_motion("empty joint path: stop requested")
+                    return
+                traj = self.trajectory_server.check(trajectory_from_msg(msg))
+                run = self.core.submit_trajectory(traj)
+            except (VrDriverError, ValueError, TypeError) as exc:
+                rospy.logerr("joint_path_command refused: %s", exc)
+                return
+            rospy.loginfo("joint_path_command: %d points over %.2f s streamed", len(traj.positions) - 1,
+                          run.traj.duration)
+            return
         points = [list(p.positions) for p in msg.points]
         try:
             jobs = self.core.submit_joint_path(msg.joint_names, points)

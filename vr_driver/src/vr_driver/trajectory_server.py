@@ -13,8 +13,9 @@ checks are in :mod:`vr_driver.driver.trajectories`, the execution in
   and the goal aborted with PATH_TOLERANCE_VIOLATED. At the end the joints must be within the goal
   tolerance (GOAL_TOLERANCE_VIOLATED otherwise), and within ``goal_time_tolerance`` of the planned
   end when one is given.
-- The result's error_string always says how much slower than planned the run was (v1 stops at
-  each kept point and moves at the controller program's own speed).
+- The result's error_string always says how the run's time compares with the plan (v1 stops at
+  each kept point and moves at the controller program's own speed; v2 streams the points with
+  their timing and blends through them).
 - Cancel stops the arm; the goal ends when it is at rest.
 """
 from __future__ import annotations
@@ -34,18 +35,24 @@ from .driver.trajectories import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TO
 from .errors import VrDriverError
 
 
-def goal_from_msg(goal) -> TrajectoryGoal:
-    """The ROS goal as a TrajectoryGoal (no ROS types)."""
-    traj = goal.trajectory
+def trajectory_from_msg(traj, path_tolerance=(), goal_tolerance=(), goal_time_tolerance: float = 0.0
+                        ) -> TrajectoryGoal:
+    """A trajectory_msgs/JointTrajectory (and tolerances) as a TrajectoryGoal (no ROS types)."""
     stamp = traj.header.stamp.to_sec() if traj.header.stamp else 0.0
     return TrajectoryGoal(
         joint_names=tuple(traj.joint_names),
         positions=tuple(tuple(p.positions) for p in traj.points),
         times=tuple(p.time_from_start.to_sec() for p in traj.points),
-        path_tolerance={t.name: t.position for t in goal.path_tolerance},
-        goal_tolerance={t.name: t.position for t in goal.goal_tolerance},
-        goal_time_tolerance=goal.goal_time_tolerance.to_sec(),
+        path_tolerance={t.name: t.position for t in path_tolerance},
+        goal_tolerance={t.name: t.position for t in goal_tolerance},
+        goal_time_tolerance=goal_time_tolerance,
         start_time=stamp or None)
+
+
+def goal_from_msg(goal) -> TrajectoryGoal:
+    """The ROS goal as a TrajectoryGoal (no ROS types)."""
+    return trajectory_from_msg(goal.trajectory, goal.path_tolerance, goal.goal_tolerance,
+                               goal.goal_time_tolerance.to_sec())
 
 
 class TrajectoryServer:
@@ -92,12 +99,15 @@ class TrajectoryServer:
 
     # ------------------------------------------------------------------ helpers
     def _check(self, goal):
+        return self.check(goal_from_msg(goal))
+
+    def check(self, goal: TrajectoryGoal):
+        """Validate a goal against the arm's joints now (TrajectoryError with its code)."""
         status = self.core.status()
         if not status.motion_possible or status.joints is None:
             raise TrajectoryError(INVALID_GOAL, "motion is not possible: %s" % status.why_no_motion())
         lim = self.core.kin.limits
-        traj = validate(goal_from_msg(goal), self.names, status.joints, lim.lower, lim.upper,
-                        rospy.get_time())
+        traj = validate(goal, self.names, status.joints, lim.lower, lim.upper, rospy.get_time())
         segment_speeds(traj, lim.velocity, self.names)
         return traj
 
@@ -199,8 +209,13 @@ class TrajectoryServer:
         self._draw("trajectory_executed", executed, (0.2, 1.0, 0.2))
         elapsed = rospy.get_time() - started
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
-        note = "ran %.2f x the planned %.2f s (protocol v1 stops at each of %d points)" % (
-            slower, traj.duration, len(run.jobs))
+        if self.core.streaming:
+            streamed = len(run.jobs[0].points) if run.jobs else 0
+            note = "ran %.2f x the planned %.2f s (protocol v2: %d of %d points streamed, blended)" % (
+                slower, traj.duration, streamed, len(traj.positions) - 1)
+        else:
+            note = "ran %.2f x the planned %.2f s (protocol v1 stops at each of %d points)" % (
+                slower, traj.duration, len(run.jobs))
         rospy.loginfo("joint_trajectory_action: %s", note)
         failed = run.failure()
         if why_stop and code != PATH_TOLERANCE_VIOLATED:
