@@ -92,6 +92,7 @@ from vr_driver.motion import MoveType  # noqa: E402
 from vr_driver.params import DriverParams  # noqa: E402
 from vr_driver.poses import ControllerPose  # noqa: E402
 from vr_driver.protocol import round_half_away  # noqa: E402
+from vr_driver.protocol_v2 import joints_to_wire  # noqa: E402
 from vr_driver.sim_arm import LogEntry, Outcome  # noqa: E402
 
 IntPose = Tuple[int, int, int, int, int, int]
@@ -123,6 +124,7 @@ class SoakConfig:
     stall_timeout: float = 60.0         # no motion possible for this long: give up the run
     progress_every: int = 0             # print a progress line every N targets (0: never)
     workdir: Optional[str] = None
+    protocol: str = "v1"                # v2: every move is streamed as joint targets (each one a target)
     driver_params: Dict[str, object] = field(default_factory=dict)   # overrides
 
 
@@ -480,6 +482,7 @@ class TargetGenerator:
 
 def driver_params(config: SoakConfig, path: str) -> DriverParams:
     params = {"port": path, "baud": config.baud, "cycle_rate": config.cycle_rate,
+              "protocol": config.protocol,
               "link_timeout": 0.5, "reconnect_period": 0.5, "watchdog_ms": 300,
               "accept_timeout": 1.0, "release_timeout": 1.0}
     params.update(config.driver_params)
@@ -487,6 +490,8 @@ def driver_params(config: SoakConfig, path: str) -> DriverParams:
 
 
 def _keys(job: MoveJob) -> Tuple[Key, ...]:
+    if job.points:      # v2: each streamed joint target, as the controller logs it (0.001 deg)
+        return tuple(("JOINT", joints_to_wire(p.joints)) for p in job.points)  # type: ignore[misc]
     return tuple((c.move_type.name, tuple(c.values)) for c in job.preview.commands)  # type: ignore[misc]
 
 
@@ -503,9 +508,10 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
     line = FaultLine(config, random.Random(rng.getrandbits(64)))
     sim = VirtualController(pty_link=path, baud=config.baud, speed_factor=config.speed_factor,
                             loop_period=config.loop_period, kinematics=kin,
-                            confirm_records=config.confirm_records).start()
+                            confirm_records=config.confirm_records, protocol=config.protocol).start()
     core = DriverCore(params, kinematics=kin, open_link=line.open_link)
-    recorder = StatusRecorder(handshake_ready=lambda: core.handshake.ready)
+    recorder = StatusRecorder(handshake_ready=(lambda: True) if config.protocol == "v2"
+                              else (lambda: core.handshake.ready))
     core.add_listener(recorder)
     cutter = (Cutter(line, config, random.Random(rng.getrandbits(64)), recorder)
               if config.cut_every > 0 or config.cut_times else None)
@@ -572,7 +578,7 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
                     and time.monotonic() < end:
                 recorder.wait_change(0.2)
         # a last motion may still be running on the controller: let it end before reading the log
-        sim.wait_until(lambda fb: fb.state.name == "READY", 5.0)
+        sim.wait_until(lambda fb: fb.state.name in ("READY", "IDLE"), 5.0)
         time.sleep(max(0.1, 3.0 / config.cycle_rate))
         final = core.status()
         core.stop()
@@ -608,7 +614,7 @@ def _account(result: SoakResult, commanded: List[Commanded], entries: List[LogEn
             known.add(key)
             result.commanded += 1
             logged = by_key.get(key, [])
-            done = [e for e in logged if e.outcome in (Outcome.EXECUTED, Outcome.VIA_STORED)]
+            done = [e for e in logged if e.outcome in (Outcome.EXECUTED, Outcome.VIA_STORED, Outcome.BLENDED)]
             if done:
                 result.executed += 1
                 if len(done) > 1:
@@ -622,7 +628,8 @@ def _account(result: SoakResult, commanded: List[Commanded], entries: List[LogEn
                 continue
             if failed_reason:
                 refused = [e for e in logged if e.outcome is Outcome.REJECTED]
-                if refused and not any(e.aborted for e in refused) and "rejected" in failed_reason:
+                if refused and not any(getattr(e, "aborted", False) for e in refused) \
+                        and ("rejected" in failed_reason or "refused" in failed_reason):
                     result.rejected += 1
                 else:
                     result.aborted += 1
@@ -672,6 +679,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--job-timeout", type=float, default=60.0, help="a job without result after this is lost (default 60)")
     p.add_argument("--progress", type=int, default=500, metavar="N", help="progress line every N jobs (0: none)")
     p.add_argument("--log-file", help="write the driver's and controller's log (INFO) here")
+    p.add_argument("--protocol", choices=("v1", "v2"), default="v1",
+                   help="controller protocol of both ends (v2: moves streamed as joint targets, each "
+                        "one accounted as a target; default v1)")
     args = p.parse_args(argv)
     if args.targets < 1:
         p.error("--targets must be >= 1")
@@ -693,7 +703,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                         confirm_records=not args.no_confirm, cut_every=args.cut_every,
                         cut_min=args.cut_min, cut_max=args.cut_max, seed=args.seed, mix=args.mix,
                         speed_factor=args.speed_factor, baud=args.baud, cycle_rate=args.cycle_rate,
-                        job_timeout=args.job_timeout, progress_every=args.progress)
+                        job_timeout=args.job_timeout, progress_every=args.progress,
+                        protocol=args.protocol)
     result = run_soak(config, progress=lambda text: print(text, flush=True))
     for text in result.summary():
         print(text)

@@ -13,9 +13,11 @@ between two consecutive points (the driver's own PTP preview and ``check_envelop
 keep one arm configuration (elbow, wrist) and the joints off their limits (``SAMPLE_BOX``); every
 point keeps off singularities (``MIN_MANIPULABILITY``), where the v1 program's rounded Cartesian
 targets would solve to joints far from the plan.
-Each leg is timed at one random fraction in [0.5, 1.0] of the joint speed limits: every segment's
-limiting joint moves at that fraction (times are whole nanoseconds, rounded up, so the fraction is
-never exceeded). The trajectories chain: each starts where the previous one ends, the first at the
+Each leg is timed at one random fraction in [0.5, 1.0] of the joint speed limits at cruise: every
+segment's limiting joint moves at that fraction; as a planner's time parameterisation, the whole
+trajectory speeds up from rest and slows down to rest with a constant acceleration over
+``ACCEL_TIME`` (:func:`time_law`; times are whole nanoseconds, rounded up, so no fraction is ever
+exceeded). The trajectories chain: each starts where the previous one ends, the first at the
 virtual controller's home pose. The bench makes trajectory i from where the arm really is, with the
 same random source (:func:`rng_for`): an arm that ended where planned runs exactly the set printed in
 the header; one that ended a little off (v1) a nearly identical one.
@@ -38,9 +40,12 @@ their header stamps (the driver's wall clock, the same as this process's):
                  the run's first to its last sample (a lower bound: 50 ms more per stop at most);
   stops          standing-still episodes between the first and the last motion of the arm;
   start          send_goal -> the first joint_states sample that moved (part of "still");
-  path dev       the largest |joint_states - plan(t)| of any joint, the plan interpolated (linearly,
-                 as the driver does) at the sample's time since send_goal (also: the distance to
-                 the planned path at any time, "path-only");
+  path dev       the largest |joint_states - plan(t - d)| of any joint, the plan interpolated
+                 (linearly, as the driver does) at the sample's time since send_goal less the start
+                 delay d (0 .. 0.5 s in 5 ms steps, the one that gives the smallest deviation: the
+                 goal's way to the driver and the bus's to the controller, "plan delay"); also the
+                 same with d = 0 ("dev at send") and the distance to the planned path at any time
+                 ("path-only");
   final error    the largest joint error of the first joint_states after the result vs the last point;
   succeeded      goals with state SUCCEEDED and error_code SUCCESSFUL.
 The v2 targets (issue 16) are printed next to them. A configuration the stack does not support
@@ -98,7 +103,10 @@ MIN_LEG = math.radians(20.0)          # a leg moves some joint at least this muc
 MIN_STEP = 0.02                       # s: points at most every 20 ms at full speed (as a planner spaces them)
 BUMP = (5.0, 20.0)                    # bent legs: sine bump amplitude [deg]
 POINTS = (10, 100)
-SPEED = (0.5, 1.0)                    # fraction of the joint speed limits per leg
+SPEED = (0.5, 1.0)                    # fraction of the joint speed limits per leg (at cruise)
+#: s: the trajectory speeds up from rest and slows down to rest over this long (constant
+#: acceleration of the time law), as a planner's time parameterisation does -- no arm jumps to speed
+ACCEL_TIME = 0.3
 #: every point this far from a singularity (Yoshikawa's measure; the median of random joints is ~0.06):
 #: near one, the v1 program's whole mm / degree poses solve to joints degrees away from the plan
 MIN_MANIPULABILITY = 0.03
@@ -263,8 +271,7 @@ def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_poi
         if sum(counts) != segments:
             continue
         points: List[Tuple[float, ...]] = [start]
-        fractions: List[float] = []
-        times_ns = [0]
+        nominal = [0.0]                               # times at the legs' cruise speeds
         ok = True
         for a, b, bump, count in zip(starts, ways, bumps, counts):
             f = rng.uniform(*speed)
@@ -276,15 +283,30 @@ def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_poi
                 if need <= 0.0:
                     ok = False
                     break
-                dt_ns = int(math.ceil(need / f * 1e9))
-                fractions.append(need / (dt_ns * 1e-9))
-                times_ns.append(times_ns[-1] + dt_ns)
+                nominal.append(nominal[-1] + need / f)
                 points.append(q)
             if not ok:
                 break
         if ok:
+            times_ns = [int(math.ceil(time_law(u, nominal[-1]) * 1e9)) for u in nominal]
+            fractions = [max(abs(y - x) / v for x, y, v in zip(p0, p1, chk.vmax)) / ((t1 - t0) * 1e-9)
+                         for p0, p1, t0, t1 in zip(points, points[1:], times_ns, times_ns[1:])]
             return Planned(tuple(points), tuple(times_ns), tuple(fractions), tuple(kinds))
     raise RuntimeError("no valid trajectory found from %s" % (start,))
+
+
+def time_law(u: float, total: float, accel: float = ACCEL_TIME) -> float:
+    """The time at which a path run at its cruise speeds in ``total`` s reaches its nominal time
+    ``u``, when the speed ramps up linearly from rest over ``accel`` s and down to rest over the
+    last ``accel`` s (both shortened to ``total`` for a short path): the run lasts ``total + accel``."""
+    a = min(accel, total)
+    if a <= 0.0:
+        return u
+    if u <= a / 2.0:
+        return math.sqrt(2.0 * a * u)
+    if u >= total - a / 2.0:
+        return total + a - math.sqrt(2.0 * a * max(0.0, total - u))
+    return u + a / 2.0
 
 
 def rng_for(seed: int, index: int) -> random.Random:
@@ -309,6 +331,7 @@ def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[S
 
 # ------------------------------------------------------------------------------------ the figures
 STILL_EPS = math.radians(0.01)        # a joint that moved less than this did not move
+MAX_LAG, LAG_STEP = 0.5, 0.005        # s: start delays tried when comparing with the plan
 
 
 def still_runs(samples: Sequence[Tuple[float, Sequence[float]]], min_still: float) -> List[Tuple[float, float]]:
@@ -353,13 +376,24 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     else:
         out["stops"] = 0
         out["start_s"] = None
-    worst, joint = 0.0, 0
-    for t, q in inside:
-        want = plan.sample(t)
-        for i, (a, b) in enumerate(zip(q, want)):
-            if abs(a - b) > worst:
-                worst, joint = abs(a - b), i
+    def deviation(lag: float) -> Tuple[float, int]:
+        worst, joint = 0.0, 0
+        for t, q in inside:
+            want = plan.sample(t - lag)
+            for i, (a, b) in enumerate(zip(q, want)):
+                if abs(a - b) > worst:
+                    worst, joint = abs(a - b), i
+        return worst, joint
+    raw, _j = deviation(0.0)
+    # the plan run late by the start delay the stack cannot avoid (the goal travels to the driver,
+    # the bus to the controller): the smallest deviation over delays 0 .. MAX_LAG in LAG_STEP steps
+    lag, (worst, joint) = 0.0, (raw, _j)
+    for k in range(1, int(round(MAX_LAG / LAG_STEP)) + 1):
+        d = deviation(k * LAG_STEP)
+        if d[0] < worst:
+            lag, (worst, joint) = k * LAG_STEP, d
     out["dev_deg"], out["dev_joint"] = math.degrees(worst), joint + 1
+    out["dev_send_deg"], out["lag_s"] = math.degrees(raw), lag
     path = ValidTrajectory(positions=plan.points, times=plan.times, path_tolerance=(1.0,) * 6,
                            goal_tolerance=(1.0,) * 6, goal_time_tolerance=0.0, delay=0.0)
     out["path_deg"] = math.degrees(max((path_deviation(path, q)[0] for _t, q in inside), default=0.0))
@@ -622,6 +656,8 @@ def summary(results: List[Dict[str, Any]]) -> None:
     cells["stops"] = []
     cells["start [s]"] = []
     cells["path-only dev [deg]"] = []
+    cells["dev at send [deg]"] = []
+    cells["plan delay [s]"] = []
     for r in results:
         if "failed" in r:
             for k in cells:
@@ -633,7 +669,9 @@ def summary(results: List[Dict[str, Any]]) -> None:
         cells["run to the end"].append("%d / %d" % (len(ran), len(goals)))
         cells["tolerances [deg]"].append(r["tolerances"])
         for label, key, _limit in TARGETS + (("stops", "stops", None), ("start [s]", "start_s", None),
-                                             ("path-only dev [deg]", "path_deg", None)):
+                                             ("path-only dev [deg]", "path_deg", None),
+                                             ("dev at send [deg]", "dev_send_deg", None),
+                                             ("plan delay [s]", "lag_s", None)):
             vals = [g[key] for g in ran if g.get(key) is not None]
             if not vals:
                 cells[label].append("n/a")

@@ -58,8 +58,10 @@ class TrajectoryGeneratorTest(unittest.TestCase):
                 speeds = segment_speeds(traj, lim.velocity, names)
                 self.assertEqual(len(speeds), len(t.points) - 1)
                 for s in speeds:
-                    self.assertGreaterEqual(s, 0.5 - 1e-6)
                     self.assertLessEqual(s, 1.0)
+                # cruise at 50..100 %, from rest and to rest: the first and last segments slower
+                self.assertGreaterEqual(max(speeds), 0.5 - 1e-6)
+                self.assertLess(speeds[0], max(speeds))
                 self.assertEqual(len(t.fractions), len(speeds))
                 for a, b in zip(t.fractions, speeds):
                     self.assertAlmostEqual(a, b, places=6)
@@ -122,7 +124,12 @@ class FiguresTest(unittest.TestCase):
         self.assertAlmostEqual(r["ratio"], 2.0)
         self.assertEqual(r["stops"], 1)                      # the one on the way, not start and end
         self.assertAlmostEqual(r["still_pct"], 100.0 * (0.25 + 0.35 + 0.3) / 2.0, delta=3.0)
-        self.assertAlmostEqual(r["dev_deg"], math.degrees(0.5), delta=0.01)  # t = 1.0-1.2: at 0.5, plan 1.0
+        self.assertAlmostEqual(r["dev_send_deg"], math.degrees(0.5), delta=0.01)  # t = 1.0-1.2: at 0.5, plan 1.0
+        # the plan run 0.3 s late (the start delay) fits the first part exactly; the stop of 0.4 s
+        # on the way still leaves 0.2 .. 0.3 of a joint unit at its worst
+        self.assertLess(r["dev_deg"], r["dev_send_deg"])
+        self.assertGreater(r["dev_deg"], math.degrees(0.19))
+        self.assertLessEqual(r["lag_s"], 0.5)
         self.assertEqual(r["dev_joint"], 1)
         self.assertAlmostEqual(r["path_deg"], 0.0, places=6)  # always on the planned line
         self.assertAlmostEqual(r["final_deg"], math.degrees(0.0001), places=6)

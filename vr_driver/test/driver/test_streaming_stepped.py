@@ -276,3 +276,18 @@ def test_a_queued_move_waits_for_the_stream_and_appends(world):
     assert world.finish(job2).success
     seqs = taken_seqs(world)
     assert len(seqs) == len(set(seqs)) == len(job1.points) + len(job2.points)
+
+
+def test_short_segments_raise_the_thinning_tolerance_up_to_its_limit():
+    times = [0.02 * k for k in range(101)]
+    pos = [(0.5 * math.sin(2.0 * t),) * 6 for t in times]
+    vmax = (2.0,) * 6
+    tight = stream_points(times, pos, vmax, 3, 1e-5, 0.0)
+    assert tight == stream_points(times, pos, vmax, 3, 1e-5, 0.1, max_tolerance=1e-5)   # capped
+    fed = stream_points(times, pos, vmax, 3, 1e-5, 0.1, max_tolerance=0.01)
+    assert len(fed) < len(tight)
+    kept = [0] + [p.index for p in fed]
+    for a, b in zip(kept, kept[1:]):                     # every dropped point within the limit, in time
+        for k in range(a + 1, b):
+            f = (times[k] - times[a]) / (times[b] - times[a])
+            assert abs(pos[a][0] + f * (pos[b][0] - pos[a][0]) - pos[k][0]) <= 0.01 + 1e-12

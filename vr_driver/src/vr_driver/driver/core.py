@@ -49,7 +49,8 @@ from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
 from .sequencer import MotionSequencer, why_no_motion
-from .streaming import MIN_SEGMENT_CYCLES, StreamSequencer, stream_points, stream_speeds
+from .streaming import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGMENT_CYCLES, StreamSequencer,
+                        stream_points, stream_speeds)
 from .trajectories import ValidTrajectory, thin
 
 log = logging.getLogger("vr_driver.driver")
@@ -353,12 +354,18 @@ class DriverCore:
 
     # ------------------------------------------------------------------------ protocol v2
     def _min_segment(self) -> float:
-        return MIN_SEGMENT_CYCLES / self.bus.cycle_rate_hz
+        """The shortest segment the bus feeds without a gap: MIN_SEGMENT_CYCLES of the configured
+        cycle, or of the measured one when the wire is slower (a 72-byte record at 19.2 kbit/s)."""
+        rate = self.bus.cycle_rate_hz
+        measured = self.link.cycle_rate
+        if measured > 0.0:
+            rate = min(rate, measured)
+        return MIN_SEGMENT_CYCLES / rate
 
-    def _stream(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float
-                ) -> Tuple[StreamPoint, ...]:
+    def _stream(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
+                max_tolerance: float) -> Tuple[StreamPoint, ...]:
         return stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
-                             tolerance, self._min_segment())
+                             tolerance, self._min_segment(), max_tolerance)
 
     def _preview_stream(self, preview: Preview) -> Tuple[StreamPoint, ...]:
         """A validated move as a stream: its planned samples (a PTP's joint line with its speed
@@ -367,7 +374,8 @@ class DriverCore:
         traj = preview.trajectory
         positions = [tuple(float(v) for v in q) for q in traj.positions]
         positions[-1] = tuple(preview.joint_target)
-        points = self._stream([float(t) for t in traj.times], positions, math.radians(0.01))
+        points = self._stream([float(t) for t in traj.times], positions, math.radians(0.01),
+                              MAX_CARTESIAN_TOLERANCE)
         if not points:      # already there: one target at the goal
             points = (StreamPoint(tuple(preview.joint_target), 1000, 0, 0.0, len(positions) - 1),)
         return points
@@ -389,7 +397,8 @@ class DriverCore:
     def _submit_stream(self, traj: ValidTrajectory, on_update: Optional[Callable[[MoveJob], None]],
                        mode: SubmitMode) -> "TrajectoryRun":
         self._require_motion_possible()
-        points = self._stream(traj.times, traj.positions, math.radians(self.params.stream_path_tolerance))
+        tol = math.radians(self.params.stream_path_tolerance)
+        points = self._stream(traj.times, traj.positions, tol, max(tol, MAX_STREAM_TOLERANCE))
         if not points:
             return TrajectoryRun(traj, [0], [], self.clock())
         try:

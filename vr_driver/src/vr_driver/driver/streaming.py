@@ -46,6 +46,10 @@ log = logging.getLogger("vr_driver.driver")
 
 __all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "seq_offset"]
 
+#: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
+#: longer than MIN_SEGMENT_CYCLES (half the default path tolerance; a Cartesian move's: 0.05 deg)
+MAX_STREAM_TOLERANCE = math.radians(0.5)
+MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
 #: a kept segment lasts at least this many bus cycles (the record moves on at most once a cycle,
 #: and the controller acts on a record seen twice: shorter segments would starve the look-ahead)
 MIN_SEGMENT_CYCLES = 2.0
@@ -122,11 +126,24 @@ def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], tim
 
 
 def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
-                  smooth: int, tolerance: float, min_dt: float) -> Tuple[StreamPoint, ...]:
+                  smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None
+                  ) -> Tuple[StreamPoint, ...]:
     """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
     thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point ``smooth`` but the
-    last (0: the stream ends with an exact stop)."""
-    kept = thin_timed(times, positions, tolerance, min_dt)[1:]
+    last (0: the stream ends with an exact stop).
+
+    A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
+    point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
+    ``tolerance``), until no segment is that short; short segments left then are sent as they are."""
+    tol = tolerance
+    top = tolerance if max_tolerance is None else max(tolerance, max_tolerance)
+    while True:
+        kept = thin_timed(times, positions, tol)
+        short = any(times[b] - times[a] < min_dt for a, b in zip(kept, kept[1:-1]))
+        if not short or tol >= top:
+            break
+        tol = min(2.0 * tol, top)
+    kept = kept[1:]
     if not kept:
         return ()
     pts = [tuple(float(v) for v in positions[k]) for k in kept]
