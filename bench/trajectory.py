@@ -43,7 +43,9 @@ their header stamps (the driver's wall clock, the same as this process's):
   path dev       the largest |joint_states - plan(t - d)| of any joint, the plan interpolated
                  (linearly, as the driver does) at the sample's time since send_goal less the start
                  delay d (0 .. 0.5 s in 5 ms steps, the one that gives the smallest deviation: the
-                 goal's way to the driver and the bus's to the controller, "plan delay"); also the
+                 goal's way to the driver and the bus's to the controller, "plan delay"); a sample
+                 is stamped when its record reached the driver, so the arm was there up to one bus
+                 cycle earlier: the nearest instant of that window counts; also the
                  same with d = 0 ("dev at send") and the distance to the planned path at any time
                  ("path-only");
   final error    the largest joint error of the first joint_states after the result vs the last point;
@@ -332,6 +334,7 @@ def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[S
 # ------------------------------------------------------------------------------------ the figures
 STILL_EPS = math.radians(0.01)        # a joint that moved less than this did not move
 MAX_LAG, LAG_STEP = 0.5, 0.005        # s: start delays tried when comparing with the plan
+AGE_STEPS = 8                         # instants tried within a sample's age window
 
 
 def still_runs(samples: Sequence[Tuple[float, Sequence[float]]], min_still: float) -> List[Tuple[float, float]]:
@@ -358,7 +361,7 @@ def min_still(cycle_rate: float, joint_states_rate: float) -> float:
 
 
 def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_result: float,
-            final: Optional[Sequence[float]], shortest_still: float) -> Dict[str, Any]:
+            final: Optional[Sequence[float]], shortest_still: float, age: float = 0.0) -> Dict[str, Any]:
     """The figures of one goal from joint_states ``samples`` (time since send_goal, joints in the
     controller's order), the result's time, the first joints after it and :func:`min_still`."""
     from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
@@ -376,13 +379,22 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     else:
         out["stops"] = 0
         out["start_s"] = None
+    # a sample is stamped when its record reached the driver: the arm was there up to ``age`` (one
+    # bus cycle) earlier -- it is compared with the plan over that window, the nearest instant counting
+    steps = [age * k / AGE_STEPS for k in range(AGE_STEPS + 1)] if age > 0.0 else [0.0]
+
     def deviation(lag: float) -> Tuple[float, int]:
         worst, joint = 0.0, 0
         for t, q in inside:
-            want = plan.sample(t - lag)
-            for i, (a, b) in enumerate(zip(q, want)):
-                if abs(a - b) > worst:
-                    worst, joint = abs(a - b), i
+            best, best_joint = math.inf, 0
+            for back in steps:
+                want = plan.sample(t - lag - back)
+                errs = [abs(a - b) for a, b in zip(q, want)]
+                m = max(errs)
+                if m < best:
+                    best, best_joint = m, errs.index(m)
+            if best > worst:
+                worst, joint = best, best_joint
         return worst, joint
     raw, _j = deviation(0.0)
     # the plan run late by the start delay the stack cannot avoid (the goal travels to the driver,
@@ -540,7 +552,8 @@ class Run:
             msgs = [m for _t, m in self.joints.messages[mark:]]
         samples = [(m.header.stamp.to_sec() - t_send, self.q_of(m)) for m in msgs if self.q_of(m) is not None]
         rec = analyse(plan, samples, t_done - t_send, final,
-                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate))
+                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate),
+                      age=1.0 / cfg["cycle_rate"])
         if cfg.get("dump"):
             with open(cfg["dump"], "a") as fh:
                 fh.write(json.dumps({"config": cfg["name"], "index": index, "plan": plan.to_json(),

@@ -186,6 +186,8 @@ class DriverCore:
         self._planning_cond = threading.Condition()
         self._planning_thread: Optional[threading.Thread] = None
         self._last_posted: Optional[MoveJob] = None
+        self._last_record = b""
+        self._repeat_now = False          # run the next bus cycle at once (a new v2 record)
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
         self._joints_pose: Optional[Tuple[int, ...]] = None
@@ -533,6 +535,12 @@ class DriverCore:
             now = self.clock()
             if next_start < now:
                 next_start = now
+            if self._repeat_now:
+                # v2: a new record is sent again at once: the controller takes a record it saw
+                # unchanged in two telegrams, so the next target goes out one cycle sooner
+                self._repeat_now = False
+                next_start = now
+                continue
             if self._wake.wait(next_start - now):
                 self._wake.clear()
                 next_start = self.clock()     # an extra cycle now; the rate resumes from here
@@ -543,7 +551,11 @@ class DriverCore:
         now = sample.time
         joints = self._update_joints(sample)
         command = self.sequencer.step(now, sample, joints)
-        self.link.set_outputs(command.encode() if self.streaming else command.encode(self.params.byte_order))
+        record = command.encode() if self.streaming else command.encode(self.params.byte_order)
+        if self.streaming and record != self._last_record and sample.connected:
+            self._repeat_now = True
+        self._last_record = record
+        self.link.set_outputs(record)
         return self._publish(now, sample)
 
     def _update_joints(self, sample: LinkSample) -> Optional[Tuple[float, ...]]:
