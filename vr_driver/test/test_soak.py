@@ -1,5 +1,5 @@
-"""The short soak (issue 10): bench/soak.py's run with ~100 targets, 2 % byte corruption both ways
-and two line cuts, DriverCore against the virtual G2 controller over a real pty pair, no ROS.
+"""The short soak (issue 10; issue 16 for protocol v2): bench/soak.py's run with ~100 targets, 2 %
+byte corruption both ways (v2: 40 streamed moves, 0.5 %) and two line cuts, DriverCore against the virtual G2 controller over a real pty pair, no ROS.
 
 Nothing may be done twice and nothing lost without a reason; every cut must be ridden out or
 reconnected within 1.5 s of the restore; the core's status must never pause for more than 1.1 s.
@@ -27,12 +27,19 @@ def _load_soak():
 soak = _load_soak()
 
 
-@pytest.fixture(scope="module")
-def result(kin, tmp_path_factory):
+#: protocol -> (moves, byte corruption, shortest share of the targets executed). v2's records are
+#: 72 bytes (81 on the wire): 0.5 % per byte fails about as many telegrams as v1's 2 % on its 23; a
+#: v2 move streams many targets, and a cut ends the rest of its stream (aborted, with the reason)
+RUNS = {"v1": (100, 0.02, 0.8), "v2": (40, 0.005, 0.6)}
+
+
+@pytest.fixture(scope="module", params=sorted(RUNS))
+def result(request, kin, tmp_path_factory):
+    targets, corrupt, _share = RUNS[request.param]
     config = soak.SoakConfig(
-        targets=100, corrupt=0.02, cut_times=(8.0, 20.0), cut_min=0.5, cut_max=1.0, seed=7,
+        targets=targets, corrupt=corrupt, cut_times=(8.0, 20.0), cut_min=0.5, cut_max=1.0, seed=7,
         speed_factor=100.0, cycle_rate=100.0, driver_params={"accept_timeout": 0.5},
-        workdir=str(tmp_path_factory.mktemp("soak")))
+        workdir=str(tmp_path_factory.mktemp("soak")), protocol=request.param)
     res = soak.run_soak(config, kin=kin)
     print("\n".join(res.summary() + [res.final_line()]))
     return res
@@ -40,7 +47,7 @@ def result(kin, tmp_path_factory):
 
 def test_the_run_completed_with_faults_injected(result):
     assert result.complete, result.error
-    assert result.jobs == 100 and result.commanded >= 100
+    assert result.jobs == result.config.targets and result.commanded >= result.config.targets
     assert len(result.cuts) == 2, "the run ended before the second cut"
     assert result.link_counters["corrupted"] > 500 and result.link_counters["cut_discarded"] > 0
     assert result.executed + result.rejected + result.aborted + result.lost == result.commanded
@@ -53,7 +60,7 @@ def test_nothing_done_twice(result):
 
 def test_nothing_lost_without_a_reason(result):
     assert result.lost == 0 and result.hung == 0, result.lost_details
-    assert result.executed >= 0.8 * result.commanded, result.summary()
+    assert result.executed >= RUNS[result.config.protocol][2] * result.commanded, result.summary()
 
 
 def test_every_cut_reconnects_within_1_5_s(result):
