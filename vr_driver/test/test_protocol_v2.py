@@ -143,3 +143,19 @@ def test_sequence_numbers_wrap_past_zero():
 def test_feedback_refuses_reserved_status_bits():
     with pytest.raises(ProtocolError, match="reserved status"):
         FeedbackV2(status=0x40)
+
+
+def test_controller_io_words_on_the_wire():
+    from vr_driver.protocol_v2 import CommandV2, FeedbackV2
+    raw = CommandV2(outputs=0xA501).encode()
+    assert raw[68:70] == bytes([0x01, 0xA5])                             # bytes 69-70: outputs 1..16
+    assert CommandV2.decode(raw).outputs == 0xA501
+    fb = FeedbackV2(inputs=0x0102, outputs=0x8001).encode()
+    assert fb[62:64] == bytes([0x02, 0x01]) and fb[64:66] == bytes([0x01, 0x80]) and fb[66:70] == bytes(4)
+    back = FeedbackV2.decode(fb)
+    assert (back.inputs, back.outputs) == (0x0102, 0x8001)
+    for bad in (-1, 0x10000, True, 1.0):
+        with pytest.raises(ProtocolError, match="outputs"):
+            CommandV2(outputs=bad)
+        with pytest.raises(ProtocolError, match="inputs"):
+            FeedbackV2(inputs=bad)

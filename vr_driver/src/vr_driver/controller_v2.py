@@ -44,7 +44,10 @@ from .protocol_v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, S
 from .sim_arm import ExecutionLog, Outcome
 from .sim_stream import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
 
-__all__ = ["ControllerProgramV2"]
+__all__ = ["ControllerProgramV2", "GRIPPER_DELAY"]
+
+#: s from setting output 1 to input 1 ("gripper closed") following it (the simulated gripper)
+GRIPPER_DELAY = 0.3
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +71,12 @@ class ControllerProgramV2(SessionProgram):
         self.reject_code = RejectCode.NONE
         self.need_start = True              # a stream begins with START (at start, after a link loss)
         self._refused: Optional[Tuple[int, RejectCode]] = None
+        # the controller's own general-purpose I/O (§9.5): outputs 1..16 as the master sets them
+        # (0 = the safe state: at start and after a link loss); a gripper wired to output 1 reports
+        # closed on input 1 GRIPPER_DELAY after output 1 was set; inputs 2..16 set by set_input()
+        self.io_outputs = 0
+        self._gripper_cmd = (0, 0.0)        # (output 1, when it last changed)
+        self._forced_inputs = 0
 
     # ------------------------------------------------------------------- SessionProgram hooks
     def decode_record(self, raw: bytes) -> CommandV2:
@@ -80,6 +89,25 @@ class ControllerProgramV2(SessionProgram):
         self.arm.brake(why, now=stop_time)
         self._log_entries(self.arm.collect())
         self.need_start = True
+        self._set_outputs(0, stop_time)            # the outputs' safe state until the master sets them
+
+    # ------------------------------------------------------------------- general-purpose I/O
+    def set_input(self, number: int, value: bool) -> None:
+        """Set general-purpose input ``number`` (2..16; input 1 is the simulated gripper's)."""
+        if not 2 <= number <= 16:
+            raise ValueError("input %r: 2..16 can be set (1 is the gripper's 'closed')" % (number,))
+        bit = 1 << (number - 1)
+        self._forced_inputs = (self._forced_inputs | bit) if value else (self._forced_inputs & ~bit)
+
+    def inputs(self, now: float) -> int:
+        out1, since = self._gripper_cmd
+        closed = 1 if out1 and now - since >= GRIPPER_DELAY else 0
+        return self._forced_inputs | closed
+
+    def _set_outputs(self, value: int, now: float) -> None:
+        if (value & 1) != self._gripper_cmd[0]:
+            self._gripper_cmd = (value & 1, now)
+        self.io_outputs = value
 
     # ---------------------------------------------------------------------------- read-outs
     @property
@@ -91,6 +119,8 @@ class ControllerProgramV2(SessionProgram):
         """One program loop at clock time ``now``."""
         command, stale = self.read_command(now)
         self._log_entries(self.arm.step(now))
+        if command is not None and not stale:
+            self._set_outputs(command.outputs, now)
         if command is not None:
             if Control.STOP in command.control:
                 if self.arm.brake("STOP from the master", now=now):
@@ -102,7 +132,8 @@ class ControllerProgramV2(SessionProgram):
             state=self.arm.state, status=arm_status_bits(self.arm), reject_code=self.reject_code,
             accepted_seq=self.accepted_seq, done_seq=self.arm.done_seq, active_seq=self.arm.active_seq,
             rejected_seq=self.rejected_seq, joints=joints_to_wire(self.arm.joints),
-            tcp=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1))
+            tcp=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1),
+            inputs=self.inputs(now), outputs=self.io_outputs)
         self.slave.inputs = feedback.encode()
         self.last_feedback = feedback
         return feedback

@@ -83,8 +83,8 @@ CHK_CFG_V2 = bytes([0x5F, 0x5F, 0x17, 0x6F, 0x6F, 0x27])
 _INT32 = (-(2 ** 31), 2 ** 31 - 1)
 _HEADER = struct.Struct("<BBH")                  # version, control, reserved
 _SLOT = struct.Struct("<HBBHH6i")                # seq, kind, smooth, speed, reserved, joints
-_COMMAND = struct.Struct("<BBH32s32sHH")         # header, slot 0, slot 1, reserved, CRC
-_FEEDBACK = struct.Struct("<BBBBHHHH6i6iH8sH")   # see FeedbackV2
+_COMMAND = struct.Struct("<BBH32s32sHH")         # header, slot 0, slot 1, outputs, CRC
+_FEEDBACK = struct.Struct("<BBBBHHHH6i6iHHH4sH")  # see FeedbackV2
 assert _SLOT.size == 32 and _COMMAND.size == RECORD_SIZE_V2 and _FEEDBACK.size == RECORD_SIZE_V2
 
 
@@ -272,15 +272,24 @@ class TargetSlot:
 EMPTY = TargetSlot()
 
 
+def _word(value: Any, name: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 0xFFFF:
+        raise ProtocolError("%s must be an integer 0..65535 (16 bits), got %r" % (name, value))
+    return value
+
+
 @dataclass(frozen=True)
 class CommandV2:
-    """Master -> controller: control bits and two target slots (next, look-ahead)."""
+    """Master -> controller: control bits, two target slots (next, look-ahead) and the controller's
+    general-purpose outputs 1..16 (bit k = output k + 1; the controller's own I/O, §9.5)."""
 
     control: Control = Control(0)
     slot0: TargetSlot = EMPTY
     slot1: TargetSlot = EMPTY
+    outputs: int = 0
 
     def __post_init__(self) -> None:
+        _word(self.outputs, "outputs")
         try:
             object.__setattr__(self, "control", Control(int(self.control)))
         except ValueError:
@@ -300,16 +309,17 @@ class CommandV2:
             raise ProtocolError("STOP carries no target")
 
     def encode(self) -> bytes:
-        body = _COMMAND.pack(VERSION, int(self.control), 0, self.slot0.pack(), self.slot1.pack(), 0, 0)
+        body = _COMMAND.pack(VERSION, int(self.control), 0, self.slot0.pack(), self.slot1.pack(),
+                             self.outputs, 0)
         return body[:-2] + struct.pack("<H", crc16(body[:-2]))
 
     @classmethod
     def decode(cls, data: Any) -> "CommandV2":
         raw = _as_record(data, "v2 command")
-        _version, control, reserved, s0, s1, reserved2, _crc = _COMMAND.unpack(raw)
-        if reserved or reserved2:
+        _version, control, reserved, s0, s1, outputs, _crc = _COMMAND.unpack(raw)
+        if reserved:
             raise ProtocolError("v2 command: reserved bytes must be 0")
-        return cls(control, TargetSlot.unpack(s0), TargetSlot.unpack(s1))
+        return cls(control, TargetSlot.unpack(s0), TargetSlot.unpack(s1), outputs)
 
 
 @dataclass(frozen=True)
@@ -326,6 +336,8 @@ class FeedbackV2:
     joints: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)   # 0.001 deg
     tcp: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)      # X Y Z 0.01 mm, Rx Ry Rz 0.001 deg
     heartbeat: int = 0                              # +1 every program loop (mod 65536)
+    inputs: int = 0                                 # general-purpose inputs 1..16 (bit k = k + 1)
+    outputs: int = 0                                # general-purpose outputs 1..16 as set
 
     def __post_init__(self) -> None:
         try:
@@ -339,6 +351,8 @@ class FeedbackV2:
         object.__setattr__(self, "status", StatusBits(status))
         for name in ("accepted_seq", "done_seq", "active_seq", "rejected_seq", "heartbeat"):
             _seq(getattr(self, name), name)
+        _word(self.inputs, "inputs")
+        _word(self.outputs, "outputs")
         for name in ("joints", "tcp"):
             values = tuple(getattr(self, name))
             if len(values) != 6 or not all(isinstance(v, int) and _INT32[0] <= v <= _INT32[1]
@@ -366,7 +380,8 @@ class FeedbackV2:
     def encode(self) -> bytes:
         body = _FEEDBACK.pack(VERSION, int(self.state), int(self.status), int(self.reject_code),
                               self.accepted_seq, self.done_seq, self.active_seq, self.rejected_seq,
-                              *self.joints, *self.tcp, self.heartbeat, bytes(8), 0)
+                              *self.joints, *self.tcp, self.heartbeat, self.inputs, self.outputs,
+                              bytes(4), 0)
         return body[:-2] + struct.pack("<H", crc16(body[:-2]))
 
     @classmethod
@@ -375,11 +390,11 @@ class FeedbackV2:
         fields = _FEEDBACK.unpack(raw)
         (_version, state, status, reject, accepted, done, active, rejected) = fields[:8]
         joints, pose = fields[8:14], fields[14:20]
-        heartbeat, reserved = fields[20], fields[21]
+        heartbeat, inputs, outputs, reserved = fields[20], fields[21], fields[22], fields[23]
         if any(reserved):
             raise ProtocolError("v2 feedback: reserved bytes must be 0")
         return cls(state, status, reject, accepted, done, active, rejected, tuple(joints),
-                   tuple(pose), heartbeat)
+                   tuple(pose), heartbeat, inputs, outputs)
 
     def describe(self) -> str:
         text = "%s, taken %d, at %d, done %d; status: %s" % (

@@ -291,3 +291,30 @@ def test_short_segments_raise_the_thinning_tolerance_up_to_its_limit():
         for k in range(a + 1, b):
             f = (times[k] - times[a]) / (times[b] - times[a])
             assert abs(pos[a][0] + f * (pos[b][0] - pos[a][0]) - pos[k][0]) <= 0.01 + 1e-12
+
+
+# ------------------------------------------------------------------------------ the controller's own I/O
+def test_controller_outputs_go_out_and_the_gripper_input_follows(world):
+    from vr_driver.controller_v2 import GRIPPER_DELAY
+    world.core.sequencer.outputs = 0x0001                      # output 1: close the gripper
+    world.run_until(lambda: world.program.io_outputs == 1, 1.0, "output 1 set")
+    t_set = world.now
+    world.run_until(lambda: world.status().feedback.inputs & 1, 2.0, "input 1 (closed)")
+    assert world.now - t_set >= GRIPPER_DELAY - 1e-9
+    assert world.status().feedback.outputs == 1
+    world.program.set_input(3, True)
+    world.run_until(lambda: world.status().feedback.inputs & 0b100, 1.0, "input 3")
+    with pytest.raises(ValueError):
+        world.program.set_input(1, True)
+
+
+def test_controller_outputs_fall_to_safe_on_a_link_loss_and_stay_there(world):
+    world.core.sequencer.outputs = 0x0005
+    world.run_until(lambda: world.program.io_outputs == 5, 1.0, "outputs set")
+    world.link.cut = True
+    world.run_until(lambda: world.program.io_outputs == 0, 2.0, "controller outputs safe")
+    world.run_until(lambda: world.status().link is not LinkState.CONNECTED, 2.0, "link lost")
+    world.link.cut = False
+    world.run_until(lambda: world.status().link is LinkState.CONNECTED, 10.0, "link back")
+    world.run_for(1.0)
+    assert world.core.sequencer.outputs == 0 and world.program.io_outputs == 0   # until set again

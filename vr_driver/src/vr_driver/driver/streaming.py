@@ -168,6 +168,9 @@ class StreamSequencer(MotionSequencer):
         self._started = 0.0
         self._stopping = False             # send STOP until the arm is at rest
         self._last_state: Optional[StreamState] = None
+        # the controller's general-purpose outputs 1..16 (§9.5), sent in every record; back to 0 (their
+        # safe state, as the controller sets them) when the link is lost, until set again
+        self.outputs = 0
 
     # ------------------------------------------------------------------ bus thread
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> CommandV2:
@@ -355,16 +358,17 @@ class StreamSequencer(MotionSequencer):
                           joints_to_wire(point.joints))
 
     def _record(self) -> CommandV2:
+        outputs = self.outputs
         if self._stopping:
-            return CommandV2(Control.STOP)
+            return CommandV2(Control.STOP, outputs=outputs)
         job = self._job
         if job is None or not self._base:
-            return CommandV2()
+            return CommandV2(outputs=outputs)
         k = job.points_taken
         if k >= self._limit:
-            return CommandV2()
+            return CommandV2(outputs=outputs)
         slot1 = self._slot(job, k + 1) if k + 1 < self._limit else EMPTY
-        return CommandV2(Control.START if k == 0 else Control(0), self._slot(job, k), slot1)
+        return CommandV2(Control.START if k == 0 else Control(0), self._slot(job, k), slot1, outputs)
 
     def _lost(self, now: float, reason: str) -> None:
         job = self._job
@@ -373,6 +377,10 @@ class StreamSequencer(MotionSequencer):
         self._stopping = False
         self._session = None
         self._rest_values = None
+        if self.outputs:
+            log.warning("controller outputs 0x%04X back to their safe state 0 (link lost); they stay "
+                        "there until set again", self.outputs)
+        self.outputs = 0
         self._end_all(JobPhase.FAILED, "link to the controller lost (%s); the stream is not re-sent; "
                       "the last pose seen is reported, where the arm came to rest is unknown" % reason)
         self._end_current()
