@@ -12,7 +12,7 @@ import select
 import subprocess
 import sys
 import time
-from typing import Callable
+from typing import Callable, Optional
 
 import pytest
 
@@ -35,12 +35,18 @@ SIGNALS = load_signal_map(os.path.join(CONFIG, "io_island_signals.yaml"), length
 BAUD = 187500
 
 
-def start_island(link: str) -> subprocess.Popen:
+def start_island(link: str, idle: Optional[Callable[[], None]] = None) -> subprocess.Popen:
+    """Start an island process and wait for its device path; ``idle()`` is called meanwhile (the
+    master keeps cycling the line: a master that stopped for the island's start-up would let the
+    controller's DP watchdog expire)."""
     env = dict(os.environ, PYTHONPATH=PYTHONPATH)
     proc = subprocess.Popen([sys.executable, "-m", "vr_driver.io_island", "--pty-link", link, "--baud", str(BAUD)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], 20.0)
-    assert ready, "the island printed no device path within 20 s"
+    deadline = time.monotonic() + 20.0
+    while not select.select([proc.stdout], [], [], 0.0 if idle is not None else 20.0)[0]:
+        assert time.monotonic() < deadline, "the island printed no device path within 20 s"
+        if idle is not None:
+            idle()
     path = proc.stdout.readline().strip()
     assert path.startswith("/dev/pts/"), (path, proc.stderr.read() if proc.poll() is not None else "")
     return proc
@@ -117,7 +123,7 @@ def test_master_cycles_controller_and_island_on_one_line_and_the_island_dies_alo
     assert rig.controller.slave_state.value == "DATA_EXCH"
     assert not rig.io.write("gripper_close", "1").success
 
-    rig.island = start_island(rig.island_link)          # a new island on the same link
+    rig.island = start_island(rig.island_link, idle=rig.cycle)   # a new island on the same link
     rig.until(rig.island_online, 15.0, "island back")
     assert rig.value("gripper_close") == 0 and rig.value("gripper_closed") == 0
     assert rig.handle.outputs == b"\x00\x00"
