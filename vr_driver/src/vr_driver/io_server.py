@@ -18,7 +18,7 @@ Without ``io_signals`` the services exist and refuse every request saying so; no
 from __future__ import annotations
 
 import threading
-from typing import Any, Optional
+from typing import Any, Optional, Tuple
 
 import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -37,7 +37,7 @@ class IoServer:
         self.io = core.io
         self.params = params
         self._lock = threading.Lock()
-        self._last: Optional[IoSnapshot] = None
+        self._last: Optional[Tuple[Tuple[str, str, bool], ...]] = None   # what io_states showed last
         self._timer: Optional[rospy.Timer] = None
         self.pub = None
         if self.io is not None:
@@ -73,17 +73,19 @@ class IoServer:
         return ""
 
     def _publish(self, force: bool) -> None:
+        """io_states when what it shows changed (``force``: anyway, the fixed rate)."""
         snap = self.io.snapshot()
-        stale = self._stale(snap)
+        stale = bool(self._stale(snap))
+        shown = tuple((s.name, "" if stale else s.text, s.online and not stale) for s in snap.signals)
         with self._lock:
-            if not force and not stale and snap == self._last:
+            if not force and shown == self._last:
                 return
-            self._last = None if stale else snap
+            self._last = shown
         msg = IOStates()
         msg.header.stamp = rospy.Time.now()
         msg.signals = [IOState(name=s.name, station=s.station, type=s.type, direction=s.direction,
-                               value="" if stale else s.text, online=s.online and not stale)
-                       for s in snap.signals]
+                               value=text, online=online)
+                       for s, (_name, text, online) in zip(snap.signals, shown)]
         self.pub.publish(msg)
 
     # ------------------------------------------------------------------ services
