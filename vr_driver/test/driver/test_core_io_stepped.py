@@ -23,6 +23,15 @@ IO_PARAMS = {"bus_config": os.path.join(CONFIG, "io_line_bus.yaml"),
 FAR = ControllerPose(1000, -600, 800, 0, 45, 0)
 
 
+class TimedLineLink(LineLink):
+    """The line where each telegram and its reply take bus time (1 ms): a station answering later
+    in a cycle answers later on the clock, as on a real line."""
+
+    def respond(self, frame):
+        self.clock.advance(0.001)
+        return super().respond(frame)
+
+
 class IoWorld(World):
     """The world with the island on the line (its program stepped with the controller's)."""
 
@@ -30,7 +39,7 @@ class IoWorld(World):
         super().__init__(kin, dict(IO_PARAMS, **(params or {})))
         self.island = island_slave(clock=self.clock)
         self.island_program = IslandProgram(self.island)
-        self.link = LineLink([self.slave, self.island], self.clock)   # before the core opens it
+        self.link = TimedLineLink([self.slave, self.island], self.clock)   # before the core opens it
 
     def tick(self) -> None:
         self.island_program.step(self.clock.t)
