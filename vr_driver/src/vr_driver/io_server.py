@@ -49,6 +49,12 @@ class IoServer:
         self.get_srv = rospy.Service("get_io", GetIO, self._get_io)
 
     def start(self) -> None:
+        mapped = {st.address for st in self.io.map.stations} if self.io is not None else set()
+        idle = [s for s in self.core.bus.slaves[1:] if s.address not in mapped]
+        if idle:
+            rospy.logwarn("interface: slave(s) %s of the bus config have no station in ~io_signals%s: "
+                          "not cycled", ", ".join("%d (%s)" % (s.address, s.name) for s in idle),
+                          "" if self.io is not None else " (empty)")
         if self.io is None:
             return
         self.core.add_listener(lambda _status: self._publish(force=False))
