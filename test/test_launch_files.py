@@ -116,17 +116,38 @@ class DriverLaunchParamsTest(unittest.TestCase):
 
     def test_sim_defaults(self):
         from vr_driver.controller_sim import SimOptions
-        p, params = self.check()
+        p, params = self.check("io:=false")
         from vr_driver.controller_sim import auto_pty_link
         # one value for both nodes (sim_port, default auto), which both resolve to the same link
         self.assertEqual(params["/virtual_controller/pty_link"], "auto")
         self.assertEqual(params["/interface/port"], "auto")
         self.assertEqual(p.port, auto_pty_link())
+        self.assertEqual(p.io_signals, "")
+        self.assertFalse(any(k.startswith("/virtual_line/") or k.startswith("/virtual_io_island/") for k in params))
         # no baud argument: the virtual controller's default is the parameter file's baud
         self.assertNotIn("/virtual_controller/baud", params)
         self.assertEqual(p.bus().baud, SimOptions().baud)
         p, params = self.check("baud:=187500")
         self.assertEqual(p.bus().baud, params["/virtual_controller/baud"])
+
+    def test_sim_with_the_io_island_by_default(self):
+        """issue 18: sim:=true (io:=true by default) puts the virtual controller and the virtual I/O island
+        on one virtual line; the driver opens the line's master end and cycles both stations."""
+        from vr_driver.controller_sim import auto_pty_link
+        for protocol, length in (("v1", 14), ("v2", 72)):
+            with self.subTest(protocol=protocol):
+                p, params = self.check("protocol:=" + protocol)
+                self.assertEqual(params["/virtual_line/stations"], ["auto", "auto:io_island"])
+                self.assertEqual(params["/virtual_io_island/pty_link"], "auto:io_island")
+                self.assertEqual(params["/interface/port"], params["/virtual_line/pty_link"])
+                self.assertEqual(p.port, auto_pty_link(station="line"))
+                bus = p.bus()
+                self.assertEqual([(s.address, s.input_len) for s in bus.slaves], [(4, length), (8, 2)])
+                self.assertEqual([s.name for s in p.signal_map(bus).signals],
+                                 ["gripper_close", "gripper_closed", "part_present"])
+        p, params = self.check("sim:=false", "port:=/dev/ttyUSB7")
+        self.assertEqual(p.io_signals, "")
+        self.assertFalse(any(k.startswith("/virtual_line/") for k in params))
 
     def test_real_port(self):
         p, params = self.check("sim:=false", "port:=/dev/ttyUSB7", "baud:=187500")
@@ -153,8 +174,10 @@ class DriverLaunchParamsTest(unittest.TestCase):
                     params = yaml.safe_load(res.stdout)
                     for name, value in expected.items():
                         self.assertEqual(params["/interface/" + name], value, name)
-                    if "sim:=false" not in args:    # the virtual controller's link, whatever the file says
-                        self.assertEqual(params["/interface/port"], params["/virtual_controller/pty_link"])
+                    if "sim:=false" not in args:    # the virtual line's link, whatever the file says
+                        self.assertEqual(params["/interface/port"], params["/virtual_line/pty_link"])
+                        self.assertEqual(params["/virtual_line/stations"][0],
+                                         params["/virtual_controller/pty_link"])
         finally:
             os.unlink(fh.name)
 

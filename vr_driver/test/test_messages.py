@@ -136,3 +136,22 @@ def test_follow_joint_trajectory_goal_round_trips():
     assert back.trajectory.points[0].time_from_start == genpy.Duration(1.5)
     assert (back.path_tolerance[0].name, back.path_tolerance[0].velocity) == ("joint_1", -1.0)
     assert back.goal_time_tolerance == genpy.Duration(0.5)
+
+
+def test_io_messages_and_services_carry_what_the_io_line_shows():
+    """issue 18: io_states (IOStates of IOState), set_io (SetIO) and get_io (GetIO) as documented in
+    doc/README.md: every field name and type, and a round trip of a state."""
+    srv = pytest.importorskip("vr_driver.srv", reason="vr_driver services not built (run scripts/test)")
+    from io import BytesIO
+    assert msg.IOState.__slots__ == ["name", "station", "type", "direction", "value", "online"]
+    assert msg.IOState._slot_types == ["string"] * 5 + ["bool"]
+    assert msg.IOStates.__slots__ == ["header", "signals"]
+    assert msg.IOStates._slot_types == ["std_msgs/Header", "vr_driver/IOState[]"]
+    assert (srv.SetIORequest.__slots__, srv.SetIOResponse.__slots__) == (["signal", "value"], ["success", "message"])
+    assert (srv.GetIORequest.__slots__, srv.GetIOResponse.__slots__) == (["signal"], ["value", "success", "message"])
+    states = msg.IOStates(signals=[msg.IOState("gripper_closed", "io_island", "bit", "in", "1", True)])
+    buf = BytesIO()
+    states.serialize(buf)
+    back = msg.IOStates()
+    back.deserialize(buf.getvalue())
+    assert (back.signals[0].name, back.signals[0].value, back.signals[0].online) == ("gripper_closed", "1", True)

@@ -1,7 +1,8 @@
 """ROS node `interface`: the thin ROS edge of :class:`vr_driver.driver.DriverCore`.
 
 Publishes robot_status, joint_states, tool_pose, /diagnostics and ~markers; serves the
-move_to_pose action and the stop_motion service; subscribes joint_path_command. All decisions
+move_to_pose action and the stop_motion service; subscribes joint_path_command. The I/O line
+(set_io, get_io, io_states) is :mod:`vr_driver.io_server`. All decisions
 (validation, preview, handshake, reconnect) are in the ROS-free core.
 """
 from __future__ import annotations
@@ -28,6 +29,7 @@ from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, 
 from .driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
                      SubmitMode)
 from .errors import VrDriverError
+from .io_server import IoServer
 from .params import DriverParams, ParamError
 from .poses import ControllerPose, MoveType
 from .protocol import StatusBits
@@ -95,6 +97,7 @@ class InterfaceNode:
         self.diag.add("link", self._diag_link)
         self.diag.add("controller", self._diag_controller)
         self.diag.period = params.diagnostics_period
+        self.io_server = IoServer(self.core, params, self.diag)      # set_io, get_io, io_states
         # a plain ActionServer: a preview_only goal runs beside a moving goal and never preempts it
         # (SimpleActionServer would cancel the running move for any new goal, previews included);
         # a new motion goal preempts the running one (the arm is stopped first)
@@ -119,6 +122,7 @@ class InterfaceNode:
         self.core.start()
         self.server.start()
         self.trajectory_server.start()
+        self.io_server.start()
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
             rospy.Timer(rospy.Duration(1.0 / self.params.joint_states_rate), self._publish_joints),
@@ -141,6 +145,7 @@ class InterfaceNode:
     def shutdown(self) -> None:
         for timer in getattr(self, "timers", []):
             timer.shutdown()
+        self.io_server.shutdown()
         self.core.stop()
 
     # ------------------------------------------------------------------ publishing
@@ -204,7 +209,7 @@ class InterfaceNode:
                 stat.add("bus %s" % key.replace("_", " "), str(s.master_counters[key]))
         c = s.counters
         for key in ("port_opens", "port_errors", "reconnect_attempts", "losses", "reconnects",
-                    "protocol_errors"):
+                    "protocol_errors", "stalled_cycles"):
             stat.add("link %s" % key.replace("_", " "), str(getattr(c, key)))
         if s.last_diag:
             stat.add("last slave diag", s.last_diag)

@@ -65,6 +65,8 @@ class IslandProgram:
         self.slave = slave
         self.delay = delay
         self.command = 0                  # gripper_close as the island acts on it
+        self.outputs = bytes(slave.safe_outputs)   # the output image the island acts on (safe
+        #                                            outside Data_Exchange)
         self.command_since: Optional[float] = None
         self.closed = 0                   # gripper_closed
         self._part_present = 0
@@ -83,6 +85,7 @@ class IslandProgram:
         """One program loop; returns the input image written."""
         self.slave.step(now)              # the DP watchdog: outputs safe when the master is silent
         outputs = self.slave.outputs if self.slave.state is SlaveState.DATA_EXCH else self.slave.safe_outputs
+        self.outputs = bytes(outputs)
         command = outputs[0] & 1
         if command != self.command or self.command_since is None:
             if command != self.command:

@@ -6,6 +6,9 @@ device end here (``auto``: this launch's own island link, ``controller_sim.resol
 
 Sets ``~device_path`` to the pty the line hub (or a master) opens. Service (std_srvs/SetBool)
 ``~set_part_present``: True puts a part in front of the sensor (input ``part_present`` = 1).
+Topic ``~outputs`` (std_msgs/String, latched): the output image the island acts on and its DP state,
+e.g. ``01 00 DATA_EXCH`` (safe image ``00 00`` outside Data_Exchange), published on every change
+(checked every 20 ms) -- what a test reads to see the outputs go safe when the master falls silent.
 
 Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
@@ -15,6 +18,7 @@ import os
 from typing import Any
 
 import rospy
+from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
 from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, SimDeviceError,
@@ -59,8 +63,10 @@ def main() -> int:
     rospy.set_param("~device_path", island.device_path)
     rospy.loginfo("virtual_io_island: DP slave %d on %s%s", island.address, island.device_path,
                   " (linked at %s)" % island.symlink if island.symlink else "")
+    outputs_pub = rospy.Publisher("~outputs", String, queue_size=10, latch=True)
+    shown = ""
     status = EXIT_OK
-    rate = rospy.Rate(5.0)
+    rate = rospy.Rate(50.0)
     try:
         while not rospy.is_shutdown() and not stop.is_set():
             if island.server_error is not None:
@@ -71,6 +77,11 @@ def main() -> int:
                 rospy.logfatal("virtual_io_island: program loop failed: %s", island.error)
                 status = EXIT_FAILURE
                 break
+            now_shown = "%s %s" % (island.program.outputs.hex(" "), island.slave.state.name)
+            if now_shown != shown:
+                shown = now_shown
+                rospy.loginfo("virtual_io_island: outputs %s", shown)
+                outputs_pub.publish(String(data=shown))
             try:
                 rate.sleep()
             except rospy.ROSInterruptException:

@@ -73,13 +73,14 @@ def _string(params: Mapping[str, Any], name: str, default: str, allowed: Tuple[s
 
 def _port(params: Mapping[str, Any], default: str) -> str:
     """``port``; ``auto`` becomes the link the virtual controller of this launch makes (the same
-    resolution as its ``pty_link: auto``, from ROS_MASTER_URI and the ROS log directory)."""
+    resolution as its ``pty_link: auto``, from ROS_MASTER_URI and the ROS log directory);
+    ``auto:NAME`` this launch's link of station NAME (``auto:line``: the virtual line's master end)."""
     value = _string(params, "port", default)
-    if value != "auto":
+    if value != "auto" and not value.startswith("auto:"):
         return value
-    from .controller_sim import SimError, auto_pty_link
+    from .controller_sim import SimError, resolve_link
     try:
-        return auto_pty_link()
+        return resolve_link(value)
     except SimError as exc:
         raise ParamError("port", value, str(exc)) from None
 
@@ -120,6 +121,8 @@ class DriverParams:
     # link to the controller
     protocol: str = "v1"                 # the robot program's protocol: v1 | v2 (both ends alike)
     bus_config: str = ""                 # "" = pyprofibus_vendor's default robot bus (vr006l_bus.yaml)
+    io_signals: str = ""                 # signal map of the I/O stations beside the controller
+    #                                      (doc/io_line.md); "" = none: only the controller is cycled
     port: str = ""                       # "" = the bus config's phy.device (default /dev/ttyUSB0);
     #                                      "auto" = this launch's virtual controller link (resolved)
     baud: Optional[int] = None           # None = the bus config's baud
@@ -158,6 +161,7 @@ class DriverParams:
     status_rate: float = 10.0
     joint_states_rate: float = 20.0
     diagnostics_period: float = 1.0
+    io_states_rate: float = 2.0          # io_states at this rate besides on every change [Hz]
     publish_markers: bool = True
 
     @classmethod
@@ -177,6 +181,9 @@ class DriverParams:
         bus_config = _string(params, "bus_config", d.bus_config)
         if bus_config and not os.path.isfile(bus_config):
             raise ParamError("bus_config", bus_config, "no such file")
+        io_signals = _string(params, "io_signals", d.io_signals)
+        if io_signals and not os.path.isfile(io_signals):
+            raise ParamError("io_signals", io_signals, "no such file")
         names = params.get("controller_joint_names", list(d.controller_joint_names))
         if (not isinstance(names, (list, tuple)) or len(names) != 6
                 or not all(isinstance(n, str) and n for n in names) or len(set(names)) != 6):
@@ -200,6 +207,7 @@ class DriverParams:
         out = cls(
             protocol=_string(params, "protocol", d.protocol, PROTOCOLS),
             bus_config=bus_config,
+            io_signals=io_signals,
             port=_port(params, d.port),
             baud=_integer(params, "baud", d.baud, 9600, 12_000_000),
             master_address=_integer(params, "master_address", d.master_address, 0, 125),
@@ -228,6 +236,7 @@ class DriverParams:
             joint_states_rate=_number(params, "joint_states_rate", d.joint_states_rate, 0.0, 1000.0,
                                       lo_open=True),
             diagnostics_period=_number(params, "diagnostics_period", d.diagnostics_period, 0.1, 60.0),
+            io_states_rate=_number(params, "io_states_rate", d.io_states_rate, 0.0, 100.0, lo_open=True),
             publish_markers=_boolean(params, "publish_markers", d.publish_markers),
         )
         if out.link_timeout < 2.0 / out.cycle_rate:
@@ -279,7 +288,9 @@ class DriverParams:
 
     def bus(self) -> "Any":
         """The PROFIBUS bus configuration: the bus config file (or the package default) with
-        this record's overrides applied, validated again by pyprofibus_vendor. Raises ParamError."""
+        this record's overrides applied, validated again by pyprofibus_vendor. Raises ParamError.
+        The controller (``slave_address``) is ``slaves[0]``; the other slaves follow in the file's
+        order (the I/O stations, :meth:`signal_map`)."""
         from pyprofibus_vendor.config import BusConfig, ConfigError, load_config, default_robot_config
         try:
             base = (load_config(self.bus_config) if self.bus_config
@@ -306,7 +317,8 @@ class DriverParams:
                              "(have %s)" % ", ".join(str(s["address"]) for s in data["slaves"]))
         if self.watchdog_ms is not None:
             slaves[0]["watchdog_ms"] = self.watchdog_ms or None
-        data["slaves"] = slaves
+        # the controller first (the link supervisor drives slaves[0]); the others for the I/O line
+        data["slaves"] = slaves + [s for s in data["slaves"] if s["address"] != self.slave_address]
         try:
             bus = BusConfig.from_dict(data)
         except ConfigError as exc:
@@ -326,3 +338,23 @@ class DriverParams:
                              "each way; the configured modules give %d in / %d out"
                              % (self.protocol, need, slave.input_len, slave.output_len))
         return bus
+
+    def signal_map(self, bus: "Any") -> "Optional[Any]":
+        """The :class:`~vr_driver.io_signals.SignalMap` of ``io_signals`` checked against ``bus``
+        (from :meth:`bus`), or None without one. Raises ParamError naming ``io_signals`` with the
+        SignalMapError's words (a bad entry, a station that is not a slave of the bus config, or
+        the controller's own address)."""
+        if not self.io_signals:
+            return None
+        from .errors import SignalMapError
+        from .io_signals import lengths_from_bus, load_signal_map
+        try:
+            signals = load_signal_map(self.io_signals, lengths_from_bus(bus))
+        except SignalMapError as exc:
+            raise ParamError("io_signals", self.io_signals, str(exc)) from None
+        for station in signals.stations:
+            if station.address == self.slave_address:
+                raise ParamError("io_signals", self.io_signals, "station %r has address %d, the robot "
+                                 "controller's (slave_address): the controller is not an I/O station"
+                                 % (station.name, station.address))
+        return signals

@@ -49,6 +49,7 @@ from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
 from .sequencer import MotionSequencer, why_no_motion
+from .stations import IoLine
 from .streaming import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGMENT_CYCLES, StreamSequencer,
                         stream_points, stream_speeds)
 from .trajectories import ValidTrajectory, thin
@@ -175,7 +176,10 @@ class DriverCore:
         self.kin = kinematics
         self.planner = planner or MotionPlanner(self.kin)
         self.clock = clock
-        self.link = LinkSupervisor(params, self.bus, clock, open_link)
+        # the I/O stations beside the controller (io_signals), cycled by the link's master
+        signals = params.signal_map(self.bus)
+        self.io: Optional[IoLine] = IoLine(signals, params.link_timeout) if signals is not None else None
+        self.link = LinkSupervisor(params, self.bus, clock, open_link, stations=self.io)
         self.streaming = params.protocol == "v2"
         self.sequencer = (StreamSequencer if self.streaming else MotionSequencer)(
             params, clock, self._schedule_replan)
@@ -549,6 +553,8 @@ class DriverCore:
         """One bus iteration: link step (one DP cycle), joints, sequencer step, snapshot."""
         sample = self.link.step(self.clock())
         now = sample.time
+        if self.io is not None:
+            self.io.update(now)          # judge the I/O stations after the cycle (io.snapshot())
         joints = self._update_joints(sample)
         command = self.sequencer.step(now, sample, joints)
         record = command.encode() if self.streaming else command.encode(self.params.byte_order)

@@ -15,6 +15,12 @@ Rules:
   old good news);
 - the first record of a session starts a new session number: the sequencer learns from it that
   everything in flight before was lost.
+
+Other stations on the line (I/O islands, PLCs): ``stations`` (a
+:class:`~vr_driver.driver.stations.IoLine`, optional) gets every master this supervisor creates
+(:meth:`IoLine.add_slaves`) and is detached when the port closes; the DriverCore judges it after
+each step. Only the controller's slave (``bus.slaves[0]``) decides the link state: the master's
+state changes of another station never touch it.
 """
 from __future__ import annotations
 
@@ -146,10 +152,12 @@ class LinkSupervisor:
     the same thread's status snapshot."""
 
     def __init__(self, params: DriverParams, bus: Any, clock: Callable[[], float],
-                 open_link: Callable[[str, int], Link] = open_serial_link) -> None:
+                 open_link: Callable[[str, int], Link] = open_serial_link,
+                 stations: Optional[Any] = None) -> None:
         self.params = params
         self.bus = bus
         self.slave_config = bus.slaves[0]
+        self.stations = stations             # IoLine of the other stations on the line, or None
         self.clock = clock
         self.open_link = open_link
         self.counters = LinkCounters()
@@ -351,12 +359,16 @@ class LinkSupervisor:
         self._slave.outputs = idle_record(self.params)
         self._master = master
         self._link = link
+        if self.stations is not None:
+            self.stations.add_slaves(master, self.bus)   # the I/O stations, cycled by the same master
         log.info("opened %s at %d bit/s; bringing slave %d (ident 0x%04X) to Data_Exchange",
                  device, baud, sc.address, sc.ident)
         self._down(LinkState.CONNECTING, "port open, waiting for the controller's PROFIBUS card")
 
     def close(self) -> None:
         link, self._link, self._master, self._slave = self._link, None, None, None
+        if self.stations is not None:
+            self.stations.detach()
         if link is not None:
             try:
                 link.close()
@@ -370,7 +382,10 @@ class LinkSupervisor:
         self._down(LinkState.PORT_ERROR, reason)
 
     def _on_slave_state(self, slave, old: MasterSlaveState, new: MasterSlaveState, reason: str) -> None:
-        """The DP master's per-slave state changes: keep the last reason for the status."""
+        """The DP master's per-slave state changes: keep the last reason for the status (the
+        controller's only: the I/O stations have their own supervision)."""
+        if slave.address != self.slave_config.address:
+            return
         if new is MasterSlaveState.INIT:
             self.counters.reconnect_attempts += 1
         connected = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
