@@ -14,7 +14,7 @@ import rostest
 from actionlib_msgs.msg import GoalStatus
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from driver_check import HOME, PKG, DriverTestBase
+from driver_check import HOME, PKG, DriverTestBase, Recorder
 from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal
 
@@ -119,6 +119,30 @@ class DriverV2Test(DriverTestBase):
         state, result = self.move(MoveToPoseGoal.LIN, (1000, -300, 800, 0, 45, 0))
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
         self.assertLess(abs(result.reached.x - 1000) + abs(result.reached.y + 300) + abs(result.reached.z - 800), 0.2)
+
+    def test_06_the_controllers_own_io_through_set_io(self):
+        """issue 18 item 6: the controller's general-purpose I/O (in the v2 records) as named
+        signals: set_io g2_gripper_close -> g2_gripper_closed in io_states and get_io."""
+        from vr_driver.msg import IOStates
+        from vr_driver.srv import GetIO, SetIO
+        rospy.wait_for_service("/set_io", 20.0)
+        set_io = rospy.ServiceProxy("/set_io", SetIO)
+        get_io = rospy.ServiceProxy("/get_io", GetIO)
+        states = Recorder("/io_states", IOStates)
+
+        def shown(name, value):
+            return lambda m: any(s.name == name and s.value == value and s.online for s in m.signals)
+        self.assertIsNotNone(states.wait_for(shown("g2_gripper_closed", "0"), 20.0), "g2 station not online")
+        res = set_io("g2_gripper_close", "1")
+        self.assertTrue(res.success, res.message)
+        self.assertIsNotNone(states.wait_for(shown("g2_gripper_closed", "1"), 5.0, after=time.monotonic() - 1.0),
+                             "g2_gripper_closed never read 1")
+        got = get_io("g2_gripper_closed")
+        self.assertTrue(got.success and got.value == "1", got)
+        bad = set_io("g2_gripper_closed", "1")
+        self.assertFalse(bad.success)
+        self.assertIn("input", bad.message)
+        self.assertTrue(set_io("g2_gripper_close", "0").success)
 
 
 if __name__ == "__main__":

@@ -348,13 +348,24 @@ class DriverParams:
             return None
         from .errors import SignalMapError
         from .io_signals import lengths_from_bus, load_signal_map
+        from .driver.stations import CONTROLLER_IO_LENGTH
+        lengths = lengths_from_bus(bus)
+        if self.protocol == "v2":       # the controller's own I/O: 16 inputs, 16 outputs in the v2 records
+            lengths[self.slave_address] = (CONTROLLER_IO_LENGTH, CONTROLLER_IO_LENGTH)
         try:
-            signals = load_signal_map(self.io_signals, lengths_from_bus(bus))
+            signals = load_signal_map(self.io_signals, lengths)
         except SignalMapError as exc:
             raise ParamError("io_signals", self.io_signals, str(exc)) from None
         for station in signals.stations:
-            if station.address == self.slave_address:
+            if station.address != self.slave_address:
+                continue
+            if self.protocol != "v2":
                 raise ParamError("io_signals", self.io_signals, "station %r has address %d, the robot "
-                                 "controller's (slave_address): the controller is not an I/O station"
-                                 % (station.name, station.address))
+                                 "controller's (slave_address): the controller's own I/O needs protocol "
+                                 "v2 (v1's 14 bytes have no room for it)" % (station.name, station.address))
+            unsafe = [sig.name for sig in station.signals if sig.is_output and sig.safe]
+            if unsafe:
+                raise ParamError("io_signals", self.io_signals, "station %r (the controller's own I/O): "
+                                 "the controller sets its outputs to 0 on a link loss, so every safe value "
+                                 "must be 0 (%s)" % (station.name, ", ".join(unsafe)))
         return signals

@@ -35,8 +35,8 @@ class TimedLineLink(LineLink):
 class IoWorld(World):
     """The world with the island on the line (its program stepped with the controller's)."""
 
-    def __init__(self, kin, params=None) -> None:
-        super().__init__(kin, dict(IO_PARAMS, **(params or {})))
+    def __init__(self, kin, params=None, protocol: str = "v1") -> None:
+        super().__init__(kin, dict(IO_PARAMS, **(params or {})), protocol=protocol)
         self.island = island_slave(clock=self.clock)
         self.island_program = IslandProgram(self.island)
         self.link = TimedLineLink([self.slave, self.island], self.clock)   # before the core opens it
@@ -148,3 +148,64 @@ def test_the_controller_cut_never_drops_the_island(world):
     world.run_until(lambda: world.value("gripper_closed") == 1, 1.0, "gripper closed")
     world.link.unplugged.discard(4)
     world.ready()
+
+
+# ------------------------------------------------------------------ the controller's own I/O (v2)
+V2_PARAMS = {"bus_config": os.path.join(CONFIG, "io_line_bus_v2.yaml"),
+             "io_signals": os.path.join(CONFIG, "io_controller_signals_v2.yaml")}
+
+
+@pytest.fixture
+def world_v2(kin):
+    w = IoWorld(kin, V2_PARAMS, protocol="v2")
+    w.ready()
+    w.run_until(lambda: w.station_online() and w.io.station("g2").online, 3.0, "stations online")
+    return w
+
+
+def test_the_controllers_own_io_is_a_station_in_v2(world_v2):
+    w = world_v2
+    assert w.value("g2_gripper_close") == 0 and w.value("g2_gripper_closed") == 0
+    result = w.core.io.write("g2_gripper_close", "1")
+    assert result.success, result.message
+    w.run_until(lambda: w.program.io_outputs == 1, 1.0, "controller output 1")
+    t_set = w.now
+    w.run_until(lambda: w.value("g2_gripper_closed") == 1, 2.0, "g2_gripper_closed")
+    assert w.now - t_set >= 0.3 - 1e-9
+    w.program.set_input(3, True)
+    w.run_until(lambda: w.value("g2_part_present") == 1, 1.0, "g2_part_present")
+    assert not w.core.io.write("g2_gripper_closed", "1").success          # an input
+    assert not w.core.io.write("g2_gripper_close", "2").success           # not a bit
+    assert w.program.io_outputs == 1                                       # refusals changed nothing
+    # the island beside it is untouched and still works
+    assert w.core.io.write("gripper_close", "1").success
+    w.run_until(lambda: w.value("gripper_closed") == 1, 2.0, "island gripper")
+
+
+def test_the_controllers_outputs_go_safe_on_a_link_loss_and_stay_safe(world_v2):
+    w = world_v2
+    assert w.core.io.write("g2_gripper_close", "1").success
+    w.run_until(lambda: w.program.io_outputs == 1, 1.0, "controller output 1")
+    w.link.cut = True
+    w.run_until(lambda: not w.io.station("g2").online, 1.0, "g2 offline")
+    assert w.value("g2_gripper_closed") is None                            # never an old value
+    w.run_until(lambda: w.program.io_outputs == 0, 2.0, "controller outputs safe")
+    w.link.cut = False
+    w.run_until(lambda: w.io.station("g2").online, 10.0, "g2 back")
+    w.run_for(1.0)
+    assert w.value("g2_gripper_close") == 0 and w.program.io_outputs == 0  # until set again
+
+
+def test_the_controllers_own_io_needs_v2_and_safe_zero(tmp_path):
+    params = DriverParams.from_dict(dict(V2_PARAMS, port="/dev/x", protocol="v1",
+                                         bus_config=IO_PARAMS["bus_config"]))
+    with pytest.raises(ParamError) as err:
+        params.signal_map(params.bus())
+    assert err.value.name == "io_signals" and "needs protocol v2" in str(err.value)
+    bad = tmp_path / "signals.yaml"
+    bad.write_text("stations:\n  g2:\n    address: 4\n    signals:\n"
+                   "      lamp: {direction: out, type: bit, byte: 0, bit: 0, safe: 1}\n")
+    params = DriverParams.from_dict(dict(V2_PARAMS, io_signals=str(bad), port="/dev/x", protocol="v2"))
+    with pytest.raises(ParamError) as err:
+        params.signal_map(params.bus())
+    assert "must be 0" in str(err.value) and "lamp" in str(err.value)

@@ -49,7 +49,7 @@ from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
 from .sequencer import MotionSequencer, why_no_motion
-from .stations import IoLine
+from .stations import ControllerIo, IoLine
 from .streaming import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGMENT_CYCLES, StreamSequencer,
                         stream_points, stream_speeds)
 from .trajectories import ValidTrajectory, thin
@@ -183,6 +183,12 @@ class DriverCore:
         self.streaming = params.protocol == "v2"
         self.sequencer = (StreamSequencer if self.streaming else MotionSequencer)(
             params, clock, self._schedule_replan)
+        # the controller's own I/O (v2) as a station of the signal map at the controller's address
+        self.controller_io: Optional[ControllerIo] = None
+        if self.io is not None and self.streaming and \
+                any(st.address == self.slave_config.address for st in self.io.map.stations):
+            self.controller_io = ControllerIo(self.slave_config.address, self._set_controller_outputs)
+            self.io.add_local(self.controller_io)
         self._stop = threading.Event()
         self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
         self._thread: Optional[threading.Thread] = None
@@ -359,6 +365,10 @@ class DriverCore:
         return TrajectoryRun(traj, kept, jobs, self.clock())
 
     # ------------------------------------------------------------------------ protocol v2
+    def _set_controller_outputs(self, value: int) -> None:
+        self.sequencer.outputs = value      # type: ignore[attr-defined]  (StreamSequencer)
+        self._wake.set()
+
     def _min_segment(self) -> float:
         """The shortest segment the bus feeds without a gap: MIN_SEGMENT_CYCLES of the configured
         cycle, or of the measured one when the wire is slower (a 72-byte record at 19.2 kbit/s)."""
@@ -553,6 +563,8 @@ class DriverCore:
         """One bus iteration: link step (one DP cycle), joints, sequencer step, snapshot."""
         sample = self.link.step(self.clock())
         now = sample.time
+        if self.controller_io is not None:
+            self.controller_io.refresh(sample.connected, sample.feedback, sample.feedback_time, now)
         if self.io is not None:
             self.io.update(now)          # judge the I/O stations after the cycle (io.snapshot())
         joints = self._update_joints(sample)

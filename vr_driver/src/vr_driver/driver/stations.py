@@ -40,7 +40,11 @@ from ..io_signals import Signal, SignalMap, StationSignals, Value
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["SignalState", "StationState", "IoSnapshot", "IoResult", "IoLine"]
+__all__ = ["SignalState", "StationState", "IoSnapshot", "IoResult", "IoLine", "ControllerIo",
+           "CONTROLLER_IO_LENGTH"]
+
+#: bytes each way of the controller's own general-purpose I/O (protocol v2: 16 inputs, 16 outputs)
+CONTROLLER_IO_LENGTH = 2
 
 _CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
 
@@ -128,6 +132,68 @@ def _explain(handle: SlaveHandle, reason: str) -> str:
     return reason
 
 
+class _Counters:
+    def __init__(self) -> None:
+        self.losses = 0
+
+
+class _Spec:
+    input_size = output_size = CONTROLLER_IO_LENGTH
+
+
+class _State:
+    def __init__(self, value: str) -> None:
+        self.value = value
+
+
+class ControllerIo:
+    """The robot controller's own general-purpose I/O (protocol v2, doc/controller_program.md §9.5)
+    as an I/O station of :class:`IoLine`: it has the shape of a master's slave handle, but its
+    inputs come from the v2 feedback and its outputs go into the v2 command. The bus loop calls
+    :meth:`refresh` with each link sample before :meth:`IoLine.update`; ``set_outputs(value)``
+    puts the outputs word into the next command."""
+
+    spec = _Spec()
+    last_diag = None
+
+    def __init__(self, address: int, set_outputs: Callable[[int], None]) -> None:
+        self.address = address
+        self._set_outputs = set_outputs
+        self.counters = _Counters()
+        self.connected = False
+        self.state = _State("no link")
+        self.state_since: Optional[float] = None
+        self.inputs: Optional[bytes] = None
+        self.inputs_time: Optional[float] = None
+        self._outputs = bytes(CONTROLLER_IO_LENGTH)
+
+    @property
+    def outputs(self) -> bytes:
+        return self._outputs
+
+    @outputs.setter
+    def outputs(self, data: bytes) -> None:
+        self._outputs = bytes(data)
+        self._set_outputs(int.from_bytes(self._outputs, "little"))
+
+    def refresh(self, connected: bool, feedback: Any, feedback_time: Optional[float], now: float) -> None:
+        """The link's sample of this bus iteration: connected (Data_Exchange with fresh v2
+        feedback), the feedback and when it arrived."""
+        if connected and feedback is not None:
+            if not self.connected:
+                self.state_since = now
+            self.connected = True
+            self.state = _State("DATA_EXCHANGE")
+            self.inputs = int(feedback.inputs).to_bytes(CONTROLLER_IO_LENGTH, "little")
+            self.inputs_time = feedback_time
+        else:
+            if self.connected:
+                self.counters.losses += 1
+            self.connected = False
+            self.state = _State("no link to the controller")
+            self.inputs = None
+
+
 class _Station:
     """Mutable per-station state (guarded by the IoLine's lock)."""
 
@@ -159,7 +225,15 @@ class IoLine:
         self._lock = threading.RLock()
         self._master: Optional[DpMaster] = None
         self._chained: Optional[Callable[..., None]] = None
+        self._local: Dict[int, Any] = {}          # stations not cycled by the master (ControllerIo)
         self._snapshot = self._make_snapshot(0.0)
+
+    def add_local(self, handle: Any) -> None:
+        """A station whose handle is not the master's (the controller's own I/O): never added to
+        the master, judged like the others."""
+        if handle.address not in self._stations:
+            raise SignalMapError("no station with address %d in the signal map" % handle.address)
+        self._local[handle.address] = handle
 
     # ------------------------------------------------------------------------ the master
     def add_slaves(self, master: DpMaster, bus: Any) -> None:
@@ -167,7 +241,8 @@ class IoLine:
         :class:`~pyprofibus_vendor.config.BusConfig`; each station's address must be one of its
         slaves), then :meth:`attach` it."""
         for address in self._stations:
-            master.add_slave(SlaveSpec.from_config(bus.slave(address)))
+            if address not in self._local:
+                master.add_slave(SlaveSpec.from_config(bus.slave(address)))
         self.attach(master)
 
     def attach(self, master: DpMaster) -> None:
@@ -177,7 +252,7 @@ class IoLine:
         with self._lock:
             self.detach()
             for address, st in self._stations.items():
-                handle = master.slave(address)
+                handle = self._local.get(address) or master.slave(address)
                 if (handle.spec.input_size, handle.spec.output_size) != (st.signals.input_len, st.signals.output_len):
                     raise SignalMapError("station %r: the master has %s bytes in / %s out for slave %d, the signal "
                                          "map %d / %d" % (st.signals.name, handle.spec.input_size,
