@@ -255,9 +255,12 @@ class LaunchFilesLoadTest(unittest.TestCase):
     def test_planning_execution_sim_runs_the_virtual_controller(self):
         c = self.load("moveit_planning_execution.launch", "sim:=true")
         nodes = {n.name: n for n in c.nodes}
-        self.assertEqual(set(nodes), {"robot_state_publisher", "virtual_controller", "interface", "move_group"}
+        # the virtual controller and the virtual I/O island on the virtual line (driver.launch io:=true)
+        self.assertEqual(set(nodes), {"robot_state_publisher", "virtual_controller", "virtual_io_island",
+                                      "virtual_line", "interface", "move_group"}
                          | {n for n in nodes if n.startswith("rviz")})
-        self.assertEqual(c.params["/interface/port"].value, c.params["/virtual_controller/pty_link"].value)
+        self.assertEqual(c.params["/interface/port"].value, c.params["/virtual_line/pty_link"].value)
+        self.assertIn(c.params["/virtual_controller/pty_link"].value, c.params["/virtual_line/stations"].value)
         self.assertIn("/robot_description", c.params)            # from driver.launch, once
 
     def test_planning_execution_real_port_passes_through(self):
