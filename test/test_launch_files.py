@@ -134,7 +134,9 @@ class DriverLaunchParamsTest(unittest.TestCase):
         """issue 18: sim:=true (io:=true by default) puts the virtual controller and the virtual I/O island
         on one virtual line; the driver opens the line's master end and cycles both stations."""
         from vr_driver.controller_sim import auto_pty_link
-        for protocol, length in (("v1", 14), ("v2", 72)):
+        island = ["gripper_close", "gripper_closed", "part_present"]
+        own = ["g2_gripper_close", "g2_gripper_closed", "g2_part_present"]   # the controller's own I/O (v2)
+        for protocol, length, names in (("v1", 14, island), ("v2", 72, island + own)):
             with self.subTest(protocol=protocol):
                 p, params = self.check("protocol:=" + protocol)
                 self.assertEqual(params["/virtual_line/stations"], ["auto", "auto:io_island"])
@@ -143,8 +145,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
                 self.assertEqual(p.port, auto_pty_link(station="line"))
                 bus = p.bus()
                 self.assertEqual([(s.address, s.input_len) for s in bus.slaves], [(4, length), (8, 2)])
-                self.assertEqual([s.name for s in p.signal_map(bus).signals],
-                                 ["gripper_close", "gripper_closed", "part_present"])
+                self.assertEqual([s.name for s in p.signal_map(bus).signals], names)
         p, params = self.check("sim:=false", "port:=/dev/ttyUSB7")
         self.assertEqual(p.io_signals, "")
         self.assertFalse(any(k.startswith("/virtual_line/") for k in params))
