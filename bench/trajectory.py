@@ -609,9 +609,9 @@ def worker(cfg: Dict[str, Any]) -> int:
     rospy = None
     status = 1
     keep = False
-    print("--- %s: protocol %s, %d bit/s, %g Hz bus cycle (ROS master port %d, speed_factor %g; tolerances %s)"
-          % (cfg["name"], cfg["protocol"], cfg["baud"], cfg["cycle_rate"], port, cfg["speed_factor"],
-             cfg["tolerances"]), flush=True)
+    print("--- %s: protocol %s, %d bit/s%s, %g Hz bus cycle (ROS master port %d, speed_factor %g; tolerances %s)"
+          % (cfg["name"], cfg["protocol"], cfg["baud"], " (line paced)" if cfg.get("paced") else "",
+             cfg["cycle_rate"], port, cfg["speed_factor"], cfg["tolerances"]), flush=True)
     try:
         stack.start_roscore()
         import rospy as _rospy
@@ -619,7 +619,8 @@ def worker(cfg: Dict[str, Any]) -> int:
         rospy.init_node("trajectory_bench", anonymous=True, disable_signals=True)
         stack.start_launch(["sim:=true", "sim_port:=%s/g2" % tmp, "baud:=%d" % cfg["baud"],
                             "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
-                            "protocol:=%s" % cfg["protocol"]])
+                            "protocol:=%s" % cfg["protocol"]]
+                           + (["line_baud:=%d" % cfg["baud"]] if cfg.get("paced") else []))
         result = Run(rospy, stack, cfg).run()
         print(RESULT_TAG + json.dumps(result), flush=True)
         status = 0
@@ -760,6 +761,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     p.add_argument("--dump", default="", help="append each goal's plan and joint_states samples to this file "
                                                "(JSON lines: config, index, plan, samples [t, joints], t_result)")
     p.add_argument("--quick", action="store_true", help="smoke run: 1 trajectory per configuration")
+    p.add_argument("--paced", action="store_true",
+                   help="the virtual line carries its bytes at the configuration's bit rate (driver.launch "
+                        "line_baud:=), so a record takes its real wire time (a 72-byte v2 exchange ~95 ms at "
+                        "19.2 kbit/s); default: pty speed")
     args = p.parse_args(argv)
     if args.quick:
         args.n = 1
@@ -789,7 +794,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         cfg = {"name": name, "protocol": protocol, "baud": baud, "cycle_rate": rate, "n": args.n, "seed": args.seed,
                "speed_factor": args.speed_factor, "path_tol": tol(args.path_tolerance, protocol),
                "goal_tol": tol(args.goal_tolerance, protocol), "ready_timeout": args.ready_timeout,
-               "ros_port": args.ros_port, "keep_logs": args.keep_logs,
+               "ros_port": args.ros_port, "keep_logs": args.keep_logs, "paced": args.paced,
                "dump": os.path.abspath(args.dump) if args.dump else ""}
         cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
         code, result = run_worker(cfg)
