@@ -739,19 +739,21 @@ def summary(results: List[Dict[str, Any]]) -> None:
     line("virtual_controller CPU idle", [cpu(r, "/virtual_controller") for r in results])
 
 
-def run_worker(cfg: Dict[str, Any]) -> Tuple[int, Optional[Dict[str, Any]]]:
-    """Run one configuration in a worker process (its own session and process group: a Ctrl-C reaches
-    this process only, which passes it on once) and relay its output; (exit status, result).
+def run_worker(cfg: Dict[str, Any], script: str = __file__, tag: str = RESULT_TAG
+               ) -> Tuple[int, Optional[Dict[str, Any]]]:
+    """Run one configuration in a worker process (``script --worker CFG``, its own session and process
+    group: a Ctrl-C reaches this process only, which passes it on once) and relay its output; (exit
+    status, the result the worker printed after ``tag``). Also bench/trajectory.py's runner.
     start_new_session, not process_group= (Python 3.11+): the benchmark runs on 3.8."""
-    proc = subprocess.Popen([sys.executable, os.path.abspath(__file__), "--worker", json.dumps(cfg)],
+    proc = subprocess.Popen([sys.executable, os.path.abspath(script), "--worker", json.dumps(cfg)],
                             stdout=subprocess.PIPE, text=True, bufsize=1, start_new_session=True)
     result = None
     forwarded = False
     while True:
         try:
             for text in proc.stdout:
-                if text.startswith(RESULT_TAG):
-                    result = json.loads(text[len(RESULT_TAG):])
+                if text.startswith(tag):
+                    result = json.loads(text[len(tag):])
                 else:
                     sys.stdout.write(text)
                     sys.stdout.flush()

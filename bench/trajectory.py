@@ -64,7 +64,6 @@ import random
 import re
 import shutil
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -709,28 +708,10 @@ def summary(results: List[Dict[str, Any]]) -> None:
 
 
 def run_worker(cfg: Dict[str, Any]) -> Tuple[int, Optional[Dict[str, Any]]]:
-    """One configuration in a worker process of its own session (a Ctrl-C reaches this process,
-    which passes it on once); its output relayed; (exit status, result)."""
-    proc = subprocess.Popen([sys.executable, os.path.abspath(__file__), "--worker", json.dumps(cfg)],
-                            stdout=subprocess.PIPE, text=True, bufsize=1, start_new_session=True)
-    result = None
-    forwarded = False
-    while True:
-        try:
-            for text in proc.stdout:
-                if text.startswith(RESULT_TAG):
-                    result = json.loads(text[len(RESULT_TAG):])
-                else:
-                    sys.stdout.write(text)
-                    sys.stdout.flush()
-            return proc.wait(), result
-        except KeyboardInterrupt:
-            if not forwarded and proc.poll() is None:
-                forwarded = True
-                try:
-                    proc.send_signal(signal.SIGINT)
-                except ProcessLookupError:
-                    pass
+    """One configuration in a worker process (driver_latency's runner: own session, Ctrl-C passed on
+    once, output relayed); (exit status, result)."""
+    from driver_latency import run_worker as run
+    return run(cfg, __file__, RESULT_TAG)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
