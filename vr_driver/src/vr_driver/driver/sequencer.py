@@ -169,6 +169,23 @@ class MotionSequencer:
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Command:
         """One bus iteration: take the requests, follow the handshake, end jobs, send the next
         target when everything allows it. Returns what to send."""
+        fb = self._begin_step(now, sample)
+        if fb is None:
+            self.handshake.update(None, now)
+            self._publish()
+            return self.handshake.outputs()
+        self._track_rest(now, fb)
+        event = self.handshake.update(sample.fresh, now)
+        self._on_event(event, fb, now)
+        self._check_settle(now, fb)
+        self._advance(now, fb, sample, joints)
+        self._publish()
+        return self.handshake.outputs()
+
+    def _begin_step(self, now: float, sample: LinkSample) -> Optional[Any]:
+        """The start of every step (v1 and v2): take the posted requests; on a lost link or a new
+        Data_Exchange session end everything in flight (:meth:`_lost`). Returns the feedback to act
+        on, or None when there is none of this session."""
         fb = sample.feedback
         if fb is not None:
             self._last_pose = fb.pose
@@ -180,20 +197,12 @@ class MotionSequencer:
         if not sample.connected or (self._session is not None and sample.session != self._session):
             if self._session is not None:
                 self._lost(now, sample.reason if not sample.connected else "a new Data_Exchange session")
-            self.handshake.update(None, now)
             if sample.connected:
                 self._session = sample.session
-            self._publish()
-            return self.handshake.outputs()
+            return None
         self._session = sample.session
         assert fb is not None
-        self._track_rest(now, fb)
-        event = self.handshake.update(sample.fresh, now)
-        self._on_event(event, fb, now)
-        self._check_settle(now, fb)
-        self._advance(now, fb, sample, joints)
-        self._publish()
-        return self.handshake.outputs()
+        return fb
 
     def shutdown(self, reason: str) -> None:
         """End every job (after the bus loop stopped): queued, in flight, posted but not taken."""
@@ -284,8 +293,12 @@ class MotionSequencer:
         self._queue.clear()
         if self._job is not None:
             self._stop_current(reason, now)
-        elif self.handshake.phase not in (MasterPhase.IDLE, MasterPhase.SYNC):
-            # nothing of ours in flight, but a motion may still run (after a timeout): stop it
+        else:
+            self._stop_untracked(reason, now)
+
+    def _stop_untracked(self, reason: str, now: float) -> None:
+        """No job of ours in flight, but a motion may still run (after a timeout): stop it."""
+        if self.handshake.phase not in (MasterPhase.IDLE, MasterPhase.SYNC):
             self.handshake.abort(reason, now, stop=True)
 
     def _stop_current(self, reason: str, now: float) -> None:

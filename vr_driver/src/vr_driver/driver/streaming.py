@@ -174,22 +174,10 @@ class StreamSequencer(MotionSequencer):
 
     # ------------------------------------------------------------------ bus thread
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> CommandV2:
-        fb = sample.feedback
-        if fb is not None:
-            self._last_pose = fb.pose
-        with self._lock:
-            requests = list(self._inbox)
-            self._inbox.clear()
-        for request in requests:
-            self._take(request, now, fb)
-        if not sample.connected or (self._session is not None and sample.session != self._session):
-            if self._session is not None:
-                self._lost(now, sample.reason if not sample.connected else "a new Data_Exchange session")
-            if sample.connected:
-                self._session = sample.session
+        fb = self._begin_step(now, sample)
+        if fb is None:
             self._publish()
             return CommandV2()
-        self._session = sample.session
         assert isinstance(fb, FeedbackV2)
         self._track_rest(now, fb)
         self._follow(now, fb)
@@ -217,19 +205,11 @@ class StreamSequencer(MotionSequencer):
             log.info("job %d: replaced by a newer joint path after %d of its %d points", job.id,
                      self._limit, len(job.points))
 
-    def _stop_everything(self, reason: str, now: float) -> None:
-        for queued in list(self._queue):
-            queued.finish(False, JobPhase.CANCELLED, reason, None)
-        self._queue.clear()
-        if self._job is not None:
-            self._stop_current(reason, now)
-        elif self._last_state in (StreamState.MOVING, StreamState.STOPPING):
+    def _stop_untracked(self, reason: str, now: float) -> None:
+        if self._last_state in (StreamState.MOVING, StreamState.STOPPING):
             self._stopping = True                 # not ours (an earlier stream's end): stop it too
-            self._begin_settle_none(reason, now)
-
-    def _begin_settle_none(self, reason: str, now: float) -> None:
-        if self._settle is None:
-            self._settle = _Settle(None, JobPhase.CANCELLED, reason, now)
+            if self._settle is None:
+                self._settle = _Settle(None, JobPhase.CANCELLED, reason, now)
 
     def _stop_current(self, reason: str, now: float) -> None:
         job = self._job
