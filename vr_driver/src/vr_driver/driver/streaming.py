@@ -41,6 +41,7 @@ from .jobs import JobPhase, MoveJob, StreamPoint, SubmitMode
 from .link import LinkSample
 from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer, _Add,
                         _Settle, why_no_motion)
+from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -67,28 +68,10 @@ def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tol
     constant-speed straight joint move between the kept points around it is within ``tolerance``
     [rad, every joint] of it *at its planned time*; then points closer than ``min_dt`` in time to
     the previous kept one are dropped too (never the last)."""
-    n = len(times)
-    if n <= 2:
-        return list(range(n))
-    keep = {0, n - 1}
-    stack = [(0, n - 1)]
-    while stack:
-        a, b = stack.pop()
-        if b - a < 2:
-            continue
-        span = times[b] - times[a]
-        worst, worst_dev = -1, tolerance
-        for k in range(a + 1, b):
-            f = (times[k] - times[a]) / span
-            dev = max(abs(pa + f * (pb - pa) - pk)
-                      for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
-            if dev > worst_dev:
-                worst, worst_dev = k, dev
-        if worst >= 0:
-            keep.add(worst)
-            stack.append((a, worst))
-            stack.append((worst, b))
-    kept = sorted(keep)
+    def excess(a: int, b: int, k: int) -> float:
+        f = (times[k] - times[a]) / (times[b] - times[a])
+        return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
+    kept = split_keep(len(times), excess, tolerance)
     if min_dt > 0.0:
         out = [kept[0]]
         for k in kept[1:-1]:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Sequence, Tuple
 
 from ..errors import VrDriverError
 
@@ -23,7 +23,7 @@ __all__ = [
     "SUCCESSFUL", "INVALID_GOAL", "INVALID_JOINTS", "OLD_HEADER_TIMESTAMP",
     "PATH_TOLERANCE_VIOLATED", "GOAL_TOLERANCE_VIOLATED",
     "TrajectoryError", "TrajectoryGoal", "ValidTrajectory", "validate", "segment_speeds", "thin",
-    "path_deviation",
+    "path_deviation", "split_keep",
     "DEFAULT_PATH_TOLERANCE", "V1_WIRE_ERROR",
 ]
 
@@ -222,21 +222,28 @@ def thin(traj: ValidTrajectory, reserve: float = V1_WIRE_ERROR) -> List[int]:
     far from a dropped point (recursive split at the worst point). A joint without a path
     tolerance (inf) never forces a point."""
     pts = traj.positions
-    n = len(pts)
+    tol = [max(t - reserve, 0.25 * t) if math.isfinite(t) else math.inf for t in traj.path_tolerance]
+    return split_keep(len(pts), lambda a, b, k: _deviation(pts[a], pts[b], pts[k], tol), 1.0)
+
+
+def split_keep(n: int, excess: Callable[[int, int, int], float], limit: float) -> List[int]:
+    """The points to keep of ``n`` (always the first and the last), by recursive split: between two
+    kept points ``a`` and ``b``, the dropped point ``k`` with the largest ``excess(a, b, k)`` above
+    ``limit`` is kept, and both halves are split again. Used by :func:`thin` (v1: distance to the
+    chord) and :func:`~vr_driver.driver.streaming.thin_timed` (v2: distance at the planned time)."""
     if n <= 2:
         return list(range(n))
-    tol = [max(t - reserve, 0.25 * t) if math.isfinite(t) else math.inf for t in traj.path_tolerance]
     keep = {0, n - 1}
     stack = [(0, n - 1)]
     while stack:
         a, b = stack.pop()
         if b - a < 2:
             continue
-        worst, worst_ratio = -1, 1.0
+        worst, worst_value = -1, limit
         for k in range(a + 1, b):
-            ratio = _deviation(pts[a], pts[b], pts[k], tol)
-            if ratio > worst_ratio:
-                worst, worst_ratio = k, ratio
+            value = excess(a, b, k)
+            if value > worst_value:
+                worst, worst_value = k, value
         if worst >= 0:
             keep.add(worst)
             stack.append((a, worst))
