@@ -175,6 +175,22 @@ class DriverTestBase(unittest.TestCase):
         return self.send_and_wait(self.trajectory_client, goal, timeout,
                                   "no result from joint_trajectory_action")
 
+    def check_on_path(self, points, times, q0, start, tol=None):
+        """joint_states from message ``start`` on stayed within the path tolerance of the planned
+        path (``tol``, or the driver's default) -- and some were seen on the way, not only at its ends."""
+        from vr_driver.driver.trajectories import TrajectoryGoal, path_deviation, validate
+        names = tuple("joint_%d" % i for i in range(1, 7))
+        lim = self.kin.limits
+        plan = validate(TrajectoryGoal(names, tuple(map(tuple, points)), tuple(times),
+                                       path_tolerance={n: tol for n in names} if tol is not None else {}),
+                        names, q0, lim.lower, lim.upper, 0.0)
+        with self.joints.cond:
+            seen = [m.position for m in self.joints.messages[start:]]
+        travel = [(q[0] - q0[0]) / (points[-1][0] - q0[0]) for q in seen]
+        self.assertTrue(any(0.2 < f < 0.8 for f in travel), "no joint_states during the motion")
+        worst = max(path_deviation(plan, q)[0] for q in seen)
+        self.assertLessEqual(worst, 1.0, "left the path tolerance (%.2f x)" % worst)
+
     def check_trajectory_refusals(self):
         """Each bad goal of joint_trajectory_action is refused with its control_msgs code, a reason,
         and nothing reaches the controller."""
@@ -571,7 +587,6 @@ class DriverTest(DriverTestBase):
     def test_14_joint_trajectory_action_runs_a_30_point_trajectory(self):
         """issue 16: an actionlib client of joint_trajectory_action, as MoveIt's controller manager
         uses it: SUCCESSFUL, joint_states within the path tolerance throughout, each target once."""
-        from vr_driver.driver.trajectories import TrajectoryGoal, path_deviation, validate
         self.wait_motion_possible()
         state, result = self.move(MoveToPoseGoal.PTP, HOME)         # a known start, whatever ran before
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
@@ -591,18 +606,7 @@ class DriverTest(DriverTestBase):
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.error_string)
         self.assertEqual(result.error_code, FollowJointTrajectoryResult.SUCCESSFUL)
         self.assertIn("planned", result.error_string)                 # how much slower, in words
-        names = tuple("joint_%d" % i for i in range(1, 7))
-        lim = self.kin.limits
-        plan = validate(TrajectoryGoal(names, tuple(map(tuple, points)), tuple(times),
-                                       path_tolerance={n: tol for n in names}), names, q0,
-                        lim.lower, lim.upper, 0.0)
-        with self.joints.cond:
-            seen = [m.position for m in self.joints.messages[start:]]
-        # the tolerance check below saw the arm on its way, not only at its ends
-        travel = [(q[0] - q0[0]) / (points[-1][0] - q0[0]) for q in seen]
-        self.assertTrue(any(0.2 < f < 0.8 for f in travel), "no joint_states during the motion")
-        worst = max(path_deviation(plan, q)[0] for q in seen)
-        self.assertLessEqual(worst, 1.0, "left the path tolerance (%.2f x)" % worst)
+        self.check_on_path(points, times, q0, start, tol)
         entries = self.entries()[before:]
         targets = [tuple(e["target"]) for e in entries]
         self.assertEqual(len(targets), len(set(targets)), "a target executed twice")

@@ -15,7 +15,6 @@ from actionlib_msgs.msg import GoalStatus
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from driver_check import HOME, PKG, DriverTestBase, Recorder
-from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal
 
 DEG = math.pi / 180.0
@@ -55,17 +54,7 @@ class DriverV2Test(DriverTestBase):
         ratio = float(re.search(r"ran ([0-9.]+) x the planned", result.error_string).group(1))
         self.assertLessEqual(ratio, 1.15, result.error_string)      # the bench measures it; a loose bound here
         self.assertLessEqual(elapsed, 1.5 * times[-1] + 1.0)
-        names = tuple("joint_%d" % i for i in range(1, 7))
-        lim = self.kin.limits
-        plan = validate(TrajectoryGoal(names, tuple(map(tuple, points)), tuple(times)), names, q0,
-                        lim.lower, lim.upper, 0.0)
-        with self.joints.cond:
-            seen = [m.position for m in self.joints.messages[start:]]
-        from vr_driver.driver.trajectories import path_deviation
-        travel = [(q[0] - q0[0]) / (points[-1][0] - q0[0]) for q in seen]
-        self.assertTrue(any(0.2 < f < 0.8 for f in travel), "no joint_states during the motion")
-        worst = max(path_deviation(plan, q)[0] for q in seen)
-        self.assertLessEqual(worst, 1.0, "left the path tolerance (%.2f x)" % worst)
+        self.check_on_path(points, times, q0, start)                # the driver's default tolerance
         entries = self.entries()[before:]
         seqs = [e["seq"] for e in entries]
         self.assertTrue(seqs, "nothing in the controller's log")
