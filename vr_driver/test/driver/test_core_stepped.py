@@ -319,3 +319,36 @@ def test_a_planner_trajectory_runs_through_its_thinned_points_each_once(world):
     assert worst[0] <= 1.0, worst[0]                     # within the path tolerance throughout
     final = world.status().joints
     assert max(abs(a - b) for a, b in zip(final, points[-1])) <= math.radians(3.0)
+
+
+def test_requests_plan_one_at_a_time(world):
+    """Requests plan in their callers' threads (one per goal); only one planner runs at a time, so
+    many goals at once cannot starve the bus thread of the interpreter lock."""
+    import threading
+    import time as _time
+    world.ready()
+    planner = world.core.planner
+    plan = planner.plan
+    running, peak, lock = [0], [0], threading.Lock()
+
+    def counting(*args, **kwargs):
+        with lock:
+            running[0] += 1
+            peak[0] = max(peak[0], running[0])
+        try:
+            _time.sleep(0.02)         # a planner holding its turn while others arrive
+            return plan(*args, **kwargs)
+        finally:
+            with lock:
+                running[0] -= 1
+    planner.plan = counting
+    try:
+        threads = [threading.Thread(target=world.core.preview, args=(lin(FAR),)) for _ in range(6)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join(30.0)
+    finally:
+        planner.plan = plan
+    assert not any(t.is_alive() for t in threads)
+    assert peak[0] == 1

@@ -193,6 +193,11 @@ class DriverCore:
         self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
         self._thread: Optional[threading.Thread] = None
         self._planning: Deque[Callable[[], None]] = collections.deque()
+        # one planner at a time: requests plan in their callers' threads (an action server runs one
+        # per goal); twenty goals planning at once starved the bus thread of the interpreter lock
+        # for over 0.3 s (every blocking call of a DP cycle waits its turn behind each of them) and
+        # the card's watchdog expired. Waiting here costs no CPU and no interpreter lock.
+        self._planning_gate = threading.Lock()
         self._planning_cond = threading.Condition()
         self._planning_thread: Optional[threading.Thread] = None
         self._last_posted: Optional[MoveJob] = None
@@ -266,7 +271,8 @@ class DriverCore:
         # plan to exactly what will be sent (whole mm / deg)
         target = commands[-1].pose
         via = commands[0].pose if len(commands) == 2 else None
-        trajectory = self.planner.plan(request.move_type, start_joints, target, via)
+        with self._planning_gate:
+            trajectory = self.planner.plan(request.move_type, start_joints, target, via)
         check_envelope(trajectory, self.params.workspace)
         return Preview(request, commands, trajectory, tuple(trajectory.goal))
 
@@ -403,7 +409,8 @@ class DriverCore:
         prev = tuple(start)
         for i, point in enumerate(points):
             try:
-                check_envelope(self.planner.ptp_joints(prev, point.joints), self.params.workspace)
+                with self._planning_gate:
+                    check_envelope(self.planner.ptp_joints(prev, point.joints), self.params.workspace)
             except VrDriverError as exc:
                 raise type(exc)("segment %d of %d (to planned point %d): %s"
                                 % (i + 1, len(points), point.index, exc)) from None
