@@ -49,9 +49,9 @@ robot_status on every snapshot change plus a 10 Hz timer, so this gap bounds rob
 Last line, exactly:
   commanded=N executed=N rejected=N aborted=N duplicated=N lost=N reconnect_max_s=X status_gap_max_s=X
 
-The virtual controller runs its two-telegram rule (a master record counts only once it arrived
-unchanged in two consecutive Data_Exchange telegrams); --no-confirm turns it off to show what it
-prevents: at 2 % corruption about 1.7e-4 of the requests pass the 8-bit FCS with wrong bytes, and
+In v1 the virtual controller runs its two-telegram rule (a master record counts only once it
+arrived unchanged in two consecutive Data_Exchange telegrams); --no-confirm turns it off to show
+what it prevents (v2 acts at the first telegram: its records' CRC-16 does the rule's job): at 2 % corruption about 1.7e-4 of the requests pass the 8-bit FCS with wrong bytes, and
 the controller then runs a target nobody commanded (an "unknown" log entry, the commanded one
 lost) or runs one twice. A pty has no baud timing: --baud only sets the DP timing parameters;
 bytes move at pty speed.
@@ -109,7 +109,7 @@ class SoakConfig:
     delay: float = 0.0
     delay_s: float = 0.01
     parity: bool = False
-    confirm_records: bool = True        # the virtual controller's two-telegram rule
+    confirm_records: Optional[bool] = None  # the two-telegram rule (None: the protocol's default)
     cut_every: float = 20.0             # mean seconds between cuts; 0 = no cuts
     cut_times: Tuple[float, ...] = ()   # or: cut at these times [s from the start] (tests)
     cut_min: float = 0.2
@@ -212,7 +212,8 @@ class SoakResult:
             "delay %.3g x %.0f ms, parity %s, two-telegram rule %s, cuts every ~%s s for %.1f..%.1f s, seed %d, speed x%g"
             % (self.jobs, self.commanded, self.duration, self.commanded / max(self.duration, 1e-9),
                c.corrupt, c.drop, c.delay, c.delay_s * 1e3, "on" if c.parity else "off",
-               "on" if c.confirm_records else "off",
+               ("on" if c.confirm_records else "off") if c.confirm_records is not None
+               else ("off (v2: CRC-16)" if c.protocol == "v2" else "on"),
                ("%g" % c.cut_every) if c.cut_every > 0 else "-", c.cut_min, c.cut_max, c.seed,
                c.speed_factor),
             "outcomes: executed %d, rejected %d, aborted %d, lost %d (jobs without result %d); "
@@ -666,7 +667,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--delay-s", type=float, default=0.01, help="delay of a delayed byte [s] (default 0.01)")
     p.add_argument("--parity", action="store_true", help="emulate the 8E1 parity check of a real port")
     p.add_argument("--no-confirm", action="store_true",
-                   help="virtual controller acts on a record at its first telegram (no two-telegram rule)")
+                   help="v1: the virtual controller acts on a record at its first telegram (no two-telegram "
+                        "rule; v2 always does)")
     p.add_argument("--cut-every", type=float, default=20.0, metavar="SECONDS",
                    help="cut the line at random around every SECONDS s (default 20; 0: no cuts)")
     p.add_argument("--cut-min", type=float, default=0.2, help="shortest cut [s] (default 0.2)")
@@ -700,7 +702,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     config = SoakConfig(targets=args.targets, corrupt=args.corrupt, drop=args.drop, delay=args.delay,
                         delay_s=args.delay_s, parity=args.parity,
-                        confirm_records=not args.no_confirm, cut_every=args.cut_every,
+                        confirm_records=False if args.no_confirm else None, cut_every=args.cut_every,
                         cut_min=args.cut_min, cut_max=args.cut_max, seed=args.seed, mix=args.mix,
                         speed_factor=args.speed_factor, baud=args.baud, cycle_rate=args.cycle_rate,
                         job_timeout=args.job_timeout, progress_every=args.progress,

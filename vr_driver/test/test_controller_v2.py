@@ -269,7 +269,7 @@ def test_lookahead_blends_through_the_inner_points_without_standing_still(kin):
     # from the first blend to the start of the final deceleration the arm never slows below
     # a third of the slower segment's speed (at a stop it would be 0)
     t_from = entries[0].end_time
-    t_to = entries[-1].end_time - DEFAULT_RAMP_TIME
+    t_to = entries[-1].end_time - DEFAULT_RAMP_TIME * entries[-1].speed / 1000.0
     inner = [v for t, v in speeds(rig.trace) if t_from <= t <= t_to]
     slowest = min(b[3] for b in bounds)
     assert len(inner) > 100 and min(inner) > slowest / 3.0, (min(inner), slowest)
@@ -336,8 +336,9 @@ def test_a_segment_takes_its_move_time_plus_the_ramp(rig, kin, speed):
     target = (0.5, 0.1, 0.2, -0.4, 0.9, 1.0)
     s = slot(1, target, speed)
     t0 = move_time(wire_exact(START_JOINTS), s.joints_rad, s.speed / 1000.0, kin)
-    expected = t0 + min(DEFAULT_RAMP_TIME, t0)
-    assert expected == segment_time(t0, min(DEFAULT_RAMP_TIME, t0), min(DEFAULT_RAMP_TIME, t0))
+    ramp = min(DEFAULT_RAMP_TIME * s.speed / 1000.0, t0)     # constant acceleration: f * ramp_time
+    expected = t0 + ramp
+    assert expected == segment_time(t0, ramp, ramp)
     rig.record = CommandV2(Control.START, s)
     fb = rig.until(lambda fb: fb.done_seq == 1 and not rig.arm.moving)
     [entry] = rig.prog.log.entries()

@@ -25,9 +25,11 @@ Rules of the program (also in ``doc/controller_program.md``):
   each time the slave enters Data_Exchange). Outside Data_Exchange, and in a new session before
   the master's first Data_Exchange, there is no command (flag 0); the slave itself replaces its
   outputs by the safe image (all zero) when it leaves Data_Exchange.
-- Two-telegram rule (``confirm_records``, the VirtualController's default): a record counts only
-  once it arrived unchanged in two consecutive Data_Exchange telegrams of the session (the master
-  repeats its record every cycle, so this costs one bus cycle per change). A telegram corrupted
+- Two-telegram rule (``confirm_records``, the VirtualController's default for v1): a record counts
+  only once it arrived unchanged in two consecutive Data_Exchange telegrams of the session (the
+  master repeats its record every cycle, so this costs one bus cycle per change). Protocol v2 does
+  not need it: its records carry a CRC-16 (§9.3 rule 7), and the program acts on a record at the
+  first telegram that brings it. A telegram corrupted
   on the line in a way the PROFIBUS checks miss (the 8-bit FCS passes about 1 in 256 multi-byte
   corruptions) is then never acted on; without the rule such a telegram can start a wrong
   target, re-start the previous one (flag 0 turned into 1), or release a DONE early so that the
@@ -538,8 +540,9 @@ class VirtualController:
     ``pty_link`` a symlink to it is made there (replacing a stale symlink, never another file) and
     removed by :meth:`stop`. A string serves that existing device (``SerialLink(link, baud)``). A
     :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
-    ``confirm_records`` (default True): the program acts on a master record only once it arrived
-    in two consecutive Data_Exchange telegrams (see the module docstring).
+    ``confirm_records`` (default: True for v1, False for v2): the program acts on a master record
+    only once it arrived in two consecutive Data_Exchange telegrams (see the module docstring; v2's
+    CRC-16 closes the gap the rule closes for v1, without costing a bus cycle per target).
     ``protocol``: ``"v1"`` (default) runs :class:`ControllerProgram` on a 14-byte slave and a
     :class:`~vr_driver.sim_arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller_v2.
     ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.sim_stream.
@@ -557,7 +560,7 @@ class VirtualController:
                  loop_period: float = DEFAULT_LOOP_PERIOD, byte_order: Any = ByteOrder.LITTLE,
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
                  kinematics: Optional[Kinematics] = None, arm: Union[None, SimArm, SimStreamArm] = None,
-                 clock: Clock = time.monotonic, confirm_records: bool = True,
+                 clock: Clock = time.monotonic, confirm_records: Optional[bool] = None,
                  brake_time: float = DEFAULT_BRAKE_TIME, protocol: str = "v1") -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
@@ -571,6 +574,8 @@ class VirtualController:
         self.loop_period = self.options.loop_period
         self.protocol = self.options.protocol
         v2 = self.protocol == "v2"
+        if confirm_records is None:
+            confirm_records = not v2
         if arm is None:
             try:
                 arm = (SimStreamArm if v2 else SimArm)(

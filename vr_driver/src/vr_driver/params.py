@@ -148,7 +148,8 @@ class DriverParams:
     stream_smooth: int = 3               # smooth level of the points a stream passes through
                                          # (0 = stop at each; the last point always stops exactly)
     stream_path_tolerance: float = 0.1   # [deg] a v2 stream drops planned points whose removal keeps
-                                         # the path within this (a straight joint-space chord)
+                                         # the path within this (a straight joint-space chord); also
+                                         # what a blended corner may round off (the smooth level)
     # safety and model
     prefix: str = ""                     # of every link, joint and frame name of this robot (the
     #                                      URDF's xacro prefix); from_dict puts it in front of

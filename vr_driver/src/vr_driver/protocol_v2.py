@@ -44,6 +44,9 @@ __all__ = [
     "POSITION_UNIT_MM",
     "SPEED_UNIT",
     "SMOOTH_MAX",
+    "BLEND_PER_LEVEL",
+    "BLEND_MAX",
+    "blend_window",
     "Control",
     "TargetKind",
     "StreamState",
@@ -73,6 +76,21 @@ POSITION_UNIT_MM = 0.01
 #: speed on the wire: 0.1 % of the joint speed limits (1..1000)
 SPEED_UNIT = 0.001
 SMOOTH_MAX = 10
+#: the blend through a point of smooth level k (doc/controller_program.md §6, the G2 behaviour this
+#: design assumes): a window of BLEND_PER_LEVEL * k of the shorter of the two move times, at most
+#: BLEND_MAX of it (the windows at a segment's two ends never overlap); the driver sizes the level
+#: at a corner from it, the virtual controller moves by it
+BLEND_PER_LEVEL = 0.05
+BLEND_MAX = 0.5
+
+
+def blend_window(smooth: int, move_time: float, next_move_time: float) -> float:
+    """The blend window [s] through a point of smooth level ``smooth`` between two segments of those
+    move times; the arm passes the point at about ``|v1 - v2| * window / 8`` from it."""
+    if smooth <= 0:
+        return 0.0
+    return min(BLEND_PER_LEVEL * smooth, BLEND_MAX) * min(move_time, next_move_time)
+
 #: Chk_Cfg modules of a v2 card configuration, inputs first like v1: 32 + 32 + 8 bytes each way
 #: (general identifier format: 0x5F = 16 words in, 0x17 = 8 bytes in, 0x6F / 0x27 the outputs)
 GSD_MODULES_V2 = ("32 Bytes In", "32 Bytes In", "8 Bytes In", "32 Bytes Out", "32 Bytes Out",

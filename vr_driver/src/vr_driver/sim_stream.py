@@ -11,7 +11,8 @@ Motion model (doc/controller_program.md §6 and §9):
   ``T0 = max_i |dq_i| / (f * vmax_i)`` (``f`` = the target's speed fraction, ``vmax`` the joint
   velocity limits of the kinematics).
 - **Speed profile**: a trapezoid in time. The normalised progress ``s`` rises with a linear speed
-  ramp of ``r_in`` (from rest: the *stop ramp* ``r = min(ramp_time, T0)``), cruises at ``1 / T0``
+  ramp of ``r_in`` (from rest: the *stop ramp* ``r = min(f * ramp_time, T0)``: the limiting joint
+  accelerates at ``vmax / ramp_time``, so ``ramp_time`` from rest to full speed), cruises at ``1 / T0``
   (the limiting joint at ``f * vmax``) and falls over ``r_out``; the segment lasts
   ``T0 + (r_in + r_out) / 2``. From rest to rest that is ``T0 + r``.
 - **Blend** (smooth level ``k > 0`` of the point, the next target known in time): the next segment
@@ -62,7 +63,7 @@ from .errors import MotionError
 from .kinematics import Kinematics
 from .poses import HOME_POSE, ControllerPose, wrap_degrees
 from .protocol import round_half_away
-from .protocol_v2 import POSITION_UNIT_MM, StreamState, joints_to_wire
+from .protocol_v2 import BLEND_MAX, BLEND_PER_LEVEL, POSITION_UNIT_MM, StreamState, blend_window, joints_to_wire
 from .sim_arm import ArmBase, Outcome, brake_progress
 
 __all__ = [
@@ -79,22 +80,11 @@ __all__ = [
 
 Clock = Callable[[], float]
 
-#: robot time [s] from rest to full speed and back (the stop ramp; a shorter move ramps over T0)
+#: robot time [s] from rest to full speed and back at a constant acceleration (the stop ramp of a
+#: move at speed fraction f lasts f times this; a shorter move ramps over T0)
 DEFAULT_RAMP_TIME = 0.1
-#: blend window per smooth level, as a fraction of the shorter of the two move times
-BLEND_PER_LEVEL = 0.05
-#: the largest blend window, as a fraction of the shorter move time (so the windows at the two
-#: ends of a segment never overlap)
-BLEND_MAX = 0.5
 
 _EPS = 1e-12
-
-
-def blend_window(smooth: int, move_time: float, next_move_time: float) -> float:
-    """The blend window [s] through a point of smooth level ``smooth`` between two segments."""
-    if smooth <= 0:
-        return 0.0
-    return min(BLEND_PER_LEVEL * smooth, BLEND_MAX) * min(move_time, next_move_time)
 
 
 def segment_time(move_time: float, ramp_in: float, ramp_out: float) -> float:
@@ -180,7 +170,7 @@ class _Segment:
         self.move_time = float(np.max(np.abs(self.delta) / (target.speed_fraction * vmax)))
         self.t0 = t0
         self.ramp_in = min(ramp_in, self.move_time)
-        self.stop_ramp = min(ramp_time, self.move_time)
+        self.stop_ramp = min(ramp_time * target.speed_fraction, self.move_time)
         self.ramp_out: Optional[float] = None         # decided at the decision point
         self.blend = 0.0                              # > 0: blends into the next over this window
         self.wall_start = wall_start

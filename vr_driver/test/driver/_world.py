@@ -83,8 +83,7 @@ class World:
         if protocol == "v2":
             self.arm = SimStreamArm(kin, speed_factor=speed_factor, initial_pose=initial_pose,
                                     clock=self.clock, brake_time=brake_time)
-            self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log,
-                                               confirm_records=True)
+            self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log)
         else:
             self.arm = SimArm(kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
                               clock=self.clock, brake_time=brake_time)
@@ -128,6 +127,9 @@ class World:
             self.core.spin_once()
             self.core.run_planning()
             self.next_bus = max(self.next_bus + self.bus_period, self.clock.t)
+            if self.core._repeat_now:          # as DriverCore._run: a changed v2 record goes out at once
+                self.core._repeat_now = False
+                self.next_bus = self.clock.t
 
     def run_until(self, predicate: Callable[[], bool], timeout: float, what: str = "") -> float:
         """Tick until ``predicate()`` holds; AssertionError after ``timeout`` of world time.

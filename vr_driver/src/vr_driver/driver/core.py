@@ -387,7 +387,8 @@ class DriverCore:
     def _stream(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
                 max_tolerance: float) -> Tuple[StreamPoint, ...]:
         return stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
-                             tolerance, self._min_segment(), max_tolerance)
+                             tolerance, self._min_segment(), max_tolerance,
+                             corner_tolerance=math.radians(self.params.stream_path_tolerance))
 
     def _preview_stream(self, preview: Preview) -> Tuple[StreamPoint, ...]:
         """A validated move as a stream: its planned samples (a PTP's joint line with its speed
@@ -557,8 +558,8 @@ class DriverCore:
             if next_start < now:
                 next_start = now
             if self._repeat_now:
-                # v2: a new record is sent again at once: the controller takes a record it saw
-                # unchanged in two telegrams, so the next target goes out one cycle sooner
+                # v2: a changed record (a new target, STOP) goes out at once, not a period later:
+                # the controller acts on it at the first telegram that brings it (its CRC-16)
                 self._repeat_now = False
                 next_start = now
                 continue

@@ -7,8 +7,10 @@ thinned with their timing (:func:`thin_timed`: a point is dropped only where the
 joint-space move between its neighbours, run at constant speed, passes it at its planned time
 within ``tolerance``, and no kept segment is shorter than the bus can feed); each kept point gets
 the speed that makes the controller's synchronous joint move end at its planned time (rounded up
-to the wire's 0.1 %, the rounding carried into the next segment so that the arrivals do not drift),
-and the smooth level ``stream_smooth`` (the last point: 0, an exact stop).
+to the wire's 0.1 %, the rounding carried into the next segment so that the arrivals do not
+drift), and a smooth level: the largest up to ``stream_smooth`` whose rounded
+corner (:func:`~vr_driver.protocol_v2.blend_window`) stays within the corner tolerance, at least
+1 (the last point: 0, an exact stop).
 
 **On the wire** (:class:`StreamSequencer`, one step per bus cycle; doc/controller_program.md §9):
 the job's points get consecutive sequence numbers from the one after the controller's
@@ -36,7 +38,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 from ..params import DriverParams
 from ..protocol import StatusBits
 from ..protocol_v2 import (EMPTY, SEQ_MAX, CommandV2, Control, FeedbackV2, StreamState, TargetKind,
-                           TargetSlot, joints_to_wire, next_seq)
+                           TargetSlot, blend_window, joints_to_wire, next_seq)
 from .jobs import JobPhase, MoveJob, StreamPoint, SubmitMode
 from .link import LinkSample
 from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer, _Add,
@@ -45,14 +47,15 @@ from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "seq_offset"]
+__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "corner_levels", "seq_offset"]
 
 #: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
 #: longer than MIN_SEGMENT_CYCLES (half the default path tolerance; a Cartesian move's: 0.05 deg)
 MAX_STREAM_TOLERANCE = math.radians(0.5)
 MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
-#: a kept segment lasts at least this many bus cycles (the record moves on at most once a cycle,
-#: and the controller acts on a record seen twice: shorter segments would starve the look-ahead)
+#: a kept segment lasts at least this many bus cycles (the record moves on once the feedback says
+#: the controller took its target, one cycle after it was sent: shorter segments would starve the
+#: look-ahead)
 MIN_SEGMENT_CYCLES = 2.0
 
 
@@ -108,12 +111,42 @@ def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], tim
     return speeds
 
 
+def corner_levels(start: Sequence[float], points: Sequence[Sequence[float]], speeds: Sequence[int],
+                  vmax: Sequence[float], smooth: int, tolerance: float) -> List[int]:
+    """The smooth level of each point but the last (0): the largest up to ``smooth`` whose blend
+    rounds the corner there (the joint velocity changing from one segment's to the next's over the
+    blend window: about ``|v1 - v2| * window / 8`` from the point, every joint) within ``tolerance``
+    [rad]; at least 1, so that the arm never stops on the way (``smooth`` 0: 0 everywhere)."""
+    if not points:
+        return []
+    moves, velocities = [], []
+    prev = start
+    for q, permille in zip(points, speeds):
+        full = max(abs(b - a) / v for a, b, v in zip(prev, q, vmax))
+        move = full * 1000.0 / permille
+        moves.append(move)
+        velocities.append(tuple((b - a) / move if move > 0.0 else 0.0 for a, b in zip(prev, q)))
+        prev = q
+    levels = []
+    for k in range(len(points) - 1):
+        if smooth <= 0:
+            levels.append(0)
+            continue
+        jump = max(abs(a - b) for a, b in zip(velocities[k], velocities[k + 1]))
+        level = smooth
+        while level > 1 and jump * blend_window(level, moves[k], moves[k + 1]) / 8.0 > tolerance:
+            level -= 1
+        levels.append(level)
+    return levels + [0]
+
+
 def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
-                  smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None
-                  ) -> Tuple[StreamPoint, ...]:
+                  smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None,
+                  corner_tolerance: Optional[float] = None) -> Tuple[StreamPoint, ...]:
     """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
-    thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point ``smooth`` but the
-    last (0: the stream ends with an exact stop).
+    thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point but the last blended
+    with the level :func:`corner_levels` gives for ``corner_tolerance`` (default: ``tolerance``;
+    the last point: 0, an exact stop).
 
     A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
     point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
@@ -132,9 +165,10 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     pts = [tuple(float(v) for v in positions[k]) for k in kept]
     ts = [float(times[k]) for k in kept]
     speeds = stream_speeds(positions[0], pts, ts, vmax)
-    last = len(kept) - 1
-    return tuple(StreamPoint(q, speed, 0 if i == last else smooth, t, k)
-                 for i, (q, speed, t, k) in enumerate(zip(pts, speeds, ts, kept)))
+    levels = corner_levels(positions[0], pts, speeds, vmax, smooth,
+                           tolerance if corner_tolerance is None else corner_tolerance)
+    return tuple(StreamPoint(q, speed, level, t, k)
+                 for q, speed, level, t, k in zip(pts, speeds, levels, ts, kept))
 
 
 class StreamSequencer(MotionSequencer):
