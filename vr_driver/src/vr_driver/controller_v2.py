@@ -5,7 +5,8 @@ joint targets with sequence numbers and a look-ahead slot, on a DP slave configu
 Each :meth:`ControllerProgramV2.step` (``now`` injected):
 
 1. the link side shared with v1 (:class:`~vr_driver.controller_session.SessionProgram`): watchdog,
-   session, the two-telegram rule, disarmed at start and after a link loss until a record with
+   session (no two-telegram rule by default: the CRC-16 does its job, rule 9.3.7), disarmed at
+   start and after a link loss until a record with
    both slots empty arrived; a link loss brakes the arm along its path (rule 9.3.5), drops the
    queue, and the next stream needs START. A record whose CRC or version is wrong does not decode:
    counted in ``bad_records`` and ignored;

@@ -126,10 +126,8 @@ class World:
             self.bus_times.append(self.clock.t)
             self.core.spin_once()
             self.core.run_planning()
-            self.next_bus = max(self.next_bus + self.bus_period, self.clock.t)
-            if self.core._repeat_now:          # as DriverCore._run: a changed v2 record goes out at once
-                self.core._repeat_now = False
-                self.next_bus = self.clock.t
+            self.next_bus = self.core.next_cycle(self.clock.t, max(self.next_bus + self.bus_period,
+                                                                   self.clock.t))
 
     def run_until(self, predicate: Callable[[], bool], timeout: float, what: str = "") -> float:
         """Tick until ``predicate()`` holds; AssertionError after ``timeout`` of world time.

@@ -10,7 +10,9 @@ import math
 import pytest
 
 from vr_driver.driver import JobPhase, LinkState, MoveRequest, SubmitMode
-from vr_driver.driver.streaming import corner_levels, seq_offset, stream_points, stream_speeds, thin_timed
+from vr_driver.driver.core import END_POLL_PERIOD
+from vr_driver.driver.streaming import (END_LEAD, END_WATCH, corner_levels, seq_offset, stream_points,
+                                      stream_speeds, thin_timed)
 from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol_v2 import SEQ_MAX, StreamState, blend_window
@@ -183,6 +185,32 @@ def test_a_corner_is_rounded_within_the_path_tolerance(world):
     assert 0.0 < closest <= world.params.stream_path_tolerance * DEG, closest / DEG
     assert [e.outcome for e in world.log.entries()] == [Outcome.BLENDED, Outcome.EXECUTED]
     assert levels == [2, 0]
+
+
+@pytest.mark.parametrize("duration", [1.0, 1.13, 1.27, 1.41, 1.55])
+def test_the_result_follows_the_arrival_without_waiting_a_bus_period(world, duration):
+    """At 20 Hz the feedback comes every 50 ms; around a stream's planned end the bus polls every
+    END_POLL_PERIOD, so the job ends within that (plus one program loop) of the arm's arrival --
+    and the fast polling stops END_WATCH after the planned end at the latest."""
+    q0 = tuple(world.arm.joints)
+    times, points = smooth_path(q0, n=10, duration=duration, amp=(0.2, 0.1, -0.1, 0.2, 0.1, 0.3))
+    traj = trajectory(world, times, points)
+    run = world.core.submit_trajectory(traj)
+    job = run.jobs[0]
+    first_bus = len(world.bus_times)
+    world.finish(job)
+    assert job.result.success, job.result.reason
+    arrival = world.log.entries()[-1]
+    assert arrival.outcome is Outcome.EXECUTED
+    assert world.now - arrival.end_time <= END_POLL_PERIOD + world.loop_period + 1e-9, \
+        world.now - arrival.end_time
+    # fast cycles only near the end: at most the watch window's worth beyond the 20 Hz ones
+    cycles = len(world.bus_times) - first_bus
+    span = world.bus_times[-1] - world.bus_times[first_bus]
+    assert cycles <= span * world.params.cycle_rate + (END_LEAD + END_WATCH) / END_POLL_PERIOD + 2 * len(job.points)
+    world.run_for(1.0)
+    idle = [t for t in world.bus_times if t > world.now - 0.9]
+    assert len(idle) <= 0.9 * world.params.cycle_rate + 1          # back to the cycle rate
 
 
 def test_joints_and_pose_come_from_the_v2_feedback(world):

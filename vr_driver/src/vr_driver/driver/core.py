@@ -55,6 +55,8 @@ from .streaming import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGME
 from .trajectories import ValidTrajectory, thin
 
 log = logging.getLogger("vr_driver.driver")
+#: s: the bus period while a stream's end is due (StreamSequencer.end_due)
+END_POLL_PERIOD = 0.01
 
 Clock = Callable[[], float]
 
@@ -557,15 +559,25 @@ class DriverCore:
             now = self.clock()
             if next_start < now:
                 next_start = now
-            if self._repeat_now:
-                # v2: a changed record (a new target, STOP) goes out at once, not a period later:
-                # the controller acts on it at the first telegram that brings it (its CRC-16)
-                self._repeat_now = False
-                next_start = now
+            next_start = self.next_cycle(now, next_start)
+            if next_start <= now:
                 continue
             if self._wake.wait(next_start - now):
                 self._wake.clear()
                 next_start = self.clock()     # an extra cycle now; the rate resumes from here
+
+    def next_cycle(self, now: float, scheduled: float) -> float:
+        """When the bus cycle after the one that just ran starts (``scheduled``: at the cycle rate).
+        v2: a changed record (a new target, STOP) goes out at once, not a period later -- the
+        controller acts on it at the first telegram that brings it (its CRC-16); and while a
+        stream's end is due (:meth:`StreamSequencer.end_due`) the bus cycles every
+        END_POLL_PERIOD, so the goal's result does not wait up to a period for the arrival."""
+        if self._repeat_now:
+            self._repeat_now = False
+            return now
+        if self.sequencer.end_due(now):
+            return min(scheduled, now + END_POLL_PERIOD)
+        return scheduled
 
     def spin_once(self) -> DriverStatus:
         """One bus iteration: link step (one DP cycle), joints, sequencer step, snapshot."""

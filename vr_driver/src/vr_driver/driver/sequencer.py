@@ -367,6 +367,10 @@ class MotionSequencer:
             self._rest_values = values
             self._rest_since = now
 
+    def end_due(self, now: float) -> bool:
+        """True while the current motion's end is due and worth polling for (v2 streams only)."""
+        return False
+
     def at_rest(self, now: float, fb: Feedback) -> bool:
         return not fb.status & StatusBits.IN_MOTION and \
             now - self._rest_since >= self.params.stop_settle_time

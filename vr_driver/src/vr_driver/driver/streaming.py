@@ -57,6 +57,10 @@ MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
 #: the controller took its target, one cycle after it was sent: shorter segments would starve the
 #: look-ahead)
 MIN_SEGMENT_CYCLES = 2.0
+#: s: a stream's end is watched (:meth:`StreamSequencer.end_due`) from this long before its planned
+#: end until END_WATCH after it
+END_LEAD = 0.02
+END_WATCH = 0.5
 
 
 def seq_offset(seq: int, base: int) -> int:
@@ -204,6 +208,15 @@ class StreamSequencer(MotionSequencer):
         self._advance(now, fb, sample, joints)
         self._publish()
         return self._record()
+
+    def end_due(self, now: float) -> bool:
+        """Every target of the running stream taken and its planned end near (from END_LEAD before
+        it to END_WATCH after it): the arm's arrival is due, the core polls for it faster."""
+        job = self._job
+        if job is None or not self._base or self._stopping or job.points_taken < self._limit:
+            return False
+        end = self._started + job.duration
+        return end - END_LEAD <= now <= end + END_WATCH
 
     def at_rest(self, now: float, fb) -> bool:
         return fb.state in (StreamState.IDLE, StreamState.WAITING) and super().at_rest(now, fb)
