@@ -213,6 +213,11 @@ class TrajectoryServer:
             streamed = len(run.jobs[0].points) if run.jobs else 0
             note = "ran %.2f x the planned %.2f s (protocol v2: %d of %d points streamed, blended)" % (
                 slower, traj.duration, streamed, len(traj.positions) - 1)
+            gaps = run.jobs[0].gaps if run.jobs else 0
+            if gaps:
+                note += ("; the arm stopped %d time(s) on the way waiting for its next target: the bus "
+                         "(%.1f cycles/s) did not bring it in time -- a faster line (baud) or a larger "
+                         "stream_path_tolerance gives fewer, longer segments" % (gaps, self.core.link.cycle_rate))
         else:
             note = "ran %.2f x the planned %.2f s (protocol v1 stops at each of %d points)" % (
                 slower, traj.duration, len(run.jobs))

@@ -154,6 +154,7 @@ def test_a_planned_trajectory_runs_as_planned(world):
             still += tb - ta
     assert still <= 0.05 * traj.duration, "stood still %.3f s mid-path" % still
     assert all(s is not StreamState.WAITING for _t, _q, s in samples), "a gap in the stream"
+    assert job.gaps == 0
     worst = max(max(abs(a - b) for a, b in zip(q, traj.sample(t - t0))) for t, q, _s in samples[moving[0]:])
     # (0.53 deg: the plan's own speed steps at its points, rounded by the blends and the ramps)
     assert worst <= 0.75 * DEG, "%.2f deg from the plan at the same time" % (worst / DEG)
@@ -211,6 +212,37 @@ def test_the_result_follows_the_arrival_without_waiting_a_bus_period(world, dura
     world.run_for(1.0)
     idle = [t for t in world.bus_times if t > world.now - 0.9]
     assert len(idle) <= 0.9 * world.params.cycle_rate + 1          # back to the cycle rate
+
+
+def test_a_late_target_is_a_gap_the_arm_waits_at_the_point_and_it_is_counted(kin):
+    """The driver's process stalls for 0.5 s mid-stream (below a 1 s watchdog): the controller runs
+    through what it took, stops exactly at the last point it has and waits (WAITING) -- it never
+    guesses; the stream goes on when the bus does, ends exactly, and the job counts the gap."""
+    world = World(kin, {"watchdog_ms": 1000, "link_timeout": 1.5}, protocol="v2")
+    world.ready()
+    q0 = tuple(world.arm.joints)
+    # a zig-zag in J1 and J2, 0.1 s per segment: no point can be thinned away
+    points = [(q0[0] + 0.05 * (k % 2), q0[1] + 0.01 * k) + q0[2:] for k in range(1, 21)]
+    times = [0.0] + [0.1 * k for k in range(1, 21)]
+    run = world.core.submit_trajectory(trajectory(world, times, [q0] + points))
+    job = run.jobs[0]
+    assert len(job.points) == 20
+    world.run_until(lambda: job.points_done >= 5, 10.0, "5 points passed")
+    states = []
+    world.frozen = True                     # as World.freeze, watching the arm meanwhile
+    end = world.now + 0.5
+    while world.now < end:
+        world.tick()
+        states.append(world.arm.state)
+    world.frozen = False
+    world.next_bus = world.now
+    record(world, job)
+    assert job.result.success, job.result.reason
+    assert StreamState.WAITING in states
+    assert job.gaps == 1
+    seqs = taken_seqs(world)
+    assert len(seqs) == len(set(seqs)) == len(job.points)
+    assert max(abs(a - b) for a, b in zip(world.arm.joints, points[-1])) <= 0.001 * DEG
 
 
 def test_joints_and_pose_come_from_the_v2_feedback(world):

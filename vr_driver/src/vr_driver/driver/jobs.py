@@ -127,12 +127,14 @@ class MoveJob:
         self.seqs: List[int] = []       # handshake sequence numbers of what was sent
         self.stop_reason = ""           # set when a stop was requested for it
         # protocol v2: the stream of joint targets (empty for a v1 job), where it was planned to
-        # start, and how many of its points the controller took / reached so far
+        # start, how many of its points the controller took / reached so far, and how often the
+        # arm stood at a point waiting for the next target (a gap: the look-ahead ran dry)
         self.points = tuple(points)
         self.start = start if start is not None else (
             preview.trajectory.start if preview is not None else None)
         self.points_taken = 0
         self.points_done = 0
+        self.gaps = 0
         if preview is None and not self.points:
             raise ValueError("a job needs a preview (v1) or stream points (v2)")
         self._done = threading.Event()

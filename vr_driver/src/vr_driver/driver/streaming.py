@@ -258,6 +258,7 @@ class StreamSequencer(MotionSequencer):
     # ------------------------------------------------------------------ the stream
     def _follow(self, now: float, fb: FeedbackV2) -> None:
         """Read the controller's progress on the current job; end it when it is over."""
+        was = self._last_state
         self._last_state = fb.state
         job = self._job
         if job is None or not self._base:
@@ -267,6 +268,11 @@ class StreamSequencer(MotionSequencer):
         taken = taken if taken <= n else 0
         done = seq_offset(fb.done_seq, self._base) + 1 if fb.done_seq else 0
         done = done if done <= n else 0
+        if fb.state is StreamState.WAITING and was is not StreamState.WAITING and 0 < done < n \
+                and not self._stopping:
+            job.gaps += 1
+            log.warning("job %d: the arm stopped at point %d of %d waiting for the next target (the "
+                        "look-ahead ran dry: the bus did not bring it in time)", job.id, done, n)
         if taken > job.points_taken:
             self.targets_sent += taken - job.points_taken
             job.points_taken = taken
