@@ -52,7 +52,7 @@ START_TOLERANCE = 0.02
 # the first request of a Data_Exchange session waits for this many replies in the session: the
 # controller then got our record with the flag at 0 in as many telegrams, which arms it (it must
 # see the flag at 0 after a link loss; the virtual controller, like a careful G2 program, acts on
-# a record only once it arrived unchanged in two consecutive telegrams)
+# a v1 record only once it arrived unchanged in two consecutive telegrams; v2 keeps the same margin)
 SESSION_RECORDS_BEFORE_REQUEST = 2
 
 

@@ -331,7 +331,7 @@ class StreamSequencer(MotionSequencer):
         if self._settle is not None or self._stopping:
             return
         if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
-            return          # the controller has not surely seen our empty record twice yet
+            return          # the controller has not surely seen our empty record (it arms on it) yet
         if self._job is None:
             if not self._queue:
                 return
