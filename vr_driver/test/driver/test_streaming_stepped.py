@@ -105,6 +105,21 @@ def test_stream_points_smooth_all_but_the_last():
     assert [p.smooth for p in stream_points(times, pts, (1.0,) * 6, 0, 1e-6, 0.0)] == [0, 0, 0]
 
 
+def test_a_pause_of_the_plan_is_a_hold_not_a_target():
+    """A kept point where the previous one is (the plan pauses): the arm stops exactly at the point
+    before (smooth 0), the next target is released when the pause ends and timed from then; a pause
+    at the start delays the first target, one at the end just ends the stream."""
+    vmax = (1.0,) * 6
+    p0, p1, p2 = (0.0,) * 6, (0.3,) * 6, (0.5,) * 6
+    stream = stream_points([0.0, 1.0, 2.0, 3.0], [p0, p1, p1, p2], vmax, 3, 1e-6, 0.0)
+    assert [(p.joints, p.smooth, p.release, p.index) for p in stream] == [(p1, 0, 0.0, 1), (p2, 0, 2.0, 3)]
+    assert [p.speed for p in stream] == [300, 200]          # 0.2 rad in the 1 s after the pause
+    start = stream_points([0.0, 1.0, 2.0], [p0, p0, p1], vmax, 3, 1e-6, 0.0)
+    assert [(p.joints, p.release, p.speed) for p in start] == [(p1, 1.0, 300)]
+    end = stream_points([0.0, 1.0, 2.0], [p0, p1, p1], vmax, 3, 1e-6, 0.0)
+    assert [(p.joints, p.smooth, p.release) for p in end] == [(p1, 0, 0.0)]
+
+
 def test_corner_levels_keep_the_rounding_within_the_tolerance():
     """The level at a point is the largest (up to the configured one) whose blend rounds the corner
     there by at most the tolerance (|v1 - v2| * window / 8, every joint)."""
@@ -243,6 +258,29 @@ def test_a_late_target_is_a_gap_the_arm_waits_at_the_point_and_it_is_counted(kin
     seqs = taken_seqs(world)
     assert len(seqs) == len(set(seqs)) == len(job.points)
     assert max(abs(a - b) for a, b in zip(world.arm.joints, points[-1])) <= 0.001 * DEG
+
+
+def test_the_arm_holds_at_a_pause_of_the_plan_for_its_planned_time(world):
+    """P1 at 1 s, P1 again at 2 s, P2 at 3 s: the arm stops exactly at P1 and stays there until the
+    pause ends (the next target is not even offered before), then reaches P2 on time; each target
+    is taken once."""
+    q0 = tuple(world.arm.joints)
+    p1 = (q0[0] + 0.2,) + q0[1:]
+    p2 = (p1[0], p1[1] + 0.2) + p1[2:]
+    traj = trajectory(world, [0.0, 1.0, 2.0, 3.0], [q0, p1, p1, p2])
+    t0 = world.now
+    run = world.core.submit_trajectory(traj)
+    job = run.jobs[0]
+    assert len(job.points) == 2 and job.points[0].smooth == 0 and job.points[1].release == 2.0
+    samples = record(world, job)
+    assert job.result.success, job.result.reason
+    at_p1 = [t - t0 for t, q, _s in samples if max(abs(a - b) for a, b in zip(q, p1)) <= 0.001 * DEG]
+    assert at_p1[0] <= 1.2 and at_p1[-1] >= 2.0, (at_p1[0], at_p1[-1])
+    entries = world.log.entries()
+    assert [e.outcome for e in entries] == [Outcome.EXECUTED, Outcome.EXECUTED]
+    assert entries[1].taken_time - t0 >= 2.0
+    assert entries[1].end_time - t0 <= 3.0 + 0.2
+    assert taken_seqs(world) == job.seqs
 
 
 def test_joints_and_pose_come_from_the_v2_feedback(world):

@@ -446,7 +446,9 @@ class DriverCore:
         points = job.points
         self.check_segments(joints, points[:1])
         first = points[0]
-        speed = stream_speeds(joints, [first.joints], [first.time], self.kin.limits.velocity)[0]
+        # (a pause at the start, first.release > 0: the move begins when it ends)
+        speed = stream_speeds(joints, [tuple(joints), first.joints], [first.release, first.time],
+                              self.kin.limits.velocity)[1]
         return (replace(first, speed=speed),) + tuple(points[1:]), tuple(joints)
 
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:

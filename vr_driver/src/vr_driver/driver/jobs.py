@@ -72,6 +72,8 @@ class StreamPoint:
     smooth: int
     time: float                  # planned arrival, seconds from the stream's start
     index: int                   # the planned point it is (index into the trajectory's points)
+    release: float = 0.0         # not offered before this many seconds from the stream's start (the
+    #                              end of a pause of the plan: the arm holds at the point before)
 
 
 class JobPhase(enum.Enum):

@@ -10,7 +10,8 @@ the speed that makes the controller's synchronous joint move end at its planned 
 to the wire's 0.1 %, the rounding carried into the next segment so that the arrivals do not
 drift), and a smooth level: the largest up to ``stream_smooth`` whose rounded
 corner (:func:`~vr_driver.protocol_v2.blend_window`) stays within the corner tolerance, at least
-1 (the last point: 0, an exact stop).
+1 (the last point: 0, an exact stop). A pause of the plan is held: the arm stops exactly at the
+point before it, and the next point is offered only when the pause ends (``StreamPoint.release``).
 
 **On the wire** (:class:`StreamSequencer`, one step per bus cycle; doc/controller_program.md §9):
 the job's points get consecutive sequence numbers from the one after the controller's
@@ -57,6 +58,8 @@ MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
 #: the controller took its target, one cycle after it was sent: shorter segments would starve the
 #: look-ahead)
 MIN_SEGMENT_CYCLES = 2.0
+#: rad: a kept point this close to the previous one (every joint) is a pause of the plan, held
+PAUSE_EPS = 1e-6
 #: s: a stream's end is watched (:meth:`StreamSequencer.end_due`) from this long before its planned
 #: end until END_WATCH after it
 END_LEAD = 0.02
@@ -103,7 +106,8 @@ def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], tim
         full = max(abs(b - a) / v for a, b, v in zip(prev, q, vmax))   # its time at 100 %
         want = t - elapsed
         if full <= 0.0:
-            permille = 1000                      # no motion: nothing to time (a pause is not kept)
+            permille = 1000                      # no motion: a pause, held until its planned end
+            elapsed = max(elapsed, t)
         elif want <= 0.0:
             permille = 1000
         else:
@@ -169,10 +173,27 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     pts = [tuple(float(v) for v in positions[k]) for k in kept]
     ts = [float(times[k]) for k in kept]
     speeds = stream_speeds(positions[0], pts, ts, vmax)
-    levels = corner_levels(positions[0], pts, speeds, vmax, smooth,
+    # a pause of the plan (a kept point where the previous one is): not a target; the arm stops
+    # exactly at the point before it, and the point after it is offered only when the pause ends
+    out_pts: List[Tuple[float, ...]] = []
+    out = []                                      # (speed, time, index, release) per target
+    holds = set()                                 # targets the arm stops at for a pause
+    prev, release = tuple(float(v) for v in positions[0]), 0.0
+    for q, speed, t, k in zip(pts, speeds, ts, kept):
+        if max(abs(a - b) for a, b in zip(prev, q)) <= PAUSE_EPS:
+            release = t
+            if out:
+                holds.add(len(out) - 1)
+            continue
+        out_pts.append(q)
+        out.append((speed, t, k, release))
+        prev, release = q, 0.0
+    if not out:
+        return ()
+    levels = corner_levels(positions[0], out_pts, [o[0] for o in out], vmax, smooth,
                            tolerance if corner_tolerance is None else corner_tolerance)
-    return tuple(StreamPoint(q, speed, level, t, k)
-                 for q, speed, level, t, k in zip(pts, speeds, levels, ts, kept))
+    return tuple(StreamPoint(q, speed, 0 if i in holds else level, t, k, release)
+                 for i, (q, level, (speed, t, k, release)) in enumerate(zip(out_pts, levels, out)))
 
 
 class StreamSequencer(MotionSequencer):
@@ -207,7 +228,7 @@ class StreamSequencer(MotionSequencer):
             self._stopping = False
         self._advance(now, fb, sample, joints)
         self._publish()
-        return self._record()
+        return self._record(now)
 
     def end_due(self, now: float) -> bool:
         """Every target of the running stream taken and its planned end near (from END_LEAD before
@@ -373,7 +394,7 @@ class StreamSequencer(MotionSequencer):
         return TargetSlot(self._seq(k), TargetKind.JOINT, point.smooth, point.speed,
                           joints_to_wire(point.joints))
 
-    def _record(self) -> CommandV2:
+    def _record(self, now: float) -> CommandV2:
         outputs = self.outputs
         if self._stopping:
             return CommandV2(Control.STOP, outputs=outputs)
@@ -381,9 +402,13 @@ class StreamSequencer(MotionSequencer):
         if job is None or not self._base:
             return CommandV2(outputs=outputs)
         k = job.points_taken
-        if k >= self._limit:
+        elapsed = now - self._started
+
+        def offered(i: int) -> bool:          # not past the limit, and its pause (if any) is over
+            return i < self._limit and job.points[i].release <= elapsed
+        if not offered(k):
             return CommandV2(outputs=outputs)
-        slot1 = self._slot(job, k + 1) if k + 1 < self._limit else EMPTY
+        slot1 = self._slot(job, k + 1) if offered(k + 1) else EMPTY
         return CommandV2(Control.START if k == 0 else Control(0), self._slot(job, k), slot1, outputs)
 
     def _lost(self, now: float, reason: str) -> None:
