@@ -72,24 +72,15 @@ def seq_offset(seq: int, base: int) -> int:
     return ((seq - 1) - (base - 1)) % SEQ_MAX
 
 
-def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
-               min_dt: float = 0.0) -> List[int]:
+def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float) -> List[int]:
     """Indices of the points to keep (always the first and the last): a point is dropped where the
     constant-speed straight joint move between the kept points around it is within ``tolerance``
-    [rad, every joint] of it *at its planned time*; then points closer than ``min_dt`` in time to
-    the previous kept one are dropped too (never the last)."""
+    [rad, every joint] of it *at its planned time* (segments too short for the bus are
+    :func:`stream_points`' concern: it raises the tolerance)."""
     def excess(a: int, b: int, k: int) -> float:
         f = (times[k] - times[a]) / (times[b] - times[a])
         return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
-    kept = split_keep(len(times), excess, tolerance)
-    if min_dt > 0.0:
-        out = [kept[0]]
-        for k in kept[1:-1]:
-            if times[k] - times[out[-1]] >= min_dt and times[kept[-1]] - times[k] >= min_dt:
-                out.append(k)
-        out.append(kept[-1])
-        kept = out
-    return kept
+    return split_keep(len(times), excess, tolerance)
 
 
 def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], times: Sequence[float],
