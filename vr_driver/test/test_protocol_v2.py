@@ -145,6 +145,21 @@ def test_feedback_refuses_reserved_status_bits():
         FeedbackV2(status=0x40)
 
 
+def test_the_armed_flag_is_byte_67_bit_0():
+    raw = FeedbackV2(armed=True).encode()
+    assert raw[66] == 0x01 and raw[67:70] == bytes(3)
+    assert FeedbackV2.decode(raw).armed is True
+    assert FeedbackV2.decode(FeedbackV2().encode()).armed is False
+    assert "not armed" in FeedbackV2().describe() and "not armed" not in FeedbackV2(armed=True).describe()
+    # another flag bit set (with a valid CRC): refused, as the reserved bytes
+    body = bytearray(raw[:70])
+    body[66] = 0x03
+    with pytest.raises(ProtocolError, match="reserved flag"):
+        FeedbackV2.decode(bytes(body) + struct.pack("<H", crc16(bytes(body))))
+    with pytest.raises(ProtocolError, match="armed"):
+        FeedbackV2(armed=1)
+
+
 def test_controller_io_words_on_the_wire():
     from vr_driver.protocol_v2 import CommandV2, FeedbackV2
     raw = CommandV2(outputs=0xA501).encode()

@@ -134,7 +134,7 @@ class ControllerProgramV2(SessionProgram):
             accepted_seq=self.accepted_seq, done_seq=self.arm.done_seq, active_seq=self.arm.active_seq,
             rejected_seq=self.rejected_seq, joints=joints_to_wire(self.arm.joints),
             tcp=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1),
-            inputs=self.inputs(now), outputs=self.io_outputs)
+            inputs=self.inputs(now), outputs=self.io_outputs, armed=self.armed)
         self.slave.inputs = feedback.encode()
         self.last_feedback = feedback
         return feedback

@@ -102,7 +102,7 @@ _INT32 = (-(2 ** 31), 2 ** 31 - 1)
 _HEADER = struct.Struct("<BBH")                  # version, control, reserved
 _SLOT = struct.Struct("<HBBHH6i")                # seq, kind, smooth, speed, reserved, joints
 _COMMAND = struct.Struct("<BBH32s32sHH")         # header, slot 0, slot 1, outputs, CRC
-_FEEDBACK = struct.Struct("<BBBBHHHH6i6iHHH4sH")  # see FeedbackV2
+_FEEDBACK = struct.Struct("<BBBBHHHH6i6iHHHB3sH")  # see FeedbackV2
 assert _SLOT.size == 32 and _COMMAND.size == RECORD_SIZE_V2 and _FEEDBACK.size == RECORD_SIZE_V2
 
 
@@ -356,6 +356,8 @@ class FeedbackV2:
     heartbeat: int = 0                              # +1 every program loop (mod 65536)
     inputs: int = 0                                 # general-purpose inputs 1..16 (bit k = k + 1)
     outputs: int = 0                                # general-purpose outputs 1..16 as set
+    armed: bool = False                             # the program takes targets (byte 67 bit 0):
+    #                                                 set once an empty record of this session came
 
     def __post_init__(self) -> None:
         try:
@@ -371,6 +373,8 @@ class FeedbackV2:
             _seq(getattr(self, name), name)
         _word(self.inputs, "inputs")
         _word(self.outputs, "outputs")
+        if not isinstance(self.armed, bool):
+            raise ProtocolError("v2 feedback: armed must be a bool, got %r" % (self.armed,))
         for name in ("joints", "tcp"):
             values = tuple(getattr(self, name))
             if len(values) != 6 or not all(isinstance(v, int) and _INT32[0] <= v <= _INT32[1]
@@ -399,7 +403,7 @@ class FeedbackV2:
         body = _FEEDBACK.pack(VERSION, int(self.state), int(self.status), int(self.reject_code),
                               self.accepted_seq, self.done_seq, self.active_seq, self.rejected_seq,
                               *self.joints, *self.tcp, self.heartbeat, self.inputs, self.outputs,
-                              bytes(4), 0)
+                              int(self.armed), bytes(3), 0)
         return body[:-2] + struct.pack("<H", crc16(body[:-2]))
 
     @classmethod
@@ -408,16 +412,20 @@ class FeedbackV2:
         fields = _FEEDBACK.unpack(raw)
         (_version, state, status, reject, accepted, done, active, rejected) = fields[:8]
         joints, pose = fields[8:14], fields[14:20]
-        heartbeat, inputs, outputs, reserved = fields[20], fields[21], fields[22], fields[23]
+        heartbeat, inputs, outputs, flags, reserved = fields[20:25]
+        if flags & ~0x01:
+            raise ProtocolError("v2 feedback: reserved flag bits set (0x%02X)" % flags)
         if any(reserved):
             raise ProtocolError("v2 feedback: reserved bytes must be 0")
         return cls(state, status, reject, accepted, done, active, rejected, tuple(joints),
-                   tuple(pose), heartbeat, inputs, outputs)
+                   tuple(pose), heartbeat, inputs, outputs, bool(flags & 0x01))
 
     def describe(self) -> str:
         text = "%s, taken %d, at %d, done %d; status: %s" % (
             self.state.name, self.accepted_seq, self.active_seq, self.done_seq, self.status.describe())
         if self.rejected_seq:
             text += "; refused %d (%s)" % (self.rejected_seq, self.reject_code.name)
+        if not self.armed:
+            text += "; not armed"
         return text
 

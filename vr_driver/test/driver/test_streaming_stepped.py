@@ -376,6 +376,41 @@ def test_a_link_cut_fails_the_stream_and_nothing_is_resent(world):
     assert world.finish(run2.jobs[0]).success
 
 
+def _reconnect_unarmed(world):
+    """Cut the line until both ends call the link lost (the controller disarms), then restore it
+    with a controller that does not arm on our empty record (a slow or faulty program)."""
+    world.link.cut = True
+    world.run_until(lambda: world.status().link is not LinkState.CONNECTED and not world.program.armed,
+                    5.0, "link lost on both ends")
+    world.program.is_idle_command = lambda command: False
+    world.link.cut = False
+    world.run_until(lambda: world.status().link is LinkState.CONNECTED, 10.0, "link back")
+    world.run_for(0.2)
+    assert world.program.last_feedback.armed is False
+
+
+@pytest.mark.parametrize("arms", [True, False])
+def test_a_stream_waits_for_the_controller_to_arm(world, arms):
+    """After a reconnect the controller reports "not armed" until it saw our empty record: the
+    driver holds the stream back (nothing taken, nothing refused) for up to accept_timeout. When it
+    arms, the stream runs; when it never does, the stream goes out and its NOT_ARMED refusal ends the
+    goal with the reason."""
+    _reconnect_unarmed(world)
+    q = world.status().joints
+    run = world.core.submit_trajectory(trajectory(world, [1.0], [tuple(v + 0.05 for v in q)]))
+    job = run.jobs[0]
+    entries = len(world.log.entries())
+    world.run_for(0.8 * world.params.accept_timeout)
+    assert len(world.log.entries()) == entries and not job.done       # held back, not refused
+    if arms:
+        del world.program.is_idle_command                           # the class's own: arms now
+        assert world.finish(job).success
+    else:
+        result = world.finish(job)
+        assert not result.success and "NOT_ARMED" in result.reason
+        assert [e.outcome for e in world.log.entries()[entries:]] == [Outcome.REJECTED]
+
+
 def test_a_new_path_replaces_the_rest_of_the_running_one(world):
     q0 = world.status().joints
     times, points = smooth_path(q0)

@@ -201,6 +201,7 @@ class StreamSequencer(MotionSequencer):
         self._started = 0.0
         self._stopping = False             # send STOP until the arm is at rest
         self._last_state: Optional[StreamState] = None
+        self._unarmed_since: Optional[float] = None   # the controller reported "not armed" since
         # the controller's general-purpose outputs 1..16 (§9.5), sent in every record; back to 0 (their
         # safe state, as the controller sets them) when the link is lost, until set again
         self.outputs = 0
@@ -344,6 +345,15 @@ class StreamSequencer(MotionSequencer):
             return
         if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
             return          # the controller has not surely seen our empty record (it arms on it) yet
+        if fb.armed:
+            self._unarmed_since = None
+        else:
+            # it arms on our empty record; a stream sent before would be refused (NOT_ARMED). Wait
+            # for it up to accept_timeout, then send anyway: the refusal ends the goal with a reason
+            if self._unarmed_since is None:
+                self._unarmed_since = now
+            if now - self._unarmed_since < self.params.accept_timeout:
+                return
         if self._job is None:
             if not self._queue:
                 return
@@ -409,6 +419,7 @@ class StreamSequencer(MotionSequencer):
         self._stopping = False
         self._session = None
         self._rest_values = None
+        self._unarmed_since = None
         if self.outputs:
             log.warning("controller outputs 0x%04X back to their safe state 0 (link lost); they stay "
                         "there until set again", self.outputs)
