@@ -11,8 +11,8 @@ import pytest
 
 from vr_driver.driver import JobPhase, LinkState, MoveRequest, SubmitMode
 from vr_driver.driver.core import END_POLL_PERIOD
-from vr_driver.driver.streaming import (END_LEAD, END_WATCH, corner_levels, seq_offset, stream_points,
-                                      stream_speeds, thin_timed)
+from vr_driver.driver.streaming import (END_LEAD, END_WATCH, _motion, corner_levels, corner_rounding,
+                                      seq_offset, stream_points, stream_speeds, thin_timed)
 from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol_v2 import SEQ_MAX, StreamState, blend_window
@@ -101,6 +101,27 @@ def test_stream_points_smooth_all_but_the_last():
     tight = stream_points(times, pts, (1.0,) * 6, 4, 1e-6, 0.0, corner_tolerance=1e-9)
     assert [p.smooth for p in tight] == [1, 1, 0]
     assert [p.smooth for p in stream_points(times, pts, (1.0,) * 6, 0, 1e-6, 0.0)] == [0, 0, 0]
+
+
+def test_a_sharp_corner_gets_its_neighbouring_planned_points_back():
+    """J1 runs 1 rad/s for 1 s, then J2 does (points every 20 ms): thinned to the corner and the end,
+    even smooth level 1 would round the corner by 0.36 deg (1 s segments). The planned points 0.1 s
+    (min_dt) before and after it come back: the corner's segments, and its blend window, shrink,
+    and its rounding stays within the tolerance at level 2."""
+    vmax = (1.0,) * 6
+    times = [0.02 * k for k in range(101)]
+    positions = [(min(t, 1.0), max(t - 1.0, 0.0), 0.0, 0.0, 0.0, 0.0) for t in times]
+    tol = 0.1 * DEG
+    stream = stream_points(times, positions, vmax, 3, 1e-6, 0.1, corner_tolerance=tol)
+    assert [round(p.time, 6) for p in stream] == [0.9, 1.0, 1.1, 2.0]
+    assert [p.smooth for p in stream] == [3, 2, 3, 0]
+    start = positions[0]
+    speeds = [p.speed for p in stream]
+    joints = [p.joints for p in stream]
+    moves, velocities = _motion(start, joints, speeds, vmax)
+    assert corner_rounding(2, moves, velocities, 1) <= tol < corner_rounding(3, moves, velocities, 1)
+    # without the points back the corner would be rounded by ~0.36 deg at level 1
+    assert corner_rounding(1, [1.0, 1.0], [(1.0, 0, 0, 0, 0, 0), (0, 1.0, 0, 0, 0, 0)], 0) > 3 * tol
 
 
 def test_a_pause_of_the_plan_is_a_hold_not_a_target():

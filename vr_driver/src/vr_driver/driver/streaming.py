@@ -48,11 +48,13 @@ from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "corner_levels", "seq_offset"]
+__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "corner_levels", "corner_rounding",
+           "seq_offset"]
 
 #: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
-#: longer than MIN_SEGMENT_CYCLES (half the default path tolerance; a Cartesian move's: 0.05 deg)
-MAX_STREAM_TOLERANCE = math.radians(0.5)
+#: longer than MIN_SEGMENT_CYCLES (a quarter of the default path tolerance: the thinning, the blended
+#: corners and the timing share it; a Cartesian move's: 0.05 deg)
+MAX_STREAM_TOLERANCE = math.radians(0.25)
 MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
 #: a kept segment lasts at least this many bus cycles (the record moves on once the feedback says
 #: the controller took its target, one cycle after it was sent: shorter segments would starve the
@@ -110,14 +112,9 @@ def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], tim
     return speeds
 
 
-def corner_levels(start: Sequence[float], points: Sequence[Sequence[float]], speeds: Sequence[int],
-                  vmax: Sequence[float], smooth: int, tolerance: float) -> List[int]:
-    """The smooth level of each point but the last (0): the largest up to ``smooth`` whose blend
-    rounds the corner there (the joint velocity changing from one segment's to the next's over the
-    blend window: about ``|v1 - v2| * window / 8`` from the point, every joint) within ``tolerance``
-    [rad]; at least 1, so that the arm never stops on the way (``smooth`` 0: 0 everywhere)."""
-    if not points:
-        return []
+def _motion(start: Sequence[float], points: Sequence[Sequence[float]], speeds: Sequence[int],
+            vmax: Sequence[float]) -> Tuple[List[float], List[Tuple[float, ...]]]:
+    """Each segment's move time [s] at its wire speed and its joint velocities [rad/s]."""
     moves, velocities = [], []
     prev = start
     for q, permille in zip(points, speeds):
@@ -126,41 +123,40 @@ def corner_levels(start: Sequence[float], points: Sequence[Sequence[float]], spe
         moves.append(move)
         velocities.append(tuple((b - a) / move if move > 0.0 else 0.0 for a, b in zip(prev, q)))
         prev = q
+    return moves, velocities
+
+
+def corner_rounding(level: int, moves: Sequence[float], velocities: Sequence[Sequence[float]], k: int) -> float:
+    """How far [rad, the worst joint] a blend of ``level`` rounds the corner at point ``k``
+    (between segments ``k`` and ``k + 1``): the velocity jump times the blend window / 8."""
+    jump = max(abs(a - b) for a, b in zip(velocities[k], velocities[k + 1]))
+    return jump * blend_window(level, moves[k], moves[k + 1]) / 8.0
+
+
+def corner_levels(start: Sequence[float], points: Sequence[Sequence[float]], speeds: Sequence[int],
+                  vmax: Sequence[float], smooth: int, tolerance: float) -> List[int]:
+    """The smooth level of each point but the last (0): the largest up to ``smooth`` whose blend
+    rounds the corner there (the joint velocity changing from one segment's to the next's over the
+    blend window: about ``|v1 - v2| * window / 8`` from the point, every joint) within ``tolerance``
+    [rad]; at least 1, so that the arm never stops on the way (``smooth`` 0: 0 everywhere)."""
+    if not points:
+        return []
+    moves, velocities = _motion(start, points, speeds, vmax)
     levels = []
     for k in range(len(points) - 1):
-        if smooth <= 0:
-            levels.append(0)
-            continue
-        jump = max(abs(a - b) for a, b in zip(velocities[k], velocities[k + 1]))
-        level = smooth
-        while level > 1 and jump * blend_window(level, moves[k], moves[k + 1]) / 8.0 > tolerance:
+        level = max(smooth, 0)
+        while level > 1 and corner_rounding(level, moves, velocities, k) > tolerance:
             level -= 1
         levels.append(level)
     return levels + [0]
 
 
-def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
-                  smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None,
-                  corner_tolerance: Optional[float] = None) -> Tuple[StreamPoint, ...]:
-    """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
-    thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point but the last blended
-    with the level :func:`corner_levels` gives for ``corner_tolerance`` (default: ``tolerance``;
-    the last point: 0, an exact stop).
-
-    A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
-    point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
-    ``tolerance``), until no segment is that short; short segments left then are sent as they are."""
-    tol = tolerance
-    top = tolerance if max_tolerance is None else max(tolerance, max_tolerance)
-    while True:
-        kept = thin_timed(times, positions, tol)
-        short = any(times[b] - times[a] < min_dt for a, b in zip(kept, kept[1:-1]))
-        if not short or tol >= top:
-            break
-        tol = min(2.0 * tol, top)
-    kept = kept[1:]
-    if not kept:
-        return ()
+def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: Sequence[int],
+           vmax: Sequence[float], smooth: int, corner_tolerance: float
+           ) -> Tuple[Tuple[StreamPoint, ...], List[int]]:
+    """The stream of the planned points ``kept`` (indices, not the start): timed, pauses held,
+    corners blended (see :func:`stream_points`); and the planned indices of the corners even
+    smooth level 1 rounds by more than ``corner_tolerance``."""
     pts = [tuple(float(v) for v in positions[k]) for k in kept]
     ts = [float(times[k]) for k in kept]
     speeds = stream_speeds(positions[0], pts, ts, vmax)
@@ -180,11 +176,69 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
         out.append((speed, t, k, release))
         prev, release = q, 0.0
     if not out:
+        return (), []
+    start = positions[0]
+    speeds_out = [o[0] for o in out]
+    levels = corner_levels(start, out_pts, speeds_out, vmax, smooth, corner_tolerance)
+    tight = []
+    if smooth > 0:
+        moves, velocities = _motion(start, out_pts, speeds_out, vmax)
+        tight = [out[i][2] for i in range(len(out) - 1)
+                 if i not in holds and corner_rounding(1, moves, velocities, i) > corner_tolerance]
+    stream = tuple(StreamPoint(q, speed, 0 if i in holds else level, t, k, release)
+                   for i, (q, level, (speed, t, k, release)) in enumerate(zip(out_pts, levels, out)))
+    return stream, tight
+
+
+def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
+                  smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None,
+                  corner_tolerance: Optional[float] = None) -> Tuple[StreamPoint, ...]:
+    """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
+    thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point but the last blended
+    with the level :func:`corner_levels` gives for ``corner_tolerance`` (default: ``tolerance``;
+    the last point: 0, an exact stop).
+
+    A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
+    point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
+    ``tolerance``), until no segment is that short; short segments left then are sent as they are.
+
+    A sharp corner (the planned velocity jumps there) that even smooth level 1 would round by more
+    than ``corner_tolerance`` gets back the planned points nearest to it on both sides that thinning
+    dropped (no closer than ``min_dt`` in time): the segments at the corner become shorter, and so
+    does the blend window (a fraction of them)."""
+    tol = tolerance
+    top = tolerance if max_tolerance is None else max(tolerance, max_tolerance)
+    while True:
+        kept = thin_timed(times, positions, tol)
+        short = any(times[b] - times[a] < min_dt for a, b in zip(kept, kept[1:-1]))
+        if not short or tol >= top:
+            break
+        tol = min(2.0 * tol, top)
+    if len(kept) < 2:
         return ()
-    levels = corner_levels(positions[0], out_pts, [o[0] for o in out], vmax, smooth,
-                           tolerance if corner_tolerance is None else corner_tolerance)
-    return tuple(StreamPoint(q, speed, 0 if i in holds else level, t, k, release)
-                 for i, (q, level, (speed, t, k, release)) in enumerate(zip(out_pts, levels, out)))
+    corner_tol = tolerance if corner_tolerance is None else corner_tolerance
+    chosen = set(kept)
+    while True:
+        order = sorted(chosen)
+        stream, tight = _timed(times, positions, order[1:], vmax, smooth, corner_tol)
+        added = False
+        for k in tight:
+            at = order.index(k)
+            before, after = order[at - 1], order[at + 1]
+            # the dropped planned point nearest the corner on each side, min_dt from both neighbours
+            gap = min_dt - 1e-9                  # (planned times in float seconds)
+            for j in range(k - 1, before, -1):
+                if times[k] - times[j] >= gap and times[j] - times[before] >= gap:
+                    chosen.add(j)
+                    added = True
+                    break
+            for j in range(k + 1, after):
+                if times[j] - times[k] >= gap and times[after] - times[j] >= gap:
+                    chosen.add(j)
+                    added = True
+                    break
+        if not added:
+            return stream
 
 
 class StreamSequencer(MotionSequencer):
