@@ -241,8 +241,9 @@ class MotionSequencer:
                 job.set_phase(JobPhase.QUEUED)
 
     def _apply_replan(self, job: MoveJob, plan) -> None:
-        """Put the new plan into the job (v1: its preview)."""
+        """Put the new plan into the job (v1: its preview, which starts where the arm now is)."""
         job.preview = plan
+        job.start = plan.trajectory.start
 
     def _take_add(self, request: _Add, now: float) -> None:
         jobs = [j for j in request.jobs if not j.done]
@@ -405,29 +406,11 @@ class MotionSequencer:
             return
         if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
             return          # the controller has not surely seen our flag at 0 twice yet
-        if self._job is None:
-            if not self._queue:
-                return
-            why = why_no_motion(fb)
-            if why:
-                self._fail_queue("motion is no longer possible: %s" % why)
-                return
-            self._job = self._queue.popleft()
-        job = self._job
-        if job.phase is JobPhase.REPLANNING or job.next_command >= len(job.preview.commands):
+        job = self._next_job(fb)
+        if job is None or job.phase is JobPhase.REPLANNING or job.next_command >= len(job.preview.commands):
             return
-        if job.next_command == 0:
-            if joints is None:
-                self._job = None
-                job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the "
-                           "planned start against", None)
-                self._fail_queue("an earlier target of the same path failed", job.group)
-                return
-            start = job.preview.trajectory.start
-            if max(abs(a - b) for a, b in zip(joints, start)) > START_TOLERANCE:
-                job.set_phase(JobPhase.REPLANNING)
-                self.replan(job, joints)
-                return
+        if job.next_command == 0 and not self._starts_here(job, joints):
+            return
         command = job.preview.commands[job.next_command]
         timeout = (self.params.motion_timeout_factor * job.preview.duration
                    + self.params.motion_timeout_margin)
@@ -443,6 +426,35 @@ class MotionSequencer:
         job.set_phase(JobPhase.SENDING)
 
     # ------------------------------------------------------------------ helpers
+    def _next_job(self, fb: Any) -> Optional[MoveJob]:
+        """The job in flight, else the next queued one (None: none; the queue fails when motion is
+        no longer possible)."""
+        if self._job is None:
+            if not self._queue:
+                return None
+            why = why_no_motion(fb)
+            if why:
+                self._fail_queue("motion is no longer possible: %s" % why)
+                return None
+            self._job = self._queue.popleft()
+        return self._job
+
+    def _starts_here(self, job: MoveJob, joints: Optional[Tuple[float, ...]]) -> bool:
+        """True when ``job`` may be sent from ``joints``. Otherwise it failed (no valid joint state
+        to check its planned start against; the rest of its path fails too) or is being planned
+        again from ``joints`` (the arm is not where it was planned to start)."""
+        if joints is None:
+            self._job = None
+            job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the planned "
+                       "start against", None)
+            self._fail_queue("an earlier target of the same path failed", job.group)
+            return False
+        if job.start is not None and max(abs(a - b) for a, b in zip(joints, job.start)) > START_TOLERANCE:
+            job.set_phase(JobPhase.REPLANNING)
+            self.replan(job, joints)
+            return False
+        return True
+
     def _fail_queue(self, reason: str, group: Optional[int] = None) -> None:
         """End the queued jobs (of one group only, when given) with ``reason``."""
         for queued in list(self._queue):

@@ -42,8 +42,7 @@ from ..protocol_v2 import (EMPTY, SEQ_MAX, CommandV2, Control, FeedbackV2, Strea
                            TargetSlot, blend_window, joints_to_wire, next_seq)
 from .jobs import JobPhase, MoveJob, StreamPoint, SubmitMode
 from .link import LinkSample
-from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer, _Add,
-                        _Settle, why_no_motion)
+from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, MotionSequencer, _Add, _Settle
 from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
@@ -141,9 +140,14 @@ def corner_levels(start: Sequence[float], points: Sequence[Sequence[float]], spe
     [rad]; at least 1, so that the arm never stops on the way (``smooth`` 0: 0 everywhere)."""
     if not points:
         return []
-    moves, velocities = _motion(start, points, speeds, vmax)
+    return _levels(*_motion(start, points, speeds, vmax), smooth, tolerance)
+
+
+def _levels(moves: Sequence[float], velocities: Sequence[Sequence[float]], smooth: int,
+            tolerance: float) -> List[int]:
+    """:func:`corner_levels` from the segments' move times and velocities (:func:`_motion`)."""
     levels = []
-    for k in range(len(points) - 1):
+    for k in range(len(moves) - 1):
         level = max(smooth, 0)
         while level > 1 and corner_rounding(level, moves, velocities, k) > tolerance:
             level -= 1
@@ -177,14 +181,11 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
         prev, release = q, 0.0
     if not out:
         return (), []
-    start = positions[0]
-    speeds_out = [o[0] for o in out]
-    levels = corner_levels(start, out_pts, speeds_out, vmax, smooth, corner_tolerance)
-    tight = []
-    if smooth > 0:
-        moves, velocities = _motion(start, out_pts, speeds_out, vmax)
-        tight = [out[i][2] for i in range(len(out) - 1)
-                 if i not in holds and corner_rounding(1, moves, velocities, i) > corner_tolerance]
+    moves, velocities = _motion(positions[0], out_pts, [o[0] for o in out], vmax)
+    levels = _levels(moves, velocities, smooth, corner_tolerance)
+    tight = [] if smooth <= 0 else [
+        out[i][2] for i in range(len(out) - 1)
+        if i not in holds and corner_rounding(1, moves, velocities, i) > corner_tolerance]
     stream = tuple(StreamPoint(q, speed, 0 if i in holds else level, t, k, release)
                    for i, (q, level, (speed, t, k, release)) in enumerate(zip(out_pts, levels, out)))
     return stream, tight
@@ -408,28 +409,12 @@ class StreamSequencer(MotionSequencer):
                 self._unarmed_since = now
             if now - self._unarmed_since < self.params.accept_timeout:
                 return
-        if self._job is None:
-            if not self._queue:
-                return
-            why = why_no_motion(fb)
-            if why:
-                self._fail_queue("motion is no longer possible: %s" % why)
-                return
-            self._job = self._queue.popleft()
-        job = self._job
-        if self._base or job.phase is JobPhase.REPLANNING:
+        job = self._next_job(fb)
+        if job is None or self._base or job.phase is JobPhase.REPLANNING:
             return
         if fb.state not in (StreamState.IDLE, StreamState.WAITING) or fb.status & StatusBits.IN_MOTION:
             return          # an earlier stream still ends
-        if joints is None:
-            self._job = None
-            job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the planned "
-                       "start against", None)
-            self._fail_queue("an earlier target of the same path failed", job.group)
-            return
-        if job.start is not None and max(abs(a - b) for a, b in zip(joints, job.start)) > START_TOLERANCE:
-            job.set_phase(JobPhase.REPLANNING)
-            self.replan(job, joints)
+        if not self._starts_here(job, joints):
             return
         self._base = next_seq(fb.accepted_seq)
         self._limit = len(job.points)
