@@ -136,6 +136,12 @@ def test_the_command_line_refuses_a_bad_address():
     assert proc.returncode == 2 and "addr" in proc.stderr
 
 
+def test_the_command_line_reports_a_missing_device(tmp_path, capsys):
+    from vr_driver.io_island import main
+    assert main(["--device", str(tmp_path / "no-such-tty")]) == 3
+    assert "device error" in capsys.readouterr().err
+
+
 def test_auto_links_are_per_station():
     env = {"ROS_MASTER_URI": "http://localhost:11411", "ROS_LOG_DIR": "/logs"}
     assert auto_pty_link(env) == "/logs/vr006l_virtual_g2_11411"

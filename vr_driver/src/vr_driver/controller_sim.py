@@ -74,7 +74,7 @@ from typing import IO, Any, Callable, Mapping, Optional, Sequence, Tuple, Union
 
 from pyprofibus_vendor.config import default_robot_config
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
-from pyprofibus_vendor.errors import ProfibusError
+from pyprofibus_vendor.errors import PhyError, ProfibusError
 from pyprofibus_vendor.phy import Link
 from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 
@@ -104,6 +104,7 @@ __all__ = [
     "SimPort",
     "robot_slave",
     "main",
+    "run_simulator",
 ]
 
 log = logging.getLogger(__name__)
@@ -833,6 +834,53 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
+def _watch(sim: Any, stop: threading.Event, prog: str) -> int:
+    """Wait for ``stop`` while ``sim``'s threads run; end early on their device or internal error."""
+    while not stop.wait(0.2):
+        if sim.server_error is not None:
+            print("%s: device error: %s" % (prog, sim.server_error), file=sys.stderr)
+            return EXIT_DEVICE
+        if sim.error is not None:
+            print("%s: internal error: %s" % (prog, sim.error), file=sys.stderr)
+            return EXIT_FAILURE
+    return EXIT_OK
+
+
+def run_simulator(prog: str, make: Callable[[], Any], out: IO[str],
+                  serve: Optional[Callable[[Any, threading.Event, str], int]] = None,
+                  usage: Optional[Callable[[], None]] = None) -> int:
+    """The command-line life of a simulator (virtual controller, I/O island, line hub): SIGINT /
+    SIGTERM stop it; ``make()`` builds and starts it (SimDeviceError -> EXIT_DEVICE, SimError ->
+    ``usage()`` and EXIT_USAGE); its ``device_path`` is the first line on ``out``; ``serve(sim,
+    stop, prog)`` (default: watch its threads' errors) runs until a signal and gives the exit status
+    (a PhyError -> EXIT_DEVICE); ``sim.stop()`` and the old signal handlers always come back."""
+    stop = threading.Event()
+    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
+    sim: Any = None
+    try:
+        try:
+            sim = make()
+        except SimDeviceError as exc:
+            print("%s: device error: %s" % (prog, exc), file=sys.stderr)
+            return EXIT_DEVICE
+        except SimError as exc:
+            if usage is not None:
+                usage()
+            print("%s: error: %s" % (prog, exc), file=sys.stderr)
+            return EXIT_USAGE
+        print(sim.device_path, file=out, flush=True)
+        try:
+            return (serve or _watch)(sim, stop, prog)
+        except PhyError as exc:
+            print("%s: device error: %s" % (prog, exc), file=sys.stderr)
+            return EXIT_DEVICE
+    finally:
+        if sim is not None:
+            sim.stop()
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
     parser = _parser()
     args = parser.parse_args(argv)          # exits 2 on a bad option
@@ -850,45 +898,17 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
         return EXIT_USAGE
 
-    stop = threading.Event()
-
-    def on_signal(signum: int, frame: Any) -> None:
-        stop.set()
-
-    old = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
-    controller: Optional[VirtualController] = None
-    try:
-        try:
-            controller = VirtualController(options.device, address=options.address, baud=options.baud,
-                                           speed_factor=options.speed_factor,
-                                           initial_pose=options.initial_pose,
-                                           loop_period=options.loop_period, byte_order=options.byte_order,
-                                           pty_link=options.pty_link, log_file=options.log_file,
-                                           brake_time=options.brake_time, protocol=options.protocol)
-        except SimDeviceError as exc:
-            print("%s: device error: %s" % (parser.prog, exc), file=sys.stderr)
-            return EXIT_DEVICE
-        except SimError as exc:
-            parser.print_usage(sys.stderr)
-            print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
-            return EXIT_USAGE
+    def make() -> VirtualController:
+        controller = VirtualController(options.device, address=options.address, baud=options.baud,
+                                       speed_factor=options.speed_factor, initial_pose=options.initial_pose,
+                                       loop_period=options.loop_period, byte_order=options.byte_order,
+                                       pty_link=options.pty_link, log_file=options.log_file,
+                                       brake_time=options.brake_time, protocol=options.protocol)
         controller.start()
-        print(controller.device_path, file=out, flush=True)
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)
-        while not stop.wait(0.2):
-            if controller.server_error is not None:
-                print("%s: device error: %s" % (parser.prog, controller.server_error), file=sys.stderr)
-                return EXIT_DEVICE
-            if controller.error is not None:
-                print("%s: internal error: %s" % (parser.prog, controller.error), file=sys.stderr)
-                return EXIT_FAILURE
-        return EXIT_OK
-    finally:
-        if controller is not None:
-            controller.stop()
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+        return controller
+    return run_simulator(parser.prog, make, out, usage=lambda: parser.print_usage(sys.stderr))
 
 
 if __name__ == "__main__":

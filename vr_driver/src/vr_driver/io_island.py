@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 import threading
 import time
@@ -33,8 +32,7 @@ from typing import IO, Any, Callable, Optional, Sequence, Union
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
 
-from .controller_sim import (EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError,
-                             SimPort, _int_option, _positive)
+from .controller_sim import SimPort, _int_option, _positive, run_simulator
 
 __all__ = ["ISLAND_ADDRESS", "ISLAND_IDENT", "ISLAND_CFG", "ISLAND_GSD", "GRIPPER_DELAY", "island_slave",
            "IslandProgram", "VirtualIoIsland", "main"]
@@ -200,34 +198,11 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
     out = stdout if stdout is not None else sys.stdout
     logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    stop = threading.Event()
-    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    island: Optional[VirtualIoIsland] = None
-    try:
-        try:
-            island = VirtualIoIsland(args.device, address=args.addr, baud=args.baud, pty_link=args.pty_link)
-        except SimDeviceError as exc:
-            print("%s: device error: %s" % (p.prog, exc), file=sys.stderr)
-            return EXIT_DEVICE
-        except SimError as exc:
-            print("%s: error: %s" % (p.prog, exc), file=sys.stderr)
-            return EXIT_USAGE
+    def make() -> VirtualIoIsland:
+        island = VirtualIoIsland(args.device, address=args.addr, baud=args.baud, pty_link=args.pty_link)
         island.set_part_present(args.part_present)
-        island.start()
-        print(island.device_path, file=out, flush=True)
-        while not stop.wait(0.2):
-            if island.server_error is not None:
-                print("%s: device error: %s" % (p.prog, island.server_error), file=sys.stderr)
-                return EXIT_DEVICE
-            if island.error is not None:
-                print("%s: internal error: %s" % (p.prog, island.error), file=sys.stderr)
-                return EXIT_FAILURE
-        return EXIT_OK
-    finally:
-        if island is not None:
-            island.stop()
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+        return island.start()
+    return run_simulator(p.prog, make, out)
 
 
 if __name__ == "__main__":

@@ -30,7 +30,6 @@ import heapq
 import logging
 import os
 import select
-import signal
 import sys
 import threading
 import time
@@ -41,8 +40,7 @@ from typing import IO, Any, Callable, List, Optional, Sequence, Tuple
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
-from .controller_sim import (EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, SimPort,
-                             _pid_alive)
+from .controller_sim import EXIT_OK, SimError, SimPort, _pid_alive, run_simulator
 
 __all__ = ["LineCounters", "LineHub", "main"]
 
@@ -247,30 +245,11 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
     out = stdout if stdout is not None else sys.stdout
     logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    stop = threading.Event()
-    old = {sig: signal.signal(sig, lambda *_: stop.set()) for sig in (signal.SIGINT, signal.SIGTERM)}
-    hub: Optional[LineHub] = None
-    try:
-        try:
-            hub = LineHub(args.stations, pty_link=args.pty_link, baud=args.baud)
-        except SimDeviceError as exc:
-            print("%s: device error: %s" % (p.prog, exc), file=sys.stderr)
-            return EXIT_DEVICE
-        except SimError as exc:
-            print("%s: error: %s" % (p.prog, exc), file=sys.stderr)
-            return EXIT_USAGE
-        print(hub.device_path, file=out, flush=True)
-        try:
-            hub.serve(stop)
-        except PhyError as exc:
-            print("%s: device error: %s" % (p.prog, exc), file=sys.stderr)
-            return EXIT_DEVICE
+    def serve(hub: LineHub, stop: threading.Event, prog: str) -> int:
+        hub.serve(stop)                 # in the foreground (a PhyError: the runner's device error)
         return EXIT_OK
-    finally:
-        if hub is not None:
-            hub.stop()
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
+    return run_simulator(p.prog, lambda: LineHub(args.stations, pty_link=args.pty_link, baud=args.baud),
+                         out, serve)
 
 
 if __name__ == "__main__":
