@@ -17,15 +17,13 @@ from the first cycle with the output to the match, inputs, error). Exit status 0
 from __future__ import annotations
 
 import argparse
-import io
-import json
 import os
 import sys
 import termios
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from pyprofibus_master import make_conf, preset_pty_speed, say  # noqa: E402
+from pyprofibus_master import finish, open_station, preset_pty_speed, say  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -46,20 +44,14 @@ def main(argv=None) -> int:
     out = bytes.fromhex(args.output)
     value, mask = (bytes.fromhex(x) for x in args.until.split("/"))
 
-    from pyprofibus import DpError, PbConf, ProfibusError
+    from pyprofibus import DpError, ProfibusError
 
     t_start = time.monotonic()
     summary = {"ok": False, "cycles": 0, "connect_s": None, "matched_s": None, "inputs": None,
                "error": None}
-    master = None
     try:
         preset_pty_speed(args.port)
-        conf = PbConf(io.StringIO(make_conf(args)), "peer.conf")
-        master = conf.makeDPM()
-        desc = conf.slaveConfs[0].makeDpSlaveDesc()
-        master.addSlave(desc)
-        master.initialize()
-        say("READY", args.port, args.baud)
+        master, desc = open_station(args, summary)
         t0 = None
         last = None
         while time.monotonic() < t_start + args.timeout:
@@ -91,13 +83,8 @@ def main(argv=None) -> int:
     except (ProfibusError, OSError, termios.error, ValueError) as err:
         summary["error"] = "%s: %s" % (type(err).__name__, str(err).replace("\n", " "))
     finally:
-        if master is not None:
-            try:
-                master.destroy()
-            except Exception as err:  # noqa: BLE001 -- report, the summary must still come
-                summary["error"] = summary["error"] or "destroy: %s" % err
-        say("SUMMARY", json.dumps(summary, sort_keys=True))
-    return 0 if summary["ok"] else 1
+        status = finish(summary)
+    return status
 
 
 if __name__ == "__main__":

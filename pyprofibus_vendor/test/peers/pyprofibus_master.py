@@ -98,6 +98,32 @@ def make_conf(args: argparse.Namespace) -> str:
     return "\n".join(lines) + "\n"
 
 
+def open_station(args: argparse.Namespace, summary: dict):
+    """pyprofibus's DP master for the one station of ``args`` (make_conf), initialised; says READY.
+    Returns (master, slave description); ``summary["master"]`` holds the master as soon as it exists,
+    so that :func:`finish` destroys it also when the set-up fails half way."""
+    from pyprofibus import PbConf
+    conf = PbConf(io.StringIO(make_conf(args)), "peer.conf")
+    master = summary["master"] = conf.makeDPM()
+    desc = conf.slaveConfs[0].makeDpSlaveDesc()
+    master.addSlave(desc)
+    master.initialize()
+    say("READY", args.port, args.baud)
+    return master, desc
+
+
+def finish(summary: dict) -> int:
+    """Destroy the master (if any), say the SUMMARY (without it) and return the exit status."""
+    master = summary.pop("master", None)
+    if master is not None:
+        try:
+            master.destroy()
+        except Exception as err:  # noqa: BLE001 -- report, the summary must still come
+            summary["error"] = summary["error"] or "destroy: %s" % err
+    say("SUMMARY", json.dumps(summary, sort_keys=True))
+    return 0 if summary["ok"] else 1
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--port", required=True)
@@ -124,7 +150,7 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
 
     # only here: the peer interpreter has pyprofibus, ours must not need it
-    from pyprofibus import DpError, PbConf, ProfibusError
+    from pyprofibus import DpError, ProfibusError
 
     t_start = time.monotonic()
     deadline = t_start + args.timeout
@@ -132,18 +158,11 @@ def main(argv=None) -> int:
                "sent_sha256": None, "wall_s": None, "cpu_s": None, "cycles_per_s": None,
                "cpu_us_per_cycle": None, "connect_s": None, "pty_preset": False,
                "chk_cfg": None, "error": None}
-    master = None
     try:
         if not args.no_pty_preset:
             summary["pty_preset"] = preset_pty_speed(args.port)
-        conf = PbConf(io.StringIO(make_conf(args)), "peer.conf")
-        master = conf.makeDPM()
-        slave_conf = conf.slaveConfs[0]
-        desc = slave_conf.makeDpSlaveDesc()
+        master, desc = open_station(args, summary)
         summary["chk_cfg"] = bytes(desc.chkCfgTelegram.getDU()).hex()
-        master.addSlave(desc)
-        master.initialize()
-        say("READY", args.port, args.baud)
 
         sent = hashlib.sha256()
         mask = args.xor & 0xFF
@@ -198,13 +217,8 @@ def main(argv=None) -> int:
     except (ProfibusError, OSError, TimeoutError, termios.error, ValueError) as err:
         summary["error"] = "%s: %s" % (type(err).__name__, str(err).replace("\n", " "))
     finally:
-        if master is not None:
-            try:
-                master.destroy()
-            except Exception as err:  # noqa: BLE001 -- report, the summary must still come
-                summary["error"] = summary["error"] or "destroy: %s" % err
-        say("SUMMARY", json.dumps(summary, sort_keys=True))
-    return 0 if summary["ok"] else 1
+        status = finish(summary)
+    return status
 
 
 if __name__ == "__main__":
