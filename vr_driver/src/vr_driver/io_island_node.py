@@ -21,10 +21,10 @@ import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, SimDeviceError,
+from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_USAGE, SimDeviceError,
                              SimError, resolve_link)
 from .io_island import ISLAND_ADDRESS, VirtualIoIsland
-from .ros_support import route_to_rosout, stop_on_signals
+from .ros_support import route_to_rosout, stop_on_signals, watch_simulator
 
 PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path")
 
@@ -64,28 +64,16 @@ def main() -> int:
     rospy.loginfo("virtual_io_island: DP slave %d on %s%s", island.address, island.device_path,
                   " (linked at %s)" % island.symlink if island.symlink else "")
     outputs_pub = rospy.Publisher("~outputs", String, queue_size=10, latch=True)
-    shown = ""
-    status = EXIT_OK
-    rate = rospy.Rate(50.0)
+    shown = [""]
+
+    def publish_outputs() -> None:
+        now_shown = "%s %s" % (island.program.outputs.hex(" "), island.slave.state.name)
+        if now_shown != shown[0]:
+            shown[0] = now_shown
+            rospy.loginfo("virtual_io_island: outputs %s", now_shown)
+            outputs_pub.publish(String(data=now_shown))
     try:
-        while not rospy.is_shutdown() and not stop.is_set():
-            if island.server_error is not None:
-                rospy.logfatal("virtual_io_island: device error: %s", island.server_error)
-                status = EXIT_DEVICE
-                break
-            if island.error is not None:
-                rospy.logfatal("virtual_io_island: program loop failed: %s", island.error)
-                status = EXIT_FAILURE
-                break
-            now_shown = "%s %s" % (island.program.outputs.hex(" "), island.slave.state.name)
-            if now_shown != shown:
-                shown = now_shown
-                rospy.loginfo("virtual_io_island: outputs %s", shown)
-                outputs_pub.publish(String(data=shown))
-            try:
-                rate.sleep()
-            except rospy.ROSInterruptException:
-                break
+        status = watch_simulator(island, "virtual_io_island", stop, 50.0, publish_outputs)
     finally:
         service.shutdown()
         island.stop()

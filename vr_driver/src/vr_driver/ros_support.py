@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import signal
 import threading
+from typing import Any, Callable, Optional
 
 import rospy
 
@@ -60,3 +61,26 @@ def wait_for_shutdown(stop: threading.Event, poll: float = 0.5) -> str:
         if rospy.is_shutdown():
             return "ROS shutdown"
     return "signal"
+
+
+def watch_simulator(sim: Any, name: str, stop: threading.Event, hz: float,
+                    each: Optional[Callable[[], None]] = None) -> int:
+    """A simulator node's main loop: until ``stop``, a ROS shutdown, or an error of ``sim``'s threads
+    (logged fatal: its serial device -> EXIT_DEVICE, its program loop -> EXIT_FAILURE), calling
+    ``each()`` (if given) ``hz`` times a second. Returns the exit status."""
+    from .controller_sim import EXIT_DEVICE, EXIT_FAILURE, EXIT_OK
+    rate = rospy.Rate(hz)
+    while not rospy.is_shutdown() and not stop.is_set():
+        if sim.server_error is not None:
+            rospy.logfatal("%s: device error: %s", name, sim.server_error)
+            return EXIT_DEVICE
+        if sim.error is not None:
+            rospy.logfatal("%s: program loop failed: %s", name, sim.error)
+            return EXIT_FAILURE
+        if each is not None:
+            each()
+        try:
+            rate.sleep()
+        except rospy.ROSInterruptException:
+            break
+    return EXIT_OK

@@ -26,9 +26,9 @@ import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_FAILURE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
+from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
                              SimDeviceError, SimError, SimOptions, VirtualController, auto_pty_link)
-from .ros_support import route_to_rosout, stop_on_signals
+from .ros_support import route_to_rosout, stop_on_signals, watch_simulator
 from .sim_arm import LogEntry
 
 #: parameters the node writes itself (not options)
@@ -86,22 +86,8 @@ def main() -> int:
     rospy.set_param("~device_path", controller.device_path)
     rospy.loginfo("virtual_controller: DP slave %d on %s%s, speed x%g", options.address, controller.device_path,
                   " (linked at %s)" % controller.symlink if controller.symlink else "", options.speed_factor)
-    status = EXIT_OK
-    rate = rospy.Rate(5.0)
     try:
-        while not rospy.is_shutdown() and not stop.is_set():
-            if controller.server_error is not None:
-                rospy.logfatal("virtual_controller: device error: %s", controller.server_error)
-                status = EXIT_DEVICE
-                break
-            if controller.error is not None:
-                rospy.logfatal("virtual_controller: program loop failed: %s", controller.error)
-                status = EXIT_FAILURE
-                break
-            try:
-                rate.sleep()
-            except rospy.ROSInterruptException:
-                break
+        status = watch_simulator(controller, "virtual_controller", stop, 5.0)
     finally:
         for service in services:
             service.shutdown()
