@@ -243,15 +243,21 @@ class SignalMap:
         return cls(tuple(stations))
 
 
+def _check_entry(where: str, what: str, name: str, body: Any, expected: str, keys: Sequence[str]) -> None:
+    """A station's or a signal's name and body: the name a letter followed by letters, digits or _,
+    the body a mapping of ``keys`` only (``expected`` says what it should hold)."""
+    if not _NAME.match(name):
+        raise SignalMapError("%s: a %s name is a letter followed by letters, digits or _" % (where, what))
+    if not isinstance(body, Mapping):
+        raise SignalMapError("%s: expected %s, got %s" % (where, expected, _kind(body)))
+    for key in body:
+        if key not in keys:
+            raise SignalMapError("%s key %r: unknown key (allowed: %s)" % (where, key, ", ".join(keys)))
+
+
 def _station(name: str, body: Any, lengths: Mapping[int, Tuple[int, int]]) -> StationSignals:
     where = "station %r" % name
-    if not _NAME.match(name):
-        raise SignalMapError("%s: a station name is a letter followed by letters, digits or _" % where)
-    if not isinstance(body, Mapping):
-        raise SignalMapError("%s: expected a mapping with address and signals, got %s" % (where, _kind(body)))
-    for key in body:
-        if key not in _STATION_KEYS:
-            raise SignalMapError("%s key %r: unknown key (allowed: %s)" % (where, key, ", ".join(_STATION_KEYS)))
+    _check_entry(where, "station", name, body, "a mapping with address and signals", _STATION_KEYS)
     address = body.get("address")
     if isinstance(address, bool) or not isinstance(address, int):
         raise SignalMapError("%s key 'address': expected the station's DP address, got %s" % (where, _kind(address)))
@@ -280,13 +286,7 @@ def _station(name: str, body: Any, lengths: Mapping[int, Tuple[int, int]]) -> St
 
 def _signal(name: str, body: Any, station: str, address: int, n_in: int, n_out: int) -> Signal:
     where = "station %r signal %r" % (station, name)
-    if not _NAME.match(name):
-        raise SignalMapError("%s: a signal name is a letter followed by letters, digits or _" % where)
-    if not isinstance(body, Mapping):
-        raise SignalMapError("%s: expected a mapping (direction, type, byte, ...), got %s" % (where, _kind(body)))
-    for key in body:
-        if key not in _SIGNAL_KEYS:
-            raise SignalMapError("%s key %r: unknown key (allowed: %s)" % (where, key, ", ".join(_SIGNAL_KEYS)))
+    _check_entry(where, "signal", name, body, "a mapping (direction, type, byte, ...)", _SIGNAL_KEYS)
     for key in ("direction", "type", "byte"):
         if key not in body:
             raise SignalMapError("%s key %r: required key is missing" % (where, key))
