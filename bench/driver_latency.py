@@ -336,8 +336,16 @@ class Failure(Exception):
     """A measurement that could not be made (the message says which)."""
 
 
-def worker(cfg: Dict[str, Any]) -> int:
-    tmp = tempfile.mkdtemp(prefix="vr_driver_latency_")
+def stack_worker(cfg: Dict[str, Any], prefix: str, node: str, header: str, launch_args: Sequence[str],
+                 measure: Callable[[Any, "Stack"], int], failed: Callable[[BaseException, "Stack"], bool]) -> int:
+    """One configuration in its own ROS graph (also bench/trajectory.py's): a temporary directory
+    (``prefix``), a roscore on a free port, this process as ROS node ``node``, driver.launch with
+    ``sim:=true``, its pty in the directory, and ``launch_args``; then ``measure(rospy, stack)`` gives
+    the exit status. ``header`` is printed first (``{port}`` and ``{tmp}`` filled in). An error is
+    reported by ``failed(exc, stack)`` (a traceback first unless it is a :class:`Failure`), which
+    says whether to keep the logs; a Ctrl-C gives 130. Everything started is stopped, and the
+    directory removed unless kept (or ``cfg["keep_logs"]``)."""
+    tmp = tempfile.mkdtemp(prefix=prefix)
     port = cfg["ros_port"] or pick_port(11700 + (os.getpid() % 150) * 2)
     stack = Stack(tmp, port)
     os.environ["ROS_MASTER_URI"] = stack.master_uri           # before rospy reads it
@@ -347,43 +355,53 @@ def worker(cfg: Dict[str, Any]) -> int:
 
     rospy = None
     status = 1
-    keep_tmp = False
-    print("--- %d bit/s, %g Hz bus cycle (ROS master port %d, pty %s/g2, speed_factor %g)"
-          % (cfg["baud"], cfg["cycle_rate"], port, tmp, cfg["speed_factor"]), flush=True)
+    keep = False
+    print(header.format(port=port, tmp=tmp), flush=True)
     try:
         stack.start_roscore()
         import rospy as _rospy
         rospy = _rospy
-        rospy.init_node("driver_latency_bench", anonymous=True, disable_signals=True)
-        stack.start_launch(["sim:=true", "sim_port:=%s/g2" % tmp, "baud:=%d" % cfg["baud"],
-                            "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"]])
-        result = Measure(rospy, stack, cfg).run()
-        print(RESULT_TAG + json.dumps(result), flush=True)
-        status = 0 if not result["failures"] else 1
+        rospy.init_node(node, anonymous=True, disable_signals=True)
+        stack.start_launch(["sim:=true", "sim_port:=%s/g2" % tmp] + list(launch_args))
+        status = measure(rospy, stack)
     except KeyboardInterrupt:
         print("interrupted: stopping what was started", flush=True)
         status = 130
-    except Failure as exc:
-        print("FAILED: %s" % exc, flush=True)
-        keep_tmp = True
     except Exception as exc:  # noqa: BLE001 - report, clean up, exit 1
-        import traceback
-        traceback.print_exc()
-        print("FAILED: %s: %s" % (type(exc).__name__, exc), flush=True)
-        keep_tmp = True
+        if not isinstance(exc, Failure):
+            import traceback
+            traceback.print_exc()
+        keep = failed(exc, stack)
     finally:
         if rospy is not None:
             rospy.signal_shutdown("benchmark done")
-        if keep_tmp:
-            print("launch log (tail), all logs in %s:\n%s" % (tmp, stack.log_tail("launch.log")), flush=True)
         left = stack.stop()
         if left:
             print("had to kill: %s" % ", ".join(left), flush=True)
-        if keep_tmp or cfg.get("keep_logs"):
+        if keep or cfg.get("keep_logs"):
             print("logs kept in %s" % tmp, flush=True)
         else:
             shutil.rmtree(tmp, ignore_errors=True)
     return status
+
+
+def worker(cfg: Dict[str, Any]) -> int:
+    def measure(rospy: Any, stack: "Stack") -> int:
+        result = Measure(rospy, stack, cfg).run()
+        print(RESULT_TAG + json.dumps(result), flush=True)
+        return 0 if not result["failures"] else 1
+
+    def failed(exc: BaseException, stack: "Stack") -> bool:
+        print("FAILED: %s" % exc if isinstance(exc, Failure) else
+              "FAILED: %s: %s" % (type(exc).__name__, exc), flush=True)
+        print("launch log (tail), all logs in %s:\n%s" % (stack.tmp, stack.log_tail("launch.log")), flush=True)
+        return True
+    return stack_worker(
+        cfg, "vr_driver_latency_", "driver_latency_bench",
+        "--- %d bit/s, %g Hz bus cycle (ROS master port {port}, pty {tmp}/g2, speed_factor %g)"
+        % (cfg["baud"], cfg["cycle_rate"], cfg["speed_factor"]),
+        ["baud:=%d" % cfg["baud"], "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"]],
+        measure, failed)
 
 
 def interrupt_once(signals: Sequence[int]) -> None:

@@ -62,10 +62,8 @@ import math
 import os
 import random
 import re
-import shutil
 import signal
 import sys
-import tempfile
 import threading
 import time
 from dataclasses import dataclass
@@ -76,6 +74,10 @@ for _pkg in ("vr_driver", "pyprofibus_vendor", "panasonic_vr006l_support"):
     _src = os.path.join(REPO, _pkg, "src")
     if _src not in sys.path:
         sys.path.insert(0, _src)
+if os.path.dirname(os.path.abspath(__file__)) not in sys.path:
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import driver_latency  # noqa: E402 (ROS-free: its Failure, Recorder, runner and stack worker serve here too)
+from driver_latency import Failure, Recorder, interrupt_once, stack_worker  # noqa: E402
 
 RESULT_TAG = "@@TRAJECTORY_RESULT "
 CONFIG_FILE = os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")
@@ -414,9 +416,7 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
 
 
 # ------------------------------------------------------------------------------------------ worker
-class Failure(Exception):
-    """A configuration that cannot be measured (the message says why)."""
-
+# (Failure, from driver_latency: a configuration that cannot be measured, the message says why)
 
 class Run:
     """One configuration: the stack is up; send the goals, collect joint_states, compute figures."""
@@ -425,7 +425,6 @@ class Run:
         import actionlib
         from sensor_msgs.msg import JointState
 
-        from driver_latency import Recorder
         from vr_driver.msg import FollowJointTrajectoryAction, RobotStatus, TriState
         self.rospy, self.stack, self.cfg = rospy, stack, cfg
         self.TRUE, self.FALSE = TriState.TRUE, TriState.FALSE
@@ -597,57 +596,25 @@ class Run:
 
 
 def worker(cfg: Dict[str, Any]) -> int:
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    from driver_latency import Stack, interrupt_once, pick_port
-    tmp = tempfile.mkdtemp(prefix="vr_traj_bench_")
-    port = cfg["ros_port"] or pick_port(11700 + (os.getpid() % 150) * 2)
-    stack = Stack(tmp, port)
-    os.environ["ROS_MASTER_URI"] = stack.master_uri
-    os.environ["ROS_LOG_DIR"] = stack.env["ROS_LOG_DIR"]
-    interrupt_once((signal.SIGINT, signal.SIGTERM, signal.SIGHUP))
-    rospy = None
-    status = 1
-    keep = False
-    print("--- %s: protocol %s, %d bit/s%s, %g Hz bus cycle (ROS master port %d, speed_factor %g; tolerances %s)"
-          % (cfg["name"], cfg["protocol"], cfg["baud"], " (line paced)" if cfg.get("paced") else "",
-             cfg["cycle_rate"], port, cfg["speed_factor"], cfg["tolerances"]), flush=True)
-    try:
-        stack.start_roscore()
-        import rospy as _rospy
-        rospy = _rospy
-        rospy.init_node("trajectory_bench", anonymous=True, disable_signals=True)
-        stack.start_launch(["sim:=true", "sim_port:=%s/g2" % tmp, "baud:=%d" % cfg["baud"],
-                            "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
-                            "protocol:=%s" % cfg["protocol"]]
-                           + (["line_baud:=%d" % cfg["baud"]] if cfg.get("paced") else []))
+    def measure(rospy: Any, stack: Any) -> int:
         result = Run(rospy, stack, cfg).run()
         print(RESULT_TAG + json.dumps(result), flush=True)
-        status = 0
-    except KeyboardInterrupt:
-        print("interrupted: stopping what was started", flush=True)
-        status = 130
-    except Failure as exc:
-        print("FAILED %s: %s" % (cfg["name"], exc), flush=True)
-        print(RESULT_TAG + json.dumps({"name": cfg["name"], "failed": str(exc).split("\n")[0]}), flush=True)
-        keep = cfg.get("keep_logs", False)
-    except Exception as exc:  # noqa: BLE001 - report, clean up, exit 1
-        import traceback
-        traceback.print_exc()
-        print("FAILED %s: %s: %s" % (cfg["name"], type(exc).__name__, exc), flush=True)
-        print(RESULT_TAG + json.dumps({"name": cfg["name"], "failed": "%s: %s" % (type(exc).__name__, exc)}),
-              flush=True)
-        keep = True
-    finally:
-        if rospy is not None:
-            rospy.signal_shutdown("benchmark done")
-        left = stack.stop()
-        if left:
-            print("had to kill: %s" % ", ".join(left), flush=True)
-        if keep or cfg.get("keep_logs"):
-            print("logs kept in %s" % tmp, flush=True)
-        else:
-            shutil.rmtree(tmp, ignore_errors=True)
-    return status
+        return 0
+
+    def failed(exc: BaseException, stack: Any) -> bool:
+        what = str(exc) if isinstance(exc, Failure) else "%s: %s" % (type(exc).__name__, exc)
+        print("FAILED %s: %s" % (cfg["name"], what), flush=True)
+        print(RESULT_TAG + json.dumps({"name": cfg["name"], "failed": what.split("\n")[0] if isinstance(exc, Failure)
+                                       else what}), flush=True)
+        return cfg.get("keep_logs", False) if isinstance(exc, Failure) else True
+    return stack_worker(
+        cfg, "vr_traj_bench_", "trajectory_bench",
+        "--- %s: protocol %s, %d bit/s%s, %g Hz bus cycle (ROS master port {port}, speed_factor %g; "
+        "tolerances %s)" % (cfg["name"], cfg["protocol"], cfg["baud"], " (line paced)" if cfg.get("paced") else "",
+                            cfg["cycle_rate"], cfg["speed_factor"], cfg["tolerances"]),
+        ["baud:=%d" % cfg["baud"], "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
+         "protocol:=%s" % cfg["protocol"]] + (["line_baud:=%d" % cfg["baud"]] if cfg.get("paced") else []),
+        measure, failed)
 
 
 # ------------------------------------------------------------------------------------------ parent
@@ -710,16 +677,13 @@ def summary(results: List[Dict[str, Any]]) -> None:
 def run_worker(cfg: Dict[str, Any]) -> Tuple[int, Optional[Dict[str, Any]]]:
     """One configuration in a worker process (driver_latency's runner: own session, Ctrl-C passed on
     once, output relayed); (exit status, result)."""
-    from driver_latency import run_worker as run
-    return run(cfg, __file__, RESULT_TAG)
+    return driver_latency.run_worker(cfg, __file__, RESULT_TAG)
 
 
 def main(argv: Optional[List[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ["--worker"]:
         return worker(json.loads(argv[1]))
-    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-    from driver_latency import interrupt_once
     sigs = [signal.SIGTERM, signal.SIGHUP]
     if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
         sigs.append(signal.SIGINT)
