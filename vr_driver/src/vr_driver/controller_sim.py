@@ -100,6 +100,7 @@ __all__ = [
     "SimDeviceError",
     "SimOptions",
     "ControllerProgram",
+    "Simulator",
     "VirtualController",
     "SimPort",
     "robot_slave",
@@ -534,7 +535,45 @@ class SimPort:
 
 
 
-class VirtualController:
+class Simulator:
+    """The life-cycle the simulators share (VirtualController, VirtualIoIsland, LineHub): a
+    background thread started by the subclass's ``start()`` (returning self) and watching
+    ``self._stop``; :meth:`stop` ends it and then :meth:`_close` closes what the subclass opened;
+    a context manager. The subclass sets ``self._stop`` and ``self._thread = None``."""
+
+    _stop: threading.Event
+    _thread: Optional[threading.Thread]
+
+    def start(self) -> Any:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        """Close what the simulator opened (after its thread ended)."""
+
+    def request_stop(self) -> None:
+        """Ask the threads to end, without waiting (safe from a signal handler / ROS shutdown hook,
+        which may interrupt a thread holding a lock that :meth:`stop` needs)."""
+        self._stop.set()
+
+    def stop(self) -> None:
+        """Stop the threads, close what this object opened (removes a pty symlink). Idempotent."""
+        self._stop.set()
+        thread, self._thread = self._thread, None
+        if thread is not None:
+            thread.join(5.0)
+        self._close()
+
+    def close(self) -> None:
+        self.stop()
+
+    def __enter__(self) -> Any:
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.stop()
+
+
+class VirtualController(Simulator):
     """The virtual G2: DP slave + program loop + simulated arm, on a link.
 
     ``link``: None (default) creates a raw pty pair -- clients open :attr:`device_path`; with
@@ -648,28 +687,10 @@ class VirtualController:
                  self.protocol, self.loop_period * 1e3, self.arm.speed_factor)
         return self
 
-    def request_stop(self) -> None:
-        """Ask the threads to end, without waiting (safe from a signal handler / ROS shutdown hook,
-        which may interrupt a thread holding a lock that :meth:`stop` needs)."""
-        self._stop.set()
-
-    def stop(self) -> None:
-        """Stop the threads, close what this object opened, remove the pty symlink. Idempotent."""
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(5.0)
+    def _close(self) -> None:
         self.server.stop()
         self.port.close()
         self._close_log()
-
-    close = stop
-
-    def __enter__(self) -> "VirtualController":
-        return self.start()
-
-    def __exit__(self, *exc: Any) -> None:
-        self.stop()
 
     def _close_log(self) -> None:
         fh, self._log_fh = self._log_fh, None

@@ -27,12 +27,12 @@ import logging
 import sys
 import threading
 import time
-from typing import IO, Any, Callable, Optional, Sequence, Union
+from typing import IO, Callable, Optional, Sequence, Union
 
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
 
-from .controller_sim import SimPort, _int_option, _positive, run_simulator
+from .controller_sim import Simulator, SimPort, _int_option, _positive, run_simulator
 
 __all__ = ["ISLAND_ADDRESS", "ISLAND_IDENT", "ISLAND_CFG", "ISLAND_GSD", "GRIPPER_DELAY", "island_slave",
            "IslandProgram", "VirtualIoIsland", "main"]
@@ -100,7 +100,7 @@ class IslandProgram:
         return image
 
 
-class VirtualIoIsland:
+class VirtualIoIsland(Simulator):
     """The virtual I/O island: DP slave + program loop, on its own port (see
     :class:`~vr_driver.controller_sim.SimPort`: ``link`` None creates a pty, symlinked at
     ``pty_link``; a string serves that device; a Link is used as it is). :meth:`step` runs one
@@ -159,25 +159,9 @@ class VirtualIoIsland:
                 return
             self._stop.wait(self.loop_period)
 
-    def request_stop(self) -> None:
-        self._stop.set()
-
-    def stop(self) -> None:
-        """Stop the threads, close the port (removes the pty symlink). Idempotent."""
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(5.0)
+    def _close(self) -> None:
         self.server.stop()
         self.port.close()
-
-    close = stop
-
-    def __enter__(self) -> "VirtualIoIsland":
-        return self.start()
-
-    def __exit__(self, *exc: Any) -> None:
-        self.stop()
 
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:

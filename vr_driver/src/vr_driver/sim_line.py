@@ -35,12 +35,12 @@ import threading
 import time
 import tty
 from dataclasses import dataclass
-from typing import IO, Any, Callable, List, Optional, Sequence, Tuple
+from typing import IO, Callable, List, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
-from .controller_sim import EXIT_OK, SimError, SimPort, _pid_alive, run_simulator
+from .controller_sim import EXIT_OK, SimError, Simulator, SimPort, _pid_alive, run_simulator
 
 __all__ = ["LineCounters", "LineHub", "main"]
 
@@ -75,7 +75,7 @@ def _lock_owner_gone(path: str) -> bool:
     return text.isdigit() and not _pid_alive(int(text))
 
 
-class LineHub:
+class LineHub(Simulator):
     """See the module docstring. :meth:`start` serves in a thread; :meth:`serve` in the caller's."""
 
     def __init__(self, stations: Sequence[str], *, pty_link: Optional[str] = None, baud: Optional[int] = None,
@@ -210,24 +210,12 @@ class LineHub:
             self._thread.start()
         return self
 
-    def stop(self) -> None:
-        self._stop.set()
-        thread, self._thread = self._thread, None
-        if thread is not None:
-            thread.join(5.0)
+    def _close(self) -> None:
         for st in self.stations:
             if st.link is not None:
                 st.link.close()
                 st.link = None
         self.port.close()
-
-    close = stop
-
-    def __enter__(self) -> "LineHub":
-        return self.start()
-
-    def __exit__(self, *exc: Any) -> None:
-        self.stop()
 
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
