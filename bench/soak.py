@@ -121,7 +121,7 @@ class SoakConfig:
     cycle_rate: float = 50.0
     loop_period: float = 0.01
     job_timeout: float = 60.0           # a job without a result after this long counts as lost
-    stall_timeout: float = 60.0         # no motion possible for this long: give up the run
+    stall_timeout: float = 60.0         # no motion possible, or no target taken, this long: give up
     progress_every: int = 0             # print a progress line every N targets (0: never)
     workdir: Optional[str] = None
     protocol: str = "v1"                # v2: every move is streamed as joint targets (each one a target)
@@ -164,6 +164,10 @@ class SoakResult:
     refused_not_possible: int = 0       # submit refused: motion not possible now (retried)
     refused_invalid: int = 0            # submit refused: invalid / unplannable target (replaced)
     reasons: Dict[str, int] = field(default_factory=dict)   # driver reasons of failed jobs
+    refusals: Dict[str, int] = field(default_factory=dict)  # submit refusals, by reason
+    outside_samples: int = 0            # bus cycles that saw the arm outside the workspace box
+    outside_max: float = 0.0            # the farthest out [mm or deg] ...
+    outside_pose: Optional[ControllerPose] = None   # ... and where
     cuts: List[Cut] = field(default_factory=list)
     status_calls: int = 0
     status_gap_max: float = 0.0
@@ -224,6 +228,9 @@ class SoakResult:
             "log entries %d" % (self.executed_but_failed, self.unknown_entries, self.log_entries),
             "submit refused: motion not possible (retried) %d, invalid/unplannable (replaced) %d"
             % (self.refused_not_possible, self.refused_invalid),
+            "workspace: the arm was outside the box in %d bus cycles%s"
+            % (self.outside_samples, "" if self.outside_pose is None else
+               " (farthest %.3f out, at %s)" % (self.outside_max, self.outside_pose)),
         ]
         times = sorted(self.reconnect_times)
         if self.cuts:
@@ -249,6 +256,9 @@ class SoakResult:
         if self.reasons:
             top = sorted(self.reasons.items(), key=lambda kv: -kv[1])[:8]
             lines.append("failed job reasons: " + "; ".join("%dx %s" % (n, r) for r, n in top))
+        if self.refusals:
+            top = sorted(self.refusals.items(), key=lambda kv: -kv[1])[:6]
+            lines.append("submit refusals: " + "; ".join("%dx %s" % (n, r) for r, n in top))
         lines.append("fault link: " + ", ".join("%s %d" % kv for kv in self.link_counters.items()))
         lines.append("driver: " + ", ".join("%s %d" % kv for kv in self.driver_counters.items()))
         lines.append("master: " + ", ".join("%s %d" % kv for kv in self.master_counters.items()
@@ -365,9 +375,11 @@ class StatusRecorder:
     time of the record they are based on, and a condition to wait on."""
 
     def __init__(self, clock: Callable[[], float] = time.monotonic,
-                 handshake_ready: Callable[[], bool] = lambda: True) -> None:
+                 handshake_ready: Callable[[], bool] = lambda: True,
+                 probe: Callable[[], None] = lambda: None) -> None:
         self.clock = clock
         self.handshake_ready = handshake_ready
+        self.probe = probe
         self.calls = 0
         self.last: Optional[float] = None
         self.gap_max = 0.0
@@ -386,6 +398,7 @@ class StatusRecorder:
             self.gap_at = now - self.t0
         self.last = now
         self.calls += 1
+        self.probe()
         fb_time = status.feedback_time
         self.targets_sent = status.counters.targets_sent
         if self._fresh_wanted and status.motion_possible and fb_time is not None:
@@ -490,6 +503,12 @@ def driver_params(config: SoakConfig, path: str) -> DriverParams:
     return DriverParams.from_dict(params)
 
 
+def _count(counts: Dict[str, int], reason: str) -> None:
+    """Count ``reason`` with its numbers masked, so that like reasons add up."""
+    short = re.sub(r"[0-9]+(\.[0-9]+)?", "#", reason)[:110]
+    counts[short] = counts.get(short, 0) + 1
+
+
 def _keys(job: MoveJob) -> Tuple[Key, ...]:
     if job.points:      # v2: each streamed joint target, as the controller logs it (0.001 deg)
         return tuple(("JOINT", joints_to_wire(p.joints)) for p in job.points)  # type: ignore[misc]
@@ -511,8 +530,17 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
                             loop_period=config.loop_period, kinematics=kin,
                             confirm_records=config.confirm_records, protocol=config.protocol).start()
     core = DriverCore(params, kinematics=kin, open_link=line.open_link)
+
+    def probe() -> None:        # the arm's exact TCP against the box, every bus cycle
+        pose = sim.program.arm.pose
+        excess = params.workspace.excess(pose)
+        if excess > 1e-6:       # (not float noise on a target that lies on a bound)
+            result.outside_samples += 1
+            if excess > result.outside_max:
+                result.outside_max, result.outside_pose = excess, pose
+
     recorder = StatusRecorder(handshake_ready=(lambda: True) if config.protocol == "v2"
-                              else (lambda: core.handshake.ready))
+                              else (lambda: core.handshake.ready), probe=probe)
     core.add_listener(recorder)
     cutter = (Cutter(line, config, random.Random(rng.getrandbits(64)), recorder)
               if config.cut_every > 0 or config.cut_times else None)
@@ -523,42 +551,53 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
         core.start()
         if cutter is not None:
             cutter.start()
-        waiting_since: Optional[float] = None
+        waiting_since: Optional[float] = None     # motion not possible since
+        accepted_at = time.monotonic()             # the last submit taken (or the start)
+        last_refusal = ""
         while len(commanded) < config.targets:
             status = core.status()
+            now = time.monotonic()
             if not status.motion_possible or not status.joints_valid:
                 if waiting_since is None:
-                    waiting_since = time.monotonic()
-                elif time.monotonic() - waiting_since > config.stall_timeout:
+                    waiting_since = now
+                elif now - waiting_since > config.stall_timeout:
                     raise RuntimeError("no motion possible for %.0f s: %s"
                                        % (config.stall_timeout, status.why_no_motion()))
                 recorder.wait_change(0.2)
                 continue
+            waiting_since = None
+            if now - accepted_at > config.stall_timeout:
+                raise RuntimeError("no target taken for %.0f s while motion was possible (arm at "
+                                   "%s, joints %s deg); last refusal: %s"
+                                   % (config.stall_timeout, status.pose,
+                                      None if status.joints is None else
+                                      ["%.2f" % math.degrees(j) for j in status.joints],
+                                      last_refusal))
             request = gen.next(status.pose)
             if request is None:
                 continue
             try:
                 job = core.submit(request)
             except DriverError as exc:
-                text = str(exc)
-                if "not possible" in text or "joint state" in text:
+                last_refusal = str(exc)
+                _count(result.refusals, last_refusal)
+                if "not possible" in last_refusal or "joint state" in last_refusal:
                     result.refused_not_possible += 1
-                    if waiting_since is None:
-                        waiting_since = time.monotonic()
                     recorder.wait_change(0.2)
                 else:
                     result.refused_invalid += 1
                 continue
-            except VrDriverError:
+            except VrDriverError as exc:
+                last_refusal = str(exc)
+                _count(result.refusals, last_refusal)
                 result.refused_invalid += 1
                 continue
-            waiting_since = None
             keys = _keys(job)
             gen.mark(keys)
             entry = Commanded(len(commanded), job.id, request.move_type.name, keys, time.monotonic())
             commanded.append(entry)
             entry.result = job.wait(config.job_timeout)
-            entry.finished = time.monotonic()
+            entry.finished = accepted_at = time.monotonic()
             if entry.result is None:
                 result.hung += 1
                 core.cancel(job, "soak: no result within %.0f s" % config.job_timeout)
@@ -609,8 +648,7 @@ def _account(result: SoakResult, commanded: List[Commanded], entries: List[LogEn
         res = cmd.result
         failed_reason = res.reason if res is not None and not res.success else ""
         if res is not None and not res.success:
-            short = re.sub(r"[0-9]+(\.[0-9]+)?", "#", failed_reason.split(";")[0])[:110]
-            result.reasons[short] = result.reasons.get(short, 0) + 1
+            _count(result.reasons, failed_reason.split(";")[0])
         for key in cmd.keys:
             known.add(key)
             result.commanded += 1

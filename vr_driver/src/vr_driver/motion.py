@@ -318,6 +318,12 @@ class MotionPlanner:
         return traj
 
 
+#: [mm, deg] how far a path sample may lie beyond a bound of the workspace box: float noise only.
+#: A target on a bound (bounds are inclusive) is reached as FK(IK(pose)), a few 1e-13 mm off; the
+#: next move starts there and must not be refused for it (that left the arm unable to move at all)
+ENVELOPE_EPS = 1e-6
+
+
 def check_envelope(trajectory: Trajectory, workspace: Workspace) -> None:
     """Every sample of ``trajectory`` (its TCP in ``base``) inside the workspace box, or
     EnvelopeError naming the first sample outside, its time and the field. Positions are checked
@@ -329,14 +335,14 @@ def check_envelope(trajectory: Trajectory, workspace: Workspace) -> None:
     if len(tcp) == 0:
         return
     xyz = tcp[:, :3, 3] * 1e3
-    lo = np.array([workspace.x[0], workspace.y[0], workspace.z[0]])
-    hi = np.array([workspace.x[1], workspace.y[1], workspace.z[1]])
+    lo = np.array([workspace.x[0], workspace.y[0], workspace.z[0]]) - ENVELOPE_EPS
+    hi = np.array([workspace.x[1], workspace.y[1], workspace.z[1]]) + ENVELOPE_EPS
     bad = np.any((xyz < lo[None, :]) | (xyz > hi[None, :]), axis=1)
     first = int(np.argmax(bad)) if np.any(bad) else None
     if workspace.angle[0] > -180.0 or workspace.angle[1] < 180.0:
         limit = len(tcp) if first is None else first
         for k in range(limit):
-            if not workspace.contains(ControllerPose.from_matrix(tcp[k])):
+            if workspace.excess(ControllerPose.from_matrix(tcp[k])) > ENVELOPE_EPS:
                 first = k
                 break
     if first is None:

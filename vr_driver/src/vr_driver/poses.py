@@ -426,6 +426,16 @@ class Workspace:
                                 % (_label(name), value, unit, lo, hi, unit))
         return pose
 
+    def excess(self, pose: ControllerPose) -> float:
+        """How far ``pose`` lies outside the box: the largest excess of a field over its range,
+        in that field's unit (mm, deg); 0 inside."""
+        worst = 0.0
+        for name in CONTROLLER_FIELDS:
+            lo, hi = getattr(self, name) if len(name) == 1 else self.angle
+            value = getattr(pose, name)
+            worst = max(worst, lo - value, value - hi)
+        return worst
+
     def contains(self, pose: ControllerPose) -> bool:
         try:
             self.check(pose)

@@ -187,6 +187,19 @@ def test_an_arc_below_the_floor_is_refused_naming_the_sample(world):
     assert world.status().counters.targets_sent == sent and len(world.log.entries()) == 1
 
 
+def test_the_arm_on_a_bound_of_the_box_can_move_on(world):
+    """Bounds are inclusive: the arm reaches a target at X = 100 mm as FK(IK(pose)), a few 1e-13
+    mm below it. The next move starts there; it was refused as "leaving the workspace at sample 0",
+    and so was every move after it (the soak stalled with the arm parked on the bound)."""
+    world.ready()
+    on_bound = (100, -192, 1001, 113, 54, -35)
+    assert world.finish(world.core.submit(MoveRequest(MoveType.PTP, on_bound))).success
+    assert world.status().pose.x == 100
+    for request in (MoveRequest(MoveType.LIN, (300, -192, 1001, 113, 54, -35)),
+                    MoveRequest(MoveType.PTP, on_bound)):
+        assert world.finish(world.core.submit(request)).success
+
+
 # ------------------------------------------------------------------ 8. no stale good news
 def test_a_frozen_driver_never_reports_old_good_news(world):
     world.ready()
