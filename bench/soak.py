@@ -45,6 +45,11 @@ reconnect time of every cut (from the restore to the first driver status with mo
 that is based on a record received after the restore; a cut the link rode out costs one cycle)
 and the longest gap between two DriverStatus listener calls of the core (the ROS node publishes
 robot_status on every snapshot change plus a 10 Hz timer, so this gap bounds robot_status's).
+On every listener call the arm's exact TCP is checked against the workspace box (bus cycles
+outside, the farthest), and while the arm rests the driver's joints against the arm's (cycles more
+than 20 deg apart: another configuration -- v1 reports only a rounded pose); submit refusals are
+counted by reason. A run in which no target is taken for 60 s while motion is possible
+ends early and says why (the last refusal, the arm's pose and joints).
 
 Last line, exactly:
   commanded=N executed=N rejected=N aborted=N duplicated=N lost=N reconnect_max_s=X status_gap_max_s=X
@@ -55,7 +60,8 @@ what it prevents (v2 acts at the first telegram: its records' CRC-16 does the ru
 the controller then runs a target nobody commanded (an "unknown" log entry, the commanded one
 lost) or runs one twice. A pty has no baud timing: --baud only sets the DP timing parameters;
 bytes move at pty speed.
-Figures only; the exit status is 1 when duplicated or lost is not 0 or the run could not finish.
+Figures only; the exit status is 1 when duplicated or lost is not 0, the arm left the box, the
+driver's joints were another configuration, or the run could not finish.
 """
 from __future__ import annotations
 
@@ -147,6 +153,11 @@ class Cut:
     ready: Optional[float] = None       # ... and the handshake ready to send the next target
 
 
+#: [deg] the driver's joints at rest further than this from the arm's: another configuration (v1's
+#: whole mm / deg feedback alone moves a joint by a few degrees at most, near a singularity)
+MISMATCH_DEG = 20.0
+
+
 @dataclass
 class SoakResult:
     config: SoakConfig
@@ -168,6 +179,8 @@ class SoakResult:
     outside_samples: int = 0            # bus cycles that saw the arm outside the workspace box
     outside_max: float = 0.0            # the farthest out [mm or deg] ...
     outside_pose: Optional[ControllerPose] = None   # ... and where
+    mismatch_samples: int = 0           # bus cycles at rest with the driver's joints off the arm's
+    mismatch_max: float = 0.0           # ... by this much at most [deg]
     cuts: List[Cut] = field(default_factory=list)
     status_calls: int = 0
     status_gap_max: float = 0.0
@@ -231,6 +244,9 @@ class SoakResult:
             "workspace: the arm was outside the box in %d bus cycles%s"
             % (self.outside_samples, "" if self.outside_pose is None else
                " (farthest %.3f out, at %s)" % (self.outside_max, self.outside_pose)),
+            "joints: the driver's off the arm's by more than %g deg (at rest) in %d bus cycles%s"
+            % (MISMATCH_DEG, self.mismatch_samples,
+               " (at most %.1f deg)" % self.mismatch_max if self.mismatch_samples else ""),
         ]
         times = sorted(self.reconnect_times)
         if self.cuts:
@@ -376,7 +392,7 @@ class StatusRecorder:
 
     def __init__(self, clock: Callable[[], float] = time.monotonic,
                  handshake_ready: Callable[[], bool] = lambda: True,
-                 probe: Callable[[], None] = lambda: None) -> None:
+                 probe: Callable[[DriverStatus], None] = lambda status: None) -> None:
         self.clock = clock
         self.handshake_ready = handshake_ready
         self.probe = probe
@@ -398,7 +414,7 @@ class StatusRecorder:
             self.gap_at = now - self.t0
         self.last = now
         self.calls += 1
-        self.probe()
+        self.probe(status)
         fb_time = status.feedback_time
         self.targets_sent = status.counters.targets_sent
         if self._fresh_wanted and status.motion_possible and fb_time is not None:
@@ -531,13 +547,30 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
                             confirm_records=config.confirm_records, protocol=config.protocol).start()
     core = DriverCore(params, kinematics=kin, open_link=line.open_link)
 
-    def probe() -> None:        # the arm's exact TCP against the box, every bus cycle
-        pose = sim.program.arm.pose
+    rest: List[object] = [None, 0.0]        # the arm's pose at the last bus cycle, seen since
+
+    def probe(status: DriverStatus) -> None:
+        """Every bus cycle: the arm's exact TCP against the box; at rest, the driver's joints
+        against the arm's (v1 reports a pose: the driver must keep track of the configuration)."""
+        arm = sim.program.arm
+        pose = arm.pose
         excess = params.workspace.excess(pose)
         if excess > 1e-6:       # (not float noise on a target that lies on a bound)
             result.outside_samples += 1
             if excess > result.outside_max:
                 result.outside_max, result.outside_pose = excess, pose
+        if arm.moving or rest[0] != pose:
+            rest[:] = [pose, time.monotonic()]
+            return
+        if status.feedback_time is None or status.feedback_time < rest[1] or \
+                status.joints is None or not status.joints_valid or status.pose is None:
+            return              # (feedback that arrived while the arm was at rest already)
+        if config.protocol == "v1" and tuple(status.pose.as_tuple()) != tuple(arm.reported_pose()):
+            return              # (the driver has not seen this pose yet)
+        off = max(abs(a - b) for a, b in zip(status.joints, arm.joints))
+        if off > math.radians(MISMATCH_DEG):
+            result.mismatch_samples += 1
+            result.mismatch_max = max(result.mismatch_max, math.degrees(off))
 
     recorder = StatusRecorder(handshake_ready=(lambda: True) if config.protocol == "v2"
                               else (lambda: core.handshake.ready), probe=probe)
@@ -749,7 +782,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     for text in result.summary():
         print(text)
     print(result.final_line(), flush=True)
-    ok = result.complete and result.duplicated == 0 and result.lost == 0
+    ok = result.complete and result.duplicated == 0 and result.lost == 0 and \
+        result.outside_samples == 0 and result.mismatch_samples == 0
     return 0 if ok else 1
 
 

@@ -169,6 +169,28 @@ def test_wrist_singularity_keeps_the_seed_roll(kin):
     assert kin.manipulability(kin.named_states["zero"]) < 1e-6
 
 
+def test_a_reported_pose_rounded_out_of_the_arms_configuration_keeps_the_seed(kin):
+    """v1 reports whole mm / deg. The arm stretched out (wrist centre ~0.95 m out, J2 near its
+    limit): the rounded pose lies just beyond the reach of the arm's own configuration, and the
+    IK nearest the true joints is another one (J1 turned by 180 deg) -- a planner starting there
+    plans the wrong path. track_pose keeps the seed, which lies within the rounding."""
+    q_true = tuple(math.radians(v) for v in (86.16, -98.69, -73.85, 132.56, -103.28, 274.66))
+    reported = tuple(float(round(v)) for v in kin.fk_pose(q_true).as_tuple())
+    assert reported == (1.0, -950.0, 335.0, 164.0, -39.0, 20.0)
+    other = kin.ik_pose(reported, seed=q_true)
+    assert abs(other[0] - q_true[0]) == pytest.approx(math.pi, abs=0.01)
+    assert kin.track_pose(reported, q_true) == pytest.approx(q_true, abs=1e-12)
+    # on a pose the seed's configuration reaches: the solution nearest the seed, not the seed
+    near = tuple(float(round(v)) for v in kin.fk_pose((0.2, 0.4, -0.3, 0.5, 0.8, -0.5)).as_tuple())
+    q = kin.track_pose(near, (0.2, 0.4, -0.3, 0.5, 0.8, -0.5))
+    assert q == pytest.approx(kin.ik_pose(near, seed=(0.2, 0.4, -0.3, 0.5, 0.8, -0.5)), abs=1e-12)
+    assert q != pytest.approx((0.2, 0.4, -0.3, 0.5, 0.8, -0.5), abs=1e-6)
+    # another configuration far from a seed that is not near the pose: that solution
+    assert kin.track_pose(reported, (0.0,) * 6) == pytest.approx(kin.ik_pose(reported, seed=(0.0,) * 6))
+    with pytest.raises(UnreachableError):
+        kin.track_pose((1400.0, 0.0, 1400.0, 0.0, 0.0, 0.0), q_true)
+
+
 def test_jacobian_matches_finite_differences_of_fk(kin):
     q = np.array([0.3, 0.2, -0.4, 0.5, 0.6, -0.7])
     jac = kin.jacobian(q)

@@ -2,7 +2,8 @@
 byte corruption both ways (v2: 40 streamed moves, 0.5 %) and two line cuts, DriverCore against the virtual G2 controller over a real pty pair, no ROS.
 
 Nothing may be done twice and nothing lost without a reason; every cut must be ridden out or
-reconnected within 1.5 s of the restore; the core's status must never pause for more than 1.1 s.
+reconnected within 1.5 s of the restore; the core's status must never pause for more than 1.1 s;
+the arm never leaves the workspace box, and the driver's joints at rest are the arm's.
 The full run (thousands of targets) is `scripts/bench soak -- --targets 5000 --cut-every 20`."""
 from __future__ import annotations
 
@@ -66,6 +67,13 @@ def test_nothing_lost_without_a_reason(result):
 def test_every_cut_reconnects_within_1_5_s(result):
     assert result.unrecovered_cuts == 0
     assert all(t <= 1.5 for t in result.reconnect_times), result.reconnect_times
+
+
+def test_the_arm_never_left_the_box_and_the_driver_knew_its_joints(result):
+    """Every bus cycle the arm's exact TCP against the workspace box, and at rest the driver's
+    joints against the arm's (v1 reports only a rounded pose: the configuration is tracked)."""
+    assert result.outside_samples == 0, (result.outside_max, result.outside_pose)
+    assert result.mismatch_samples == 0, result.mismatch_max
 
 
 def test_status_never_pauses_longer_than_1_1_s(result):

@@ -72,6 +72,11 @@ __all__ = [
 TWO_PI = 2.0 * math.pi
 _MOVABLE = ("revolute", "continuous", "prismatic")
 _GEOM_EPS = 1e-9           # tolerance of the structure detection (m, or unit-vector components)
+#: [rad] track_pose: an IK solution this far from the seed in some joint is another configuration
+TRACK_JUMP = math.radians(15.0)
+#: [mm, deg] track_pose: how near the seed's pose must be to the reported one to stand for it (the
+#: report is rounded to whole mm / deg: within 0.5 of the truth; 1 leaves room for Euler noise)
+TRACK_NEAR = (1.0, 1.0)
 
 
 # =========================================================================================== the URDF
@@ -689,6 +694,34 @@ class Kinematics:
         if not isinstance(pose, ControllerPose):
             pose = ControllerPose.from_sequence(pose)
         return self.ik(self.conventions.controller_to_tip(pose), seed, **kwargs)
+
+    def track_pose(self, pose: Any, seed: Sequence[float],
+                   near: Tuple[float, float] = TRACK_NEAR) -> Tuple[float, ...]:
+        """The joints of a *reported* pose (v1: whole mm / deg) of an arm known, or predicted, to
+        be at ``seed``: the IK solution nearest the seed -- unless that is another configuration (a
+        joint over TRACK_JUMP away) while the seed itself lies within ``near`` (mm, deg) of the
+        pose: the rounding pushed the pose past a reach or joint limit of the seed's branch (the
+        arm is stretched out, at a limit), and the arm is at the seed. Raises as :meth:`ik_pose`
+        when the pose is unreachable and the seed is not near it."""
+        if not isinstance(pose, ControllerPose):
+            pose = ControllerPose.from_sequence(pose)
+        seed = self.joint_vector(seed)
+        try:
+            q = self.ik_pose(pose, seed=seed)
+        except KinematicsError:
+            if not self._near_pose(seed, pose, near):
+                raise
+            return seed
+        if max(abs(a - b) for a, b in zip(q, seed)) > TRACK_JUMP and self._near_pose(seed, pose, near):
+            return seed
+        return q
+
+    def _near_pose(self, q: Sequence[float], pose: ControllerPose, near: Tuple[float, float]) -> bool:
+        at = self.fk_pose(q)
+        d_xyz = max(abs(a - b) for a, b in zip(at.as_tuple()[:3], pose.as_tuple()[:3]))
+        d_ang = max(abs((a - b + 180.0) % 360.0 - 180.0)
+                    for a, b in zip(at.as_tuple()[3:], pose.as_tuple()[3:]))
+        return d_xyz <= near[0] and d_ang <= near[1]
 
     def ik(self, target: Any, seed: Optional[Sequence[float]] = None, timeout: Optional[float] = None,
            rng: Optional[random.Random] = None, min_manipulability: Optional[float] = None,

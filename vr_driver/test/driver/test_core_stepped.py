@@ -4,10 +4,13 @@ sequencer), our DP master, the in-memory link, the virtual controller's DP slave
 """
 from __future__ import annotations
 
+import math
+import random
+
 import pytest
 
 from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
-from vr_driver.errors import EnvelopeError
+from vr_driver.errors import EnvelopeError, VrDriverError
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol import ControllerState, StatusBits
 
@@ -198,6 +201,29 @@ def test_the_arm_on_a_bound_of_the_box_can_move_on(world):
     for request in (MoveRequest(MoveType.LIN, (300, -192, 1001, 113, 54, -35)),
                     MoveRequest(MoveType.PTP, on_bound)):
         assert world.finish(world.core.submit(request)).success
+
+
+def test_the_joints_follow_the_arms_configuration_through_fast_random_moves(kin):
+    """v1 reports a pose in whole mm / deg; one pose has many joint solutions. At speed x100 the
+    bus sees two or three poses of a move; near a reach or joint limit the rounded pose lies beyond
+    the arm's own configuration. Solving each report nearest the previous solution lost the
+    configuration (J1 off by 180 deg, J4..J6 by 360): the next move was validated from the wrong
+    joints and the controller ran a path the driver never checked, up to 200 mm out of the box."""
+    world = World(kin, speed_factor=100.0, params={"cycle_rate": 100.0})
+    world.ready()
+    rng = random.Random(3)                       # lost the configuration at the 5th move
+    moved = 0
+    while moved < 30:
+        values = tuple(float(round(v)) for v in kin.fk_pose(kin.random_joints(rng)).as_tuple())
+        try:
+            job = world.core.submit(MoveRequest(MoveType.PTP, values))
+        except VrDriverError:
+            continue                             # outside the box, or its path leaves it
+        assert world.finish(job).success
+        world.run_for(0.1)
+        moved += 1
+        off = [abs(a - b) for a, b in zip(world.status().joints, world.arm.joints)]
+        assert max(off) < math.radians(3.0), (moved, [round(math.degrees(v), 1) for v in off])
 
 
 # ------------------------------------------------------------------ 8. no stale good news

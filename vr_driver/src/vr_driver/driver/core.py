@@ -37,6 +37,7 @@ import time
 from dataclasses import dataclass, replace
 from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
+import numpy as np
 from pyprofibus_vendor.phy import Link
 
 from ..errors import VrDriverError
@@ -57,6 +58,9 @@ from .trajectories import ValidTrajectory, thin
 log = logging.getLogger("vr_driver.driver")
 #: s: the bus period while a stream's end is due (StreamSequencer.end_due)
 END_POLL_PERIOD = 0.01
+#: [mm, deg] a reported pose this near a sample of the last plan lies on it (PlanSeed): the
+#: samples are a planner step apart, a few mm / deg at full speed
+PLAN_SEED_NEAR = 30.0
 
 Clock = Callable[[], float]
 
@@ -161,6 +165,34 @@ class TrajectoryRun:
         return n
 
 
+class PlanSeed:
+    """Where on the last validated v1 plan a reported pose lies: the joints of the plan sample
+    nearest the pose (field-wise, mm / deg), when one is within :data:`PLAN_SEED_NEAR`. The arm
+    moves along that plan (and stops on it), whatever the bus lets the driver see of it: sparse
+    samples at speed, rounded poses near a reach or joint limit or a singularity, where the nearest
+    solution to the previous one may be another configuration."""
+
+    def __init__(self) -> None:
+        self._plan = None
+        self._poses = np.zeros((0, 6))
+
+    def follow(self, trajectory) -> None:
+        if trajectory is not self._plan:
+            self._plan = trajectory
+            self._poses = np.array([p.as_tuple() for p in trajectory.poses()], dtype=float)
+
+    def at(self, values: Sequence[float]) -> Optional[Tuple[float, ...]]:
+        if self._plan is None or not len(self._poses):
+            return None
+        d = np.abs(self._poses - np.asarray(values, dtype=float))
+        d[:, 3:] = np.minimum(d[:, 3:], 360.0 - d[:, 3:])
+        dist = d.max(axis=1)
+        k = int(np.argmin(dist))
+        if dist[k] > PLAN_SEED_NEAR:
+            return None
+        return tuple(float(v) for v in self._plan.positions[k])
+
+
 class DriverCore:
     """See the module docstring. ``open_link(device, baud)`` makes the link (tests may pass a
     factory for an in-memory or fault-injecting link)."""
@@ -208,6 +240,7 @@ class DriverCore:
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
         self._joints_pose: Optional[Tuple[int, ...]] = None
+        self._plan_seed = PlanSeed()
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
 
@@ -599,8 +632,12 @@ class DriverCore:
         return self._publish(now, sample)
 
     def _update_joints(self, sample: LinkSample) -> Optional[Tuple[float, ...]]:
-        """The joints of the reported pose (IK seeded by the last solution: continuous, and a few
-        milliseconds at most -- the solver's time budget); None while the link is down."""
+        """The joints of the reported pose; None while the link is down. v1 reports a pose in whole
+        mm / deg, and one pose has many joint solutions (J4..J6 turn over 360 deg and more): the
+        solution is the one nearest the planned joints where the pose lies on the last validated
+        plan (the controller moves along it), else nearest the last solution -- and the seed itself
+        where rounding pushed the pose just out of the seed's configuration
+        (:meth:`Kinematics.track_pose`). A few milliseconds at most (the solver's time budget)."""
         fb = sample.feedback
         if fb is None:
             self._joints_valid = False
@@ -609,10 +646,15 @@ class DriverCore:
             self._joints, self._joints_valid = fb.joints_rad, True
             return self._joints
         values = fb.values
+        job = self.sequencer.view.job
+        if job is not None and job.preview is not None:
+            self._plan_seed.follow(job.preview.trajectory)
         if values == self._joints_pose and self._joints_valid:
             return self._joints
         try:
-            self._joints = self.kin.ik_pose(fb.pose, seed=self._joints)
+            seed = self._plan_seed.at(values) or self._joints
+            self._joints = (self.kin.ik_pose(fb.pose) if seed is None
+                            else self.kin.track_pose(fb.pose, seed))
             self._joints_valid = True
             self._joints_pose = values
         except VrDriverError as exc:
