@@ -7,9 +7,12 @@ from __future__ import annotations
 import math
 import random
 
+import numpy as np
 import pytest
 
 from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
+from vr_driver.driver.core import PlanSeed
+from vr_driver.motion import MotionPlanner
 from vr_driver.errors import EnvelopeError, VrDriverError
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol import ControllerState, StatusBits
@@ -224,6 +227,21 @@ def test_the_joints_follow_the_arms_configuration_through_fast_random_moves(kin)
         moved += 1
         off = [abs(a - b) for a, b in zip(world.status().joints, world.arm.joints)]
         assert max(off) < math.radians(3.0), (moved, [round(math.degrees(v), 1) for v in off])
+
+
+def test_the_plan_seed_lies_between_the_samples_the_arm_stopped_between(kin):
+    planner = MotionPlanner(kin)
+    plan = planner.ptp_joints((0.2, 0.4, -0.3, 0.5, 0.8, -0.5), (0.9, 0.1, -0.6, -0.4, 1.2, 0.7))
+    seeds = PlanSeed()
+    assert seeds.at((500.0, 0.0, 500.0, 0.0, 0.0, 0.0)) is None          # no plan yet
+    seeds.follow(plan)
+    q = np.asarray(plan.positions)
+    k = len(q) // 2
+    stopped = 0.7 * q[k] + 0.3 * q[k + 1]
+    seed = np.asarray(seeds.at(kin.fk_pose(stopped).as_tuple()))
+    assert np.abs(seed - stopped).max() < 0.3 * np.abs(q[k + 1] - q[k]).max()
+    assert seeds.at(kin.fk_pose(q[-1]).as_tuple()) == pytest.approx(tuple(q[-1]), abs=1e-9)
+    assert seeds.at((1300.0, 800.0, 50.0, 0.0, 0.0, 0.0)) is None         # not on the plan
 
 
 # ------------------------------------------------------------------ 8. no stale good news

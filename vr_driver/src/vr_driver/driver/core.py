@@ -182,15 +182,36 @@ class PlanSeed:
             self._poses = np.array([p.as_tuple() for p in trajectory.poses()], dtype=float)
 
     def at(self, values: Sequence[float]) -> Optional[Tuple[float, ...]]:
+        """The planned joints at ``values`` (a reported pose): the nearest sample, moved towards
+        the neighbour the pose lies towards (the arm stops between samples)."""
         if self._plan is None or not len(self._poses):
             return None
-        d = np.abs(self._poses - np.asarray(values, dtype=float))
-        d[:, 3:] = np.minimum(d[:, 3:], 360.0 - d[:, 3:])
-        dist = d.max(axis=1)
+        target = np.asarray(values, dtype=float)
+        dist = np.abs(_pose_delta(self._poses, target)).max(axis=1)
         k = int(np.argmin(dist))
         if dist[k] > PLAN_SEED_NEAR:
             return None
-        return tuple(float(v) for v in self._plan.positions[k])
+        q = np.asarray(self._plan.positions)
+        best, seed = float(dist[k]), q[k]
+        for j in (k - 1, k + 1):
+            if not 0 <= j < len(q):
+                continue
+            step = _pose_delta(self._poses[j], self._poses[k])
+            span = float(step @ step)
+            if span <= 0.0:
+                continue
+            a = min(1.0, max(0.0, float(_pose_delta(target, self._poses[k]) @ step) / span))
+            off = float(np.abs(_pose_delta(target, self._poses[k] + a * step)).max())
+            if off < best:
+                best, seed = off, q[k] + a * (q[j] - q[k])
+        return tuple(float(v) for v in seed)
+
+
+def _pose_delta(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a - b`` of controller poses (..., 6), the angles wrapped into [-180, 180)."""
+    d = np.array(a, dtype=float) - b
+    d[..., 3:] = (d[..., 3:] + 180.0) % 360.0 - 180.0
+    return d
 
 
 class DriverCore:
