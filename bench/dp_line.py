@@ -6,7 +6,7 @@
 
 Stations: slave 4 the robot controller's image (14/14 bytes, Chk_Cfg 13 13 13 11 23 23 23 21),
 slaves 8, 9, 10 virtual I/O islands (2/2 bytes, Chk_Cfg 11 21). They are plain DpSlaves served in one
-helper process, each on its own pty; the line hub (vr_driver.sim_line) runs in a second process,
+helper process, each on its own pty; the line hub (vr_driver.controller.line) runs in a second process,
 joins their ptys and PACES the line at the bit rate (each chunk takes 11 bits per character on the
 wire, one direction at a time); our DpMaster runs here on the hub's pty, cycling every station in
 turn, back to back, for ``--seconds`` after all stations reached Data_Exchange.
@@ -110,7 +110,7 @@ def measure(n: int, baud: int, seconds: float) -> Dict[str, Optional[float]]:
     try:
         if slaves.words[:1] != ["READY"]:
             raise RuntimeError("stations: %r" % slaves.words)
-        hub = Proc(["env", "PYTHONPATH=" + env_path, sys.executable, "-m", "vr_driver.sim_line", "--baud",
+        hub = Proc(["env", "PYTHONPATH=" + env_path, sys.executable, "-m", "vr_driver.controller.line", "--baud",
                     str(baud)] + slaves.words[1:], "the line hub")
         master = DpMaster(SerialLink(hub.words[0], baud), MASTER, baud)
         handles = [master.add_slave(SlaveSpec(a, i, c, watchdog=1.0)) for a, i, c, _s in stations(n)]

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""The standard IK benchmark of vr_driver.kinematics (issue 6; like every benchmark: printed, never asserted).
+"""The standard IK benchmark of vr_driver.kinematics.solver (issue 6; like every benchmark: printed, never asserted).
 
     scripts/env python3 bench/ik.py [--n 10000] [--seed 1] [--budget 0.005] [--noise 0.05] [--no-numeric]
 
@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 import PyKDL as kdl  # noqa: E402
 
 from vr_driver.errors import KinematicsError  # noqa: E402
-from vr_driver.kinematics import Kinematics  # noqa: E402
+from vr_driver.kinematics.solver import Kinematics  # noqa: E402
 from vr_driver.poses import matrix_to_kdl_frame  # noqa: E402
 
 POS_TOL = 1e-6

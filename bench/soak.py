@@ -90,16 +90,16 @@ for _pkg in ("vr_driver", "pyprofibus_vendor", "panasonic_vr006l_support"):
 from pyprofibus_vendor.phy import FaultyLink, Link  # noqa: E402
 from pyprofibus_vendor.phy_serial import SerialLink  # noqa: E402
 
-from vr_driver.controller_sim import VirtualController  # noqa: E402
+from vr_driver.controller.program import VirtualController  # noqa: E402
 from vr_driver.driver import DriverCore, DriverError, DriverStatus, JobResult, MoveJob, MoveRequest  # noqa: E402
 from vr_driver.errors import VrDriverError  # noqa: E402
-from vr_driver.kinematics import Kinematics  # noqa: E402
-from vr_driver.motion import MoveType  # noqa: E402
+from vr_driver.kinematics.solver import Kinematics  # noqa: E402
+from vr_driver.kinematics.preview import MoveType  # noqa: E402
 from vr_driver.params import DriverParams  # noqa: E402
 from vr_driver.poses import ControllerPose  # noqa: E402
-from vr_driver.protocol import round_half_away  # noqa: E402
-from vr_driver.protocol_v2 import joints_to_wire  # noqa: E402
-from vr_driver.sim_arm import LogEntry, Outcome  # noqa: E402
+from vr_driver.protocol.v1 import round_half_away  # noqa: E402
+from vr_driver.protocol.v2 import joints_to_wire  # noqa: E402
+from vr_driver.controller.arm import LogEntry, Outcome  # noqa: E402
 
 IntPose = Tuple[int, int, int, int, int, int]
 Key = Tuple[str, IntPose]              # (wire move type name, target values): unique per target

@@ -81,7 +81,7 @@ from driver_latency import Failure, Recorder, interrupt_once, stack_worker  # no
 
 RESULT_TAG = "@@TRAJECTORY_RESULT "
 CONFIG_FILE = os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")
-#: the virtual controller's initial pose (controller_sim's default, mm / deg)
+#: the virtual controller's initial pose (controller.program's default, mm / deg)
 HOME_POSE = (1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
 #: name -> (protocol, baud, bus cycles per second)
 CONFIGS = {
@@ -169,8 +169,8 @@ class Checker:
     def __init__(self, margin: float = WORKSPACE_MARGIN, config: str = CONFIG_FILE):
         import yaml
 
-        from vr_driver.kinematics import Kinematics
-        from vr_driver.motion import MotionPlanner
+        from vr_driver.kinematics.solver import Kinematics
+        from vr_driver.kinematics.preview import MotionPlanner
         from vr_driver.params import DriverParams
         from vr_driver.poses import Workspace
         with open(config) as fh:
@@ -196,7 +196,7 @@ class Checker:
     def chord_ok(self, a: Sequence[float], b: Sequence[float]) -> bool:
         """Every sample (0.02 rad apart) of the straight joint-space move a -> b in the box."""
         from vr_driver.errors import VrDriverError
-        from vr_driver.motion import check_envelope
+        from vr_driver.kinematics.preview import check_envelope
         try:
             check_envelope(self.planner.ptp_joints(a, b), self.workspace)
         except VrDriverError:

@@ -115,9 +115,9 @@ class DriverLaunchParamsTest(unittest.TestCase):
         return DriverParams.from_dict(nested), params
 
     def test_sim_defaults(self):
-        from vr_driver.controller_sim import SimOptions
+        from vr_driver.controller.program import SimOptions
         p, params = self.check("io:=false")
-        from vr_driver.controller_sim import auto_pty_link
+        from vr_driver.controller.program import auto_pty_link
         # one value for both nodes (sim_port, default auto), which both resolve to the same link
         self.assertEqual(params["/virtual_controller/pty_link"], "auto")
         self.assertEqual(params["/interface/port"], "auto")
@@ -133,7 +133,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
     def test_sim_with_the_io_island_by_default(self):
         """issue 18: sim:=true (io:=true by default) puts the virtual controller and the virtual I/O island
         on one virtual line; the driver opens the line's master end and cycles both stations."""
-        from vr_driver.controller_sim import auto_pty_link
+        from vr_driver.controller.program import auto_pty_link
         island = ["gripper_close", "gripper_closed", "part_present"]
         own = ["g2_gripper_close", "g2_gripper_closed", "g2_part_present"]   # the controller's own I/O (v2)
         for protocol, length, names in (("v1", 14, island), ("v2", 72, island + own)):

@@ -29,8 +29,8 @@ class TrajectoryGeneratorTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
         cls.bench = load_bench()
-        from vr_driver.kinematics import Kinematics
-        from vr_driver.motion import MotionPlanner
+        from vr_driver.kinematics.solver import Kinematics
+        from vr_driver.kinematics.preview import MotionPlanner
         from vr_driver.params import DriverParams
         with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
             cls.params = DriverParams.from_dict(yaml.safe_load(fh))
@@ -67,7 +67,7 @@ class TrajectoryGeneratorTest(unittest.TestCase):
                     self.assertAlmostEqual(a, b, places=6)
 
     def test_points_and_chords_inside_the_limits_and_the_workspace(self):
-        from vr_driver.motion import check_envelope
+        from vr_driver.kinematics.preview import check_envelope
         ws = self.params.workspace
         lim = self.kin.limits
         for k, t in enumerate(self.trajs):

@@ -1,4 +1,4 @@
-"""model.RobotModel is the stack's one URDF reader (vr_driver.kinematics.UrdfModel builds on it). It
+"""model.RobotModel is the stack's one URDF reader (vr_driver.kinematics.solver.UrdfModel builds on it). It
 reads the rendered VR-006L exactly as urdf_parser_py does (joints, limits, shapes, colours), and
 says what is wrong with a broken URDF."""
 import os

@@ -17,11 +17,11 @@ import pytest  # noqa: E402  (after the path set-up above)
 def kin():
     """The default VR-006L kinematics (built once: parsing the URDF and SRDF takes a while).
     Shared: tests must not modify it."""
-    from vr_driver.kinematics import Kinematics
+    from vr_driver.kinematics.solver import Kinematics
     return Kinematics.default()
 
 
 @pytest.fixture(scope="session")
 def planner(kin):
-    from vr_driver.motion import MotionPlanner
+    from vr_driver.kinematics.preview import MotionPlanner
     return MotionPlanner(kin)

@@ -29,8 +29,8 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
-from vr_driver.controller_sim import SimDeviceError, VirtualController, auto_pty_link
-from vr_driver.kinematics import Kinematics
+from vr_driver.controller.program import SimDeviceError, VirtualController, auto_pty_link
+from vr_driver.kinematics.solver import Kinematics
 from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJointTrajectoryGoal,
                            FollowJointTrajectoryResult, JointTolerance, MoveToPoseAction, MoveToPoseGoal,
                            RobotStatus, TriState)

@@ -1,6 +1,6 @@
 """The virtual G2 controller with an injected clock: the simulated arm (timing and path of PTP / LIN /
 CIRC from the reported poses, rejections, faults), the program loop on a real DpSlave driven by
-telegrams and protocol.MasterHandshake, the watchdog, the log, the options and the CLI's exit codes.
+telegrams and protocol.v1.MasterHandshake, the watchdog, the log, the options and the CLI's exit codes.
 Nothing here sleeps; the pty tests are in test_controller_sim_pty.py."""
 from __future__ import annotations
 
@@ -16,13 +16,13 @@ from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame
 from pyprofibus_vendor.dp_slave import SlaveState
 from pyprofibus_vendor.fdl import FcbRequester
 
-from vr_driver.controller_sim import (ControllerProgram, SimError, SimOptions, VirtualController, main,
+from vr_driver.controller.program import (ControllerProgram, SimError, SimOptions, VirtualController, main,
                                       robot_slave)
 from vr_driver.errors import JointLimitError, MotionError, UnreachableError
 from vr_driver.poses import HOME_POSE
-from vr_driver.protocol import (Accepted, Command, ControllerState, Done, Feedback, MasterHandshake, Rejected,
+from vr_driver.protocol.v1 import (Accepted, Command, ControllerState, Done, Feedback, MasterHandshake, Rejected,
                                 StatusBits, WireMoveType)
-from vr_driver.sim_arm import ExecutionLog, LogEntry, Outcome, SimArm, round_pose
+from vr_driver.controller.arm import ExecutionLog, LogEntry, Outcome, SimArm, round_pose
 
 MASTER = 2
 PERIOD = 0.01
@@ -33,7 +33,7 @@ OUT_OF_LIMITS = (-600, 0, 400, 0, 90, 180)      # behind the robot: only with jo
 
 class Rig:
     """Fake clock + robot DpSlave + SimArm + ControllerProgram, and a minimal DP master (telegrams
-    straight into DpSlave.handle) running protocol.MasterHandshake: one bus cycle per program loop."""
+    straight into DpSlave.handle) running protocol.v1.MasterHandshake: one bus cycle per program loop."""
 
     def __init__(self, kin, speed: float = SPEED, period: float = PERIOD, watchdog_units: int = 10,
                  **arm_kw) -> None:
@@ -558,7 +558,7 @@ def test_set_fault_service_logic(kin, tmp_path):
 
 
 def test_core_modules_import_without_ros():
-    """controller_sim and sim_arm are core modules: they import with rospy and every *_msgs blocked."""
+    """controller.program and controller.arm are core modules: they import with rospy and every *_msgs blocked."""
     import os
     import subprocess
     import sys
@@ -569,7 +569,7 @@ def test_core_modules_import_without_ros():
               "for name in ('rospy', 'rospkg', 'roslib', 'std_msgs', 'std_srvs'):\n"
               "    sys.modules[name] = None\n"
               "sys.path[:0] = %r\n"
-              "import vr_driver.controller_sim, vr_driver.sim_arm\n"
+              "import vr_driver.controller.program, vr_driver.controller.arm\n"
               "assert not [m for m in sys.modules if m.endswith('_msgs') and sys.modules[m] is not None]\n"
               "print('ok')\n" % (paths,))
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
@@ -579,7 +579,7 @@ def test_core_modules_import_without_ros():
 def test_node_parameter_split():
     pytest.importorskip("rospy")
     pytest.importorskip("std_srvs.srv")
-    from vr_driver.virtual_controller_node import split_params
+    from vr_driver.ros.virtual_controller import split_params
     params = {"pty_link": "/tmp/x", "addr": 4, "device_path": "/dev/pts/3", "typo_speed": 2}
     known, unknown = split_params(params)
     assert known == {"pty_link": "/tmp/x", "addr": 4} and unknown == ("typo_speed",)

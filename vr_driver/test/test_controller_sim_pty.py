@@ -1,4 +1,4 @@
-"""The virtual G2 controller over a REAL pty pair, driven by our DpMaster and protocol.MasterHandshake:
+"""The virtual G2 controller over a REAL pty pair, driven by our DpMaster and protocol.v1.MasterHandshake:
 200 random reachable targets of all three move types plus unreachable ones (exactly once, in order,
 converging), the DP watchdog stopping a motion, and the command line (pty link, log file, signals).
 
@@ -24,13 +24,13 @@ from pyprofibus_vendor.dp_master import DpMaster
 from pyprofibus_vendor.dp_slave import SlaveState
 from pyprofibus_vendor.phy_serial import open_pty_pair
 
-from vr_driver.controller_sim import SimDeviceError, SimError, VirtualController, auto_pty_link
+from vr_driver.controller.program import SimDeviceError, SimError, VirtualController, auto_pty_link
 from vr_driver.errors import VrDriverError
-from vr_driver.motion import MotionPlanner, MoveType
+from vr_driver.kinematics.preview import MotionPlanner, MoveType
 from vr_driver.poses import ControllerPose, Workspace
-from vr_driver.protocol import (Accepted, Command, ControllerState, Done, Feedback, HandshakeEvent,
+from vr_driver.protocol.v1 import (Accepted, Command, ControllerState, Done, Feedback, HandshakeEvent,
                                 MasterHandshake, Rejected, commands_for)
-from vr_driver.sim_arm import Outcome
+from vr_driver.controller.arm import Outcome
 
 from _pty_master import ThreadedMaster
 
@@ -280,7 +280,7 @@ def test_cli_serves_a_pty_link_and_exits_cleanly(tmp_path, sig):
     log_file = str(tmp_path / "executed.jsonl")
     env = dict(os.environ, PYTHONPATH=PYTHONPATH)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "vr_driver.controller_sim", "--pty-link", link, "--speed-factor", "50",
+        [sys.executable, "-m", "vr_driver.controller.program", "--pty-link", link, "--speed-factor", "50",
          "--loop-period", "0.005", "--log-file", log_file, "--initial-pose", "1000", "0", "700", "0", "60", "0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     driver = None

@@ -1,5 +1,5 @@
-"""The virtual G2 controller's protocol v2 program (controller_v2.ControllerProgramV2) and its
-streaming arm (sim_stream.SimStreamArm), stepped with a fake clock in one thread: CommandV2 records
+"""The virtual G2 controller's protocol v2 program (controller.program_v2.ControllerProgramV2) and its
+streaming arm (controller.stream_arm.SimStreamArm), stepped with a fake clock in one thread: CommandV2 records
 go straight into the robot DpSlave (Data_Exchange telegrams, as test_controller_sim.py does for v1),
 FeedbackV2 comes back in the replies. Nothing sleeps; times and speeds are the fake clock's, exact."""
 from __future__ import annotations
@@ -13,14 +13,14 @@ from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame
 from pyprofibus_vendor.dp_slave import SlaveState
 from pyprofibus_vendor.fdl import FcbRequester
 
-from vr_driver.controller_sim import SimError, SimOptions, VirtualController, main, robot_slave
-from vr_driver.controller_v2 import ControllerProgramV2
+from vr_driver.controller.program import SimError, SimOptions, VirtualController, main, robot_slave
+from vr_driver.controller.program_v2 import ControllerProgramV2
 from vr_driver.errors import ProtocolError
-from vr_driver.protocol import StatusBits
-from vr_driver.protocol_v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Control, FeedbackV2, RejectCode,
+from vr_driver.protocol.v1 import StatusBits
+from vr_driver.protocol.v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Control, FeedbackV2, RejectCode,
                                    StreamState, TargetSlot, joints_from_wire, joints_to_wire)
-from vr_driver.sim_arm import Outcome
-from vr_driver.sim_stream import (DEFAULT_RAMP_TIME, SimStreamArm, blend_window, segment_time, wire_pose)
+from vr_driver.controller.arm import Outcome
+from vr_driver.controller.stream_arm import (DEFAULT_RAMP_TIME, SimStreamArm, blend_window, segment_time, wire_pose)
 
 MASTER = 2
 PERIOD = 0.005

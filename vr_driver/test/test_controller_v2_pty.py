@@ -8,11 +8,11 @@ from typing import List, Optional, Set
 
 from pyprofibus_vendor.dp_master import DpMaster
 
-from vr_driver.controller_sim import VirtualController
+from vr_driver.controller.program import VirtualController
 from vr_driver.errors import ProtocolError
-from vr_driver.protocol_v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Control, FeedbackV2, StreamState,
+from vr_driver.protocol.v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Control, FeedbackV2, StreamState,
                                    TargetSlot, joints_to_wire)
-from vr_driver.sim_arm import Outcome
+from vr_driver.controller.arm import Outcome
 
 from _pty_master import ThreadedMaster
 

@@ -10,13 +10,13 @@ import time
 
 import pytest
 
-from vr_driver.controller_sim import VirtualController
+from vr_driver.controller.program import VirtualController
 from vr_driver.driver import DriverCore, DriverError, JobPhase, LinkState, MoveRequest
 from vr_driver.errors import VrDriverError
-from vr_driver.motion import MoveType
+from vr_driver.kinematics.preview import MoveType
 from vr_driver.params import DriverParams
 from vr_driver.poses import HOME_POSE, ControllerPose
-from vr_driver.sim_arm import Outcome
+from vr_driver.controller.arm import Outcome
 
 from _rig import BAUD, StatusWaiter, rig_params
 
@@ -274,7 +274,7 @@ def test_a_10000_point_joint_path_is_validated_while_the_bus_keeps_cycling(rig, 
     rig.core.add_listener(lambda s: times.append(s.time))
     losses = rig.core.status().counters.losses
     switch = sys.getswitchinterval()
-    sys.setswitchinterval(0.001)                  # as the interface node runs (interface_node.main)
+    sys.setswitchinterval(0.001)                  # as the interface node runs (ros.interface.main)
     try:
         start = time.monotonic()
         jobs = rig.core.submit_joint_path(names, points)
@@ -318,7 +318,7 @@ def test_missing_port_is_reported_and_retried(tmp_path, kin):
 def test_planning_never_runs_on_the_bus_thread(tmp_path, kin):
     """Every plan -- submit, joint path, the replan of a job queued behind a stopped one -- runs in
     the caller's thread or the planning thread, never in the bus thread."""
-    from vr_driver.motion import MotionPlanner
+    from vr_driver.kinematics.preview import MotionPlanner
 
     threads = []
 

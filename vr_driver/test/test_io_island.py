@@ -14,10 +14,10 @@ from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
 from pyprofibus_vendor.dp_slave import SlaveLink, SlaveState
 from pyprofibus_vendor.gsd import build_chk_cfg, load_gsd
 
-from vr_driver.controller_sim import SimError, auto_pty_link, resolve_link
-from vr_driver.io_island import (GRIPPER_DELAY, ISLAND_ADDRESS, ISLAND_CFG, ISLAND_GSD, ISLAND_IDENT, IslandProgram,
+from vr_driver.controller.program import SimError, auto_pty_link, resolve_link
+from vr_driver.controller.io_island import (GRIPPER_DELAY, ISLAND_ADDRESS, ISLAND_CFG, ISLAND_GSD, ISLAND_IDENT, IslandProgram,
                                  island_slave)
-from vr_driver.sim_line import LineHub, _lock_owner_gone
+from vr_driver.controller.line import LineHub, _lock_owner_gone
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SRC = os.path.join(REPO, "vr_driver", "src")
@@ -113,7 +113,7 @@ def test_outputs_outside_data_exchange_are_not_a_command():
 
 def test_the_command_line_prints_the_device_and_stops_on_sigterm(tmp_path):
     link = str(tmp_path / "island")
-    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.io_island", "--pty-link", link, "--part-present"],
+    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.controller.io_island", "--pty-link", link, "--part-present"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONPATH=PYTHONPATH))
     try:
@@ -131,13 +131,13 @@ def test_the_command_line_prints_the_device_and_stops_on_sigterm(tmp_path):
 
 
 def test_the_command_line_refuses_a_bad_address():
-    proc = subprocess.run([sys.executable, "-m", "vr_driver.io_island", "--addr", "200"], capture_output=True,
+    proc = subprocess.run([sys.executable, "-m", "vr_driver.controller.io_island", "--addr", "200"], capture_output=True,
                           text=True, timeout=30, env=dict(os.environ, PYTHONPATH=PYTHONPATH))
     assert proc.returncode == 2 and "addr" in proc.stderr
 
 
 def test_the_command_line_reports_a_missing_device(tmp_path, capsys):
-    from vr_driver.io_island import main
+    from vr_driver.controller.io_island import main
     assert main(["--device", str(tmp_path / "no-such-tty")]) == 3
     assert "device error" in capsys.readouterr().err
 
@@ -203,7 +203,7 @@ def test_the_hub_paces_the_line_and_joins_a_station_that_appears_late(tmp_path):
 
 def test_the_line_command_prints_the_master_end_and_stops_on_sigterm(tmp_path):
     link = str(tmp_path / "line")
-    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.sim_line", "--pty-link", link, str(tmp_path / "none")],
+    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.controller.line", "--pty-link", link, str(tmp_path / "none")],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONPATH=PYTHONPATH))
     try:

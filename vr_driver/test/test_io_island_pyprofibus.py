@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from vr_driver.io_island import GRIPPER_DELAY, ISLAND_ADDRESS, ISLAND_CFG, VirtualIoIsland
+from vr_driver.controller.io_island import GRIPPER_DELAY, ISLAND_ADDRESS, ISLAND_CFG, VirtualIoIsland
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 PEER_TESTS = os.path.join(REPO, "pyprofibus_vendor", "test")

@@ -1,4 +1,4 @@
-"""vr_driver.kinematics: URDF -> KDL chain, FK against hand computation, IK round trips, errors, CLI."""
+"""vr_driver.kinematics.solver: URDF -> KDL chain, FK against hand computation, IK round trips, errors, CLI."""
 from __future__ import annotations
 
 import json
@@ -13,10 +13,10 @@ import yaml
 
 from panasonic_vr006l_support.description import default_kinematics_yaml, render_urdf
 from panasonic_vr006l_support.model import RobotModel
-from vr_driver import kinematics as kin_mod
+from vr_driver.kinematics import solver as kin_mod
 from vr_driver.errors import (IkTimeoutError, JointLimitError, ModelError, NearSingularError,
                               PoseError, UnreachableError)
-from vr_driver.kinematics import IkSettings, Kinematics, UrdfModel, read_ik_settings, read_srdf
+from vr_driver.kinematics.solver import IkSettings, Kinematics, UrdfModel, read_ik_settings, read_srdf
 from vr_driver.poses import HOME_POSE, rpy_to_matrix
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -355,7 +355,7 @@ def test_cli_usage_errors_exit_2(capsys):
 def test_kinematics_reads_the_urdf_with_the_support_packages_reader(urdf):
     """One URDF reader: UrdfModel is panasonic_vr006l_support's RobotModel with our ModelError."""
     from panasonic_vr006l_support import model as support_model
-    import vr_driver.kinematics as kinematics
+    import vr_driver.kinematics.solver as kinematics
     assert issubclass(UrdfModel, support_model.RobotModel) and kinematics.UrdfJoint is support_model.Joint
     assert not hasattr(kinematics, "_floats")
     model = UrdfModel.from_string(urdf)

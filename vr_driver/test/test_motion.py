@@ -1,4 +1,4 @@
-"""vr_driver.motion: PTP / LIN / CIRC trajectories, their geometry, limits, timing and rejections."""
+"""vr_driver.kinematics.preview: PTP / LIN / CIRC trajectories, their geometry, limits, timing and rejections."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ import pytest
 
 from vr_driver.errors import (JointLimitError, MotionError, NearSingularError, PoseError, UnreachableError,
                               VrDriverError)
-from vr_driver.motion import MotionPlanner, MotionSettings, MoveType, Trajectory, trapezoid_tau
+from vr_driver.kinematics.preview import MotionPlanner, MotionSettings, MoveType, Trajectory, trapezoid_tau
 from vr_driver.poses import HOME_POSE, ControllerPose
 
 TOL = 1e-3  # 1 mm

@@ -11,11 +11,13 @@ import pytest
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
-CORE = ("errors", "validate", "poses", "kinematics", "motion", "protocol", "protocol_v2", "params", "driver",
-        "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
-        "driver.stations", "io_signals", "io_island", "sim_arm",
-        "controller_sim", "controller_session", "controller_v2", "sim_stream", "csr",
-        "pose_input") + tuple("csr." + m for m in CSR_MODULES)
+CORE = ("errors", "validate", "poses", "params", "io_signals",
+        "protocol", "protocol.v1", "protocol.v2", "kinematics", "kinematics.solver", "kinematics.preview",
+        "driver", "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
+        "driver.stations", "driver.streaming",
+        "controller", "controller.program", "controller.session", "controller.program_v2", "controller.arm",
+        "controller.stream_arm", "controller.io_island", "controller.line",
+        "terminal", "terminal.pose_input", "csr") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")
 
@@ -61,13 +63,13 @@ def test_rospy_blocked_in_process_too():
         sys.modules.update(saved)
 
 
-@pytest.mark.parametrize("module", ["protocol", "protocol_v2", "poses", "params"])
+@pytest.mark.parametrize("module", ["protocol.v1", "protocol.v2", "poses", "params"])
 def test_the_wire_codec_and_the_vocabulary_need_no_kinematics(module):
     """The 14-byte codec, the pose vocabulary (MoveType lives there) and the parameters import
     neither PyKDL nor the kinematics or planning modules."""
     paths = [SRC, os.path.join(REPO, "pyprofibus_vendor", "src")]
     script = ("import sys; sys.path[:0] = %r; import vr_driver.%s; "
-              "bad = [m for m in ('PyKDL', 'vr_driver.kinematics', 'vr_driver.motion') if m in sys.modules]; "
+              "bad = [m for m in ('PyKDL', 'vr_driver.kinematics') if m in sys.modules]; "
               "assert not bad, bad; print('ok')" % (paths, module))
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)
     assert proc.returncode == 0 and proc.stdout.strip() == "ok", proc.stderr

@@ -31,9 +31,9 @@ import pytest
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy import FaultyLink
 from pyprofibus_vendor.phy_serial import SerialLink
-from vr_driver.controller_sim import VirtualController
+from vr_driver.controller.program import VirtualController
 from vr_driver.driver import ERROR_LINK, DriverCore, DriverError, DriverStatus, LinkState, MoveRequest
-from vr_driver.motion import MoveType
+from vr_driver.kinematics.preview import MoveType
 
 from _rig import BAUD, StatusWaiter, rig_params
 

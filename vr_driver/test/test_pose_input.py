@@ -1,4 +1,4 @@
-"""vr_driver.pose_input: parsing and validation of what an operator types, and the terminal dialogue
+"""vr_driver.terminal.pose_input: parsing and validation of what an operator types, and the terminal dialogue
 against a fake driver backend (ROS-free; the end-to-end version through a pseudo-terminal and the
 real driver is test/pose_terminal_check.py)."""
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import List, Optional
 
 import pytest
 
-from vr_driver.motion import MoveType
-from vr_driver.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, FIELDS, Backend, InputError,
+from vr_driver.kinematics.preview import MoveType
+from vr_driver.terminal.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, FIELDS, Backend, InputError,
                                   MoveHandle, MoveProgress, MoveResult, PoseRequest, PreviewResult,
                                   ProgressPrinter, RangeError, StatusInfo, Terminal, build_arg_parser,
                                   check_pose, check_value, fmt_number, parse_command, parse_move_type, parse_number,
@@ -199,7 +199,7 @@ def test_bad_command_line_requests(argv, kind, words):
 
 
 def test_node_main_refuses_bad_usage_before_touching_ros(capsys):
-    from vr_driver.pose_terminal_node import main
+    from vr_driver.ros.pose_terminal import main
     for argv in (["--pose", "1", "2"], ["--pose", "1120", "0", "inf", "0", "45", "0"], ["--type", "lin"],
                  ["--pose", "1120", "0", "725", "0", "45", "0", "--type", "circ"], ["--bogus"]):
         with pytest.raises(SystemExit) as exc:
@@ -614,7 +614,7 @@ def test_pose_input_imports_without_ros():
               "for name in ('rospy', 'rospkg', 'roslib', 'actionlib', 'rosgraph', 'std_msgs', 'vr_driver.msg'):\n"
               "    sys.modules[name] = None\n"
               "sys.path[:0] = %r\n"
-              "import vr_driver.pose_input, vr_driver.pose_terminal_node\n"
+              "import vr_driver.terminal.pose_input, vr_driver.ros.pose_terminal\n"
               "print('ok')\n" % [src, os.path.join(repo, "pyprofibus_vendor", "src"),
                                  os.path.join(repo, "panasonic_vr006l_support", "src")])
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)

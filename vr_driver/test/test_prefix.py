@@ -17,12 +17,12 @@ import pytest
 import yaml
 
 from vr_driver import csr
-from vr_driver.controller_sim import auto_pty_link
+from vr_driver.controller.program import auto_pty_link
 from vr_driver.driver import DriverCore, DriverError
 from vr_driver.driver.trajectories import INVALID_JOINTS, TrajectoryError, TrajectoryGoal, validate
-from vr_driver.kinematics import Kinematics
+from vr_driver.kinematics.solver import Kinematics
 from vr_driver.params import DriverParams, ParamError
-from vr_driver.pose_input import build_arg_parser, in_namespace
+from vr_driver.terminal.pose_input import build_arg_parser, in_namespace
 
 TODAY_JOINTS = ("joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6")
 LEFT_JOINTS = tuple("left_" + n for n in TODAY_JOINTS)

@@ -1,4 +1,4 @@
-"""vr_driver.protocol: the 14-byte records of doc/controller_program.md and both sides of the request handshake."""
+"""vr_driver.protocol.v1: the 14-byte records of doc/controller_program.md and both sides of the request handshake."""
 from __future__ import annotations
 
 import math
@@ -11,9 +11,9 @@ from hypothesis import strategies as st
 
 from vr_driver.errors import (HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected,
                               VrDriverError)
-from vr_driver.motion import MoveType
+from vr_driver.kinematics.preview import MoveType
 from vr_driver.poses import HOME_POSE, ControllerPose, Workspace
-from vr_driver.protocol import (RECORD_SIZE, Aborted, Accepted, ByteOrder, Command, ControllerHandshake,
+from vr_driver.protocol.v1 import (RECORD_SIZE, Aborted, Accepted, ByteOrder, Command, ControllerHandshake,
                                 ControllerState, Done, Feedback, MasterHandshake, MasterPhase, Rejected,
                                 StatusBits, TimedOut, WireMoveType, commands_for, parse_byte_order,
                                 round_half_away, to_wire_int)

@@ -1,4 +1,4 @@
-"""Protocol v2 records (vr_driver.protocol_v2): golden bytes, round trips, resolution over the full
+"""Protocol v2 records (vr_driver.protocol.v2): golden bytes, round trips, resolution over the full
 joint ranges, the CRC catching every corruption of a record, and the rules a record must obey."""
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from vr_driver.errors import PoseError, ProtocolError
-from vr_driver.protocol import StatusBits
-from vr_driver.protocol_v2 import (EMPTY, RECORD_SIZE_V2, SEQ_MAX, CommandV2, Control, FeedbackV2,
+from vr_driver.protocol.v1 import StatusBits
+from vr_driver.protocol.v2 import (EMPTY, RECORD_SIZE_V2, SEQ_MAX, CommandV2, Control, FeedbackV2,
                                    RejectCode, StreamState, TargetKind, TargetSlot, crc16,
                                    joints_from_wire, joints_to_wire, next_seq, seq_after)
 
@@ -161,7 +161,7 @@ def test_the_armed_flag_is_byte_67_bit_0():
 
 
 def test_controller_io_words_on_the_wire():
-    from vr_driver.protocol_v2 import CommandV2, FeedbackV2
+    from vr_driver.protocol.v2 import CommandV2, FeedbackV2
     raw = CommandV2(outputs=0xA501).encode()
     assert raw[68:70] == bytes([0x01, 0xA5])                             # bytes 69-70: outputs 1..16
     assert CommandV2.decode(raw).outputs == 0xA501

@@ -20,10 +20,10 @@ from pyprofibus_vendor.config import load_config
 from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
 from pyprofibus_vendor.phy_serial import SerialLink
 
-from vr_driver.controller_sim import VirtualController
+from vr_driver.controller.program import VirtualController
 from vr_driver.driver.stations import IoLine
 from vr_driver.io_signals import lengths_from_bus, load_signal_map
-from vr_driver.sim_line import LineHub
+from vr_driver.controller.line import LineHub
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
@@ -40,7 +40,7 @@ def start_island(link: str, idle: Optional[Callable[[], None]] = None) -> subpro
     master keeps cycling the line: a master that stopped for the island's start-up would let the
     controller's DP watchdog expire)."""
     env = dict(os.environ, PYTHONPATH=PYTHONPATH)
-    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.io_island", "--pty-link", link, "--baud", str(BAUD)],
+    proc = subprocess.Popen([sys.executable, "-m", "vr_driver.controller.io_island", "--pty-link", link, "--baud", str(BAUD)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
     deadline = time.monotonic() + 20.0
     while not select.select([proc.stdout], [], [], 0.0 if idle is not None else 20.0)[0]:

@@ -96,9 +96,9 @@ def test_final_line_format(result):
 from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame  # noqa: E402
 from pyprofibus_vendor.dp_slave import SlaveState  # noqa: E402
 from pyprofibus_vendor.fdl import FcbRequester  # noqa: E402
-from vr_driver.controller_sim import ControllerProgram, robot_slave  # noqa: E402
-from vr_driver.protocol import Command, ControllerState, WireMoveType  # noqa: E402
-from vr_driver.sim_arm import Outcome, SimArm  # noqa: E402
+from vr_driver.controller.program import ControllerProgram, robot_slave  # noqa: E402
+from vr_driver.protocol.v1 import Command, ControllerState, WireMoveType  # noqa: E402
+from vr_driver.controller.arm import Outcome, SimArm  # noqa: E402
 
 
 class Program:

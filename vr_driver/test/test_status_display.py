@@ -1,6 +1,6 @@
 """status_display: robot_status in words and colour for the RViz text marker."""
 from vr_driver.msg import RobotMode, RobotStatus, TriState
-from vr_driver.status_display_node import GREEN, GREY, RED, YELLOW, status_text
+from vr_driver.ros.status_display import GREEN, GREY, RED, YELLOW, status_text
 
 
 def status(mode=2, e_stopped=0, drives=1, possible=1, moving=0, error=0, code=0):

@@ -1,5 +1,5 @@
 """vr_driver.validate: the one set of value checks, and the modules that used to carry copies of it
-(params, csr.fields, controller_sim, protocol, poses, sim_arm, pose_input) keep their error types
+(params, csr.fields, controller.program, protocol.v1, poses, controller.arm, terminal.pose_input) keep their error types
 and wording while sharing it."""
 from __future__ import annotations
 
@@ -11,13 +11,15 @@ import sys
 import numpy as np
 import pytest
 
-from vr_driver import pose_input, protocol, validate
-from vr_driver.controller_sim import SimError, SimOptions
+from vr_driver import validate
+from vr_driver.protocol import v1 as protocol
+from vr_driver.terminal import pose_input
+from vr_driver.controller.program import SimError, SimOptions
 from vr_driver.csr.fields import _integer as csr_integer
 from vr_driver.csr.fields import _number as csr_number
 from vr_driver.errors import CsrError, HandshakeError, MotionError, PoseError
 from vr_driver.params import DriverParams, ParamError
-from vr_driver.pose_input import PoseRequest
+from vr_driver.terminal.pose_input import PoseRequest
 from vr_driver.poses import ControllerPose, MoveType, finite_number
 
 
@@ -132,7 +134,7 @@ def test_protocol_and_poses_keep_their_errors():
 
 
 def test_sim_arm_keeps_motion_error_wording():
-    from vr_driver.sim_arm import SimArm
+    from vr_driver.controller.arm import SimArm
     with pytest.raises(MotionError, match="speed_factor must be a finite number > 0, got '2'"):
         SimArm(speed_factor="2")
     with pytest.raises(MotionError, match="brake_time must be a finite number >= 0, got nan"):

@@ -1,9 +1,9 @@
 """The stack's one URDF reader and a small read-only view of the model: the joint tree, the shapes,
 forward kinematics of every link (batched, numpy) and the reach. ROS-free, our own small parser on
 ElementTree (urdf_parser_py is not needed). Used by the model tests, the picture renderer and
-``vr_driver.kinematics`` (which builds its KDL chain from :meth:`RobotModel.chain`).
+``vr_driver.kinematics.solver`` (which builds its KDL chain from :meth:`RobotModel.chain`).
 
-Kinematics for control (IK, Jacobians) lives in ``vr_driver.kinematics`` on PyKDL; this module
+Kinematics for control (IK, Jacobians) lives in ``vr_driver.kinematics.solver`` on PyKDL; this module
 only answers questions about the model's geometry.
 """
 from __future__ import annotations

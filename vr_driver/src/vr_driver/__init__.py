@@ -1,8 +1,9 @@
 """vr_driver: ROS driver stack for the Panasonic VR-006L on a G2 controller over PROFIBUS-DP.
 
-The core modules import no rospy (test/test_no_ros_imports.py): protocol, driver, controller_sim,
-sim_arm, kinematics, motion, poses, validate, params, pose_input, csr and errors. The ROS edge: interface_node
-(the driver node), virtual_controller_node, pose_terminal_node and ros_support.
+The core modules import no rospy (test/test_no_ros_imports.py): errors, poses, params, validate,
+io_signals (the vocabulary), protocol, kinematics, driver, controller, terminal and csr.
+The ROS edge: ros (the nodes and their helpers). The layout and what each subpackage may import:
+doc/README.md, "Layout" (test/test_layout.py checks it).
 """
 
 # The generated messages (vr_driver.msg) live in the catkin devel/install space, the code here:

@@ -78,7 +78,7 @@ def _port(params: Mapping[str, Any], default: str) -> str:
     value = _string(params, "port", default)
     if value != "auto" and not value.startswith("auto:"):
         return value
-    from .controller_sim import SimError, resolve_link
+    from .controller.program import SimError, resolve_link
     try:
         return resolve_link(value)
     except SimError as exc:
@@ -300,7 +300,7 @@ class DriverParams:
             raise ParamError("bus_config", self.bus_config, str(exc)) from None
         data: Dict[str, Any] = base.to_dict()
         if not self.bus_config and self.protocol == "v2":
-            from .protocol_v2 import GSD_MODULES_V2, RECORD_SIZE_V2
+            from .protocol.v2 import GSD_MODULES_V2, RECORD_SIZE_V2
             for slave in data["slaves"]:
                 slave.pop("cfg", None)
                 slave["modules"] = list(GSD_MODULES_V2)

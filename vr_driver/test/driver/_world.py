@@ -18,13 +18,13 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import SlaveLink
 
-from vr_driver.controller_sim import ControllerProgram, robot_slave
-from vr_driver.controller_v2 import ControllerProgramV2
-from vr_driver.sim_stream import SimStreamArm
+from vr_driver.controller.program import ControllerProgram, robot_slave
+from vr_driver.controller.program_v2 import ControllerProgramV2
+from vr_driver.controller.stream_arm import SimStreamArm
 from vr_driver.driver import DriverCore, DriverStatus, MoveJob
 from vr_driver.params import DriverParams
 from vr_driver.poses import HOME_POSE
-from vr_driver.sim_arm import ExecutionLog, SimArm
+from vr_driver.controller.arm import ExecutionLog, SimArm
 
 
 class FakeClock:

@@ -10,7 +10,7 @@ import os
 import pytest
 
 from vr_driver.driver import LinkState, MoveRequest
-from vr_driver.io_island import IslandProgram, island_slave
+from vr_driver.controller.io_island import IslandProgram, island_slave
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.poses import ControllerPose, MoveType
 

@@ -12,10 +12,10 @@ import pytest
 
 from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
 from vr_driver.driver.core import PlanSeed
-from vr_driver.motion import MotionPlanner
+from vr_driver.kinematics.preview import MotionPlanner
 from vr_driver.errors import EnvelopeError, VrDriverError
 from vr_driver.poses import ControllerPose, MoveType
-from vr_driver.protocol import ControllerState, StatusBits
+from vr_driver.protocol.v1 import ControllerState, StatusBits
 
 from _world import World
 

@@ -15,8 +15,8 @@ from vr_driver.driver.streaming import (END_LEAD, END_WATCH, _motion, corner_lev
                                       seq_offset, stream_points, stream_speeds, thin_timed)
 from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.poses import ControllerPose, MoveType
-from vr_driver.protocol_v2 import SEQ_MAX, StreamState, blend_window
-from vr_driver.sim_arm import Outcome
+from vr_driver.protocol.v2 import SEQ_MAX, StreamState, blend_window
+from vr_driver.controller.arm import Outcome
 
 from _world import World
 
@@ -491,7 +491,7 @@ def test_short_segments_raise_the_thinning_tolerance_up_to_its_limit():
 
 # ------------------------------------------------------------------------------ the controller's own I/O
 def test_controller_outputs_go_out_and_the_gripper_input_follows(world):
-    from vr_driver.controller_v2 import GRIPPER_DELAY
+    from vr_driver.controller.program_v2 import GRIPPER_DELAY
     world.core.sequencer.outputs = 0x0001                      # output 1: close the gripper
     world.run_until(lambda: world.program.io_outputs == 1, 1.0, "output 1 set")
     t_set = world.now

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from ..errors import CsrConversionError, CsrError, KinematicsError, PoseError, VrDriverError
-from ..motion import MoveType
+from ..kinematics.preview import MoveType
 from ..poses import ControllerPose, Workspace
 from .conventions import JointConvention
 from .fields import CARTESIAN_COLUMNS, JOINT_COLUMNS, SMOOTH_RANGE, WELD_FLAGS, _fmt, _integer, _speed, show
@@ -225,7 +225,7 @@ def kinematics_for(params: Any) -> Any:
     tcp = tuple(params.tcp_offset)
     key = (params.prefix,) + tcp
     if key not in _KIN_CACHE:
-        from ..kinematics import Kinematics
+        from ..kinematics.solver import Kinematics
         kin = Kinematics.default(prefix=params.prefix)
         if any(tcp):
             kin.conventions = kin.conventions.with_tcp(tcp)

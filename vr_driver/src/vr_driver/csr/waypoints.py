@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple
 
 from ..errors import CsrError, MotionError, PoseError
-from ..motion import MoveType
+from ..kinematics.preview import MoveType
 from ..poses import ControllerPose
 from .fields import SMOOTH_RANGE, _integer, _number, _speed, show
 from .inputs import load_yaml, read_bounded

@@ -41,11 +41,11 @@ import numpy as np
 from pyprofibus_vendor.phy import Link
 
 from ..errors import VrDriverError
-from ..kinematics import Kinematics
-from ..motion import MotionPlanner, check_envelope
+from ..kinematics.solver import Kinematics
+from ..kinematics.preview import MotionPlanner, check_envelope
 from ..params import DriverParams
 from ..poses import ControllerPose, MoveType
-from ..protocol import Feedback, StatusBits, commands_for
+from ..protocol.v1 import Feedback, StatusBits, commands_for
 from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)

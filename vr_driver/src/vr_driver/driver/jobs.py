@@ -15,9 +15,9 @@ import threading
 from dataclasses import dataclass
 from typing import Callable, List, Optional, Tuple
 
-from ..motion import Trajectory
+from ..kinematics.preview import Trajectory
 from ..poses import ControllerPose, MoveType
-from ..protocol import Command
+from ..protocol.v1 import Command
 
 log = logging.getLogger("vr_driver.driver")
 

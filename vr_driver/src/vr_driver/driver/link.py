@@ -39,8 +39,8 @@ from pyprofibus_vendor.phy import Link
 
 from ..errors import ProtocolError
 from ..params import DriverParams
-from ..protocol import Command, Feedback
-from ..protocol_v2 import CommandV2, FeedbackV2
+from ..protocol.v1 import Command, Feedback
+from ..protocol.v2 import CommandV2, FeedbackV2
 
 log = logging.getLogger("vr_driver.driver")
 

@@ -3,7 +3,7 @@ by the bus loop. ROS-free, no I/O, no planning.
 
 :meth:`MotionSequencer.step` is called once per bus iteration with the link's
 :class:`~vr_driver.driver.link.LinkSample` and the arm's current joints; it returns the
-:class:`~vr_driver.protocol.Command` to send next. Other threads never touch its state: they
+:class:`~vr_driver.protocol.v1.Command` to send next. Other threads never touch its state: they
 :meth:`~MotionSequencer.post` requests (add jobs, cancel one, stop all), which the next step takes
 in the order they were posted. Planning never runs here: a job whose planned start no longer
 matches the arm is handed to ``replan(job, joints)`` (the driver core runs it on its planning
@@ -11,7 +11,7 @@ thread) and waits in REPLANNING until :meth:`~MotionSequencer.post` brings the n
 
 Rules (README "Reliability", doc/README.md):
 
-- **exactly once**: a target is sent only through :class:`~vr_driver.protocol.MasterHandshake`
+- **exactly once**: a target is sent only through :class:`~vr_driver.protocol.v1.MasterHandshake`
   and never again; a job that fails, is stopped or loses the link is never re-sent;
 - **truth at the end**: a job that is stopped (cancel, stop_motion, preempted), rejected while the
   arm moved, or timed out ends only when the controller reports the arm at rest -- the in-motion
@@ -35,7 +35,7 @@ from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple, Union
 from ..errors import HandshakeError
 from ..params import DriverParams
 from ..poses import ControllerPose
-from ..protocol import (Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected,
+from ..protocol.v1 import (Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected,
                         StatusBits, TimedOut)
 from .jobs import JobPhase, MoveJob, SubmitMode
 from .link import LinkSample

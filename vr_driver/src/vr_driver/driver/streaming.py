@@ -9,7 +9,7 @@ within ``tolerance``, and no kept segment is shorter than the bus can feed); eac
 the speed that makes the controller's synchronous joint move end at its planned time (rounded up
 to the wire's 0.1 %, the rounding carried into the next segment so that the arrivals do not
 drift), and a smooth level: the largest up to ``stream_smooth`` whose rounded
-corner (:func:`~vr_driver.protocol_v2.blend_window`) stays within the corner tolerance, at least
+corner (:func:`~vr_driver.protocol.v2.blend_window`) stays within the corner tolerance, at least
 1 (the last point: 0, an exact stop). A pause of the plan is held: the arm stops exactly at the
 point before it, and the next point is offered only when the pause ends (``StreamPoint.release``).
 
@@ -37,8 +37,8 @@ import math
 from typing import Callable, List, Optional, Sequence, Tuple
 
 from ..params import DriverParams
-from ..protocol import StatusBits
-from ..protocol_v2 import (EMPTY, SEQ_MAX, CommandV2, Control, FeedbackV2, StreamState, TargetKind,
+from ..protocol.v1 import StatusBits
+from ..protocol.v2 import (EMPTY, SEQ_MAX, CommandV2, Control, FeedbackV2, StreamState, TargetKind,
                            TargetSlot, blend_window, joints_to_wire, next_seq)
 from .jobs import JobPhase, MoveJob, StreamPoint, SubmitMode
 from .link import LinkSample
@@ -245,7 +245,7 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
 class StreamSequencer(MotionSequencer):
     """The v2 counterpart of :class:`MotionSequencer` (same requests, queue, tickets, settle and
     outcome rules; see the module docstring for the stream). :meth:`step` returns a
-    :class:`~vr_driver.protocol_v2.CommandV2`."""
+    :class:`~vr_driver.protocol.v2.CommandV2`."""
 
     def __init__(self, params: DriverParams, clock: Callable[[], float],
                  replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:

@@ -3,21 +3,21 @@ simulated arm. ROS-free.
 
 Pieces:
 
-- :class:`~vr_driver.sim_arm.SimArm` (``sim_arm.py``): joints, planned motions played back
+- :class:`~vr_driver.controller.arm.SimArm` (``controller/arm.py``): joints, planned motions played back
   ``speed_factor`` times faster, e-stop / drives / error, whole-mm/deg pose reports.
 - :class:`ControllerProgram`: the program loop. Each :meth:`~ControllerProgram.step` (``now``
   injected) checks the DP watchdog, reads the slave's output image (the master's command), runs
-  :class:`~vr_driver.protocol.ControllerHandshake` and the arm, and writes the
-  :class:`~vr_driver.protocol.Feedback` into the slave's input image. Every handled request becomes
-  one :class:`~vr_driver.sim_arm.LogEntry` in the :class:`~vr_driver.sim_arm.ExecutionLog`.
+  :class:`~vr_driver.protocol.v1.ControllerHandshake` and the arm, and writes the
+  :class:`~vr_driver.protocol.v1.Feedback` into the slave's input image. Every handled request becomes
+  one :class:`~vr_driver.controller.arm.LogEntry` in the :class:`~vr_driver.controller.arm.ExecutionLog`.
 - :class:`VirtualController`: a :class:`~pyprofibus_vendor.DpSlave` (ident 0x06C6, address 4, the
   default Chk_Cfg ``13 13 13 11 23 23 23 21``) served on a pty pair it creates (optionally
   symlinked), on a device, or on any link, plus the program loop in a thread at a fixed period.
 - Protocol v2 (``protocol="v2"``, ``--protocol v2``): the slave takes ``CHK_CFG_V2`` (72 bytes each
-  way) and runs :class:`~vr_driver.controller_v2.ControllerProgramV2` on a
-  :class:`~vr_driver.sim_stream.SimStreamArm` (streamed joint targets, look-ahead blending); the
-  link-side rules below are shared (:mod:`vr_driver.controller_session`).
-- :func:`main`: ``python3 -m vr_driver.controller_sim`` (see ``--help``).
+  way) and runs :class:`~vr_driver.controller.program_v2.ControllerProgramV2` on a
+  :class:`~vr_driver.controller.stream_arm.SimStreamArm` (streamed joint targets, look-ahead blending); the
+  link-side rules below are shared (:mod:`vr_driver.controller.session`).
+- :func:`main`: ``python3 -m vr_driver.controller.program`` (see ``--help``).
 
 Rules of the program (also in ``doc/controller_program.md``):
 
@@ -47,7 +47,7 @@ Rules of the program (also in ``doc/controller_program.md``):
   path over ``brake_time`` (default 0.3 s of robot time; 0 halts at once) with IN_MOTION set, and
   the target ends REJECTED once the arm is at rest (the state stays BUSY until then). Outside BUSY
   flag 2 is "no request".
-- E-stop, drives off or an error during a motion stop the arm at once (sim_arm); the target ends
+- E-stop, drives off or an error during a motion stop the arm at once (controller.arm); the target ends
   REJECTED (state 3, held until the flag drops). While any of them is active a request is
   REJECTED and the status bits say which (ESTOP; DRIVES_POWERED clear; ERROR). The e-stop switches
   the drives off; after it is released they stay off until switched on again (``set_fault
@@ -78,16 +78,16 @@ from pyprofibus_vendor.errors import PhyError, ProfibusError
 from pyprofibus_vendor.phy import Link
 from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 
-from . import validate
-from .errors import ProtocolError, VrDriverError
-from .kinematics import Kinematics
-from .poses import HOME_POSE, ControllerPose
-from .controller_session import SessionProgram, arm_status_bits
-from .controller_v2 import ControllerProgramV2
-from .protocol import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
-from .protocol_v2 import CHK_CFG_V2, FeedbackV2, StreamState
-from .sim_arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
-from .sim_stream import SimStreamArm, StreamLogEntry
+from .. import validate
+from ..errors import ProtocolError, VrDriverError
+from ..kinematics.solver import Kinematics
+from ..poses import HOME_POSE, ControllerPose
+from .session import SessionProgram, arm_status_bits
+from .program_v2 import ControllerProgramV2
+from ..protocol.v1 import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
+from ..protocol.v2 import CHK_CFG_V2, FeedbackV2, StreamState
+from .arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
+from .stream_arm import SimStreamArm, StreamLogEntry
 
 __all__ = [
     "DEFAULT_ADDRESS",
@@ -219,7 +219,7 @@ class SimOptions:
 
 def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic, protocol: str = "v1") -> DpSlave:
     """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()`` (v1,
-    14 bytes each way) or ``protocol_v2.CHK_CFG_V2`` (v2, 72 bytes each way)."""
+    14 bytes each way) or ``protocol.v2.CHK_CFG_V2`` (v2, 72 bytes each way)."""
     if protocol not in PROTOCOLS:
         raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), protocol))
     slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
@@ -245,7 +245,7 @@ class ControllerProgram(SessionProgram):
     injected from anywhere).
 
     The session, the two-telegram rule, arming and link-loss detection are
-    :class:`~vr_driver.controller_session.SessionProgram`'s (shared with protocol v2): a *session*
+    :class:`~vr_driver.controller.session.SessionProgram`'s (shared with protocol v2): a *session*
     starts each time the slave enters Data_Exchange; until the master's first Data_Exchange of that
     session there is no command at all. A session that ended (or was replaced by a new one between
     two loops) is a link loss. After a link loss, and at start, the program is *disarmed*: a request
@@ -374,7 +374,7 @@ AUTO_LINK = "auto"
 def auto_pty_link(environ: Optional[Mapping[str, str]] = None, station: str = "g2") -> str:
     """This launch's pty link: ``<ROS log dir>/vr006l_virtual_<station>_<master port>`` (``station``
     ``g2`` the virtual controller, ``io_island`` the virtual I/O island, ``line`` the line hub's
-    master end, :mod:`vr_driver.sim_line`), followed by ``_<namespace>`` for nodes in a namespace
+    master end, :mod:`vr_driver.controller.line`), followed by ``_<namespace>`` for nodes in a namespace
     (``/arm1`` -> ``..._11311_arm1``, ``/cell/arm1`` -> ``..._11311_cell_arm1``).
 
     Both the virtual controller and the driver resolve ``auto`` with this function from the
@@ -458,7 +458,7 @@ def _take_link_lock(path: str) -> str:
 
 class SimPort:
     """Where a simulated DP station serves the bus (shared by the virtual controller and the virtual
-    I/O island, :mod:`vr_driver.io_island`).
+    I/O island, :mod:`vr_driver.controller.io_island`).
 
     ``link``: None creates a raw pty pair -- masters (or the line hub, :mod:`pyprofibus_vendor.line`)
     open :attr:`device_path`; with ``pty_link`` a symlink to it is made there (replacing a stale
@@ -584,8 +584,8 @@ class VirtualController(Simulator):
     only once it arrived in two consecutive Data_Exchange telegrams (see the module docstring; v2's
     CRC-16 closes the gap the rule closes for v1, without costing a bus cycle per target).
     ``protocol``: ``"v1"`` (default) runs :class:`ControllerProgram` on a 14-byte slave and a
-    :class:`~vr_driver.sim_arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller_v2.
-    ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.sim_stream.
+    :class:`~vr_driver.controller.arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller.program_v2.
+    ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.controller.stream_arm.
     SimStreamArm` (streamed joint targets, look-ahead blending); its feedback is a FeedbackV2.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
@@ -821,7 +821,7 @@ class VirtualController(Simulator):
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.controller_sim",
+        prog="python3 -m vr_driver.controller.program",
         description="Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
                     "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
                     "joint-target streaming protocol) against a simulated VR-006L. Without "

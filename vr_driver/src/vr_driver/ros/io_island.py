@@ -1,7 +1,7 @@
-"""ROS node `virtual_io_island`: the thin ROS edge of :class:`vr_driver.io_island.VirtualIoIsland`.
+"""ROS node `virtual_io_island`: the thin ROS edge of :class:`vr_driver.controller.io_island.VirtualIoIsland`.
 
 Private parameters (defaults in brackets): ``~pty_link`` ["auto"] create a pty pair and symlink its
-device end here (``auto``: this launch's own island link, ``controller_sim.resolve_link``; "" no symlink); ``~device`` [""] serve this existing device instead; ``~addr`` [8];
+device end here (``auto``: this launch's own island link, ``controller.program.resolve_link``; "" no symlink); ``~device`` [""] serve this existing device instead; ``~addr`` [8];
 ``~baud`` [19200]; ``~part_present`` [false] the part sensor at start.
 
 Sets ``~device_path`` to the pty the line hub (or a master) opens. Service (std_srvs/SetBool)
@@ -21,10 +21,10 @@ import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_USAGE, SimDeviceError,
+from ..controller.program import (AUTO_LINK, EXIT_DEVICE, EXIT_USAGE, SimDeviceError,
                              SimError, resolve_link)
-from .io_island import ISLAND_ADDRESS, VirtualIoIsland
-from .ros_support import route_to_rosout, stop_on_signals, watch_simulator
+from ..controller.io_island import ISLAND_ADDRESS, VirtualIoIsland
+from .support import route_to_rosout, stop_on_signals, watch_simulator
 
 PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path")
 

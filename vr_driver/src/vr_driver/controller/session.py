@@ -1,5 +1,5 @@
-"""The link side of a virtual G2 program, shared by protocol v1 (:class:`~vr_driver.controller_sim.
-ControllerProgram`) and v2 (:class:`~vr_driver.controller_v2.ControllerProgramV2`). ROS-free.
+"""The link side of a virtual G2 program, shared by protocol v1 (:class:`~vr_driver.controller.program.
+ControllerProgram`) and v2 (:class:`~vr_driver.controller.program_v2.ControllerProgramV2`). ROS-free.
 
 :class:`SessionProgram` hooks a :class:`~pyprofibus_vendor.DpSlave` and gives each program loop the
 master's command of the current Data_Exchange session (``None``: no command), with the rules both
@@ -27,8 +27,8 @@ from typing import Any, Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveState
 
-from .errors import ProtocolError
-from .protocol import StatusBits
+from ..errors import ProtocolError
+from ..protocol.v1 import StatusBits
 
 __all__ = ["SessionProgram", "arm_status_bits"]
 

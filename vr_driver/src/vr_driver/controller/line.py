@@ -20,7 +20,7 @@ before it could remove its symlink) is not opened: its pty number may already be
 on a real line at that bit rate (11 bits per character, one direction at a time), so cycle rates
 measured through the hub show the bus time. Without it the ptys move bytes as fast as they can.
 
-``python3 -m vr_driver.sim_line [--pty-link PATH] [--baud B] STATION_PATH...`` runs it from the
+``python3 -m vr_driver.controller.line [--pty-link PATH] [--baud B] STATION_PATH...`` runs it from the
 shell (:func:`main`; the first line on stdout is the master's device path).
 """
 from __future__ import annotations
@@ -40,7 +40,7 @@ from typing import IO, Callable, List, Optional, Sequence, Tuple
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
-from .controller_sim import EXIT_OK, SimError, Simulator, SimPort, _pid_alive, run_simulator
+from .program import EXIT_OK, SimError, Simulator, SimPort, _pid_alive, run_simulator
 
 __all__ = ["LineCounters", "LineHub", "main"]
 
@@ -220,7 +220,7 @@ class LineHub(Simulator):
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
     p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.sim_line",
+        prog="python3 -m vr_driver.controller.line",
         description="The virtual RS-485 line: joins the ptys of simulated DP stations (virtual controller, "
                     "virtual I/O island) into one multi-drop line. The first line on stdout is the device "
                     "path the master opens. Stops cleanly on SIGINT / SIGTERM.",

@@ -28,8 +28,8 @@ limits, naming the joint), ``NearSingularError`` (when the caller sets ``min_man
 
 Command line (controller units: mm and degrees; joints in radians)::
 
-    python3 -m vr_driver.kinematics fk J1 J2 J3 J4 J5 J6
-    python3 -m vr_driver.kinematics ik X Y Z RX RY RZ [--seed J1 ... J6]
+    python3 -m vr_driver.kinematics.solver fk J1 J2 J3 J4 J5 J6
+    python3 -m vr_driver.kinematics.solver ik X Y Z RX RY RZ [--seed J1 ... J6]
 
 prints JSON ``{"joints", "pose", "reachable", "error"}``; exit 0 solved, 3 unreachable, 2 usage.
 """
@@ -51,10 +51,10 @@ import numpy as np
 import PyKDL as kdl
 from panasonic_vr006l_support import model as _support_model
 
-from . import validate
-from .errors import (IkTimeoutError, JointLimitError, KinematicsError, ModelError, NearSingularError, PoseError,
+from .. import validate
+from ..errors import (IkTimeoutError, JointLimitError, KinematicsError, ModelError, NearSingularError, PoseError,
                      UnreachableError)
-from .poses import (ControllerPose, FrameConventions, check_transform, finite_number, rpy_to_matrix,
+from ..poses import (ControllerPose, FrameConventions, check_transform, finite_number, rpy_to_matrix,
                     wrap_angle)
 
 __all__ = [
@@ -882,7 +882,7 @@ def _json_pose(pose: ControllerPose) -> List[float]:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.kinematics",
+        prog="python3 -m vr_driver.kinematics.solver",
         description="Forward / inverse kinematics of the VR-006L (controller units: mm, degrees; joints: rad). "
                     "Prints JSON {joints, pose, reachable, error}; exit 0 solved, 3 unreachable, 2 usage.")
     sub = parser.add_subparsers(dest="command")

@@ -15,10 +15,10 @@ replaces its outputs by the safe image when it leaves Data_Exchange -- the DP wa
 master fell silent) or the master re-parameterised it -- and :class:`IslandProgram` takes no output
 image as a command unless the slave is in Data_Exchange.
 
-:class:`VirtualIoIsland` serves the slave on its own pty (:class:`~vr_driver.controller_sim.SimPort`)
+:class:`VirtualIoIsland` serves the slave on its own pty (:class:`~vr_driver.controller.program.SimPort`)
 with the program loop in a thread; on the virtual line the hub (:mod:`pyprofibus_vendor.line`)
-joins its pty with the controller's. ``python3 -m vr_driver.io_island`` runs it from the shell
-(:func:`main`); the ROS node is ``virtual_io_island`` (:mod:`vr_driver.io_island_node`).
+joins its pty with the controller's. ``python3 -m vr_driver.controller.io_island`` runs it from the shell
+(:func:`main`); the ROS node is ``virtual_io_island`` (:mod:`vr_driver.ros.io_island`).
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ from typing import IO, Callable, Optional, Sequence, Union
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
 
-from .controller_sim import Simulator, SimPort, _int_option, _positive, run_simulator
+from .program import Simulator, SimPort, _int_option, _positive, run_simulator
 
 __all__ = ["ISLAND_ADDRESS", "ISLAND_IDENT", "ISLAND_CFG", "ISLAND_GSD", "GRIPPER_DELAY", "island_slave",
            "IslandProgram", "VirtualIoIsland", "main"]
@@ -102,7 +102,7 @@ class IslandProgram:
 
 class VirtualIoIsland(Simulator):
     """The virtual I/O island: DP slave + program loop, on its own port (see
-    :class:`~vr_driver.controller_sim.SimPort`: ``link`` None creates a pty, symlinked at
+    :class:`~vr_driver.controller.program.SimPort`: ``link`` None creates a pty, symlinked at
     ``pty_link``; a string serves that device; a Link is used as it is). :meth:`step` runs one
     program loop by hand (stepped tests; do not mix with :meth:`start`)."""
 
@@ -166,7 +166,7 @@ class VirtualIoIsland(Simulator):
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
     p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.io_island",
+        prog="python3 -m vr_driver.controller.io_island",
         description="Virtual I/O island: a PROFIBUS-DP slave (ident 0x0F1A, 2 bytes in / 2 out, GSD "
                     "VRIO0F1A.gsd) with a simulated gripper. Without --device it creates a pty pair; the "
                     "first line on stdout is the device path. Stops cleanly on SIGINT / SIGTERM.",

@@ -1,7 +1,7 @@
 """The pose terminal's logic, ROS-free: parse and validate what an operator types, and run the
 dialogue (prompt, preview, confirm, send, progress, result) against a :class:`Backend`.
 
-The ROS node ``pose_terminal`` (vr_driver.pose_terminal_node) only provides the backend (the
+The ROS node ``pose_terminal`` (vr_driver.ros.pose_terminal) only provides the backend (the
 driver's ``move_to_pose`` action, ``stop_motion``, ``robot_status``, ``tool_pose``); tests use a fake.
 
 What is typed, at the first prompt of an entry (the X prompt)::
@@ -32,9 +32,9 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable, List, Optional, Sequence, TextIO, Tuple
 
-from .motion import MoveType
-from .poses import HOME_POSE, ControllerPose, Workspace
-from .protocol import round_half_away
+from ..kinematics.preview import MoveType
+from ..poses import HOME_POSE, ControllerPose, Workspace
+from ..protocol.v1 import round_half_away
 
 __all__ = [
     "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",

@@ -1,7 +1,7 @@
 """The simulated arm of the virtual G2 controller, and its execution log. ROS-free, no I/O.
 
 :class:`SimArm` holds the joints of the arm and plays back trajectories of
-:class:`~vr_driver.motion.MotionPlanner` (PTP joint-interpolated, LIN straight, CIRC through a via
+:class:`~vr_driver.kinematics.preview.MotionPlanner` (PTP joint-interpolated, LIN straight, CIRC through a via
 point) in time divided by ``speed_factor``. Time is injected: :meth:`SimArm.begin` and
 :meth:`SimArm.step` take ``now``; the run-time injections (e-stop, drives, error) read the arm's
 clock (default ``time.monotonic``, the same clock the program loop uses) so that a stop lands at
@@ -44,12 +44,12 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import validate
-from .errors import MotionError, VrDriverError
-from .kinematics import Kinematics
-from .motion import MotionPlanner, MotionSettings, MoveType, Trajectory
-from .poses import HOME_POSE, ControllerPose, wrap_degrees
-from .protocol import INT16_MAX, INT16_MIN, round_half_away
+from .. import validate
+from ..errors import MotionError, VrDriverError
+from ..kinematics.solver import Kinematics
+from ..kinematics.preview import MotionPlanner, MotionSettings, MoveType, Trajectory
+from ..poses import HOME_POSE, ControllerPose, wrap_degrees
+from ..protocol.v1 import INT16_MAX, INT16_MIN, round_half_away
 
 __all__ = [
     "IntPose",
@@ -73,7 +73,7 @@ _INT16 = (INT16_MIN, INT16_MAX)
 
 def round_pose(pose: Any) -> IntPose:
     """A pose in whole mm / degrees as the G2 reports it: rounded half away from zero (the wire's
-    rounding, :func:`vr_driver.protocol.round_half_away`), angles wrapped into (-180, 180], every
+    rounding, :func:`vr_driver.protocol.v1.round_half_away`), angles wrapped into (-180, 180], every
     value clamped into int16."""
     if not isinstance(pose, ControllerPose):
         pose = ControllerPose.from_sequence(pose)

@@ -30,10 +30,10 @@ from typing import Any, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from . import validate
-from .errors import EnvelopeError, KinematicsError, MotionError, NearSingularError, PathDeviationError, PoseError
-from .kinematics import Kinematics
-from .poses import ControllerPose, MoveType, Workspace, matrix_to_quaternion, quaternion_slerp, quaternion_to_matrix
+from .. import validate
+from ..errors import EnvelopeError, KinematicsError, MotionError, NearSingularError, PathDeviationError, PoseError
+from .solver import Kinematics
+from ..poses import ControllerPose, MoveType, Workspace, matrix_to_quaternion, quaternion_slerp, quaternion_to_matrix
 
 __all__ = ["MoveType", "MotionSettings", "Trajectory", "MotionPlanner", "trapezoid_tau", "check_envelope"]
 

@@ -29,10 +29,10 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 
 from vr_driver.msg import FollowJointTrajectoryAction, FollowJointTrajectoryFeedback, FollowJointTrajectoryResult
 
-from .driver import DriverCore, DriverError
-from .driver.trajectories import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
+from ..driver import DriverCore, DriverError
+from ..driver.trajectories import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
                                   TrajectoryError, TrajectoryGoal, path_deviation, segment_speeds, validate)
-from .errors import VrDriverError
+from ..errors import VrDriverError
 
 
 def trajectory_from_msg(traj, path_tolerance=(), goal_tolerance=(), goal_time_tolerance: float = 0.0

@@ -34,10 +34,10 @@ Motion model (doc/controller_program.md §6 and §9):
   ``blended``; the next one becomes active and the queue has room again); a stopped-at target when
   the arm reaches it (``executed``).
 - **STOP** (:meth:`brake`; also the program's link loss): the arm follows its planned path while
-  the rate of progress ramps to zero over ``brake_time`` (:func:`~vr_driver.sim_arm.brake_progress`,
+  the rate of progress ramps to zero over ``brake_time`` (:func:`~vr_driver.controller.arm.brake_progress`,
   as SimArm); queued targets not yet started are dropped (``stopped``), a blend already begun goes
   on, no new one begins; the active target ends ``stopped`` unless the ramp carried the arm to it.
-- **Faults** (e-stop, drives off, error: :class:`~vr_driver.sim_arm.ArmBase`) stop the arm at once
+- **Faults** (e-stop, drives off, error: :class:`~vr_driver.controller.arm.ArmBase`) stop the arm at once
   at the position of that moment and drop the queue.
 - States: MOVING (a segment runs), STOPPING (braking), WAITING (at rest at ``done_seq``'s point after
   a target with smooth > 0 and nothing queued), IDLE (at rest otherwise).
@@ -59,12 +59,12 @@ from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-from .errors import MotionError
-from .kinematics import Kinematics
-from .poses import HOME_POSE, ControllerPose, wrap_degrees
-from .protocol import round_half_away
-from .protocol_v2 import BLEND_MAX, BLEND_PER_LEVEL, POSITION_UNIT_MM, StreamState, blend_window, joints_to_wire
-from .sim_arm import ArmBase, Outcome, brake_progress
+from ..errors import MotionError
+from ..kinematics.solver import Kinematics
+from ..poses import HOME_POSE, ControllerPose, wrap_degrees
+from ..protocol.v1 import round_half_away
+from ..protocol.v2 import BLEND_MAX, BLEND_PER_LEVEL, POSITION_UNIT_MM, StreamState, blend_window, joints_to_wire
+from .arm import ArmBase, Outcome, brake_progress
 
 __all__ = [
     "DEFAULT_RAMP_TIME",

@@ -2,7 +2,7 @@
 
 Publishes robot_status, joint_states, tool_pose, /diagnostics and ~markers; serves the
 move_to_pose action and the stop_motion service; subscribes joint_path_command. The I/O line
-(set_io, get_io, io_states) is :mod:`vr_driver.io_server`. All decisions
+(set_io, get_io, io_states) is :mod:`vr_driver.ros.io_server`. All decisions
 (validation, preview, handshake, reconnect) are in the ROS-free core.
 """
 from __future__ import annotations
@@ -26,15 +26,15 @@ from visualization_msgs.msg import Marker, MarkerArray
 from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, MoveToPoseGoal,
                            MoveToPoseResult, RobotMode, RobotStatus, TriState)
 
-from .driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
+from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
                      SubmitMode)
-from .errors import VrDriverError
+from ..errors import VrDriverError
 from .io_server import IoServer
-from .params import DriverParams, ParamError
-from .poses import ControllerPose, MoveType
-from .protocol import StatusBits
+from ..params import DriverParams, ParamError
+from ..poses import ControllerPose, MoveType
+from ..protocol.v1 import StatusBits
 from .trajectory_server import TrajectoryServer, trajectory_from_msg
-from .ros_support import route_to_rosout, stop_on_signals, wait_for_shutdown
+from .support import route_to_rosout, stop_on_signals, wait_for_shutdown
 
 _MOVE_TYPES = {MoveToPoseGoal.PTP: MoveType.PTP, MoveToPoseGoal.LIN: MoveType.LIN,
                MoveToPoseGoal.CIRC: MoveType.CIRC}

@@ -68,7 +68,7 @@ def watch_simulator(sim: Any, name: str, stop: threading.Event, hz: float,
     """A simulator node's main loop: until ``stop``, a ROS shutdown, or an error of ``sim``'s threads
     (logged fatal: its serial device -> EXIT_DEVICE, its program loop -> EXIT_FAILURE), calling
     ``each()`` (if given) ``hz`` times a second. Returns the exit status."""
-    from .controller_sim import EXIT_DEVICE, EXIT_FAILURE, EXIT_OK
+    from ..controller.program import EXIT_DEVICE, EXIT_FAILURE, EXIT_OK
     rate = rospy.Rate(hz)
     while not rospy.is_shutdown() and not stop.is_set():
         if sim.server_error is not None:

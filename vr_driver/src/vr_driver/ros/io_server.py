@@ -26,9 +26,9 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from vr_driver.msg import IOState, IOStates
 from vr_driver.srv import GetIO, GetIOResponse, SetIO, SetIOResponse
 
-from .driver import DriverCore
-from .driver.stations import IoResult, IoSnapshot
-from .params import DriverParams
+from ..driver import DriverCore
+from ..driver.stations import IoResult, IoSnapshot
+from ..params import DriverParams
 
 
 class IoServer:

@@ -33,9 +33,9 @@ import time
 from dataclasses import dataclass, replace
 from typing import Any, Callable, ClassVar, List, Optional, Tuple
 
-from . import validate
-from .errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
-from .poses import CONTROLLER_FIELDS, ControllerPose, MoveType, Workspace, finite_number
+from .. import validate
+from ..errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
+from ..poses import CONTROLLER_FIELDS, ControllerPose, MoveType, Workspace, finite_number
 
 __all__ = [
     "RECORD_SIZE",

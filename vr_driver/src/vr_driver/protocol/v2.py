@@ -1,6 +1,6 @@
 """Controller protocol v2: joint targets with sequence numbers and a look-ahead slot, joint feedback.
 ROS-free, no I/O, no kinematics. The byte layouts, units and the controller program's rules are in
-``doc/controller_program.md`` ("Protocol v2"); v1 (the thesis' 14 bytes, :mod:`vr_driver.protocol`)
+``doc/controller_program.md`` ("Protocol v2"); v1 (the thesis' 14 bytes, :mod:`vr_driver.protocol.v1`)
 stays the default for an unchanged robot program. One parameter chooses the version on both ends;
 the frames differ in length (72 bytes each way), so a v1 card configuration refuses a v2 master at
 Chk_Cfg (Cfg_Fault) before a single record is exchanged.
@@ -32,9 +32,9 @@ import struct
 from dataclasses import dataclass
 from typing import Any, Sequence, Tuple
 
-from .errors import PoseError, ProtocolError
-from .poses import ControllerPose
-from .protocol import StatusBits, round_half_away
+from ..errors import PoseError, ProtocolError
+from ..poses import ControllerPose
+from .v1 import StatusBits, round_half_away
 
 __all__ = [
     "VERSION",

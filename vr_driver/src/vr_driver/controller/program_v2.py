@@ -1,10 +1,10 @@
 """The virtual G2 controller's program for protocol v2 (doc/controller_program.md §9): streamed
 joint targets with sequence numbers and a look-ahead slot, on a DP slave configured with
-``CHK_CFG_V2`` (72 bytes each way), moving a :class:`~vr_driver.sim_stream.SimStreamArm`. ROS-free.
+``CHK_CFG_V2`` (72 bytes each way), moving a :class:`~vr_driver.controller.stream_arm.SimStreamArm`. ROS-free.
 
 Each :meth:`ControllerProgramV2.step` (``now`` injected):
 
-1. the link side shared with v1 (:class:`~vr_driver.controller_session.SessionProgram`): watchdog,
+1. the link side shared with v1 (:class:`~vr_driver.controller.session.SessionProgram`): watchdog,
    session (no two-telegram rule by default: the CRC-16 does its job, rule 9.3.7), disarmed at
    start and after a link loss until a record with
    both slots empty arrived; a link loss brakes the arm along its path (rule 9.3.5), drops the
@@ -25,11 +25,11 @@ Each :meth:`ControllerProgramV2.step` (``now`` injected):
      repeat.
 
    A refusal is logged once per (seq, code), however often the master repeats the record;
-4. the :class:`~vr_driver.protocol_v2.FeedbackV2` goes into the slave's input image: the arm's
+4. the :class:`~vr_driver.protocol.v2.FeedbackV2` goes into the slave's input image: the arm's
    state, status bits, accepted / done / active / rejected seq and the reject code, the exact joints
    and the TCP pose in the wire's units, and a heartbeat that grows by one every loop.
 
-Every target taken ends in exactly one :class:`~vr_driver.sim_stream.StreamLogEntry` (executed,
+Every target taken ends in exactly one :class:`~vr_driver.controller.stream_arm.StreamLogEntry` (executed,
 blended or stopped), every refusal in one entry with outcome ``rejected``.
 """
 from __future__ import annotations
@@ -39,11 +39,11 @@ from typing import Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
-from .controller_session import SessionProgram, arm_status_bits
-from .protocol_v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState, TargetSlot,
+from .session import SessionProgram, arm_status_bits
+from ..protocol.v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState, TargetSlot,
                           joints_to_wire, next_seq, seq_after)
-from .sim_arm import ExecutionLog, Outcome
-from .sim_stream import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
+from .arm import ExecutionLog, Outcome
+from .stream_arm import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
 
 __all__ = ["ControllerProgramV2", "GRIPPER_DELAY"]
 

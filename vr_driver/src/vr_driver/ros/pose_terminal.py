@@ -1,4 +1,4 @@
-"""ROS node `pose_terminal`: the thin ROS edge of :mod:`vr_driver.pose_input`.
+"""ROS node `pose_terminal`: the thin ROS edge of :mod:`vr_driver.terminal.pose_input`.
 
 Talks to the driver node through its public API only: the ``move_to_pose`` action (preview with
 preview_only, then the move; cancel = stop), the ``stop_motion`` service, ``robot_status``,
@@ -17,12 +17,12 @@ import threading
 import time
 from typing import List, Optional, Tuple
 
-from .errors import VrDriverError
-from .pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_USAGE, Backend, InputError, MoveHandle,
+from ..errors import VrDriverError
+from ..terminal.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_USAGE, Backend, InputError, MoveHandle,
                          MoveProgress, MoveResult, PoseRequest, PreviewResult, RangeError, StatusInfo, Terminal,
                          build_arg_parser, fmt_pose, in_namespace, request_from_args)
-from .motion import MoveType
-from .poses import ControllerPose, Workspace
+from ..kinematics.preview import MoveType
+from ..poses import ControllerPose, Workspace
 
 #: exit status after Ctrl-C while waiting for the driver (the shell's convention for SIGINT)
 EXIT_INTERRUPTED = 130

@@ -1,8 +1,8 @@
-"""ROS node `virtual_controller`: the thin ROS edge of :class:`vr_driver.controller_sim.VirtualController`.
+"""ROS node `virtual_controller`: the thin ROS edge of :class:`vr_driver.controller.program.VirtualController`.
 
-Private parameters (validated by ``controller_sim.SimOptions``; defaults in brackets):
+Private parameters (validated by ``controller.program.SimOptions``; defaults in brackets):
 ``~pty_link`` [""] create a pty pair and symlink its device end here (``auto``: this launch's own
-link, ``controller_sim.auto_pty_link``; a link another live controller holds is refused); ``~device`` [""] serve this
+link, ``controller.program.auto_pty_link``; a link another live controller holds is refused); ``~device`` [""] serve this
 existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.0];
 ``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
 ``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets);
@@ -12,8 +12,8 @@ existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.
 Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
 ``~set_error`` (True sets a controller error). Publishes ``~executed`` (std_msgs/String, latched):
-one JSON object per handled target (``sim_arm.LogEntry.to_json``: seq, move_type, target, outcome
-executed / rejected / via_stored, reason, times, final_pose; v2: ``sim_stream.StreamLogEntry``).
+one JSON object per handled target (``controller.arm.LogEntry.to_json``: seq, move_type, target, outcome
+executed / rejected / via_stored, reason, times, final_pose; v2: ``controller.stream_arm.StreamLogEntry``).
 
 Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
@@ -26,10 +26,10 @@ import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from .controller_sim import (AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
+from ..controller.program import (AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
                              SimDeviceError, SimError, SimOptions, VirtualController, auto_pty_link)
-from .ros_support import route_to_rosout, stop_on_signals, watch_simulator
-from .sim_arm import LogEntry
+from .support import route_to_rosout, stop_on_signals, watch_simulator
+from ..controller.arm import LogEntry
 
 #: parameters the node writes itself (not options)
 _OWN_PARAMS = ("device_path",)

@@ -1,9 +1,9 @@
-"""ROS node `virtual_line`: the thin ROS edge of :class:`vr_driver.sim_line.LineHub`, the hub that
+"""ROS node `virtual_line`: the thin ROS edge of :class:`vr_driver.controller.line.LineHub`, the hub that
 joins the ptys of the simulated stations into one multi-drop PROFIBUS line.
 
 Private parameters: ``~stations`` [["auto", "auto:io_island"]] the stations' pty paths; ``auto`` is this
 launch's virtual controller link, ``auto:NAME`` this launch's link of station NAME
-(``controller_sim.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
+(``controller.program.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
 linked (``auto``: ``<ROS log dir>/vr006l_virtual_line_<master port>``; the driver's ``port``);
 ``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys).
 
@@ -19,9 +19,9 @@ import rospy
 
 from pyprofibus_vendor.errors import PhyError
 
-from .controller_sim import AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, resolve_link
-from .ros_support import route_to_rosout, stop_on_signals
-from .sim_line import LineHub
+from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, resolve_link
+from .support import route_to_rosout, stop_on_signals
+from ..controller.line import LineHub
 
 
 def main() -> int:
