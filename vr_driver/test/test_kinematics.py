@@ -13,7 +13,7 @@ import yaml
 
 from panasonic_vr006l_support.description import default_kinematics_yaml, render_urdf
 from panasonic_vr006l_support.model import RobotModel
-from vr_driver.kinematics import solver as kin_mod
+import vr_driver.kinematics.solver as kin_mod
 from vr_driver.errors import (IkTimeoutError, JointLimitError, ModelError, NearSingularError,
                               PoseError, UnreachableError)
 from vr_driver.kinematics.solver import IkSettings, Kinematics, UrdfModel, read_ik_settings, read_srdf

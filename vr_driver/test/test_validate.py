@@ -11,16 +11,16 @@ import sys
 import numpy as np
 import pytest
 
+import vr_driver.protocol.v1 as protocol
+import vr_driver.terminal.pose_input as pose_input
 from vr_driver import validate
-from vr_driver.protocol import v1 as protocol
-from vr_driver.terminal import pose_input
 from vr_driver.controller.program import SimError, SimOptions
 from vr_driver.csr.fields import _integer as csr_integer
 from vr_driver.csr.fields import _number as csr_number
 from vr_driver.errors import CsrError, HandshakeError, MotionError, PoseError
 from vr_driver.params import DriverParams, ParamError
-from vr_driver.terminal.pose_input import PoseRequest
 from vr_driver.poses import ControllerPose, MoveType, finite_number
+from vr_driver.terminal.pose_input import PoseRequest
 
 
 def _fail(got):
