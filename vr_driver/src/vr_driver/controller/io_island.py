@@ -116,17 +116,7 @@ class VirtualIoIsland(Simulator):
         self.program = IslandProgram(self.slave)
         self.port = SimPort(link, _int_option(baud, "baud", 9600, 12_000_000), pty_link or None)
         self.server = SlaveServer(self.port.link, self.slave, clock=clock)
-        self._stop = threading.Event()
-        self._thread: Optional[threading.Thread] = None
-        self.error: Optional[BaseException] = None
-
-    @property
-    def device_path(self) -> str:
-        return self.port.device_path
-
-    @property
-    def symlink(self) -> Optional[str]:
-        return self.port.symlink
+        super().__init__()
 
     @property
     def server_error(self) -> Optional[BaseException]:

@@ -94,18 +94,7 @@ class LineHub(Simulator):
         self._queue: List[Tuple[float, int, int, bytes]] = []     # (due, seq, target (-1 master), bytes)
         self._seq = 0
         self._line_free = 0.0
-        self._stop = threading.Event()
-        self._thread: Optional[threading.Thread] = None
-        self.error: Optional[BaseException] = None
-
-    @property
-    def device_path(self) -> str:
-        """The pty the master opens."""
-        return self.port.device_path
-
-    @property
-    def symlink(self) -> Optional[str]:
-        return self.port.symlink
+        super().__init__()
 
     def connected(self) -> List[str]:
         """The station paths joined to the line now."""

@@ -539,10 +539,24 @@ class Simulator:
     """The life-cycle the simulators share (VirtualController, VirtualIoIsland, LineHub): a
     background thread started by the subclass's ``start()`` (returning self) and watching
     ``self._stop``; :meth:`stop` ends it and then :meth:`_close` closes what the subclass opened;
-    a context manager. The subclass sets ``self._stop`` and ``self._thread = None``."""
+    a context manager. The subclass calls ``Simulator.__init__`` and opens ``self.port`` (the
+    :class:`SimPort` a master connects to)."""
 
-    _stop: threading.Event
-    _thread: Optional[threading.Thread]
+    port: SimPort
+
+    def __init__(self) -> None:
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.error: Optional[BaseException] = None     # what ended the thread, if anything did
+
+    @property
+    def device_path(self) -> str:
+        """What a master opens (pty slave path or the device)."""
+        return self.port.device_path
+
+    @property
+    def symlink(self) -> Optional[str]:
+        return self.port.symlink
 
     def start(self) -> Any:
         raise NotImplementedError
@@ -638,9 +652,7 @@ class VirtualController(Simulator):
                                              execution_log=self.execution_log,
                                              confirm_records=confirm_records)
         self._cond = threading.Condition()
-        self._stop = threading.Event()
-        self._thread: Optional[threading.Thread] = None
-        self.error: Optional[BaseException] = None
+        super().__init__()
         self.overruns = 0
         self._log_fh: Optional[IO[str]] = None
         if self.options.log_file:
@@ -664,15 +676,6 @@ class VirtualController(Simulator):
     @property
     def pty(self) -> Optional[PtyPair]:
         return self.port.pty
-
-    @property
-    def symlink(self) -> Optional[str]:
-        return self.port.symlink
-
-    @property
-    def device_path(self) -> str:
-        """What a master opens (pty slave path or the device)."""
-        return self.port.device_path
 
     def start(self) -> "VirtualController":
         """Serve the bus and run the program loop in background threads."""
