@@ -145,8 +145,10 @@ def test_a_socket_url_is_a_port_the_driver_opens(monkeypatch):
 def _export(folder, trajectory, config=None):
     wp = os.path.join(folder, "traj.yaml")
     with open(wp, "w") as f:
-        yaml.safe_dump({"program": {"date": "2024-01-01 12:00:00"}, **trajectory}, f)
-    argv = [wp, "-o", "-"]
+        yaml.safe_dump(trajectory, f)
+    # a fixed create / update time: two exports a second apart must not differ in it (a trajectory
+    # dump has no program block, so only --date sets it)
+    argv = [wp, "-o", "-", "--date", "2024-01-01T12:00:00"]
     if config is not None:
         path = os.path.join(folder, "driver.yaml")
         with open(path, "w") as f:
