@@ -17,7 +17,7 @@ Layers (the first name below ``vr_driver``):
 
 Known exceptions (KNOWN, each a lazy import inside one function; one that is no longer needed
 fails the test, so the list only shrinks): ``params`` resolves ``port: auto`` with
-``controller.program.resolve_link``, takes the v2 module list from ``protocol.v2`` and the
+``controller.program.resolve_link``, takes the protocol object from ``protocol.registry`` and the
 controller's own I/O length from ``driver.stations``; ``csr.cli`` imports rospy, rosgraph and
 trajectory_msgs for ``--from-topic``.
 
@@ -56,7 +56,7 @@ ROS_PACKAGES = {"rospy", "rosgraph", "rospkg", "roslib", "rosparam", "rosservice
 #: (importing module, imported module): allowed only inside a function
 KNOWN = {
     ("vr_driver.params", "vr_driver.controller.program"): "port: auto resolves like the virtual controller's link",
-    ("vr_driver.params", "vr_driver.protocol.v2"): "the v2 GSD module list of the default bus config",
+    ("vr_driver.params", "vr_driver.protocol"): "the protocol object (names, GSD modules, record length, I/O)",
     ("vr_driver.params", "vr_driver.driver.stations"): "the controller's own I/O length in the v2 records",
     ("vr_driver.csr.cli", "rosgraph"): "csr_export --from-topic",
     ("vr_driver.csr.cli", "rospy"): "csr_export --from-topic",

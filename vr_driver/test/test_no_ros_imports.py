@@ -12,7 +12,7 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
 CORE = ("errors", "validate", "poses", "params", "io_signals",
-        "protocol", "protocol.v1", "protocol.v2", "kinematics", "kinematics.solver", "kinematics.preview",
+        "protocol", "protocol.base", "protocol.registry", "protocol.v1", "protocol.v2", "kinematics", "kinematics.solver", "kinematics.preview",
         "driver", "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
         "driver.stations", "driver.streaming",
         "controller", "controller.program", "controller.session", "controller.program_v2", "controller.arm",

@@ -19,16 +19,23 @@ from .poses import ControllerPose, Workspace
 
 DEFAULT_PORT = "/dev/ttyUSB0"
 DEFAULT_JOINT_NAMES = tuple("joint_%d" % i for i in range(1, 7))
-#: the controller protocols (doc/controller_program.md): v1 the thesis' 14-byte Cartesian targets,
-#: v2 streamed joint targets with a look-ahead (72 bytes each way)
-PROTOCOLS = ("v1", "v2")
-#: record length of each protocol, each way
-RECORD_LENGTHS = {"v1": 14, "v2": 72}
 #: the DP watchdog's largest value: factors 255 x 255 x 10 ms
 WATCHDOG_MAX_MS = 650_250
 #: a name prefix (``left_``, ``arm1_``): empty, or a letter then letters, digits and underscores --
 #: the characters a TF frame, a URDF link and a ROS name fragment all accept
 PREFIX_PATTERN = re.compile(r"\A(?:[A-Za-z][A-Za-z0-9_]*)?\Z")
+
+
+def _protocols() -> Tuple[str, ...]:
+    """The controller protocols' names (vr_driver.protocol; doc/controller_program.md)."""
+    from .protocol import registry
+    return registry.names()
+
+
+def _io_protocols() -> Tuple[str, ...]:
+    """The protocols whose records carry the controller's own I/O."""
+    from .protocol import registry
+    return tuple(name for name in registry.names() if registry.get(name).controller_io)
 
 
 class ParamError(VrDriverError, ValueError):
@@ -119,7 +126,7 @@ class DriverParams:
     """Everything the driver reads at start (see config/vr_driver.yaml for the documentation)."""
 
     # link to the controller
-    protocol: str = "v1"                 # the robot program's protocol: v1 | v2 (both ends alike)
+    protocol: str = "v1"                 # the robot program's protocol (vr_driver.protocol; both ends alike)
     bus_config: str = ""                 # "" = pyprofibus_vendor's default robot bus (vr006l_bus.yaml)
     io_signals: str = ""                 # signal map of the I/O stations beside the controller
     #                                      (doc/io_line.md); "" = none: only the controller is cycled
@@ -206,7 +213,7 @@ class DriverParams:
             raise ParamError("base_frame", base_frame, "must not be empty")
         prefix = _prefix(params, d.prefix)
         out = cls(
-            protocol=_string(params, "protocol", d.protocol, PROTOCOLS),
+            protocol=_string(params, "protocol", d.protocol, _protocols()),
             bus_config=bus_config,
             io_signals=io_signals,
             port=_port(params, d.port),
@@ -287,6 +294,12 @@ class DriverParams:
                              "must stop the arm before the driver calls the link lost "
                              "(from %s)" % (1000.0 * self.link_timeout, source))
 
+    @property
+    def wire(self) -> "Any":
+        """The controller protocol as one object (:class:`vr_driver.protocol.base.Protocol`)."""
+        from .protocol import registry
+        return registry.get(self.protocol)
+
     def bus(self) -> "Any":
         """The PROFIBUS bus configuration: the bus config file (or the package default) with
         this record's overrides applied, validated again by pyprofibus_vendor. Raises ParamError.
@@ -299,12 +312,12 @@ class DriverParams:
         except ConfigError as exc:
             raise ParamError("bus_config", self.bus_config, str(exc)) from None
         data: Dict[str, Any] = base.to_dict()
-        if not self.bus_config and self.protocol == "v2":
-            from .protocol.v2 import GSD_MODULES_V2, RECORD_SIZE_V2
+        proto = self.wire
+        if not self.bus_config and proto.gsd_modules:
             for slave in data["slaves"]:
                 slave.pop("cfg", None)
-                slave["modules"] = list(GSD_MODULES_V2)
-                slave["input_len"] = slave["output_len"] = RECORD_SIZE_V2
+                slave["modules"] = list(proto.gsd_modules)
+                slave["input_len"] = slave["output_len"] = proto.record_length
         data["cycle_rate_hz"] = self.cycle_rate
         if self.port:
             data["phy"]["device"] = self.port
@@ -333,7 +346,7 @@ class DriverParams:
         slave = bus.slaves[0]
         self.check_watchdog(slave.watchdog_ms, "the bus config %s" % (self.bus_config or "(built in)")
                             if self.watchdog_ms is None else "watchdog_ms")
-        need = RECORD_LENGTHS[self.protocol]
+        need = proto.record_length
         if slave.input_len != need or slave.output_len != need:
             raise ParamError("bus_config", self.bus_config, "the controller protocol %s needs %d bytes "
                              "each way; the configured modules give %d in / %d out"
@@ -351,7 +364,7 @@ class DriverParams:
         from .io_signals import lengths_from_bus, load_signal_map
         from .driver.stations import CONTROLLER_IO_LENGTH
         lengths = lengths_from_bus(bus)
-        if self.protocol == "v2":       # the controller's own I/O: 16 inputs, 16 outputs in the v2 records
+        if self.wire.controller_io:     # the controller's own I/O: 16 inputs, 16 outputs in the records
             lengths[self.slave_address] = (CONTROLLER_IO_LENGTH, CONTROLLER_IO_LENGTH)
         try:
             signals = load_signal_map(self.io_signals, lengths)
@@ -360,10 +373,11 @@ class DriverParams:
         for station in signals.stations:
             if station.address != self.slave_address:
                 continue
-            if self.protocol != "v2":
+            if not self.wire.controller_io:
                 raise ParamError("io_signals", self.io_signals, "station %r has address %d, the robot "
-                                 "controller's (slave_address): the controller's own I/O needs protocol "
-                                 "v2 (v1's 14 bytes have no room for it)" % (station.name, station.address))
+                                 "controller's (slave_address): the controller's own I/O needs a protocol "
+                                 "that carries it (%s; %s's records have no room for it)"
+                                 % (station.name, station.address, ", ".join(_io_protocols()), self.protocol))
             unsafe = [sig.name for sig in station.signals if sig.is_output and sig.safe]
             if unsafe:
                 raise ParamError("io_signals", self.io_signals, "station %r (the controller's own I/O): "

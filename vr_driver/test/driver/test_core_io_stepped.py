@@ -201,7 +201,7 @@ def test_the_controllers_own_io_needs_v2_and_safe_zero(tmp_path):
                                          bus_config=IO_PARAMS["bus_config"]))
     with pytest.raises(ParamError) as err:
         params.signal_map(params.bus())
-    assert err.value.name == "io_signals" and "needs protocol v2" in str(err.value)
+    assert err.value.name == "io_signals" and "needs a protocol that carries it (v2;" in str(err.value)
     bad = tmp_path / "signals.yaml"
     bad.write_text("stations:\n  g2:\n    address: 4\n    signals:\n"
                    "      lamp: {direction: out, type: bit, byte: 0, bit: 0, safe: 1}\n")

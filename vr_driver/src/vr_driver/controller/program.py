@@ -85,7 +85,9 @@ from ..poses import HOME_POSE, ControllerPose
 from .session import SessionProgram, arm_status_bits
 from .program_v2 import ControllerProgramV2
 from ..protocol.v1 import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
-from ..protocol.v2 import CHK_CFG_V2, FeedbackV2, StreamState
+from ..protocol.v2 import FeedbackV2, StreamState
+from ..protocol import registry as protocols
+from ..protocol.base import Protocol
 from .arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
 from .stream_arm import SimStreamArm, StreamLogEntry
 
@@ -129,8 +131,9 @@ PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "b
                "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
                "protocol": "protocol"}
 
-#: the controller programs: v1 the thesis' 14-byte handshake (default), v2 streamed joint targets
-PROTOCOLS = ("v1", "v2")
+#: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
+#: streamed joint targets
+PROTOCOLS = protocols.names()
 
 
 class SimError(VrDriverError):
@@ -172,11 +175,10 @@ class SimOptions:
     byte_order: str = ByteOrder.LITTLE.value
     log_file: Optional[str] = None
     brake_time: float = DEFAULT_BRAKE_TIME
-    protocol: str = "v1"
+    protocol: str = protocols.DEFAULT
 
     def __post_init__(self) -> None:
-        if self.protocol not in PROTOCOLS:
-            raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), self.protocol))
+        _protocol(self.protocol)
         for name in ("device", "pty_link", "log_file"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, str):
@@ -217,13 +219,20 @@ class SimOptions:
         return cls(**{PARAM_NAMES[k]: v for k, v in params.items()})
 
 
-def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic, protocol: str = "v1") -> DpSlave:
-    """The G2's DP slave: ident 0x06C6 and the Chk_Cfg of ``config.default_robot_config()`` (v1,
-    14 bytes each way) or ``protocol.v2.CHK_CFG_V2`` (v2, 72 bytes each way)."""
-    if protocol not in PROTOCOLS:
-        raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), protocol))
+def _protocol(name: Any) -> Protocol:
+    try:
+        return protocols.get(name)
+    except ProtocolError:
+        raise SimError("protocol must be one of %s, got %r" % (", ".join(PROTOCOLS), name)) from None
+
+
+def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic,
+                protocol: Any = protocols.DEFAULT) -> DpSlave:
+    """The G2's DP slave: ident 0x06C6 and the protocol's Chk_Cfg (v1: the one of
+    ``config.default_robot_config()``, 14 bytes each way; v2: ``protocol.v2.CHK_CFG_V2``, 72 bytes)."""
+    proto = _protocol(protocol)
     slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
-    cfg = CHK_CFG_V2 if protocol == "v2" else slave_cfg.cfg
+    cfg = proto.chk_cfg or slave_cfg.cfg
     return DpSlave(address, slave_cfg.ident, cfg, clock=clock)
 
 
@@ -615,36 +624,37 @@ class VirtualController(Simulator):
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
                  kinematics: Optional[Kinematics] = None, arm: Union[None, SimArm, SimStreamArm] = None,
                  clock: Clock = time.monotonic, confirm_records: Optional[bool] = None,
-                 brake_time: float = DEFAULT_BRAKE_TIME, protocol: str = "v1") -> None:
+                 brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
                                   initial_pose=tuple(pose), loop_period=loop_period,
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
-                                  brake_time=brake_time, protocol=protocol)
+                                  brake_time=brake_time, protocol=_protocol(protocol).name)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         self.clock = clock
         self.loop_period = self.options.loop_period
         self.protocol = self.options.protocol
-        v2 = self.protocol == "v2"
+        self.wire = protocols.get(self.protocol)
+        streams = self.wire.streams
         if confirm_records is None:
-            confirm_records = not v2
+            confirm_records = self.wire.confirm_records
         if arm is None:
             try:
-                arm = (SimStreamArm if v2 else SimArm)(
+                arm = (SimStreamArm if streams else SimArm)(
                     kinematics, speed_factor=self.options.speed_factor,
                     initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
                     brake_time=self.options.brake_time)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
-        if isinstance(arm, SimStreamArm) != v2:
-            raise SimError("protocol %s needs a %s" % (self.protocol, "SimStreamArm" if v2 else "SimArm"))
+        if isinstance(arm, SimStreamArm) != streams:
+            raise SimError("protocol %s needs a %s" % (self.protocol, "SimStreamArm" if streams else "SimArm"))
         self.arm: Any = arm
         self.execution_log = ExecutionLog()
         self.slave = robot_slave(self.options.address, clock, self.protocol)
         self.program: Union[ControllerProgram, ControllerProgramV2]
-        if v2:
+        if streams:
             self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
                                                confirm_records=confirm_records)
         else:
@@ -849,7 +859,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--brake-time", type=float, default=DEFAULT_BRAKE_TIME,
                    help="robot time in seconds a stop takes from path speed to rest (default %g; "
                         "0 halts at once)" % DEFAULT_BRAKE_TIME)
-    p.add_argument("--protocol", choices=PROTOCOLS, default="v1",
+    p.add_argument("--protocol", choices=PROTOCOLS, default=protocols.DEFAULT,
                    help="the robot program: v1 the 14-byte Cartesian handshake (default), v2 streamed "
                         "joint targets with look-ahead (72 bytes each way, doc/controller_program.md §9)")
     p.add_argument("--log-file", metavar="FILE",

@@ -235,12 +235,13 @@ class DriverCore:
         signals = params.signal_map(self.bus)
         self.io: Optional[IoLine] = IoLine(signals, params.link_timeout) if signals is not None else None
         self.link = LinkSupervisor(params, self.bus, clock, open_link, stations=self.io)
-        self.streaming = params.protocol == "v2"
+        self.protocol = params.wire
+        self.streaming = self.protocol.streams
         self.sequencer = (StreamSequencer if self.streaming else MotionSequencer)(
             params, clock, self._schedule_replan)
         # the controller's own I/O (v2) as a station of the signal map at the controller's address
         self.controller_io: Optional[ControllerIo] = None
-        if self.io is not None and self.streaming and \
+        if self.io is not None and self.protocol.controller_io and \
                 any(st.address == self.slave_config.address for st in self.io.map.stations):
             self.controller_io = ControllerIo(self.slave_config.address, self._set_controller_outputs)
             self.io.add_local(self.controller_io)
@@ -645,7 +646,7 @@ class DriverCore:
             self.io.update(now)          # judge the I/O stations after the cycle (io.snapshot())
         joints = self._update_joints(sample)
         command = self.sequencer.step(now, sample, joints)
-        record = command.encode() if self.streaming else command.encode(self.params.byte_order)
+        record = self.protocol.encode(command, self.params.byte_order)
         if self.streaming and record != self._last_record and sample.connected:
             self._repeat_now = True
         self._last_record = record
@@ -663,8 +664,9 @@ class DriverCore:
         if fb is None:
             self._joints_valid = False
             return None
-        if self.streaming:                  # v2 reports the joints themselves (0.001 deg)
-            self._joints, self._joints_valid = fb.joints_rad, True
+        reported = self.protocol.feedback_joints(fb)
+        if reported is not None:            # v2 reports the joints themselves (0.001 deg)
+            self._joints, self._joints_valid = reported, True
             return self._joints
         values = fb.values
         job = self.sequencer.view.job

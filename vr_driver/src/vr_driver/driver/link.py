@@ -39,8 +39,7 @@ from pyprofibus_vendor.phy import Link
 
 from ..errors import ProtocolError
 from ..params import DriverParams
-from ..protocol.v1 import Command, Feedback
-from ..protocol.v2 import CommandV2, FeedbackV2
+from ..protocol.v1 import Feedback
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -135,9 +134,7 @@ def _diag_words(diag: Any) -> str:
 
 def idle_record(params: DriverParams) -> bytes:
     """The record that asks nothing of the controller (the flag at 0 / both slots empty)."""
-    if params.protocol == "v2":
-        return CommandV2().encode()
-    return Command.idle().encode(params.byte_order)
+    return params.wire.idle_record(params.byte_order)
 
 
 def open_serial_link(device: str, baud: int) -> Link:
@@ -161,10 +158,9 @@ class LinkSupervisor:
         self.clock = clock
         self.open_link = open_link
         self.counters = LinkCounters()
-        # the controller's records: v1 Feedback (14 bytes) or v2 FeedbackV2 (72 bytes, CRC)
-        self._decode: Callable[[bytes], Any] = (
-            FeedbackV2.decode if params.protocol == "v2"
-            else (lambda data: Feedback.decode(data, params.byte_order)))
+        # the controller's records, decoded by the protocol (vr_driver.protocol)
+        wire, order = params.wire, params.byte_order
+        self._decode: Callable[[bytes], Any] = lambda data: wire.decode_feedback(data, order)
         self._link: Optional[Link] = None
         self._master: Optional[DpMaster] = None
         self._slave = None

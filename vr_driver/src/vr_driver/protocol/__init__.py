@@ -1,3 +1,8 @@
-"""The wire protocols between the PROFIBUS master and the G2 controller card: v1 (one 14-byte target
-record, the handshake, the master's sequencer states) and v2 (the streaming records). Imports only
-the vocabulary modules (errors, poses, validate)."""
+"""The wire protocols between the PROFIBUS master and the G2 controller card, each one object
+(:class:`~vr_driver.protocol.base.Protocol`) chosen once from the ``protocol`` parameter with
+:func:`vr_driver.protocol.registry.get`: v1 (the thesis' 14-byte Cartesian target record and its
+handshake) and v2 (streamed joint targets). Imports only the vocabulary modules (errors, poses,
+validate).
+
+Nothing outside this package compares protocol names: it asks the protocol object
+(``vr_driver/test/test_protocol_seam.py``)."""

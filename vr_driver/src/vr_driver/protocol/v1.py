@@ -36,8 +36,11 @@ from typing import Any, Callable, ClassVar, List, Optional, Tuple
 from .. import validate
 from ..errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
 from ..poses import CONTROLLER_FIELDS, ControllerPose, MoveType, Workspace, finite_number
+from .base import Protocol
 
 __all__ = [
+    "V1",
+    "ProtocolV1",
     "RECORD_SIZE",
     "INT16_MIN",
     "INT16_MAX",
@@ -955,3 +958,43 @@ class MasterHandshake:
                             "the controller did not return to READY within %.3g s after the flag "
                             "was cleared" % self.release_timeout, self.last_feedback, "release")
         return None
+
+
+# ---------------------------------------------------------------------------------- the seam
+
+class ProtocolV1(Protocol):
+    """Protocol v1 as one object (:mod:`vr_driver.protocol.base`): the thesis' 14-byte records."""
+
+    name = "v1"
+    version = 1
+    record_length = RECORD_SIZE
+    streams = False
+    joint_targets = False
+    reports_joints = False
+    controller_io = False
+    confirm_records = True          # no integrity check of its own: the two-telegram rule
+    byte_order_matters = True
+    pose_resolution = (1.0, 1.0)
+    #: whole-mm / whole-degree targets solved again by the controller put a joint up to ~1.5 deg
+    #: off a planned joint point (measured over random configurations; the thinning keeps it in
+    #: reserve, driver.trajectories.V1_WIRE_ERROR)
+    target_error = math.radians(1.5)
+    summary = "the thesis' Cartesian targets in whole mm / deg, one at a time (request / done handshake)"
+
+    def encode(self, command: Command, byte_order: Any = ByteOrder.LITTLE) -> bytes:
+        return command.encode(byte_order)
+
+    def idle_command(self) -> Command:
+        return Command.idle()
+
+    def idle_record(self, byte_order: Any = ByteOrder.LITTLE) -> bytes:
+        return Command.idle().encode(byte_order)
+
+    def decode_feedback(self, data: Any, byte_order: Any = ByteOrder.LITTLE) -> Feedback:
+        return Feedback.decode(data, byte_order)
+
+    def decode_command(self, data: Any, byte_order: Any = ByteOrder.LITTLE) -> Command:
+        return Command.decode(data, byte_order)
+
+
+V1 = ProtocolV1()

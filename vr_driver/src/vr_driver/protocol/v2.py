@@ -34,9 +34,12 @@ from typing import Any, Sequence, Tuple
 
 from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose
+from .base import Protocol
 from .v1 import StatusBits, round_half_away
 
 __all__ = [
+    "V2",
+    "ProtocolV2",
     "VERSION",
     "RECORD_SIZE_V2",
     "SEQ_MAX",
@@ -429,3 +432,45 @@ class FeedbackV2:
             text += "; not armed"
         return text
 
+
+
+# ---------------------------------------------------------------------------------- the seam
+
+class ProtocolV2(Protocol):
+    """Protocol v2 as one object (:mod:`vr_driver.protocol.base`): streamed joint targets."""
+
+    name = "v2"
+    version = VERSION
+    record_length = RECORD_SIZE_V2
+    gsd_modules = GSD_MODULES_V2
+    chk_cfg = CHK_CFG_V2
+    streams = True
+    joint_targets = True
+    reports_joints = True
+    controller_io = True
+    confirm_records = False         # the CRC-16 does the two-telegram rule's job (section 9.3)
+    pose_resolution = (POSITION_UNIT_MM, JOINT_UNIT_DEG)
+    joint_resolution = JOINT_UNIT_DEG
+    target_error = math.radians(JOINT_UNIT_DEG / 2.0)
+    summary = "streamed joint targets in 0.001 deg with a look-ahead slot and a CRC-16 (needs a controller that takes joint targets)"
+
+    def encode(self, command: CommandV2, byte_order: Any = "little") -> bytes:
+        return command.encode()
+
+    def idle_command(self) -> CommandV2:
+        return CommandV2()
+
+    def idle_record(self, byte_order: Any = "little") -> bytes:
+        return CommandV2().encode()
+
+    def decode_feedback(self, data: Any, byte_order: Any = "little") -> FeedbackV2:
+        return FeedbackV2.decode(data)
+
+    def feedback_joints(self, feedback: FeedbackV2) -> Tuple[float, ...]:
+        return feedback.joints_rad
+
+    def decode_command(self, data: Any, byte_order: Any = "little") -> CommandV2:
+        return CommandV2.decode(data)
+
+
+V2 = ProtocolV2()

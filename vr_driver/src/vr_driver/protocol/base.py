@@ -1,0 +1,119 @@
+"""The protocol seam: one object per controller protocol, chosen once from the ``protocol``
+parameter (:func:`vr_driver.protocol.get`), that says everything the rest of the stack may know of
+the wire. ROS-free, no I/O.
+
+Nothing outside ``vr_driver.protocol`` compares protocol names (``test_protocol_seam.py`` parses
+every module and fails on such a comparison): code that depends on the protocol asks its object --
+for a fact (record length, Chk_Cfg, resolution), a codec (encode / decode, the idle record), a
+conversion (feedback -> joints), or a capability (``streams``: trajectories go out with their timing
+and a look-ahead; ``reports_joints``: the feedback carries the joints; ``controller_io``: the records
+carry the controller's own I/O words).
+
+A protocol is both ends: the driver uses ``encode`` / ``decode_feedback`` / ``idle_record``, the
+virtual controller ``decode_command`` / ``encode_feedback`` and the Chk_Cfg; both see the same
+record length, so a card configured for another protocol refuses the master at Chk_Cfg.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Optional, Tuple
+
+__all__ = ["Protocol"]
+
+
+class Protocol:
+    """One controller protocol (subclassed once per protocol; a single instance each).
+
+    Class attributes (facts of the wire):
+
+    - ``name`` / ``version``: the ``protocol`` parameter's value / the version byte (v1 has none: 1);
+    - ``record_length``: bytes each way;
+    - ``gsd_modules``: the card's GSD modules (inputs first), or None for the bus config's default
+      (the thesis' 14-byte card configuration);
+    - ``chk_cfg``: the Chk_Cfg bytes of those modules, or None for the default;
+    - ``streams``: a planner trajectory goes out as a stream of timed targets with a look-ahead
+      (False: one target at a time, the arm stops at each: the v1 handshake);
+    - ``joint_targets``: targets are joint angles (False: Cartesian poses the controller solves);
+    - ``reports_joints``: the feedback carries the joints (False: only the pose; the driver solves
+      the joints by IK);
+    - ``controller_io``: the records carry the controller's general-purpose I/O (16 in, 16 out);
+    - ``confirm_records``: the controller program acts on a record only after two equal telegrams
+      (the default of the virtual controller: the protocols without an integrity check need it);
+    - ``pose_resolution``: (mm, deg) of a reported pose and of a Cartesian target;
+    - ``joint_resolution``: deg of a reported joint (None: the protocol reports no joints);
+    - ``target_error``: rad, how far the arm's joints may land from a planned joint point the wire
+      carries (rounding of a Cartesian target, solved again by the controller's IK): the default
+      path and goal tolerances are built on it (:attr:`default_goal_tolerance`);
+    - ``summary``: one line for logs and ``--help``.
+    """
+
+    name: str = ""
+    version: int = 0
+    record_length: int = 0
+    gsd_modules: Optional[Tuple[str, ...]] = None
+    chk_cfg: Optional[bytes] = None
+    streams: bool = False
+    joint_targets: bool = False
+    reports_joints: bool = False
+    controller_io: bool = False
+    confirm_records: bool = False
+    pose_resolution: Tuple[float, float] = (1.0, 1.0)
+    joint_resolution: Optional[float] = None
+    target_error: float = 0.0
+    summary: str = ""
+
+    # ------------------------------------------------------------------ tolerances
+    @property
+    def default_goal_tolerance(self) -> float:
+        """rad: the goal tolerance of a joint a FollowJointTrajectory goal leaves at 0. At least
+        0.05 deg (what the stack promises a goal reaches), and twice what the wire alone may put
+        the joints off (``target_error``): a goal with empty tolerances never fails because of the
+        wire's own resolution."""
+        return max(math.radians(0.05), 2.0 * self.target_error)
+
+    @property
+    def default_path_tolerance(self) -> float:
+        """rad: the path tolerance of a joint a goal leaves at 0: 1 deg beyond the goal tolerance
+        (the deviation the timing and the blending may add on the way)."""
+        return self.default_goal_tolerance + math.radians(1.0)
+
+    # ------------------------------------------------------------------ driver side
+    def encode(self, command: Any, byte_order: Any = "little") -> bytes:
+        """The bytes of a master record (a command of this protocol)."""
+        raise NotImplementedError
+
+    def idle_record(self, byte_order: Any = "little") -> bytes:
+        """The master record that asks nothing of the controller (sent while nothing moves and at
+        every (re)connection: it arms the controller program)."""
+        raise NotImplementedError
+
+    def idle_command(self) -> Any:
+        """The command object of :meth:`idle_record`."""
+        raise NotImplementedError
+
+    def decode_feedback(self, data: Any, byte_order: Any = "little") -> Any:
+        """A controller record as this protocol's feedback object; ProtocolError (with the reason)
+        for bytes that are not one."""
+        raise NotImplementedError
+
+    def feedback_joints(self, feedback: Any) -> Optional[Tuple[float, ...]]:
+        """The joints [rad] a feedback record reports, or None where the protocol reports only the
+        pose (the driver then solves them)."""
+        return None
+
+    # ------------------------------------------------------------------ controller side
+    def decode_command(self, data: Any, byte_order: Any = "little") -> Any:
+        """A master record as this protocol's command object (ProtocolError otherwise)."""
+        raise NotImplementedError
+
+    def encode_feedback(self, feedback: Any, byte_order: Any = "little") -> bytes:
+        return feedback.encode(byte_order) if self.byte_order_matters else feedback.encode()
+
+    #: the records' words follow the ``byte_order`` parameter (v1); False: fixed little-endian
+    byte_order_matters: bool = False
+
+    def describe(self) -> str:
+        return "%s (%d bytes each way): %s" % (self.name, self.record_length, self.summary)
+
+    def __repr__(self) -> str:
+        return "<protocol %s>" % self.name
