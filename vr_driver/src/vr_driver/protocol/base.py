@@ -16,9 +16,25 @@ record length, so a card configured for another protocol refuses the master at C
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Tuple
+from dataclasses import dataclass
+from typing import Any, Optional, Sequence, Tuple
 
-__all__ = ["Protocol"]
+from ..poses import ControllerPose
+
+__all__ = ["Protocol", "WireTarget"]
+
+
+@dataclass(frozen=True)
+class WireTarget:
+    """One target of a stream as the driver hands it to a streaming protocol
+    (:meth:`Protocol.stream_command`): the protocol puts on the wire what it carries of it (v2: the
+    joints; a Cartesian protocol: the pose)."""
+
+    seq: int                                  # 1..65535, consecutive within a stream
+    joints: Tuple[float, ...]                 # rad, the controller's joint order: the planned point
+    pose: Optional[ControllerPose]            # mm / deg: FK of ``joints`` (Cartesian protocols need it)
+    speed: int                                # 0.1 % of the joint speed limits, 1..1000
+    smooth: int                               # 0 (an exact stop) .. the protocol's largest level
 
 
 class Protocol:
@@ -100,6 +116,18 @@ class Protocol:
         """The joints [rad] a feedback record reports, or None where the protocol reports only the
         pose (the driver then solves them)."""
         return None
+
+    # ------------------------------------------------------------------ streaming protocols
+    #: targets a streaming protocol's record offers at once (v2: 2 slots; 0: not a streaming protocol)
+    look_ahead_slots: int = 0
+
+    def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
+                       outputs: int = 0) -> Any:
+        """A streaming protocol's command: STOP (no target), or up to ``look_ahead_slots`` targets
+        (the first not yet taken by the controller, then the ones after it; ``start``: the first
+        begins a new stream), and the controller's outputs where the protocol carries them.
+        ProtocolError for a target the wire cannot carry."""
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ controller side
     def decode_command(self, data: Any, byte_order: Any = "little") -> Any:

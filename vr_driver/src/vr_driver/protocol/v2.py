@@ -34,7 +34,7 @@ from typing import Any, Sequence, Tuple
 
 from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose
-from .base import Protocol
+from .base import Protocol, WireTarget
 from .v1 import StatusBits, round_half_away
 
 __all__ = [
@@ -468,6 +468,18 @@ class ProtocolV2(Protocol):
 
     def feedback_joints(self, feedback: FeedbackV2) -> Tuple[float, ...]:
         return feedback.joints_rad
+
+    look_ahead_slots = 2
+
+    def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
+                       outputs: int = 0) -> CommandV2:
+        if stop:
+            return CommandV2(Control.STOP, outputs=outputs)
+        slots = [TargetSlot(t.seq, TargetKind.JOINT, t.smooth, t.speed, joints_to_wire(t.joints))
+                 for t in list(targets)[:self.look_ahead_slots]]
+        slots += [EMPTY] * (2 - len(slots))
+        return CommandV2(Control.START if start and not slots[0].empty else Control(0), slots[0], slots[1],
+                         outputs)
 
     def decode_command(self, data: Any, byte_order: Any = "little") -> CommandV2:
         return CommandV2.decode(data)
