@@ -85,6 +85,18 @@ def test_tolerances_default_negative_and_unknown():
     assert err.value.code == INVALID_JOINTS
 
 
+def test_the_caller_names_the_default_tolerances():
+    """A joint left at 0 (or not named) gets the caller's defaults, path and goal each its own; a
+    given or negative tolerance is kept."""
+    path, goal_default = math.radians(4.0), math.radians(3.0)
+    traj = check(goal([HOME], [1.0], path_tolerance={"joint_2": 0.01, "joint_4": 0.0},
+                      goal_tolerance={"joint_3": -1.0}),
+                 default_path_tolerance=path, default_goal_tolerance=goal_default)
+    assert traj.path_tolerance == pytest.approx((path, 0.01, path, path, path, path))
+    assert math.isinf(traj.goal_tolerance[2])
+    assert [traj.goal_tolerance[i] for i in (0, 1, 3, 4, 5)] == pytest.approx([goal_default] * 5)
+
+
 def test_segment_speeds_keep_the_planned_timing_and_refuse_beyond_the_limits():
     p1 = list(HOME)
     p1[0] += 1.045                       # 1.045 rad of J1 in 1 s: half of 2.09 rad/s

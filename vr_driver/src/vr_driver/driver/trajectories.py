@@ -35,7 +35,10 @@ OLD_HEADER_TIMESTAMP = -3
 PATH_TOLERANCE_VIOLATED = -4
 GOAL_TOLERANCE_VIOLATED = -5
 
-#: path tolerance [rad] used for a joint the goal gives none for (0 there means "the default")
+#: the path and goal tolerance [rad] :func:`validate` uses for a joint the goal leaves at 0 when the
+#: caller names no defaults. A caller that knows the protocol passes its defaults instead
+#: (:attr:`vr_driver.protocol.base.Protocol.default_path_tolerance` / ``default_goal_tolerance``:
+#: what the wire can reach; the action server does): 1 deg is tighter than v1's targets can land.
 DEFAULT_PATH_TOLERANCE = math.radians(1.0)
 #: how far a joint may land from a joint point sent through v1 (whole mm / degree Cartesian targets,
 #: solved again by the controller's IK): the thinning keeps this much of the tolerance in reserve
@@ -114,7 +117,9 @@ def _tolerances(names: Sequence[str], given: Dict[str, float], default: float, w
 
 def validate(goal: TrajectoryGoal, controller_names: Sequence[str], current: Sequence[float],
              lower: Sequence[float], upper: Sequence[float], now: float,
-             start_tolerance: float = math.radians(2.0), late_start: float = 0.5) -> ValidTrajectory:
+             start_tolerance: float = math.radians(2.0), late_start: float = 0.5,
+             default_path_tolerance: float = DEFAULT_PATH_TOLERANCE,
+             default_goal_tolerance: float = DEFAULT_PATH_TOLERANCE) -> ValidTrajectory:
     """Check a goal and bring it into the controller's joint order. Raises TrajectoryError:
 
     - INVALID_JOINTS: names missing, unknown, duplicated;
@@ -127,6 +132,9 @@ def validate(goal: TrajectoryGoal, controller_names: Sequence[str], current: Seq
 
     A first point at a time > 0 is reached from the arm's joints now; otherwise the first point
     is the start and must be where the arm is.
+
+    A joint the goal's path / goal tolerance leaves at 0 (or does not name) gets
+    ``default_path_tolerance`` / ``default_goal_tolerance`` [rad]; a negative one means no limit.
     """
     names = list(goal.joint_names)
     expected = list(controller_names)
@@ -191,8 +199,8 @@ def validate(goal: TrajectoryGoal, controller_names: Sequence[str], current: Seq
         times.insert(0, 0.0)
     return ValidTrajectory(
         positions=tuple(points), times=tuple(times),
-        path_tolerance=_tolerances(expected, goal.path_tolerance, DEFAULT_PATH_TOLERANCE, "path_tolerance"),
-        goal_tolerance=_tolerances(expected, goal.goal_tolerance, DEFAULT_PATH_TOLERANCE, "goal_tolerance"),
+        path_tolerance=_tolerances(expected, goal.path_tolerance, default_path_tolerance, "path_tolerance"),
+        goal_tolerance=_tolerances(expected, goal.goal_tolerance, default_goal_tolerance, "goal_tolerance"),
         goal_time_tolerance=max(0.0, float(goal.goal_time_tolerance)), delay=delay)
 
 
