@@ -1,0 +1,229 @@
+"""Supervision of a planner trajectory on its way: what ``joint_trajectory_action`` decides while a
+:class:`~vr_driver.driver.core.TrajectoryRun` executes and when it ends. ROS-free, no I/O, no
+clock of its own: the caller steps a :class:`TrajectorySupervisor` with the time and the driver's
+status (or just the joints), publishes what each step returns, and sets the :class:`Outcome`.
+
+- Per sample (:meth:`TrajectorySupervisor.step`): the feedback (desired = the plan at the sample's
+  time since the start, actual, error) and the path check: the distance to the planned *path*
+  (:func:`~vr_driver.driver.trajectories.path_deviation`, in units of each joint's path tolerance;
+  v1 cannot keep the schedule, so the path is checked, not the point of the schedule). Outside it
+  (> 1) the run must stop: PATH_TOLERANCE_VIOLATED.
+- Also per sample, the deviation from the plan *at the same time* (max over joints of
+  |actual - plan(stamp - start)|): not a reason to stop, a figure of how well the schedule was
+  kept; its largest value is in the note and in :attr:`Outcome.max_time_deviation`.
+- At the end (:meth:`TrajectorySupervisor.finish`): cancelled / preempted / shut down -> canceled;
+  the path left or a job failed -> aborted; the final joints outside the goal tolerance, or later
+  than ``goal_time_tolerance`` after the planned end -> GOAL_TOLERANCE_VIOLATED; otherwise
+  succeeded. The error_string always ends with the note on how the run's time compared with the
+  plan, in the protocol's own terms (its ``name`` and whether it ``streams``).
+
+Units: radians, seconds (the driver's clock), mm for the TCP positions it records.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, List, Optional, Sequence, Tuple
+
+from .trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL, ValidTrajectory,
+                           path_deviation)
+
+__all__ = ["SUCCEEDED", "ABORTED", "CANCELED", "SHUTDOWN", "PREEMPTED", "CANCELLED",
+           "Sample", "Outcome", "TrajectorySupervisor"]
+
+# how a goal ends (actionlib's terminal states of an accepted goal)
+SUCCEEDED = "succeeded"
+ABORTED = "aborted"
+CANCELED = "canceled"
+
+# why a run was stopped from outside (the start of the error_string)
+SHUTDOWN = "driver shutting down"
+PREEMPTED = "preempted by a newer trajectory"
+CANCELLED = "cancelled by the client"
+
+
+@dataclass(frozen=True)
+class Sample:
+    """One stepped sample: the feedback to publish and what was checked."""
+
+    time: float                                  # seconds since the start (the sample's stamp)
+    desired: Tuple[float, ...]                   # the plan at ``time``
+    actual: Tuple[float, ...]
+    error: Tuple[float, ...]                     # actual - desired
+    path_deviation: float                        # distance to the planned path, x the path tolerance
+    segment: int                                 # the planned segment nearest the joints
+    time_deviation: float                        # rad, max |error| over the joints
+    violated: bool                               # outside the path tolerance: the run must stop
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """How the goal ends: ``state`` (SUCCEEDED / ABORTED / CANCELED), the control_msgs
+    ``error_code`` and ``error_string`` of the result; ``note`` (the time compared with the plan,
+    the end of ``error_string``) and the run's figures."""
+
+    state: str
+    error_code: int
+    error_string: str
+    note: str
+    elapsed: float                               # seconds from the start to the end
+    max_path_deviation: float                    # x the path tolerance (0: no sample)
+    max_time_deviation: float                    # rad, vs the plan at the same time (0: no sample)
+    samples: int
+
+
+class TrajectorySupervisor:
+    """Watches one run of ``traj`` (``run``: what :meth:`DriverCore.submit_trajectory` returned,
+    started at ``started`` on the driver's clock) for ``protocol``
+    (:class:`vr_driver.protocol.base.Protocol`). ``joint_names``: the controller's joint names, for
+    the texts (default joint_1..joint_n).
+
+    The caller's loop: ``while sup.running:`` read the status, :meth:`step_status` (or
+    :meth:`step`), publish the returned sample; :meth:`cancel` / :meth:`shutdown` on a request
+    from outside. After the loop: if :attr:`stops_arm`, stop the arm (reason :attr:`stop_reason`)
+    and wait for the run's jobs; then :meth:`finish` (or :meth:`finish_status`)."""
+
+    def __init__(self, traj: ValidTrajectory, run: Any, started: float, protocol: Any,
+                 joint_names: Optional[Sequence[str]] = None) -> None:
+        self.traj = traj
+        self.run = run
+        self.started = started
+        self.protocol = protocol
+        n = len(traj.positions[0])
+        self.names = list(joint_names) if joint_names is not None else ["joint_%d" % (i + 1) for i in range(n)]
+        self.executed: List[Tuple[float, float, float]] = []   # TCP positions seen [mm]
+        self.samples = 0
+        self.max_path_deviation = 0.0
+        self.max_time_deviation = 0.0
+        self.worst_time: Optional[Tuple[int, float]] = None      # (joint index, seconds since start)
+        self._stop_reason = ""
+        self._preempted = False
+        self._violated = False
+
+    # ------------------------------------------------------------------ during the run
+    @property
+    def stop_reason(self) -> str:
+        """Why the run was stopped before its end ("" while it was not)."""
+        return self._stop_reason
+
+    @property
+    def preempted(self) -> bool:
+        return self._preempted
+
+    @property
+    def stops_arm(self) -> bool:
+        """The caller must stop the arm: cancelled, out of the path tolerance, shut down. Not when
+        preempted: the newer trajectory already replaced the queued points and starts from the one
+        in flight."""
+        return bool(self._stop_reason) and not self._preempted
+
+    @property
+    def running(self) -> bool:
+        """Keep stepping: the run has not ended, failed, or been stopped."""
+        return not self._stop_reason and not self.run.done and self.run.failure() is None
+
+    def cancel(self, preempted: bool = False) -> None:
+        """The client cancelled the goal (``preempted``: a newer goal replaced it)."""
+        if not self._stop_reason:
+            self._preempted = preempted
+            self._stop_reason = PREEMPTED if preempted else CANCELLED
+
+    def shutdown(self) -> None:
+        """The driver shuts down: the run is stopped."""
+        if not self._stop_reason:
+            self._stop_reason = SHUTDOWN
+
+    def step(self, now: float, joints_valid: bool, joints: Optional[Sequence[float]],
+             stamp: Optional[float] = None, pose: Any = None) -> Optional[Sample]:
+        """One sample of the arm: ``joints`` measured at ``stamp`` (default ``now``), ``pose``
+        (a ControllerPose or None) recorded for the executed TCP path. None when there are no
+        valid joints (nothing to publish, nothing checked)."""
+        if not joints_valid or joints is None:
+            return None
+        t = (now if stamp is None else stamp) - self.started
+        actual = tuple(float(v) for v in joints)
+        desired = tuple(self.traj.sample(t))
+        error = tuple(a - d for a, d in zip(actual, desired))
+        worst = max(range(len(error)), key=lambda i: abs(error[i]))
+        off = abs(error[worst])
+        self.samples += 1
+        if off > self.max_time_deviation or self.worst_time is None:
+            self.max_time_deviation, self.worst_time = off, (worst, t)
+        if pose is not None:
+            self.executed.append(tuple(pose.as_tuple()[:3]))
+        deviation, segment = path_deviation(self.traj, actual)
+        self.max_path_deviation = max(self.max_path_deviation, deviation)
+        violated = deviation > 1.0
+        if violated and not self._stop_reason:
+            self._violated = True
+            self._stop_reason = ("the arm left the path tolerance near segment %d (%.1f x the "
+                                 "tolerance)" % (segment, deviation))
+        return Sample(t, desired, actual, error, deviation, segment, off, violated)
+
+    def step_status(self, now: float, status: Any) -> Optional[Sample]:
+        """:meth:`step` with a :class:`~vr_driver.driver.core.DriverStatus` (stamp: the time its
+        feedback record arrived, else the snapshot's time)."""
+        stamp = status.feedback_time if status.feedback_time is not None else status.time
+        return self.step(now, status.joints_valid, status.joints, stamp, status.pose)
+
+    # ------------------------------------------------------------------ the end
+    def note(self, elapsed: float, cycle_rate: float = 0.0) -> str:
+        """How the run's time compared with the plan, in the protocol's terms, and how far it was
+        from the plan at the same time."""
+        traj, run, protocol = self.traj, self.run, self.protocol
+        slower = elapsed / traj.duration if traj.duration > 0 else 1.0
+        if protocol.streams:
+            streamed = len(run.jobs[0].points) if run.jobs else 0
+            text = "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, blended)" % (
+                slower, traj.duration, protocol.name, streamed, len(traj.positions) - 1)
+            gaps = run.jobs[0].gaps if run.jobs else 0
+            if gaps:
+                text += ("; the arm stopped %d time(s) on the way waiting for its next target: the bus "
+                         "(%.1f cycles/s) did not bring it in time -- a faster line (baud) or a larger "
+                         "stream_path_tolerance gives fewer, longer segments" % (gaps, cycle_rate))
+        else:
+            text = "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
+                slower, traj.duration, protocol.name, len(run.jobs))
+        if self.worst_time is not None:
+            joint, at = self.worst_time
+            text += "; at most %.3f deg from the plan at the same time (%s, %.2f s after the start)" % (
+                math.degrees(self.max_time_deviation), self.names[joint], at)
+        return text
+
+    def finish(self, now: float, joints_valid: bool, joints: Optional[Sequence[float]],
+               cycle_rate: float = 0.0) -> Outcome:
+        """The outcome, with the arm's final joints at ``now`` (the run's jobs ended, or the
+        caller gave up waiting for them); ``cycle_rate``: the measured DP cycles per second (for
+        the note on a streaming protocol's gaps)."""
+        traj, run = self.traj, self.run
+        elapsed = now - self.started
+        note = self.note(elapsed, cycle_rate)
+
+        def outcome(state: str, code: int, text: str) -> Outcome:
+            return Outcome(state, code, text, note, elapsed, self.max_path_deviation,
+                           self.max_time_deviation, self.samples)
+
+        if self._stop_reason and not self._violated:
+            return outcome(CANCELED, SUCCESSFUL, "%s; %s" % (self._stop_reason, note))
+        failed = run.failure()
+        if self._violated or failed is not None:
+            reason = self._stop_reason or (failed.result.reason if failed.result else "failed")
+            return outcome(ABORTED, PATH_TOLERANCE_VIOLATED, "%s; %s" % (reason, note))
+        if joints is None or not joints_valid:
+            return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "no joint state at the end; " + note)
+        final = traj.positions[-1]
+        off = [abs(a - b) for a, b in zip(joints, final)]
+        bad = [(self.names[i], off[i], t) for i, t in enumerate(traj.goal_tolerance) if off[i] > t]
+        if bad:
+            name, err, tol = bad[0]
+            return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "%s ended %.4f rad from the goal (tolerance "
+                           "%.4f); %s" % (name, err, tol, note))
+        late = elapsed - traj.duration
+        if traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
+            return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "reached %.2f s after the planned end "
+                           "(goal_time_tolerance %.2f s); %s" % (late, traj.goal_time_tolerance, note))
+        return outcome(SUCCEEDED, SUCCESSFUL, note)
+
+    def finish_status(self, now: float, status: Any) -> Outcome:
+        """:meth:`finish` with a :class:`~vr_driver.driver.core.DriverStatus`."""
+        return self.finish(now, status.joints_valid, status.joints, status.cycle_rate)
