@@ -1,13 +1,18 @@
 """`joint_trajectory_action`: the FollowJointTrajectory action server of the node `interface`
-(the ROS-Industrial name; what MoveIt's simple controller manager drives). ROS adapter only: the
-checks are in :mod:`vr_driver.driver.trajectories`, the execution in
-:meth:`vr_driver.driver.DriverCore.submit_trajectory`.
+(the ROS-Industrial name; what MoveIt's simple controller manager drives). ROS adapter only: it
+translates messages. The checks are in :mod:`vr_driver.driver.trajectories`, the execution in
+:meth:`vr_driver.driver.DriverCore.submit_trajectory`, what is decided while it runs and how it
+ends in :class:`vr_driver.driver.supervision.TrajectorySupervisor`; here: goal message ->
+TrajectoryGoal -> validate -> submit -> step the supervisor with the driver's status, publish its
+feedback, pass on cancel / preempt / shutdown -> set the result it gives (and draw in RViz).
 
 - A goal is validated before anything is sent; a refusal is ``set_rejected`` with the control_msgs
   error code (INVALID_JOINTS, INVALID_GOAL, OLD_HEADER_TIMESTAMP) and the reason.
 - A new goal preempts the running one (its remaining points are replaced; the one in flight
   completes), as MoveIt expects of a trajectory controller.
 - Feedback at the joint_states rate: desired (the plan at the elapsed time), actual, error.
+- A joint the goal leaves at 0 gets the protocol's default tolerances
+  (``default_path_tolerance`` / ``default_goal_tolerance``: what its wire can reach).
 - The path is watched against the path tolerance (v1 cannot keep the schedule, so the distance to
   the planned *path* is checked, not to the point of the schedule); outside it: the arm is stopped
   and the goal aborted with PATH_TOLERANCE_VIOLATED. At the end the joints must be within the goal
@@ -30,8 +35,8 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from vr_driver.msg import FollowJointTrajectoryAction, FollowJointTrajectoryFeedback, FollowJointTrajectoryResult
 
 from ..driver import DriverCore, DriverError
-from ..driver.trajectories import (GOAL_TOLERANCE_VIOLATED, INVALID_GOAL, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
-                                  TrajectoryError, TrajectoryGoal, path_deviation, segment_speeds, validate)
+from ..driver.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
+from ..driver.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
 from ..errors import VrDriverError
 
 
@@ -107,7 +112,10 @@ class TrajectoryServer:
         if not status.motion_possible or status.joints is None:
             raise TrajectoryError(INVALID_GOAL, "motion is not possible: %s" % status.why_no_motion())
         lim = self.core.kin.limits
-        traj = validate(goal, self.names, status.joints, lim.lower, lim.upper, rospy.get_time())
+        protocol = self.core.protocol
+        traj = validate(goal, self.names, status.joints, lim.lower, lim.upper, rospy.get_time(),
+                        default_path_tolerance=protocol.default_path_tolerance,
+                        default_goal_tolerance=protocol.default_goal_tolerance)
         segment_speeds(traj, lim.velocity, self.names)
         return traj
 
@@ -157,98 +165,52 @@ class TrajectoryServer:
             result = FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=str(exc))
             handle.set_aborted(result, str(exc))
             return
-        started = rospy.get_time()
+        sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names)
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
-        executed: List[Tuple[float, float, float]] = []
-        last_draw = started
+        last_draw = rospy.get_time()
         fb = FollowJointTrajectoryFeedback(joint_names=self.names)
-        why_stop = ""
-        preempted = False
-        code = SUCCESSFUL
-        while not run.done:
+        while sup.running:
             if rospy.is_shutdown():
-                why_stop = "driver shutting down"
+                sup.shutdown()
                 break
             if cancel.is_set():
                 with self._lock:
                     preempted = self._current != goal_id
-                why_stop = "preempted by a newer trajectory" if preempted else "cancelled by the client"
+                sup.cancel(preempted)
                 break
-            status = self.core.status()
-            if status.joints_valid and status.joints is not None:
-                elapsed = rospy.get_time() - started
-                desired = traj.sample(elapsed)
-                actual = list(status.joints)
+            sample = sup.step_status(self.core.clock(), self.core.status())
+            if sample is not None:
                 fb.header.stamp = rospy.Time.now()
-                fb.desired = JointTrajectoryPoint(positions=list(desired))
-                fb.actual = JointTrajectoryPoint(positions=actual)
-                fb.error = JointTrajectoryPoint(positions=[a - d for a, d in zip(actual, desired)])
+                fb.desired = JointTrajectoryPoint(positions=list(sample.desired))
+                fb.actual = JointTrajectoryPoint(positions=list(sample.actual))
+                fb.error = JointTrajectoryPoint(positions=list(sample.error))
                 handle.publish_feedback(fb)
-                if status.pose is not None:
-                    executed.append(tuple(v / 1000.0 for v in status.pose.as_tuple()[:3]))
-                    if rospy.get_time() - last_draw > 0.5:
-                        last_draw = rospy.get_time()
-                        self._draw("trajectory_executed", executed, (0.2, 1.0, 0.2))
-                deviation, segment = path_deviation(traj, actual)
-                if deviation > 1.0:
-                    code = PATH_TOLERANCE_VIOLATED
-                    why_stop = ("the arm left the path tolerance near segment %d (%.1f x the "
-                                "tolerance)" % (segment, deviation))
+                if rospy.get_time() - last_draw > 0.5:
+                    last_draw = rospy.get_time()
+                    self._draw("trajectory_executed", self._executed(sup), (0.2, 1.0, 0.2))
+                if sample.violated:
                     break
-            failed = run.failure()
-            if failed is not None:
-                break
-            run.jobs[-1].wait(self.period)
-        if why_stop:
+            if run.jobs:
+                run.jobs[-1].wait(self.period)
+        if sup.stop_reason:
             # preempted: the newer trajectory already replaced our queued points and starts from
             # the one in flight; cancelled / out of tolerance / shutdown: stop the arm (at rest)
-            if not preempted:
-                self.core.stop_motion(why_stop)
+            if sup.stops_arm:
+                self.core.stop_motion(sup.stop_reason)
             for job in run.jobs:
                 job.wait(self.core.params.stop_timeout + 5.0)
-        self._draw("trajectory_executed", executed, (0.2, 1.0, 0.2))
-        elapsed = rospy.get_time() - started
-        slower = elapsed / traj.duration if traj.duration > 0 else 1.0
-        if self.core.streaming:
-            streamed = len(run.jobs[0].points) if run.jobs else 0
-            note = "ran %.2f x the planned %.2f s (protocol v2: %d of %d points streamed, blended)" % (
-                slower, traj.duration, streamed, len(traj.positions) - 1)
-            gaps = run.jobs[0].gaps if run.jobs else 0
-            if gaps:
-                note += ("; the arm stopped %d time(s) on the way waiting for its next target: the bus "
-                         "(%.1f cycles/s) did not bring it in time -- a faster line (baud) or a larger "
-                         "stream_path_tolerance gives fewer, longer segments" % (gaps, self.core.link.cycle_rate))
+        self._draw("trajectory_executed", self._executed(sup), (0.2, 1.0, 0.2))
+        outcome = sup.finish_status(self.core.clock(), self.core.status())
+        rospy.loginfo("joint_trajectory_action: %s", outcome.note)
+        result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string=outcome.error_string)
+        if outcome.state == SUCCEEDED:
+            handle.set_succeeded(result)
+        elif outcome.state == CANCELED:
+            handle.set_canceled(result)
         else:
-            note = "ran %.2f x the planned %.2f s (protocol v1 stops at each of %d points)" % (
-                slower, traj.duration, len(run.jobs))
-        rospy.loginfo("joint_trajectory_action: %s", note)
-        failed = run.failure()
-        if why_stop and code != PATH_TOLERANCE_VIOLATED:
-            handle.set_canceled(FollowJointTrajectoryResult(error_code=SUCCESSFUL,
-                                                            error_string="%s; %s" % (why_stop, note)))
-            return
-        if code == PATH_TOLERANCE_VIOLATED or failed is not None:
-            reason = why_stop or (failed.result.reason if failed is not None and failed.result else "failed")
-            handle.set_aborted(FollowJointTrajectoryResult(
-                error_code=code if code != SUCCESSFUL else PATH_TOLERANCE_VIOLATED,
-                error_string="%s; %s" % (reason, note)))
-            return
-        status = self.core.status()
-        final = traj.positions[-1]
-        if status.joints is None or not status.joints_valid:
-            handle.set_aborted(FollowJointTrajectoryResult(error_code=GOAL_TOLERANCE_VIOLATED,
-                                                           error_string="no joint state at the end; " + note))
-            return
-        off = [abs(a - b) for a, b in zip(status.joints, final)]
-        bad = [(self.names[i], off[i], t) for i, t in enumerate(traj.goal_tolerance) if off[i] > t]
-        late = elapsed - traj.duration
-        if bad:
-            name, err, tol = bad[0]
-            text = "%s ended %.4f rad from the goal (tolerance %.4f); %s" % (name, err, tol, note)
-            handle.set_aborted(FollowJointTrajectoryResult(error_code=GOAL_TOLERANCE_VIOLATED, error_string=text))
-        elif traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
-            text = "reached %.2f s after the planned end (goal_time_tolerance %.2f s); %s" % (
-                late, traj.goal_time_tolerance, note)
-            handle.set_aborted(FollowJointTrajectoryResult(error_code=GOAL_TOLERANCE_VIOLATED, error_string=text))
-        else:
-            handle.set_succeeded(FollowJointTrajectoryResult(error_code=SUCCESSFUL, error_string=note))
+            handle.set_aborted(result)
+
+    @staticmethod
+    def _executed(sup: TrajectorySupervisor) -> List[Tuple[float, float, float]]:
+        """The executed TCP path the supervisor recorded, in metres (RViz)."""
+        return [(x / 1000.0, y / 1000.0, z / 1000.0) for x, y, z in sup.executed]
