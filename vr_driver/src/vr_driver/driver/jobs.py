@@ -74,6 +74,8 @@ class StreamPoint:
     index: int                   # the planned point it is (index into the trajectory's points)
     release: float = 0.0         # not offered before this many seconds from the stream's start (the
     #                              end of a pause of the plan: the arm holds at the point before)
+    pose: Optional[ControllerPose] = None   # FK of ``joints`` in controller units (mm, deg): what a
+    #                              Cartesian streaming protocol sends (None for a joint protocol)
 
 
 class JobPhase(enum.Enum):

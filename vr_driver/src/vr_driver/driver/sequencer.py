@@ -1,13 +1,20 @@
-"""The motion sequencer: the job queue, the exactly-once handshake, stops and outcomes, stepped
-by the bus loop. ROS-free, no I/O, no planning.
+"""The motion sequencers: the job queue, exactly-once sending, stops and outcomes, stepped by the
+bus loop. ROS-free, no I/O, no planning.
 
-:meth:`MotionSequencer.step` is called once per bus iteration with the link's
-:class:`~vr_driver.driver.link.LinkSample` and the arm's current joints; it returns the
-:class:`~vr_driver.protocol.v1.Command` to send next. Other threads never touch its state: they
-:meth:`~MotionSequencer.post` requests (add jobs, cancel one, stop all), which the next step takes
-in the order they were posted. Planning never runs here: a job whose planned start no longer
-matches the arm is handed to ``replan(job, joints)`` (the driver core runs it on its planning
-thread) and waits in REPLANNING until :meth:`~MotionSequencer.post` brings the new preview back.
+:class:`SequencerBase` is what every protocol shares; a protocol's sequencer implements its small
+public hook interface (``follow``, ``advance``, ``record``, ``idle_command``, ``stop_job``,
+``stop_untracked``, ``replaced``, ``apply_replan``, ``on_lost``, ``resting``, ``end_due``):
+:class:`MotionSequencer` (v1: one target at a time through the handshake) here, and
+:class:`~vr_driver.driver.streaming.StreamSequencer` (the streaming protocols). The driver core
+picks one by the protocol object's ``streams``.
+
+:meth:`SequencerBase.step` is called once per bus iteration with the link's
+:class:`~vr_driver.driver.link.LinkSample` and the arm's current joints; it returns the command to
+send next. Other threads never touch its state: they post requests (:meth:`~SequencerBase.add`,
+:meth:`~SequencerBase.cancel`, :meth:`~SequencerBase.stop_all`), which the next step takes in the
+order they were posted. Planning never runs here: a job whose planned start no longer matches the
+arm is handed to ``replan(job, joints)`` (the driver core runs it on its planning thread) and
+waits in REPLANNING until :meth:`~SequencerBase.replanned` brings the new plan back.
 
 Rules (README "Reliability", doc/README.md):
 
@@ -42,7 +49,7 @@ from .link import LinkSample
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["MotionSequencer", "SequencerView", "START_TOLERANCE", "SESSION_RECORDS_BEFORE_REQUEST",
+__all__ = ["SequencerBase", "MotionSequencer", "SequencerView", "START_TOLERANCE", "SESSION_RECORDS_BEFORE_REQUEST",
            "why_no_motion"]
 
 # a queued job whose planned start differs from the current joints by more than this [rad] is
@@ -118,15 +125,28 @@ class _Settle:
         self.since = since
 
 
-class MotionSequencer:
-    """See the module docstring."""
+class SequencerBase:
+    """What every protocol's sequencer shares (see the module docstring): the requests posted by
+    other threads, tickets, the queue, the job in flight, waiting for rest, outcomes, the link
+    session and the view. A protocol's sequencer implements the public hooks below and nothing else
+    (it may call the base's helpers: :meth:`next_job`, :meth:`starts_here`, :meth:`begin_settle`,
+    :meth:`fail_queue`, :meth:`end_all`):
+
+    - :meth:`follow` reads the controller's progress from a feedback record and ends jobs;
+    - :meth:`advance` sends (or starts) what is next when everything allows it;
+    - :meth:`record` / :meth:`idle_command`: the command to send (with / without feedback);
+    - :meth:`stop_job` / :meth:`stop_untracked`: stop the job in flight / a motion of no job;
+    - :meth:`replaced`: a REPLACE request arrived while ``job`` runs;
+    - :meth:`apply_replan`: put a new plan (from ``replan``) into a job;
+    - :meth:`on_lost`: the link was lost (the base then ends every job);
+    - :meth:`resting` (the protocol's own "at rest" condition) and :meth:`end_due`.
+    """
 
     def __init__(self, params: DriverParams, clock: Callable[[], float],
                  replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
         self.params = params
         self.clock = clock
         self.replan = replan
-        self.handshake = MasterHandshake(params.accept_timeout, params.release_timeout, clock=clock)
         self._lock = threading.Lock()            # guards only the inbox and the ticket counter
         self._inbox: Deque[_Request] = collections.deque()
         self._claimed = 0                         # newest ticket handed out
@@ -166,21 +186,70 @@ class MotionSequencer:
             self._inbox.append(request)
 
     # ------------------------------------------------------------------ bus thread
-    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Command:
-        """One bus iteration: take the requests, follow the handshake, end jobs, send the next
-        target when everything allows it. Returns what to send."""
+    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
+        """One bus iteration: take the requests, follow the controller, end jobs, send the next
+        target when everything allows it. Returns the command to send."""
         fb = self._begin_step(now, sample)
         if fb is None:
-            self.handshake.update(None, now)
+            command = self.idle_command(now)
             self._publish()
-            return self.handshake.outputs()
+            return command
         self._track_rest(now, fb)
-        event = self.handshake.update(sample.fresh, now)
-        self._on_event(event, fb, now)
+        self.follow(now, fb, sample)
         self._check_settle(now, fb)
-        self._advance(now, fb, sample, joints)
+        self.advance(now, fb, sample, joints)
         self._publish()
-        return self.handshake.outputs()
+        return self.record(now)
+
+    # ------------------------------------------------------------------ the hooks
+    def follow(self, now: float, fb: Any, sample: LinkSample) -> None:
+        """Read the controller's progress in ``fb`` (this session's latest record; ``sample.fresh``
+        is set when it arrived in this cycle); end the jobs it ends."""
+        raise NotImplementedError
+
+    def advance(self, now: float, fb: Any, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> None:
+        """Send or start what is next, when nothing forbids it (a job settling, the controller not
+        armed, a job being planned again...)."""
+        raise NotImplementedError
+
+    def record(self, now: float) -> Any:
+        """The command to send in this cycle."""
+        raise NotImplementedError
+
+    def idle_command(self, now: float) -> Any:
+        """The command to send while there is no feedback of this session (link down, new session)."""
+        raise NotImplementedError
+
+    def stop_job(self, job: MoveJob, reason: str, now: float) -> None:
+        """Stop the job in flight (it is no longer the current job when this is called): stop the
+        arm and :meth:`begin_settle`, or end the job at once when nothing of it was sent."""
+        raise NotImplementedError
+
+    def stop_untracked(self, reason: str, now: float) -> None:
+        """No job in flight, but a motion may still run (after a timeout, an earlier stream's end):
+        stop it."""
+        raise NotImplementedError
+
+    def replaced(self, job: MoveJob) -> None:
+        """A REPLACE request (a new joint path) arrived while ``job`` runs and was sent."""
+
+    def apply_replan(self, job: MoveJob, plan: Any) -> None:
+        """Put a new plan into ``job`` (what ``replan`` produced from the arm's joints)."""
+        raise NotImplementedError
+
+    def on_lost(self, now: float, reason: str) -> None:
+        """The link was lost or a new session began: forget what was in flight on the wire (the
+        base then ends every job with the reason)."""
+        raise NotImplementedError
+
+    def resting(self, fb: Any) -> bool:
+        """The protocol's own condition for the arm at rest, besides the in-motion bit clear and
+        the pose unchanged for ``stop_settle_time``."""
+        return True
+
+    def end_due(self, now: float) -> bool:
+        """True while the current motion's end is due and worth polling for."""
+        return False
 
     def _begin_step(self, now: float, sample: LinkSample) -> Optional[Any]:
         """The start of every step (v1 and v2): take the posted requests; on a lost link or a new
@@ -210,7 +279,7 @@ class MotionSequencer:
             requests = list(self._inbox)
             self._inbox.clear()
         posted = [job for request in requests if isinstance(request, _Add) for job in request.jobs]
-        self._end_all(JobPhase.CANCELLED, reason, posted)
+        self.end_all(JobPhase.CANCELLED, reason, posted)
         self._publish()
 
     # ------------------------------------------------------------------ requests
@@ -232,18 +301,13 @@ class MotionSequencer:
                             "here: %s", job.id, request.error)
                 job.finish(False, JobPhase.FAILED, "not sent: from the arm's current pose: %s"
                            % request.error, None)
-                self._fail_queue("an earlier target of the same path failed (%s)" % request.error,
+                self.fail_queue("an earlier target of the same path failed (%s)" % request.error,
                                  job.group)
             else:
-                self._apply_replan(job, request.preview)
+                self.apply_replan(job, request.preview)
                 log.info("job %d planned again from the arm's current pose (%.1f s)", job.id,
                          job.duration)
                 job.set_phase(JobPhase.QUEUED)
-
-    def _apply_replan(self, job: MoveJob, plan) -> None:
-        """Put the new plan into the job (v1: its preview, which starts where the arm now is)."""
-        job.preview = plan
-        job.start = plan.trajectory.start
 
     def _take_add(self, request: _Add, now: float) -> None:
         jobs = [j for j in request.jobs if not j.done]
@@ -273,6 +337,8 @@ class MotionSequencer:
                 dropped += 1
             if dropped:
                 log.info("joint path: %d queued target(s) of the previous path dropped", dropped)
+            if self._job is not None and self._job.sent:
+                self.replaced(self._job)
         self._queue.extend(jobs)
 
     def _cancel(self, job: MoveJob, reason: str, now: float) -> None:
@@ -295,32 +361,173 @@ class MotionSequencer:
         if self._job is not None:
             self._stop_current(reason, now)
         else:
-            self._stop_untracked(reason, now)
-
-    def _stop_untracked(self, reason: str, now: float) -> None:
-        """No job of ours in flight, but a motion may still run (after a timeout): stop it."""
-        if self.handshake.phase not in (MasterPhase.IDLE, MasterPhase.SYNC):
-            self.handshake.abort(reason, now, stop=True)
+            self.stop_untracked(reason, now)
 
     def _stop_current(self, reason: str, now: float) -> None:
         job = self._job
         assert job is not None
         self._job = None
         job.stop_reason = reason
+        self.stop_job(job, reason, now)
+
+
+        # ------------------------------------------------------------------ at rest
+    def _track_rest(self, now: float, fb: Feedback) -> None:
+        values = fb.values
+        if values != self._rest_values or fb.status & StatusBits.IN_MOTION:
+            self._rest_values = values
+            self._rest_since = now
+
+    def at_rest(self, now: float, fb: Any) -> bool:
+        """The arm at rest: the protocol's own condition (:meth:`resting`), the in-motion bit clear
+        and the reported pose unchanged for ``stop_settle_time``."""
+        return self.resting(fb) and not fb.status & StatusBits.IN_MOTION and \
+            now - self._rest_since >= self.params.stop_settle_time
+
+    def begin_settle(self, job: MoveJob, phase: JobPhase, reason: str, now: float) -> None:
+        job.set_phase(JobPhase.STOPPING)
+        self._settle = _Settle(job, phase, reason, now)
+
+    def _check_settle(self, now: float, fb: Feedback) -> None:
+        settle = self._settle
+        if settle is None:
+            return
+        job = settle.job
+        if self.at_rest(now, fb):
+            self._settle = None
+            if job is not None:
+                log.info("job %d: the arm is at rest at %s", job.id, fb.values)
+                job.finish(False, settle.phase, settle.reason, fb.pose)
+            return
+        if now - settle.since > self.params.stop_timeout:
+            self._settle = None
+            why = ("%s; the arm did not come to rest within %.3g s (stop_timeout); last reported "
+                   "pose %s" % (settle.reason, self.params.stop_timeout, fb.values))
+            log.error("job %s: %s", job.id if job is not None else "-", why)
+            if job is not None:
+                job.finish(False, JobPhase.FAILED, why, fb.pose)
+
+    # ------------------------------------------------------------------ helpers
+    def next_job(self, fb: Any) -> Optional[MoveJob]:
+        """The job in flight, else the next queued one (None: none; the queue fails when motion is
+        no longer possible)."""
+        if self._job is None:
+            if not self._queue:
+                return None
+            why = why_no_motion(fb)
+            if why:
+                self.fail_queue("motion is no longer possible: %s" % why)
+                return None
+            self._job = self._queue.popleft()
+        return self._job
+
+    def starts_here(self, job: MoveJob, joints: Optional[Tuple[float, ...]]) -> bool:
+        """True when ``job`` may be sent from ``joints``. Otherwise it failed (no valid joint state
+        to check its planned start against; the rest of its path fails too) or is being planned
+        again from ``joints`` (the arm is not where it was planned to start)."""
+        if joints is None:
+            self._job = None
+            job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the planned "
+                       "start against", None)
+            self.fail_queue("an earlier target of the same path failed", job.group)
+            return False
+        if job.start is not None and max(abs(a - b) for a, b in zip(joints, job.start)) > START_TOLERANCE:
+            job.set_phase(JobPhase.REPLANNING)
+            self.replan(job, joints)
+            return False
+        return True
+
+    def fail_queue(self, reason: str, group: Optional[int] = None) -> None:
+        """End the queued jobs (of one group only, when given) with ``reason``."""
+        for queued in list(self._queue):
+            if group is None or queued.group == group:
+                queued.finish(False, JobPhase.FAILED, reason, None)
+                self._queue.remove(queued)
+
+    def _lost(self, now: float, reason: str) -> None:
+        self.on_lost(now, reason)
+        self._session = None
+        self._rest_values = None
+        self.end_all(JobPhase.FAILED, "link to the controller lost (%s); what was sent is not re-sent; "
+                     "the last pose seen is reported, where the arm came to rest is unknown" % reason)
+
+    def end_all(self, phase: JobPhase, reason: str, extra: Sequence[MoveJob] = ()) -> None:
+        """End every job: settling, in flight, queued (and ``extra``); a job that was sent
+        reports the last pose seen."""
+        jobs: List[MoveJob] = list(extra)
+        if self._settle is not None and self._settle.job is not None:
+            jobs.append(self._settle.job)
+        if self._job is not None:
+            jobs.append(self._job)
+        jobs.extend(self._queue)
+        self._settle, self._job = None, None
+        self._queue.clear()
+        for job in jobs:
+            job.finish(False, phase, reason, self._last_pose if job.sent else None)
+
+    def _publish(self) -> None:
+        job = self._job
+        tail = None
+        if self._queue:
+            tail = self._queue[-1].joint_target
+        elif job is not None:
+            tail = job.joint_target
+        settle_job = self._settle.job if self._settle is not None else None
+        self.view = SequencerView(
+            job=job if job is not None else settle_job, queue_length=len(self._queue),
+            tail_joints=tail, inflight_joints=job.joint_target if job is not None else None,
+            settling=self._settle is not None, targets_sent=self.targets_sent,
+            targets_done=self.targets_done, targets_rejected=self.targets_rejected,
+            targets_aborted=self.targets_aborted)
+
+
+class MotionSequencer(SequencerBase):
+    """Protocol v1: one target at a time through :class:`~vr_driver.protocol.v1.MasterHandshake`
+    (request, accepted, done / rejected; the arm stops at each target). :meth:`step` returns a
+    :class:`~vr_driver.protocol.v1.Command`."""
+
+    def __init__(self, params: DriverParams, clock: Callable[[], float],
+                 replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
+        super().__init__(params, clock, replan)
+        self.handshake = MasterHandshake(params.accept_timeout, params.release_timeout, clock=clock)
+
+    # ------------------------------------------------------------------ hooks
+    def idle_command(self, now: float) -> Command:
+        self.handshake.update(None, now)
+        return self.handshake.outputs()
+
+    def record(self, now: float) -> Command:
+        return self.handshake.outputs()
+
+    def apply_replan(self, job: MoveJob, plan: Any) -> None:
+        """v1: the job's new preview, which starts where the arm now is."""
+        job.preview = plan
+        job.start = plan.trajectory.start
+
+    def stop_untracked(self, reason: str, now: float) -> None:
+        if self.handshake.phase not in (MasterPhase.IDLE, MasterPhase.SYNC):
+            self.handshake.abort(reason, now, stop=True)
+
+    def stop_job(self, job: MoveJob, reason: str, now: float) -> None:
         aborted = self.handshake.abort(reason, now, stop=True)
         if aborted is not None:
             self.targets_aborted += 1
             log.info("job %d: stop sent (%s); waiting for the arm to come to rest", job.id, reason)
-            self._begin_settle(job, JobPhase.CANCELLED, reason, now)
+            self.begin_settle(job, JobPhase.CANCELLED, reason, now)
         elif job.sent:
             # between the via point and the end point of a CIRC: nothing in flight, the arm is
             # where the last target left it -- still, report the pose at rest
-            self._begin_settle(job, JobPhase.CANCELLED, reason, now)
+            self.begin_settle(job, JobPhase.CANCELLED, reason, now)
         else:
             job.finish(False, JobPhase.CANCELLED, reason, None)
 
+    def on_lost(self, now: float, reason: str) -> None:
+        if self.handshake.reset(reason, now) is not None:
+            self.targets_aborted += 1
+
     # ------------------------------------------------------------------ handshake events
-    def _on_event(self, event, fb: Feedback, now: float) -> None:
+    def follow(self, now: float, fb: Feedback, sample: LinkSample) -> None:
+        event = self.handshake.update(sample.fresh, now)
         if event is None:
             return
         job = self._job
@@ -355,61 +562,23 @@ class MotionSequencer:
             self.handshake.abort(reason, now, stop=True)
         moved = job.phase is JobPhase.MOVING or bool(fb.status & StatusBits.IN_MOTION)
         if moved or isinstance(event, TimedOut):
-            self._begin_settle(job, JobPhase.FAILED, reason, now)
+            self.begin_settle(job, JobPhase.FAILED, reason, now)
         else:
             job.finish(False, JobPhase.FAILED, reason, fb.pose)
         # a failed target ends the rest of its joint path too: never skip ahead silently
-        self._fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
-
-    # ------------------------------------------------------------------ at rest
-    def _track_rest(self, now: float, fb: Feedback) -> None:
-        values = fb.values
-        if values != self._rest_values or fb.status & StatusBits.IN_MOTION:
-            self._rest_values = values
-            self._rest_since = now
-
-    def end_due(self, now: float) -> bool:
-        """True while the current motion's end is due and worth polling for (v2 streams only)."""
-        return False
-
-    def at_rest(self, now: float, fb: Feedback) -> bool:
-        return not fb.status & StatusBits.IN_MOTION and \
-            now - self._rest_since >= self.params.stop_settle_time
-
-    def _begin_settle(self, job: MoveJob, phase: JobPhase, reason: str, now: float) -> None:
-        job.set_phase(JobPhase.STOPPING)
-        self._settle = _Settle(job, phase, reason, now)
-
-    def _check_settle(self, now: float, fb: Feedback) -> None:
-        settle = self._settle
-        if settle is None:
-            return
-        job = settle.job
-        if self.at_rest(now, fb):
-            self._settle = None
-            if job is not None:
-                log.info("job %d: the arm is at rest at %s", job.id, fb.values)
-                job.finish(False, settle.phase, settle.reason, fb.pose)
-            return
-        if now - settle.since > self.params.stop_timeout:
-            self._settle = None
-            why = ("%s; the arm did not come to rest within %.3g s (stop_timeout); last reported "
-                   "pose %s" % (settle.reason, self.params.stop_timeout, fb.values))
-            log.error("job %s: %s", job.id if job is not None else "-", why)
-            if job is not None:
-                job.finish(False, JobPhase.FAILED, why, fb.pose)
+        self.fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
 
     # ------------------------------------------------------------------ sending
-    def _advance(self, now: float, fb: Feedback, sample: LinkSample,
-                 joints: Optional[Tuple[float, ...]]) -> None:
+    def advance(self, now: float, fb: Feedback, sample: LinkSample,
+                joints: Optional[Tuple[float, ...]]) -> None:
         if self._settle is not None or not self.handshake.ready:
             return
         if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
             return          # the controller has not surely seen our flag at 0 twice yet
-        job = self._next_job(fb)
+        job = self.next_job(fb)
         if job is None or job.phase is JobPhase.REPLANNING or job.next_command >= len(job.preview.commands):
             return
-        if job.next_command == 0 and not self._starts_here(job, joints):
+        if job.next_command == 0 and not self.starts_here(job, joints):
             return
         command = job.preview.commands[job.next_command]
         timeout = (self.params.motion_timeout_factor * job.preview.duration
@@ -425,77 +594,3 @@ class MotionSequencer:
         log.info("job %d: sent target %d: %s", job.id, seq, command.describe())
         job.set_phase(JobPhase.SENDING)
 
-    # ------------------------------------------------------------------ helpers
-    def _next_job(self, fb: Any) -> Optional[MoveJob]:
-        """The job in flight, else the next queued one (None: none; the queue fails when motion is
-        no longer possible)."""
-        if self._job is None:
-            if not self._queue:
-                return None
-            why = why_no_motion(fb)
-            if why:
-                self._fail_queue("motion is no longer possible: %s" % why)
-                return None
-            self._job = self._queue.popleft()
-        return self._job
-
-    def _starts_here(self, job: MoveJob, joints: Optional[Tuple[float, ...]]) -> bool:
-        """True when ``job`` may be sent from ``joints``. Otherwise it failed (no valid joint state
-        to check its planned start against; the rest of its path fails too) or is being planned
-        again from ``joints`` (the arm is not where it was planned to start)."""
-        if joints is None:
-            self._job = None
-            job.finish(False, JobPhase.FAILED, "not sent: no valid joint state to check the planned "
-                       "start against", None)
-            self._fail_queue("an earlier target of the same path failed", job.group)
-            return False
-        if job.start is not None and max(abs(a - b) for a, b in zip(joints, job.start)) > START_TOLERANCE:
-            job.set_phase(JobPhase.REPLANNING)
-            self.replan(job, joints)
-            return False
-        return True
-
-    def _fail_queue(self, reason: str, group: Optional[int] = None) -> None:
-        """End the queued jobs (of one group only, when given) with ``reason``."""
-        for queued in list(self._queue):
-            if group is None or queued.group == group:
-                queued.finish(False, JobPhase.FAILED, reason, None)
-                self._queue.remove(queued)
-
-    def _lost(self, now: float, reason: str) -> None:
-        aborted = self.handshake.reset(reason, now)
-        if aborted is not None:
-            self.targets_aborted += 1
-        self._session = None
-        self._rest_values = None
-        self._end_all(JobPhase.FAILED, "link to the controller lost (%s); the target is not re-sent; "
-                      "the last pose seen is reported, where the arm came to rest is unknown" % reason)
-
-    def _end_all(self, phase: JobPhase, reason: str, extra: Sequence[MoveJob] = ()) -> None:
-        """End every job: settling, in flight, queued (and ``extra``); a job that was sent
-        reports the last pose seen."""
-        jobs: List[MoveJob] = list(extra)
-        if self._settle is not None and self._settle.job is not None:
-            jobs.append(self._settle.job)
-        if self._job is not None:
-            jobs.append(self._job)
-        jobs.extend(self._queue)
-        self._settle, self._job = None, None
-        self._queue.clear()
-        for job in jobs:
-            job.finish(False, phase, reason, self._last_pose if job.sent else None)
-
-    def _publish(self) -> None:
-        job = self._job
-        tail = None
-        if self._queue:
-            tail = self._queue[-1].joint_target
-        elif job is not None:
-            tail = job.joint_target
-        settle_job = self._settle.job if self._settle is not None else None
-        self.view = SequencerView(
-            job=job if job is not None else settle_job, queue_length=len(self._queue),
-            tail_joints=tail, inflight_joints=job.joint_target if job is not None else None,
-            settling=self._settle is not None, targets_sent=self.targets_sent,
-            targets_done=self.targets_done, targets_rejected=self.targets_rejected,
-            targets_aborted=self.targets_aborted)

@@ -34,15 +34,15 @@ from __future__ import annotations
 
 import logging
 import math
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from ..params import DriverParams
+from ..protocol.base import WireTarget
 from ..protocol.v1 import StatusBits
-from ..protocol.v2 import (EMPTY, SEQ_MAX, CommandV2, Control, FeedbackV2, StreamState, TargetKind,
-                           TargetSlot, blend_window, joints_to_wire, next_seq)
-from .jobs import JobPhase, MoveJob, StreamPoint, SubmitMode
+from ..protocol.v2 import SEQ_MAX, StreamState, blend_window, next_seq
+from .jobs import JobPhase, MoveJob, StreamPoint
 from .link import LinkSample
-from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, MotionSequencer, _Add, _Settle
+from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, SequencerBase, _Settle
 from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
@@ -242,14 +242,16 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
             return stream
 
 
-class StreamSequencer(MotionSequencer):
-    """The v2 counterpart of :class:`MotionSequencer` (same requests, queue, tickets, settle and
-    outcome rules; see the module docstring for the stream). :meth:`step` returns a
-    :class:`~vr_driver.protocol.v2.CommandV2`."""
+class StreamSequencer(SequencerBase):
+    """The sequencer of a streaming protocol (v2; same requests, queue, tickets, settle and outcome
+    rules as every sequencer, :class:`~vr_driver.driver.sequencer.SequencerBase`; see the module
+    docstring for the stream). :meth:`step` returns the protocol's command, built by
+    ``params.wire.stream_command`` from the job's points."""
 
     def __init__(self, params: DriverParams, clock: Callable[[], float],
                  replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
         super().__init__(params, clock, replan)
+        self.wire = params.wire
         self._base = 0                     # sequence number of the current job's point 0 (0: not started)
         self._limit = 0                    # points of the current job still offered up to (REPLACE cuts it)
         self._rejected_before = 0          # the controller's rejected_seq when the job started
@@ -261,21 +263,12 @@ class StreamSequencer(MotionSequencer):
         # safe state, as the controller sets them) when the link is lost, until set again
         self.outputs = 0
 
-    # ------------------------------------------------------------------ bus thread
-    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> CommandV2:
-        fb = self._begin_step(now, sample)
-        if fb is None:
-            self._publish()
-            return CommandV2()
-        assert isinstance(fb, FeedbackV2)
-        self._track_rest(now, fb)
+    # ------------------------------------------------------------------ hooks
+    def idle_command(self, now: float) -> Any:
+        return self.wire.idle_command()
+
+    def follow(self, now: float, fb: Any, sample: LinkSample) -> None:
         self._follow(now, fb)
-        self._check_settle(now, fb)
-        if self._settle is None:
-            self._stopping = False
-        self._advance(now, fb, sample, joints)
-        self._publish()
-        return self._record(now)
 
     def end_due(self, now: float) -> bool:
         """Every target of the running stream taken and its planned end near (from END_LEAD before
@@ -286,45 +279,39 @@ class StreamSequencer(MotionSequencer):
         end = self._started + job.duration
         return end - END_LEAD <= now <= end + END_WATCH
 
-    def at_rest(self, now: float, fb) -> bool:
-        return fb.state in (StreamState.IDLE, StreamState.WAITING) and super().at_rest(now, fb)
+    def resting(self, fb: Any) -> bool:
+        return fb.state in (StreamState.IDLE, StreamState.WAITING)
 
-    # ------------------------------------------------------------------ requests
-    def _apply_replan(self, job: MoveJob, plan) -> None:
+    def apply_replan(self, job: MoveJob, plan: Any) -> None:
         job.points, job.start = plan
 
-    def _take_add(self, request: _Add, now: float) -> None:
-        super()._take_add(request, now)
-        job = self._job
-        if request.mode is SubmitMode.REPLACE and job is not None and job.sent and not self._stopping:
+    def replaced(self, job: MoveJob) -> None:
+        if not self._stopping:
             # the points the controller took run to their end; the rest of the old stream is dropped
             self._limit = min(self._limit, max(job.points_taken, 1))
             job.stop_reason = "replaced by a newer joint path"
             log.info("job %d: replaced by a newer joint path after %d of its %d points", job.id,
                      self._limit, len(job.points))
 
-    def _stop_untracked(self, reason: str, now: float) -> None:
+    def stop_untracked(self, reason: str, now: float) -> None:
         if self._last_state in (StreamState.MOVING, StreamState.STOPPING):
             self._stopping = True                 # not ours (an earlier stream's end): stop it too
             if self._settle is None:
                 self._settle = _Settle(None, JobPhase.CANCELLED, reason, now)
 
-    def _stop_current(self, reason: str, now: float) -> None:
-        job = self._job
-        assert job is not None
+    def stop_job(self, job: MoveJob, reason: str, now: float) -> None:
         self._end_current()
-        job.stop_reason = reason
         if job.sent:
             self._stopping = True
             if job.points_taken > job.points_done:
                 self.targets_aborted += 1
             log.info("job %d: STOP sent (%s); waiting for the arm to come to rest", job.id, reason)
-            self._begin_settle(job, JobPhase.CANCELLED, reason, now)
+            self.begin_settle(job, JobPhase.CANCELLED, reason, now)
         else:
             job.finish(False, JobPhase.CANCELLED, reason, None)
 
     # ------------------------------------------------------------------ the stream
-    def _follow(self, now: float, fb: FeedbackV2) -> None:
+    def _follow(self, now: float, fb: Any) -> None:
         """Read the controller's progress on the current job; end it when it is over."""
         was = self._last_state
         self._last_state = fb.state
@@ -387,15 +374,17 @@ class StreamSequencer(MotionSequencer):
         self._base = 0
         self._limit = 0
 
-    def _fail_current(self, job: MoveJob, reason: str, now: float, fb: FeedbackV2) -> None:
+    def _fail_current(self, job: MoveJob, reason: str, now: float, fb: Any) -> None:
         log.warning("job %d ended: %s", job.id, reason)
         self._end_current()
         self._stopping = True
-        self._begin_settle(job, JobPhase.FAILED, reason, now)
-        self._fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
+        self.begin_settle(job, JobPhase.FAILED, reason, now)
+        self.fail_queue("an earlier target of the same path failed (%s)" % reason, job.group)
 
-    def _advance(self, now: float, fb, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> None:
+    def advance(self, now: float, fb: Any, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> None:
         """Start the next job when nothing runs and the arm is at rest."""
+        if self._settle is None:
+            self._stopping = False
         if self._settle is not None or self._stopping:
             return
         if sample.session_records < SESSION_RECORDS_BEFORE_REQUEST:
@@ -409,12 +398,12 @@ class StreamSequencer(MotionSequencer):
                 self._unarmed_since = now
             if now - self._unarmed_since < self.params.accept_timeout:
                 return
-        job = self._next_job(fb)
+        job = self.next_job(fb)
         if job is None or self._base or job.phase is JobPhase.REPLANNING:
             return
         if fb.state not in (StreamState.IDLE, StreamState.WAITING) or fb.status & StatusBits.IN_MOTION:
             return          # an earlier stream still ends
-        if not self._starts_here(job, joints):
+        if not self.starts_here(job, joints):
             return
         self._base = next_seq(fb.accepted_seq)
         self._limit = len(job.points)
@@ -429,40 +418,37 @@ class StreamSequencer(MotionSequencer):
     def _seq(self, k: int) -> int:
         return (self._base - 1 + k) % SEQ_MAX + 1
 
-    def _slot(self, job: MoveJob, k: int) -> TargetSlot:
+    def _target(self, job: MoveJob, k: int) -> WireTarget:
         point = job.points[k]
-        return TargetSlot(self._seq(k), TargetKind.JOINT, point.smooth, point.speed,
-                          joints_to_wire(point.joints))
+        return WireTarget(self._seq(k), point.joints, point.pose, point.speed, point.smooth)
 
-    def _record(self, now: float) -> CommandV2:
+    def record(self, now: float) -> Any:
         outputs = self.outputs
         if self._stopping:
-            return CommandV2(Control.STOP, outputs=outputs)
+            return self.wire.stream_command((), stop=True, outputs=outputs)
         job = self._job
         if job is None or not self._base:
-            return CommandV2(outputs=outputs)
+            return self.wire.stream_command((), outputs=outputs)
         k = job.points_taken
         elapsed = now - self._started
 
         def offered(i: int) -> bool:          # not past the limit, and its pause (if any) is over
             return i < self._limit and job.points[i].release <= elapsed
-        if not offered(k):
-            return CommandV2(outputs=outputs)
-        slot1 = self._slot(job, k + 1) if offered(k + 1) else EMPTY
-        return CommandV2(Control.START if k == 0 else Control(0), self._slot(job, k), slot1, outputs)
+        targets = []
+        for i in range(k, k + self.wire.look_ahead_slots):
+            if not offered(i):
+                break
+            targets.append(self._target(job, i))
+        return self.wire.stream_command(targets, start=k == 0 and bool(targets), outputs=outputs)
 
-    def _lost(self, now: float, reason: str) -> None:
+    def on_lost(self, now: float, reason: str) -> None:
         job = self._job
         if job is not None and job.points_taken > job.points_done:
             self.targets_aborted += 1
         self._stopping = False
-        self._session = None
-        self._rest_values = None
         self._unarmed_since = None
         if self.outputs:
             log.warning("controller outputs 0x%04X back to their safe state 0 (link lost); they stay "
                         "there until set again", self.outputs)
         self.outputs = 0
-        self._end_all(JobPhase.FAILED, "link to the controller lost (%s); the stream is not re-sent; "
-                      "the last pose seen is reported, where the arm came to rest is unknown" % reason)
-        self._end_current()
+        self._base = self._limit = 0         # the job itself is ended by the base (end_all)
