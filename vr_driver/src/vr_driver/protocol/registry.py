@@ -9,10 +9,11 @@ from ..errors import ProtocolError
 from .base import Protocol
 from .v1 import V1
 from .v2 import V2
+from .v3 import V3
 
 __all__ = ["get", "names", "DEFAULT"]
 
-_ALL: Dict[str, Protocol] = {p.name: p for p in (V1, V2)}
+_ALL: Dict[str, Protocol] = {p.name: p for p in (V1, V2, V3)}
 #: the protocol of an unchanged G2 program (the thesis')
 DEFAULT = V1.name
 
