@@ -61,6 +61,10 @@ END_POLL_PERIOD = 0.01
 #: [mm, deg] a reported pose this near a sample of the last plan lies on it (PlanSeed): the
 #: samples are a planner step apart, a few mm / deg at full speed
 PLAN_SEED_NEAR = 30.0
+#: rad: a Cartesian stream's target, solved as the controller will (the IK solution nearest the
+#: previous target's joints), must land this near the planned point (every joint); farther, the
+#: controller would run another configuration than the one planned and checked
+CONFIGURATION_TOLERANCE = math.radians(1.0)
 
 Clock = Callable[[], float]
 
@@ -92,6 +96,9 @@ class DriverStatus:
     error_code: int
     error_reason: str
     feedback_time: Optional[float] = None     # clock time the feedback record arrived (None: none)
+    record_time: Optional[float] = None       # clock time the controller's record was taken: the
+    #                                           reply that brought it began then (arrival less its
+    #                                           time on the wire); a new value = a new sample
     settling: bool = False                    # a stopped move is waiting for the arm to be at rest
 
     @property
@@ -125,7 +132,7 @@ class DriverStatus:
             reason = "the controller's last record is %.2f s old" % fb_age
         return replace(self, link=LinkState.STALE, link_reason=reason, feedback=None, pose=None,
                        joints_valid=False, error_code=ERROR_LINK, error_reason=reason,
-                       feedback_time=None)
+                       feedback_time=None, record_time=None)
 
 
 class TrajectoryRun:
@@ -175,11 +182,22 @@ class PlanSeed:
     def __init__(self) -> None:
         self._plan = None
         self._poses = np.zeros((0, 6))
+        self._positions: List[Tuple[float, ...]] = []
 
     def follow(self, trajectory) -> None:
         if trajectory is not self._plan:
             self._plan = trajectory
             self._poses = np.array([p.as_tuple() for p in trajectory.poses()], dtype=float)
+
+    def follow_stream(self, job: MoveJob, kin: Kinematics) -> None:
+        """Follow a stream job's points (from its start): a Cartesian stream's poses as planned."""
+        if job is self._plan or job.start is None:
+            return
+        positions = [tuple(job.start)] + [p.joints for p in job.points]
+        poses = [kin.fk_pose(job.start)] + [p.pose or kin.fk_pose(p.joints) for p in job.points]
+        self._plan = job
+        self._positions = positions
+        self._poses = np.array([p.as_tuple() for p in poses], dtype=float)
 
     def at(self, values: Sequence[float]) -> Optional[Tuple[float, ...]]:
         """The planned joints at ``values`` (a reported pose): the nearest sample, moved towards
@@ -191,7 +209,7 @@ class PlanSeed:
         k = int(np.argmin(dist))
         if dist[k] > PLAN_SEED_NEAR:
             return None
-        q = np.asarray(self._plan.positions)
+        q = np.asarray(self._plan.positions if not isinstance(self._plan, MoveJob) else self._positions)
         best, seed = float(dist[k]), q[k]
         for j in (k - 1, k + 1):
             if not 0 <= j < len(q):
@@ -443,9 +461,46 @@ class DriverCore:
 
     def _stream(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
                 max_tolerance: float) -> Tuple[StreamPoint, ...]:
-        return stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
-                             tolerance, self._min_segment(), max_tolerance,
-                             corner_tolerance=math.radians(self.params.stream_path_tolerance))
+        points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
+                               tolerance, self._min_segment(), max_tolerance,
+                               corner_tolerance=math.radians(self.params.stream_path_tolerance))
+        if self.protocol.joint_targets or not points:
+            return points
+        return self.cartesian_points(positions[0], points)
+
+    def cartesian_points(self, start: Sequence[float], points: Sequence[StreamPoint],
+                         first: int = 0) -> Tuple[StreamPoint, ...]:
+        """A stream for a Cartesian protocol: each point gets its pose (FK of the planned joints, as
+        the wire carries it) and is solved as the controller will solve it -- the IK solution
+        nearest the previous target's joints (the arm's, ``start``, for the first): it must be the
+        planned point within CONFIGURATION_TOLERANCE, or the controller would run another
+        configuration than the one planned and checked (doc/controller_program.md section 7).
+        Raises DriverError naming the point (nothing is sent)."""
+        out = []
+        prev = tuple(start)
+        for i, point in enumerate(points):
+            pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
+            try:
+                with self._planning_gate:
+                    solved = self.kin.ik_pose(pose, seed=prev)
+            except VrDriverError as exc:
+                raise DriverError("point %d of %d (planned point %d): the controller cannot solve its "
+                                  "pose %s: %s; nothing was sent" % (first + i + 1, first + len(points),
+                                                                    point.index, pose, exc)) from None
+            off = [abs(a - b) for a, b in zip(solved, point.joints)]
+            worst = max(range(len(off)), key=off.__getitem__)
+            if off[worst] > CONFIGURATION_TOLERANCE:
+                raise DriverError(
+                    "point %d of %d (planned point %d): the controller would reach its pose %s in "
+                    "another configuration than planned (joint_%d %.1f deg instead of %.1f deg: the "
+                    "solution nearest the previous target's joints); plan a path that stays in one "
+                    "configuration, or use a protocol with joint targets; nothing was sent"
+                    % (first + i + 1, first + len(points), point.index, pose, worst + 1,
+                       math.degrees(solved[worst]), math.degrees(point.joints[worst])))
+            out.append(replace(point, pose=pose))
+            prev = point.joints
+            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
+        return tuple(out)
 
     def _preview_stream(self, preview: Preview) -> Tuple[StreamPoint, ...]:
         """A validated move as a stream: its planned samples (a PTP's joint line with its speed
@@ -500,6 +555,8 @@ class DriverCore:
         faster than the limits)."""
         points = job.points
         self.check_segments(joints, points[:1])
+        if not self.protocol.joint_targets:
+            self.cartesian_points(joints, points[:1])
         first = points[0]
         # (a pause at the start, first.release > 0: the move begins when it ends)
         speed = stream_speeds(joints, [tuple(joints), first.joints], [first.release, first.time],
@@ -672,6 +729,8 @@ class DriverCore:
         job = self.sequencer.view.job
         if job is not None and job.preview is not None:
             self._plan_seed.follow(job.preview.trajectory)
+        elif job is not None and job.points:
+            self._plan_seed.follow_stream(job, self.kin)
         if values == self._joints_pose and self._joints_valid:
             return self._joints
         try:
@@ -713,6 +772,7 @@ class DriverCore:
             slave_state=self.link.slave_state, last_diag=self.link.last_diag,
             error_code=error_code, error_reason=error_reason,
             feedback_time=sample.feedback_time if sample is not None and fb is not None else None,
+            record_time=sample.record_time if sample is not None and fb is not None else None,
             settling=view.settling)
 
     def _publish(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:

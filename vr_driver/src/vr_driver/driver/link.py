@@ -99,6 +99,9 @@ class LinkSample:
     error_code: int
     error_reason: str
     cycled: bool                           # a DP cycle ran in this iteration
+    record_time: Optional[float] = None    # when the controller's ``feedback`` was taken: the
+    #                                        reply that carried it began then (its arrival less its
+    #                                        time on the wire); what joint_states are stamped with
 
     @property
     def connected(self) -> bool:
@@ -182,6 +185,9 @@ class LinkSupervisor:
         self._error_code = ERROR_LINK
         self._error_reason = "not started"
         self._cycle_times: Deque[float] = collections.deque(maxlen=50)
+        # a reply's time on the wire (SD2 telegram: 9 characters of frame + the controller's record,
+        # 11 bits each): a record arrives this long after the card began sending it
+        self.reply_time = BusTiming.for_baud(bus.baud).chars(9 + self.slave_config.input_len)
 
     # ----------------------------------------------------------------------- read-outs
     @property
@@ -304,6 +310,8 @@ class LinkSupervisor:
             time=now, state=self._state, reason=self._reason, fresh=fresh,
             feedback=self._feedback if connected else None,
             feedback_time=self._good_time if connected else None,
+            record_time=(self._good_time - self.reply_time) if connected and self._good_time is not None
+            else None,
             session=self._session, session_records=self._session_records,
             error_code=self._error_code, error_reason=self._error_reason, cycled=cycled)
 

@@ -140,6 +140,16 @@ class Protocol:
     #: the records' words follow the ``byte_order`` parameter (v1); False: fixed little-endian
     byte_order_matters: bool = False
 
+    def wire_pose(self, pose: ControllerPose) -> ControllerPose:
+        """``pose`` as a Cartesian target of this protocol carries it: each field rounded half away
+        from zero to ``pose_resolution`` (mm for X Y Z, deg for Rx Ry Rz), the controller's view."""
+        mm, deg = self.pose_resolution
+        out = []
+        for value, unit in zip(pose.as_tuple(), (mm, mm, mm, deg, deg, deg)):
+            steps = math.floor(abs(value) / unit + 0.5)
+            out.append(math.copysign(steps, value) * unit if steps else 0.0)
+        return ControllerPose(*out)
+
     def describe(self) -> str:
         return "%s (%d bytes each way): %s" % (self.name, self.record_length, self.summary)
 

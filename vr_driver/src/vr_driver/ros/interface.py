@@ -115,6 +115,7 @@ class InterfaceNode:
                                          queue_size=1)
         self._last_link = None
         self._last_status_key = None
+        self._last_record: Optional[float] = None     # record_time of the last joint_states sample
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
@@ -125,7 +126,6 @@ class InterfaceNode:
         self.io_server.start()
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
-            rospy.Timer(rospy.Duration(1.0 / self.params.joint_states_rate), self._publish_joints),
             # force_update: Updater.update() compares against its own period (and re-reads it from
             # ~diagnostic_period), so a timer of the same period skipped every other call (0.67 Hz)
             rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.force_update()),
@@ -161,6 +161,7 @@ class InterfaceNode:
         if key != self._last_status_key:
             self._last_status_key = key
             self.status_pub.publish(msg)
+        self._publish_joints(status, stamp)
         if status.link is not self._last_link:
             self._last_link = status.link
             if status.link is LinkState.CONNECTED:
@@ -172,11 +173,18 @@ class InterfaceNode:
         stamp = rospy.Time.now()                 # first: the status is then at least this new
         self.status_pub.publish(robot_status_msg(self.core.status(), stamp))
 
-    def _publish_joints(self, _event=None) -> None:
-        status = self.core.status()
-        if not status.joints_valid or status.joints is None or status.pose is None:
+    def _publish_joints(self, status: DriverStatus, now: rospy.Time) -> None:
+        """One joint_states (and tool_pose) message per new controller record, at most
+        ``joint_states_rate`` a second, stamped with the time the controller took the record (the
+        bus thread: ``now`` is ROS time read at the core's clock time ``status.time`` or later)."""
+        if not status.joints_valid or status.joints is None or status.pose is None \
+                or status.record_time is None:
             return                           # no position feedback while the link is down
-        stamp = rospy.Time.now()
+        if self._last_record is not None and \
+                status.record_time - self._last_record < 0.9 / self.params.joint_states_rate:
+            return                           # the same record again, or one too soon after it
+        self._last_record = status.record_time
+        stamp = now - rospy.Duration.from_sec(max(0.0, self.core.clock() - status.record_time))
         js = JointState()
         js.header.stamp = stamp
         js.name = self.names
