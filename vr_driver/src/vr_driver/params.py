@@ -317,7 +317,8 @@ class DriverParams:
             for slave in data["slaves"]:
                 slave.pop("cfg", None)
                 slave["modules"] = list(proto.gsd_modules)
-                slave["input_len"] = slave["output_len"] = proto.record_length
+                slave["input_len"] = proto.input_length
+                slave["output_len"] = proto.output_length
         data["cycle_rate_hz"] = self.cycle_rate
         if self.port:
             data["phy"]["device"] = self.port
@@ -346,11 +347,11 @@ class DriverParams:
         slave = bus.slaves[0]
         self.check_watchdog(slave.watchdog_ms, "the bus config %s" % (self.bus_config or "(built in)")
                             if self.watchdog_ms is None else "watchdog_ms")
-        need = proto.record_length
-        if slave.input_len != need or slave.output_len != need:
+        if slave.input_len != proto.input_length or slave.output_len != proto.output_length:
             raise ParamError("bus_config", self.bus_config, "the controller protocol %s needs %d bytes "
-                             "each way; the configured modules give %d in / %d out"
-                             % (self.protocol, need, slave.input_len, slave.output_len))
+                             "in / %d out; the configured modules give %d in / %d out"
+                             % (self.protocol, proto.input_length, proto.output_length,
+                                slave.input_len, slave.output_len))
         return bus
 
     def signal_map(self, bus: "Any") -> "Optional[Any]":

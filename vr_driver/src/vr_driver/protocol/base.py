@@ -43,7 +43,8 @@ class Protocol:
     Class attributes (facts of the wire):
 
     - ``name`` / ``version``: the ``protocol`` parameter's value / the version byte (v1 has none: 1);
-    - ``record_length``: bytes each way;
+    - ``record_length``: bytes each way (a protocol whose records differ sets ``input_length`` and
+      ``output_length`` instead, and ``record_length`` 0);
     - ``gsd_modules``: the card's GSD modules (inputs first), or None for the bus config's default
       (the thesis' 14-byte card configuration);
     - ``chk_cfg``: the Chk_Cfg bytes of those modules, or None for the default;
@@ -77,6 +78,16 @@ class Protocol:
     joint_resolution: Optional[float] = None
     target_error: float = 0.0
     summary: str = ""
+
+    @property
+    def input_length(self) -> int:
+        """Bytes controller -> master (the feedback: the master's DP inputs)."""
+        return self.record_length
+
+    @property
+    def output_length(self) -> int:
+        """Bytes master -> controller (the command: the master's DP outputs)."""
+        return self.record_length
 
     # ------------------------------------------------------------------ tolerances
     @property
