@@ -161,9 +161,10 @@ class TrajectorySupervisor:
         return Sample(t, desired, actual, error, deviation, segment, off, violated)
 
     def step_status(self, now: float, status: Any) -> Optional[Sample]:
-        """:meth:`step` with a :class:`~vr_driver.driver.core.DriverStatus` (stamp: the time its
-        feedback record arrived, else the snapshot's time)."""
-        stamp = status.feedback_time if status.feedback_time is not None else status.time
+        """:meth:`step` with a :class:`~vr_driver.driver.core.DriverStatus` (stamp: the time the
+        controller took its record, else the time the record arrived, else the snapshot's time)."""
+        stamp = next((t for t in (getattr(status, "record_time", None), status.feedback_time)
+                      if t is not None), status.time)
         return self.step(now, status.joints_valid, status.joints, stamp, status.pose)
 
     # ------------------------------------------------------------------ the end

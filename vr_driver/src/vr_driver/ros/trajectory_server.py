@@ -169,6 +169,7 @@ class TrajectoryServer:
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
         last_draw = rospy.get_time()
         fb = FollowJointTrajectoryFeedback(joint_names=self.names)
+        last_record = None
         while sup.running:
             if rospy.is_shutdown():
                 sup.shutdown()
@@ -178,9 +179,14 @@ class TrajectoryServer:
                     preempted = self._current != goal_id
                 sup.cancel(preempted)
                 break
-            sample = sup.step_status(self.core.clock(), self.core.status())
+            status = self.core.status()
+            new = status.record_time is not None and status.record_time != last_record
+            sample = sup.step_status(self.core.clock(), status) if new else None
             if sample is not None:
-                fb.header.stamp = rospy.Time.now()
+                # once per new controller record, stamped with the time the controller took it
+                last_record = status.record_time
+                fb.header.stamp = rospy.Time.now() - rospy.Duration.from_sec(
+                    max(0.0, self.core.clock() - status.record_time))
                 fb.desired = JointTrajectoryPoint(positions=list(sample.desired))
                 fb.actual = JointTrajectoryPoint(positions=list(sample.actual))
                 fb.error = JointTrajectoryPoint(positions=list(sample.error))
