@@ -238,6 +238,14 @@ class DriverTest(DriverTestBase):
         self.assertAlmostEqual(joint_rate, 20.0, delta=5.0)
         js = self.joints.last()
         self.assertEqual(list(js.name), ["joint_%d" % i for i in range(1, 7)])
+        # one message per controller record, stamped with the time the controller took it: the
+        # stamps strictly increase (a record is never re-published under a new stamp) and lie
+        # before the moment the message was read, by the reply's time on the wire at least
+        with self.joints.cond:
+            stamps = [m.header.stamp.to_sec() for m in self.joints.messages[n_joints:]]
+        self.assertGreater(len(stamps), 10)
+        self.assertTrue(all(b > a for a, b in zip(stamps, stamps[1:])), stamps)
+        self.assertLess(stamps[-1], rospy.get_time())
         tool = self.tool.last()
         self.assertEqual(tool.header.frame_id, "base")
         p, q = tool.pose.position, tool.pose.orientation

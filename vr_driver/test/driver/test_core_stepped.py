@@ -409,3 +409,22 @@ def test_requests_plan_one_at_a_time(world):
         planner.plan = plan
     assert not any(t.is_alive() for t in threads)
     assert peak[0] == 1
+
+
+def test_the_record_is_stamped_with_the_time_the_controller_took_it(world):
+    """record_time (what joint_states carry): the reply's arrival less its time on the wire (an SD2
+    frame of 9 characters + the 14-byte record, 11 bits each at 19.2 kbit/s); a cycle without a new
+    record keeps the stamp (nothing is re-published under a new one)."""
+    status = world.ready()
+    wire = (9 + 14) * 11 / 19200.0
+    assert world.core.link.reply_time == pytest.approx(wire)
+    assert status.record_time == pytest.approx(status.feedback_time - wire)
+    stamps = set()
+    for _ in range(10):
+        world.run_for(world.bus_period)
+        s = world.status()
+        assert s.record_time == pytest.approx(s.feedback_time - wire)
+        stamps.add(s.record_time)
+    assert len(stamps) >= 8          # a new record nearly every bus cycle, each with its own stamp
+    world.freeze(0.2)                # no bus cycle: the status keeps its record and stamp
+    assert world.status().record_time == max(stamps)
