@@ -67,7 +67,7 @@ def test_golden_feedback_bytes():
                     armed=True)
     raw = fb.encode()
     assert len(raw) == FEEDBACK_SIZE_V3 == 28
-    assert raw[:4] == bytes([3, 0x83, 0x11, 4])                      # version, WAITING + armed, status, code
+    assert raw[:4] == bytes([3, 3 | ARMED_BIT, 0x11, 4])                 # version, WAITING + armed, status, code
     assert raw[4:12] == struct.pack("<4H", 12, 10, 0, 13)
     assert raw[12:24] == struct.pack("<6h", 11200, 0, 7250, 0, 4500, -17999)
     assert raw[24:26] == b"\xff\xff"
@@ -408,6 +408,15 @@ def test_stream_command():
     with pytest.raises(ProtocolError):
         V3.stream_command([target(speed=0)])
     assert V3.encode(V3.stream_command([target(5)]), "big") == V3.stream_command([target(5)]).encode("big")
+
+
+def test_wire_pose_is_what_the_controller_gets():
+    for pose in (ControllerPose(0.15, -0.25, 1e3, 0.005, -190.004, 180.0),
+                 ControllerPose(1120.04, 0.05, 725.0, 359.995, 45.0049, -0.0051)):
+        sent = V3.stream_command([target(1, pose)]).slot.controller_pose
+        assert V3.wire_pose(pose) == sent
+    assert V3.wire_pose(ControllerPose(0.15, 0, 0, 0, -190.004, 0)).as_tuple() == pytest.approx(
+        (0.2, 0, 0, 0, 170.0, 0))
 
 
 def test_target_error_bounds_the_rounding(kin):

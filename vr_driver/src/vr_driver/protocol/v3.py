@@ -437,6 +437,12 @@ class ProtocolV3(Protocol):
         return "%s (%d bytes out, %d bytes in): %s" % (self.name, self.output_length, self.input_length,
                                                        self.summary)
 
+    def wire_pose(self, pose: ControllerPose) -> ControllerPose:
+        """``pose`` exactly as a v3 target carries it to the controller: rounded by
+        :func:`pose_to_wire` (0.1 mm, 0.01 deg, halves away from zero, angles wrapped into
+        (-180, 180])."""
+        return pose_from_wire(pose_to_wire(pose))
+
     # ------------------------------------------------------------------ driver side
     def encode(self, command: CommandV3, byte_order: Any = ByteOrder.LITTLE) -> bytes:
         return command.encode(byte_order)
