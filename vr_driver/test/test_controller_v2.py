@@ -487,11 +487,11 @@ def test_protocol_option_slave_and_cli(kin):
     assert SimOptions.from_mapping({"protocol": "v2"}).protocol == "v2"
     assert SimOptions().protocol == "v1"
     with pytest.raises(SimError):
-        SimOptions(protocol="v3")
+        SimOptions(protocol="v9")
     with pytest.raises(SimError):
-        robot_slave(4, protocol="v3")
+        robot_slave(4, protocol="v9")
     with pytest.raises(SystemExit) as exc:
-        main(["--protocol", "v3"])
+        main(["--protocol", "v9"])
     assert exc.value.code == 2
     vc = VirtualController(kinematics=kin, protocol="v2")
     try:
