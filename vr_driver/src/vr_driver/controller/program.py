@@ -17,6 +17,11 @@ Pieces:
   way) and runs :class:`~vr_driver.controller.program_v2.ControllerProgramV2` on a
   :class:`~vr_driver.controller.stream_arm.SimStreamArm` (streamed joint targets, look-ahead blending); the
   link-side rules below are shared (:mod:`vr_driver.controller.session`).
+- Protocol v3 (``protocol="v3"``, ``--protocol v3``): the slave takes ``CHK_CFG_V3`` (28 bytes in,
+  24 out) and runs :class:`~vr_driver.controller.program_v3.ControllerProgramV3` (Cartesian targets
+  into a ring of ``ring_size`` positions, solved by the controller's own IK, run as MOVEP with an
+  ``interpreter_lookahead`` of MOVEs read ahead) on a SimStreamArm. The program is chosen by the
+  protocol's capabilities (``streams``, ``joint_targets``), never by its name.
 - :func:`main`: ``python3 -m vr_driver.controller.program`` (see ``--help``).
 
 Rules of the program (also in ``doc/controller_program.md``):
@@ -84,8 +89,10 @@ from ..kinematics.solver import Kinematics
 from ..poses import HOME_POSE, ControllerPose
 from .session import SessionProgram, arm_status_bits
 from .program_v2 import ControllerProgramV2
+from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, ControllerProgramV3
 from ..protocol.v1 import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
 from ..protocol.v2 import FeedbackV2, StreamState
+from ..protocol.v3 import FeedbackV3
 from ..protocol import registry as protocols
 from ..protocol.base import Protocol
 from .arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
@@ -129,10 +136,11 @@ FAULTS = ("estop", "drives_powered", "error")
 PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "baud": "baud",
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
                "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
-               "protocol": "protocol"}
+               "protocol": "protocol", "interpreter_lookahead": "interpreter_lookahead",
+               "ring_size": "ring_size"}
 
 #: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
-#: streamed joint targets
+#: streamed joint targets, v3 streamed Cartesian targets for the G2 as it is
 PROTOCOLS = protocols.names()
 
 
@@ -176,6 +184,10 @@ class SimOptions:
     log_file: Optional[str] = None
     brake_time: float = DEFAULT_BRAKE_TIME
     protocol: str = protocols.DEFAULT
+    #: protocol v3: MOVEs the G2's interpreter reads beyond the running one (0: a stop at every
+    #: point); the positions of the program's ring
+    interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD
+    ring_size: int = DEFAULT_RING_SIZE
 
     def __post_init__(self) -> None:
         _protocol(self.protocol)
@@ -189,6 +201,9 @@ class SimOptions:
                            "and link it there), not both")
         object.__setattr__(self, "address", _int_option(self.address, "addr", 0, 125))
         object.__setattr__(self, "baud", _int_option(self.baud, "baud", 9600, 12_000_000))
+        object.__setattr__(self, "interpreter_lookahead",
+                           _int_option(self.interpreter_lookahead, "interpreter_lookahead", 0, 100))
+        object.__setattr__(self, "ring_size", _int_option(self.ring_size, "ring_size", 1, 1000))
         try:  # the DP bit rates, checked by the bus configuration
             default_robot_config("virtual", self.baud, phy_type="memory", slave_address=self.address)
         except ProfibusError as exc:
@@ -210,7 +225,8 @@ class SimOptions:
     @classmethod
     def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
-        initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2).
+        initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2 |
+        v3), interpreter_lookahead, ring_size (v3).
         Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
         if unknown:
@@ -229,7 +245,8 @@ def _protocol(name: Any) -> Protocol:
 def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic,
                 protocol: Any = protocols.DEFAULT) -> DpSlave:
     """The G2's DP slave: ident 0x06C6 and the protocol's Chk_Cfg (v1: the one of
-    ``config.default_robot_config()``, 14 bytes each way; v2: ``protocol.v2.CHK_CFG_V2``, 72 bytes)."""
+    ``config.default_robot_config()``, 14 bytes each way; v2: ``protocol.v2.CHK_CFG_V2``, 72 bytes;
+    v3: ``protocol.v3.CHK_CFG_V3``, 28 bytes in, 24 out)."""
     proto = _protocol(protocol)
     slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
     cfg = proto.chk_cfg or slave_cfg.cfg
@@ -610,6 +627,11 @@ class VirtualController(Simulator):
     :class:`~vr_driver.controller.arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller.program_v2.
     ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.controller.stream_arm.
     SimStreamArm` (streamed joint targets, look-ahead blending); its feedback is a FeedbackV2.
+    ``"v3"`` runs :class:`~vr_driver.controller.program_v3.ControllerProgramV3` on a slave with
+    ``CHK_CFG_V3`` and a SimStreamArm whose look-ahead is ``interpreter_lookahead`` (a given
+    ``arm`` keeps its own); the program's ring holds ``ring_size`` positions and it solves the
+    targets with ``controller_kinematics`` (default: its own instance of the model's); its feedback
+    is a FeedbackV3 in ``byte_order``. Both options are ignored by v1 and v2.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
     :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
@@ -624,13 +646,16 @@ class VirtualController(Simulator):
                  pty_link: Optional[str] = None, log_file: Optional[str] = None,
                  kinematics: Optional[Kinematics] = None, arm: Union[None, SimArm, SimStreamArm] = None,
                  clock: Clock = time.monotonic, confirm_records: Optional[bool] = None,
-                 brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT) -> None:
+                 brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT,
+                 interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD, ring_size: int = DEFAULT_RING_SIZE,
+                 controller_kinematics: Optional[Kinematics] = None) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
                                   initial_pose=tuple(pose), loop_period=loop_period,
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
-                                  brake_time=brake_time, protocol=_protocol(protocol).name)
+                                  brake_time=brake_time, protocol=_protocol(protocol).name,
+                                  interpreter_lookahead=interpreter_lookahead, ring_size=ring_size)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         self.clock = clock
@@ -638,14 +663,16 @@ class VirtualController(Simulator):
         self.protocol = self.options.protocol
         self.wire = protocols.get(self.protocol)
         streams = self.wire.streams
+        cartesian_stream = streams and not self.wire.joint_targets   # the controller solves the IK
         if confirm_records is None:
             confirm_records = self.wire.confirm_records
         if arm is None:
+            extra = {"look_ahead": self.options.interpreter_lookahead} if cartesian_stream else {}
             try:
                 arm = (SimStreamArm if streams else SimArm)(
                     kinematics, speed_factor=self.options.speed_factor,
                     initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
-                    brake_time=self.options.brake_time)
+                    brake_time=self.options.brake_time, **extra)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
         if isinstance(arm, SimStreamArm) != streams:
@@ -653,8 +680,14 @@ class VirtualController(Simulator):
         self.arm: Any = arm
         self.execution_log = ExecutionLog()
         self.slave = robot_slave(self.options.address, clock, self.protocol)
-        self.program: Union[ControllerProgram, ControllerProgramV2]
-        if streams:
+        self.program: Union[ControllerProgram, ControllerProgramV2, ControllerProgramV3]
+        if cartesian_stream:
+            self.program = ControllerProgramV3(self.slave, arm, kinematics=controller_kinematics,
+                                               ring_size=self.options.ring_size,
+                                               byte_order=self.options.byte_order,
+                                               execution_log=self.execution_log,
+                                               confirm_records=confirm_records)
+        elif streams:
             self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
                                                confirm_records=confirm_records)
         else:
@@ -738,7 +771,7 @@ class VirtualController(Simulator):
                 next_time = now
             self._stop.wait(next_time - now)
 
-    def step(self, now: Optional[float] = None) -> Union[Feedback, FeedbackV2]:
+    def step(self, now: Optional[float] = None) -> Union[Feedback, FeedbackV2, FeedbackV3]:
         """One program loop (at ``now``, default the clock)."""
         feedback = self.program.step(self.clock() if now is None else now)
         with self._cond:
@@ -770,7 +803,7 @@ class VirtualController(Simulator):
         return self.program.state
 
     @property
-    def feedback(self) -> Union[None, Feedback, FeedbackV2]:
+    def feedback(self) -> Union[None, Feedback, FeedbackV2, FeedbackV3]:
         return self.program.last_feedback
 
     @property
@@ -837,7 +870,8 @@ def _parser() -> argparse.ArgumentParser:
         prog="python3 -m vr_driver.controller.program",
         description="Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
                     "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
-                    "joint-target streaming protocol) against a simulated VR-006L. Without "
+                    "joint-target streaming protocol; with --protocol v3, Cartesian-target streaming "
+                    "for the G2 as it is) against a simulated VR-006L. Without "
                     "--device it creates a pty pair; the first line on stdout is the device path "
                     "for the master. Stops cleanly on SIGINT / SIGTERM.",
         epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")
@@ -861,7 +895,13 @@ def _parser() -> argparse.ArgumentParser:
                         "0 halts at once)" % DEFAULT_BRAKE_TIME)
     p.add_argument("--protocol", choices=PROTOCOLS, default=protocols.DEFAULT,
                    help="the robot program: v1 the 14-byte Cartesian handshake (default), v2 streamed "
-                        "joint targets with look-ahead (72 bytes each way, doc/controller_program.md §9)")
+                        "joint targets with look-ahead (72 bytes each way, doc/controller_program.md §9), "
+                        "v3 streamed Cartesian targets into a ring (24 bytes out, 28 in, §10)")
+    p.add_argument("--interpreter-lookahead", type=int, default=DEFAULT_INTERPRETER_LOOKAHEAD, metavar="N",
+                   help="v3: MOVEs the G2's interpreter reads beyond the running one (default %d; 0: the "
+                        "arm stops at every point)" % DEFAULT_INTERPRETER_LOOKAHEAD)
+    p.add_argument("--ring-size", type=int, default=DEFAULT_RING_SIZE, metavar="N",
+                   help="v3: positions in the program's ring (default %d)" % DEFAULT_RING_SIZE)
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -926,7 +966,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
         options = SimOptions(device=args.device, pty_link=args.pty_link, address=args.addr, baud=args.baud,
                              speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
                              loop_period=args.loop_period, byte_order=args.byte_order,
-                             log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol)
+                             log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
+                             interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -937,7 +978,9 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                        speed_factor=options.speed_factor, initial_pose=options.initial_pose,
                                        loop_period=options.loop_period, byte_order=options.byte_order,
                                        pty_link=options.pty_link, log_file=options.log_file,
-                                       brake_time=options.brake_time, protocol=options.protocol)
+                                       brake_time=options.brake_time, protocol=options.protocol,
+                                       interpreter_lookahead=options.interpreter_lookahead,
+                                       ring_size=options.ring_size)
         controller.start()
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)

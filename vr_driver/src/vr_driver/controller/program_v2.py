@@ -31,16 +31,25 @@ Each :meth:`ControllerProgramV2.step` (``now`` injected):
 
 Every target taken ends in exactly one :class:`~vr_driver.controller.stream_arm.StreamLogEntry` (executed,
 blended or stopped), every refusal in one entry with outcome ``rejected``.
+
+A streaming program of another record (protocol v3's Cartesian targets,
+:class:`~vr_driver.controller.program_v3.ControllerProgramV3`) keeps these rules and overrides the
+small hooks of the loop: :meth:`~ControllerProgramV2.command_slots`,
+:meth:`~ControllerProgramV2.command_outputs`, :meth:`~ControllerProgramV2.room`,
+:meth:`~ControllerProgramV2.stream_idle`, :meth:`~ControllerProgramV2.prepare`,
+:meth:`~ControllerProgramV2.queue`, :meth:`~ControllerProgramV2.brake`,
+:meth:`~ControllerProgramV2.on_arm_advanced`, :meth:`~ControllerProgramV2.make_feedback` and
+:meth:`~ControllerProgramV2.refusal_entry`.
 """
 from __future__ import annotations
 
 import logging
-from typing import Optional, Tuple
+from typing import Any, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
 from .session import SessionProgram, arm_status_bits
-from ..protocol.v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState, TargetSlot,
+from ..protocol.v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState,
                           joints_to_wire, next_seq, seq_after)
 from .arm import ExecutionLog, Outcome
 from .stream_arm import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
@@ -87,7 +96,7 @@ class ControllerProgramV2(SessionProgram):
         return command.slot0.empty and command.slot1.empty
 
     def on_link_lost(self, why: str, stop_time: float) -> None:
-        self.arm.brake(why, now=stop_time)
+        self.brake(why, stop_time)
         self._log_entries(self.arm.collect())
         self.need_start = True
         self._set_outputs(0, stop_time)            # the outputs' safe state until the master sets them
@@ -116,32 +125,83 @@ class ControllerProgramV2(SessionProgram):
         return self.arm.state
 
     # ------------------------------------------------------------------------------ the loop
-    def step(self, now: float) -> FeedbackV2:
+    def step(self, now: float) -> Any:
         """One program loop at clock time ``now``."""
         command, stale = self.read_command(now)
         self._log_entries(self.arm.step(now))
+        self.on_arm_advanced(now)
         if command is not None and not stale:
-            self._set_outputs(command.outputs, now)
+            outputs = self.command_outputs(command)
+            if outputs is not None:
+                self._set_outputs(outputs, now)
         if command is not None:
             if Control.STOP in command.control:
-                if self.arm.brake("STOP from the master", now=now):
+                if self.brake("STOP from the master", now):
                     log.info("STOP: braking, queue dropped")
             else:
                 self._take(command, now, stale)
             self._log_entries(self.arm.collect())
+        feedback, raw = self.make_feedback(now)
+        self.slave.inputs = raw
+        self.last_feedback = feedback
+        return feedback
+
+    # ---------------------------------------------------------------------- hooks of the loop
+    def command_slots(self, command: Any) -> Sequence[Any]:
+        """The command's target slots in order (v2: slot 0, then the look-ahead slot 1)."""
+        return (command.slot0, command.slot1)
+
+    def command_outputs(self, command: Any) -> Optional[int]:
+        """The general-purpose outputs a command sets, or None where the record carries none."""
+        return command.outputs
+
+    def room(self) -> int:
+        """How many more targets the program takes now (v2: the arm's queue of two)."""
+        return self.arm.room()
+
+    def stream_idle(self) -> bool:
+        """At rest with nothing taken but not yet run: a START may begin a new stream."""
+        return self.arm.state is StreamState.IDLE and not self.arm.queued
+
+    def prepare(self, slot: Any, now: float) -> Tuple[Optional[StreamTarget], RejectCode, str]:
+        """The target to queue for a slot that may be taken, or (None, code, reason) to refuse it
+        (v2: joints outside the limits -> UNREACHABLE)."""
+        target = StreamTarget(slot.seq, slot.joints, slot.speed, slot.smooth, now)
+        bad = self.arm.limit_violation(target.joints)
+        if bad is not None:
+            return None, RejectCode.UNREACHABLE, bad
+        return target, RejectCode.NONE, ""
+
+    def queue(self, target: StreamTarget, now: float) -> None:
+        """Queue a target taken (v2: to the arm; it starts at once from rest)."""
+        self.arm.push(target, now)
+
+    def brake(self, reason: str, now: float) -> bool:
+        """STOP or a link loss: brake the arm along its path and drop what is queued; True if the
+        arm was moving and not braking already."""
+        return self.arm.brake(reason, now=now)
+
+    def on_arm_advanced(self, now: float) -> None:
+        """Called each loop once the arm has advanced to ``now``, before the command is handled."""
+
+    def make_feedback(self, now: float) -> Tuple[Any, bytes]:
+        """The feedback record of this loop and its bytes for the slave's input image."""
         feedback = FeedbackV2(
             state=self.arm.state, status=arm_status_bits(self.arm), reject_code=self.reject_code,
             accepted_seq=self.accepted_seq, done_seq=self.arm.done_seq, active_seq=self.arm.active_seq,
             rejected_seq=self.rejected_seq, joints=joints_to_wire(self.arm.joints),
             tcp=wire_pose(self.arm.pose), heartbeat=self.loops % (SEQ_MAX + 1),
             inputs=self.inputs(now), outputs=self.io_outputs, armed=self.armed)
-        self.slave.inputs = feedback.encode()
-        self.last_feedback = feedback
-        return feedback
+        return feedback, feedback.encode()
+
+    def refusal_entry(self, slot: Any, code: RejectCode, now: float, reason: str) -> StreamLogEntry:
+        """The execution-log entry of a refused slot."""
+        return StreamLogEntry(slot.seq, slot.joints, slot.speed, slot.smooth, Outcome.REJECTED, reason, now,
+                              None, now, joints_to_wire(self.arm.joints), reject_code=int(code))
 
     # ------------------------------------------------------------------------------- helpers
-    def _take(self, command: CommandV2, now: float, stale: bool) -> None:
-        for index, slot in enumerate((command.slot0, command.slot1)):
+    def _take(self, command: Any, now: float, stale: bool) -> None:
+        for index, slot in enumerate(self.command_slots(command)):
             if slot.empty:
                 return
             if not seq_after(slot.seq, self.accepted_seq):
@@ -152,7 +212,7 @@ class ControllerProgramV2(SessionProgram):
                              "after (re)start / link loss")
                 return
             start = index == 0 and Control.START in command.control
-            idle = self.arm.state is StreamState.IDLE and not self.arm.queued
+            idle = self.stream_idle()
             if start and not idle and self.need_start:
                 return                                      # wait until the arm is at rest
             if not (start and idle) and (self.need_start or slot.seq != next_seq(self.accepted_seq)):
@@ -160,32 +220,29 @@ class ControllerProgramV2(SessionProgram):
                     else "expected %d (after %d)" % (next_seq(self.accepted_seq), self.accepted_seq)
                 self._refuse(slot, RejectCode.OUT_OF_ORDER, now, why)
                 return
-            if self.arm.room() <= 0:
+            if self.room() <= 0:
                 return                                      # the queue is full: it waits
             blocked = self.arm.blocked_reason()
             if blocked is not None:
                 self._refuse(slot, RejectCode.FAULT, now, blocked)
                 return
-            target = StreamTarget(slot.seq, slot.joints, slot.speed, slot.smooth, now)
-            bad = self.arm.limit_violation(target.joints)
-            if bad is not None:
-                self._refuse(slot, RejectCode.UNREACHABLE, now, bad)
+            target, code, why = self.prepare(slot, now)
+            if target is None:
+                self._refuse(slot, code, now, why)
                 return
-            self.arm.push(target, now)
+            self.queue(target, now)
             self.accepted_seq = slot.seq
             self.need_start = False
             self._refused = None            # a later refusal of a reused number is logged again
             log.debug("taken: %s", slot.describe())
 
-    def _refuse(self, slot: TargetSlot, code: RejectCode, now: float, reason: str) -> None:
+    def _refuse(self, slot: Any, code: RejectCode, now: float, reason: str) -> None:
         self.rejected_seq, self.reject_code = slot.seq, code
         if self._refused == (slot.seq, code):
             return                                          # the master repeats its record
         self._refused = (slot.seq, code)
         log.info("target %d refused (%s): %s", slot.seq, code.name, reason)
-        self.log.append(StreamLogEntry(
-            slot.seq, slot.joints, slot.speed, slot.smooth, Outcome.REJECTED, reason, now, None, now,
-            joints_to_wire(self.arm.joints), reject_code=int(code)))
+        self.log.append(self.refusal_entry(slot, code, now, reason))
 
     def _log_entries(self, entries) -> None:
         for entry in entries:

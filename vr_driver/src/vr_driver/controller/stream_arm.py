@@ -5,7 +5,10 @@ injected (``now``; the fault injections read the arm's clock when no ``now`` is 
 Motion model (doc/controller_program.md §6 and §9):
 
 - **Queue of two**: the target the arm moves to (*active*) and one look-ahead target. :meth:`room`
-  says how many more it takes now (none while it stops).
+  says how many more it takes now (none while it stops). ``look_ahead`` (default 1, v2's queue of
+  two) sets how many targets beyond the active one the arm holds: the interpreter look-ahead of a
+  G2 program (protocol v3's ``interpreter_lookahead``); 0 = the next target comes only after the
+  active one ended, so the arm stops at every point whatever the smooth level.
 - **Segment**: a synchronous joint move from the previous point (or from rest) to the target: every
   joint starts and ends together, on the straight line in joint space. Its *move time* is
   ``T0 = max_i |dq_i| / (f * vmax_i)`` (``f`` = the target's speed fraction, ``vmax`` the joint
@@ -121,6 +124,16 @@ class StreamTarget:
     def speed_fraction(self) -> float:
         return self.speed / 1000.0
 
+    @property
+    def log_target(self) -> Tuple[int, ...]:
+        """The target as its log entry shows it (the wire's values; v2: the joints in 0.001 deg)."""
+        return self.wire_joints
+
+    @property
+    def move_type(self) -> str:
+        """The move its log entry names."""
+        return "JOINT"
+
 
 @dataclass(frozen=True)
 class StreamLogEntry:
@@ -128,7 +141,7 @@ class StreamLogEntry:
     (``rejected`` with the wire's reject code)."""
 
     seq: int
-    target: Tuple[int, ...]             # joints, 0.001 degree, as received
+    target: Tuple[int, ...]             # as received: v2 the joints in 0.001 degree, v3 the pose (0.1 mm, 0.01 deg)
     speed: int                          # 0.1 %
     smooth: int
     outcome: Outcome
@@ -217,10 +230,13 @@ class SimStreamArm(ArmBase):
     def __init__(self, kinematics: Optional[Kinematics] = None, *, speed_factor: float = 1.0,
                  initial_pose: Any = HOME_POSE, initial_joints: Optional[Sequence[float]] = None,
                  clock: Clock = time.monotonic, brake_time: float = 0.0,
-                 ramp_time: float = DEFAULT_RAMP_TIME) -> None:
+                 ramp_time: float = DEFAULT_RAMP_TIME, look_ahead: int = 1) -> None:
         if not (isinstance(ramp_time, (int, float)) and not isinstance(ramp_time, bool)
                 and math.isfinite(ramp_time) and ramp_time >= 0.0):
             raise MotionError("ramp_time must be a finite number >= 0, got %r" % (ramp_time,))
+        if isinstance(look_ahead, bool) or not isinstance(look_ahead, int) or look_ahead < 0:
+            raise MotionError("look_ahead must be an integer >= 0, got %r" % (look_ahead,))
+        self.look_ahead = look_ahead
         self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock)
         self.ramp_time = float(ramp_time)
         self.vmax = np.array(self.kin.limits.velocity, dtype=float)
@@ -273,11 +289,12 @@ class SimStreamArm(ArmBase):
             return tuple(seqs + [t.seq for t in self._queue])
 
     def room(self) -> int:
-        """How many targets the arm takes now (queue of two; none while it stops)."""
+        """How many targets the arm takes now (the active one and ``look_ahead`` more: a queue of
+        two by default; none while it stops)."""
         with self._lock:
             if self._brake is not None:
                 return 0
-            return max(0, 2 - len(self._queue) - (self._active is not None))
+            return max(0, 1 + self.look_ahead - len(self._queue) - (self._active is not None))
 
     def limit_violation(self, joints: Sequence[float]) -> Optional[str]:
         """Why these joints cannot be a target (outside the joint limits), or None."""
@@ -501,12 +518,12 @@ class SimStreamArm(ArmBase):
             dropped.append(self._queue.pop())
         for target in reversed(dropped):
             self._results.append(StreamLogEntry(
-                target.seq, target.wire_joints, target.speed, target.smooth, Outcome.STOPPED,
+                target.seq, target.log_target, target.speed, target.smooth, Outcome.STOPPED,
                 "dropped before it started: %s" % reason, target.taken_time, None, now,
-                joints_to_wire(q)))
+                joints_to_wire(q), move_type=target.move_type))
 
     def _finish(self, seg: _Segment, outcome: Outcome, reason: str, now: float, q: np.ndarray) -> None:
         t = seg.target
         self._results.append(StreamLogEntry(
-            t.seq, t.wire_joints, t.speed, t.smooth, outcome, reason, t.taken_time, seg.wall_start, now,
-            joints_to_wire(q)))
+            t.seq, t.log_target, t.speed, t.smooth, outcome, reason, t.taken_time, seg.wall_start, now,
+            joints_to_wire(q), move_type=t.move_type))
