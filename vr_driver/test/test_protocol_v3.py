@@ -33,6 +33,15 @@ def words(raw: bytes, order: str):
     return struct.unpack(("<" if order == "little" else ">") + "%dH" % n, raw)
 
 
+def weighted(raw: bytes, order: str = "little") -> int:
+    """The check word by its definition: sum of (2k + 1) * word k, modulo 65536."""
+    return sum((2 * k + 1) * w for k, w in enumerate(words(raw, order))) % 65536
+
+
+def plain_sum(raw: bytes, order: str = "little") -> int:
+    return sum(words(raw, order)) % 65536
+
+
 # ------------------------------------------------------------------------------------ golden bytes
 
 def test_golden_command_little_endian():
@@ -43,7 +52,7 @@ def test_golden_command_little_endian():
     assert raw[2:8] == bytes([7, 0, 1, 3]) + struct.pack("<H", 500)   # seq, kind, smooth, speed
     assert raw[8:20] == struct.pack("<6h", 11200, -1, 7250, -18000, 4500, 17999)
     assert raw[20:22] == bytes([7, 0])                                # the seq again
-    assert raw[22:] == struct.pack("<H", sum(words(raw[:22], "little")) % 65536)
+    assert raw[22:] == struct.pack("<H", weighted(raw[:22]))
     assert CommandV3.decode(raw) == CommandV3(Control.START, slot)
 
 
@@ -55,7 +64,7 @@ def test_golden_command_big_endian_swaps_only_the_words():
     assert big[4:6] == little[4:6] == bytes([2, 10])
     assert big[2:4] == bytes([1, 2]) and little[2:4] == bytes([2, 1])
     assert big[8:20] == struct.pack(">6h", 1, 2, 3, -4, 5, -6)
-    assert big[22:] == struct.pack(">H", sum(words(big[:22], "big")) % 65536)
+    assert big[22:] == struct.pack(">H", weighted(big[:22], "big"))
     assert CommandV3.decode(big, "big") == CommandV3(Control(0), slot)
     with pytest.raises(ProtocolError):
         CommandV3.decode(big, "little")           # the check word is read (and summed) the wrong way
@@ -71,7 +80,7 @@ def test_golden_feedback_bytes():
     assert raw[4:12] == struct.pack("<4H", 12, 10, 0, 13)
     assert raw[12:24] == struct.pack("<6h", 11200, 0, 7250, 0, 4500, -17999)
     assert raw[24:26] == b"\xff\xff"
-    assert raw[26:] == struct.pack("<H", sum(words(raw[:26], "little")) % 65536)
+    assert raw[26:] == struct.pack("<H", weighted(raw[:26]))
     assert FeedbackV3.decode(raw) == fb
     big = fb.encode("big")
     assert big[:4] == raw[:4] and big[12:24] == struct.pack(">6h", 11200, 0, 7250, 0, 4500, -17999)
@@ -116,7 +125,7 @@ def test_command_round_trip(command, order):
     raw = V3.encode(command, order)
     assert len(raw) == V3.output_length
     assert V3.decode_command(raw, order) == command
-    assert sum(words(raw, order)[:-1]) % 65536 == words(raw, order)[-1]
+    assert weighted(raw[:-2], order) == words(raw, order)[-1]
 
 
 @settings(max_examples=150, deadline=None)
@@ -227,7 +236,7 @@ def test_feedback_field_ranges(field, value):
 
 
 def _sealed(body: bytes, order: str = "little") -> bytes:
-    return body + struct.pack(("<" if order == "little" else ">") + "H", sum(words(body, order)) % 65536)
+    return body + struct.pack(("<" if order == "little" else ">") + "H", weighted(body, order))
 
 
 @pytest.mark.parametrize("byte, value, words_", [
@@ -333,15 +342,41 @@ def test_torn_commands_are_refused_or_are_one_of_the_two(order):
     assert torn_refused > 1000
 
 
-def test_a_plain_sum_alone_would_miss_such_a_tear():
-    """Why the seq is carried twice: seq + 1 and speed - 1 leave the sum unchanged, so the front
-    of the next target with the back of this one has a valid check word; the seq copy refuses it."""
+def test_a_sum_alone_would_miss_such_a_tear():
+    """Why the seq is carried twice: seq + 1 and speed - 1 leave a plain sum unchanged, so the front
+    of the next target with the back of this one would pass it; the seq copy refuses it."""
     a = CommandV3(Control(0), CartesianSlot(7, 1, 3, 500, (100, 200, 300, 0, 0, 0))).encode()
     b = CommandV3(Control(0), CartesianSlot(8, 1, 3, 499, (900, 200, 300, 0, 0, 0))).encode()
     torn = b[:8] + a[8:]
-    assert check_word(torn[:-2]) == struct.unpack("<H", torn[-2:])[0]      # the sum holds
-    with pytest.raises(ProtocolError, match="torn"):
+    assert plain_sum(a[:-2]) == plain_sum(torn[:-2])
+    with pytest.raises(ProtocolError, match="torn|check word"):
         V3.decode_command(torn)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_the_weights_catch_what_the_profibus_checksum_misses(order):
+    """+d in one byte and -d in another keep the PROFIBUS FCS (a byte sum) -- and a plain sum of
+    words when both bytes are the same half of their words. The odd weights catch all such pairs
+    of low bytes (and all but a few of high bytes) in a command."""
+    raw = CommandV3(Control(0), CartesianSlot(1234, 1, 3, 517, (11200, -345, 7250, 1234, 4500, -17999))).encode(order)
+    low = [i for i in range(22) if (i % 2 == 0) == (order == "little")]      # the low byte of each word
+    missed_plain = missed = total = 0
+    for i in low:
+        for j in low:
+            if j <= i:
+                continue
+            for d in (1, 7, 100, 255):
+                bad = bytearray(raw)
+                bad[i], bad[j] = (bad[i] + d) % 256, (bad[j] - d) % 256
+                assert sum(bad) % 256 == sum(raw) % 256                 # the FCS would pass it
+                total += 1
+                missed_plain += plain_sum(bytes(bad[:-2]), order) == plain_sum(raw[:-2], order)
+                try:
+                    V3.decode_command(bytes(bad), order)
+                    missed += 1
+                except ProtocolError:
+                    pass
+    assert missed == 0 and missed_plain > total // 2
 
 
 # --------------------------------------------------------------------------------------- the seam
@@ -386,6 +421,35 @@ def test_gsd_modules_match_the_chk_cfg_and_the_lengths():
     bus = BusConfig.from_dict(data)
     assert bus.slaves[0].cfg == CHK_CFG_V3
     assert (bus.slaves[0].input_len, bus.slaves[0].output_len) == (28, 24)
+
+
+def data_exchange_bits(timing, input_len: int, output_len: int, tsdr: int) -> int:
+    """Bits on the line for one Data_Exchange (doc/controller_program.md §10.6): the idle time TSYN
+    before the request, the request SD2 telegram (9 characters of header and trailer + the outputs),
+    the slave's response time, the response SD2 telegram (9 + the inputs); 11-bit characters."""
+    return timing.tsyn_bits + 11 * (9 + output_len) + tsdr + 11 * (9 + input_len)
+
+
+def test_wire_time_per_bus_cycle_with_the_io_island():
+    """§10.6's figures from pyprofibus_vendor's BusTiming and the v3 line's bus config: at 19.2
+    kbit/s the arm and the I/O island cycle at >= 15 Hz even at the slaves' largest response time."""
+    import os
+    from pyprofibus_vendor.config import load_config
+    from pyprofibus_vendor.dp_master import BusTiming
+    here = os.path.dirname(os.path.abspath(__file__))
+    bus = load_config(os.path.join(os.path.dirname(here), "config", "io_line_bus_v3.yaml"))
+    arm, island = bus.slaves
+    assert (arm.input_len, arm.output_len, arm.cfg) == (V3.input_length, V3.output_length, CHK_CFG_V3)
+    assert (island.input_len, island.output_len) == (2, 2)
+    expected = {19200: (863, 1198), 93750: (863, 1198), 187500: (863, 1198)}
+    for baud, (arm_bits, both_bits) in expected.items():
+        t = BusTiming.for_baud(baud)
+        assert (t.tsyn_bits, t.min_tsdr_bits, t.max_tsdr_bits) == (33, 11, 60)
+        got_arm = data_exchange_bits(t, arm.input_len, arm.output_len, t.max_tsdr_bits)
+        got_both = got_arm + data_exchange_bits(t, island.input_len, island.output_len, t.max_tsdr_bits)
+        assert (got_arm, got_both) == (arm_bits, both_bits)
+    rate = 19200 / 1198
+    assert 15.0 <= rate < 16.1                        # 62.4 ms a cycle
 
 
 def target(seq=5, pose=ControllerPose(1120, 0, 725, 0, 45, 0), speed=300, smooth=2):

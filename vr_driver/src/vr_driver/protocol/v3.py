@@ -24,18 +24,23 @@ The lengths differ (24 out, 28 in): :attr:`ProtocolV3.output_length` / :attr:`Pr
 (DP's "output" = master -> slave). A card configured for v1 or v2 answers a v3 master with Cfg_Fault.
 
 Integrity: the last word of each record is the **check word**, the sum of the record's other 16-bit
-words (read in the record's byte order) modulo 65536. A G2 program computes it with integer
-additions only (doc §10.3 shows it for 16- and 32-bit integers); both ends verify it, and a record
-whose check word does not match (corrupted on the line, torn between the card's modules) is refused
-(ProtocolError), as v2's CRC. It catches every single-byte error and every error within one word;
-it does not catch two words swapped (see the doc).
+words (read in the record's byte order), the k-th (from 0) weighted by 2k + 1, modulo 65536. A G2
+program computes it with integer multiplications by small constants and additions only (doc §10.3
+shows it for 16- and 32-bit integers); both ends verify it, and a record whose check word does not
+match (corrupted on the line, torn between the card's modules) is refused (ProtocolError), as v2's
+CRC. The odd weights make it catch every error within one word (an odd factor is invertible
+modulo 65536) and nearly all errors the PROFIBUS checksum misses: that checksum is itself a sum of
+bytes, so a plain sum of words would let through the same compensating errors (+d in one byte, -d in
+another of the same half of a word: 39 % of the two-byte errors that pass the FCS; with the weights
+0.3 %, doc §10.3).
 
 Torn records: the command carries its ``seq`` twice, as its second word and again as its last word
 before the check word. A record read while the card's buffer changes from one target to the next
 (the front of one and the back of the other) has two different sequence numbers and is refused,
-wherever the tear falls; a plain sum alone lets such a mix through whenever the changed words of the
-two parts happen to cancel (seq + 1 and speed - 1 between two consecutive targets do). A tear before
-the first seq word changes only the control byte, one word, which the check word catches.
+wherever the tear falls, whatever the check word says (a sum lets such a mix through whenever the
+changed words of the two parts happen to cancel: seq + 1 and speed - 1 between two consecutive
+targets do for a plain sum). A tear before the first seq word changes only the control byte, one
+word, which the check word catches.
 """
 from __future__ import annotations
 
@@ -128,13 +133,13 @@ class CartesianKind(enum.IntEnum):
 # ---------------------------------------------------------------------------------------- helpers
 
 def check_word(body: bytes, byte_order: Any = ByteOrder.LITTLE) -> int:
-    """The check word of a record's bytes before it: the sum of its 16-bit words (unsigned, in
-    ``byte_order``) modulo 65536."""
+    """The check word of a record's bytes before it: the sum of its 16-bit words w_k (unsigned, in
+    ``byte_order``, k = 0, 1, ...) weighted by 2k + 1, modulo 65536."""
     order = ByteOrder.parse(byte_order)
     if len(body) % 2:
         raise ProtocolError("a check word sums whole 16-bit words, got %d bytes" % len(body))
     words = _WORDS.get((order, len(body) // 2)) or struct.Struct(order.struct_prefix + "%dH" % (len(body) // 2))
-    return sum(words.unpack(body)) & 0xFFFF
+    return sum((2 * k + 1) * w for k, w in enumerate(words.unpack(body))) & 0xFFFF
 
 
 def _seal(body: bytes, order: ByteOrder) -> bytes:
@@ -154,7 +159,7 @@ def _as_record(data: Any, size: int, what: str, order: ByteOrder) -> bytes:
     want = struct.unpack_from(order.struct_prefix + "H", raw, size - 2)[0]
     got = check_word(raw[:-2], order)
     if want != got:
-        raise ProtocolError("%s record: check word 0x%04X does not match its words (sum 0x%04X, %s "
+        raise ProtocolError("%s record: check word 0x%04X does not match its words (0x%04X, %s "
                             "byte order): corrupted or torn; ignored" % (what, want, got, order.value))
     return raw
 
