@@ -342,6 +342,30 @@ def test_torn_commands_are_refused_or_are_one_of_the_two(order):
     assert torn_refused > 1000
 
 
+def g2_check_word_16bit(raw: bytes, order: str) -> bytes:
+    """doc/controller_program.md §10.3's recipe for a G2 with 16-bit signed integers: the low and the
+    high byte of the weighted sum apart, every intermediate below 32768."""
+    lo_first = order == "little"
+    low = high = carry = 0
+    for k in range(len(raw) // 2):
+        lo, hi = (raw[2 * k], raw[2 * k + 1]) if lo_first else (raw[2 * k + 1], raw[2 * k])
+        c = 2 * k + 1
+        low = low + c * lo
+        carry = carry + low // 256
+        low = low % 256
+        high = (high + c * hi) % 256
+        assert max(low + c * 255, carry, high + c * 255) < 32768
+    check_low, check_high = low, (high + carry) % 256
+    return bytes([check_low, check_high]) if lo_first else bytes([check_high, check_low])
+
+
+@settings(max_examples=100, deadline=None)
+@given(command=commands(), fb=feedbacks, order=st.sampled_from(ORDERS))
+def test_the_16_bit_recipe_gives_the_check_word(command, fb, order):
+    for raw in (command.encode(order), fb.encode(order)):
+        assert g2_check_word_16bit(raw[:-2], order) == raw[-2:]
+
+
 def test_a_sum_alone_would_miss_such_a_tear():
     """Why the seq is carried twice: seq + 1 and speed - 1 leave a plain sum unchanged, so the front
     of the next target with the back of this one would pass it; the seq copy refuses it."""
