@@ -1,11 +1,23 @@
 #!/usr/bin/python3
 """Planner-like trajectories through joint_trajectory_action on the virtual controller (printed, never asserted).
 
-    scripts/bench trajectory [-- --n 3 --seed 1 --configs v1-slow,v1-fast,v2-slow,v2-fast --speed-factor 1]
+    scripts/bench trajectory [-- --n 3 --seed 1 --configs v1-paced,v2-paced,v3-paced,v3-paced-la0 --plot DIR]
 
 Trajectories (:func:`generate`, deterministic for a seed; the same set for every configuration):
 random joint paths as a sampling planner returns them -- 1 to 3 legs between random waypoints, each
-leg straight or bent (a sine bump in one or two joints) in joint space, 10 to 100 points in all
+leg straight or bent (a sine bump in one or two joints) in joint space.
+
+The "topp" set (default, ``--set topp``), as MoveIt's time parameterisation and resampling give
+them: each leg's curve timed from rest to rest (the legs meet at corners, where a path followed
+exactly must stop) time-optimally under MoveIt's joint velocity limits (times one velocity scaling
+in [0.5, 1.0] per trajectory) AND acceleration limits (panasonic_vr006l_moveit_config's
+joint_limits.yaml, full), by the classic forward-backward pass on the path parameter
+(:func:`time_leg`, at ``TOPP_MARGIN`` of each limit for its grid), then resampled every 0.1 s plus
+the end (:func:`resample`). Each leg's curve, every resampled point and every chord between two lie
+in the limits and the box below. Goals carry empty tolerances (the driver's per-protocol defaults),
+as MoveIt sends them.
+
+The "dense" set (``--set dense``, the first bench's): 10 to 100 points in all
 (point 0 = the start, at time 0), the points spread over the legs by length. Every point lies inside
 the joint limits and its TCP inside the driver's workspace box (vr_driver.yaml, shrunk by a margin
 for the controller's whole-mm rounding), and so does every sample of the straight joint-space chord
@@ -22,13 +34,15 @@ virtual controller's home pose. The bench makes trajectory i from where the arm 
 same random source (:func:`rng_for`): an arm that ended where planned runs exactly the set printed in
 the header; one that ended a little off (v1) a nearly identical one.
 
-Configurations: protocol v1 / v2 (``driver.launch protocol:=``, both ends) at 19 200 bit/s, 20 Hz
-bus cycle ("slow") and 187 500 bit/s, 50 Hz ("fast"); each in a worker process with its own roscore
-and driver.launch (sim:=true). A goal is a FollowJointTrajectory (vr_driver's md5-identical copy of
-control_msgs) sent by an actionlib client with header.stamp 0 (start now) and the path / goal
-tolerances of --path-tolerance / --goal-tolerance; by default v2 goals give none (the driver's
-defaults, 1 deg, as MoveIt sends them) and v1 goals 5 deg (``V1_TOLERANCE``: v1's rounded Cartesian
-targets land up to ~1.5 deg off, so with 1 deg no v1 goal would run to the end).
+Configurations (``CONFIGS``): protocol v1 / v2 / v3 (``driver.launch protocol:=``, both ends) at
+19 200 bit/s, 20 Hz bus cycle ("slow", "paced") and 187 500 bit/s, 50 Hz ("fast"); "paced": the
+virtual line carries its bytes at the bit rate (``line_baud:=``) with the I/O island on it
+(``io:=true``); v3 with the G2 program's interpreter look-ahead 1 or 0 ("-la0",
+``interpreter_lookahead:=``); each in a worker process with its own roscore and driver.launch
+(sim:=true). A goal is a FollowJointTrajectory (vr_driver's md5-identical copy of control_msgs)
+sent by an actionlib client with header.stamp 0 (start now) and the path / goal tolerances of
+--path-tolerance / --goal-tolerance; by default none (the driver's per-protocol defaults), except
+v1 goals of the dense set: 5 deg (``V1_TOLERANCE``).
 
 Figures per goal and, in the summary, median / max per configuration over the goals run to the end
 (succeeded, or missed only the goal tolerance). t = 0 is send_goal at this client; joint_states by
@@ -43,14 +57,20 @@ their header stamps (the driver's wall clock, the same as this process's):
   path dev       the largest |joint_states - plan(t - d)| of any joint, the plan interpolated
                  (linearly, as the driver does) at the sample's time since send_goal less the start
                  delay d (0 .. 0.5 s in 5 ms steps, the one that gives the smallest deviation: the
-                 goal's way to the driver and the bus's to the controller, "plan delay"); a sample
-                 is stamped when its record reached the driver, so the arm was there up to one bus
-                 cycle earlier: the nearest instant of that window counts; also the
+                 goal's way to the driver and the bus's to the controller, "plan delay"); each sample
+                 at its header stamp (the time the controller took its record); also the
                  same with d = 0 ("dev at send") and the distance to the planned path at any time
                  ("path-only");
   final error    the largest joint error of the first joint_states after the result vs the last point;
-  succeeded      goals with state SUCCEEDED and error_code SUCCESSFUL.
-The v2 targets (issue 16) are printed next to them. A configuration the stack does not support
+  succeeded      goals with state SUCCEEDED and error_code SUCCESSFUL;
+  time margin    time - (1.10 x plan + 0.3 s);
+  per joint      the path dev of each joint (at the goal's start delay), median / max over the goals;
+  driver's own   the driver's "at most X deg from the plan at the same time" of the result.
+joint_states are stamped with the time the controller took their record (no age window: ``age`` 0).
+The summary is Markdown tables, then per configuration each target (``TARGETS``: v3 on the paced
+19.2 kbit/s line at look-ahead >= 1; every configuration is judged against them) met or NOT met.
+``--plot DIR``: per goal DIR/<config>_<goal>.png, the planned and the executed joints over time
+(:func:`plot_goal`, matplotlib Agg). A configuration the stack does not support
 (no ready driver, every goal refused) is reported with the reason; the bench then goes on with the
 next one. Exit status 1 when a configuration failed.
 """
@@ -83,16 +103,26 @@ RESULT_TAG = "@@TRAJECTORY_RESULT "
 CONFIG_FILE = os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")
 #: the virtual controller's initial pose (controller.program's default, mm / deg)
 HOME_POSE = (1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
-#: name -> (protocol, baud, bus cycles per second)
-CONFIGS = {
-    "v1-slow": ("v1", 19200, 20.0),
-    "v1-fast": ("v1", 187500, 50.0),
-    "v2-slow": ("v2", 19200, 20.0),
-    "v2-fast": ("v2", 187500, 50.0),
+#: name -> (protocol, baud, bus cycles per second, options): "paced" the virtual line carries its
+#: bytes at the bit rate (driver.launch line_baud:=, io:=true: the I/O island on the line too),
+#: "lookahead" the v3 G2 program's interpreter look-ahead (driver.launch interpreter_lookahead:=)
+CONFIGS: Dict[str, Tuple[str, int, float, Dict[str, Any]]] = {
+    "v1-slow": ("v1", 19200, 20.0, {}),
+    "v1-fast": ("v1", 187500, 50.0, {}),
+    "v1-paced": ("v1", 19200, 20.0, {"paced": True}),
+    "v2-slow": ("v2", 19200, 20.0, {}),
+    "v2-fast": ("v2", 187500, 50.0, {}),
+    "v2-paced": ("v2", 19200, 20.0, {"paced": True}),
+    "v3-fast": ("v3", 187500, 50.0, {"lookahead": 1}),
+    "v3-paced": ("v3", 19200, 20.0, {"paced": True, "lookahead": 1}),
+    "v3-paced-la0": ("v3", 19200, 20.0, {"paced": True, "lookahead": 0}),
 }
-#: issue 16's targets for v2: (label, key, limit)
-TARGETS = (("time ratio", "ratio", 1.10), ("still [%]", "still_pct", 5.0),
-           ("path dev [deg]", "dev_deg", 0.5), ("final error [deg]", "final_deg", 0.01))
+DEFAULT_CONFIGS = ("v1-paced", "v2-paced", "v3-paced", "v3-paced-la0", "v3-fast")
+#: the targets (v3 at 19.2 kbit/s on the paced line with the I/O island, look-ahead >= 1; shown for
+#: every configuration): (label, key, limit)
+TARGETS = (("time - 1.10 x plan - 0.3 s", "margin_s", 0.0), ("still [%]", "still_pct", 5.0),
+           ("dev per joint [deg]", "dev_deg", 0.5), ("final error [deg]", "final_deg", 0.05))
+TIME_FACTOR, TIME_SLACK = 1.10, 0.3   # s: the time target, time <= 1.10 x plan + 0.3 s
 
 # --------------------------------------------------------------------------------- the generator
 #: where waypoints are drawn [deg]: inside the limits with room to spare, one arm configuration as a
@@ -118,6 +148,9 @@ WORKSPACE_MARGIN = 5.0                # mm: the box shrunk by this (the v1 progr
 #: the controller's IK, land the wrist up to ~1.5 deg off (trajectories.V1_WIRE_ERROR); with the
 #: driver's default 1 deg every goal would end early, with no figures of a whole run
 V1_TOLERANCE = 5.0
+#: the trajectory sets: "topp" time-optimal (velocity and acceleration limited) and resampled, as
+#: MoveIt's time parameterisation gives; "dense" 10-100 points at cruise fractions (the first bench)
+TIMINGS = ("topp", "dense")
 
 
 @dataclass(frozen=True)
@@ -184,6 +217,8 @@ class Checker:
                                    z=(ws.z[0] + margin, ws.z[1] - margin), angle=ws.angle)
         self.lower, self.upper = self.kin.limits.lower, self.kin.limits.upper
         self.vmax = self.kin.limits.velocity
+        #: MoveIt's limits (joint_limits.yaml), the "topp" set's time parameterisation's
+        self.vmax_planner, self.amax = joint_limits(self.params.controller_joint_names)
 
     def home(self) -> Tuple[float, ...]:
         return self.kin.ik_pose(HOME_POSE)
@@ -229,9 +264,13 @@ def _waypoint(rng: random.Random, prev: Sequence[float], chk: Checker) -> Option
 
 
 def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_points: Optional[int] = None,
-                 speed: Tuple[float, float] = SPEED) -> Planned:
-    """One planner-like trajectory from ``start`` (see the module doc). Raises RuntimeError when no
-    valid one is found in many attempts (cannot happen from a valid start in practice)."""
+                 speed: Tuple[float, float] = SPEED, timing: str = "topp") -> Planned:
+    """One planner-like trajectory from ``start`` (see the module doc): ``timing`` "topp" (time-optimal
+    under the velocity and acceleration limits, resampled every RESAMPLE_DT) or "dense" (10-100
+    points, each leg at its cruise fraction, :func:`time_law`). Raises RuntimeError when no valid
+    one is found in many attempts (cannot happen from a valid start in practice)."""
+    if timing not in TIMINGS:
+        raise ValueError("timing %r: one of %s" % (timing, ", ".join(TIMINGS)))
     start = tuple(float(v) for v in start)
     for _attempt in range(200):
         n_legs = rng.randint(1, 3)
@@ -256,6 +295,11 @@ def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_poi
                 kinds.append("straight")
             bumps.append(bump)
         starts = [start] + ways[:-1]
+        if timing == "topp":
+            planned = _topp_plan(rng, starts, ways, bumps, kinds, chk, speed)
+            if planned is not None:
+                return planned
+            continue
         lengths = [max(abs(y - x) / v for x, y, v in zip(a, b, chk.vmax)) for a, b in zip(starts, ways)]
         if n_points is not None:
             n = n_points
@@ -298,6 +342,36 @@ def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_poi
     raise RuntimeError("no valid trajectory found from %s" % (start,))
 
 
+def _topp_plan(rng: random.Random, starts: Sequence[Tuple[float, ...]], ways: Sequence[Tuple[float, ...]],
+               bumps: Sequence[Sequence[float]], kinds: Sequence[str], chk: Checker,
+               speed: Tuple[float, float]) -> Optional[Planned]:
+    """The "topp" set: the legs' curves checked against the limits and the box, timed at one velocity
+    scaling in ``speed`` (as MoveIt's) with the full acceleration limits, resampled; None if a
+    curve or a resampled point or chord leaves the box."""
+    legs = [Leg(tuple(a), tuple(b), tuple(bump)) for a, b, bump in zip(starts, ways, bumps)]
+    for leg in legs:
+        prev = leg.a
+        for k in range(1, LEG_CHECKS + 1):
+            q = leg.q(k / LEG_CHECKS)
+            if not (chk.point_ok(q) and chk.chord_ok(prev, q)):
+                return None
+            prev = q
+    f = rng.uniform(*speed)
+    vmax = [f * v * TOPP_MARGIN for v in chk.vmax_planner]
+    amax = [a * TOPP_MARGIN for a in chk.amax]
+    try:
+        timed = [time_leg(leg, vmax, amax) for leg in legs]
+    except ValueError:
+        return None
+    points, times_ns = resample(timed)
+    for p0, p1 in zip(points, points[1:]):
+        if not (chk.point_ok(p1) and chk.chord_ok(p0, p1)):
+            return None
+    fractions = [max(abs(y - x) / v for x, y, v in zip(p0, p1, chk.vmax)) / ((t1 - t0) * 1e-9)
+                 for p0, p1, t0, t1 in zip(points, points[1:], times_ns, times_ns[1:])]
+    return Planned(tuple(points), tuple(times_ns), tuple(fractions), tuple(kinds))
+
+
 def time_law(u: float, total: float, accel: float = ACCEL_TIME) -> float:
     """The time at which a path run at its cruise speeds in ``total`` s reaches its nominal time
     ``u``, when the speed ramps up linearly from rest over ``accel`` s and down to rest over the
@@ -317,8 +391,8 @@ def rng_for(seed: int, index: int) -> random.Random:
     return random.Random(seed * 1000003 + index)
 
 
-def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[Sequence[float]] = None
-             ) -> List[Planned]:
+def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[Sequence[float]] = None,
+             timing: str = "dense") -> List[Planned]:
     """``n`` chained trajectories (each from the previous one's end), from ``start`` (default home).
     The bench makes trajectory ``i`` the same way from where the arm really is (:func:`rng_for`):
     from the planned end, it is this one."""
@@ -326,10 +400,175 @@ def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[S
     q = tuple(start) if start is not None else chk.home()
     out = []
     for i in range(n):
-        traj = generate_one(rng_for(seed, i), q, chk)
+        traj = generate_one(rng_for(seed, i), q, chk, timing=timing)
         out.append(traj)
         q = traj.points[-1]
     return out
+
+
+# ------------------------------------------------------------------ time-optimal timing ("topp" set)
+#: MoveIt's joint limits (velocity and acceleration), as a planner's time parameterisation reads them
+JOINT_LIMITS_FILE = os.path.join(REPO, "panasonic_vr006l_moveit_config", "config", "joint_limits.yaml")
+RESAMPLE_DT = 0.1                     # s: the timed path resampled this often (MoveIt's resample_dt)
+#: the forward-backward pass aims at this share of every limit: it checks the limits at its grid
+#: points only, the margin covers the path's curvature between them (the test checks the result)
+TOPP_MARGIN = 0.97
+TOPP_GRID = 240                       # path parameter steps per leg
+LEG_CHECKS = 24                       # points of each leg's curve checked against the box
+
+
+def joint_limits(names: Sequence[str], path: str = JOINT_LIMITS_FILE) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
+    """(max velocity, max acceleration) per joint of ``names`` [rad/s, rad/s^2] from MoveIt's
+    joint_limits.yaml (every joint must have both)."""
+    import yaml
+    with open(path) as fh:
+        limits = (yaml.safe_load(fh) or {})["joint_limits"]
+    vel, acc = [], []
+    for n in names:
+        d = limits[n]
+        if not (d.get("has_velocity_limits") and d.get("has_acceleration_limits")):
+            raise ValueError("%s: %s has no velocity or no acceleration limit" % (path, n))
+        vel.append(float(d["max_velocity"]))
+        acc.append(float(d["max_acceleration"]))
+    return tuple(vel), tuple(acc)
+
+
+@dataclass(frozen=True)
+class Leg:
+    """One leg of a path: q(s) = a + s (b - a) + sin(pi s) bump, s in [0, 1]."""
+
+    a: Tuple[float, ...]
+    b: Tuple[float, ...]
+    bump: Tuple[float, ...]
+
+    def q(self, s: float) -> Tuple[float, ...]:
+        w = math.sin(math.pi * s)
+        return tuple(x + s * (y - x) + w * d for x, y, d in zip(self.a, self.b, self.bump))
+
+    def dq(self, s: float) -> Tuple[float, ...]:
+        c = math.pi * math.cos(math.pi * s)
+        return tuple((y - x) + c * d for x, y, d in zip(self.a, self.b, self.bump))
+
+    def ddq(self, s: float) -> Tuple[float, ...]:
+        c = -math.pi * math.pi * math.sin(math.pi * s)
+        return tuple(c * d for d in self.bump)
+
+
+def _accel_range(d1: Sequence[float], d2: Sequence[float], x: float, amax: Sequence[float]
+                 ) -> Optional[Tuple[float, float]]:
+    """The path accelerations u allowed at path speed^2 ``x``: every joint's q' u + q'' x within
+    +-amax; None if there is none."""
+    lo, hi = -math.inf, math.inf
+    for a1, a2, am in zip(d1, d2, amax):
+        if abs(a1) > 1e-12:
+            c1, c2 = (-am - a2 * x) / a1, (am - a2 * x) / a1
+            lo, hi = max(lo, min(c1, c2)), min(hi, max(c1, c2))
+        elif abs(a2 * x) > am:
+            return None
+    return (lo, hi) if lo <= hi else None
+
+
+@dataclass(frozen=True)
+class TimedLeg:
+    """A leg timed from rest to rest: path speed^2 ``x`` at the grid points s = i / n, their times ``t``."""
+
+    leg: Leg
+    x: Tuple[float, ...]
+    t: Tuple[float, ...]
+
+    @property
+    def duration(self) -> float:
+        return self.t[-1]
+
+    def s_at(self, t: float) -> float:
+        """The path parameter at ``t`` s after the leg's start (constant path acceleration per step)."""
+        n = len(self.x) - 1
+        if t <= 0.0:
+            return 0.0
+        if t >= self.t[-1]:
+            return 1.0
+        lo, hi = 0, n
+        while hi - lo > 1:                        # t[lo] <= t < t[hi]
+            mid = (lo + hi) // 2
+            if self.t[mid] <= t:
+                lo = mid
+            else:
+                hi = mid
+        ds = 1.0 / n
+        u = (self.x[lo + 1] - self.x[lo]) / (2.0 * ds)
+        tau = t - self.t[lo]
+        s = lo * ds + math.sqrt(self.x[lo]) * tau + 0.5 * u * tau * tau
+        return min(max(s, lo * ds), (lo + 1) * ds)
+
+
+def time_leg(leg: Leg, vmax: Sequence[float], amax: Sequence[float], n: int = TOPP_GRID) -> TimedLeg:
+    """Time-optimal timing of ``leg`` from rest to rest with joint speeds <= ``vmax`` and joint
+    accelerations <= ``amax``: the classic forward-backward pass on the path parameter s (the
+    phase plane s, x = ds/dt^2, constant path acceleration u between grid points; Bobrow / Shin &
+    McKay, as TOPP-RA's reachability sets reduce to on a path like this): the speed limit curve from
+    both limits, then the forward pass at the largest u allowed, the backward pass at the smallest
+    u allowed, the smaller of the two at each point."""
+    ds = 1.0 / n
+    d1 = [leg.dq(i * ds) for i in range(n + 1)]
+    d2 = [leg.ddq(i * ds) for i in range(n + 1)]
+    mvc = []
+    for a1, a2 in zip(d1, d2):
+        top = min(((vm / abs(v)) ** 2 for v, vm in zip(a1, vmax) if abs(v) > 1e-12), default=1e12)
+        if _accel_range(a1, a2, top, amax) is None:          # the acceleration limit bounds the speed
+            lo, hi = 0.0, top
+            for _ in range(50):
+                mid = 0.5 * (lo + hi)
+                if _accel_range(a1, a2, mid, amax) is None:
+                    hi = mid
+                else:
+                    lo = mid
+            top = lo
+        mvc.append(top)
+    x = [0.0] * (n + 1)
+    for i in range(n):                                        # forward: accelerate as hard as allowed
+        r = _accel_range(d1[i], d2[i], x[i], amax)
+        up = r[1] if r is not None else 0.0
+        x[i + 1] = max(0.0, min(mvc[i + 1], x[i] + 2.0 * up * ds))
+    x[n] = 0.0
+    for i in range(n - 1, -1, -1):                            # backward: brake as hard as allowed
+        r = _accel_range(d1[i + 1], d2[i + 1], x[i + 1], amax)
+        down = r[0] if r is not None else 0.0
+        x[i] = min(x[i], max(0.0, x[i + 1] - 2.0 * down * ds))
+    x[0] = 0.0
+    t = [0.0]
+    for i in range(n):
+        v = math.sqrt(x[i]) + math.sqrt(x[i + 1])
+        if v <= 0.0:
+            raise ValueError("leg cannot be timed (stuck at s = %.3f)" % (i * ds))
+        t.append(t[-1] + 2.0 * ds / v)
+    return TimedLeg(leg, tuple(x), tuple(t))
+
+
+def resample(timed: Sequence[TimedLeg], dt: float = RESAMPLE_DT) -> Tuple[List[Tuple[float, ...]], List[int]]:
+    """The legs one after the other (each from rest to rest: they meet at corners), sampled every
+    ``dt`` s and at the end (a last sample closer than dt / 2 to the end is left out, so the last
+    segment is 0.5 .. 1.5 dt long); (points, times in whole ns). The first point is the first leg's
+    start and the last the last leg's end, exactly."""
+    starts, total = [], 0.0
+    for tl in timed:
+        starts.append(total)
+        total += tl.duration
+    step_ns = int(round(dt * 1e9))
+    end_ns = int(math.ceil(total * 1e9))
+    times_ns = list(range(0, end_ns, step_ns))
+    if len(times_ns) > 1 and end_ns - times_ns[-1] < step_ns // 2:
+        times_ns.pop()
+    points = []
+    for tn in times_ns:
+        t = tn * 1e-9
+        k = len(starts) - 1
+        while k > 0 and starts[k] > t:
+            k -= 1
+        points.append(timed[k].leg.q(timed[k].s_at(t - starts[k])))
+    points[0] = tuple(timed[0].leg.a)
+    points.append(tuple(timed[-1].leg.b))
+    times_ns.append(end_ns)
+    return points, times_ns
 
 
 # ------------------------------------------------------------------------------------ the figures
@@ -368,6 +607,7 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
     inside = [(t, q) for t, q in samples if 0.0 <= t <= t_result]
     out: Dict[str, Any] = {"planned": plan.duration, "elapsed": t_result, "ratio": t_result / plan.duration,
+                           "margin_s": t_result - (TIME_FACTOR * plan.duration + TIME_SLACK),
                            "samples": len(inside)}
     runs = still_runs(inside, shortest_still)
     still = sum(b - a for a, b in runs)
@@ -380,32 +620,35 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     else:
         out["stops"] = 0
         out["start_s"] = None
-    # a sample is stamped when its record reached the driver: the arm was there up to ``age`` (one
-    # bus cycle) earlier -- it is compared with the plan over that window, the nearest instant counting
+    # ``age`` > 0: a sample stamped when its record reached the driver (the arm was there up to ``age``
+    # earlier) is compared with the plan over that window, the nearest instant counting; the bench
+    # passes 0, its stamps being the time the controller took the record
     steps = [age * k / AGE_STEPS for k in range(AGE_STEPS + 1)] if age > 0.0 else [0.0]
 
-    def deviation(lag: float) -> Tuple[float, int]:
+    def deviation(lag: float) -> Tuple[float, int, List[float]]:
         worst, joint = 0.0, 0
+        per_joint = [0.0] * len(plan.points[0])
         for t, q in inside:
-            best, best_joint = math.inf, 0
+            best, best_errs = math.inf, per_joint
             for back in steps:
                 want = plan.sample(t - lag - back)
                 errs = [abs(a - b) for a, b in zip(q, want)]
-                m = max(errs)
-                if m < best:
-                    best, best_joint = m, errs.index(m)
+                if max(errs) < best:
+                    best, best_errs = max(errs), errs
+            per_joint = [max(a, b) for a, b in zip(per_joint, best_errs)]
             if best > worst:
-                worst, joint = best, best_joint
-        return worst, joint
-    raw, _j = deviation(0.0)
+                worst, joint = best, best_errs.index(best)
+        return worst, joint, per_joint
+    raw, _j, raw_joints = deviation(0.0)
     # the plan run late by the start delay the stack cannot avoid (the goal travels to the driver,
     # the bus to the controller): the smallest deviation over delays 0 .. MAX_LAG in LAG_STEP steps
-    lag, (worst, joint) = 0.0, (raw, _j)
+    lag, (worst, joint, joints) = 0.0, (raw, _j, raw_joints)
     for k in range(1, int(round(MAX_LAG / LAG_STEP)) + 1):
         d = deviation(k * LAG_STEP)
         if d[0] < worst:
-            lag, (worst, joint) = k * LAG_STEP, d
+            lag, (worst, joint, joints) = k * LAG_STEP, d
     out["dev_deg"], out["dev_joint"] = math.degrees(worst), joint + 1
+    out["dev_joints_deg"] = [math.degrees(v) for v in joints]
     out["dev_send_deg"], out["lag_s"] = math.degrees(raw), lag
     path = ValidTrajectory(positions=plan.points, times=plan.times, path_tolerance=(1.0,) * 6,
                            goal_tolerance=(1.0,) * 6, goal_time_tolerance=0.0, delay=0.0)
@@ -413,6 +656,47 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     out["final_deg"] = (math.degrees(max(abs(a - b) for a, b in zip(final, plan.points[-1])))
                         if final is not None else None)
     return out
+
+
+#: the driver's own figure in the result's error_string (driver.supervision's note)
+DRIVER_DEV = re.compile(r"at most ([0-9.]+) deg from the plan at the same time")
+
+
+def plot_goal(directory: str, config: str, index: int, plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]],
+              lag: float, t_result: float, heading: str) -> str:
+    """One PNG per goal, ``directory/<config>_<index>.png``: per joint (six panels) the plan over time
+    since send_goal, run late by the fitted start delay ``lag`` (line), the joint_states samples by
+    their header stamps (dots) and the result's arrival (dotted line); its path."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    os.makedirs(directory, exist_ok=True)
+    fig, axes = plt.subplots(3, 2, figsize=(8.0, 6.4), sharex=True)
+    t_plan = [lag + t for t in plan.times]
+    t_dense, k = [], 0.0
+    end = max(t_result, (samples[-1][0] if samples else 0.0), t_plan[-1]) + 0.1
+    while k <= end:
+        t_dense.append(k)
+        k += 0.01
+    shown = [(t, q) for t, q in samples if -0.2 <= t <= end]
+    for j, ax in enumerate(axes.flat):
+        ax.plot(t_dense, [math.degrees(plan.sample(t - lag)[j]) for t in t_dense], "-", color="tab:blue", lw=1.2,
+                label="plan (+%.2f s start delay)" % lag)
+        ax.plot(t_plan, [math.degrees(q[j]) for q in plan.points], ".", color="tab:blue", ms=3)
+        ax.plot([t for t, _q in shown], [math.degrees(q[j]) for _t, q in shown], ".", color="tab:red", ms=3,
+                label="joint_states (header stamps)")
+        ax.axvline(t_result, color="0.4", ls=":", lw=1.0, label="result")
+        ax.set_ylabel("J%d [deg]" % (j + 1))
+        ax.grid(True, lw=0.3)
+    for ax in axes[-1]:
+        ax.set_xlabel("time since send_goal [s]")
+    axes[0][0].legend(fontsize=6, loc="best")
+    fig.suptitle(heading, fontsize=9)
+    fig.tight_layout()
+    path = os.path.join(directory, "%s_%02d.png" % (config, index))
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
 
 
 # ------------------------------------------------------------------------------------------ worker
@@ -533,11 +817,11 @@ class Run:
         q = self.current()
         note = ""
         try:
-            plan = generate_one(rng_for(cfg["seed"], index - 1), q, self.chk)
+            plan = generate_one(rng_for(cfg["seed"], index - 1), q, self.chk, timing=cfg["set"])
         except RuntimeError:                  # the arm stopped somewhere odd: from home
             note = self.reposition(self.chk.home())
             self.wait_idle(time.monotonic() + 30.0, "the arm not idle after going home")
-            plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk)
+            plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk, timing=cfg["set"])
         mark = self.joints.mark()
         timeout = 30.0 + 4.0 * plan.duration + 1.5 * len(plan.points)
         status, result, t_send, t_done = self.send(self.goal(plan, cfg["path_tol"], cfg["goal_tol"]), timeout)
@@ -549,9 +833,12 @@ class Run:
         with self.joints.cond:
             msgs = [m for _t, m in self.joints.messages[mark:]]
         samples = [(m.header.stamp.to_sec() - t_send, self.q_of(m)) for m in msgs if self.q_of(m) is not None]
+        # joint_states are stamped with the time the controller took their record: no age window
         rec = analyse(plan, samples, t_done - t_send, final,
-                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate),
-                      age=1.0 / cfg["cycle_rate"])
+                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate), age=0.0)
+        if cfg.get("plot"):
+            rec["plot"] = plot_goal(cfg["plot"], cfg["name"], index, plan, samples, rec["lag_s"],
+                                    t_done - t_send, "%s goal %d: %s" % (cfg["name"], index, cfg["title"]))
         if cfg.get("dump"):
             with open(cfg["dump"], "a") as fh:
                 fh.write(json.dumps({"config": cfg["name"], "index": index, "plan": plan.to_json(),
@@ -561,6 +848,8 @@ class Run:
                    code=result.error_code if result is not None else None,
                    error_string=result.error_string if result is not None else "no result within %.0f s" % timeout,
                    note=note)
+        found = DRIVER_DEV.search(rec["error_string"])
+        rec["driver_dev_deg"] = float(found.group(1)) if found else None
         rec["ok"] = status == GoalStatus.SUCCEEDED and result is not None and result.error_code == 0
         rec["ran"] = status not in (None, GoalStatus.REJECTED)
         # to the end: succeeded, or only the goal tolerance missed (the figures are of a whole run)
@@ -573,17 +862,17 @@ class Run:
         ready = self.wait_ready(cfg["ready_timeout"])
         print("ready %.1f s after roslaunch (joint_trajectory_action up, motion_possible TRUE)" % ready, flush=True)
         recs = []
-        print("%3s %4s %7s %-10s %6s %7s %7s %5s %10s %8s %9s  %s" % (
-            "#", "pts", "plan s", "state", "ratio", "still%", "start s", "stops", "dev deg(J)", "path deg",
-            "final deg", "result"), flush=True)
+        print("%3s %4s %7s %-10s %6s %7s %7s %7s %5s %10s %7s %8s %9s  %s" % (
+            "#", "pts", "plan s", "state", "ratio", "margin", "still%", "start s", "stops", "dev deg(J)", "delay",
+            "path deg", "final deg", "result"), flush=True)
         refused_in_a_row = 0
         for i in range(cfg["n"]):
             rec = self.one(i + 1)
             recs.append(rec)
-            print("%3d %4d %7.2f %-10s %6.2f %7.1f %7s %5d %7.2f(%d) %8.2f %9s  %s%s"
-                  % (rec["index"], rec["points"], rec["planned"], rec["state_name"], rec["ratio"], rec["still_pct"],
-                     "n/a" if rec["start_s"] is None else "%.2f" % rec["start_s"],
-                     rec["stops"], rec["dev_deg"], rec["dev_joint"], rec["path_deg"],
+            print("%3d %4d %7.2f %-10s %6.2f %+7.2f %7.1f %7s %5d %7.2f(%d) %7.3f %8.2f %9s  %s%s"
+                  % (rec["index"], rec["points"], rec["planned"], rec["state_name"], rec["ratio"], rec["margin_s"],
+                     rec["still_pct"], "n/a" if rec["start_s"] is None else "%.2f" % rec["start_s"],
+                     rec["stops"], rec["dev_deg"], rec["dev_joint"], rec["lag_s"], rec["path_deg"],
                      "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
                      rec["error_string"][:110], " [%s]" % rec["note"] if rec["note"] else ""), flush=True)
             refused_in_a_row = 0 if rec["ran"] else refused_in_a_row + 1
@@ -592,7 +881,7 @@ class Run:
             if rec["state"] is None and not any(r["ok"] for r in recs):
                 raise Failure("unsupported: no result for trajectory %d within the timeout" % rec["index"])
         return {"name": cfg["name"], "protocol": cfg["protocol"], "baud": cfg["baud"], "cycle_rate": cfg["cycle_rate"],
-                "goals": recs, "tolerances": cfg["tolerances"]}
+                "goals": recs, "tolerances": cfg["tolerances"], "title": cfg["title"], "set": cfg["set"]}
 
 
 def worker(cfg: Dict[str, Any]) -> int:
@@ -609,12 +898,29 @@ def worker(cfg: Dict[str, Any]) -> int:
         return cfg.get("keep_logs", False) if isinstance(exc, Failure) else True
     return stack_worker(
         cfg, "vr_traj_bench_", "trajectory_bench",
-        "--- %s: protocol %s, %d bit/s%s, %g Hz bus cycle (ROS master port {port}, speed_factor %g; "
-        "tolerances %s)" % (cfg["name"], cfg["protocol"], cfg["baud"], " (line paced)" if cfg.get("paced") else "",
-                            cfg["cycle_rate"], cfg["speed_factor"], cfg["tolerances"]),
-        ["baud:=%d" % cfg["baud"], "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
-         "protocol:=%s" % cfg["protocol"]] + (["line_baud:=%d" % cfg["baud"]] if cfg.get("paced") else []),
-        measure, failed)
+        "--- %s: %s (ROS master port {port}, speed_factor %g; %s set; tolerances %s)"
+        % (cfg["name"], cfg["title"], cfg["speed_factor"], cfg["set"], cfg["tolerances"]),
+        launch_args(cfg), measure, failed)
+
+
+def launch_args(cfg: Dict[str, Any]) -> List[str]:
+    """driver.launch's arguments for a configuration (besides sim:=true and sim_port)."""
+    args = ["baud:=%d" % cfg["baud"], "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
+            "protocol:=%s" % cfg["protocol"]]
+    if cfg.get("paced"):
+        args += ["io:=true", "line_baud:=%d" % cfg["baud"]]
+    if cfg.get("lookahead") is not None:
+        args.append("interpreter_lookahead:=%d" % cfg["lookahead"])
+    return args
+
+
+def title(protocol: str, baud: int, rate: float, paced: bool, lookahead: Optional[int]) -> str:
+    """A configuration in words, e.g. 'v3, 19.2 kbit/s, 20 Hz, paced line + I/O island, look-ahead 1'."""
+    text = "%s, %g kbit/s, %g Hz" % (protocol, baud / 1000.0, rate)
+    text += ", paced line + I/O island" if paced else ", pty"
+    if lookahead is not None:
+        text += ", look-ahead %d" % lookahead
+    return text
 
 
 # ------------------------------------------------------------------------------------------ parent
@@ -624,54 +930,66 @@ def _median(values: Sequence[float]) -> float:
     return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
 
 
+def _mm(values: Sequence[float], fmt: str = "%.3g") -> str:
+    """median / max, or n/a."""
+    return (fmt + " / " + fmt) % (_median(values), max(values)) if values else "n/a"
+
+
+def verdicts(result: Dict[str, Any]) -> List[Tuple[str, bool]]:
+    """(target, met) of one configuration: every goal SUCCESSFUL, then each of TARGETS on every goal
+    run to the end (a deviation per joint: the largest joint of the goal)."""
+    goals = result["goals"]
+    ran = [g for g in goals if g["completed"]]
+    out = [("all goals SUCCESSFUL", bool(goals) and all(g["ok"] for g in goals))]
+    for label, key, limit in TARGETS:
+        vals = [g[key] for g in ran if g.get(key) is not None]
+        out.append((label, bool(vals) and len(vals) == len(goals) and max(vals) <= limit))
+    return out
+
+
 def summary(results: List[Dict[str, Any]]) -> None:
-    print("=== summary: median / max over the goals run to the end (succeeded, or missed only the goal tolerance); "
-          "v2 targets of issue 16 in the last column")
-    width = 17
-    names = [r["name"] for r in results]
-    print("%-22s" % "" + "".join(" %-*s" % (width, n) for n in names) + "  v2 target")
-    cells: Dict[str, List[str]] = {"goals succeeded": [], "run to the end": [], "tolerances [deg]": []}
-    for label, _key, _limit in TARGETS:
-        cells[label] = []
-    cells["stops"] = []
-    cells["start [s]"] = []
-    cells["path-only dev [deg]"] = []
-    cells["dev at send [deg]"] = []
-    cells["plan delay [s]"] = []
+    """The figures per configuration as Markdown tables (median / max over the goals run to the end,
+    that is succeeded or missed only the goal tolerance), then the targets met or not."""
+    print("=== summary: median / max over the goals run to the end (succeeded, or missed only the goal "
+          "tolerance); time margin = time - (%.2f x plan + %.1f s); deviation from the plan at the same time "
+          "(joint_states header stamps) less the fitted start delay" % (TIME_FACTOR, TIME_SLACK))
+    head = ("configuration", "goals SUCCESSFUL", "time / plan", "time margin [s]", "standing still [%]", "stops",
+            "deviation [deg]", "start delay [s]", "driver's own [deg]", "deviation at send [deg]",
+            "distance to the path [deg]", "final error [deg]")
+    print("| " + " | ".join(head) + " |")
+    print("|" + " --- |" * len(head))
+    rows_j = []
     for r in results:
         if "failed" in r:
-            for k in cells:
-                cells[k].append("FAILED" if k == "goals succeeded" else "-")
+            print("| %s | FAILED: %s |" % (r["name"], r["failed"][:160]) + " |" * (len(head) - 2))
             continue
         goals = r["goals"]
         ran = [g for g in goals if g["completed"]]
-        cells["goals succeeded"].append("%d / %d" % (sum(1 for g in goals if g["ok"]), len(goals)))
-        cells["run to the end"].append("%d / %d" % (len(ran), len(goals)))
-        cells["tolerances [deg]"].append(r["tolerances"])
-        for label, key, _limit in TARGETS + (("stops", "stops", None), ("start [s]", "start_s", None),
-                                             ("path-only dev [deg]", "path_deg", None),
-                                             ("dev at send [deg]", "dev_send_deg", None),
-                                             ("plan delay [s]", "lag_s", None)):
-            vals = [g[key] for g in ran if g.get(key) is not None]
-            if not vals:
-                cells[label].append("n/a")
-            elif key == "stops":
-                cells[label].append("%g / %d" % (_median(vals), max(vals)))
-            else:
-                cells[label].append("%.3g / %.3g" % (_median(vals), max(vals)))
-    targets = {label: "<= %g" % limit for label, _key, limit in TARGETS}
-    for label, row in cells.items():
-        print("%-22s" % label + "".join(" %-*s" % (width, c) for c in row) + "  " + targets.get(label, ""))
+
+        def vals(key: str) -> List[float]:
+            return [g[key] for g in ran if g.get(key) is not None]
+        print("| %s | %d / %d | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            r["title"], sum(1 for g in goals if g["ok"]), len(goals), _mm(vals("ratio"), "%.2f"),
+            _mm(vals("margin_s"), "%+.2f"), _mm(vals("still_pct"), "%.1f"), _mm(vals("stops"), "%g"),
+            _mm(vals("dev_deg"), "%.2f"), _mm(vals("lag_s"), "%.3f"), _mm(vals("driver_dev_deg"), "%.2f"),
+            _mm(vals("dev_send_deg"), "%.2f"), _mm(vals("path_deg"), "%.2f"), _mm(vals("final_deg"), "%.3f")))
+        per_joint = [[g["dev_joints_deg"][j] for g in ran if g.get("dev_joints_deg")] for j in range(6)]
+        rows_j.append("| %s | %s |" % (r["title"], " | ".join(_mm(v, "%.2f") for v in per_joint)))
+    print("| **target** (v3, 19.2 kbit/s paced, I/O island, look-ahead >= 1) | all | | <= 0 | <= 5 | | <= 0.5 "
+          "per joint | | | | | <= 0.05 |")
+    if rows_j:
+        print("\ndeviation from the plan at the same time per joint [deg], median / max over the goals (target <= 0.5):")
+        print("| configuration | J1 | J2 | J3 | J4 | J5 | J6 |")
+        print("|" + " --- |" * 7)
+        for row in rows_j:
+            print(row)
+    print()
     for r in results:
         if "failed" in r:
             print("%s: FAILED / unsupported: %s" % (r["name"], r["failed"]))
-        elif r["name"].startswith("v2"):
-            ran = [g for g in r["goals"] if g["completed"]]
-            verdict = []
-            for label, key, limit in TARGETS:
-                vals = [g[key] for g in ran if g.get(key) is not None]
-                verdict.append("%s %s" % (label, "MEET" if vals and max(vals) <= limit else "MISS"))
-            print("%s against the v2 targets (every goal): %s" % (r["name"], ", ".join(verdict)))
+            continue
+        print("%s against the targets (every goal): %s" % (
+            r["name"], ", ".join("%s %s" % (label, "met" if met else "NOT met") for label, met in verdicts(r))))
 
 
 def run_worker(cfg: Dict[str, Any]) -> Tuple[int, Optional[Dict[str, Any]]]:
@@ -691,15 +1009,23 @@ def main(argv: Optional[List[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--n", type=int, default=3, help="trajectories per configuration (default 3)")
     p.add_argument("--seed", type=int, default=1, help="the trajectories' seed (default 1)")
-    p.add_argument("--configs", default=",".join(CONFIGS),
-                   help="comma-separated subset of %s (default: all)" % ", ".join(CONFIGS))
+    p.add_argument("--configs", default=",".join(DEFAULT_CONFIGS),
+                   help="comma-separated subset of %s (default: %s)" % (", ".join(CONFIGS), ",".join(DEFAULT_CONFIGS)))
+    p.add_argument("--set", choices=TIMINGS, default="topp",
+                   help="trajectories: topp = time-optimal under MoveIt's velocity and acceleration limits, "
+                        "resampled every %g s, goals with empty tolerances (default); dense = 10-100 points at "
+                        "cruise fractions, v1 goals with %g deg tolerances" % (RESAMPLE_DT, V1_TOLERANCE))
+    p.add_argument("--plot", default="", metavar="DIR",
+                   help="draw each goal's planned and executed joints over time into DIR/<config>_<goal>.png")
     p.add_argument("--speed-factor", type=float, default=1.0,
                    help="virtual controller motion time divisor (default 1: real time)")
     p.add_argument("--path-tolerance", type=float, default=None,
                    help="path tolerance per joint in the goals [deg]; 0: none given (the driver's default, "
-                        "as MoveIt sends them), negative: no limit (default: v1 %g, v2 none given)" % V1_TOLERANCE)
+                        "as MoveIt sends them), negative: no limit (default: none given; --set dense: v1 %g)"
+                        % V1_TOLERANCE)
     p.add_argument("--goal-tolerance", type=float, default=None,
-                   help="goal tolerance per joint [deg]; 0: none given (default: v1 %g, v2 none given)" % V1_TOLERANCE)
+                   help="goal tolerance per joint [deg]; 0: none given (default: none given; --set dense: v1 %g)"
+                        % V1_TOLERANCE)
     p.add_argument("--ready-timeout", type=float, default=60.0, help="driver ready within [s] (default 60)")
     p.add_argument("--ros-port", type=int, default=0, help="ROS master port (default: a free one from 11700)")
     p.add_argument("--keep-logs", action="store_true", help="keep the ROS logs and print where")
@@ -707,9 +1033,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                                                "(JSON lines: config, index, plan, samples [t, joints], t_result)")
     p.add_argument("--quick", action="store_true", help="smoke run: 1 trajectory per configuration")
     p.add_argument("--paced", action="store_true",
-                   help="the virtual line carries its bytes at the configuration's bit rate (driver.launch "
-                        "line_baud:=), so a record takes its real wire time (a 72-byte v2 exchange ~95 ms at "
-                        "19.2 kbit/s); default: pty speed")
+                   help="every configuration on the paced line (the *-paced ones always are): the virtual line "
+                        "carries its bytes at the configuration's bit rate (driver.launch line_baud:=), so a "
+                        "record takes its real wire time (a 72-byte v2 exchange ~95 ms at 19.2 kbit/s)")
     args = p.parse_args(argv)
     if args.quick:
         args.n = 1
@@ -722,24 +1048,28 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     def tol(deg: Optional[float], protocol: str) -> float:
         if deg is None:
-            deg = V1_TOLERANCE if protocol == "v1" else 0.0
+            deg = V1_TOLERANCE if protocol == "v1" and args.set == "dense" else 0.0
         return -1.0 if deg < 0 else math.radians(deg)
 
     def shown(value: float) -> str:
         return "none" if value < 0 else "default" if value == 0 else "%g" % math.degrees(value)
     started = time.perf_counter()
-    plans = generate(args.seed, args.n)
-    print("trajectory benchmark: %d trajectories per configuration (seed %d: %s points, %s s planned), "
+    plans = generate(args.seed, args.n, timing=args.set)
+    print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned), "
           "configurations %s; each with its own roscore + driver.launch sim:=true"
-          % (args.n, args.seed, "/".join(str(len(t.points)) for t in plans),
+          % (args.n, args.set, args.seed, "/".join(str(len(t.points)) for t in plans),
              "/".join("%.2f" % t.duration for t in plans), ", ".join(names)), flush=True)
     results, status = [], 0
     for name in names:
-        protocol, baud, rate = CONFIGS[name]
+        protocol, baud, rate, opts = CONFIGS[name]
+        paced = bool(args.paced or opts.get("paced"))
         cfg = {"name": name, "protocol": protocol, "baud": baud, "cycle_rate": rate, "n": args.n, "seed": args.seed,
                "speed_factor": args.speed_factor, "path_tol": tol(args.path_tolerance, protocol),
                "goal_tol": tol(args.goal_tolerance, protocol), "ready_timeout": args.ready_timeout,
-               "ros_port": args.ros_port, "keep_logs": args.keep_logs, "paced": args.paced,
+               "ros_port": args.ros_port, "keep_logs": args.keep_logs, "paced": paced,
+               "lookahead": opts.get("lookahead"), "set": args.set,
+               "title": title(protocol, baud, rate, paced, opts.get("lookahead")),
+               "plot": os.path.abspath(args.plot) if args.plot else "",
                "dump": os.path.abspath(args.dump) if args.dump else ""}
         cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
         code, result = run_worker(cfg)

@@ -95,6 +95,99 @@ class TrajectoryGeneratorTest(unittest.TestCase):
         self.assertGreater(len(sizes), 3, "the number of points varies")
 
 
+def joint_limits_yaml():
+    """(velocity, acceleration) limits per joint, read here from MoveIt's joint_limits.yaml."""
+    with open(os.path.join(REPO, "panasonic_vr006l_moveit_config", "config", "joint_limits.yaml")) as fh:
+        d = yaml.safe_load(fh)["joint_limits"]
+    names = ["joint_%d" % i for i in range(1, 7)]
+    return [d[n]["max_velocity"] for n in names], [d[n]["max_acceleration"] for n in names]
+
+
+class TimeOptimalSetTest(unittest.TestCase):
+    """The "topp" set (the bench's default): resampled every 0.1 s, within MoveIt's velocity AND
+    acceleration limits as the samples show them (divided differences: a trajectory within the
+    limits gives samples within them, whatever it is between), from rest to rest, accepted by the
+    driver, and time-optimal on a plain move."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.bench = load_bench()
+        from vr_driver.kinematics.solver import Kinematics
+        from vr_driver.kinematics.preview import MotionPlanner
+        from vr_driver.params import DriverParams
+        with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
+            cls.params = DriverParams.from_dict(yaml.safe_load(fh))
+        cls.kin = Kinematics.default()
+        cls.planner = MotionPlanner(cls.kin)
+        cls.vmax, cls.amax = joint_limits_yaml()
+        cls.trajs = cls.bench.generate(5, 4, timing="topp") + cls.bench.generate(9, 4, timing="topp")
+
+    def test_within_the_velocity_and_acceleration_limits(self):
+        eps = 1e-9
+        seen_acc = 0.0
+        for k, t in enumerate(self.trajs):
+            with self.subTest(trajectory=k):
+                times, pts = t.times, t.points
+                h = [b - a for a, b in zip(times, times[1:])]
+                v = [[(q1[j] - q0[j]) / hh for j in range(6)] for q0, q1, hh in zip(pts, pts[1:], h)]
+                for vv in v:
+                    for j in range(6):
+                        self.assertLessEqual(abs(vv[j]), self.vmax[j] + eps)
+                for i in range(len(v) - 1):
+                    for j in range(6):
+                        acc = 2.0 * (v[i + 1][j] - v[i][j]) / (h[i] + h[i + 1])
+                        self.assertLessEqual(abs(acc), self.amax[j] + eps)
+                        seen_acc = max(seen_acc, abs(acc) / self.amax[j])
+                # from rest and to rest: the first and last segments as if accelerating from rest
+                for j in range(6):
+                    self.assertLessEqual(abs(v[0][j]), self.amax[j] * h[0] / 2.0 + eps)
+                    self.assertLessEqual(abs(v[-1][j]), self.amax[j] * h[-1] / 2.0 + eps)
+        self.assertGreater(seen_acc, 0.8, "time-optimal: some joint accelerates near its limit")
+
+    def test_resampled_every_tenth_of_a_second_and_the_driver_accepts_them(self):
+        from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+        from vr_driver.kinematics.preview import check_envelope
+        names = self.params.controller_joint_names
+        lim = self.kin.limits
+        for k, t in enumerate(self.trajs):
+            with self.subTest(trajectory=k):
+                steps = [b - a for a, b in zip(t.times_ns, t.times_ns[1:])]
+                self.assertTrue(all(s == 100_000_000 for s in steps[:-1]), steps)
+                self.assertTrue(50_000_000 <= steps[-1] <= 150_000_000, steps[-1])
+                traj = validate(TrajectoryGoal(names, t.points, t.times), names, t.points[0], lim.lower, lim.upper, 0.0)
+                self.assertTrue(all(s <= 1.0 for s in segment_speeds(traj, lim.velocity, names)))
+                for a, b in zip(t.points, t.points[1:]):
+                    self.assertTrue(self.params.workspace.contains(self.kin.fk_pose(b)))
+                    check_envelope(self.planner.ptp_joints(a, b), self.params.workspace)
+        for a, b in zip(self.trajs[:3], self.trajs[1:4]):
+            self.assertEqual(a.points[-1], b.points[0])                  # chained
+
+    def test_a_straight_move_of_one_joint_takes_the_trapezoid_time(self):
+        b = self.bench
+        vmax, amax = [1.0] * 6, [2.0] * 6
+        for dist, optimal in ((2.0, 2.0 / 1.0 + 1.0 / 2.0),              # cruises: D / v + v / a
+                              (0.2, 2.0 * math.sqrt(0.2 / 2.0))):        # never at full speed: 2 sqrt(D / a)
+            leg = b.Leg((0.0,) * 6, (dist,) + (0.0,) * 5, (0.0,) * 6)
+            timed = b.time_leg(leg, vmax, amax)
+            self.assertAlmostEqual(timed.duration, optimal, delta=0.01 * optimal)
+            self.assertAlmostEqual(timed.leg.q(timed.s_at(timed.duration / 2.0))[0], dist / 2.0, delta=1e-3)
+
+    def test_a_bent_leg_keeps_both_limits_between_the_grid_points(self):
+        b = self.bench
+        vmax, amax = self.vmax, self.amax
+        leg = b.Leg((0.0, 0.2, -0.3, 0.0, 0.5, 0.0), (1.2, -0.4, 0.3, 1.5, 1.0, -2.0),
+                    (0.0, 0.3, 0.0, -0.35, 0.0, 0.2))
+        timed = b.time_leg(leg, [v * b.TOPP_MARGIN for v in vmax], [a * b.TOPP_MARGIN for a in amax])
+        pts, tns = b.resample([timed], dt=0.004)                          # finely: between the grid points too
+        times = [x * 1e-9 for x in tns]
+        v = [[(q1[j] - q0[j]) / (t1 - t0) for j in range(6)] for q0, q1, t0, t1 in zip(pts, pts[1:], times, times[1:])]
+        for i in range(len(v) - 1):
+            h = times[i + 2] - times[i]
+            for j in range(6):
+                self.assertLessEqual(abs(v[i][j]), vmax[j])
+                self.assertLessEqual(abs(2.0 * (v[i + 1][j] - v[i][j]) / h), amax[j])
+
+
 class FiguresTest(unittest.TestCase):
     """analyse(): the figures of one goal from joint_states samples, on a made-up run."""
 
@@ -134,6 +227,36 @@ class FiguresTest(unittest.TestCase):
         self.assertAlmostEqual(r["path_deg"], 0.0, places=6)  # always on the planned line
         self.assertAlmostEqual(r["final_deg"], math.degrees(0.0001), places=6)
         self.assertAlmostEqual(r["start_s"], 0.3, delta=0.06)
+        self.assertAlmostEqual(r["margin_s"], 2.0 - (1.10 * 1.0 + 0.3))   # time <= 1.10 x plan + 0.3 s missed by 0.6 s
+        self.assertEqual(len(r["dev_joints_deg"]), 6)
+        self.assertAlmostEqual(r["dev_joints_deg"][0], r["dev_deg"])
+        self.assertEqual(r["dev_joints_deg"][1:], [0.0] * 5)
+
+    def test_the_plot_of_a_goal(self):
+        import tempfile
+        b = self.bench
+        plan = b.Planned(((0.0,) * 6, (1.0,) * 6), (0, 1_000_000_000), (0.5,), ("straight",))
+        samples = [(0.05 * k, (min(1.0, 0.05 * k),) * 6) for k in range(30)]
+        with tempfile.TemporaryDirectory() as tmp:
+            path = b.plot_goal(tmp, "v3-paced", 2, plan, samples, 0.1, 1.4, "test")
+            self.assertEqual(os.path.basename(path), "v3-paced_02.png")
+            with open(path, "rb") as fh:
+                self.assertEqual(fh.read(8), b"\x89PNG\r\n\x1a\n")
+            self.assertLess(os.path.getsize(path), 150_000)
+
+    def test_configurations_launch_what_they_say(self):
+        b = self.bench
+        for name, (protocol, baud, rate, opts) in b.CONFIGS.items():
+            cfg = {"baud": baud, "cycle_rate": rate, "speed_factor": 1.0, "protocol": protocol,
+                   "paced": bool(opts.get("paced")), "lookahead": opts.get("lookahead")}
+            args = b.launch_args(cfg)
+            with self.subTest(config=name):
+                self.assertIn("protocol:=%s" % protocol, args)
+                self.assertEqual("line_baud:=%d" % baud in args, name.endswith(("-paced", "-la0")))
+                self.assertEqual("io:=true" in args, cfg["paced"])
+                if protocol == "v3":
+                    self.assertIn("interpreter_lookahead:=%d" % (0 if name.endswith("-la0") else 1), args)
+        self.assertEqual(b.CONFIGS["v3-paced"][:2], ("v3", 19200))
 
     def test_a_moving_arm_whose_feedback_repeats_once_is_not_standing_still(self):
         b = self.bench
