@@ -60,7 +60,9 @@ def main() -> int:
                                        speed_factor=options.speed_factor, initial_pose=options.initial_pose,
                                        loop_period=options.loop_period, byte_order=options.byte_order,
                                        pty_link=options.pty_link, log_file=options.log_file,
-                                       brake_time=options.brake_time, protocol=options.protocol)
+                                       brake_time=options.brake_time, protocol=options.protocol,
+                                       interpreter_lookahead=options.interpreter_lookahead,
+                                       ring_size=options.ring_size)
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
         return EXIT_DEVICE
