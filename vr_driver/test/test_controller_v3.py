@@ -228,20 +228,27 @@ def test_the_ring_fills_to_its_size_while_the_arm_runs(kin):
 
 
 def test_out_of_order_is_refused_once(rig, kin):
-    pts = zigzag(4)
+    """One number ahead (the master sends the next target before the acknowledgement of the one
+    before it, protocol.send_ahead) waits, neither taken nor refused; further ahead is refused once."""
+    pts = zigzag(5)
     rig.record = CommandV3(Control.START, target(kin, 1, pts[0], 800, 5))
     rig.until(lambda fb: fb.accepted_seq == 1)
-    rig.record = CommandV3(Control(0), target(kin, 3, pts[2], 800, 5))           # 2 skipped
-    fb = rig.until(lambda fb: fb.rejected_seq == 3)
+    rig.record = CommandV3(Control(0), target(kin, 3, pts[2], 800, 5))           # 2 not taken yet
+    fb = rig.loop(20)
+    assert fb.accepted_seq == 1 and fb.rejected_seq == 0                        # it waits
+    rig.record = CommandV3(Control(0), target(kin, 4, pts[3], 800, 5))           # 2 and 3 skipped
+    fb = rig.until(lambda fb: fb.rejected_seq == 4)
     assert fb.reject_code is RejectCode.OUT_OF_ORDER and fb.accepted_seq == 1
     fb = rig.until(lambda fb: fb.state is StreamState.WAITING, 10.0)           # no guess past point 1
     assert fb.done_seq == 1
     rejected = [e for e in rig.prog.log.entries() if e.outcome is Outcome.REJECTED]
-    assert [(e.seq, e.reject_code, e.move_type) for e in rejected] == [(3, 1, "MOVEP")]    # once
+    assert [(e.seq, e.reject_code, e.move_type) for e in rejected] == [(4, 1, "MOVEP")]    # once
     rig.record = CommandV3(Control(0), target(kin, 2, pts[1], 800, 0))
     rig.until(lambda fb: fb.done_seq == 2 and not rig.arm.moving)
+    rig.record = CommandV3(Control(0), target(kin, 3, pts[2], 800, 0))           # now the next one
+    rig.until(lambda fb: fb.done_seq == 3 and not rig.arm.moving)
     assert sorted((e.seq, e.outcome.value) for e in rig.prog.log.entries()) == [
-        (1, "executed"), (2, "executed"), (3, "rejected")]
+        (1, "executed"), (2, "executed"), (3, "executed"), (4, "rejected")]
 
 
 def test_a_new_stream_begins_with_start(rig, kin):

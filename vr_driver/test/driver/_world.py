@@ -20,6 +20,7 @@ from pyprofibus_vendor.dp_slave import SlaveLink
 
 from vr_driver.controller.program import ControllerProgram, robot_slave
 from vr_driver.controller.program_v2 import ControllerProgramV2
+from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.stream_arm import SimStreamArm
 from vr_driver.driver import DriverCore, DriverStatus, MoveJob
 from vr_driver.params import DriverParams
@@ -74,15 +75,24 @@ WORLD_PARAMS: Dict[str, Any] = {
 class World:
     def __init__(self, kin, params: Optional[Dict[str, Any]] = None, *, speed_factor: float = 1.0,
                  brake_time: float = 0.3, initial_pose: Any = HOME_POSE, loop_period: float = 0.01,
-                 planner=None, protocol: str = "v1") -> None:
+                 planner=None, protocol: str = "v1", interpreter_lookahead: int = 1,
+                 controller_kin=None, ramp_time: Optional[float] = None) -> None:
         self.clock = FakeClock()
         self.kin = kin
         self.protocol = protocol
+        self.streams = protocol in ("v2", "v3")
         self.slave = robot_slave(clock=self.clock, protocol=protocol)
         self.log = ExecutionLog()
-        if protocol == "v2":
+        extra = {} if ramp_time is None else {"ramp_time": ramp_time}
+        if protocol == "v3":
+            self.arm = SimStreamArm(controller_kin or kin, speed_factor=speed_factor, initial_pose=initial_pose,
+                                    clock=self.clock, brake_time=brake_time, look_ahead=interpreter_lookahead,
+                                    **extra)
+            self.program = ControllerProgramV3(self.slave, self.arm, kinematics=controller_kin or kin,
+                                               execution_log=self.log)
+        elif protocol == "v2":
             self.arm = SimStreamArm(kin, speed_factor=speed_factor, initial_pose=initial_pose,
-                                    clock=self.clock, brake_time=brake_time)
+                                    clock=self.clock, brake_time=brake_time, **extra)
             self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log)
         else:
             self.arm = SimArm(kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
@@ -161,7 +171,7 @@ class World:
 
     def ready(self, timeout: float = 5.0) -> DriverStatus:
         self.run_until(lambda: self.status().motion_possible and self.status().joints_valid
-                       and (self.protocol == "v2" or self.core.handshake.ready), timeout, "driver ready")
+                       and (self.streams or self.core.handshake.ready), timeout, "driver ready")
         return self.status()
 
     def finish(self, job: MoveJob, timeout: float = 30.0):

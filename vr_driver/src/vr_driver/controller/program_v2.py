@@ -50,7 +50,7 @@ from pyprofibus_vendor.dp_slave import DpSlave
 
 from .session import SessionProgram, arm_status_bits
 from ..protocol.v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState,
-                          joints_to_wire, next_seq, seq_after)
+                          V2, joints_to_wire, next_seq, seq_after, seq_offset)
 from .arm import ExecutionLog, Outcome
 from .stream_arm import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
 
@@ -68,6 +68,11 @@ class ControllerProgramV2(SessionProgram):
     Call :meth:`step` once per loop with the clock time; it returns the FeedbackV2 it wrote. One
     thread runs it (the arm and the log are thread-safe, so faults can be injected from anywhere).
     """
+
+    #: a slot 0 this many numbers beyond ``accepted_seq + 1`` waits (neither taken nor refused): the
+    #: master sent it before the acknowledgement of the one before it (protocol.send_ahead beyond
+    #: the record's slots); v2's two slots leave none
+    waits_ahead = V2.send_ahead - V2.look_ahead_slots
 
     def __init__(self, slave: DpSlave, arm: SimStreamArm, *, execution_log: Optional[ExecutionLog] = None,
                  confirm_records: bool = False) -> None:
@@ -212,6 +217,8 @@ class ControllerProgramV2(SessionProgram):
                              "after (re)start / link loss")
                 return
             start = index == 0 and Control.START in command.control
+            if not start and 2 <= seq_offset(slot.seq, self.accepted_seq) <= 1 + self.waits_ahead:
+                return          # sent ahead of the acknowledgement of the one before it: it waits
             idle = self.stream_idle()
             if start and not idle and self.need_start:
                 return                                      # wait until the arm is at rest

@@ -41,7 +41,7 @@ from ..errors import KinematicsError, MotionError, PoseError
 from ..kinematics.solver import Kinematics
 from ..protocol.v1 import ByteOrder
 from ..protocol.v3 import (SEQ_MAX, CartesianKind, CartesianSlot, CommandV3, FeedbackV3, RejectCode,
-                           pose_from_wire, pose_to_wire)
+                           V3, pose_from_wire, pose_to_wire)
 from ..protocol.v2 import joints_to_wire
 from .arm import ExecutionLog, Outcome
 from .program_v2 import ControllerProgramV2
@@ -84,6 +84,8 @@ class ControllerProgramV3(ControllerProgramV2):
     """The v3 program loop on one DP slave (``CHK_CFG_V3``) and one :class:`SimStreamArm` (whose
     ``look_ahead`` is the interpreter look-ahead). Call :meth:`step` once per loop with the clock
     time; it returns the FeedbackV3 it wrote."""
+
+    waits_ahead = V3.send_ahead - V3.look_ahead_slots      # 1: the master sends one target ahead
 
     def __init__(self, slave: DpSlave, arm: SimStreamArm, *, kinematics: Optional[Kinematics] = None,
                  ring_size: int = DEFAULT_RING_SIZE, byte_order: Any = ByteOrder.LITTLE,

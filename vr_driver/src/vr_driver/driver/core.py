@@ -225,6 +225,10 @@ class PlanSeed:
         return tuple(float(v) for v in seed)
 
 
+def _fmt_pose(pose: ControllerPose) -> str:
+    return "(%.1f, %.1f, %.1f mm, %.2f, %.2f, %.2f deg)" % pose.as_tuple()
+
+
 def _pose_delta(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """``a - b`` of controller poses (..., 6), the angles wrapped into [-180, 180)."""
     d = np.array(a, dtype=float) - b
@@ -277,6 +281,7 @@ class DriverCore:
         self._last_posted: Optional[MoveJob] = None
         self._last_record = b""
         self._repeat_now = False          # run the next bus cycle at once (a new v2 record)
+        self._repeated = False            # this cycle was such a repeat
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
         self._joints_pose: Optional[Tuple[int, ...]] = None
@@ -486,7 +491,7 @@ class DriverCore:
             except VrDriverError as exc:
                 raise DriverError("point %d of %d (planned point %d): the controller cannot solve its "
                                   "pose %s: %s; nothing was sent" % (first + i + 1, first + len(points),
-                                                                    point.index, pose, exc)) from None
+                                                                    point.index, _fmt_pose(pose), exc)) from None
             off = [abs(a - b) for a, b in zip(solved, point.joints)]
             worst = max(range(len(off)), key=off.__getitem__)
             if off[worst] > CONFIGURATION_TOLERANCE:
@@ -495,7 +500,7 @@ class DriverCore:
                     "another configuration than planned (joint_%d %.1f deg instead of %.1f deg: the "
                     "solution nearest the previous target's joints); plan a path that stays in one "
                     "configuration, or use a protocol with joint targets; nothing was sent"
-                    % (first + i + 1, first + len(points), point.index, pose, worst + 1,
+                    % (first + i + 1, first + len(points), point.index, _fmt_pose(pose), worst + 1,
                        math.degrees(solved[worst]), math.degrees(point.joints[worst])))
             out.append(replace(point, pose=pose))
             prev = point.joints
@@ -688,7 +693,8 @@ class DriverCore:
         END_POLL_PERIOD, so the goal's result does not wait up to a period for the arrival."""
         if self._repeat_now:
             self._repeat_now = False
-            return now
+            self._repeated = True             # never two in a row: a record that changed at every
+            return now                        # cycle must not make the bus loop spin
         if self.sequencer.end_due(now):
             return min(scheduled, now + END_POLL_PERIOD)
         return scheduled
@@ -704,8 +710,10 @@ class DriverCore:
         joints = self._update_joints(sample)
         command = self.sequencer.step(now, sample, joints)
         record = self.protocol.encode(command, self.params.byte_order)
-        if self.streaming and record != self._last_record and sample.connected:
+        if self.protocol.send_changes_at_once and record != self._last_record and sample.connected \
+                and not self._repeated:
             self._repeat_now = True
+        self._repeated = False
         self._last_record = record
         self.link.set_outputs(record)
         return self._publish(now, sample)

@@ -39,7 +39,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 from ..params import DriverParams
 from ..protocol.base import WireTarget
 from ..protocol.v1 import StatusBits
-from ..protocol.v2 import SEQ_MAX, StreamState, blend_window, next_seq
+from ..protocol.v2 import SEQ_MAX, StreamState, blend_window, next_seq, seq_offset
 from .jobs import JobPhase, MoveJob, StreamPoint
 from .link import LinkSample
 from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, SequencerBase, _Settle
@@ -66,11 +66,6 @@ PAUSE_EPS = 1e-6
 END_LEAD = 0.02
 END_WATCH = 0.5
 
-
-def seq_offset(seq: int, base: int) -> int:
-    """How many numbers ``seq`` lies after ``base`` in the wrapping sequence 1..SEQ_MAX (0 for
-    ``base`` itself; SEQ_MAX - 1 for the number just before it)."""
-    return ((seq - 1) - (base - 1)) % SEQ_MAX
 
 
 def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float) -> List[int]:
@@ -257,6 +252,9 @@ class StreamSequencer(SequencerBase):
         self._rejected_before = 0          # the controller's rejected_seq when the job started
         self._started = 0.0
         self._stopping = False             # send STOP until the arm is at rest
+        self._offered: Optional[int] = None   # the last point of the current job put on the wire
+        self._acked = -1                      # points_taken at the last record
+        self._ahead = True                    # send ahead of the acknowledgements (send_ahead)
         self._last_state: Optional[StreamState] = None
         self._unarmed_since: Optional[float] = None   # the controller reported "not armed" since
         # the controller's general-purpose outputs 1..16 (§9.5), sent in every record; back to 0 (their
@@ -406,6 +404,7 @@ class StreamSequencer(SequencerBase):
         if not self.starts_here(job, joints):
             return
         self._base = next_seq(fb.accepted_seq)
+        self._offered, self._acked, self._ahead = None, -1, True
         self._limit = len(job.points)
         self._rejected_before = fb.rejected_seq
         self._started = now
@@ -434,12 +433,30 @@ class StreamSequencer(SequencerBase):
 
         def offered(i: int) -> bool:          # not past the limit, and its pause (if any) is over
             return i < self._limit and job.points[i].release <= elapsed
+        # the first target not acknowledged -- or, when the record has fewer slots than the master
+        # may send ahead (protocol.send_ahead), the one after the last offered: the acknowledgement
+        # of a record comes two records later (the reply to the telegram that carries it was
+        # written before the controller read it), so in the steady state the last offered is the
+        # first unacknowledged one and the next goes out now. When the acknowledgements did not
+        # follow (the controller had no room, or missed a record) the master falls back to the
+        # first unacknowledged target until the controller takes it.
+        if k != self._acked:
+            self._acked, self._ahead = k, True
+        first = k
+        ahead = self.wire.send_ahead - self.wire.look_ahead_slots
+        last = self._offered
+        if ahead > 0 and last is not None:
+            if last - k >= ahead:
+                self._ahead = False           # sent ahead, not taken: wait for the acknowledgement
+            elif self._ahead and last >= k and offered(last + 1):
+                first = last + 1
         targets = []
-        for i in range(k, k + self.wire.look_ahead_slots):
+        for i in range(first, first + self.wire.look_ahead_slots):
             if not offered(i):
                 break
             targets.append(self._target(job, i))
-        return self.wire.stream_command(targets, start=k == 0 and bool(targets), outputs=outputs)
+        self._offered = first + len(targets) - 1 if targets else None
+        return self.wire.stream_command(targets, start=first == 0 and bool(targets), outputs=outputs)
 
     def on_lost(self, now: float, reason: str) -> None:
         job = self._job

@@ -131,6 +131,19 @@ class Protocol:
     # ------------------------------------------------------------------ streaming protocols
     #: targets a streaming protocol's record offers at once (v2: 2 slots; 0: not a streaming protocol)
     look_ahead_slots: int = 0
+    #: how many targets from the first one the controller has not acknowledged yet the master may
+    #: put on the wire (>= look_ahead_slots). A controller acknowledges a record one bus cycle after
+    #: it arrived (its reply to the same telegram carries the older feedback), so a one-slot record
+    #: that waited for the acknowledgement would bring one target every two cycles; with 2, the
+    #: master sends the next target in the very next cycle. The controller takes only the target
+    #: after the last one it took: one further ahead (sent before the acknowledgement of the one
+    #: before it, which the controller had no room for) waits -- neither taken nor refused -- and the
+    #: master goes back to the first unacknowledged target (exactly once either way).
+    send_ahead: int = 0
+    #: a record that changed goes out at once, in an extra bus cycle (v2: its controller acts at the
+    #: first telegram; False: one record per bus cycle, so that the controller's program loop reads
+    #: each record the master sends ahead before the next one replaces it)
+    send_changes_at_once: bool = False
 
     def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
                        outputs: int = 0) -> Any:

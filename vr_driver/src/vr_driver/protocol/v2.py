@@ -56,6 +56,7 @@ __all__ = [
     "RejectCode",
     "crc16",
     "next_seq",
+    "seq_offset",
     "seq_after",
     "joints_to_wire",
     "joints_from_wire",
@@ -157,6 +158,12 @@ def crc16(data: bytes) -> int:
 def next_seq(seq: int) -> int:
     """The sequence number after ``seq`` (1..SEQ_MAX, wrapping to 1; after 0 comes 1)."""
     return 1 if seq >= SEQ_MAX else seq + 1
+
+
+def seq_offset(seq: int, base: int) -> int:
+    """How many numbers ``seq`` lies after ``base`` in the wrapping sequence 1..SEQ_MAX (0 for
+    ``base`` itself; SEQ_MAX - 1 for the number just before it)."""
+    return ((seq - 1) - (base - 1)) % SEQ_MAX
 
 
 def seq_after(a: int, b: int) -> bool:
@@ -470,6 +477,8 @@ class ProtocolV2(Protocol):
         return feedback.joints_rad
 
     look_ahead_slots = 2
+    send_ahead = 2                  # its two slots
+    send_changes_at_once = True
 
     def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
                        outputs: int = 0) -> CommandV2:

@@ -465,6 +465,7 @@ class ProtocolV3(Protocol):
         return None
 
     look_ahead_slots = 1
+    send_ahead = 2                  # one slot, the next target sent before the acknowledgement
 
     def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
                        outputs: int = 0) -> CommandV3:

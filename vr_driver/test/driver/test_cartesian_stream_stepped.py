@@ -1,0 +1,134 @@
+"""Protocol v3 (Cartesian targets streamed with a look-ahead, the G2 as it is) stepped with a fake
+clock, in one thread: DriverCore with the StreamSequencer, our DP master, the in-memory link, the
+virtual controller's v3 slave and program (its own IK, a ring, an interpreter look-ahead) and the
+streaming arm (_world.World(protocol="v3")). A planned trajectory runs as planned, each target
+exactly once, one new target per bus cycle; the interpreter look-ahead 0 stops at every point and
+the driver says so; a target the controller would solve in another configuration is refused
+before anything is sent."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from vr_driver.controller.arm import Outcome
+from vr_driver.driver import DriverError
+from vr_driver.driver.core import CONFIGURATION_TOLERANCE
+from vr_driver.driver.jobs import StreamPoint
+from vr_driver.protocol.registry import get
+from vr_driver.protocol.v2 import StreamState
+
+from _world import World
+from test_streaming_stepped import record, smooth_path, trajectory
+
+DEG = math.pi / 180.0
+V3 = get("v3")
+
+
+@pytest.fixture
+def world(kin):
+    w = World(kin, protocol="v3")
+    w.ready()
+    return w
+
+
+def run_path(world, n=30, duration=4.0):
+    q0 = tuple(world.arm.joints)
+    times, points = smooth_path(q0, n=n, duration=duration)
+    traj = trajectory(world, times, points)
+    t_submit = world.now
+    run = world.core.submit_trajectory(traj)
+    job = run.jobs[0]
+    samples = record(world, job)
+    return traj, run, job, samples, world.now - t_submit
+
+
+def test_a_planned_trajectory_runs_as_planned(world):
+    traj, run, job, samples, elapsed = run_path(world)
+    assert job.result.success, job.result.reason
+    assert run.success and run.points_done() == len(traj.positions) - 1
+    assert elapsed <= 1.10 * traj.duration + 0.3, elapsed
+    assert job.gaps == 0 and all(s is not StreamState.WAITING for _t, _q, s in samples)
+    # each target taken once, in order, as the MOVEP of its pose rounded to the wire
+    entries = world.log.entries()
+    assert [e.seq for e in entries] == job.seqs and len(set(job.seqs)) == len(job.points)
+    assert all(e.move_type == "MOVEP" for e in entries)
+    assert [tuple(e.target) for e in entries] == [
+        tuple(round(v / u) for v, u in zip(p.pose.as_tuple(), (0.1,) * 3 + (0.01,) * 3)) for p in job.points]
+    assert [e.outcome for e in entries][-1] is Outcome.EXECUTED
+    # the end: the planned joints within what the wire's rounding costs (protocol.target_error)
+    off = max(abs(a - b) for a, b in zip(world.arm.joints, traj.positions[-1]))
+    assert off <= V3.target_error, off / DEG
+    # joint_states (the IK of the reported pose) agree with the arm at rest
+    s = world.status()
+    assert max(abs(a - b) for a, b in zip(s.joints, world.arm.joints)) <= 0.05 * DEG
+    assert s.counters.targets_sent == s.counters.targets_done == len(job.points)
+
+
+def test_one_new_target_per_bus_cycle(world):
+    """A one-slot record would bring a target every second cycle if the master waited for each
+    acknowledgement (it comes a cycle late); with protocol.send_ahead 2 the ring fills one target
+    per cycle."""
+    assert V3.look_ahead_slots == 1 and V3.send_ahead == 2
+    traj, run, job, _samples, _elapsed = run_path(world, n=40, duration=4.0)
+    assert job.result.success, job.result.reason
+    taken = [e.taken_time for e in world.log.entries()]
+    period = world.bus_period
+    # the first four fill the empty ring (ring_size 4): one per bus cycle, not one per two
+    first = taken[:4]
+    assert first[-1] - first[0] <= 3.5 * period, [round((t - first[0]) / period, 2) for t in first]
+
+
+def test_interpreter_lookahead_0_stops_at_every_point_and_says_so(kin):
+    """A G2 whose interpreter reads the next MOVE only after the current one ended: the arm stops at
+    each point (the controller's log: every target executed, none blended). Every target still runs
+    once, in order, and the goal succeeds; the stops cost time."""
+    world = World(kin, protocol="v3", interpreter_lookahead=0)
+    world.ready()
+    traj, run, job, samples, elapsed = run_path(world, n=10, duration=3.0)
+    assert job.result.success, job.result.reason
+    entries = world.log.entries()
+    assert [e.seq for e in entries] == job.seqs and len(set(job.seqs)) == len(job.points)
+    assert all(e.outcome is Outcome.EXECUTED for e in entries)       # none blended: a stop at each
+    assert elapsed > traj.duration                                   # the stops cost time
+    lookahead_1 = World(kin, protocol="v3", interpreter_lookahead=1)
+    lookahead_1.ready()
+    _traj, _run, job1, _samples, elapsed1 = run_path(lookahead_1, n=10, duration=3.0)
+    assert job1.result.success and elapsed1 < elapsed
+    assert {e.outcome for e in lookahead_1.log.entries()[:-1]} == {Outcome.BLENDED}
+
+
+def test_a_target_in_another_configuration_is_refused_before_anything_is_sent(world):
+    """The wrist flipped (J4 + 180 deg, J5 negated, J6 + 180 deg) is the same pose: the controller,
+    solving nearest the previous target, would run the unflipped joints, not the planned ones."""
+    q = (0.2, 0.3, -0.2, 0.3, 0.5, 0.4)
+    flipped = (0.2, 0.3, -0.2, 0.3 + math.pi, -0.5, 0.4 + math.pi)
+    assert world.core.kin.fk_pose(q).distance_to(world.core.kin.fk_pose(flipped))[0] < 1e-6
+    points = [StreamPoint(q, 100, 3, 1.0, 1), StreamPoint(flipped, 100, 0, 2.0, 2)]
+    assert world.core.cartesian_points(q, points[:1])[0].pose is not None
+    with pytest.raises(DriverError) as err:
+        world.core.cartesian_points(q, points)
+    text = str(err.value)
+    assert "point 2 of 2" in text and "another configuration" in text
+    assert "joint_4" in text or "joint_6" in text, text                   # 180 deg off the plan
+    assert "nothing was sent" in text
+    assert CONFIGURATION_TOLERANCE < math.pi / 2
+
+
+def test_a_flipping_trajectory_is_refused_and_nothing_is_sent(world):
+    q0 = tuple(world.arm.joints)
+    flip = (q0[0], q0[1], q0[2], q0[3] + math.pi, -q0[4], q0[5] + math.pi)
+    lim = world.kin.limits
+    if not all(lo <= v <= hi for v, lo, hi in zip(flip, lim.lower, lim.upper)):
+        pytest.skip("the flipped wrist is outside the joint limits at this start")
+    # a straight joint move to the flipped wrist: the last point is the start's pose again
+    n = 20
+    points = [tuple(a + (b - a) * k / n for a, b in zip(q0, flip)) for k in range(1, n + 1)]
+    times = [4.0 * k / n for k in range(1, n + 1)]
+    traj = trajectory(world, times, points)
+    sent = world.status().counters.targets_sent
+    with pytest.raises(DriverError) as err:
+        world.core.submit_trajectory(traj)
+    assert "another configuration" in str(err.value) or "cannot solve" in str(err.value)
+    world.run_for(0.5)
+    assert world.status().counters.targets_sent == sent and not world.log.entries()
