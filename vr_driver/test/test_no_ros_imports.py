@@ -14,7 +14,7 @@ CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "
 CORE = ("errors", "validate", "poses", "params", "io_signals",
         "protocol", "protocol.base", "protocol.registry", "protocol.v1", "protocol.v2", "kinematics", "kinematics.solver", "kinematics.preview",
         "driver", "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
-        "driver.stations", "driver.streaming", "driver.supervision",
+        "driver.stations", "driver.streaming", "driver.record_clock", "driver.supervision",
         "controller", "controller.program", "controller.session", "controller.program_v2", "controller.arm",
         "controller.stream_arm", "controller.io_island", "controller.line",
         "terminal", "terminal.pose_input", "csr") + tuple("csr." + m for m in CSR_MODULES)

@@ -279,8 +279,24 @@ def test_the_deviation_at_the_same_time_is_recorded_and_reported():
     succeed(run)
     out = sup.finish(T0 + 2.2, True, END)
     assert out.state == SUCCEEDED and out.max_time_deviation == pytest.approx(0.65)
-    assert "at most %.3f deg from the plan at the same time (joint_1, 1.90 s after the start)" % (
-        math.degrees(0.65)) in out.note
+    assert "at most " in out.note and " deg from the plan at the same time after a start delay of " in out.note
+    assert "%.3f deg without the delay)" % math.degrees(0.65) in out.note
+
+
+def test_a_constant_start_delay_is_fitted_out_of_the_deviation_at_the_same_time():
+    """The arm keeps the schedule, 0.2 s late (the stream reached the controller a few bus cycles
+    after the goal): 0.1 rad off the plan at the same time, 0 after the fitted delay."""
+    traj = plan(V2)
+    run = stream_run(traj)
+    sup = TrajectorySupervisor(traj, run, T0, V2, NAMES)
+    follow(sup, traj, until=2.4, lag=0.2)
+    delay, off, joint, _at = sup.fit_delay()
+    assert delay == pytest.approx(0.2, abs=0.006) and off < 0.01 and joint is not None
+    assert sup.max_time_deviation == pytest.approx(0.1)
+    succeed(run)
+    out = sup.finish(T0 + 2.4, True, END)
+    assert out.start_delay == pytest.approx(0.2, abs=0.006) and out.max_delayed_deviation < 0.01
+    assert "after a start delay of 0.20" in out.note
 
 
 # ------------------------------------------------------------------------------ on the stepped core

@@ -40,6 +40,7 @@ from pyprofibus_vendor.phy import Link
 from ..errors import ProtocolError
 from ..params import DriverParams
 from ..protocol.v1 import Feedback
+from .record_clock import RecordClock
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -188,6 +189,10 @@ class LinkSupervisor:
         # a reply's time on the wire (SD2 telegram: 9 characters of frame + the controller's record,
         # 11 bits each): a record arrives this long after the card began sending it
         self.reply_time = BusTiming.for_baud(bus.baud).chars(9 + self.slave_config.input_len)
+        # when the controller took each record: from its heartbeat where the protocol has one
+        self.record_clock = RecordClock()
+        self._wire = wire
+        self._record_stamp: Optional[float] = None
 
     # ----------------------------------------------------------------------- read-outs
     @property
@@ -276,6 +281,10 @@ class LinkSupervisor:
                     self._bad_record = "invalid feedback from the controller: %s" % exc
             if fresh is not None:
                 self._good_time = at
+                if self._state is not LinkState.CONNECTED:
+                    self.record_clock.reset()        # a new session: the program may have restarted
+                self._record_stamp = self.record_clock.stamp(at - self.reply_time,
+                                                             self._wire.feedback_heartbeat(fresh))
                 self._session_records += 1
                 master = self._master
                 if master is not None:        # garbled bytes are counted from the last good record
@@ -310,8 +319,7 @@ class LinkSupervisor:
             time=now, state=self._state, reason=self._reason, fresh=fresh,
             feedback=self._feedback if connected else None,
             feedback_time=self._good_time if connected else None,
-            record_time=(self._good_time - self.reply_time) if connected and self._good_time is not None
-            else None,
+            record_time=self._record_stamp if connected else None,
             session=self._session, session_records=self._session_records,
             error_code=self._error_code, error_reason=self._error_reason, cycled=cycled)
 

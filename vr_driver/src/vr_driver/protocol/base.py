@@ -153,6 +153,12 @@ class Protocol:
         ProtocolError for a target the wire cannot carry."""
         raise NotImplementedError
 
+    def feedback_heartbeat(self, feedback: Any) -> Optional[int]:
+        """The program's loop counter in a feedback record (+1 every program loop, modulo 65536),
+        or None where the protocol has none (v1). It dates the record
+        (:mod:`vr_driver.driver.record_clock`)."""
+        return None
+
     # ------------------------------------------------------------------ controller side
     def decode_command(self, data: Any, byte_order: Any = "little") -> Any:
         """A master record as this protocol's command object (ProtocolError otherwise)."""

@@ -476,6 +476,9 @@ class ProtocolV2(Protocol):
     def feedback_joints(self, feedback: FeedbackV2) -> Tuple[float, ...]:
         return feedback.joints_rad
 
+    def feedback_heartbeat(self, feedback: Any) -> int:
+        return feedback.heartbeat
+
     look_ahead_slots = 2
     send_ahead = 2                  # its two slots
     send_changes_at_once = True

@@ -464,6 +464,9 @@ class ProtocolV3(Protocol):
     def feedback_joints(self, feedback: Any) -> Optional[Tuple[float, ...]]:
         return None
 
+    def feedback_heartbeat(self, feedback: Any) -> int:
+        return feedback.heartbeat
+
     look_ahead_slots = 1
     send_ahead = 2                  # one slot, the next target sent before the acknowledgement
 
