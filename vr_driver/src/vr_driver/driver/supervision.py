@@ -36,6 +36,7 @@ __all__ = ["SUCCEEDED", "ABORTED", "CANCELED", "SHUTDOWN", "PREEMPTED", "CANCELL
 #: the start delays the at-time deviation is fitted over [s], and the step
 MAX_START_DELAY = 0.5
 DELAY_STEP = 0.005
+FINE_DELAY_STEP = 0.00025
 #: samples kept for the fit (a 10-minute trajectory at 50 Hz)
 MAX_HISTORY = 30000
 
@@ -218,13 +219,21 @@ class TrajectorySupervisor:
         times = np.asarray(self.traj.times, dtype=float)
         plan = np.asarray(self.traj.positions, dtype=float)
         best = None
-        for delay in np.arange(0.0, MAX_START_DELAY + 1e-9, DELAY_STEP):
+
+        def judge(delay: float) -> None:
+            nonlocal best
             desired = np.column_stack([np.interp(ts - delay, times, plan[:, j]) for j in range(plan.shape[1])])
             err = np.abs(actual - desired)
             worst = float(err.max())
             if best is None or worst < best[1] - 1e-12:
                 i, j = np.unravel_index(int(err.argmax()), err.shape)
                 best = (float(delay), worst, int(j), float(ts[i]))
+        for delay in np.arange(0.0, MAX_START_DELAY + 1e-9, DELAY_STEP):
+            judge(float(delay))
+        coarse = best[0]                      # then finer around it: at 150 deg/s, 2.5 ms is 0.4 deg
+        for delay in np.arange(coarse - DELAY_STEP, coarse + DELAY_STEP + 1e-9, FINE_DELAY_STEP):
+            if 0.0 <= delay <= MAX_START_DELAY:
+                judge(float(delay))
         return best
 
     def finish(self, now: float, joints_valid: bool, joints: Optional[Sequence[float]],
