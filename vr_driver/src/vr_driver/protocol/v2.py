@@ -57,6 +57,7 @@ __all__ = [
     "crc16",
     "next_seq",
     "seq_offset",
+    "describe_stream_feedback",
     "seq_after",
     "joints_to_wire",
     "joints_from_wire",
@@ -431,13 +432,20 @@ class FeedbackV2:
                    tuple(pose), heartbeat, inputs, outputs, bool(flags & 0x01))
 
     def describe(self) -> str:
-        text = "%s, taken %d, at %d, done %d; status: %s" % (
-            self.state.name, self.accepted_seq, self.active_seq, self.done_seq, self.status.describe())
-        if self.rejected_seq:
-            text += "; refused %d (%s)" % (self.rejected_seq, self.reject_code.name)
-        if not self.armed:
-            text += "; not armed"
-        return text
+        return describe_stream_feedback(self)
+
+
+def describe_stream_feedback(fb: Any, where: str = "") -> str:
+    """A streaming protocol's feedback in words (its state, sequence numbers, status bits, a
+    refusal, arming); ``where``: the arm's position as text, if the record has one to show."""
+    text = "%s, taken %d, at %d, done %d%s; status: %s" % (
+        fb.state.name, fb.accepted_seq, fb.active_seq, fb.done_seq, ", " + where if where else "",
+        fb.status.describe())
+    if fb.rejected_seq:
+        text += "; refused %d (%s)" % (fb.rejected_seq, fb.reject_code.name)
+    if not fb.armed:
+        text += "; not armed"
+    return text
 
 
 

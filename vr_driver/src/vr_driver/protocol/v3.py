@@ -54,7 +54,8 @@ from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose, finite_number, wrap_degrees
 from .base import Protocol, WireTarget
 from .v1 import ByteOrder, StatusBits, round_half_away
-from .v2 import SEQ_MAX, SMOOTH_MAX, Control, RejectCode, StreamState, next_seq, seq_after
+from .v2 import (SEQ_MAX, SMOOTH_MAX, Control, RejectCode, StreamState, describe_stream_feedback, next_seq,
+                 seq_after)
 
 __all__ = [
     "V3",
@@ -385,14 +386,7 @@ class FeedbackV3:
                    heartbeat, bool(state & ARMED_BIT))
 
     def describe(self) -> str:
-        text = "%s, taken %d, at %d, done %d, TCP %s; status: %s" % (
-            self.state.name, self.accepted_seq, self.active_seq, self.done_seq, _fmt_pose(self.tcp),
-            self.status.describe())
-        if self.rejected_seq:
-            text += "; refused %d (%s)" % (self.rejected_seq, self.reject_code.name)
-        if not self.armed:
-            text += "; not armed"
-        return text
+        return describe_stream_feedback(self, "TCP " + _fmt_pose(self.tcp))
 
 
 # ---------------------------------------------------------------------------------- the seam
