@@ -9,11 +9,13 @@ import numpy as np
 import yaml
 
 try:  # the support package's helpers: from the devel space, else from the source tree
+    from panasonic_vr006l_support import joint_limits as model_limits
     from panasonic_vr006l_support.description import render_urdf
     from panasonic_vr006l_support.model import RobotModel, rpy_matrix
 except ImportError:  # plain pytest from the source tree
     sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..",
                                     "panasonic_vr006l_support", "src"))
+    from panasonic_vr006l_support import joint_limits as model_limits
     from panasonic_vr006l_support.description import render_urdf
     from panasonic_vr006l_support.model import RobotModel, rpy_matrix
 
@@ -121,6 +123,22 @@ class LimitsAndKinematicsTest(unittest.TestCase):
             self.assertAlmostEqual(lim["max_velocity"], model.joints[name].velocity, places=9, msg=name)
             if lim["has_acceleration_limits"]:
                 self.assertGreater(lim["max_acceleration"], 0.0, name)
+
+    def test_joint_limits_yaml_has_the_models_accelerations(self):
+        # the one set: panasonic_vr006l_support/config/kinematics_vr006l.yaml, joints.<name>.acceleration
+        path = config("joint_limits.yaml")
+        with open(path) as f:
+            limits = yaml.safe_load(f)["joint_limits"]
+        model = model_limits.accelerations()
+        self.assertEqual(sorted(model), JOINTS)
+        for name in JOINTS:
+            lim = limits[name]
+            self.assertIs(lim.get("has_acceleration_limits"), True,
+                          "%s: %s has no acceleration limit (has_acceleration_limits: true)" % (path, name))
+            self.assertAlmostEqual(lim.get("max_acceleration"), model[name], places=9,
+                                   msg="%s: %s max_acceleration %r differs from the model's %r (%s)"
+                                   % (path, name, lim.get("max_acceleration"), model[name],
+                                      model_limits.YAML_PATH))
 
     def test_kinematics_yaml_has_the_settings_our_ik_reads(self):
         with open(config("kinematics.yaml")) as f:

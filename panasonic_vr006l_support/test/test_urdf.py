@@ -88,6 +88,8 @@ class ModelTest(unittest.TestCase):
             self.assertIn("calibrate", entry, key)
         for key, entry in self.cfg["joints"].items():
             self.assertIn("source", entry, key)
+            self.assertIn("acceleration_source", entry, key)
+            self.assertIn("assumption", entry["acceleration_source"], key)
 
     def test_zero_pose_fk_matches_hand_computed_dimensions(self):
         g = self.geo
