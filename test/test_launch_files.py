@@ -150,6 +150,18 @@ class DriverLaunchParamsTest(unittest.TestCase):
         self.assertEqual(p.io_signals, "")
         self.assertFalse(any(k.startswith("/virtual_line/") for k in params))
 
+    def test_ramp_time_reaches_the_virtual_controller_only(self):
+        """The virtual arm's ramp: unset by default (the model's joint limits give 0.1 s), ramp_time:=0.5
+        (an older controller) a valid option of the virtual controller and of no other node."""
+        from vr_driver.controller.program import SimOptions
+        _, params = self.check("protocol:=v3")
+        self.assertFalse(any(k.endswith("/ramp_time") for k in params))
+        _, params = self.check("protocol:=v3", "ramp_time:=0.5")
+        self.assertEqual([k for k in params if k.endswith("/ramp_time")], ["/virtual_controller/ramp_time"])
+        self.assertEqual(params["/virtual_controller/ramp_time"], 0.5)
+        own = {k[len("/virtual_controller/"):]: v for k, v in params.items() if k.startswith("/virtual_controller/")}
+        self.assertEqual(SimOptions.from_mapping(own).ramp_time, 0.5)
+
     def test_real_port(self):
         p, params = self.check("sim:=false", "port:=/dev/ttyUSB7", "baud:=187500")
         self.assertEqual((p.port, p.baud), ("/dev/ttyUSB7", 187500))

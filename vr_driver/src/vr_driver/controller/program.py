@@ -75,7 +75,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import IO, Any, Callable, Mapping, Optional, Sequence, Tuple, Union
+from typing import IO, Any, Callable, Dict, Mapping, Optional, Sequence, Tuple, Union
 
 from pyprofibus_vendor.config import default_robot_config
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
@@ -96,7 +96,7 @@ from ..protocol.v3 import FeedbackV3
 from ..protocol import registry as protocols
 from ..protocol.base import Protocol
 from .arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
-from .stream_arm import SimStreamArm, StreamLogEntry
+from .stream_arm import DEFAULT_RAMP_TIME, SimStreamArm, StreamLogEntry
 
 __all__ = [
     "DEFAULT_ADDRESS",
@@ -137,7 +137,7 @@ PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "b
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
                "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
                "protocol": "protocol", "interpreter_lookahead": "interpreter_lookahead",
-               "ring_size": "ring_size"}
+               "ring_size": "ring_size", "ramp_time": "ramp_time"}
 
 #: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
 #: streamed joint targets, v3 streamed Cartesian targets for the G2 as it is
@@ -188,6 +188,11 @@ class SimOptions:
     #: point); the positions of the program's ring
     interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD
     ring_size: int = DEFAULT_RING_SIZE
+    #: protocol v2 / v3: robot time [s] the streaming arm takes from rest to full speed (the limiting
+    #: joint accelerates at vmax / ramp_time); None: from the model's joint limits, max velocity /
+    #: acceleration (0.1 s; an assumption to measure); e.g. 0.5 for an older controller. v1's arm
+    #: ramps over a share of each move instead and ignores it
+    ramp_time: Optional[float] = None
 
     def __post_init__(self) -> None:
         _protocol(self.protocol)
@@ -212,6 +217,10 @@ class SimOptions:
         object.__setattr__(self, "loop_period", _positive(self.loop_period, "loop_period"))
         object.__setattr__(self, "brake_time", validate.number(self.brake_time, lambda _: SimError(
             "brake_time must be a finite number >= 0 (seconds), got %r" % (self.brake_time,)), 0.0))
+        if self.ramp_time is not None:
+            object.__setattr__(self, "ramp_time", validate.number(self.ramp_time, lambda _: SimError(
+                "ramp_time must be a finite number > 0 (seconds of robot time from rest to full speed), "
+                "got %r" % (self.ramp_time,)), 0.0, lo_open=True))
         try:
             pose = ControllerPose.from_sequence(self.initial_pose)
         except VrDriverError as exc:
@@ -226,7 +235,7 @@ class SimOptions:
     def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
         initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2 |
-        v3), interpreter_lookahead, ring_size (v3).
+        v3), interpreter_lookahead, ring_size (v3), ramp_time (v2, v3).
         Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
         if unknown:
@@ -631,7 +640,10 @@ class VirtualController(Simulator):
     ``CHK_CFG_V3`` and a SimStreamArm whose look-ahead is ``interpreter_lookahead`` (a given
     ``arm`` keeps its own); the program's ring holds ``ring_size`` positions and it solves the
     targets with ``controller_kinematics`` (default: its own instance of the model's); its feedback
-    is a FeedbackV3 in ``byte_order``. Both options are ignored by v1 and v2.
+    is a FeedbackV3 in ``byte_order``. Both options are ignored by v1 and v2. ``ramp_time`` (v2,
+    v3; a given ``arm`` keeps its own): robot time [s] the SimStreamArm takes from rest to full
+    speed; None (default) from the kinematics' joint limits, max velocity / acceleration (0.1 s for
+    the model); v1's SimArm ignores it.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
     :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
@@ -648,14 +660,15 @@ class VirtualController(Simulator):
                  clock: Clock = time.monotonic, confirm_records: Optional[bool] = None,
                  brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT,
                  interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD, ring_size: int = DEFAULT_RING_SIZE,
-                 controller_kinematics: Optional[Kinematics] = None) -> None:
+                 controller_kinematics: Optional[Kinematics] = None, ramp_time: Optional[float] = None) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
                                   initial_pose=tuple(pose), loop_period=loop_period,
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
                                   brake_time=brake_time, protocol=_protocol(protocol).name,
-                                  interpreter_lookahead=interpreter_lookahead, ring_size=ring_size)
+                                  interpreter_lookahead=interpreter_lookahead, ring_size=ring_size,
+                                  ramp_time=ramp_time)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         self.clock = clock
@@ -667,7 +680,9 @@ class VirtualController(Simulator):
         if confirm_records is None:
             confirm_records = self.wire.confirm_records
         if arm is None:
-            extra = {"look_ahead": self.options.interpreter_lookahead} if cartesian_stream else {}
+            extra: Dict[str, Any] = {"look_ahead": self.options.interpreter_lookahead} if cartesian_stream else {}
+            if streams:
+                extra["ramp_time"] = self.options.ramp_time
             try:
                 arm = (SimStreamArm if streams else SimArm)(
                     kinematics, speed_factor=self.options.speed_factor,
@@ -902,6 +917,10 @@ def _parser() -> argparse.ArgumentParser:
                         "arm stops at every point)" % DEFAULT_INTERPRETER_LOOKAHEAD)
     p.add_argument("--ring-size", type=int, default=DEFAULT_RING_SIZE, metavar="N",
                    help="v3: positions in the program's ring (default %d)" % DEFAULT_RING_SIZE)
+    p.add_argument("--ramp-time", type=float, default=None, metavar="S",
+                   help="v2, v3: robot time in seconds the arm takes from rest to full speed (default: from "
+                        "the model's joint limits, max velocity / acceleration, %g s; e.g. 0.5 for an older "
+                        "controller)" % DEFAULT_RAMP_TIME)
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -967,7 +986,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                              speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
                              loop_period=args.loop_period, byte_order=args.byte_order,
                              log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
-                             interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size)
+                             interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size,
+                             ramp_time=args.ramp_time)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -980,7 +1000,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                        pty_link=options.pty_link, log_file=options.log_file,
                                        brake_time=options.brake_time, protocol=options.protocol,
                                        interpreter_lookahead=options.interpreter_lookahead,
-                                       ring_size=options.ring_size)
+                                       ring_size=options.ring_size, ramp_time=options.ramp_time)
         controller.start()
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)

@@ -15,7 +15,8 @@ Motion model (doc/controller_program.md §6 and §9):
   velocity limits of the kinematics).
 - **Speed profile**: a trapezoid in time. The normalised progress ``s`` rises with a linear speed
   ramp of ``r_in`` (from rest: the *stop ramp* ``r = min(f * ramp_time, T0)``: the limiting joint
-  accelerates at ``vmax / ramp_time``, so ``ramp_time`` from rest to full speed), cruises at ``1 / T0``
+  accelerates at ``vmax / ramp_time``, so ``ramp_time`` from rest to full speed; default: from the
+  kinematics' joint limits, max velocity / acceleration, 0.1 s for the model), cruises at ``1 / T0``
   (the limiting joint at ``f * vmax``) and falls over ``r_out``; the segment lasts
   ``T0 + (r_in + r_out) / 2``. From rest to rest that is ``T0 + r``.
 - **Blend** (smooth level ``k > 0`` of the point, the next target known in time): the next segment
@@ -62,6 +63,8 @@ from typing import Any, Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
 
+from panasonic_vr006l_support.joint_limits import model_ramp_time
+
 from ..errors import MotionError
 from ..kinematics.solver import Kinematics
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
@@ -84,8 +87,12 @@ __all__ = [
 Clock = Callable[[], float]
 
 #: robot time [s] from rest to full speed and back at a constant acceleration (the stop ramp of a
-#: move at speed fraction f lasts f times this; a shorter move ramps over T0)
-DEFAULT_RAMP_TIME = 0.1
+#: move at speed fraction f lasts f times this; a shorter move ramps over T0): by default the model's
+#: joint limits give it, max over the joints of velocity / acceleration (Kinematics.limits.ramp_time;
+#: the accelerations of panasonic_vr006l_support's kinematics_vr006l.yaml, an assumption of velocity /
+#: 0.1 s to measure on the real arm): 0.1 s. This one is the model's, for an arm whose kinematics
+#: know no accelerations.
+DEFAULT_RAMP_TIME = model_ramp_time()
 
 _EPS = 1e-12
 
@@ -230,15 +237,17 @@ class SimStreamArm(ArmBase):
     def __init__(self, kinematics: Optional[Kinematics] = None, *, speed_factor: float = 1.0,
                  initial_pose: Any = HOME_POSE, initial_joints: Optional[Sequence[float]] = None,
                  clock: Clock = time.monotonic, brake_time: float = 0.0,
-                 ramp_time: float = DEFAULT_RAMP_TIME, look_ahead: int = 1) -> None:
-        if not (isinstance(ramp_time, (int, float)) and not isinstance(ramp_time, bool)
-                and math.isfinite(ramp_time) and ramp_time >= 0.0):
+                 ramp_time: Optional[float] = None, look_ahead: int = 1) -> None:
+        if ramp_time is not None and not (isinstance(ramp_time, (int, float)) and not isinstance(ramp_time, bool)
+                                          and math.isfinite(ramp_time) and ramp_time >= 0.0):
             raise MotionError("ramp_time must be a finite number >= 0, got %r" % (ramp_time,))
         if isinstance(look_ahead, bool) or not isinstance(look_ahead, int) or look_ahead < 0:
             raise MotionError("look_ahead must be an integer >= 0, got %r" % (look_ahead,))
         self.look_ahead = look_ahead
         self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock)
-        self.ramp_time = float(ramp_time)
+        if ramp_time is None:      # the model's joint limits: max velocity / acceleration (0.1 s)
+            ramp_time = self.kin.limits.ramp_time
+        self.ramp_time = float(DEFAULT_RAMP_TIME if ramp_time is None else ramp_time)
         self.vmax = np.array(self.kin.limits.velocity, dtype=float)
         self._rest = np.array(self._joints, dtype=float)
         self._queue: Deque[StreamTarget] = collections.deque()

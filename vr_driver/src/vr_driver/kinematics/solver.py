@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import json
 import math
 import os
@@ -49,6 +50,7 @@ from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import PyKDL as kdl
+from panasonic_vr006l_support import joint_limits as _support_limits
 from panasonic_vr006l_support import model as _support_model
 
 from .. import validate
@@ -66,6 +68,7 @@ __all__ = [
     "build_kdl_chain",
     "read_srdf",
     "read_ik_settings",
+    "model_accelerations",
     "main",
 ]
 
@@ -205,11 +208,34 @@ def read_ik_settings(yaml_text: str, group: str = "manipulator") -> IkSettings:
 
 @dataclass(frozen=True)
 class JointLimits:
+    """Per joint, in chain order: position limits and velocity [rad/s] from the URDF; acceleration
+    [rad/s^2] from the model's one set (panasonic_vr006l_support's kinematics_vr006l.yaml: an
+    assumption, velocity / 0.1 s, to measure on the real arm), inf for a joint the set does not name."""
+
     names: Tuple[str, ...]
     lower: Tuple[float, ...]
     upper: Tuple[float, ...]
     velocity: Tuple[float, ...]
     revolute: Tuple[bool, ...]
+    acceleration: Tuple[float, ...] = ()
+
+    @property
+    def ramp_time(self) -> Optional[float]:
+        """[s] from rest to full speed of the slowest-ramping joint (max velocity / acceleration over
+        the joints with both finite, rounded to 1 ns); None when no joint has an acceleration."""
+        try:
+            return _support_limits.ramp_time(self.velocity, self.acceleration)
+        except _support_limits.LimitsError:
+            return None
+
+
+@functools.lru_cache(maxsize=None)
+def model_accelerations() -> Dict[str, float]:
+    """{joint name: acceleration [rad/s^2]} of the model's set (the support package's YAML, read once)."""
+    try:
+        return dict(_support_limits.accelerations())
+    except _support_limits.LimitsError as exc:
+        raise ModelError(str(exc)) from exc
 
 
 # ====================================================================== small pure-Python 3-D helpers
@@ -478,7 +504,7 @@ class Kinematics:
     def __init__(self, model: UrdfModel, base: str, tip: str, settings: Optional[IkSettings] = None,
                  named_states: Optional[Mapping[str, Mapping[str, float]]] = None,
                  conventions: Optional[FrameConventions] = None, analytic: bool = True,
-                 prefix: str = ""):
+                 prefix: str = "", accelerations: Optional[Mapping[str, float]] = None):
         self.model = model
         self.prefix = prefix          # of every link and joint name (the URDF's xacro prefix)
         self.base, self.tip = base, tip
@@ -492,7 +518,8 @@ class Kinematics:
             lower=tuple(-math.inf if j.lower is None else j.lower for j in movable),
             upper=tuple(math.inf if j.upper is None else j.upper for j in movable),
             velocity=tuple(math.inf if j.velocity is None else j.velocity for j in movable),
-            revolute=tuple(j.type != "prismatic" for j in movable))
+            revolute=tuple(j.type != "prismatic" for j in movable),
+            acceleration=self._accelerations(movable, prefix, accelerations))
         self.joint_names = self.limits.names
         self.dof = len(movable)
         self.chain = build_kdl_chain(self.chain_joints)
@@ -522,6 +549,24 @@ class Kinematics:
         ok, why = _detect_analytic(axes, points, [j.type for j in movable])
         self.analytic_reason = why
         self._analytic = _AnalyticSolver(axes, points, t) if (ok and analytic) else None
+
+    @staticmethod
+    def _accelerations(movable: Sequence[UrdfJoint], prefix: str,
+                       given: Optional[Mapping[str, float]]) -> Tuple[float, ...]:
+        """Each joint's acceleration limit: from ``given`` ({joint name: rad/s^2}, the URDF's names),
+        else from the model's set by the joint's name without ``prefix``; inf where none is known."""
+        out = []
+        for j in movable:
+            if given is not None:
+                value = given.get(j.name, math.inf)
+            else:
+                plain = j.name[len(prefix):] if prefix and j.name.startswith(prefix) else j.name
+                value = model_accelerations().get(plain, math.inf)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0.0
+                    and not math.isnan(value)):
+                raise ModelError("joint %s: acceleration limit must be a number > 0, got %r" % (j.name, value))
+            out.append(float(value))
+        return tuple(out)
 
     # ------------------------------------------------------------------------------------ factories
     @classmethod

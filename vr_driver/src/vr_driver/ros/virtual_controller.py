@@ -7,7 +7,10 @@ existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.
 ``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
 ``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets);
 ``~brake_time`` [0.3] s of robot time a stop takes from path speed to rest (0: halts at once);
-``~protocol`` ["v1"] the robot program: v1 (14-byte handshake) or v2 (streamed joint targets).
+``~protocol`` ["v1"] the robot program: v1 (14-byte handshake), v2 (streamed joint targets) or v3
+(streamed Cartesian targets); ``~interpreter_lookahead`` [1], ``~ring_size`` (v3);
+``~ramp_time`` [unset: from the model's joint limits, max velocity / acceleration, 0.1 s] s of robot
+time the v2 / v3 arm takes from rest to full speed (e.g. 0.5: an older controller; > 0).
 
 Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
@@ -62,7 +65,7 @@ def main() -> int:
                                        pty_link=options.pty_link, log_file=options.log_file,
                                        brake_time=options.brake_time, protocol=options.protocol,
                                        interpreter_lookahead=options.interpreter_lookahead,
-                                       ring_size=options.ring_size)
+                                       ring_size=options.ring_size, ramp_time=options.ramp_time)
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
         return EXIT_DEVICE
