@@ -38,7 +38,9 @@ Configurations (``CONFIGS``): protocol v1 / v2 / v3 (``driver.launch protocol:=`
 19 200 bit/s, 20 Hz bus cycle ("slow", "paced") and 187 500 bit/s, 50 Hz ("fast"); "paced": the
 virtual line carries its bytes at the bit rate (``line_baud:=``) with the I/O island on it
 (``io:=true``); v3 with the G2 program's interpreter look-ahead 1 or 0 ("-la0",
-``interpreter_lookahead:=``); each in a worker process with its own roscore and driver.launch
+``interpreter_lookahead:=``); "-ramp05" (not run by default): the paced ones with the virtual arm
+reaching full speed in 0.5 s (``ramp_time:=0.5``, as an older controller may) instead of the 0.1 s
+of the model's joint limits (velocity / acceleration; v1's arm does not model it); each in a worker process with its own roscore and driver.launch
 (sim:=true). A goal is a FollowJointTrajectory (vr_driver's md5-identical copy of control_msgs)
 sent by an actionlib client with header.stamp 0 (start now) and the path / goal tolerances of
 --path-tolerance / --goal-tolerance; by default none (the driver's per-protocol defaults), except
@@ -105,7 +107,10 @@ CONFIG_FILE = os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")
 HOME_POSE = (1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
 #: name -> (protocol, baud, bus cycles per second, options): "paced" the virtual line carries its
 #: bytes at the bit rate (driver.launch line_baud:=, io:=true: the I/O island on the line too),
-#: "lookahead" the v3 G2 program's interpreter look-ahead (driver.launch interpreter_lookahead:=)
+#: "lookahead" the v3 G2 program's interpreter look-ahead (driver.launch interpreter_lookahead:=),
+#: "ramp_time" the virtual arm's time from rest to full speed [s] (driver.launch ramp_time:=; unset: the
+#: model's joint limits, velocity / acceleration = 0.1 s; 0.5: an older controller may ramp so slowly;
+#: v1's arm ramps over a share of each move and ignores it)
 CONFIGS: Dict[str, Tuple[str, int, float, Dict[str, Any]]] = {
     "v1-slow": ("v1", 19200, 20.0, {}),
     "v1-fast": ("v1", 187500, 50.0, {}),
@@ -116,6 +121,9 @@ CONFIGS: Dict[str, Tuple[str, int, float, Dict[str, Any]]] = {
     "v3-fast": ("v3", 187500, 50.0, {"lookahead": 1}),
     "v3-paced": ("v3", 19200, 20.0, {"paced": True, "lookahead": 1}),
     "v3-paced-la0": ("v3", 19200, 20.0, {"paced": True, "lookahead": 0}),
+    "v1-paced-ramp05": ("v1", 19200, 20.0, {"paced": True, "ramp_time": 0.5}),
+    "v2-paced-ramp05": ("v2", 19200, 20.0, {"paced": True, "ramp_time": 0.5}),
+    "v3-paced-ramp05": ("v3", 19200, 20.0, {"paced": True, "lookahead": 1, "ramp_time": 0.5}),
 }
 DEFAULT_CONFIGS = ("v1-paced", "v2-paced", "v3-paced", "v3-paced-la0", "v3-fast")
 #: the targets (v3 at 19.2 kbit/s on the paced line with the I/O island, look-ahead >= 1; shown for
@@ -920,15 +928,21 @@ def launch_args(cfg: Dict[str, Any]) -> List[str]:
         args += ["io:=true", "line_baud:=%d" % cfg["baud"]]
     if cfg.get("lookahead") is not None:
         args.append("interpreter_lookahead:=%d" % cfg["lookahead"])
+    if cfg.get("ramp_time") is not None:
+        args.append("ramp_time:=%g" % cfg["ramp_time"])
     return args
 
 
-def title(protocol: str, baud: int, rate: float, paced: bool, lookahead: Optional[int]) -> str:
-    """A configuration in words, e.g. 'v3, 19.2 kbit/s, 20 Hz, paced line + I/O island, look-ahead 1'."""
+def title(protocol: str, baud: int, rate: float, paced: bool, lookahead: Optional[int],
+          ramp_time: Optional[float] = None) -> str:
+    """A configuration in words, e.g. 'v3, 19.2 kbit/s, 20 Hz, paced line + I/O island, look-ahead 1'
+    (', ramp 0.5 s' when the virtual arm's ramp is not the model's)."""
     text = "%s, %g kbit/s, %g Hz" % (protocol, baud / 1000.0, rate)
     text += ", paced line + I/O island" if paced else ", pty"
     if lookahead is not None:
         text += ", look-ahead %d" % lookahead
+    if ramp_time is not None:
+        text += ", ramp %g s%s" % (ramp_time, " (v1's arm: not modelled)" if protocol == "v1" else "")
     return text
 
 
@@ -1076,8 +1090,8 @@ def main(argv: Optional[List[str]] = None) -> int:
                "speed_factor": args.speed_factor, "path_tol": tol(args.path_tolerance, protocol),
                "goal_tol": tol(args.goal_tolerance, protocol), "ready_timeout": args.ready_timeout,
                "ros_port": args.ros_port, "keep_logs": args.keep_logs, "paced": paced,
-               "lookahead": opts.get("lookahead"), "set": args.set,
-               "title": title(protocol, baud, rate, paced, opts.get("lookahead")),
+               "lookahead": opts.get("lookahead"), "ramp_time": opts.get("ramp_time"), "set": args.set,
+               "title": title(protocol, baud, rate, paced, opts.get("lookahead"), opts.get("ramp_time")),
                "plot": os.path.abspath(args.plot) if args.plot else "",
                "dump": os.path.abspath(args.dump) if args.dump else ""}
         cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
