@@ -47,7 +47,7 @@ and the longest gap between two DriverStatus listener calls of the core (the ROS
 robot_status on every snapshot change plus a 10 Hz timer, so this gap bounds robot_status's).
 On every listener call the arm's exact TCP is checked against the workspace box (bus cycles
 outside, the farthest), and while the arm rests the driver's joints against the arm's (cycles more
-than 20 deg apart: another configuration -- v1 reports only a rounded pose); submit refusals are
+than 20 deg apart: another configuration -- v1 and v3 report only a rounded pose); submit refusals are
 counted by reason. A run in which no target is taken for 60 s while motion is possible
 ends early and says why (the last refusal, the arm's pose and joints).
 
@@ -56,7 +56,8 @@ Last line, exactly:
 
 In v1 the virtual controller runs its two-telegram rule (a master record counts only once it
 arrived unchanged in two consecutive Data_Exchange telegrams); --no-confirm turns it off to show
-what it prevents (v2 acts at the first telegram: its records' CRC-16 does the rule's job): at 2 % corruption about 1.7e-4 of the requests pass the 8-bit FCS with wrong bytes, and
+what it prevents (v2 and v3 act at the first telegram: v2's CRC-16 and v3's check word and seq copy
+do the rule's job): at 2 % corruption about 1.7e-4 of the requests pass the 8-bit FCS with wrong bytes, and
 the controller then runs a target nobody commanded (an "unknown" log entry, the commanded one
 lost) or runs one twice. A pty has no baud timing: --baud only sets the DP timing parameters;
 bytes move at pty speed.
@@ -97,8 +98,10 @@ from vr_driver.kinematics.solver import Kinematics  # noqa: E402
 from vr_driver.kinematics.preview import MoveType  # noqa: E402
 from vr_driver.params import DriverParams  # noqa: E402
 from vr_driver.poses import ControllerPose  # noqa: E402
+from vr_driver.protocol import registry as protocols  # noqa: E402
 from vr_driver.protocol.v1 import round_half_away  # noqa: E402
 from vr_driver.protocol.v2 import joints_to_wire  # noqa: E402
+from vr_driver.protocol.v3 import pose_to_wire  # noqa: E402
 from vr_driver.controller.arm import LogEntry, Outcome  # noqa: E402
 
 IntPose = Tuple[int, int, int, int, int, int]
@@ -130,7 +133,7 @@ class SoakConfig:
     stall_timeout: float = 60.0         # no motion possible, or no target taken, this long: give up
     progress_every: int = 0             # print a progress line every N targets (0: never)
     workdir: Optional[str] = None
-    protocol: str = "v1"                # v2: every move is streamed as joint targets (each one a target)
+    protocol: str = "v1"                # v2 / v3: every move is streamed (each streamed point a target)
     driver_params: Dict[str, object] = field(default_factory=dict)   # overrides
 
 
@@ -230,7 +233,7 @@ class SoakResult:
             % (self.jobs, self.commanded, self.duration, self.commanded / max(self.duration, 1e-9),
                c.corrupt, c.drop, c.delay, c.delay_s * 1e3, "on" if c.parity else "off",
                ("on" if c.confirm_records else "off") if c.confirm_records is not None
-               else ("off (v2: CRC-16)" if c.protocol == "v2" else "on"),
+               else _confirm_default(c.protocol),
                ("%g" % c.cut_every) if c.cut_every > 0 else "-", c.cut_min, c.cut_max, c.seed,
                c.speed_factor),
             "outcomes: executed %d, rejected %d, aborted %d, lost %d (jobs without result %d); "
@@ -525,9 +528,22 @@ def _count(counts: Dict[str, int], reason: str) -> None:
     counts[short] = counts.get(short, 0) + 1
 
 
-def _keys(job: MoveJob) -> Tuple[Key, ...]:
-    if job.points:      # v2: each streamed joint target, as the controller logs it (0.001 deg)
-        return tuple(("JOINT", joints_to_wire(p.joints)) for p in job.points)  # type: ignore[misc]
+def _confirm_default(protocol: str) -> str:
+    """The two-telegram rule as the protocol's controller runs it by default, in words."""
+    if protocols.get(protocol).confirm_records:
+        return "on"
+    return "off (%s: its records' integrity check)" % protocol
+
+
+def _keys(job: MoveJob, protocol: str = "v1") -> Tuple[Key, ...]:
+    """The wire targets of ``job`` as the controller's log names them. A stream's points (protocol
+    ``streams``): joint targets (``joint_targets``, v2) in 0.001 deg, move type JOINT; Cartesian
+    targets (v3) as the wire carries their pose (X Y Z 0.1 mm, Rx Ry Rz 0.01 deg), move type MOVEP.
+    Otherwise (v1) the preview's handshake commands."""
+    if job.points:
+        if protocols.get(protocol).joint_targets:
+            return tuple(("JOINT", joints_to_wire(p.joints)) for p in job.points)  # type: ignore[misc]
+        return tuple(("MOVEP", pose_to_wire(p.pose)) for p in job.points)  # type: ignore[misc]
     return tuple((c.move_type.name, tuple(c.values)) for c in job.preview.commands)  # type: ignore[misc]
 
 
@@ -546,12 +562,14 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
                             loop_period=config.loop_period, kinematics=kin,
                             confirm_records=config.confirm_records, protocol=config.protocol).start()
     core = DriverCore(params, kinematics=kin, open_link=line.open_link)
+    proto = protocols.get(config.protocol)
 
     rest: List[object] = [None, 0.0]        # the arm's pose at the last bus cycle, seen since
 
     def probe(status: DriverStatus) -> None:
         """Every bus cycle: the arm's exact TCP against the box; at rest, the driver's joints
-        against the arm's (v1 reports a pose: the driver must keep track of the configuration)."""
+        against the arm's (v1 and v3 report only a pose, the driver solves the joints: it must keep
+        track of the configuration)."""
         arm = sim.program.arm
         pose = arm.pose
         excess = params.workspace.excess(pose)
@@ -565,14 +583,16 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
         if status.feedback_time is None or status.feedback_time < rest[1] or \
                 status.joints is None or not status.joints_valid or status.pose is None:
             return              # (feedback that arrived while the arm was at rest already)
-        if config.protocol == "v1" and tuple(status.pose.as_tuple()) != tuple(arm.reported_pose()):
-            return              # (the driver has not seen this pose yet)
+        if not proto.reports_joints:
+            reported = sim.feedback         # the pose the controller reports, rounded as on the wire
+            if reported is None or tuple(status.pose.as_tuple()) != tuple(reported.pose.as_tuple()):
+                return          # (the driver has not seen this pose yet)
         off = max(abs(a - b) for a, b in zip(status.joints, arm.joints))
         if off > math.radians(MISMATCH_DEG):
             result.mismatch_samples += 1
             result.mismatch_max = max(result.mismatch_max, math.degrees(off))
 
-    recorder = StatusRecorder(handshake_ready=(lambda: True) if config.protocol == "v2"
+    recorder = StatusRecorder(handshake_ready=(lambda: True) if proto.streams
                               else (lambda: core.handshake.ready), probe=probe)
     core.add_listener(recorder)
     cutter = (Cutter(line, config, random.Random(rng.getrandbits(64)), recorder)
@@ -625,7 +645,7 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
                 _count(result.refusals, last_refusal)
                 result.refused_invalid += 1
                 continue
-            keys = _keys(job)
+            keys = _keys(job, config.protocol)
             gen.mark(keys)
             entry = Commanded(len(commanded), job.id, request.move_type.name, keys, time.monotonic())
             commanded.append(entry)
@@ -739,7 +759,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--parity", action="store_true", help="emulate the 8E1 parity check of a real port")
     p.add_argument("--no-confirm", action="store_true",
                    help="v1: the virtual controller acts on a record at its first telegram (no two-telegram "
-                        "rule; v2 always does)")
+                        "rule; v2 and v3 always do: their records carry an integrity check)")
     p.add_argument("--cut-every", type=float, default=20.0, metavar="SECONDS",
                    help="cut the line at random around every SECONDS s (default 20; 0: no cuts)")
     p.add_argument("--cut-min", type=float, default=0.2, help="shortest cut [s] (default 0.2)")
@@ -752,9 +772,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p.add_argument("--job-timeout", type=float, default=60.0, help="a job without result after this is lost (default 60)")
     p.add_argument("--progress", type=int, default=500, metavar="N", help="progress line every N jobs (0: none)")
     p.add_argument("--log-file", help="write the driver's and controller's log (INFO) here")
-    p.add_argument("--protocol", choices=("v1", "v2"), default="v1",
-                   help="controller protocol of both ends (v2: moves streamed as joint targets, each "
-                        "one accounted as a target; default v1)")
+    p.add_argument("--protocol", choices=protocols.names(), default=protocols.DEFAULT,
+                   help="controller protocol of both ends (v2 / v3: moves streamed as joint / Cartesian "
+                        "targets, each one accounted as a target; default %(default)s)")
     args = p.parse_args(argv)
     if args.targets < 1:
         p.error("--targets must be >= 1")
