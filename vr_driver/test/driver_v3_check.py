@@ -1,0 +1,179 @@
+#!/usr/bin/python3
+"""rostest of protocol v3 (test/driver_v3.test): the driver streams Cartesian targets to the virtual
+G2's v3 program on the paced 19.2 kbit/s line with the I/O island. A planner's 30-point trajectory
+with empty tolerances (v3's defaults apply) succeeds with each target once in the controller's own
+log; a cancel mid-way ends the goal only at rest, with the rest pose the robot reports; a trajectory
+that flips the wrist configuration is refused before anything is sent."""
+from __future__ import annotations
+
+import math
+import re
+import time
+
+import actionlib
+import rostest
+from actionlib_msgs.msg import GoalStatus
+
+from driver_check import HOME, PKG, DriverTestBase
+from driver_v2_check import smooth_points
+from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal
+from vr_driver.poses import ControllerPose
+from vr_driver.protocol import registry
+
+V3 = registry.get("v3")
+
+DEG = math.pi / 180.0
+
+
+def wire_joints(values):
+    """Joints of a v3 log entry (0.001 deg) in rad."""
+    return [math.radians(v * 0.001) for v in values]
+
+
+class DriverV3Test(DriverTestBase):
+    def at_home(self):
+        """The arm at HOME (a known start). Not moved when it is there already: a v3 move to the pose
+        the arm is at streams one target without a pose, which stops the driver's bus thread
+        (DriverCore._preview_stream's "already there" point skips cartesian_points; reported)."""
+        self.wait_motion_possible()
+        tool = self.tool.wait_for(lambda m: True, 2.0, after=time.monotonic())
+        p, q = tool.pose.position, tool.pose.orientation
+        dp, da = ControllerPose.from_ros((p.x, p.y, p.z), (q.x, q.y, q.z, q.w)).distance_to(ControllerPose(*HOME))
+        if dp > 0.5 or da > 0.5:
+            state, result = self.move(MoveToPoseGoal.PTP, HOME)
+            self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        return list(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
+
+    def test_01_a_30_point_trajectory_with_empty_tolerances_runs_each_target_once(self):
+        q0 = self.at_home()
+        before = len(self.entries())
+        points, times = smooth_points(q0)
+        start = len(self.joints.messages)
+        t_sent = time.monotonic()
+        state, result = self.follow(self.trajectory_goal(points, times))     # empty tolerances
+        elapsed = time.monotonic() - t_sent
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.error_string)
+        self.assertEqual(result.error_code, FollowJointTrajectoryResult.SUCCESSFUL, result.error_string)
+        self.assertIn("protocol v3", result.error_string)
+        streamed = re.search(r"protocol v3: ([0-9]+) of ([0-9]+) points streamed", result.error_string)
+        self.assertIsNotNone(streamed, result.error_string)
+        n_streamed, n_planned = int(streamed.group(1)), int(streamed.group(2))
+        self.assertEqual(n_planned, len(points))
+        self.assertTrue(1 <= n_streamed <= n_planned, result.error_string)
+        self.assertLessEqual(elapsed, 1.5 * times[-1] + 2.0, result.error_string)
+        self.check_on_path(points, times, q0, start, V3.default_path_tolerance)
+        # the controller's own log: each streamed target exactly once, in order, Cartesian (MOVEP)
+        entries = self.wait_entries(before + n_streamed, 5.0)[before:]
+        self.status.wait_for(lambda m: False, 0.5)                 # nothing more comes
+        entries = self.entries()[before:]
+        seqs = [e["seq"] for e in entries]
+        self.assertEqual(len(entries), n_streamed, "%d log entries for %d targets streamed: %s"
+                         % (len(entries), n_streamed, seqs))
+        self.assertEqual(len(seqs), len(set(seqs)), "a target taken twice: %s" % seqs)
+        self.assertEqual(seqs, list(range(seqs[0], seqs[0] + len(seqs))))
+        targets = [tuple(e["target"]) for e in entries]
+        self.assertEqual(len(targets), len(set(targets)), "a pose executed twice")
+        self.assertTrue(all(e["move_type"] == "MOVEP" for e in entries), entries)
+        self.assertTrue(all(len(t) == 6 and all(isinstance(v, int) for v in t) for t in targets), targets)
+        outcomes = [e["outcome"] for e in entries]
+        self.assertEqual(outcomes[-1], "executed", outcomes)
+        self.assertTrue(set(outcomes[:-1]) <= {"blended", "executed"}, outcomes)
+        # the last target is the last planned point's pose, as the wire carries it
+        last = V3.wire_pose(self.kin.fk_pose(points[-1]))
+        dp, da = ControllerPose(*[v * (0.1 if i < 3 else 0.01) for i, v in enumerate(targets[-1])]
+                                ).distance_to(last)
+        self.assertLess(dp, 0.01)
+        self.assertLess(da, 0.001)
+        final = self.joints.last().position
+        off = max(abs(a - b) for a, b in zip(final, points[-1]))
+        self.assertLessEqual(off, V3.default_goal_tolerance, "%.3f deg from the last point" % math.degrees(off))
+
+    def test_02_cancel_mid_way_ends_at_rest_with_the_rest_pose_reported(self):
+        q0 = self.at_home()
+        points, times = smooth_points(q0, duration=6.0)
+        before = len(self.entries())
+        ended = []                          # when the client saw the goal end
+
+        def transition(h):
+            if h.get_comm_state() == actionlib.CommState.DONE and not ended:
+                ended.append(time.monotonic())
+        t_sent = time.monotonic()
+        handle = self.trajectory_client.send_goal(self.trajectory_goal(points, times), transition_cb=transition)
+        moved = self.joints.wait_for(lambda m: abs(m.position[0] - q0[0]) > 0.05, 10.0, after=t_sent)
+        self.assertIsNotNone(moved, "the arm did not move")
+        self.status.wait_for(lambda m: False, t_sent + 0.5 * times[-1] - time.monotonic())    # mid-way
+        self.assertFalse(ended, "the goal ended before the cancel")
+        t_cancel = time.monotonic()
+        handle.cancel()
+        done = self.status.wait_for(lambda m: bool(ended), 15.0)
+        self.assertIsNotNone(done, "the cancelled goal never ended")
+        t_done = ended[0]
+        self.assertEqual(handle.get_goal_status(), GoalStatus.PREEMPTED, handle.get_goal_status_text())
+        # the arm stays where it is: nothing moves, nothing more is taken or logged
+        self.status.wait_for(lambda m: False, 1.5)
+        entries = self.entries()[before:]
+        self.assertTrue(entries, "nothing in the controller's log")
+        self.assertTrue(all(e["time"] <= t_done for e in entries),
+                        "the controller still handled targets after the goal ended: %s"
+                        % [(e["seq"], e["outcome"], round(e["time"] - t_done, 3)) for e in entries
+                           if e["time"] > t_done])
+        with self.joints.cond:
+            after = [m.position for m, t in zip(self.joints.messages, self.joints.times) if t >= t_done + 0.3]
+        self.assertGreater(len(after), 10, "no joint_states after the goal ended")
+        rest = after[0]
+        drift = max(max(abs(a - b) for a, b in zip(q, rest)) for q in after)
+        self.assertLess(drift, 0.001 * DEG, "joint_states moved after the goal ended (%.4f deg)" % (drift / DEG))
+        self.assertGreater(max(abs(a - b) for a, b in zip(rest, points[-1])), 0.05)   # stopped short of the end
+        # the arm ended at rest (its last target halted or reached), before the goal was done
+        moved_entries = [e for e in entries if e["start_time"] is not None]
+        self.assertTrue(moved_entries, entries)
+        halted = max(moved_entries, key=lambda e: e["time"])
+        self.assertLessEqual(halted["time"], t_done)
+        arm_rest = wire_joints(halted["final_joints"])
+        off = max(abs(a - b) for a, b in zip(rest, arm_rest))
+        self.assertLessEqual(off, V3.default_goal_tolerance,
+                             "the driver reports %.3f deg away from where the arm rests" % (off / DEG))
+        tool = self.tool.wait_for(lambda m: True, 2.0, after=time.monotonic())
+        p, q = tool.pose.position, tool.pose.orientation
+        dp, da = ControllerPose.from_ros((p.x, p.y, p.z), (q.x, q.y, q.z, q.w)).distance_to(
+            self.kin.fk_pose(arm_rest))
+        self.assertLess(dp, 0.2)
+        self.assertLess(da, 0.05)
+        # no target started after the stop reached the controller (its first "stopped" entry),
+        # beyond the one segment the arm may have been committed to blend into
+        stopped = [e for e in entries if e["outcome"] == "stopped"]
+        self.assertTrue(stopped, "no target stopped: %s" % [(e["seq"], e["outcome"]) for e in entries])
+        t_stop = min(e["time"] for e in stopped)
+        self.assertGreaterEqual(t_stop, t_cancel)
+        self.assertFalse([e for e in entries if e["taken_time"] > t_stop],
+                         "targets taken after the stop")
+        late = [e for e in entries if e["outcome"] in ("executed", "blended") and e["time"] > t_stop]
+        self.assertLessEqual(len(late), 1, late)
+
+    def test_03_a_wrist_flip_is_refused_and_nothing_is_sent(self):
+        q0 = self.at_home()
+        flip = [q0[0], q0[1], q0[2], q0[3] + math.pi, -q0[4], q0[5] + math.pi]
+        lim = self.kin.limits
+        if not all(lo <= v <= hi for v, lo, hi in zip(flip, lim.lower, lim.upper)):
+            self.skipTest("the flipped wrist is outside the joint limits at home")
+        dp, da = self.kin.fk_pose(q0).distance_to(self.kin.fk_pose(flip))
+        self.assertLess(dp, 1e-6)                                    # the same TCP pose
+        n = 20
+        points = [[a + (b - a) * k / n for a, b in zip(q0, flip)] for k in range(1, n + 1)]
+        times = [4.0 * k / n for k in range(1, n + 1)]
+        before = len(self.entries())
+        sent = len(self.executed.messages)
+        state, result = self.follow(self.trajectory_goal(points, times), 20.0)
+        self.assertIn(state, (GoalStatus.REJECTED, GoalStatus.ABORTED), result.error_string)
+        self.assertEqual(result.error_code, FollowJointTrajectoryResult.INVALID_GOAL, result.error_string)
+        self.assertIn("another configuration", result.error_string)
+        self.assertIn("nothing was sent", result.error_string)
+        self.status.wait_for(lambda m: False, 1.0)
+        self.assertEqual(len(self.entries()), before)
+        self.assertEqual(len(self.executed.messages), sent)
+        now = self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position
+        self.assertLess(max(abs(a - b) for a, b in zip(now, q0)), 0.001 * DEG)     # the arm never moved
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "driver_v3", DriverV3Test)
