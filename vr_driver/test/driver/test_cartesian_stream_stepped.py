@@ -132,3 +132,15 @@ def test_a_flipping_trajectory_is_refused_and_nothing_is_sent(world):
     assert "another configuration" in str(err.value) or "cannot solve" in str(err.value)
     world.run_for(0.5)
     assert world.status().counters.targets_sent == sent and not world.log.entries()
+
+
+def test_a_move_to_where_the_arm_already_is_runs_as_one_target(world):
+    """(It once sent a point without a pose: the bus thread raised and dropped the link.)"""
+    from vr_driver.driver import MoveRequest
+    from vr_driver.poses import MoveType
+    here = world.status().pose
+    job = world.core.submit(MoveRequest(MoveType.PTP, here))
+    result = world.finish(job)
+    assert result.success, result.reason
+    assert world.status().counters.targets_sent == 1 and world.core.link.counters.losses == 0
+    assert [e.move_type for e in world.log.entries()] == ["MOVEP"]

@@ -518,6 +518,8 @@ class DriverCore:
                               MAX_CARTESIAN_TOLERANCE)
         if not points:      # already there: one target at the goal
             points = (StreamPoint(tuple(preview.joint_target), 1000, 0, 0.0, len(positions) - 1),)
+            if not self.protocol.joint_targets:
+                points = self.cartesian_points(positions[0], points)
         return points
 
     def check_segments(self, start: Sequence[float], points: Sequence[StreamPoint]) -> None:
