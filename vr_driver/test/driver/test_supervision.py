@@ -97,7 +97,7 @@ def test_a_run_on_plan_succeeds_with_its_note():
     out = sup.finish(T0 + 2.0, True, END)
     assert (out.state, out.error_code) == (SUCCEEDED, SUCCESSFUL)
     assert out.error_string.startswith("ran 1.00 x the planned 2.00 s (protocol v2: 2 of 2 points "
-                                       "streamed, blended)"), out.error_string
+                                       "streamed, smooth levels up to 3)"), out.error_string
     assert out.samples == 21 and out.max_time_deviation < 1e-9
 
 
@@ -115,8 +115,12 @@ def test_the_note_names_the_protocol_and_its_way_of_running():
         streams = True
     sup = TrajectorySupervisor(traj, stream_run(traj, gaps=3), T0, Streams, NAMES)
     note = sup.note(2.0, cycle_rate=87.5)
-    assert note.startswith("ran 1.00 x the planned 2.00 s (protocol v7: 2 of 2 points streamed, blended)")
+    assert note.startswith("ran 1.00 x the planned 2.00 s (protocol v7: 2 of 2 points streamed, smooth "
+                           "levels up to 3)")
     assert "stopped 3 time(s) on the way" in note and "(87.5 cycles/s)" in note
+    slow = TrajectorySupervisor(traj, stream_run(traj), T0, Streams, NAMES).note(3.0)
+    assert "1.50 x" in slow and "50 % longer than planned although no target came late" in slow
+    assert "interpreter" in slow and "longer than planned" not in note
 
 
 def test_samples_without_valid_joints_are_skipped():

@@ -33,6 +33,9 @@ from .trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUC
 __all__ = ["SUCCEEDED", "ABORTED", "CANCELED", "SHUTDOWN", "PREEMPTED", "CANCELLED",
            "Sample", "Outcome", "TrajectorySupervisor"]
 
+#: a stream that took this many times its plan, with no target late, says it may have stopped at
+#: each point (the interpreter look-ahead of the controller: 1.45 x with look-ahead 0 in the bench)
+SLOW_STREAM = 1.25
 #: the start delays the at-time deviation is fitted over [s], and the step
 MAX_START_DELAY = 0.5
 DELAY_STEP = 0.005
@@ -188,14 +191,20 @@ class TrajectorySupervisor:
         traj, run, protocol = self.traj, self.run, self.protocol
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
         if protocol.streams:
-            streamed = len(run.jobs[0].points) if run.jobs else 0
-            text = "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, blended)" % (
-                slower, traj.duration, protocol.name, streamed, len(traj.positions) - 1)
+            points = run.jobs[0].points if run.jobs else ()
+            smooth = max((p.smooth for p in points), default=0)
+            how = "smooth levels up to %d" % smooth if smooth else "an exact stop at each"
+            text = "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, %s)" % (
+                slower, traj.duration, protocol.name, len(points), len(traj.positions) - 1, how)
             gaps = run.jobs[0].gaps if run.jobs else 0
             if gaps:
                 text += ("; the arm stopped %d time(s) on the way waiting for its next target: the bus "
                          "(%.1f cycles/s) did not bring it in time -- a faster line (baud) or a larger "
                          "stream_path_tolerance gives fewer, longer segments" % (gaps, cycle_rate))
+            elif smooth and slower > SLOW_STREAM and len(points) >= 2:
+                text += ("; %.0f %% longer than planned although no target came late: a controller that "
+                         "stops at each point (its interpreter does not read the next MOVE ahead, "
+                         "doc/controller_program.md section 10.9) runs this way" % (100.0 * (slower - 1.0)))
         else:
             text = "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
                 slower, traj.duration, protocol.name, len(run.jobs))
