@@ -157,6 +157,9 @@ class DriverParams:
     stream_path_tolerance: float = 0.1   # [deg] a v2 stream drops planned points whose removal keeps
                                          # the path within this (a straight joint-space chord); also
                                          # what a blended corner may round off (the smooth level)
+    # the model against the controller (protocols that report joints and pose: v2)
+    model_check_position: float = 0.5    # [mm] the reported pose may differ this much from our FK of
+    model_check_angle: float = 0.05      # [deg] the reported joints before the model is called off
     # safety and model
     prefix: str = ""                     # of every link, joint and frame name of this robot (the
     #                                      URDF's xacro prefix); from_dict puts it in front of
@@ -235,6 +238,10 @@ class DriverParams:
             stream_smooth=_integer(params, "stream_smooth", d.stream_smooth, 0, 10),
             stream_path_tolerance=_number(params, "stream_path_tolerance", d.stream_path_tolerance,
                                           0.0, 5.0),
+            model_check_position=_number(params, "model_check_position", d.model_check_position, 0.0, 1000.0,
+                                         lo_open=True),
+            model_check_angle=_number(params, "model_check_angle", d.model_check_angle, 0.0, 180.0,
+                                      lo_open=True),
             prefix=prefix,
             workspace=workspace,
             controller_joint_names=prefixed(prefix, tuple(names)),

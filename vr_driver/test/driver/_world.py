@@ -91,7 +91,7 @@ class World:
             self.program = ControllerProgramV3(self.slave, self.arm, kinematics=controller_kin or kin,
                                                execution_log=self.log)
         elif protocol == "v2":
-            self.arm = SimStreamArm(kin, speed_factor=speed_factor, initial_pose=initial_pose,
+            self.arm = SimStreamArm(controller_kin or kin, speed_factor=speed_factor, initial_pose=initial_pose,
                                     clock=self.clock, brake_time=brake_time, **extra)
             self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log)
         else:

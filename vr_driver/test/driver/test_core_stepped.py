@@ -428,3 +428,45 @@ def test_the_record_is_stamped_with_the_time_the_controller_took_it(world):
     assert len(stamps) >= 8          # a new record nearly every bus cycle, each with its own stamp
     world.freeze(0.2)                # no bus cycle: the status keeps its record and stamp
     assert world.status().record_time == max(stamps)
+
+
+def _longer_upper_arm(dz):
+    """The model with the upper arm (joint_2 -> joint_3) ``dz`` metres longer: a robot the driver's
+    model does not match."""
+    import xml.etree.ElementTree as ET
+    from panasonic_vr006l_support.description import render_urdf
+    from vr_driver.kinematics.solver import Kinematics
+    root = ET.fromstring(render_urdf())
+    origin = next(j for j in root.findall("joint") if j.get("name") == "joint_3").find("origin")
+    x, y, z = (float(v) for v in origin.get("xyz").split())
+    origin.set("xyz", "%r %r %r" % (x, y, z + dz))
+    return Kinematics.from_urdf_string(ET.tostring(root, encoding="unicode"))
+
+
+def test_the_model_is_checked_against_the_controller_at_every_connection(kin, caplog):
+    """v2 reports joints and pose: at each connection the driver compares the pose with its own FK
+    of the joints. The same model: within the wire's resolution, no warning. A controller whose
+    upper arm is 10 mm longer: a warning naming the size, in the status (-> /diagnostics)."""
+    same = World(kin, protocol="v2")
+    same.ready()
+    check = same.status().model_check
+    assert check is not None and check.ok and check.position_mm < 0.05 and check.angle_deg < 0.01
+    other = World(kin, protocol="v2", controller_kin=_longer_upper_arm(0.010))
+    with caplog.at_level("WARNING", logger="vr_driver.driver"):
+        other.ready()
+    check = other.status().model_check
+    assert check is not None and not check.ok and 5.0 < check.position_mm < 10.5, check
+    assert "are not the robot's" in check.describe()
+    assert any("model check" in r.getMessage() and "%.3f mm" % check.position_mm in r.getMessage()
+               for r in caplog.records)
+    first = check.session
+    other.link.cut = True                                  # a new connection is checked again
+    other.run_until(lambda: not other.status().connected, 2.0, "link lost")
+    other.link.cut = False
+    other.ready(10.0)
+    assert other.status().model_check.session > first
+
+
+def test_a_protocol_without_joints_has_no_model_check(world):
+    world.ready()
+    assert world.status().model_check is None

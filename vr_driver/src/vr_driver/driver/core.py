@@ -68,11 +68,32 @@ CONFIGURATION_TOLERANCE = math.radians(1.0)
 
 Clock = Callable[[], float]
 
-__all__ = ["DriverCore", "DriverError", "DriverStatus", "TrajectoryRun"]
+__all__ = ["DriverCore", "DriverError", "DriverStatus", "ModelCheck", "TrajectoryRun"]
 
 
 class DriverError(VrDriverError):
     """A request the driver refuses (not connected, e-stop, bad input...). The message says why."""
+
+
+@dataclass(frozen=True)
+class ModelCheck:
+    """Our model against the controller's, at a connection (protocols that report both the joints
+    and the pose: v2): how far the reported pose lies from our FK of the reported joints."""
+
+    session: int                       # the link session it was made in
+    position_mm: float                 # the largest of |dX|, |dY|, |dZ|
+    angle_deg: float                   # the largest of |dRx|, |dRy|, |dRz| (wrapped)
+    ok: bool                           # within model_check_position / model_check_angle
+    joints: Tuple[float, ...]          # the reported joints it was made at [rad]
+
+    def describe(self) -> str:
+        text = "the controller's pose is %.3f mm / %.3f deg from our model's FK of its joints" % (
+            self.position_mm, self.angle_deg)
+        if not self.ok:
+            text += (": the model's dimensions (panasonic_vr006l_support/config/kinematics_vr006l.yaml) "
+                     "are not the robot's -- Cartesian targets, the workspace box and the RViz preview "
+                     "are off by about that much; calibrate the model (README, The robot model)")
+        return text
 
 
 @dataclass(frozen=True)
@@ -100,6 +121,7 @@ class DriverStatus:
     #                                           reply that brought it began then (arrival less its
     #                                           time on the wire); a new value = a new sample
     settling: bool = False                    # a stopped move is waiting for the arm to be at rest
+    model_check: Optional[ModelCheck] = None  # the model against the controller (v2), latest connection
 
     @property
     def connected(self) -> bool:
@@ -286,6 +308,7 @@ class DriverCore:
         self._joints_valid = False
         self._joints_pose: Optional[Tuple[int, ...]] = None
         self._plan_seed = PlanSeed()
+        self._model_check: Optional[ModelCheck] = None
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
 
@@ -710,6 +733,7 @@ class DriverCore:
         if self.io is not None:
             self.io.update(now)          # judge the I/O stations after the cycle (io.snapshot())
         joints = self._update_joints(sample)
+        self._check_model(sample, joints)
         command = self.sequencer.step(now, sample, joints)
         record = self.protocol.encode(command, self.params.byte_order)
         if self.protocol.send_changes_at_once and record != self._last_record and sample.connected \
@@ -755,6 +779,27 @@ class DriverCore:
             self._joints_valid = False
         return self._joints if self._joints_valid else None
 
+    def _check_model(self, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> None:
+        """Once per connection (the first record of a link session) where the protocol reports the
+        joints and the pose: the reported pose against our FK of the reported joints. One FK on the
+        bus thread per connection. A mismatch is a warning in the log (and /diagnostics)."""
+        fb = sample.fresh
+        if fb is None or joints is None or not self.protocol.reports_joints:
+            return
+        if self._model_check is not None and self._model_check.session == sample.session:
+            return
+        ours = self.kin.fk_pose(joints).as_tuple()
+        theirs = fb.pose.as_tuple()
+        d_pos = max(abs(a - b) for a, b in zip(ours[:3], theirs[:3]))
+        d_ang = max(abs((a - b + 180.0) % 360.0 - 180.0) for a, b in zip(ours[3:], theirs[3:]))
+        check = ModelCheck(sample.session, d_pos, d_ang, d_pos <= self.params.model_check_position
+                           and d_ang <= self.params.model_check_angle, tuple(joints))
+        self._model_check = check
+        if check.ok:
+            log.info("model check: %s", check.describe())
+        else:
+            log.warning("model check: %s", check.describe())
+
     # ------------------------------------------------------------------------ snapshots
     def _snapshot(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
         view = self.sequencer.view
@@ -781,6 +826,7 @@ class DriverCore:
             counters=counters, master_counters=self.link.master_counters(),
             slave_state=self.link.slave_state, last_diag=self.link.last_diag,
             error_code=error_code, error_reason=error_reason,
+            model_check=self._model_check,
             feedback_time=sample.feedback_time if sample is not None and fb is not None else None,
             record_time=sample.record_time if sample is not None and fb is not None else None,
             settling=view.settling)

@@ -235,6 +235,12 @@ class InterfaceNode:
             stat.summary(level, "%s; %s" % (fb.state.name, fb.status.describe()))
             stat.add("pose", " ".join(str(v) for v in fb.values))
             stat.add("why no motion", s.why_no_motion() or "-")
+        check = s.model_check
+        if check is not None:
+            stat.add("model check", check.describe())
+            if not check.ok and fb is not None:
+                stat.mergeSummary(DiagnosticStatus.WARN, "the model differs from the controller's by "
+                                  "%.2f mm / %.3f deg" % (check.position_mm, check.angle_deg))
         c = s.counters
         for key in ("targets_sent", "targets_done", "targets_rejected", "targets_aborted"):
             stat.add(key.replace("_", " "), str(getattr(c, key)))
