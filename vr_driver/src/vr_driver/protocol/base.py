@@ -21,7 +21,25 @@ from typing import Any, Optional, Sequence, Tuple
 
 from ..poses import ControllerPose
 
-__all__ = ["Protocol", "WireTarget"]
+__all__ = ["Protocol", "WireTarget", "framed_record"]
+
+
+def framed_record(data: Any, size: int, version: int, what: str) -> bytes:
+    """``data`` as the bytes of a record of ``size`` bytes whose first byte is ``version``;
+    ProtocolError naming ``what`` otherwise (the record's own integrity check comes after)."""
+    from ..errors import ProtocolError
+    try:
+        raw = bytes(data)
+    except (TypeError, ValueError) as exc:
+        raise ProtocolError("%s record must be bytes, got %r" % (what, type(data).__name__)) from exc
+    if len(raw) != size:
+        raise ProtocolError("%s record must be %d bytes, got %d" % (what, size, len(raw)))
+    if raw[0] != version:
+        from .registry import get, names
+        other = [name for name in names() if get(name).version == raw[0]]
+        raise ProtocolError("%s record: version byte %d, expected %d (is the other end running %s?)"
+                            % (what, raw[0], version, "protocol " + other[0] if other else "another protocol"))
+    return raw
 
 
 @dataclass(frozen=True)

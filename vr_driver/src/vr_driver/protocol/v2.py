@@ -34,7 +34,7 @@ from typing import Any, Sequence, Tuple
 
 from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose
-from .base import Protocol, WireTarget
+from .base import Protocol, WireTarget, framed_record
 from .v1 import StatusBits, round_half_away
 
 __all__ = [
@@ -208,15 +208,7 @@ def _check_crc(raw: bytes, what: str) -> None:
 
 
 def _as_record(data: Any, what: str) -> bytes:
-    try:
-        raw = bytes(data)
-    except (TypeError, ValueError) as exc:
-        raise ProtocolError("%s record must be bytes, got %r" % (what, type(data).__name__)) from exc
-    if len(raw) != RECORD_SIZE_V2:
-        raise ProtocolError("%s record must be %d bytes, got %d" % (what, RECORD_SIZE_V2, len(raw)))
-    if raw[0] != VERSION:
-        raise ProtocolError("%s record: version byte %d, expected %d (is the other end running "
-                            "protocol v1?)" % (what, raw[0], VERSION))
+    raw = framed_record(data, RECORD_SIZE_V2, VERSION, what)
     _check_crc(raw, what)
     return raw
 

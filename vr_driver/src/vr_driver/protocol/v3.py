@@ -52,7 +52,7 @@ from typing import Any, Optional, Sequence, Tuple
 
 from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose, finite_number, wrap_degrees
-from .base import Protocol, WireTarget
+from .base import Protocol, WireTarget, framed_record
 from .v1 import ByteOrder, StatusBits, round_half_away
 from .v2 import (SEQ_MAX, SMOOTH_MAX, Control, RejectCode, StreamState, describe_stream_feedback, next_seq,
                  seq_after)
@@ -148,15 +148,7 @@ def _seal(body: bytes, order: ByteOrder) -> bytes:
 
 
 def _as_record(data: Any, size: int, what: str, order: ByteOrder) -> bytes:
-    try:
-        raw = bytes(data)
-    except (TypeError, ValueError) as exc:
-        raise ProtocolError("%s record must be bytes, got %r" % (what, type(data).__name__)) from exc
-    if len(raw) != size:
-        raise ProtocolError("%s record must be %d bytes, got %d" % (what, size, len(raw)))
-    if raw[0] != VERSION:
-        raise ProtocolError("%s record: version byte %d, expected %d (is the other end running "
-                            "another protocol?)" % (what, raw[0], VERSION))
+    raw = framed_record(data, size, VERSION, what)
     want = struct.unpack_from(order.struct_prefix + "H", raw, size - 2)[0]
     got = check_word(raw[:-2], order)
     if want != got:
