@@ -272,3 +272,18 @@ def test_load_pairs_yaml_and_csv(good_pairs, tmp_path):
         assert len(loaded) == len(good_pairs)
         assert np.allclose(np.array([list(j) + list(p) for j, p in loaded]),
                            np.array([list(j) + list(p) for j, p in good_pairs]))
+
+
+def test_cli_propose_fit_and_write(good_pairs, tmp_path, capsys):
+    assert kc.main(["propose", "-n", "12"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("\n") >= 13 and "predicted standard uncertainty" in out
+    data = tmp_path / "pairs.yaml"
+    data.write_text(yaml.safe_dump([{"joints": [float(v) for v in j], "pose": [float(v) for v in p]}
+                                    for j, p in good_pairs]))
+    written = tmp_path / "fitted.yaml"
+    assert kc.main(["fit", str(data), "--write", str(written)]) == 0
+    out = capsys.readouterr().out
+    assert "residuals: position RMS" in out and "HELD" in out and "wrote" in out
+    assert yaml.safe_load(written.read_text())["geometry"]["upper_arm"]["calibrate"] is False
+    assert kc.main([]) == 2
