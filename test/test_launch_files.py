@@ -162,6 +162,19 @@ class DriverLaunchParamsTest(unittest.TestCase):
         own = {k[len("/virtual_controller/"):]: v for k, v in params.items() if k.startswith("/virtual_controller/")}
         self.assertEqual(SimOptions.from_mapping(own).ramp_time, 0.5)
 
+    def test_true_model_reaches_the_virtual_controller_only(self):
+        """issue 25: true_model:=FILE gives the virtual G2 its own kinematics; the driver (and the
+        robot description) keep the model's. Unset by default (the model's)."""
+        from vr_driver.controller.program import SimOptions
+        example = os.path.join(REPO, "vr_driver", "test", "data", "true_model_example.yaml")
+        _, params = self.check("protocol:=v3")
+        self.assertFalse(any(k.endswith("/true_model") for k in params))
+        _, plain = self.check("protocol:=v3", "true_model:=" + example)
+        self.assertEqual([k for k in plain if k.endswith("/true_model")], ["/virtual_controller/true_model"])
+        own = {k[len("/virtual_controller/"):]: v for k, v in plain.items() if k.startswith("/virtual_controller/")}
+        self.assertEqual(SimOptions.from_mapping(own).true_model, example)
+        self.assertEqual(plain["/robot_description"], params["/robot_description"])
+
     def test_real_port(self):
         p, params = self.check("sim:=false", "port:=/dev/ttyUSB7", "baud:=187500")
         self.assertEqual((p.port, p.baud), ("/dev/ttyUSB7", 187500))

@@ -6,7 +6,6 @@ FeedbackV3 comes back in the replies. Nothing sleeps."""
 from __future__ import annotations
 
 import math
-import xml.etree.ElementTree as ET
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -437,22 +436,23 @@ def test_the_ik_seed_is_the_previous_target_then_the_arm(kin):
     assert abs(rig.arm.joints[5] + 1.5) < 1e-3
 
 
-def shifted_kinematics(dz: float) -> Kinematics:
-    """The model with the upper arm (joint_2 -> joint_3) ``dz`` metres longer."""
-    from panasonic_vr006l_support.description import render_urdf
-    root = ET.fromstring(render_urdf())
-    for joint in root.findall("joint"):
-        if joint.get("name") == "joint_3":
-            origin = joint.find("origin")
-            x, y, z = (float(v) for v in origin.get("xyz").split())
-            origin.set("xyz", "%r %r %r" % (x, y, z + dz))
-    return Kinematics.from_urdf_string(ET.tostring(root, encoding="unicode"))
+def shifted_kinematics(dz: float, tmp_path) -> Kinematics:
+    """The model with the upper arm (joint_2 -> joint_3) ``dz`` metres longer: a true-model file
+    (panasonic_vr006l_support.true_model) of the model's numbers with that change."""
+    import yaml
+    from panasonic_vr006l_support.description import default_kinematics_yaml
+    with open(default_kinematics_yaml()) as f:
+        tree = yaml.safe_load(f)
+    tree["geometry"]["upper_arm"]["value"] += dz
+    path = tmp_path / "upper_arm.yaml"
+    path.write_text(yaml.safe_dump(tree))
+    return Kinematics.from_true_model(str(path))
 
 
-def test_the_controller_solves_with_its_own_kinematics(kin):
+def test_the_controller_solves_with_its_own_kinematics(kin, tmp_path):
     """A G2 whose model differs from the robot's (upper arm 5 mm longer): it solves the pose with
     its own IK, and the arm (the real robot) lands off the pose by about that much."""
-    own = shifted_kinematics(0.005)
+    own = shifted_kinematics(0.005, tmp_path)
     stream = stream_of(kin, zigzag(2), 500, 0)
     exact = RigV3(kin)
     exact.connect()

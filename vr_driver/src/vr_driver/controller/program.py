@@ -137,7 +137,7 @@ PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "b
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
                "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
                "protocol": "protocol", "interpreter_lookahead": "interpreter_lookahead",
-               "ring_size": "ring_size", "ramp_time": "ramp_time"}
+               "ring_size": "ring_size", "ramp_time": "ramp_time", "true_model": "true_model"}
 
 #: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
 #: streamed joint targets, v3 streamed Cartesian targets for the G2 as it is
@@ -193,10 +193,14 @@ class SimOptions:
     #: acceleration (0.1 s; an assumption to measure); e.g. 0.5 for an older controller. v1's arm
     #: ramps over a share of each move instead and ignores it
     ramp_time: Optional[float] = None
+    #: the simulated robot's own kinematics: a YAML of the layout of kinematics_vr006l.yaml (plus
+    #: ``zero_offset`` per joint, panasonic_vr006l_support.true_model); None: the model's. The arm
+    #: (its FK, the pose it reports) and the v3 program's IK use it; v2 joints are its angles
+    true_model: Optional[str] = None
 
     def __post_init__(self) -> None:
         _protocol(self.protocol)
-        for name in ("device", "pty_link", "log_file"):
+        for name in ("device", "pty_link", "log_file", "true_model"):
             value = getattr(self, name)
             if value is not None and not isinstance(value, str):
                 raise SimError("%s must be a path, got %r" % (name, value))
@@ -221,6 +225,8 @@ class SimOptions:
             object.__setattr__(self, "ramp_time", validate.number(self.ramp_time, lambda _: SimError(
                 "ramp_time must be a finite number > 0 (seconds of robot time from rest to full speed), "
                 "got %r" % (self.ramp_time,)), 0.0, lo_open=True))
+        if self.true_model:
+            _check_true_model(self.true_model)
         try:
             pose = ControllerPose.from_sequence(self.initial_pose)
         except VrDriverError as exc:
@@ -235,13 +241,31 @@ class SimOptions:
     def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
         initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2 |
-        v3), interpreter_lookahead, ring_size (v3), ramp_time (v2, v3).
+        v3), interpreter_lookahead, ring_size (v3), ramp_time (v2, v3), true_model (a file; "" the
+        model's).
         Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
         if unknown:
             raise SimError("unknown parameter(s) %s (known: %s)"
                            % (", ".join(unknown), ", ".join(sorted(PARAM_NAMES))))
         return cls(**{PARAM_NAMES[k]: v for k, v in params.items()})
+
+
+def _check_true_model(path: str) -> None:
+    """SimError naming the file and the key when the true-model file is unusable."""
+    from panasonic_vr006l_support import true_model
+    try:
+        true_model.load(path)
+    except true_model.TrueModelError as exc:
+        raise SimError("true_model: %s" % exc) from exc
+
+
+def true_kinematics(path: Optional[str]) -> Kinematics:
+    """The kinematics of the simulated robot of the true-model file ``path`` (None: the model's)."""
+    try:
+        return Kinematics.from_true_model(path)
+    except VrDriverError as exc:
+        raise SimError("true_model: %s" % exc) from exc
 
 
 def _protocol(name: Any) -> Protocol:
@@ -644,6 +668,13 @@ class VirtualController(Simulator):
     v3; a given ``arm`` keeps its own): robot time [s] the SimStreamArm takes from rest to full
     speed; None (default) from the kinematics' joint limits, max velocity / acceleration (0.1 s for
     the model); v1's SimArm ignores it.
+    ``true_model``: a YAML file of the simulated robot's own dimensions, joint limits and joint zero
+    offsets (panasonic_vr006l_support.true_model; None, default: the model's). The arm (its FK: the
+    pose it reports and where it really is; v1's SimArm also its IK and planner) and the v3
+    program's IK both use it -- the G2 knows its own robot --, and the joints the arm holds, reports
+    (v2) and takes (v2 targets) are in its zero convention (``q_true - zero_offset``). With it,
+    ``kinematics`` and ``arm`` must not be given; a given ``controller_kinematics`` still wins for
+    the v3 program.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
     :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
@@ -660,7 +691,8 @@ class VirtualController(Simulator):
                  clock: Clock = time.monotonic, confirm_records: Optional[bool] = None,
                  brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT,
                  interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD, ring_size: int = DEFAULT_RING_SIZE,
-                 controller_kinematics: Optional[Kinematics] = None, ramp_time: Optional[float] = None) -> None:
+                 controller_kinematics: Optional[Kinematics] = None, ramp_time: Optional[float] = None,
+                 true_model: Optional[str] = None) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
@@ -668,9 +700,16 @@ class VirtualController(Simulator):
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
                                   brake_time=brake_time, protocol=_protocol(protocol).name,
                                   interpreter_lookahead=interpreter_lookahead, ring_size=ring_size,
-                                  ramp_time=ramp_time)
+                                  ramp_time=ramp_time, true_model=true_model)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
+        if self.options.true_model:
+            if kinematics is not None or arm is not None:
+                raise SimError("true_model gives the simulated arm its kinematics: do not give kinematics "
+                               "or arm as well")
+            kinematics = true_kinematics(self.options.true_model)
+            if controller_kinematics is None:
+                controller_kinematics = kinematics     # the G2 knows its own robot
         self.clock = clock
         self.loop_period = self.options.loop_period
         self.protocol = self.options.protocol
@@ -921,6 +960,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="v2, v3: robot time in seconds the arm takes from rest to full speed (default: from "
                         "the model's joint limits, max velocity / acceleration, %g s; e.g. 0.5 for an older "
                         "controller)" % DEFAULT_RAMP_TIME)
+    p.add_argument("--true-model", metavar="FILE", default=None,
+                   help="the simulated robot's own dimensions, joint limits and joint zero offsets: a YAML of "
+                        "the layout of kinematics_vr006l.yaml plus zero_offset [rad] per joint (reported angle "
+                        "= true angle - zero_offset); default: the model's. The arm and the v3 program's IK "
+                        "use it, the driver keeps the model: a robot that differs from the model")
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -987,7 +1031,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                              loop_period=args.loop_period, byte_order=args.byte_order,
                              log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
                              interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size,
-                             ramp_time=args.ramp_time)
+                             ramp_time=args.ramp_time, true_model=args.true_model)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -1000,7 +1044,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                        pty_link=options.pty_link, log_file=options.log_file,
                                        brake_time=options.brake_time, protocol=options.protocol,
                                        interpreter_lookahead=options.interpreter_lookahead,
-                                       ring_size=options.ring_size, ramp_time=options.ramp_time)
+                                       ring_size=options.ring_size, ramp_time=options.ramp_time,
+                                       true_model=options.true_model)
         controller.start()
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)

@@ -627,6 +627,37 @@ class Kinematics:
         return cls.from_files(default_xacro_path(), os.path.join(moveit, "panasonic_vr006l.srdf"),
                               os.path.join(moveit, "kinematics.yaml"), **kwargs)
 
+    @classmethod
+    def from_true_model(cls, path: Optional[str] = None, **kwargs: Any) -> "Kinematics":
+        """The kinematics of a "true" VR-006L whose dimensions, joint limits and joint zero offsets
+        come from ``path`` (panasonic_vr006l_support.true_model: the layout of kinematics_vr006l.yaml,
+        plus ``zero_offset`` per joint; the joint variables are the controller's angles, ``q_true -
+        zero_offset``); None or "": exactly :meth:`default`. The SRDF, kinematics.yaml and (unless
+        the file gives every joint's ``acceleration``) the accelerations are the model's. Raises
+        ModelError naming the file and the key."""
+        if not path:
+            return cls.default(**kwargs)
+        from panasonic_vr006l_support import true_model
+        from panasonic_vr006l_support.description import DescriptionError, package_dir
+        try:
+            model = true_model.load(path)
+            xml = true_model.render_urdf(model, kwargs.get("prefix", ""))
+        except (true_model.TrueModelError, DescriptionError) as exc:
+            raise ModelError(str(exc)) from exc
+        moveit = os.path.join(os.path.dirname(package_dir()), "panasonic_vr006l_moveit_config", "config")
+
+        def read(name: str) -> str:
+            try:
+                with open(os.path.join(moveit, name)) as f:
+                    return f.read()
+            except OSError as exc:
+                raise ModelError("cannot read %s: %s" % (os.path.join(moveit, name), exc)) from exc
+
+        acc = model.accelerations
+        if acc is not None and "accelerations" not in kwargs:
+            kwargs["accelerations"] = {kwargs.get("prefix", "") + name: v for name, v in acc.items()}
+        return cls.from_urdf_string(xml, read("panasonic_vr006l.srdf"), read("kinematics.yaml"), **kwargs)
+
     def _default_conventions(self) -> FrameConventions:
         """``base`` in the chain root and ``flange`` in the chain tip, from the URDF when present."""
         links = self.model.links

@@ -10,7 +10,10 @@ existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.
 ``~protocol`` ["v1"] the robot program: v1 (14-byte handshake), v2 (streamed joint targets) or v3
 (streamed Cartesian targets); ``~interpreter_lookahead`` [1], ``~ring_size`` (v3);
 ``~ramp_time`` [unset: from the model's joint limits, max velocity / acceleration, 0.1 s] s of robot
-time the v2 / v3 arm takes from rest to full speed (e.g. 0.5: an older controller; > 0).
+time the v2 / v3 arm takes from rest to full speed (e.g. 0.5: an older controller; > 0);
+``~true_model`` [""] a YAML of the simulated robot's own dimensions and joint zero offsets
+(panasonic_vr006l_support.true_model; empty: the model's): the arm and the v3 program compute with
+it while the driver keeps the model, as with a real robot that differs from the model.
 
 Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
@@ -65,7 +68,8 @@ def main() -> int:
                                        pty_link=options.pty_link, log_file=options.log_file,
                                        brake_time=options.brake_time, protocol=options.protocol,
                                        interpreter_lookahead=options.interpreter_lookahead,
-                                       ring_size=options.ring_size, ramp_time=options.ramp_time)
+                                       ring_size=options.ring_size, ramp_time=options.ramp_time,
+                                       true_model=options.true_model)
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
         return EXIT_DEVICE
