@@ -286,4 +286,9 @@ def test_cli_propose_fit_and_write(good_pairs, tmp_path, capsys):
     out = capsys.readouterr().out
     assert "residuals: position RMS" in out and "HELD" in out and "wrote" in out
     assert yaml.safe_load(written.read_text())["geometry"]["upper_arm"]["calibrate"] is False
+    xacro = tmp_path / "fitted.xacro"
+    assert kc.main(["fit", str(data), "--write", str(written), "--xacro", str(xacro)]) == 0
+    fitted = yaml.safe_load(written.read_text())["geometry"]["upper_arm"]["value"]
+    assert "vr006l_calibration" in xacro.read_text() and repr(fitted) in xacro.read_text()
+    assert kc.main(["fit", str(data), "--xacro", str(xacro)]) == 1          # --xacro needs --write
     assert kc.main([]) == 2

@@ -912,6 +912,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     p_fit.add_argument("--hold", nargs="*", default=[], help="parameters to keep at their nominal value")
     p_fit.add_argument("--model", default=YAML_PATH, help="the model YAML (default: the package's)")
     p_fit.add_argument("--write", metavar="OUT", help="write a copy of the model YAML with the fitted values")
+    p_fit.add_argument("--xacro", metavar="OUT", help="with --write: also the generated xacro property of that "
+                       "YAML (what urdf/vr006l_calibration.xacro holds for the package's own YAML)")
     args = parser.parse_args(argv)
     if args.command is None:
         parser.print_usage(sys.stderr)
@@ -927,11 +929,22 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                   % (max(v for k, v in std.items() if k in GEOMETRY) * 1000.0,
                      math.degrees(max(v for k, v in std.items() if k in OFFSETS))))
             return 0
+        if args.xacro and not args.write:
+            raise CalibrationError("--xacro needs --write (the xacro is generated from the written YAML)")
         result = fit(load_pairs(args.pairs), nominal_parameters(args.model), hold=args.hold)
         print(result.summary())
         if args.write:
             write_yaml(result, args.write, model_path=args.model)
             print("wrote %s" % args.write)
+        if args.xacro:
+            from . import calibration
+            try:
+                text = calibration.xacro_text(calibration.load(args.write), os.path.basename(args.write))
+            except calibration.CalibrationError as exc:
+                raise CalibrationError("the written YAML gives no xacro property: %s" % exc) from None
+            with open(args.xacro, "w") as f:
+                f.write(text)
+            print("wrote %s" % args.xacro)
         return 0
     except CalibrationError as exc:
         print("kinematic_calibration: error: %s" % exc, file=sys.stderr)
