@@ -855,7 +855,7 @@ def write_yaml(result: FitResult, path: str, model_path: str = YAML_PATH, date: 
         while lines and not lines[-1].strip():
             lines.pop()
         lines += ["", "# Joint zero offsets [rad]: the true joint angle = the angle the pendant shows + the offset",
-                  "# (kinematic_calibration). The URDF does not apply them yet.",
+                  "# (kinematic_calibration); the URDF turns each joint's origin about its axis by it.",
                   "zero_offsets:"]
         for i, name in enumerate(OFFSETS):
             if name in result.fitted:
