@@ -181,3 +181,28 @@ def test_stream_params_checked(values, name):
     with pytest.raises(ParamError) as err:
         DriverParams.from_dict(values)
     assert err.value.name == name
+
+
+TRUE_MODEL = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "true_model_example.yaml")
+
+
+def test_model_file_is_checked_at_start_naming_the_parameter(tmp_path):
+    """``model``: a kinematics YAML (e.g. calibrate fit --write's); a missing or bad file is refused
+    naming ``model`` (and the file's key); a good one is accepted and becomes the driver's model."""
+    assert DriverParams.from_dict({}).model == ""
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"model": str(tmp_path / "none.yaml")})
+    assert err.value.name == "model" and "no such file" in str(err.value)
+    bad = tmp_path / "bad.yaml"
+    with open(TRUE_MODEL) as f:
+        data = yaml.safe_load(f)
+    del data["geometry"]["upper_arm"]
+    bad.write_text(yaml.safe_dump(data))
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"model": str(bad)})
+    assert err.value.name == "model" and "~model" in str(err.value) and "upper_arm" in str(err.value)
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"model": 3})
+    assert err.value.name == "model"
+    params = DriverParams.from_dict({"model": TRUE_MODEL})
+    assert params.model == TRUE_MODEL

@@ -121,6 +121,22 @@ def _vector(params: Mapping[str, Any], name: str, default: Tuple[float, ...], le
                                                             % length), text=False) for item in value)
 
 
+def _model(params: Mapping[str, Any], default: str) -> str:
+    """``model``: "" or a kinematics YAML that panasonic_vr006l_support.true_model accepts (checked
+    here, at start: a missing or bad file is a ParamError naming ``model`` with the file's key)."""
+    value = _string(params, "model", default)
+    if not value:
+        return value
+    if not os.path.isfile(value):
+        raise ParamError("model", value, "no such file")
+    from panasonic_vr006l_support import true_model
+    try:
+        true_model.load(value)
+    except (true_model.TrueModelError, OSError) as exc:
+        raise ParamError("model", value, str(exc)) from None
+    return value
+
+
 @dataclass(frozen=True)
 class DriverParams:
     """Everything the driver reads at start (see config/vr_driver.yaml for the documentation)."""
@@ -167,6 +183,8 @@ class DriverParams:
     workspace: Workspace = field(default_factory=Workspace)
     controller_joint_names: Tuple[str, ...] = DEFAULT_JOINT_NAMES
     tcp_offset: Tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)   # mm, deg in the flange frame
+    model: str = ""                      # kinematics YAML (the layout of kinematics_vr006l.yaml, e.g.
+    #                                      `calibrate fit --write`'s); "" = the package's model
     base_frame: str = "base"
     # publishing
     status_rate: float = 10.0
@@ -215,6 +233,7 @@ class DriverParams:
         if not base_frame:
             raise ParamError("base_frame", base_frame, "must not be empty")
         prefix = _prefix(params, d.prefix)
+        model = _model(params, d.model)
         out = cls(
             protocol=_string(params, "protocol", d.protocol, _protocols()),
             bus_config=bus_config,
@@ -246,6 +265,7 @@ class DriverParams:
             workspace=workspace,
             controller_joint_names=prefixed(prefix, tuple(names)),
             tcp_offset=tcp,
+            model=model,
             base_frame=prefix + base_frame,
             status_rate=_number(params, "status_rate", d.status_rate, 0.0, 1000.0, lo_open=True),
             joint_states_rate=_number(params, "joint_states_rate", d.joint_states_rate, 0.0, 1000.0,

@@ -77,6 +77,10 @@ class World:
                  brake_time: float = 0.3, initial_pose: Any = HOME_POSE, loop_period: float = 0.01,
                  planner=None, protocol: str = "v1", interpreter_lookahead: int = 1,
                  controller_kin=None, ramp_time: Optional[float] = None) -> None:
+        """``kin``: the driver's model (None: the driver builds it from ``params``, e.g. ``model``;
+        then the controller needs ``controller_kin``)."""
+        if kin is None and controller_kin is None:
+            raise ValueError("World: kin=None needs controller_kin")
         self.clock = FakeClock()
         self.kin = kin
         self.protocol = protocol
@@ -95,7 +99,7 @@ class World:
                                     clock=self.clock, brake_time=brake_time, **extra)
             self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log)
         else:
-            self.arm = SimArm(kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
+            self.arm = SimArm(kin or controller_kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
                               clock=self.clock, brake_time=brake_time)
             self.program = ControllerProgram(self.slave, self.arm, execution_log=self.log,
                                              confirm_records=True)
@@ -105,6 +109,7 @@ class World:
         self.open_error: Optional[Exception] = None
         self.core = DriverCore(self.params, kinematics=kin, planner=planner, clock=self.clock,
                                open_link=self._open)
+        self.kin = self.core.kin
         self.bus_period = 1.0 / self.params.cycle_rate
         self.loop_period = loop_period
         self.next_bus = self.clock.t

@@ -470,3 +470,23 @@ def test_the_model_is_checked_against_the_controller_at_every_connection(kin, ca
 def test_a_protocol_without_joints_has_no_model_check(world):
     world.ready()
     assert world.status().model_check is None
+
+
+def test_the_driver_parameter_model_makes_the_true_robot_the_drivers_model():
+    """``model`` = the controller's own robot (as calibrate fit --write would give it): the driver's
+    FK of the reported joints meets the reported pose (the model check passes); with the package's
+    model it does not."""
+    import os
+    from vr_driver.kinematics.solver import Kinematics
+    path = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data",
+                        "true_model_example.yaml")
+    true_kin = Kinematics.from_true_model(path)
+    calibrated = World(None, {"model": path}, protocol="v2", controller_kin=true_kin)
+    assert calibrated.core.kin is not true_kin
+    calibrated.ready()
+    check = calibrated.status().model_check
+    assert check is not None and check.ok and check.position_mm < 0.05, check
+    default = World(None, protocol="v2", controller_kin=true_kin)
+    default.ready()
+    check = default.status().model_check
+    assert check is not None and not check.ok, check

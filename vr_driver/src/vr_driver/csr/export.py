@@ -221,13 +221,11 @@ _KIN_CACHE: Dict[Tuple[Any, ...], Any] = {}
 
 
 def kinematics_for(params: Any) -> Any:
-    """Kinematics.default() with the driver's prefix and TCP offset (cached per process)."""
+    """The driver's model (DriverParams.kinematics: the package's or ``model``'s, with the driver's
+    prefix and TCP offset; cached per process)."""
     tcp = tuple(params.tcp_offset)
-    key = (params.prefix,) + tcp
+    key = (params.prefix, getattr(params, "model", "")) + tcp
     if key not in _KIN_CACHE:
-        from ..kinematics.solver import Kinematics
-        kin = Kinematics.default(prefix=params.prefix)
-        if any(tcp):
-            kin.conventions = kin.conventions.with_tcp(tcp)
-        _KIN_CACHE[key] = kin
+        from ..driver.core import driver_kinematics
+        _KIN_CACHE[key] = driver_kinematics(params)
     return _KIN_CACHE[key]

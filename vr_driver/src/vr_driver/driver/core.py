@@ -258,6 +258,23 @@ def _pose_delta(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return d
 
 
+def driver_kinematics(params: DriverParams) -> Kinematics:
+    """The driver's model: the package's (``model`` empty) or the robot of the ``model`` file
+    (Kinematics.from_true_model: e.g. what ``calibrate fit --write`` produced), with ``prefix`` and
+    ``tcp_offset`` applied. Raises ParamError naming ``model`` when the file cannot be made into one."""
+    from ..errors import ModelError
+    from ..params import ParamError
+    try:
+        kin = Kinematics.from_true_model(params.model or None, prefix=params.prefix)
+    except ModelError as exc:
+        if not params.model:
+            raise
+        raise ParamError("model", params.model, str(exc)) from None
+    if any(params.tcp_offset):
+        kin.conventions = kin.conventions.with_tcp(params.tcp_offset)
+    return kin
+
+
 class DriverCore:
     """See the module docstring. ``open_link(device, baud)`` makes the link (tests may pass a
     factory for an in-memory or fault-injecting link)."""
@@ -269,9 +286,7 @@ class DriverCore:
         self.bus = params.bus()
         self.slave_config = self.bus.slaves[0]
         if kinematics is None:
-            kinematics = Kinematics.default(prefix=params.prefix)
-            if any(params.tcp_offset):
-                kinematics.conventions = kinematics.conventions.with_tcp(params.tcp_offset)
+            kinematics = driver_kinematics(params)     # the package's model or ``model``'s
         self.kin = kinematics
         self.planner = planner or MotionPlanner(self.kin)
         self.clock = clock
