@@ -14,7 +14,10 @@ import actionlib
 import rostest
 from actionlib_msgs.msg import GoalStatus
 
-from driver_check import HOME, PKG, DriverTestBase
+import rospy
+from sensor_msgs.msg import JointState
+
+from driver_check import HOME, PKG, DriverTestBase, Recorder
 from driver_v2_check import smooth_points
 from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal
 from vr_driver.poses import ControllerPose
@@ -84,6 +87,14 @@ class DriverV3Test(DriverTestBase):
         final = self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position
         off = max(abs(a - b) for a, b in zip(final, points[-1]))
         self.assertLessEqual(off, V3.default_goal_tolerance, "%.3f deg from the last point" % math.degrees(off))
+        # the virtual G2's ~true_joints (no true_model here: the arm's own joints), stamped when read
+        true = Recorder("/virtual_controller/true_joints", JointState)
+        msg = true.wait_for(lambda m: True, 2.0)
+        self.assertIsNotNone(msg, "no /virtual_controller/true_joints")
+        self.assertEqual(list(msg.name), ["joint_%d" % i for i in range(1, 7)])
+        self.assertLess(abs(msg.header.stamp.to_sec() - rospy.get_time()), 1.0)
+        off = max(abs(a - b) for a, b in zip(msg.position, final))
+        self.assertLess(off, 0.01 * DEG, "true_joints %.4f deg from joint_states at rest" % math.degrees(off))
 
     def test_02_cancel_mid_way_ends_at_rest_with_the_rest_pose_reported(self):
         q0 = self.at_home()

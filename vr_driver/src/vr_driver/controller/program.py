@@ -268,6 +268,19 @@ def true_kinematics(path: Optional[str]) -> Kinematics:
         raise SimError("true_model: %s" % exc) from exc
 
 
+def true_zero_offsets(path: Optional[str]) -> Tuple[float, ...]:
+    """The joint zero offsets [rad] of the true-model file ``path``, joint_1 .. joint_6 (None or "":
+    the model's, all 0)."""
+    if not path:
+        return (0.0,) * 6
+    from panasonic_vr006l_support import true_model
+    try:
+        model = true_model.load(path)
+    except true_model.TrueModelError as exc:
+        raise SimError("true_model: %s" % exc) from exc
+    return tuple(float(model.zero_offsets.get(name, 0.0)) for name in true_model.JOINT_NAMES)
+
+
 def _protocol(name: Any) -> Protocol:
     try:
         return protocols.get(name)
@@ -677,7 +690,7 @@ class VirtualController(Simulator):
     the v3 program.
 
     Thread-safe read-outs: :attr:`state`, :attr:`feedback`, :attr:`slave_state`, :attr:`log`,
-    :attr:`pose`, :attr:`joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
+    :attr:`pose`, :attr:`joints`, :attr:`true_joints`; injections :meth:`set_estop`, :meth:`set_drives_powered`,
     :meth:`set_error`, :meth:`clear_faults`. :meth:`wait_until` blocks on a condition over the
     feedback. :meth:`step` runs one program loop by hand (tests with an injected clock; do not mix
     with :meth:`start`).
@@ -710,6 +723,8 @@ class VirtualController(Simulator):
             kinematics = true_kinematics(self.options.true_model)
             if controller_kinematics is None:
                 controller_kinematics = kinematics     # the G2 knows its own robot
+        #: the true robot's joint zero offsets [rad] (true_joints = joints + these)
+        self.zero_offsets = true_zero_offsets(self.options.true_model)
         self.clock = clock
         self.loop_period = self.options.loop_period
         self.protocol = self.options.protocol
@@ -876,6 +891,13 @@ class VirtualController(Simulator):
     @property
     def joints(self) -> Tuple[float, ...]:
         return self.arm.joints
+
+    @property
+    def true_joints(self) -> Tuple[float, ...]:
+        """The arm's joints [rad] in the true robot's angles, measured from the model's zero pose:
+        :attr:`joints` (the controller's, ``q_true - zero_offset``) plus the true model's zero
+        offsets (without ``true_model``: equal to :attr:`joints`). A simulation-only read-out."""
+        return tuple(q + z for q, z in zip(self.arm.joints, self.zero_offsets))
 
     # ---------------------------------------------------------------------------- injections
     def set_estop(self, pressed: bool) -> None:

@@ -20,6 +20,11 @@ Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBo
 ``~set_error`` (True sets a controller error). Publishes ``~executed`` (std_msgs/String, latched):
 one JSON object per handled target (``controller.arm.LogEntry.to_json``: seq, move_type, target, outcome
 executed / rejected / via_stored, reason, times, final_pose; v2: ``controller.stream_arm.StreamLogEntry``).
+``~true_joints`` (sensor_msgs/JointState, 50 Hz; a simulation-only diagnostic): the simulated arm's
+joints [rad] in the TRUE robot's angles (``VirtualController.true_joints``: the controller's plus the
+true model's zero offsets, from the model's zero pose; without ``~true_model`` the controller's),
+names joint_1 .. joint_6, stamped with the ROS time they were read -- where the arm really is, which
+joint_states (the driver's model, v1 / v3: its IK of the reported pose) may not show.
 
 Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
@@ -29,6 +34,7 @@ import os
 from typing import Any, Dict, Mapping, Tuple
 
 import rospy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
@@ -39,6 +45,10 @@ from ..controller.arm import LogEntry
 
 #: parameters the node writes itself (not options)
 _OWN_PARAMS = ("device_path",)
+
+#: Hz of ~true_joints
+TRUE_JOINTS_RATE = 50.0
+TRUE_JOINT_NAMES = tuple("joint_%d" % i for i in range(1, 7))
 
 _SERVICES = (("set_estop", "estop"), ("set_drives_powered", "drives_powered"), ("set_error", "error"))
 
@@ -89,6 +99,12 @@ def main() -> int:
         return handle
 
     controller.log.add_listener(publish)
+    true_joints = rospy.Publisher("~true_joints", JointState, queue_size=10)
+
+    def publish_true_joints() -> None:
+        msg = JointState(name=list(TRUE_JOINT_NAMES), position=list(controller.true_joints))
+        msg.header.stamp = rospy.Time.now()
+        true_joints.publish(msg)
     services = [rospy.Service("~" + name, SetBool, handler(fault)) for name, fault in _SERVICES]
     rospy.on_shutdown(controller.request_stop)     # e.g. rosnode kill; the real stop is below
     controller.start()
@@ -96,7 +112,8 @@ def main() -> int:
     rospy.loginfo("virtual_controller: DP slave %d on %s%s, speed x%g", options.address, controller.device_path,
                   " (linked at %s)" % controller.symlink if controller.symlink else "", options.speed_factor)
     try:
-        status = watch_simulator(controller, "virtual_controller", stop, 5.0)
+        status = watch_simulator(controller, "virtual_controller", stop, TRUE_JOINTS_RATE,
+                                 each=publish_true_joints)
     finally:
         for service in services:
             service.shutdown()
