@@ -71,6 +71,17 @@ their header stamps (the driver's wall clock, the same as this process's):
 joint_states are stamped with the time the controller took their record (no age window: ``age`` 0).
 The summary is Markdown tables, then per configuration each target (``TARGETS``: v3 on the paced
 19.2 kbit/s line at look-ahead >= 1; every configuration is judged against them) met or NOT met.
+``--true-model FILE``: the virtual G2 is the robot of FILE (driver.launch ``true_model:=``; the
+driver keeps its model) and every goal's deviation, distance to the path and final error are of the arm's TRUE joints (the
+virtual controller's ``~true_joints``, at their header stamps, the same start-delay fit; the timing
+figures stay joint_states'), not of joint_states: with v1 and
+v3 those are the driver's IK of the reported pose and would hide the error. To compare with the plan,
+whose joints are the driver model's, the true joints are taken less the driver model's joint zero
+offsets (0 for the package's model): both then count from the same zero pose. ``--calibrate``
+(with ``--true-model``): then the pendant session is simulated (:func:`simulate_calibration`: the
+proposed poses, the joints the pendant shows and the TCP pose the controller reports on the true
+robot, rounded to 0.01; the fit from the package's model, written to a temporary YAML) and every
+configuration runs again with the driver's ``model:=`` that file; the before / after table follows.
 ``--plot DIR``: per goal DIR/<config>_<goal>.png, the planned and the executed joints over time
 (:func:`plot_goal`, matplotlib Agg). A configuration the stack does not support
 (no ready driver, every goal refused) is reported with the reason; the bench then goes on with the
@@ -610,9 +621,13 @@ def min_still(cycle_rate: float, joint_states_rate: float) -> float:
 
 
 def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_result: float,
-            final: Optional[Sequence[float]], shortest_still: float, age: float = 0.0) -> Dict[str, Any]:
+            final: Optional[Sequence[float]], shortest_still: float, age: float = 0.0,
+            judged: Optional[Sequence[Tuple[float, Sequence[float]]]] = None) -> Dict[str, Any]:
     """The figures of one goal from joint_states ``samples`` (time since send_goal, joints in the
-    controller's order), the result's time, the first joints after it and :func:`min_still`."""
+    controller's order), the result's time, the first joints after it and :func:`min_still`.
+    ``judged`` (--true-model: the true joints, same form): the deviation, the distance to the path
+    and (``final`` being then the first true joints after the result) the final error are of these;
+    the timing figures (still, stops, start) stay those of ``samples``."""
     from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
     inside = [(t, q) for t, q in samples if 0.0 <= t <= t_result]
     out: Dict[str, Any] = {"planned": plan.duration, "elapsed": t_result, "ratio": t_result / plan.duration,
@@ -633,6 +648,8 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     # earlier) is compared with the plan over that window, the nearest instant counting; the bench
     # passes 0, its stamps being the time the controller took the record
     steps = [age * k / AGE_STEPS for k in range(AGE_STEPS + 1)] if age > 0.0 else [0.0]
+    if judged is not None:
+        inside = [(t, q) for t, q in judged if 0.0 <= t <= t_result]
 
     def deviation(lag: float) -> Tuple[float, int, List[float]]:
         worst, joint = 0.0, 0
@@ -719,6 +736,54 @@ def plot_goal(directory: str, config: str, index: int, plan: Planned, samples: S
 # ------------------------------------------------------------------------------------------ worker
 # (Failure, from driver_latency: a configuration that cannot be measured, the message says why)
 
+def model_zero_offsets(path: str = "") -> Tuple[float, ...]:
+    """The joint zero offsets [rad] of a kinematics YAML (``path`` "": the package's model)."""
+    from panasonic_vr006l_support import kinematic_calibration as kc
+    params = kc.nominal_parameters(path) if path else kc.nominal_parameters()
+    return tuple(params[name] for name in kc.OFFSETS)
+
+
+def simulate_calibration(true_file: str, out_path: str, n_poses: Optional[int] = None, seed: int = 0
+                         ) -> Dict[str, Any]:
+    """The commissioning session on the robot of ``true_file``, ROS-free: at each of
+    ``propose_poses()`` (whole degrees, the controller's angles the operator jogs to) the joints the
+    pendant shows (rounded to 0.01 deg) and the TCP pose the controller reports (the true robot's FK,
+    ``kinematic_calibration.fk_controller`` with ``nominal_parameters(true_file)``, rounded to 0.01 mm
+    / 0.01 deg); ``fit`` from the package's model; ``write_yaml`` to ``out_path``. Returns the fit's
+    summary and how far the fitted parameters are from the true file's: the largest length error [mm]
+    and zero offset error [deg] (``j2_height`` as ``j2_height - base_frame_z``, the combination the
+    data determines; ``base_frame_z`` is held)."""
+    from panasonic_vr006l_support import kinematic_calibration as kc
+    truth = kc.nominal_parameters(true_file)
+    poses = kc.propose_poses(kc.DEFAULT_POSES if n_poses is None else n_poses, seed=seed)
+    pairs = []
+    for q in poses:
+        shown = [round(float(v), 2) for v in q]
+        pose = kc.fk_controller(truth, list(q))
+        pairs.append((shown, [round(float(v), 2) for v in pose]))
+    result = kc.fit(pairs)
+    kc.write_yaml(result, out_path)
+    fitted = result.parameters
+    length_err: Dict[str, float] = {}
+    for name in kc.GEOMETRY:
+        if name == "base_frame_z":
+            continue
+        if name == "j2_height":
+            err = (fitted[name] - fitted["base_frame_z"]) - (truth[name] - truth["base_frame_z"])
+        else:
+            err = fitted[name] - truth[name]
+        length_err[name] = abs(err) * 1000.0
+    angle_err = {name: abs(math.degrees(fitted[name] - truth[name])) for name in kc.OFFSETS}
+    worst_l = max(length_err, key=length_err.get)
+    worst_a = max(angle_err, key=angle_err.get)
+    before_l = max(abs(result.nominal[n] - truth[n]) * 1000.0 for n in kc.GEOMETRY if n != "base_frame_z")
+    before_a = max(abs(math.degrees(result.nominal[n] - truth[n])) for n in kc.OFFSETS)
+    return {"path": out_path, "poses": len(pairs), "summary": result.summary(),
+            "rms_mm": result.rms_mm, "max_mm": length_err[worst_l], "max_mm_name": worst_l,
+            "max_deg": angle_err[worst_a], "max_deg_name": worst_a,
+            "model_max_mm": before_l, "model_max_deg": before_a}
+
+
 class Run:
     """One configuration: the stack is up; send the goals, collect joint_states, compute figures."""
 
@@ -733,6 +798,11 @@ class Run:
         self.names = list(self.chk.params.controller_joint_names)
         self.status = Recorder(rospy, "/robot_status", RobotStatus)
         self.joints = Recorder(rospy, "/joint_states", JointState)
+        # --true-model: the goals are judged on the arm's true joints, counted from the driver model's
+        # zero pose (the true angles less the driver model's zero offsets)
+        self.true = (Recorder(rospy, "/virtual_controller/true_joints", JointState)
+                     if cfg.get("true_model") else None)
+        self.zero = tuple(cfg.get("model_zero") or (0.0,) * 6)
         self.client = actionlib.ActionClient("/joint_trajectory_action", FollowJointTrajectoryAction)
 
     def q_of(self, msg: Any) -> Optional[Tuple[float, ...]]:
@@ -740,6 +810,14 @@ class Run:
             return tuple(msg.position[list(msg.name).index(n)] for n in self.names)
         except (ValueError, IndexError):
             return None
+
+    def true_q(self, msg: Any) -> Optional[Tuple[float, ...]]:
+        """The true joints of a ~true_joints message in the driver model's convention."""
+        try:
+            q = [msg.position[list(msg.name).index("joint_%d" % (i + 1))] for i in range(6)]
+        except (ValueError, IndexError):
+            return None
+        return tuple(a - z for a, z in zip(q, self.zero))
 
     def crash(self) -> Optional[str]:
         """The exception line of the first traceback in the launch log (a node's thread died: the
@@ -840,6 +918,7 @@ class Run:
             self.wait_idle(time.monotonic() + 30.0, "the arm not idle after going home")
             plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk, timing=cfg["set"])
         mark = self.joints.mark()
+        true_mark = self.true.mark() if self.true is not None else 0
         timeout = 30.0 + 4.0 * plan.duration + 1.5 * len(plan.points)
         status, result, t_send, t_done = self.send(self.goal(plan, cfg["path_tol"], cfg["goal_tol"]), timeout)
         final = None
@@ -850,16 +929,28 @@ class Run:
         with self.joints.cond:
             msgs = [m for _t, m in self.joints.messages[mark:]]
         samples = [(m.header.stamp.to_sec() - t_send, self.q_of(m)) for m in msgs if self.q_of(m) is not None]
+        judged = None
+        if self.true is not None:             # judged on the true joints (at their stamps)
+            final = None
+            hit = self.true.wait_for(lambda m: m.header.stamp.to_sec() >= t_done and self.true_q(m) is not None,
+                                     2.0, true_mark)
+            if hit is not None:
+                final = self.true_q(hit[1])
+            with self.true.cond:
+                msgs = [m for _t, m in self.true.messages[true_mark:]]
+            judged = [(m.header.stamp.to_sec() - t_send, self.true_q(m)) for m in msgs
+                      if self.true_q(m) is not None]
         # joint_states are stamped with the time the controller took their record: no age window
         rec = analyse(plan, samples, t_done - t_send, final,
-                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate), age=0.0)
+                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate), age=0.0, judged=judged)
         if cfg.get("plot"):
             rec["plot"] = plot_goal(cfg["plot"], cfg["name"], index, plan, samples, rec["lag_s"],
                                     t_done - t_send, "%s goal %d: %s" % (cfg["name"], index, cfg["title"]))
         if cfg.get("dump"):
             with open(cfg["dump"], "a") as fh:
                 fh.write(json.dumps({"config": cfg["name"], "index": index, "plan": plan.to_json(),
-                                     "samples": samples, "t_result": t_done - t_send, "final": final}) + "\n")
+                                     "samples": samples, "t_result": t_done - t_send, "final": final,
+                                     "true_samples": judged}) + "\n")
         rec.update(index=index, points=len(plan.points), legs=list(plan.legs),
                    state=status, state_name=GoalStatus.to_string(status) if status is not None else "NO RESULT",
                    code=result.error_code if result is not None else None,
@@ -898,7 +989,8 @@ class Run:
             if rec["state"] is None and not any(r["ok"] for r in recs):
                 raise Failure("unsupported: no result for trajectory %d within the timeout" % rec["index"])
         return {"name": cfg["name"], "protocol": cfg["protocol"], "baud": cfg["baud"], "cycle_rate": cfg["cycle_rate"],
-                "goals": recs, "tolerances": cfg["tolerances"], "title": cfg["title"], "set": cfg["set"]}
+                "goals": recs, "tolerances": cfg["tolerances"], "title": cfg["title"], "set": cfg["set"],
+                "true_model": cfg.get("true_model", ""), "model": cfg.get("model", "")}
 
 
 def worker(cfg: Dict[str, Any]) -> int:
@@ -930,6 +1022,10 @@ def launch_args(cfg: Dict[str, Any]) -> List[str]:
         args.append("interpreter_lookahead:=%d" % cfg["lookahead"])
     if cfg.get("ramp_time") is not None:
         args.append("ramp_time:=%g" % cfg["ramp_time"])
+    if cfg.get("true_model"):
+        args.append("true_model:=%s" % cfg["true_model"])
+    if cfg.get("model"):
+        args.append("model:=%s" % cfg["model"])
     return args
 
 
@@ -975,7 +1071,9 @@ def summary(results: List[Dict[str, Any]]) -> None:
     that is succeeded or missed only the goal tolerance), then the targets met or not."""
     print("=== summary: median / max over the goals run to the end (succeeded, or missed only the goal "
           "tolerance); time margin = time - (%.2f x plan + %.1f s); deviation from the plan at the same time "
-          "(joint_states header stamps) less the fitted start delay" % (TIME_FACTOR, TIME_SLACK))
+          "(joint_states header stamps%s) less the fitted start delay"
+          % (TIME_FACTOR, TIME_SLACK, "; deviation, distance to the path and final error: the TRUE joints, "
+             "/virtual_controller/true_joints" if any(r.get("true_model") for r in results) else ""))
     head = ("configuration", "goals SUCCESSFUL", "time / plan", "time margin [s]", "standing still [%]", "stops",
             "deviation [deg]", "start delay [s]", "driver's own [deg]", "deviation at send [deg]",
             "distance to the path [deg]", "final error [deg]")
@@ -1059,7 +1157,20 @@ def main(argv: Optional[List[str]] = None) -> int:
                    help="every configuration on the paced line (the *-paced ones always are): the virtual line "
                         "carries its bytes at the configuration's bit rate (driver.launch line_baud:=), so a "
                         "record takes its real wire time (a 72-byte v2 exchange ~95 ms at 19.2 kbit/s)")
+    p.add_argument("--true-model", default="", metavar="FILE",
+                   help="the virtual G2 is the robot of FILE (driver.launch true_model:=; e.g. "
+                        "vr_driver/test/data/true_model_example.yaml); the goals are judged on its true joints "
+                        "(/virtual_controller/true_joints) instead of joint_states")
+    p.add_argument("--calibrate", action="store_true",
+                   help="with --true-model: then simulate the pendant calibration session, fit, and run every "
+                        "configuration again with the driver's model:= the fitted YAML; print before / after")
     args = p.parse_args(argv)
+    if args.calibrate and not args.true_model:
+        p.error("--calibrate needs --true-model")
+    if args.true_model:
+        if not os.path.isfile(args.true_model):
+            p.error("--true-model: no such file %s" % args.true_model)
+        args.true_model = os.path.abspath(args.true_model)
     if args.quick:
         args.n = 1
     names = [c.strip() for c in args.configs.split(",") if c.strip()]
@@ -1068,7 +1179,41 @@ def main(argv: Optional[List[str]] = None) -> int:
         p.error("unknown configuration(s) %s (known: %s)" % (", ".join(bad), ", ".join(CONFIGS)))
     if args.n < 1:
         p.error("--n must be >= 1")
+    started = time.perf_counter()
+    plans = generate(args.seed, args.n, timing=args.set)
+    print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned), "
+          "configurations %s; each with its own roscore + driver.launch sim:=true"
+          % (args.n, args.set, args.seed, "/".join(str(len(t.points)) for t in plans),
+             "/".join("%.2f" % t.duration for t in plans), ", ".join(names)), flush=True)
+    status, results = run_all(args, names, title_note="", model="")
+    if status == 130:
+        return 130
+    summary(results)
+    if args.calibrate:
+        import tempfile
+        out = os.path.join(tempfile.mkdtemp(prefix="vr_traj_calib_"), "kinematics_fitted.yaml")
+        calib = simulate_calibration(args.true_model, out)
+        print("=== simulated calibration: %d poses read at the pendant of the true robot %s, fitted from the "
+              "package's model, written to %s" % (calib["poses"], args.true_model, out))
+        print(calib["summary"])
+        print("the package's model vs the true file: up to %.3f mm / %.4f deg; fitted: up to %.4f mm (%s) / "
+              "%.5f deg (%s)" % (calib["model_max_mm"], calib["model_max_deg"], calib["max_mm"],
+                                 calib["max_mm_name"], calib["max_deg"], calib["max_deg_name"]), flush=True)
+        code, after = run_all(args, names, title_note=" (driver model: the fitted YAML)", model=out)
+        if code == 130:
+            return 130
+        status = status or code
+        summary(after)
+        compare(results, after, calib)
+    print("python %s, %d CPUs, load %.2f, wall time %.1f s%s"
+          % (sys.version.split()[0], os.cpu_count() or 0, os.getloadavg()[0], time.perf_counter() - started,
+             "; a configuration FAILED (see above)" if status else ""))
+    return status
 
+
+def run_all(args: Any, names: Sequence[str], title_note: str, model: str) -> Tuple[int, List[Dict[str, Any]]]:
+    """Every configuration of ``names`` in its worker, the driver's ``model`` "" (the package's) or a
+    YAML; (exit status: 0, 1 a configuration failed, 130 interrupted; the results)."""
     def tol(deg: Optional[float], protocol: str) -> float:
         if deg is None:
             deg = V1_TOLERANCE if protocol == "v1" and args.set == "dense" else 0.0
@@ -1076,13 +1221,8 @@ def main(argv: Optional[List[str]] = None) -> int:
 
     def shown(value: float) -> str:
         return "none" if value < 0 else "default" if value == 0 else "%g" % math.degrees(value)
-    started = time.perf_counter()
-    plans = generate(args.seed, args.n, timing=args.set)
-    print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned), "
-          "configurations %s; each with its own roscore + driver.launch sim:=true"
-          % (args.n, args.set, args.seed, "/".join(str(len(t.points)) for t in plans),
-             "/".join("%.2f" % t.duration for t in plans), ", ".join(names)), flush=True)
     results, status = [], 0
+    zero = list(model_zero_offsets(model)) if args.true_model else None
     for name in names:
         protocol, baud, rate, opts = CONFIGS[name]
         paced = bool(args.paced or opts.get("paced"))
@@ -1093,22 +1233,50 @@ def main(argv: Optional[List[str]] = None) -> int:
                "lookahead": opts.get("lookahead"), "ramp_time": opts.get("ramp_time"), "set": args.set,
                "title": title(protocol, baud, rate, paced, opts.get("lookahead"), opts.get("ramp_time")),
                "plot": os.path.abspath(args.plot) if args.plot else "",
-               "dump": os.path.abspath(args.dump) if args.dump else ""}
+               "dump": os.path.abspath(args.dump) if args.dump else "",
+               "true_model": args.true_model, "model": model, "model_zero": zero}
+        if args.true_model:
+            cfg["title"] += ", true robot %s%s" % (os.path.basename(args.true_model), title_note)
         cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
         code, result = run_worker(cfg)
         if code == 130:
             print("interrupted")
-            return 130
+            return 130, results
         if result is None:
             result = {"name": name, "failed": "the worker exited with status %d and no result" % code}
         if code != 0 or "failed" in result:
             status = 1
         results.append(result)
-    summary(results)
-    print("python %s, %d CPUs, load %.2f, wall time %.1f s%s"
-          % (sys.version.split()[0], os.cpu_count() or 0, os.getloadavg()[0], time.perf_counter() - started,
-             "; a configuration FAILED (see above)" if status else ""))
-    return status
+    return status, results
+
+
+def compare(before: List[Dict[str, Any]], after: List[Dict[str, Any]], calib: Dict[str, Any]) -> None:
+    """The before / after calibration table (Markdown), per configuration: the deviation from the
+    plan of the TRUE joints (median / max over the goals run to the end) and their final error, with
+    the package's model and with the fitted one."""
+    print("=== before / after calibration: the true joints vs the plan (median / max over the goals run to the end); "
+          "parameters: the package's model up to %.2f mm / %.3f deg from the true file, the fitted one up to "
+          "%.4f mm / %.5f deg" % (calib["model_max_mm"], calib["model_max_deg"], calib["max_mm"], calib["max_deg"]))
+    head = ("configuration", "goals SUCCESSFUL before → after", "deviation before [deg]", "deviation after [deg]",
+            "distance to the path before [deg]", "distance to the path after [deg]",
+            "final error before [deg]", "final error after [deg]", "fitted parameters' largest error")
+    print("| " + " | ".join(head) + " |")
+    print("|" + " --- |" * len(head))
+    by_name = {r["name"]: r for r in after}
+    for b in before:
+        a = by_name.get(b["name"], {"failed": "not run"})
+
+        def vals(r: Dict[str, Any], key: str) -> List[float]:
+            return [g[key] for g in r.get("goals", []) if g["completed"] and g.get(key) is not None]
+
+        def ok(r: Dict[str, Any]) -> str:
+            if "failed" in r:
+                return "FAILED"
+            return "%d / %d" % (sum(1 for g in r["goals"] if g["ok"]), len(r["goals"]))
+        print("| %s | %s → %s | %s | %s | %s | %s | %s | %s | %.4f mm / %.5f deg |" % (
+            b["name"], ok(b), ok(a), _mm(vals(b, "dev_deg"), "%.3f"), _mm(vals(a, "dev_deg"), "%.3f"),
+            _mm(vals(b, "path_deg"), "%.3f"), _mm(vals(a, "path_deg"), "%.3f"),
+            _mm(vals(b, "final_deg"), "%.3f"), _mm(vals(a, "final_deg"), "%.3f"), calib["max_mm"], calib["max_deg"]))
 
 
 if __name__ == "__main__":

@@ -289,6 +289,48 @@ class FiguresTest(unittest.TestCase):
         self.assertEqual(b.CONFIGS["v3-paced-ramp05"][3]["lookahead"], 1)
         self.assertEqual(b.CONFIGS["v3-paced"][:2], ("v3", 19200))
 
+    def test_the_simulated_pendant_session_recovers_the_true_robot(self):
+        """--calibrate's pendant session (ROS-free): the readings of the proposed poses on the true
+        robot, rounded as the pendant shows them, fit from the package's model to the true file's
+        parameters (the issue's 0.2 mm / 0.02 deg); the written YAML is a valid driver ``model`` and
+        carries the true zero offsets; the true model and the driver's model reach driver.launch."""
+        import tempfile
+        from vr_driver.params import DriverParams
+        b = self.bench
+        true_file = os.path.join(REPO, "vr_driver", "test", "data", "true_model_example.yaml")
+        with tempfile.TemporaryDirectory() as tmp:
+            out = os.path.join(tmp, "fitted.yaml")
+            calib = b.simulate_calibration(true_file, out)
+            self.assertEqual(calib["poses"], 12)
+            self.assertLess(calib["max_mm"], 0.2, calib)
+            self.assertLess(calib["max_deg"], 0.02, calib)
+            self.assertGreater(calib["model_max_mm"], 5.0, calib)          # the package's model is off
+            self.assertEqual(DriverParams.from_dict({"model": out}).model, out)
+            zero = b.model_zero_offsets(out)
+            self.assertAlmostEqual(zero[1], math.radians(0.3), delta=math.radians(0.02))
+        self.assertEqual(b.model_zero_offsets(), (0.0,) * 6)
+        args = b.launch_args({"baud": 19200, "cycle_rate": 20.0, "speed_factor": 1.0, "protocol": "v2",
+                              "true_model": true_file, "model": "/x/fitted.yaml"})
+        self.assertIn("true_model:=%s" % true_file, args)
+        self.assertIn("model:=/x/fitted.yaml", args)
+
+    def test_judged_on_the_true_joints(self):
+        """--true-model: the deviation, the distance to the path and the final error are of the
+        judged (true) samples; the timing figures of joint_states."""
+        b = self.bench
+        plan = b.Planned(((0.0,) * 6, (1.0, 0.5) + (0.0,) * 4), (0, 1_000_000_000), (0.5,), ("straight",))
+        ts = [k * 0.05 for k in range(int(plan.duration / 0.05) + 1)]
+        samples = [(t, plan.sample(t)) for t in ts]
+        off = [(t, tuple(v + (0.01 if j == 1 else 0.0) for j, v in enumerate(q))) for t, q in samples]
+        plain = b.analyse(plan, samples, plan.duration, plan.points[-1], 0.1)
+        judged = b.analyse(plan, samples, plan.duration, off[-1][1], 0.1, judged=off)
+        self.assertLess(plain["dev_deg"], 1e-6)
+        self.assertAlmostEqual(judged["dev_deg"], math.degrees(0.01), places=3)
+        self.assertEqual(judged["dev_joint"], 2)
+        self.assertAlmostEqual(judged["final_deg"], math.degrees(0.01), places=6)
+        for key in ("still_pct", "stops", "start_s", "samples"):
+            self.assertEqual(plain[key], judged[key], key)
+
     def test_a_moving_arm_whose_feedback_repeats_once_is_not_standing_still(self):
         b = self.bench
         moving = [(0.0, (0.0,) * 6), (0.05, (0.1,) + (0.0,) * 5), (0.1, (0.1,) + (0.0,) * 5),
