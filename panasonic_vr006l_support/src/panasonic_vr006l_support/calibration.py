@@ -74,14 +74,21 @@ def xacro_text(cfg: Any, yaml_name: str = "config/kinematics_vr006l.yaml") -> st
     return "\n".join(lines)
 
 
-def load(path: str = YAML_PATH) -> Any:
+def read_yaml(path: str, error: Any = None, what: str = "") -> Any:
+    """The YAML tree of ``path``; ``error`` (an exception class, default CalibrationError) with the
+    reason when it cannot be read or parsed, the file named as ``what`` + path."""
+    error = error or CalibrationError
     try:
         with open(path) as f:
             return yaml.safe_load(f)
     except OSError as exc:
-        raise CalibrationError("cannot read %s: %s" % (path, exc.strerror or exc)) from exc
+        raise error("cannot read %s%s: %s" % (what, path, exc.strerror or exc)) from exc
     except yaml.YAMLError as exc:
-        raise CalibrationError("%s is not valid YAML: %s" % (path, exc)) from exc
+        raise error("%s%s is not valid YAML: %s" % (what, path, exc)) from exc
+
+
+def load(path: str = YAML_PATH) -> Any:
+    return read_yaml(path)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -126,9 +126,14 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except DescriptionError as exc:
         print("xacro_compat: error: %s" % exc, file=sys.stderr)
         return 1
-    if args.output:
-        with open(args.output, "w") as out:
+    write_output(text, args.output)
+    return 0
+
+
+def write_output(text: str, path: Optional[str]) -> None:
+    """A command line's result: to the file ``path``, or to standard output without one."""
+    if path:
+        with open(path, "w") as out:
             out.write(text)
     else:
         sys.stdout.write(text)
-    return 0

@@ -54,7 +54,7 @@ from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
 import numpy as np
 import yaml
 
-from .calibration import YAML_PATH
+from .calibration import YAML_PATH, read_yaml
 
 __all__ = ["CalibrationError", "GEOMETRY", "OFFSETS", "PARAMETERS", "DEFAULT_POSES", "LEVER_MM",
            "nominal_parameters", "joint_limits", "fk", "fk_controller", "fit", "FitResult", "propose_poses",
@@ -99,13 +99,7 @@ Parameters = Dict[str, float]
 # ============================================================================================ model
 
 def _load_yaml(path: str) -> Any:
-    try:
-        with open(path) as f:
-            return yaml.safe_load(f)
-    except OSError as exc:
-        raise CalibrationError("cannot read %s: %s" % (path, exc.strerror or exc)) from exc
-    except yaml.YAMLError as exc:
-        raise CalibrationError("%s is not valid YAML: %s" % (path, exc)) from exc
+    return read_yaml(path, CalibrationError)
 
 
 def _entry_value(entry: Any, where: str) -> float:

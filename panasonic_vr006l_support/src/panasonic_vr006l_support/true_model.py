@@ -55,7 +55,7 @@ from typing import Any, Dict, Mapping, Optional, Sequence, Union
 import numpy as np
 import yaml
 
-from . import description
+from . import calibration, description
 
 __all__ = ["GEOMETRY_KEYS", "LENGTH_KEYS", "JOINT_NAMES", "JOINT_KEYS", "TrueModelError", "TrueModel", "load",
            "from_mapping", "render_urdf", "apply_zero_offsets", "main"]
@@ -126,13 +126,7 @@ def _model_masses() -> Dict[str, float]:
 
 
 def _read_yaml(path: str) -> Any:
-    try:
-        with open(path) as f:
-            return yaml.safe_load(f)
-    except OSError as exc:
-        raise TrueModelError("cannot read the true model %s: %s" % (path, exc.strerror or exc)) from exc
-    except yaml.YAMLError as exc:
-        raise TrueModelError("the true model %s is not valid YAML: %s" % (path, exc)) from exc
+    return calibration.read_yaml(path, TrueModelError, "the true model ")
 
 
 def from_mapping(cfg: Any, path: str = "<mapping>") -> TrueModel:
@@ -325,11 +319,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except (TrueModelError, description.DescriptionError) as exc:
         print("true_model: error: %s" % exc, file=sys.stderr)
         return 1
-    if args.output:
-        with open(args.output, "w") as out:
-            out.write(text)
-    else:
-        sys.stdout.write(text)
+    description.write_output(text, args.output)
     return 0
 
 
