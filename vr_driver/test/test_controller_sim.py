@@ -7,14 +7,13 @@ from __future__ import annotations
 import json
 import math
 import threading
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, List, Tuple
 
 import numpy as np
 import pytest
 
-from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame
+from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm
 from pyprofibus_vendor.dp_slave import SlaveState
-from pyprofibus_vendor.fdl import FcbRequester
 
 from vr_driver.controller.program import (ControllerProgram, SimError, SimOptions, VirtualController, main,
                                       robot_slave)
@@ -24,50 +23,27 @@ from vr_driver.protocol.v1 import (Accepted, Command, ControllerState, Done, Fee
                                 StatusBits, WireMoveType)
 from vr_driver.controller.arm import ExecutionLog, LogEntry, Outcome, SimArm, round_pose
 
-MASTER = 2
+from _slave_rig import SlaveRig
+
 PERIOD = 0.01
 SPEED = 4.0
 UNREACHABLE = (2000, 0, 500, 0, 90, 0)          # 2 m out: beyond the reach
 OUT_OF_LIMITS = (-600, 0, 400, 0, 90, 180)      # behind the robot: only with joint_1 = pi
 
 
-class Rig:
+class Rig(SlaveRig):
     """Fake clock + robot DpSlave + SimArm + ControllerProgram, and a minimal DP master (telegrams
     straight into DpSlave.handle) running protocol.v1.MasterHandshake: one bus cycle per program loop."""
 
     def __init__(self, kin, speed: float = SPEED, period: float = PERIOD, watchdog_units: int = 10,
                  **arm_kw) -> None:
-        self.t = 1000.0
+        super().__init__(period, watchdog_units)
         clock = self.clock
-        self.period = period
         self.slave = robot_slave(4, clock)
         self.arm = SimArm(kin, speed_factor=speed, clock=clock, **arm_kw)
         self.prog = ControllerProgram(self.slave, self.arm)
         self.master = MasterHandshake(accept_timeout=0.5, release_timeout=0.5, settle_time=0.0, clock=clock)
-        self.fcb = FcbRequester()
-        self.watchdog_units = watchdog_units      # x 10 ms
         self.trace: List[Tuple[float, Feedback]] = []
-        self.exchanging = True
-        self.last_rx: Optional[float] = None
-
-    def clock(self) -> float:
-        return self.t
-
-    def call(self, sap, payload=b""):
-        fcb, fcv = self.fcb.bits()
-        reply = self.slave.handle(request_frame(4, MASTER, fcb, fcv, sap, payload), self.t)
-        self.fcb.acknowledge()
-        self.last_rx = self.t
-        return reply
-
-    def connect(self) -> None:
-        prm = SetPrm(ident=0x06C6, station_status=PrmStationStatus.LOCK_REQ | PrmStationStatus.WD_ON,
-                     wd_fact1=self.watchdog_units, wd_fact2=1)
-        self.call(Sap.SET_PRM, prm.encode())
-        self.call(Sap.CHK_CFG, self.slave.cfg)
-        assert self.slave.state is SlaveState.DATA_EXCH
-        self.fcb = FcbRequester()
-        self.loop()
 
     def loop(self, n: int = 1):
         """n rounds of: advance the clock, one Data_Exchange (if exchanging), one program loop."""

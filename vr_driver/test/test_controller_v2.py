@@ -4,31 +4,29 @@ go straight into the robot DpSlave (Data_Exchange telegrams, as test_controller_
 FeedbackV2 comes back in the replies. Nothing sleeps; times and speeds are the fake clock's, exact."""
 from __future__ import annotations
 
-from typing import List, Optional, Sequence, Tuple
+from typing import List, Optional, Tuple
 
 import numpy as np
 import pytest
 
-from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame
 from pyprofibus_vendor.dp_slave import SlaveState
-from pyprofibus_vendor.fdl import FcbRequester
 
 from vr_driver.controller.program import SimError, SimOptions, VirtualController, main, robot_slave
 from vr_driver.controller.program_v2 import ControllerProgramV2
-from vr_driver.errors import ProtocolError
 from vr_driver.protocol.v1 import StatusBits
 from vr_driver.protocol.v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Control, FeedbackV2, RejectCode,
                                    StreamState, TargetSlot, joints_from_wire, joints_to_wire)
 from vr_driver.controller.arm import Outcome
 from vr_driver.controller.stream_arm import (DEFAULT_RAMP_TIME, SimStreamArm, blend_window, segment_time, wire_pose)
 
-MASTER = 2
+from _slave_rig import StreamRig
+
 PERIOD = 0.005
 START_JOINTS = (0.0, 0.4, -0.3, 0.0, 0.6, 0.0)
 BRAKE = 0.2
 
 
-class RigV2:
+class RigV2(StreamRig):
     """Fake clock + v2 robot DpSlave + SimStreamArm + ControllerProgramV2, and a minimal DP master
     sending ``self.record`` every bus cycle (one Data_Exchange per program loop). With ``stream``
     set, the master streams those targets: slot 0 = the first one the controller has not taken
@@ -37,86 +35,29 @@ class RigV2:
 
     def __init__(self, kin, period: float = PERIOD, speed: float = 1.0, watchdog_units: int = 10,
                  brake_time: float = BRAKE, confirm: bool = False) -> None:
-        self.t = 1000.0
-        self.period = period
+        super().__init__(period, watchdog_units)
         self.slave = robot_slave(4, self.clock, "v2")
         self.arm = SimStreamArm(kin, speed_factor=speed, clock=self.clock, brake_time=brake_time,
                                 initial_joints=START_JOINTS)
         self.prog = ControllerProgramV2(self.slave, self.arm, confirm_records=confirm)
-        self.fcb = FcbRequester()
-        self.watchdog_units = watchdog_units
         self.record = CommandV2()
-        self.stream: List[TargetSlot] = []
         self.lookahead = True
         self.withhold: Optional[int] = None       # stream only up to (excluding) this seq
-        self.master_fb: Optional[FeedbackV2] = None
-        self.trace: List[Tuple[float, FeedbackV2, Tuple[float, ...]]] = []
-        self.exchanging = True
 
-    def clock(self) -> float:
-        return self.t
+    def encode(self, record: CommandV2) -> bytes:
+        return record.encode()
 
-    def call(self, sap, payload=b""):
-        fcb, fcv = self.fcb.bits()
-        reply = self.slave.handle(request_frame(4, MASTER, fcb, fcv, sap, payload), self.t)
-        self.fcb.acknowledge()
-        return reply
-
-    def connect(self) -> None:
-        prm = SetPrm(ident=0x06C6, station_status=PrmStationStatus.LOCK_REQ | PrmStationStatus.WD_ON,
-                     wd_fact1=self.watchdog_units, wd_fact2=1)
-        self.call(Sap.SET_PRM, prm.encode())
-        self.call(Sap.CHK_CFG, CHK_CFG_V2)
-        assert self.slave.state is SlaveState.DATA_EXCH
-        self.fcb = FcbRequester()
-        self.loop()
+    def decode(self, data: bytes) -> FeedbackV2:
+        return FeedbackV2.decode(data)
 
     def streamed_record(self) -> CommandV2:
-        seqs = [s.seq for s in self.stream]
-        accepted = self.master_fb.accepted_seq if self.master_fb is not None else 0
-        i = seqs.index(accepted) + 1 if accepted in seqs else 0
+        i = self.accepted_index()
         slots = [s for s in self.stream[i:i + (2 if self.lookahead else 1)]
                  if self.withhold is None or s.seq < self.withhold]
         if not slots:
             return CommandV2()
         return CommandV2(Control.START if i == 0 else Control(0), slots[0],
                          slots[1] if len(slots) > 1 else TargetSlot())
-
-    def send_raw(self, raw: bytes) -> FeedbackV2:
-        self.t += self.period
-        self.call(None, raw)
-        return self.prog.step(self.t)
-
-    def loop(self, n: int = 1) -> FeedbackV2:
-        fb = None
-        for _ in range(n):
-            self.t += self.period
-            if self.exchanging and self.slave.state is SlaveState.DATA_EXCH:
-                if self.stream:
-                    self.record = self.streamed_record()
-                reply = self.call(None, self.record.encode())
-                try:
-                    self.master_fb = FeedbackV2.decode(reply.data)
-                except ProtocolError:            # the image before the program's first loop
-                    assert not any(reply.data)
-            fb = self.prog.step(self.t)
-            self.trace.append((self.t, fb, self.arm.joints))
-        assert fb is not None
-        return fb
-
-    def until(self, pred, max_time: float = 30.0) -> FeedbackV2:
-        end = self.t + max_time
-        fb = self.loop()
-        while not pred(fb):
-            assert self.t < end, "condition not reached within %.1f s of fake time" % max_time
-            fb = self.loop()
-        return fb
-
-    def run_stream(self, slots: Sequence[TargetSlot], max_time: float = 60.0) -> FeedbackV2:
-        self.stream = list(slots)
-        last = slots[-1].seq
-        return self.until(lambda fb: fb.done_seq == last and fb.state in (StreamState.IDLE, StreamState.WAITING)
-                          and not self.arm.moving, max_time)
 
 
 def slot(seq: int, joints, speed: float = 0.5, smooth: int = 0) -> TargetSlot:

@@ -11,9 +11,7 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 import pytest
 
-from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame
 from pyprofibus_vendor.dp_slave import SlaveState
-from pyprofibus_vendor.fdl import FcbRequester
 
 from vr_driver.controller.arm import Outcome
 from vr_driver.controller.program import SimError, SimOptions, VirtualController, main, robot_slave
@@ -28,13 +26,14 @@ from vr_driver.protocol.v1 import StatusBits
 from vr_driver.protocol.v3 import (CHK_CFG_V3, CartesianKind, CartesianSlot, CommandV3, Control,
                                    FeedbackV3, RejectCode, StreamState, pose_from_wire, pose_to_wire)
 
-MASTER = 2
+from _slave_rig import StreamRig
+
 PERIOD = 0.005
 START_JOINTS = (0.0, 0.4, -0.3, 0.0, 0.6, 0.0)
 BRAKE = 0.2
 
 
-class RigV3:
+class RigV3(StreamRig):
     """Fake clock + v3 robot DpSlave + SimStreamArm (look-ahead = the interpreter's) +
     ControllerProgramV3, and a minimal DP master sending ``self.record`` every bus cycle. With
     ``stream`` set, the master offers the first target the controller has not taken (by the
@@ -44,87 +43,32 @@ class RigV3:
                  controller_kin: Optional[Kinematics] = None, confirm: bool = False,
                  period: float = PERIOD, watchdog_units: int = 10, brake_time: float = BRAKE,
                  start_joints: Sequence[float] = START_JOINTS) -> None:
-        self.t = 1000.0
-        self.period = period
+        super().__init__(period, watchdog_units)
         self.order = order
         self.slave = robot_slave(4, self.clock, "v3")
         self.arm = SimStreamArm(kin, clock=self.clock, brake_time=brake_time, initial_joints=start_joints,
                                 look_ahead=lookahead)
         self.prog = ControllerProgramV3(self.slave, self.arm, kinematics=controller_kin or kin, ring_size=ring,
                                         byte_order=order, confirm_records=confirm)
-        self.fcb = FcbRequester()
-        self.watchdog_units = watchdog_units
         self.record = CommandV3()
-        self.stream: List[CartesianSlot] = []
-        self.master_fb: Optional[FeedbackV3] = None
-        self.trace: List[Tuple[float, FeedbackV3, Tuple[float, ...]]] = []
-        self.exchanging = True
         self.occupancy_seen: List[int] = []      # targets in the ring, each loop
         self.read_ahead_seen: List[int] = []     # targets the arm holds (running + read ahead), each loop
 
-    def clock(self) -> float:
-        return self.t
+    def encode(self, record: CommandV3) -> bytes:
+        return record.encode(self.order)
 
-    def call(self, sap, payload=b""):
-        fcb, fcv = self.fcb.bits()
-        reply = self.slave.handle(request_frame(4, MASTER, fcb, fcv, sap, payload), self.t)
-        self.fcb.acknowledge()
-        return reply
-
-    def connect(self) -> None:
-        prm = SetPrm(ident=0x06C6, station_status=PrmStationStatus.LOCK_REQ | PrmStationStatus.WD_ON,
-                     wd_fact1=self.watchdog_units, wd_fact2=1)
-        self.call(Sap.SET_PRM, prm.encode())
-        self.call(Sap.CHK_CFG, CHK_CFG_V3)
-        assert self.slave.state is SlaveState.DATA_EXCH
-        self.fcb = FcbRequester()
-        self.loop()
+    def decode(self, data: bytes) -> FeedbackV3:
+        return FeedbackV3.decode(data, self.order)
 
     def streamed_record(self) -> CommandV3:
-        seqs = [s.seq for s in self.stream]
-        accepted = self.master_fb.accepted_seq if self.master_fb is not None else 0
-        i = seqs.index(accepted) + 1 if accepted in seqs else 0
+        i = self.accepted_index()
         if i >= len(self.stream):
             return CommandV3()
         return CommandV3(Control.START if i == 0 else Control(0), self.stream[i])
 
-    def send_raw(self, raw: bytes) -> FeedbackV3:
-        self.t += self.period
-        self.call(None, raw)
-        return self.prog.step(self.t)
-
-    def loop(self, n: int = 1) -> FeedbackV3:
-        fb = None
-        for _ in range(n):
-            self.t += self.period
-            if self.exchanging and self.slave.state is SlaveState.DATA_EXCH:
-                if self.stream:
-                    self.record = self.streamed_record()
-                reply = self.call(None, self.record.encode(self.order))
-                try:
-                    self.master_fb = FeedbackV3.decode(reply.data, self.order)
-                except ProtocolError:            # the image before the program's first loop
-                    assert not any(reply.data)
-            fb = self.prog.step(self.t)
-            self.trace.append((self.t, fb, self.arm.joints))
-            self.occupancy_seen.append(self.prog.occupancy)
-            self.read_ahead_seen.append(len(self.arm.queued))
-        assert fb is not None
-        return fb
-
-    def until(self, pred, max_time: float = 30.0) -> FeedbackV3:
-        end = self.t + max_time
-        fb = self.loop()
-        while not pred(fb):
-            assert self.t < end, "condition not reached within %.1f s of fake time" % max_time
-            fb = self.loop()
-        return fb
-
-    def run_stream(self, slots: Sequence[CartesianSlot], max_time: float = 60.0) -> FeedbackV3:
-        self.stream = list(slots)
-        last = slots[-1].seq
-        return self.until(lambda fb: fb.done_seq == last and fb.state in (StreamState.IDLE, StreamState.WAITING)
-                          and not self.arm.moving, max_time)
+    def observe(self) -> None:
+        self.occupancy_seen.append(self.prog.occupancy)
+        self.read_ahead_seen.append(len(self.arm.queued))
 
 
 def zigzag(n: int = 9) -> List[Tuple[float, ...]]:
