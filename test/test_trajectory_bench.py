@@ -25,17 +25,23 @@ def load_bench():
     return module
 
 
+def set_up_stack(cls):
+    """The bench module, the driver's parameter file, the kinematics and the motion planner, as
+    class attributes of a test class."""
+    cls.bench = load_bench()
+    from vr_driver.kinematics.solver import Kinematics
+    from vr_driver.kinematics.preview import MotionPlanner
+    from vr_driver.params import DriverParams
+    with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
+        cls.params = DriverParams.from_dict(yaml.safe_load(fh))
+    cls.kin = Kinematics.default()
+    cls.planner = MotionPlanner(cls.kin)
+
+
 class TrajectoryGeneratorTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        cls.bench = load_bench()
-        from vr_driver.kinematics.solver import Kinematics
-        from vr_driver.kinematics.preview import MotionPlanner
-        from vr_driver.params import DriverParams
-        with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
-            cls.params = DriverParams.from_dict(yaml.safe_load(fh))
-        cls.kin = Kinematics.default()
-        cls.planner = MotionPlanner(cls.kin)
+        set_up_stack(cls)
         cls.trajs = cls.bench.generate(7, 12)
 
     def test_same_seed_same_trajectories(self):
@@ -111,14 +117,7 @@ class TimeOptimalSetTest(unittest.TestCase):
 
     @classmethod
     def setUpClass(cls):
-        cls.bench = load_bench()
-        from vr_driver.kinematics.solver import Kinematics
-        from vr_driver.kinematics.preview import MotionPlanner
-        from vr_driver.params import DriverParams
-        with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
-            cls.params = DriverParams.from_dict(yaml.safe_load(fh))
-        cls.kin = Kinematics.default()
-        cls.planner = MotionPlanner(cls.kin)
+        set_up_stack(cls)
         cls.vmax, cls.amax = joint_limits_yaml()
         cls.trajs = cls.bench.generate(5, 4, timing="topp") + cls.bench.generate(9, 4, timing="topp")
 
