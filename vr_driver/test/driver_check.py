@@ -135,6 +135,15 @@ class DriverTestBase(unittest.TestCase):
                                    after=time.monotonic())
         self.assertIsNotNone(msg, "motion_possible never became TRUE")
 
+    def at_home(self):
+        """The arm at HOME (a known start): a PTP there, also when it is there already (with v3 that
+        is one target with its pose: it once had none and the bus thread dropped the link); the
+        joints of the first joint_states sample after it."""
+        self.wait_motion_possible()
+        state, result = self.move(MoveToPoseGoal.PTP, HOME)
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
+        return list(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
+
     def move(self, kind, target, via=None, preview_only=False, timeout=40.0):
         goal = MoveToPoseGoal(target=cp(target), move_type=kind, has_via=via is not None,
                               via=cp(via) if via is not None else CartesianPose(),

@@ -14,7 +14,7 @@ import rostest
 from actionlib_msgs.msg import GoalStatus
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from driver_check import HOME, PKG, DriverTestBase, Recorder
+from driver_check import PKG, DriverTestBase, Recorder
 from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal
 from vr_driver.protocol import registry
 
@@ -37,12 +37,6 @@ def smooth_points(q0, n=30, duration=4.0):
 
 
 class DriverV2Test(DriverTestBase):
-    def at_home(self):
-        self.wait_motion_possible()
-        state, result = self.move(MoveToPoseGoal.PTP, HOME)
-        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
-        return list(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
-
     def test_01_a_30_point_trajectory_runs_as_planned(self):
         q0 = self.at_home()
         before = len(self.entries())

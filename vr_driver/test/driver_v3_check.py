@@ -17,9 +17,9 @@ from actionlib_msgs.msg import GoalStatus
 import rospy
 from sensor_msgs.msg import JointState
 
-from driver_check import HOME, PKG, DriverTestBase, Recorder
+from driver_check import PKG, DriverTestBase, Recorder
 from driver_v2_check import smooth_points
-from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal
+from vr_driver.msg import FollowJointTrajectoryResult
 from vr_driver.poses import ControllerPose
 from vr_driver.protocol import registry
 
@@ -34,14 +34,6 @@ def wire_joints(values):
 
 
 class DriverV3Test(DriverTestBase):
-    def at_home(self):
-        """The arm at HOME (a known start): a PTP there, also when it is there already (one target
-        with its pose: it once had none and the bus thread dropped the link)."""
-        self.wait_motion_possible()
-        state, result = self.move(MoveToPoseGoal.PTP, HOME)
-        self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
-        return list(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
-
     def test_01_a_30_point_trajectory_with_empty_tolerances_runs_each_target_once(self):
         q0 = self.at_home()
         before = len(self.entries())
