@@ -185,9 +185,10 @@ class TrajectorySupervisor:
         return self.step(now, status.joints_valid, status.joints, stamp, status.pose)
 
     # ------------------------------------------------------------------ the end
-    def note(self, elapsed: float, cycle_rate: float = 0.0) -> str:
+    def note(self, elapsed: float, cycle_rate: float = 0.0,
+             fit: Optional[Tuple[float, float, Optional[int], float]] = None) -> str:
         """How the run's time compared with the plan, in the protocol's terms, and how far it was
-        from the plan at the same time."""
+        from the plan at the same time (``fit``: :meth:`fit_delay`'s result when the caller has it)."""
         traj, run, protocol = self.traj, self.run, self.protocol
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
         if protocol.streams:
@@ -208,7 +209,7 @@ class TrajectorySupervisor:
         else:
             text = "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
                 slower, traj.duration, protocol.name, len(run.jobs))
-        delay, off, joint, at = self.fit_delay()
+        delay, off, joint, at = fit if fit is not None else self.fit_delay()
         if joint is not None:
             text += ("; at most %.3f deg from the plan at the same time after a start delay of %.3f s "
                      "(%s, %.2f s after the start; %.3f deg without the delay)" % (
@@ -252,9 +253,10 @@ class TrajectorySupervisor:
         the note on a streaming protocol's gaps)."""
         traj, run = self.traj, self.run
         elapsed = now - self.started
-        note = self.note(elapsed, cycle_rate)
+        fit = self.fit_delay()
+        note = self.note(elapsed, cycle_rate, fit)
 
-        delay, delayed, _joint, _at = self.fit_delay()
+        delay, delayed, _joint, _at = fit
 
         def outcome(state: str, code: int, text: str) -> Outcome:
             return Outcome(state, code, text, note, elapsed, self.max_path_deviation,
