@@ -265,9 +265,6 @@ class StreamSequencer(SequencerBase):
     def idle_command(self, now: float) -> Any:
         return self.wire.idle_command()
 
-    def follow(self, now: float, fb: Any, sample: LinkSample) -> None:
-        self._follow(now, fb)
-
     def end_due(self, now: float) -> bool:
         """Every target of the running stream taken and its planned end near (from END_LEAD before
         it to END_WATCH after it): the arm's arrival is due, the core polls for it faster."""
@@ -309,7 +306,7 @@ class StreamSequencer(SequencerBase):
             job.finish(False, JobPhase.CANCELLED, reason, None)
 
     # ------------------------------------------------------------------ the stream
-    def _follow(self, now: float, fb: Any) -> None:
+    def follow(self, now: float, fb: Any, sample: LinkSample) -> None:
         """Read the controller's progress on the current job; end it when it is over."""
         was = self._last_state
         self._last_state = fb.state
