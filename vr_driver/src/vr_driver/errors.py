@@ -24,9 +24,12 @@
     │                            also a ValueError
     ├── CsrConversionError       valid waypoints that cannot be exported (unreachable, outside the
     │                            joint limits or the workspace box); ``problems`` lists each one
-    └── SignalMapError           an I/O signal map (io_signals) entry is invalid, or a value does
-                                 not fit a signal's type (names the station and key); also a
-                                 ValueError
+    ├── SignalMapError           an I/O signal map (io_signals) entry is invalid, or a value does
+    │                            not fit a signal's type (names the station and key); also a
+    │                            ValueError
+    └── MissingDependency        an optional library (pinocchio, coal, OMPL, TOPP-RA: collision-aware
+                                 planning) is not installed; names the package and scripts/setup;
+                                 also an ImportError
 
 Motion planning re-raises kinematic errors unchanged when a single step fails (the message names
 the step), so callers catch ``VrDriverError`` or one of its direct children. Foreign exceptions
@@ -53,6 +56,7 @@ __all__ = [
     "CsrError",
     "CsrConversionError",
     "SignalMapError",
+    "MissingDependency",
 ]
 
 
@@ -183,3 +187,18 @@ class SignalMapError(VrDriverError, ValueError):
     """An I/O signal map is invalid (unknown key or type, overlap, offset past the station's image,
     duplicate name, safe value that does not fit), or a value does not fit a signal's type. The
     message names the station and the key."""
+
+
+class MissingDependency(VrDriverError, ImportError):
+    """An optional library a feature needs is not importable (collision-aware planning: pinocchio,
+    coal, OMPL, TOPP-RA, Python >= 3.10 wheels from PyPI). ``package`` is the PyPI name, ``module`` the
+    import name; the message names both and the command that installs them (scripts/setup)."""
+
+    def __init__(self, package: str, module: str = "", feature: str = "", reason: str = ""):
+        self.package = package
+        self.module = module or package
+        self.feature = feature
+        text = "%s needs the Python package %s (import %s), which is not usable here%s: run scripts/setup " \
+               "(it installs it from PyPI, pinned; Python >= 3.10)" % (
+                   feature or "this feature", package, self.module, " (%s)" % reason if reason else "")
+        super().__init__(text)
