@@ -27,6 +27,8 @@
     ├── SignalMapError           an I/O signal map (io_signals) entry is invalid, or a value does
     │                            not fit a signal's type (names the station and key); also a
     │                            ValueError
+    ├── SceneError               a cell (collision scene) file or object is invalid (names the
+    │                            entry and key); also a ValueError
     └── MissingDependency        an optional library (pinocchio, coal, OMPL, TOPP-RA: collision-aware
                                  planning) is not installed; names the package and scripts/setup;
                                  also an ImportError
@@ -56,6 +58,7 @@ __all__ = [
     "CsrError",
     "CsrConversionError",
     "SignalMapError",
+    "SceneError",
     "MissingDependency",
 ]
 
@@ -187,6 +190,12 @@ class SignalMapError(VrDriverError, ValueError):
     """An I/O signal map is invalid (unknown key or type, overlap, offset past the station's image,
     duplicate name, safe value that does not fit), or a value does not fit a signal's type. The
     message names the station and the key."""
+
+
+class SceneError(VrDriverError, ValueError):
+    """A collision scene (vr_driver.kinematics.scene: a cell YAML, or an object added in code) is
+    invalid: unknown key, missing key, a value that is not a finite number, a size <= 0, a duplicate
+    or unknown name. The message names the file, the entry and the key."""
 
 
 class MissingDependency(VrDriverError, ImportError):

@@ -1,0 +1,295 @@
+"""Collision checking of the arm against itself and the cell (kinematics.scene), on pinocchio and
+coal (PyPI ``pin``, ``coal``; pinned in scripts/setup; Python >= 3.10). Without them, building a
+checker raises MissingDependency naming the package and scripts/setup; importing this module does
+not need them.
+
+    checker = CollisionChecker.default(scene=load_scene(path), padding=0.02)
+    checker.in_collision(q)        # q: joint_1..joint_6 [rad], the controller's angles
+    checker.contacts(q)            # [Contact(link_a, other, distance, world)], nearest first
+    checker.check_path(qs)         # None, or (index of the first colliding sample, its contacts)
+    checker.min_distance(q)        # smallest distance over the checked pairs [m] (< 0: penetration)
+
+What is checked (the pairs, fixed when the checker or its scene is built):
+
+- self: every two links' collision geometry of the URDF, except the pairs the SRDF disables
+  (``disable_collisions``: adjacent links and pairs that can never meet); without an SRDF the links
+  joined by one joint are left out instead (their housings overlap at the joint by design);
+- world: every moving link against every scene object. The fixed root link (base_link) is not
+  checked against the scene: it cannot move, and the surface the robot stands on touches it.
+
+Padding inflates every shape by ``padding`` [m] for the verdict (coal's security margin: a pair
+counts as colliding when its distance is below ``padding``); distances reported are those of the
+true shapes. The URDF's collision geometry is made of primitives (vr006l_macro.xacro), as the scene.
+
+Joint angles: ``q`` is given in the order of ``joint_names`` (default: the URDF's six revolute
+joints joint_1..joint_6, prefixed); the URDF already holds the zero offsets, so these are the
+controller's angles, the same vectors as kinematics.solver's.
+"""
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from typing import Any, Iterable, List, NamedTuple, Optional, Sequence, Set, Tuple
+
+import numpy as np
+
+from vr_driver.errors import ModelError, PoseError
+from vr_driver.kinematics.deps import require
+from vr_driver.kinematics.scene import Scene, SceneObject
+
+__all__ = ["Contact", "CollisionChecker", "read_disabled_pairs"]
+
+
+class Contact(NamedTuple):
+    """One colliding pair: ``link_a`` a link of the robot, ``other`` another link (``world`` False)
+    or a scene object's name (``world`` True), ``distance`` [m] between their true shapes (< 0:
+    penetration depth; >= 0 but < padding: inside the padding)."""
+    link_a: str
+    other: str
+    distance: float
+    world: bool
+
+    def __str__(self) -> str:
+        return "%s with %s %s (%s)" % (self.link_a, "object" if self.world else "link", self.other,
+                                       "%.1f mm apart" % (self.distance * 1e3) if self.distance >= 0
+                                       else "%.1f mm deep" % (-self.distance * 1e3))
+
+
+def read_disabled_pairs(srdf_xml: str, prefix: str = "") -> Set[frozenset]:
+    """The SRDF's ``disable_collisions`` pairs as frozensets of link names (with ``prefix``)."""
+    try:
+        root = ET.fromstring(srdf_xml)
+    except ET.ParseError as exc:
+        raise ModelError("SRDF is not valid XML: %s" % exc) from exc
+    pairs = set()
+    for el in root.iter("disable_collisions"):
+        a, b = el.get("link1"), el.get("link2")
+        if not a or not b:
+            raise ModelError("SRDF: disable_collisions needs link1 and link2, got %r" % (el.attrib,))
+        pairs.add(frozenset((prefix + a, prefix + b)))
+    return pairs
+
+
+class CollisionChecker:
+    """Collision queries for one robot model and one scene. Not thread-safe (one pinocchio Data):
+    give each thread its own checker (:meth:`copy`)."""
+
+    def __init__(self, model: Any, geom_model: Any, joint_names: Optional[Sequence[str]] = None,
+                 disabled: Iterable[frozenset] = (), padding: float = 0.0, scene: Optional[Scene] = None,
+                 adjacent_free: bool = False):
+        self._pin = require("pinocchio")
+        self._coal = require("coal")
+        self.model = model
+        self._robot_geom = geom_model
+        self.data = model.createData()
+        names = list(joint_names) if joint_names is not None else [model.names[i] for i in range(1, model.njoints)]
+        idx = []
+        for name in names:
+            if not model.existJointName(name):
+                raise ModelError("collision model: no joint %r (joints: %s)"
+                                 % (name, ", ".join(model.names[i] for i in range(1, model.njoints))))
+            joint = model.joints[model.getJointId(name)]
+            if joint.nq != 1:
+                raise ModelError("collision model: joint %s is not a 1-DOF joint (nq=%d)" % (name, joint.nq))
+            idx.append(joint.idx_q)
+        self.joint_names = tuple(names)
+        self._q_index = np.array(idx, dtype=int)
+        self._q = self._pin.neutral(model)
+        self.disabled = set(disabled)
+        self.adjacent_free = adjacent_free
+        # the link each robot geometry belongs to, and whether it moves
+        self._geom_link = [model.frames[g.parentFrame].name for g in geom_model.geometryObjects]
+        self._geom_moves = [g.parentJoint != 0 for g in geom_model.geometryObjects]
+        self._adjacent = set()
+        for jid in range(1, model.njoints):
+            parent = model.parents[jid]
+            a = [self._geom_link[k] for k, g in enumerate(geom_model.geometryObjects) if g.parentJoint == parent]
+            b = [self._geom_link[k] for k, g in enumerate(geom_model.geometryObjects) if g.parentJoint == jid]
+            self._adjacent.update(frozenset((x, y)) for x in a for y in b if x != y)
+        self.padding = self._check_padding(padding)
+        self.scene = Scene()
+        self.set_scene(scene if scene is not None else Scene())
+
+    # ------------------------------------------------------------------------------------ factories
+    @classmethod
+    def from_urdf(cls, urdf_xml: str, srdf_xml: Optional[str] = None, padding: float = 0.0,
+                  scene: Optional[Scene] = None, joint_names: Optional[Sequence[str]] = None,
+                  prefix: str = "") -> "CollisionChecker":
+        """From URDF text (rendered, no xacro) and SRDF text (its ``disable_collisions``; link names
+        there without ``prefix``). Without an SRDF, links joined by one joint are not checked."""
+        pin = require("pinocchio")
+        try:
+            model = pin.buildModelFromXML(urdf_xml)
+            geom = pin.buildGeomFromUrdfString(model, urdf_xml, pin.GeometryType.COLLISION)
+        except (RuntimeError, ValueError) as exc:
+            raise ModelError("pinocchio cannot build the collision model from the URDF: %s" % exc) from exc
+        disabled = read_disabled_pairs(srdf_xml, prefix) if srdf_xml is not None else set()
+        if joint_names is None and prefix:
+            joint_names = ["%sjoint_%d" % (prefix, i) for i in range(1, 7)]
+        return cls(model, geom, joint_names, disabled, padding, scene, adjacent_free=srdf_xml is None)
+
+    @classmethod
+    def default(cls, padding: float = 0.0, scene: Optional[Scene] = None, prefix: str = "") -> "CollisionChecker":
+        """The VR-006L: the support package's xacro (rendered), the moveit_config's SRDF."""
+        import os
+
+        from panasonic_vr006l_support.description import DescriptionError, default_xacro_path, package_dir, render_urdf
+        try:
+            xml = render_urdf(default_xacro_path(), {"prefix": prefix} if prefix else None)
+        except DescriptionError as exc:
+            raise ModelError(str(exc)) from exc
+        srdf = os.path.join(os.path.dirname(package_dir()), "panasonic_vr006l_moveit_config", "config",
+                            "panasonic_vr006l.srdf")
+        try:
+            with open(srdf) as f:
+                srdf_xml = f.read()
+        except OSError as exc:
+            raise ModelError("cannot read %s: %s" % (srdf, exc)) from exc
+        return cls.from_urdf(xml, srdf_xml, padding, scene, prefix=prefix)
+
+    def copy(self) -> "CollisionChecker":
+        """An independent checker (own pinocchio data) on the same model, pairs, padding and scene."""
+        return CollisionChecker(self.model, self._robot_geom, self.joint_names, self.disabled, self.padding,
+                                self.scene, self.adjacent_free)
+
+    # ------------------------------------------------------------------------------------ scene
+    @staticmethod
+    def _check_padding(padding: Any) -> float:
+        if isinstance(padding, bool) or not isinstance(padding, (int, float)) or not math.isfinite(padding) \
+                or padding < 0.0:
+            raise ValueError("padding must be a finite number >= 0 [m], got %r" % (padding,))
+        return float(padding)
+
+    def set_padding(self, padding: float) -> None:
+        self.padding = self._check_padding(padding)
+        self._apply_padding()
+
+    def _apply_padding(self) -> None:
+        # coal reports a collision below the security margin (GeometryData.setSecurityMargins wants a
+        # matrix over all geometries: setting each pair's request is simpler)
+        for req in self.geom_data.collisionRequests:
+            req.security_margin = self.padding
+
+    def _shape(self, obj: SceneObject) -> Any:
+        c = self._coal
+        if obj.shape == "box":
+            return c.Box(*obj.size)
+        if obj.shape == "cylinder":
+            return c.Cylinder(obj.size[0], obj.size[1])
+        return c.Sphere(obj.size[0])
+
+    def set_scene(self, scene: Scene) -> None:
+        """Replace the world objects by those of ``scene`` (a snapshot: later changes to ``scene``
+        need another set_scene) and rebuild the pairs."""
+        if not isinstance(scene, Scene):
+            raise TypeError("set_scene takes a Scene, got %r" % (scene,))
+        pin = self._pin
+        gm = self._robot_geom.clone()
+        n_robot = gm.ngeoms
+        names = set(g.name for g in gm.geometryObjects)
+        objects = scene.objects()
+        for obj in objects:
+            if obj.name in names:
+                raise ModelError("scene object %r has the name of a robot geometry" % obj.name)
+            placement = pin.SE3(obj.rotation, np.array(obj.position, dtype=float))
+            gm.addGeometryObject(pin.GeometryObject(obj.name, 0, 0, placement, self._shape(obj)))
+        pairs: List[Tuple[int, int]] = []
+        for i in range(n_robot):
+            for j in range(i + 1, n_robot):
+                a, b = self._geom_link[i], self._geom_link[j]
+                if a == b or gm.geometryObjects[i].parentJoint == gm.geometryObjects[j].parentJoint:
+                    continue   # rigidly attached: never move relative to each other
+                if frozenset((a, b)) in self.disabled:
+                    continue
+                if self.adjacent_free and frozenset((a, b)) in self._adjacent:
+                    continue
+                pairs.append((i, j))
+        for i in range(n_robot):
+            if not self._geom_moves[i]:
+                continue
+            for k in range(len(objects)):
+                pairs.append((i, n_robot + k))
+        for i, j in pairs:
+            gm.addCollisionPair(pin.CollisionPair(i, j))
+        self.geom_model = gm
+        self.geom_data = gm.createData()
+        self._apply_padding()
+        for req in self.geom_data.distanceRequests:
+            req.enable_signed_distance = True
+        self._n_robot = n_robot
+        self._pairs = pairs
+        self._pair_names = [(self._geom_link[i], self._geom_link[j] if j < n_robot else gm.geometryObjects[j].name,
+                             j >= n_robot) for i, j in pairs]
+        self.scene = scene.copy()
+
+    def checked_pairs(self) -> List[Tuple[str, str, bool]]:
+        """(link, other link or object, world) of every checked pair, one per geometry pair."""
+        return list(self._pair_names)
+
+    # ------------------------------------------------------------------------------------ queries
+    def _config(self, q: Sequence[float]) -> np.ndarray:
+        try:
+            arr = np.asarray(q, dtype=float).reshape(-1)
+        except (TypeError, ValueError) as exc:
+            raise PoseError("joint vector must be %d numbers, got %r" % (len(self.joint_names), q)) from exc
+        if arr.shape[0] != len(self.joint_names):
+            raise PoseError("joint vector must have %d values (%s), got %d"
+                            % (len(self.joint_names), ", ".join(self.joint_names), arr.shape[0]))
+        if not np.all(np.isfinite(arr)):
+            bad = int(np.flatnonzero(~np.isfinite(arr))[0])
+            raise PoseError("joint vector: %s is not finite (%r)" % (self.joint_names[bad], arr[bad]))
+        full = self._q.copy()
+        full[self._q_index] = arr
+        return full
+
+    def in_collision(self, q: Sequence[float]) -> bool:
+        """True when any checked pair is closer than the padding (or overlaps) at ``q``."""
+        return bool(self._pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data,
+                                                self._config(q), True))
+
+    def contacts(self, q: Sequence[float]) -> List[Contact]:
+        """Every colliding pair at ``q`` (one per link / object pair: the deepest geometry pair),
+        nearest first; [] when free."""
+        pin = self._pin
+        pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data, self._config(q), False)
+        best = {}
+        for k, res in enumerate(self.geom_data.collisionResults):
+            if not res.isCollision():
+                continue
+            pin.computeDistance(self.geom_model, self.geom_data, k)
+            d = float(self.geom_data.distanceResults[k].min_distance)
+            a, b, world = self._pair_names[k]
+            key = (a, b, world)
+            if key not in best or d < best[key].distance:
+                best[key] = Contact(a, b, d, world)
+        return sorted(best.values(), key=lambda c: (c.distance, c.link_a, c.other))
+
+    def min_distance(self, q: Sequence[float]) -> float:
+        """Smallest distance [m] over the checked pairs at ``q`` between the true (unpadded)
+        shapes; < 0 when two overlap; inf when nothing is checked."""
+        if not self._pairs:
+            return math.inf
+        pin = self._pin
+        pin.computeDistances(self.model, self.data, self.geom_model, self.geom_data, self._config(q))
+        return float(min(r.min_distance for r in self.geom_data.distanceResults))
+
+    def nearest(self, q: Sequence[float]) -> Contact:
+        """The pair closest at ``q`` (colliding or not), as a Contact."""
+        if not self._pairs:
+            raise ModelError("no pair is checked")
+        pin = self._pin
+        pin.computeDistances(self.model, self.data, self.geom_model, self.geom_data, self._config(q))
+        d = [r.min_distance for r in self.geom_data.distanceResults]
+        k = int(np.argmin(d))
+        a, b, world = self._pair_names[k]
+        return Contact(a, b, float(d[k]), world)
+
+    def check_path(self, qs: Iterable[Sequence[float]]) -> Optional[Tuple[int, List[Contact]]]:
+        """The first sample of ``qs`` in collision, as (its index, its contacts); None when every
+        sample is free. Every sample is validated before any is checked."""
+        configs = [self._config(q) for q in qs]
+        pin = self._pin
+        for i, full in enumerate(configs):
+            if pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data, full, True):
+                return i, self.contacts(full[self._q_index])
+        return None
