@@ -33,7 +33,12 @@ def require(module: str, feature: str = _FEATURE) -> ModuleType:
     try:
         return importlib.import_module(module)
     except ImportError as exc:  # absent, or a wheel that does not load (wrong Python, ABI)
-        raise MissingDependency(package, module, feature, "%s: %s" % (type(exc).__name__, exc)) from exc
+        reason = "%s: %s" % (type(exc).__name__, exc)
+        inner = (getattr(exc, "name", None) or "").split(".")[0]
+        if inner and inner != module.split(".")[0]:     # the module is there, a library it imports is not
+            reason = "needed by %s; %s" % (module, reason)
+            module, package = inner, PACKAGES.get(inner, inner)
+        raise MissingDependency(package, module, feature, reason) from exc
 
 
 def missing_dependencies(modules: Tuple[str, ...] = tuple(PACKAGES)) -> List[Tuple[str, str]]:
