@@ -170,6 +170,9 @@ class DriverParams:
     # streaming (protocol v2)
     stream_smooth: int = 3               # smooth level of the points a stream passes through
                                          # (0 = stop at each; the last point always stops exactly)
+    joint_command_timeout: float = 0.2   # [s] joint_command: no command for this long ends the
+                                         # stream (the arm rests at the last accepted target); each
+                                         # command's step must be done within it (speed check)
     stream_path_tolerance: float = 0.1   # [deg] a v2 stream drops planned points whose removal keeps
                                          # the path within this (a straight joint-space chord); also
                                          # what a blended corner may round off (the smooth level)
@@ -257,6 +260,8 @@ class DriverParams:
             stream_smooth=_integer(params, "stream_smooth", d.stream_smooth, 0, 10),
             stream_path_tolerance=_number(params, "stream_path_tolerance", d.stream_path_tolerance,
                                           0.0, 5.0),
+            joint_command_timeout=_number(params, "joint_command_timeout", d.joint_command_timeout,
+                                          0.0, 5.0, lo_open=True),
             model_check_position=_number(params, "model_check_position", d.model_check_position, 0.0, 1000.0,
                                          lo_open=True),
             model_check_angle=_number(params, "model_check_angle", d.model_check_angle, 0.0, 180.0,
@@ -282,6 +287,11 @@ class DriverParams:
             raise ParamError("stop_settle_time", out.stop_settle_time,
                              "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz): the "
                              "pose must be seen unchanged in two records" % (2.0 / out.cycle_rate, out.cycle_rate))
+        if out.joint_command_timeout < 2.0 / out.cycle_rate:
+            raise ParamError("joint_command_timeout", out.joint_command_timeout,
+                             "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz): a "
+                             "command may wait a cycle for the bus and another for the controller"
+                             % (2.0 / out.cycle_rate, out.cycle_rate))
         if out.stop_timeout <= out.stop_settle_time:
             raise ParamError("stop_timeout", out.stop_timeout, "must be longer than stop_settle_time "
                              "(%g s)" % out.stop_settle_time)

@@ -46,6 +46,7 @@ from ..kinematics.preview import MotionPlanner, check_envelope
 from ..params import DriverParams
 from ..poses import ControllerPose, MoveType
 from ..protocol.v1 import Feedback, StatusBits, commands_for
+from .joint_command import JointCommander
 from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
@@ -326,6 +327,7 @@ class DriverCore:
         self._model_check: Optional[ModelCheck] = None
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
+        self.joint_commander = JointCommander(self)
 
     @property
     def handshake(self):
@@ -608,6 +610,13 @@ class DriverCore:
                               self.kin.limits.velocity)[1]
         return (replace(first, speed=speed),) + tuple(points[1:]), tuple(joints)
 
+    def joint_command(self, names: Sequence[str], positions: Sequence[float],
+                      time_from_start: float = 0.0) -> MoveJob:
+        """One streamed joint target (the ``joint_command`` topic; :mod:`.joint_command` has the
+        rules): validated here, in the caller's thread, then a point of the live stream job it
+        returns. Raises JointCommandRefused (nothing sent) with the rule and the reason."""
+        return self.joint_commander.command(names, positions, time_from_start)
+
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:
         """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when
         the arm is at rest."""
@@ -624,6 +633,46 @@ class DriverCore:
         return n
 
     # ------------------------------------------------------------------------ request helpers
+    @property
+    def planning_gate(self) -> threading.Lock:
+        """Held while planning or checking a path (one at a time, off the bus thread)."""
+        return self._planning_gate
+
+    @property
+    def last_posted(self) -> Optional[MoveJob]:
+        """The job posted last (a move, a trajectory, a joint_command stream), or None."""
+        return self._last_posted
+
+    def post_job(self, job: MoveJob) -> None:
+        """Queue ``job`` (validated already) behind the others and run a bus cycle now."""
+        self._last_posted = job
+        self.sequencer.add([job], SubmitMode.APPEND)
+        self._wake.set()
+
+    def wake(self) -> None:
+        """Run a bus cycle now (a request was posted), not at the next tick."""
+        self._wake.set()
+
+    def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
+        """A Cartesian protocol: why the controller would not reach ``joints`` when sent their pose
+        (FK, rounded as the wire carries it) after a target at ``prev`` -- it solves the pose as the
+        IK solution nearest the previous target's joints -- or "" when it reaches them within
+        CONFIGURATION_TOLERANCE."""
+        pose = self.protocol.wire_pose(self.kin.fk_pose(joints))
+        try:
+            with self._planning_gate:
+                solved = self.kin.ik_pose(pose, seed=tuple(prev))
+        except VrDriverError as exc:
+            return "the controller cannot solve its pose %s: %s" % (_fmt_pose(pose), exc)
+        off = [abs(a - b) for a, b in zip(solved, joints)]
+        worst = max(range(len(off)), key=off.__getitem__)
+        if off[worst] <= CONFIGURATION_TOLERANCE:
+            return ""
+        return ("the controller would reach its pose %s in another configuration (joint_%d %.1f deg "
+                "instead of %.1f deg: the solution nearest the previous target's joints); use a "
+                "protocol with joint targets" % (_fmt_pose(pose), worst + 1, math.degrees(solved[worst]),
+                                                 math.degrees(joints[worst])))
+
     def _require_motion_possible(self) -> None:
         status = self.status()
         if not status.motion_possible:

@@ -119,7 +119,8 @@ class MoveJob:
 
     def __init__(self, preview: Optional[Preview], on_update: Optional[Callable[["MoveJob"], None]] = None,
                  group: Optional[int] = None, ticket: Optional[int] = None,
-                 points: Tuple[StreamPoint, ...] = (), start: Optional[Tuple[float, ...]] = None) -> None:
+                 points: Tuple[StreamPoint, ...] = (), start: Optional[Tuple[float, ...]] = None,
+                 live: bool = False, stamp: float = 0.0) -> None:
         self.id = next(MoveJob._ids)
         self.group = self.id if group is None else group   # the jobs of one joint path share it
         self.ticket = ticket                                # arrival order of the goal (or None)
@@ -139,6 +140,14 @@ class MoveJob:
         self.points_taken = 0
         self.points_done = 0
         self.gaps = 0
+        # a joint_command stream (DriverCore.joint_command): its points grow while commands come
+        # (StreamSequencer.extend); ``closed`` once none came for joint_command_timeout (or a
+        # trajectory took over): then it ends like any stream, at rest at its last point.
+        # ``last_command``: the clock time the newest command was accepted
+        self.live = live
+        self.closed = False
+        self.last_command = stamp
+        self.replaced = 0               # commands that replaced a point not yet on the wire
         if preview is None and not self.points:
             raise ValueError("a job needs a preview (v1) or stream points (v2)")
         self._done = threading.Event()

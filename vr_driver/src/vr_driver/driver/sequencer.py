@@ -91,6 +91,8 @@ class SequencerView:
     targets_done: int = 0
     targets_rejected: int = 0
     targets_aborted: int = 0
+    live_anchor: Optional[Tuple[float, ...]] = None  # a live job: its last point put on the wire
+    #                                              (None: none yet, the job's start is the anchor)
 
 
 @dataclass(frozen=True)
@@ -112,7 +114,15 @@ class _Replanned:
     error: str
 
 
-_Request = Union[_Add, _Cancel, _Replanned]
+@dataclass(frozen=True)
+class _Extend:
+    job: MoveJob                    # a live job (a joint_command stream)
+    point: Any                      # the validated StreamPoint of the new command
+    anchored: Any                   # the same point as the successor of ``anchor`` (see extend)
+    stamp: float                    # clock time the command was accepted
+
+
+_Request = Union[_Add, _Cancel, _Replanned, _Extend]
 
 
 class _Settle:
@@ -181,6 +191,13 @@ class SequencerBase:
     def replanned(self, job: MoveJob, preview: Optional[Any], error: str = "") -> None:
         self._post(_Replanned(job, preview, error))
 
+    def extend(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
+        """A new command of the live job ``job`` (a joint_command stream): ``point`` follows the
+        job's last point; ``anchored`` is the same target as the successor of the view's
+        ``live_anchor`` (the last point put on the wire when it was validated), used where the
+        new point replaces one not put on the wire yet (streaming protocols only)."""
+        self._post(_Extend(job, point, anchored, stamp))
+
     def _post(self, request: _Request) -> None:
         with self._lock:
             self._inbox.append(request)
@@ -242,6 +259,11 @@ class SequencerBase:
         base then ends every job with the reason)."""
         raise NotImplementedError
 
+    def take_point(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
+        """A new command of a live job (:meth:`extend`). Only a streaming protocol's sequencer
+        takes one (the driver core refuses joint commands on the others)."""
+        raise NotImplementedError("this protocol does not stream joint commands")
+
     def resting(self, fb: Any) -> bool:
         """The protocol's own condition for the arm at rest, besides the in-motion bit clear and
         the pose unchanged for ``stop_settle_time``."""
@@ -286,6 +308,8 @@ class SequencerBase:
     def _take(self, request: _Request, now: float, fb: Optional[Feedback]) -> None:
         if isinstance(request, _Add):
             self._take_add(request, now)
+        elif isinstance(request, _Extend):
+            self.take_point(request.job, request.point, request.anchored, request.stamp)
         elif isinstance(request, _Cancel):
             if request.job is None:
                 self._stop_everything(request.reason, now)
@@ -478,7 +502,11 @@ class SequencerBase:
             tail_joints=tail, inflight_joints=job.joint_target if job is not None else None,
             settling=self._settle is not None, targets_sent=self.targets_sent,
             targets_done=self.targets_done, targets_rejected=self.targets_rejected,
-            targets_aborted=self.targets_aborted)
+            targets_aborted=self.targets_aborted, live_anchor=self.live_anchor())
+
+    def live_anchor(self) -> Optional[Tuple[float, ...]]:
+        """The last point of the live job in flight put on the wire (None: none)."""
+        return None
 
 
 class MotionSequencer(SequencerBase):

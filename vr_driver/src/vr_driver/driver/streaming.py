@@ -29,6 +29,19 @@ of the stream is re-sent: the job fails with the reason.
   stream is not offered any more; the new one starts from where the old one ended;
 - the arm not where the stream was planned from (after a stop): the first segment is planned
   again from the arm's joints (on the core's planning thread) before anything is sent.
+
+**A live stream** (``MoveJob.live``: the ``joint_command`` topic, :meth:`DriverCore.joint_command`):
+the same job, whose points grow while commands come (:meth:`StreamSequencer.take_point`, posted
+through :meth:`~vr_driver.driver.sequencer.SequencerBase.extend`). A new point replaces the job's
+last point when that one was not put on the wire yet (at most one point is ever waiting: the newest
+command wins; a point on the wire is never changed or recalled -- the controller may have taken it),
+else it is appended with the next sequence number. Every point passes through (smooth level
+``stream_smooth``): the controller blends into the next one only when it already has it, and
+otherwise stops exactly at the point (state WAITING) -- it never runs past the last command. When no
+command came for ``joint_command_timeout`` the job is closed: it takes no more points and ends
+(SUCCEEDED) once the arm is at rest at its last point. A gap (WAITING between commands) is normal
+here and not counted. A trajectory (REPLACE) closes it like any running stream; a move, a cancel or
+stop_motion stops it (STOP, at rest).
 """
 from __future__ import annotations
 
@@ -42,7 +55,7 @@ from ..protocol.v1 import StatusBits
 from ..protocol.v2 import SEQ_MAX, StreamState, blend_window, next_seq, seq_offset
 from .jobs import JobPhase, MoveJob, StreamPoint
 from .link import LinkSample
-from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, SequencerBase, _Settle
+from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, SequencerBase, _Settle
 from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
@@ -253,6 +266,7 @@ class StreamSequencer(SequencerBase):
         self._started = 0.0
         self._stopping = False             # send STOP until the arm is at rest
         self._offered: Optional[int] = None   # the last point of the current job put on the wire
+        self._high = -1                       # the highest point of the current job ever put on it
         self._acked = -1                      # points_taken at the last record
         self._ahead = True                    # send ahead of the acknowledgements (send_ahead)
         self._last_state: Optional[StreamState] = None
@@ -271,6 +285,9 @@ class StreamSequencer(SequencerBase):
         job = self._job
         if job is None or not self._base or self._stopping or job.points_taken < self._limit:
             return False
+        if job.live:                 # a live stream ends when closed and the arm reached its end
+            return job.closed and now - job.last_command <= \
+                self.params.joint_command_timeout + END_WATCH
         end = self._started + job.duration
         return end - END_LEAD <= now <= end + END_WATCH
 
@@ -280,7 +297,36 @@ class StreamSequencer(SequencerBase):
     def apply_replan(self, job: MoveJob, plan: Any) -> None:
         job.points, job.start = plan
 
+    def live_anchor(self) -> Optional[Tuple[float, ...]]:
+        job = self._job
+        if job is None or not job.live or not self._base or self._high < 0:
+            return None
+        return job.points[self._high].joints
+
+    def take_point(self, job: MoveJob, point: StreamPoint, anchored: StreamPoint, stamp: float) -> None:
+        """A new command of the live job ``job`` (module docstring): it replaces the job's last point
+        when that one is not on the wire yet (``anchored``: validated from the last point that is),
+        else it is appended (``point``: validated from the last accepted command)."""
+        if job.done or job.closed:
+            log.warning("job %d: a joint command arrived as its stream ended (%s); dropped -- the next "
+                        "one starts a new stream", job.id, job.phase.value)
+            return
+        job.last_command = stamp
+        started = job is self._job and bool(self._base)
+        high = self._high if started else -1
+        if len(job.points) - 1 > high:
+            job.points = job.points[:-1] + (anchored,)
+            job.replaced += 1
+        else:
+            job.points = job.points + (point,)
+            if started:
+                job.seqs.append(self._seq(len(job.points) - 1))
+        if started:
+            self._limit = len(job.points)
+
     def replaced(self, job: MoveJob) -> None:
+        if job.live:
+            job.closed = True
         if not self._stopping:
             # the points the controller took run to their end; the rest of the old stream is dropped
             self._limit = min(self._limit, max(job.points_taken, 1))
@@ -318,8 +364,13 @@ class StreamSequencer(SequencerBase):
         taken = taken if taken <= n else 0
         done = seq_offset(fb.done_seq, self._base) + 1 if fb.done_seq else 0
         done = done if done <= n else 0
+        if job.live and not job.closed and now - job.last_command > self.params.joint_command_timeout:
+            job.closed = True
+            log.info("job %d: no joint command for %.3g s (joint_command_timeout): the stream ends at "
+                     "its last point (%d points, %d replaced before they were sent)", job.id,
+                     self.params.joint_command_timeout, n, job.replaced)
         if fb.state is StreamState.WAITING and was is not StreamState.WAITING and 0 < done < n \
-                and not self._stopping:
+                and not self._stopping and not job.live:
             job.gaps += 1
             log.warning("job %d: the arm stopped at point %d of %d waiting for the next target (the "
                         "look-ahead ran dry: the bus did not bring it in time)", job.id, done, n)
@@ -342,7 +393,7 @@ class StreamSequencer(SequencerBase):
             return
         resting = fb.state in (StreamState.IDLE, StreamState.WAITING) and \
             not fb.status & StatusBits.IN_MOTION
-        if done >= n and resting:
+        if done >= n and resting and (job.closed or not job.live):
             self._end_current()
             log.info("job %d done: %d points, at %s", job.id, n, fb.describe())
             job.finish(True, JobPhase.SUCCEEDED, "", fb.pose)
@@ -357,6 +408,15 @@ class StreamSequencer(SequencerBase):
                                "%.3g s (accept_timeout; %s)" % (self.params.accept_timeout,
                                                                 fb.describe()), now, fb)
             return
+        if job.live:
+            # a live stream lasts as long as commands come; once closed, its last segment lasts at
+            # most joint_command_timeout (DriverCore.joint_command's speed check)
+            limit = self.params.joint_command_timeout + self.params.motion_timeout_margin
+            if job.closed and now - job.last_command > limit:
+                self._fail_current(job, "the arm did not come to rest at the stream's last point "
+                                   "within %.3g s of the last joint command (joint_command_timeout "
+                                   "+ motion_timeout_margin)" % limit, now, fb)
+            return
         timeout = self.params.motion_timeout_factor * job.duration + self.params.motion_timeout_margin
         if now - self._started > timeout:
             self._fail_current(job, "the stream did not end within %.3g s (motion timeout: %g x the "
@@ -368,6 +428,7 @@ class StreamSequencer(SequencerBase):
         self._job = None
         self._base = 0
         self._limit = 0
+        self._high = -1
 
     def _fail_current(self, job: MoveJob, reason: str, now: float, fb: Any) -> None:
         log.warning("job %d ended: %s", job.id, reason)
@@ -398,10 +459,18 @@ class StreamSequencer(SequencerBase):
             return
         if fb.state not in (StreamState.IDLE, StreamState.WAITING) or fb.status & StatusBits.IN_MOTION:
             return          # an earlier stream still ends
+        if job.live and joints is not None and job.start is not None and \
+                max(abs(a - b) for a, b in zip(joints, job.start)) > START_TOLERANCE:
+            # its first point was checked from job.start: never send it from elsewhere
+            self._job = None
+            job.finish(False, JobPhase.FAILED, "not sent: the arm moved since the joint command was "
+                       "checked (it is %.2f deg from there); the next command starts a new stream"
+                       % math.degrees(max(abs(a - b) for a, b in zip(joints, job.start))), None)
+            return
         if not self.starts_here(job, joints):
             return
         self._base = next_seq(fb.accepted_seq)
-        self._offered, self._acked, self._ahead = None, -1, True
+        self._offered, self._acked, self._ahead, self._high = None, -1, True, -1
         self._limit = len(job.points)
         self._rejected_before = fb.rejected_seq
         self._started = now
@@ -453,6 +522,8 @@ class StreamSequencer(SequencerBase):
                 break
             targets.append(self._target(job, i))
         self._offered = first + len(targets) - 1 if targets else None
+        if self._offered is not None:
+            self._high = max(self._high, self._offered)
         return self.wire.stream_command(targets, start=first == 0 and bool(targets), outputs=outputs)
 
     def on_lost(self, now: float, reason: str) -> None:
@@ -466,3 +537,4 @@ class StreamSequencer(SequencerBase):
                         "there until set again", self.outputs)
         self.outputs = 0
         self._base = self._limit = 0         # the job itself is ended by the base (end_all)
+        self._high = -1
