@@ -122,5 +122,22 @@ class FuzzBenchTest(unittest.TestCase):
         self.assertIn("RESULT: PASS (violations 0)", res.stdout)
 
 
+class CollisionBenchTest(BenchRun):
+    """bench/collision.py --quick: the time per call of each collision query beside FK, and the
+    ratios (skipped with a line naming the package where pinocchio / coal are missing)."""
+    BENCH = "collision"
+
+    def test_figures(self):
+        self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
+        if "collision benchmark skipped:" in self.out:
+            self.skipTest(self.out.strip().splitlines()[-1])
+        for query in ("pin FK", "KDL FK", "in_collision", "in_collision free", "in_collision hit", "min_distance",
+                      "contacts"):
+            self.line(r"^%s\s+%s$" % (re.escape(query), NUM))
+        self.line(r"^ratio in_collision / pin FK: %s$" % NUM)
+        self.line(r"^ratio in_collision / KDL FK: %s$" % NUM)
+        self.line(r"^free [0-9]+, colliding [0-9]+ \(%s %% free\)$" % NUM)
+
+
 if __name__ == "__main__":
     unittest.main()
