@@ -435,6 +435,14 @@ def _pair_errors(p: np.ndarray, joints_deg: np.ndarray, poses: np.ndarray) -> Tu
     return np.linalg.norm(r[:, :3], axis=1), np.degrees(np.linalg.norm(r[:, 3:], axis=1))
 
 
+def pair_errors(params: Mapping[str, float], joints_deg: Any, poses: Any) -> Tuple[np.ndarray, np.ndarray]:
+    """Per pair: how far the model ``params`` puts the TCP at the shown joints ``joints_deg`` (N, 6 deg)
+    from the reported ``poses`` (N, 6: mm, deg): position [mm] and rotation angle [deg]."""
+    joints = np.atleast_2d(np.asarray(joints_deg, dtype=float))
+    reported = np.atleast_2d(np.asarray(poses, dtype=float))
+    return _pair_errors(_vector(params), joints, reported)
+
+
 def _check_radians(joints: np.ndarray, poses: np.ndarray, p: np.ndarray, lever_mm: float) -> None:
     """Joints or pose angles in radians: every value within +-2 pi (joints) / +-pi (pose angles), and
     the nominal model fits much better when they are read as radians."""

@@ -55,6 +55,24 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, "%s: error: %s (see --help)\n" % (self.prog, message))
 
 
+
+def add_convention_arguments(parser: argparse.ArgumentParser) -> None:
+    """The joint-angle convention options (AJ columns <-> the model's joints), shared by csr_export and
+    ``calibrate``."""
+    conv = parser.add_argument_group("joint-angle convention (verify on the controller)")
+    conv.add_argument("--fa-reference", choices=("ua", "horizontal"), default="ua",
+                      help="FA measured relative to the upper arm (default) or to the horizontal")
+    conv.add_argument("--flip", default="", metavar="AXES", help="axes whose sign is inverted, e.g. UA,BW")
+    conv.add_argument("--offset", action="append", default=[], metavar="AXIS=DEG",
+                      help="add DEG to an axis after the flip, e.g. BW=-90 (repeatable)")
+
+
+def convention_from(args: argparse.Namespace, kin: Any) -> JointConvention:
+    """The :class:`JointConvention` of parsed :func:`add_convention_arguments` options (``kin``: the
+    model, for the FA coupling when FA counts from the horizontal)."""
+    coupling = JointConvention.coupling_of(kin) if args.fa_reference == "horizontal" else 1
+    return JointConvention.from_options(args.fa_reference, args.flip, args.offset, coupling)
+
 def _build_parser(prog: str) -> argparse.ArgumentParser:
     p = _Parser(prog=prog, formatter_class=argparse.RawDescriptionHelpFormatter, epilog=_EPILOG,
                 description="Export waypoints or a JointTrajectory to a Panasonic DTPS .csr program, or read a "
@@ -91,19 +109,14 @@ def _build_parser(prog: str) -> argparse.ArgumentParser:
     moves.add_argument("--move", choices=("ptp", "lin", "circ"), help="move type (default ptp = MOVEP)")
     moves.add_argument("--speed", type=float, help="speed in m/min (default 10)")
     moves.add_argument("--smooth", type=int, help="smooth level, -1 = controller default (default -1)")
-    conv = p.add_argument_group("joint-angle convention (verify on the controller)")
-    conv.add_argument("--fa-reference", choices=("ua", "horizontal"), default="ua",
-                      help="FA measured relative to the upper arm (default) or to the horizontal")
-    conv.add_argument("--flip", default="", metavar="AXES", help="axes whose sign is inverted, e.g. UA,BW")
-    conv.add_argument("--offset", action="append", default=[], metavar="AXIS=DEG",
-                      help="add DEG to an axis after the flip, e.g. BW=-90 (repeatable)")
+    add_convention_arguments(p)
     p.add_argument("--driver-config", metavar="YAML",
                    help="the driver's parameter file (e.g. vr_driver/config/vr_driver.yaml): workspace box, "
                         "TCP offset, joint names (default: the built-in defaults)")
     return p
 
 
-def _load_params(path: Optional[str]):
+def load_params(path: Optional[str]):
     from ..params import DriverParams, ParamError
     if not path:
         return DriverParams()
@@ -189,7 +202,7 @@ def _output(data: bytes, path: Optional[str], force: bool = False) -> None:
 
 
 def _run_export(args: argparse.Namespace, prog: str) -> int:
-    params = _load_params(args.driver_config)
+    params = load_params(args.driver_config)
     joint_names = params.controller_joint_names
     if args.from_topic:
         validate.number(args.timeout, lambda _: CsrError("must be a positive number of seconds, got %g" % args.timeout,
@@ -201,8 +214,7 @@ def _run_export(args: argparse.Namespace, prog: str) -> int:
         wfile = load_waypoints(args.input, joint_names)
     defaults = wfile.defaults
     kin = kinematics_for(params)
-    coupling = JointConvention.coupling_of(kin) if args.fa_reference == "horizontal" else 1
-    convention = JointConvention.from_options(args.fa_reference, args.flip, args.offset, coupling)
+    convention = convention_from(args, kin)
     try:
         settings = ExportSettings(
             description=_description(args, wfile.program, wfile.source),
@@ -228,10 +240,9 @@ def _run_from_csr(args: argparse.Namespace, prog: str) -> int:
     program = parse_program(text, path)
     if args.decimals is not None:
         program = replace(program, decimals=_integer(args.decimals, "--decimals", 0, 15))
-    params = _load_params(args.driver_config)
+    params = load_params(args.driver_config)
     kin = kinematics_for(params)
-    coupling = JointConvention.coupling_of(kin) if args.fa_reference == "horizontal" else 1
-    convention = JointConvention.from_options(args.fa_reference, args.flip, args.offset, coupling)
+    convention = convention_from(args, kin)
     rows, problems = check_program(program, kin, convention, params.workspace, args.from_csr)
     if args.output:
         if problems:
