@@ -6,6 +6,7 @@ or coal are not installed (Python < 3.10, or scripts/setup not run); the Missing
 itself is tested everywhere."""
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -199,6 +200,36 @@ def test_padding_changes_the_verdict_at_a_known_distance(urdf, srdf):
     assert CollisionChecker.from_urdf(urdf, srdf, padding=0.04, scene=ball).in_collision(zero)
     # joint_1 turns the arm away from the ball: free again with the same padding
     assert not c.in_collision([1.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+
+
+@pytest.mark.parametrize("obj", [
+    SceneObject("cyl_x", "cylinder", (0.05, 0.3), (0.39, 0.0, 0.7), rpy=(0.0, math.pi / 2, 0.0)),
+    SceneObject("cyl_z", "cylinder", (0.05, 0.3), (0.29, 0.0, 0.7)),
+    SceneObject("box_x", "box", (0.3, 0.1, 0.1), (0.39, 0.0, 0.7)),
+    SceneObject("box_yawed", "box", (0.1, 0.3, 0.1), (0.39, 0.0, 0.7), rpy=(0.0, 0.0, math.pi / 2)),
+    SceneObject("box_quat", "box", (0.1, 0.3, 0.1), (0.39, 0.0, 0.7),
+                quaternion=(0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))),
+])
+@needs_libs
+def test_sizes_are_full_lengths_and_poses_turn_the_shape(urdf, srdf, obj):
+    """Each solid, turned so that its long side points away from the upper arm, starts 30 mm in front
+    of the arm's face at x = 0.21 (the cylinder's length and the box's size are full lengths, a
+    cylinder's axis is its z, rpy and quaternion rotate it)."""
+    from vr_driver.kinematics.collision import CollisionChecker
+
+    c = CollisionChecker.from_urdf(urdf, srdf, scene=Scene([obj]))
+    nearest = c.nearest(np.zeros(6))
+    assert (nearest.link_a, nearest.other) == ("link_2", obj.name)
+    assert nearest.distance == pytest.approx(0.03, abs=1e-6)
+
+
+@needs_libs
+def test_touching_counts_as_collision(urdf, srdf):
+    from vr_driver.kinematics.collision import CollisionChecker
+
+    for x, hit in ((0.2601, False), (0.26, True), (0.2599, True)):
+        c = CollisionChecker.from_urdf(urdf, srdf, scene=Scene([SceneObject("ball", "sphere", (0.05,), (x, 0.0, 0.7))]))
+        assert c.in_collision(np.zeros(6)) is hit, x
 
 
 @needs_libs
