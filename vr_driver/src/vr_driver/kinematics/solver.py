@@ -454,6 +454,12 @@ def _turn(v, s, lo, hi):
     return best
 
 
+def _product(choices: Sequence[Sequence[float]]) -> Iterator[Tuple[float, ...]]:
+    """Every combination of one value per entry of ``choices`` (itertools.product, as tuples)."""
+    import itertools
+    return (tuple(c) for c in itertools.product(*choices))
+
+
 def _closest_point(p1, a1, p2, a2):
     """The midpoint of the common normal of two lines (point, unit direction)."""
     w = _sub(p1, p2)
@@ -818,6 +824,43 @@ class Kinematics:
         if min_manipulability is not None:
             self.check_singularity(q, min_manipulability)
         return q
+
+    def ik_solutions(self, target: Any, seed: Optional[Sequence[float]] = None) -> List[Tuple[float, ...]]:
+        """Every joint solution within the limits that puts the tip at ``target`` (as :meth:`ik`),
+        nearest to ``seed`` first (squared joint distance): with the analytic solver each geometric
+        branch (shoulder x elbow x wrist, up to 8) and, for each revolute joint whose range spans
+        more than 2 pi (the wrist), each full turn of it that fits the limits; a planner picks the
+        nearest one that is also collision-free. Without the analytic solver: the one solution of
+        :meth:`ik`. Raises as :meth:`ik` when there is none."""
+        r, p = self._target(target)
+        seed_t = self.joint_vector(seed) if seed is not None else self.clamp((0.0,) * self.dof)
+        if self._analytic is None:
+            return [self.ik(target, seed_t)]
+        lower, upper = self.limits.lower, self.limits.upper
+        candidates, _, _, _ = self._analytic.solve(r, p, seed_t, lower, upper)
+        found = []
+        for _, q in candidates:
+            if not self._ok(q, r, p):
+                q = self._nr_polish(q, r, p)
+                if q is None:
+                    continue
+            found.append(q)
+        if not found:                          # the errors (and the polish) of the one-solution path
+            found.append(self._ik_analytic(r, p, seed_t))
+        out: List[Tuple[float, ...]] = []
+        for q in found:
+            turns = []
+            for v, lo, hi, rev in zip(q, lower, upper, self.limits.revolute):
+                if not rev:
+                    turns.append((v,))
+                    continue
+                k_lo, k_hi = math.ceil((lo - 1e-9 - v) / TWO_PI), math.floor((hi + 1e-9 - v) / TWO_PI)
+                turns.append(tuple(min(max(v + k * TWO_PI, lo), hi) for k in range(k_lo, k_hi + 1)) or (v,))
+            for variant in _product(turns):
+                if all(max(abs(a - b) for a, b in zip(variant, other)) > 1e-9 for other in out):
+                    out.append(variant)
+        out.sort(key=lambda q: sum((a - b) ** 2 for a, b in zip(q, seed_t)))
+        return out
 
     def _target(self, target: Any):
         if isinstance(target, kdl.Frame):

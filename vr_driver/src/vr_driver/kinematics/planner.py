@@ -1,0 +1,591 @@
+"""Collision-aware motion planning in joint space: OMPL (RRTConnect by default), OMPL's path
+simplifier, TOPP-RA timing under the joint speed and acceleration limits. ROS-free; the planning
+part of the MoveIt stand-in (issue 27).
+
+    planner = Planner(kinematics, checker)            # a CollisionChecker, or any is_valid(q) -> bool
+    plan = planner.plan(start, "home")                # a named state of the SRDF
+    plan = planner.plan(start, (0.1, 0.5, ...))       # joints [rad], chain order (or {name: value})
+    plan = planner.plan(start, ControllerPose(...))   # TCP in ``base``, mm / deg (the controller's)
+    plan = planner.plan(start, ((x, y, z), (qx, qy, qz, qw)))  # tool0 in base_link, m / quaternion
+    plan.joint_names, plan.times, plan.positions, plan.velocities, plan.accelerations
+    plan.to_goal()                                     # the driver's TrajectoryGoal
+    plan.to_msg(JointTrajectory, JointTrajectoryPoint, rospy.Duration.from_sec)
+
+What :meth:`Planner.plan` does, in order; every failure is a :class:`PlanningError` saying which
+step and why, and nothing else happens:
+
+1. The start: inside the joint limits and valid (a checker's contacts are named).
+2. The goal: joints inside the limits and valid; a named state looked up in the SRDF's group states
+   (``Kinematics.named_states``); a pose solved for *every* IK branch and full wrist turn
+   (``Kinematics.ik_solutions``), those inside the limits and valid kept, the nearest to the start
+   chosen ("nearest": the shortest synchronous joint move, max over joints of |dq| / speed limit).
+3. Planning: when the straight joint-space move is valid it is the path; otherwise OMPL's planner
+   (``planner``, one of :data:`PLANNERS`) within ``time_budget`` seconds. The planner keeps
+   ``clearance`` more than the validity asks (a checker: a copy of it padded by that much more;
+   a callable: ``planning_validity`` when given) except near the start and the goal, so that what
+   the later steps deviate from the checked path stays valid.
+4. Simplification (OMPL's PathSimplifier, step counts rather than a time limit, so that a seed
+   gives one result): vertex reduction, partial shortcuts, collapsing close vertices, B-spline
+   smoothing of the corners; each step keeps the path valid (it checks its motions as the planner
+   does).
+5. Timing: a cubic spline through the path (resampled densely, so that it stays on the checked
+   path), TOPP-RA time-optimal under the joint speed and acceleration limits times the scaling
+   factors (less :data:`TOPP_MARGIN`), from rest to rest.
+6. Sampling every ``dt`` (at most; evenly spaced over the duration): positions, velocities,
+   accelerations, times. Every sample is checked again -- joint limits, speed and acceleration,
+   validity -- and so is every straight chord between two samples (what the driver interpolates),
+   at the motion-check resolution below.
+
+**Motion-check resolution.** OMPL checks a motion at states at most one "longest valid segment"
+apart. The planner plans in *scaled* joint coordinates x_i = w_i q_i, where w_i [m/rad] bounds
+how far any point of the arm beyond joint i is from that joint's axis (the chain's link lengths
+beyond it, plus :data:`LINK_ALLOWANCE` for the links' own size and a tool): a joint move dq moves no
+point of the arm by more than sum_i w_i |dq_i| <= sqrt(n) |dx|. The segment length is set so that
+this bound is ``max_sweep`` (default 20 mm): between two checked configurations no point of the
+arm travels farther than that, so a collision is missed only where less than ``max_sweep`` / 2 of
+the arm crosses less than ``max_sweep`` of an obstacle -- the checker's padding covers it. For the
+VR-006L (w = 2.09, 1.64, 1.08, 0.95, 0.39, 0.39 m/rad) the planner checks a move of joint 1 alone
+every 0.22 deg, of joint 6 alone every 1.2 deg; the check of the result (which subdivides each chord
+by the sum itself, not the sqrt(n) bound) every 0.55 and 2.9 deg. The scaled space also
+makes the planner's distance (which tree node is nearest) a measure of how far the arm moves.
+
+Determinism: OMPL's random numbers come from one process-wide seed generator; :meth:`Planner.plan`
+reseeds it with ``seed`` (when given) before it makes its planner and simplifier, so one seed and
+one problem give one path (as long as the planner finishes within its budget: a planner cut off by
+the clock stops where the clock stops it).
+
+The optional libraries (OMPL, TOPP-RA) are imported when a Planner is made, through
+:mod:`vr_driver.kinematics.deps`: a machine without them gets :class:`~vr_driver.errors.MissingDependency`
+naming the package and scripts/setup, and ``import vr_driver.kinematics.planner`` itself always works.
+"""
+from __future__ import annotations
+
+import importlib
+import math
+import random
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
+from ..poses import ControllerPose, ros_to_matrix
+from . import deps
+
+__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER",
+           "DEFAULT_MAX_SWEEP", "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "LINK_ALLOWANCE", "TOPP_MARGIN", "joint_weights"]
+
+#: the planners one may name (OMPL geometric planners); RRTConnect is MoveIt's default, too
+PLANNERS = ("RRTConnect", "RRT", "RRTstar", "InformedRRTstar", "BITstar", "PRM", "PRMstar",
+            "KPIECE1", "BKPIECE1", "LBKPIECE1", "FMT", "AORRTC")
+DEFAULT_PLANNER = "RRTConnect"
+#: [m] no point of the arm moves farther than this between two checked configurations
+DEFAULT_MAX_SWEEP = 0.02
+#: [s] the largest spacing of the sampled trajectory (the rate MoveIt-timed goals usually have)
+DEFAULT_DT = 0.05
+#: [m] the planner keeps this much farther from everything than the validity asks (a checker's
+#: padding + this; module text): what the motion checks may miss between two checked
+#: configurations (half of ``max_sweep``) and what the timing spline and the chords between the
+#: samples deviate from the checked path stay inside it, so the check of the result passes
+DEFAULT_CLEARANCE = 0.01
+#: [m] near the start and the goal (this far by the sweep bound) the clearance is not asked for
+ESCAPE_SWEEP = 0.2
+#: [m] added to each joint's lever arm: the links' own size (their collision shapes stand out of
+#: the joint axes) and a tool on the flange
+LINK_ALLOWANCE = 0.3
+#: the fraction of each speed and acceleration limit TOPP-RA plans to: its constraints hold at its
+#: grid points, the spline between them may exceed them slightly; the sampled result is checked
+#: against the full limits
+TOPP_MARGIN = 0.97
+#: rounds of shortcutting at most (each tries as many shortcuts as the path has vertices)
+_SIMPLIFY_ROUNDS = 2
+_FEATURE = "collision-aware planning (vr_driver.kinematics.planner)"
+#: the timing's tries: ([rad] the largest joint step between two points of the path the timing
+#: spline goes through, the sample spacing as a fraction of ``dt``). The spline overshoots a corner of
+#: the path a little, and the straight chord between two samples cuts a curve by its sag: where the
+#: path runs along an obstacle, that can touch it. Closer spline points shrink the overshoot and
+#: half the spacing quarters the sag; the result is the first try that passes every check.
+_TIMING_ATTEMPTS = ((0.05, 1.0), (0.01, 0.5), (0.002, 0.25))
+
+
+class PlanningError(MotionError):
+    """No trajectory: the start or the goal is invalid, the goal is unreachable or in collision,
+    the planner found no path within its budget, or the timed result failed its checks. ``step`` names
+    the step (start, goal, plan, time, check); ``contacts`` holds a checker's contacts when
+    there were some."""
+
+    def __init__(self, step: str, message: str, contacts: Sequence[Any] = ()) -> None:
+        super().__init__(message)
+        self.step = step
+        self.contacts = tuple(contacts)
+
+
+@dataclass(frozen=True)
+class PlannedTrajectory:
+    """A timed joint trajectory, from rest to rest, as trajectory_msgs/JointTrajectory carries one
+    (radians, rad/s, rad/s^2, seconds from the start); ``path`` is the geometric path it follows
+    (after simplification), ``timings`` how long each step took [s]."""
+
+    joint_names: Tuple[str, ...]
+    times: Tuple[float, ...]
+    positions: Tuple[Tuple[float, ...], ...]
+    velocities: Tuple[Tuple[float, ...], ...]
+    accelerations: Tuple[Tuple[float, ...], ...]
+    path: Tuple[Tuple[float, ...], ...]
+    planner: str
+    timings: Dict[str, float] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return self.times[-1]
+
+    @property
+    def start(self) -> Tuple[float, ...]:
+        return self.positions[0]
+
+    @property
+    def goal(self) -> Tuple[float, ...]:
+        return self.positions[-1]
+
+    def to_goal(self, **kwargs: Any):
+        """The driver's :class:`~vr_driver.driver.trajectories.TrajectoryGoal` of this trajectory
+        (``kwargs``: its tolerances and start time)."""
+        from ..driver.trajectories import TrajectoryGoal
+        return TrajectoryGoal(joint_names=self.joint_names, positions=self.positions, times=self.times, **kwargs)
+
+    def to_msg(self, trajectory_type: Callable[..., Any], point_type: Callable[..., Any],
+               duration: Callable[[float], Any]) -> Any:
+        """A trajectory_msgs/JointTrajectory, the message classes and the Duration maker given by
+        the caller (this module imports no ROS): ``to_msg(JointTrajectory, JointTrajectoryPoint,
+        rospy.Duration.from_sec)``. The header is left to the caller (stamp 0: start now)."""
+        msg = trajectory_type()
+        msg.joint_names = list(self.joint_names)
+        msg.points = [point_type(positions=list(p), velocities=list(v), accelerations=list(a),
+                                 time_from_start=duration(t))
+                      for t, p, v, a in zip(self.times, self.positions, self.velocities, self.accelerations)]
+        return msg
+
+
+def joint_weights(kinematics: Any, allowance: float = LINK_ALLOWANCE) -> Tuple[float, ...]:
+    """Per movable joint [m/rad]: a bound on the distance from the joint's axis to any point of the
+    arm beyond it -- the lengths of the chain's joint offsets after it (whatever the pose: the
+    triangle inequality) plus ``allowance``. A rotation dq of the joint moves no such point farther
+    than weight * |dq|."""
+    joints = kinematics.chain_joints
+    out = []
+    for k, j in enumerate(joints):
+        if not j.movable:
+            continue
+        beyond = sum(float(np.linalg.norm(o.origin[:3, 3])) for o in joints[k + 1:])
+        out.append(beyond + allowance if j.type != "prismatic" else 1.0)
+    return tuple(out)
+
+
+def _validity(validity: Any) -> Tuple[Callable[[Sequence[float]], bool], Optional[Callable[[Sequence[float]], list]]]:
+    """(is_valid, contacts or None) of a checker (``in_collision`` / ``contacts``) or a callable."""
+    if validity is None:
+        return (lambda q: True), None
+    if hasattr(validity, "in_collision"):
+        in_collision = validity.in_collision
+        contacts = getattr(validity, "contacts", None)
+        return (lambda q: not in_collision(q)), contacts
+    if callable(validity):
+        return validity, None
+    raise TypeError("validity must be a collision checker (in_collision(q)) or a callable is_valid(q) -> bool, "
+                    "got %r" % (validity,))
+
+
+def _require(module: str) -> Any:
+    """The module ``module`` of an optional package, or MissingDependency naming the package."""
+    top = module.split(".")[0]
+    deps.require(top, _FEATURE)
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:  # the package is there but a part of it does not load
+        raise MissingDependency(deps.PACKAGES.get(top, top), module, _FEATURE,
+                                "%s: %s" % (type(exc).__name__, exc)) from exc
+
+
+def _fmt(q: Sequence[float]) -> str:
+    return "(%s) deg" % ", ".join("%.1f" % math.degrees(v) for v in q)
+
+
+def _number(value: Any, name: str, lo: float, hi: float = math.inf, lo_open: bool = True) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or math.isnan(value) \
+            or not ((lo < value) if lo_open else (lo <= value)) or not value <= hi:
+        raise PoseError("%s must be a number in %s%g, %g], got %r" % (name, "(" if lo_open else "[", lo, hi, value))
+    return float(value)
+
+
+class Planner:
+    """Plans collision-free, timed joint trajectories for one chain (see the module text).
+
+    ``kinematics``: a :class:`~vr_driver.kinematics.solver.Kinematics`; ``validity``: a
+    CollisionChecker (``in_collision(q)``, ``contacts(q)``) or any callable ``is_valid(q) -> bool``
+    (None: everything within the limits is valid); ``limits``: a JointLimits (default: the
+    kinematics'; ``velocity`` and ``acceleration`` are the speed and acceleration limits);
+    ``planner``: one of :data:`PLANNERS`; ``time_budget`` [s] of the planner; ``seed``: an int
+    for reproducible plans; ``velocity_scaling`` / ``acceleration_scaling`` in (0, 1];
+    ``dt`` [s] the largest sample spacing; ``max_sweep`` [m] the motion-check resolution."""
+
+    def __init__(self, kinematics: Any, validity: Any = None, limits: Any = None,
+                 planner: str = DEFAULT_PLANNER, time_budget: float = 1.0, seed: Optional[int] = None,
+                 velocity_scaling: float = 1.0, acceleration_scaling: float = 1.0, dt: float = DEFAULT_DT,
+                 max_sweep: float = DEFAULT_MAX_SWEEP, clearance: float = DEFAULT_CLEARANCE,
+                 planning_validity: Optional[Callable[[Sequence[float]], bool]] = None) -> None:
+        if planner not in PLANNERS:
+            raise PlanningError("plan", "unknown planner %r: the planners are %s" % (planner, ", ".join(PLANNERS)))
+        self.kin = kinematics
+        self.limits = limits if limits is not None else kinematics.limits
+        self.names = tuple(self.limits.names)
+        self.dof = len(self.names)
+        self.planner_name = planner
+        self.time_budget = _number(time_budget, "time_budget [s]", 0.0)
+        self.seed = seed
+        self.velocity_scaling = _number(velocity_scaling, "velocity_scaling", 0.0, 1.0)
+        self.acceleration_scaling = _number(acceleration_scaling, "acceleration_scaling", 0.0, 1.0)
+        self.dt = _number(dt, "dt [s]", 0.0)
+        self.max_sweep = _number(max_sweep, "max_sweep [m]", 0.0)
+        self.is_valid, self._contacts = _validity(validity)
+        self.clearance = _number(clearance, "clearance [m]", 0.0, lo_open=False)
+        self._strict = self._strict_validity(validity, planning_validity)
+        self._ends: Tuple[Tuple[float, ...], ...] = ()
+        for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
+            if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
+                raise PlanningError("time", "every joint needs a finite %s limit > 0 for the timing, got %r"
+                                    % (what, tuple(values)))
+        self.lower = tuple(self.limits.lower)
+        self.upper = tuple(self.limits.upper)
+        for n, lo, hi in zip(self.names, self.lower, self.upper):
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise PlanningError("plan", "joint %s needs finite position limits to plan in, got [%r, %r]"
+                                    % (n, lo, hi))
+        self.weights = joint_weights(kinematics)
+        self._ob, self._og, self._ou = (_require(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+        self._toppra = _require("toppra")
+        _require("toppra.algorithm")
+        _require("toppra.constraint")
+        self._ou.setLogLevel(self._ou.LOG_WARN)
+
+    # --------------------------------------------------------------------------------- checks
+    def _strict_validity(self, validity: Any, given: Optional[Callable]) -> Callable[[Sequence[float]], bool]:
+        """What the planner plans with: ``given``; else, for a checker that can be copied and padded,
+        a copy padded by ``clearance`` more; else the validity itself."""
+        if given is not None:
+            if not callable(given):
+                raise TypeError("planning_validity must be a callable is_valid(q) -> bool, got %r" % (given,))
+            return given
+        if self.clearance > 0.0 and all(hasattr(validity, a) for a in ("copy", "set_padding", "padding")):
+            strict = validity.copy()
+            strict.set_padding(validity.padding + self.clearance)
+            return lambda q: not strict.in_collision(q)
+        return self.is_valid
+
+    def planning_valid(self, q: Sequence[float]) -> bool:
+        """The planner's test: valid with the clearance -- or, within ``ESCAPE_SWEEP`` of the start
+        or the goal of the plan being made, valid (an arm that starts or ends closer than the
+        clearance to something must be able to leave or reach that place)."""
+        if self._strict(q):
+            return True
+        return (any(self._sweep(q, e) <= ESCAPE_SWEEP for e in self._ends)) and bool(self.is_valid(q))
+
+    def _why_invalid(self, q: Sequence[float]) -> Tuple[str, tuple]:
+        if self._contacts is None:
+            return "", ()
+        try:
+            contacts = tuple(self._contacts(q))
+        except Exception:  # the naming is an aid; the verdict was is_valid's
+            return "", ()
+        return (": " + "; ".join(str(c) for c in contacts)) if contacts else "", contacts
+
+    def _sweep(self, a: Sequence[float], b: Sequence[float]) -> float:
+        return sum(w * abs(x - y) for w, x, y in zip(self.weights, a, b))
+
+    def motion_valid(self, a: Sequence[float], b: Sequence[float],
+                     is_valid: Optional[Callable[[Sequence[float]], bool]] = None) -> Optional[Tuple[float, ...]]:
+        """None when the straight joint move a -> b is valid (``is_valid``, default the validity) at
+        the check resolution (``a`` is taken as checked), else the first invalid configuration on it."""
+        is_valid = is_valid or self.is_valid
+        n = max(1, int(math.ceil(self._sweep(a, b) / self.max_sweep)))
+        for k in range(1, n + 1):
+            f = k / n
+            q = tuple(x + f * (y - x) for x, y in zip(a, b))
+            if not is_valid(q):
+                return q
+        return None
+
+    def _joints(self, q: Any, what: str) -> Tuple[float, ...]:
+        try:
+            q = self.kin.joint_vector(q)
+        except PoseError as exc:
+            raise PlanningError(what, "%s: %s" % (what, exc)) from exc
+        bad = ["%s = %.4f outside [%.4f, %.4f]" % (n, v, lo, hi)
+               for n, v, lo, hi in zip(self.names, q, self.lower, self.upper) if not lo - 1e-9 <= v <= hi + 1e-9]
+        if bad:
+            raise PlanningError(what, "%s %s is outside the joint limits: %s" % (what, _fmt(q), "; ".join(bad)))
+        return tuple(min(max(v, lo), hi) for v, lo, hi in zip(q, self.lower, self.upper))
+
+    def _nearness(self, a: Sequence[float], b: Sequence[float]) -> Tuple[float, float]:
+        return (max(abs(x - y) / v for x, y, v in zip(a, b, self.limits.velocity)),
+                sum((x - y) ** 2 for x, y in zip(a, b)))
+
+    # ------------------------------------------------------------------------------------ goals
+    def goal_candidates(self, start: Sequence[float], goal: Any) -> List[Tuple[float, ...]]:
+        """The goal's joint configurations inside the limits, nearest to ``start`` first (one for a
+        joint or named goal; every IK branch of a pose). PlanningError when there is none."""
+        if isinstance(goal, str):
+            states = getattr(self.kin, "named_states", {}) or {}
+            if goal not in states:
+                raise PlanningError("goal", "unknown named state %r: the SRDF's states are %s"
+                                    % (goal, ", ".join(sorted(states)) or "(none)"))
+            return [self._joints(states[goal], "goal state %r" % goal)]
+        target = self._pose_target(goal)
+        if target is None:
+            return [self._joints(goal, "goal")]
+        try:
+            sols = self.kin.ik_solutions(target, seed=start)
+        except KinematicsError as exc:
+            raise PlanningError("goal", "goal pose unreachable: %s" % exc) from exc
+        sols = [tuple(q) for q in sols if all(lo - 1e-9 <= v <= hi + 1e-9
+                                              for v, lo, hi in zip(q, self.lower, self.upper))]
+        if not sols:
+            raise PlanningError("goal", "goal pose unreachable within the planner's joint limits")
+        sols.sort(key=lambda q: self._nearness(start, q))
+        return sols
+
+    def _pose_target(self, goal: Any) -> Optional[np.ndarray]:
+        """The tip pose (4x4 in the chain root) of a pose goal; None for a joint goal."""
+        if isinstance(goal, ControllerPose):
+            return self.kin.conventions.controller_to_tip(goal)
+        if isinstance(goal, np.ndarray) and goal.shape == (4, 4):
+            return goal.astype(float)
+        if isinstance(goal, (tuple, list)) and len(goal) == 2 and all(isinstance(g, (tuple, list, np.ndarray))
+                                                                       for g in goal):
+            position, quaternion = goal
+            if len(position) != 3 or len(quaternion) != 4:
+                raise PlanningError("goal", "a pose goal is ((x, y, z) [m], (qx, qy, qz, qw)), got %r" % (goal,))
+            try:
+                return ros_to_matrix(position, quaternion)
+            except (PoseError, ValueError) as exc:
+                raise PlanningError("goal", "goal pose: %s" % exc) from exc
+        return None
+
+    # ------------------------------------------------------------------------------------ plan
+    def plan(self, start: Any, goal: Any, velocity_scaling: Optional[float] = None,
+             acceleration_scaling: Optional[float] = None, time_budget: Optional[float] = None,
+             seed: Optional[int] = None) -> PlannedTrajectory:
+        """A collision-free timed trajectory from the joints ``start`` to ``goal`` (joints, a named
+        state, a ControllerPose, ((x, y, z), (qx, qy, qz, qw)) of tool0 in base_link, or a 4x4 tip
+        pose). Per-call overrides of the constructor's scaling, budget and seed. PlanningError when
+        there is none (see the module text)."""
+        t0 = time.perf_counter()
+        vs = self.velocity_scaling if velocity_scaling is None else _number(velocity_scaling, "velocity_scaling",
+                                                                            0.0, 1.0)
+        acs = self.acceleration_scaling if acceleration_scaling is None else _number(
+            acceleration_scaling, "acceleration_scaling", 0.0, 1.0)
+        budget = self.time_budget if time_budget is None else _number(time_budget, "time_budget [s]", 0.0)
+        seed = self.seed if seed is None else seed
+        q0 = self._joints(start, "start")
+        if not self.is_valid(q0):
+            why, contacts = self._why_invalid(q0)
+            raise PlanningError("start", "start %s is in collision%s" % (_fmt(q0), why), contacts)
+        candidates = self.goal_candidates(q0, goal)
+        valid = [q for q in candidates if self.is_valid(q)]
+        if not valid:
+            why, contacts = self._why_invalid(candidates[0])
+            what = ("goal %s is in collision" % _fmt(candidates[0]) if len(candidates) == 1 else
+                    "all %d joint solutions of the goal pose are in collision; the nearest, %s"
+                    % (len(candidates), _fmt(candidates[0])))
+            raise PlanningError("goal", what + why, contacts)
+        q1 = valid[0]
+        timings = {"goal": time.perf_counter() - t0}
+        path = self._geometric_path(q0, q1, budget, seed, timings)
+        t = time.perf_counter()
+        timings["time"] = timings["check"] = 0.0
+        for attempt, (step, dt) in enumerate(_TIMING_ATTEMPTS):
+            result = self._time(path, vs, acs, step, self.dt * dt)
+            timings["time"] += time.perf_counter() - t
+            t = time.perf_counter()
+            try:
+                self._check(*result)
+            except PlanningError:
+                if attempt == len(_TIMING_ATTEMPTS) - 1:
+                    raise
+                continue
+            finally:
+                timings["check"] += time.perf_counter() - t
+                t = time.perf_counter()
+            break
+        timings["total"] = time.perf_counter() - t0
+        times, pos, vel, acc = result
+        return PlannedTrajectory(self.names, times, pos, vel, acc, tuple(path), self.planner_name, timings)
+
+    # ------------------------------------------------------------------------------ OMPL part
+    def _space(self):
+        ob = self._ob
+        space = ob.RealVectorStateSpace(self.dof)
+        bounds = ob.RealVectorBounds(self.dof)
+        for i, (w, lo, hi) in enumerate(zip(self.weights, self.lower, self.upper)):
+            bounds.setLow(i, w * lo)
+            bounds.setHigh(i, w * hi)
+        space.setBounds(bounds)
+        si = ob.SpaceInformation(space)
+        weights, dof, is_valid = self.weights, self.dof, self.planning_valid
+
+        def valid(state) -> bool:
+            return bool(is_valid(tuple(state[i] / weights[i] for i in range(dof))))
+
+        si.setStateValidityChecker(valid)
+        # the longest segment checked in one piece: |dx| <= max_sweep / sqrt(n) bounds the sweep
+        # sum_i w_i |dq_i| by max_sweep (module text)
+        si.setStateValidityCheckingResolution(self.max_sweep / math.sqrt(dof) / space.getMaximumExtent())
+        si.setup()
+        return si
+
+    def _state(self, si, q: Sequence[float]):
+        s = si.allocState()
+        for i, (w, v) in enumerate(zip(self.weights, q)):
+            s[i] = w * v
+        return s
+
+    def _geometric_path(self, q0, q1, budget: float, seed: Optional[int], timings: Dict[str, float]
+                        ) -> List[Tuple[float, ...]]:
+        t = time.perf_counter()
+        self._ends = (tuple(q0), tuple(q1))
+        if self.motion_valid(q0, q1, self.planning_valid) is None:
+            timings["plan"] = time.perf_counter() - t
+            timings["simplify"] = 0.0
+            return [q0, q1]
+        ob, og, ou = self._ob, self._og, self._ou
+        # reseed OMPL's seed generator before anything here draws a seed from it (module text); OMPL
+        # logs an error when it has drawn seeds before, but reseeds all the same
+        previous = ou.getLogLevel()
+        ou.setLogLevel(ou.LOG_NONE)
+        try:
+            ou.RNG.setSeed(int(seed) if seed is not None else random.SystemRandom().randrange(1, 2 ** 31))
+        finally:
+            ou.setLogLevel(previous)
+        si = self._space()
+        pdef = ob.ProblemDefinition(si)
+        pdef.setStartAndGoalStates(self._state(si, q0), self._state(si, q1))
+        planner = getattr(og, self.planner_name)(si)
+        planner.setProblemDefinition(pdef)
+        planner.setup()
+        status = planner.solve(budget)
+        timings["plan"] = time.perf_counter() - t
+        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION or not pdef.hasExactSolution():
+            raise PlanningError("plan", "%s found no path within %.3g s (%s) from %s to %s"
+                                % (self.planner_name, budget, status.asString(), _fmt(q0), _fmt(q1)))
+        path = pdef.getSolutionPath()
+        t = time.perf_counter()
+        self._simplify(path, og, si)
+        timings["simplify"] = time.perf_counter() - t
+        out = [tuple(s[i] / self.weights[i] for i in range(self.dof)) for s in path.getStates()]
+        out[0], out[-1] = tuple(q0), tuple(q1)
+        # the simplifier keeps the path valid; the check here is the planner's own guarantee
+        for a, b in zip(out, out[1:]):
+            bad = self.motion_valid(a, b)
+            if bad is not None:
+                why, contacts = self._why_invalid(bad)
+                raise PlanningError("plan", "the simplified path passes an invalid configuration %s%s"
+                                    % (_fmt(bad), why), contacts)
+        return out
+
+    @staticmethod
+    def _simplify(path, og, si) -> None:
+        """OMPL's simplification steps with step counts, not a time limit (a seed gives one path):
+        rounds of vertex reduction (random shortcuts between vertices), partial shortcuts (a subset
+        of the joints at a time) and collapsing close vertices, until a round changes nothing (at
+        most ``_SIMPLIFY_ROUNDS``), then B-spline smoothing of the corners. (OMPL's rope
+        shortcutting gave 4 % shorter motions on the example cell for twice the time: left out.)"""
+        simplifier = og.PathSimplifier(si)
+        for _ in range(_SIMPLIFY_ROUNDS):
+            changed = simplifier.reduceVertices(path, 0, 0)
+            changed = simplifier.partialShortcutPath(path, 0, 0) or changed
+            changed = simplifier.collapseCloseVertices(path) or changed
+            if not changed:
+                break
+        simplifier.smoothBSpline(path, 3)
+
+    # ---------------------------------------------------------------------------- timing part
+    def _time(self, path: Sequence[Tuple[float, ...]], vs: float, acs: float, spline_step: float, dt: float):
+        """TOPP-RA along a spline through the (densified) path; sampled evenly every <= dt."""
+        ta = self._toppra
+        dense = [path[0]]
+        for a, b in zip(path, path[1:]):
+            n = max(1, int(math.ceil(max(abs(x - y) for x, y in zip(a, b)) / spline_step)))
+            dense.extend(tuple(x + (y - x) * k / n for x, y in zip(a, b)) for k in range(1, n + 1))
+        wp = np.array(dense)
+        seg = np.linalg.norm(np.diff(wp, axis=0), axis=1)
+        keep = np.concatenate(([True], seg > 1e-9))
+        wp = wp[keep]
+        if len(wp) < 2:                       # start == goal: one point, at rest
+            q = tuple(float(v) for v in path[0])
+            zero = (0.0,) * self.dof
+            return (0.0,), (q,), (zero,), (zero,)
+        s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))))
+        s = s / s[-1]
+        curve = ta.SplineInterpolator(s, wp)
+        vmax = np.array(self.limits.velocity) * vs * TOPP_MARGIN
+        amax = np.array(self.limits.acceleration) * acs * TOPP_MARGIN
+        constraints = [ta.constraint.JointVelocityConstraint(np.stack([-vmax, vmax], axis=1)),
+                       ta.constraint.JointAccelerationConstraint(np.stack([-amax, amax], axis=1))]
+        gridpoints = np.linspace(0.0, 1.0, max(100, min(2000, 4 * len(wp))))
+        algo = ta.algorithm.TOPPRA(constraints, curve, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
+        timed = algo.compute_trajectory(0.0, 0.0)
+        if timed is None:
+            raise PlanningError("time", "TOPP-RA found no timing of the path under the speed and acceleration limits")
+        duration = float(timed.duration)
+        # TOPP-RA's limits hold at its grid points; between them the spline may exceed them a little:
+        # where it does (checked on a grid 4 x finer than the samples), the whole timing is slowed
+        # by the factor that brings it back (speeds / k, accelerations / k^2)
+        vlim = np.array(self.limits.velocity) * vs
+        alim = np.array(self.limits.acceleration) * acs
+
+        def excess(u: np.ndarray, k: float) -> float:
+            return max(float(np.max(np.abs(timed(u, 1)) / k / vlim)),
+                       math.sqrt(float(np.max(np.abs(timed(u, 2)) / (k * k) / alim))))
+
+        k = max(1.0, excess(np.linspace(0.0, duration, 4 * max(1, int(math.ceil(duration / dt))) + 1), 1.0))
+        for _ in range(10):
+            n = max(1, int(math.ceil(k * duration / dt - 1e-9)))
+            ts = np.linspace(0.0, k * duration, n + 1)
+            u = np.minimum(ts / k, duration)
+            over = excess(u, k)
+            if over <= 1.0:
+                break
+            k *= over * (1.0 + 1e-6)
+        else:
+            raise PlanningError("time", "the timed path keeps exceeding the speed or acceleration limits")
+        pos, vel, acc = timed(u), timed(u, 1) / k, timed(u, 2) / (k * k)
+        pos[0], pos[-1] = path[0], path[-1]
+        vel[0] = vel[-1] = 0.0
+        return (tuple(float(t) for t in ts), tuple(tuple(float(v) for v in p) for p in pos),
+                tuple(tuple(float(v) for v in p) for p in vel), tuple(tuple(float(v) for v in p) for p in acc))
+
+    def _check(self, times, positions, velocities, accelerations) -> None:
+        """Every sample inside the joint, speed and acceleration limits (less nothing: the margin
+        of the timing is the slack) and valid, every chord between two samples valid and within
+        the speed limits (what the driver's segment check asks)."""
+        vlim, alim = self.limits.velocity, self.limits.acceleration
+        for k, (t, q, v, a) in enumerate(zip(times, positions, velocities, accelerations)):
+            for i, name in enumerate(self.names):
+                if not self.lower[i] - 1e-9 <= q[i] <= self.upper[i] + 1e-9:
+                    raise PlanningError("check", "sample %d (t = %.3f s): %s = %.4f rad is outside its limits "
+                                        "[%.4f, %.4f]" % (k, t, name, q[i], self.lower[i], self.upper[i]))
+                if abs(v[i]) > vlim[i] * (1 + 1e-6) or abs(a[i]) > alim[i] * (1 + 1e-6):
+                    raise PlanningError("check", "sample %d (t = %.3f s): %s at %.3f rad/s, %.3f rad/s^2 exceeds its "
+                                        "limits %.3f rad/s, %.3f rad/s^2" % (k, t, name, v[i], a[i], vlim[i], alim[i]))
+            if k and any(abs(x - y) > (t - times[k - 1]) * vl * (1 + 1e-9)
+                         for x, y, vl in zip(q, positions[k - 1], vlim)):
+                raise PlanningError("check", "segment %d -> %d needs more than the speed limits" % (k - 1, k))
+        if not self.is_valid(positions[0]):
+            why, contacts = self._why_invalid(positions[0])
+            raise PlanningError("check", "sample 0 is invalid%s" % why, contacts)
+        for k in range(1, len(positions)):
+            bad = self.motion_valid(positions[k - 1], positions[k])
+            if bad is not None:
+                why, contacts = self._why_invalid(bad)
+                raise PlanningError("check", "the timed trajectory between samples %d and %d (t = %.3f s) passes "
+                                    "an invalid configuration %s%s" % (k - 1, k, times[k], _fmt(bad), why), contacts)

@@ -1,0 +1,305 @@
+"""vr_driver.kinematics.planner: collision-aware planning (OMPL), timing (TOPP-RA), the checks of the
+result, and the driver's own trajectory validation of what it plans. Skipped, with the reason,
+where OMPL or TOPP-RA is missing (the cell test also needs pinocchio and coal)."""
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from vr_driver.driver.trajectories import segment_speeds, validate
+from vr_driver.errors import MissingDependency, MotionError
+from vr_driver.kinematics import deps
+from vr_driver.kinematics.planner import PLANNERS, Planner, PlanningError
+
+_MISSING = deps.missing_dependencies(("ompl", "toppra"))
+pytestmark = pytest.mark.skipif(bool(_MISSING), reason="; ".join(r for _, r in _MISSING))
+
+SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
+REPO = os.path.dirname(os.path.dirname(SRC))
+CELL = os.path.join(REPO, "panasonic_vr006l_support", "config", "cell_example.yaml")
+
+START = (-1.0, 0.3, -0.3, 0.0, 0.4, 0.0)
+GOAL = (1.0, 0.3, -0.3, 0.0, 0.4, 0.0)
+
+
+def wall(q):
+    """A joint-space obstacle between START and GOAL: joint_1 in (-0.3, 0.3) with joint_2 below 1.2
+    rad (the arm must lift its upper arm to pass)."""
+    return not (-0.3 < q[0] < 0.3 and q[1] < 1.2)
+
+
+def chords_valid(plan, is_valid, step=math.radians(0.1)):
+    """Every sample and every point of the straight chords between samples, 0.1 deg apart (finer
+    than the planner's own checks): the first invalid configuration, or None."""
+    for a, b in zip(plan.positions, plan.positions[1:]):
+        n = max(1, int(math.ceil(max(abs(x - y) for x, y in zip(a, b)) / step)))
+        for k in range(n + 1):
+            q = tuple(x + (y - x) * k / n for x, y in zip(a, b))
+            if not is_valid(q):
+                return q
+    return None
+
+
+@pytest.fixture(scope="module")
+def walled(kin):
+    return Planner(kin, wall, seed=7)
+
+
+@pytest.fixture(scope="module")
+def around(walled):
+    return walled.plan(START, GOAL)
+
+
+# ------------------------------------------------------------------------------------------ paths
+
+def test_plans_around_a_joint_space_obstacle(walled, around):
+    assert walled.motion_valid(START, GOAL) is not None          # the straight move crosses the wall
+    assert around.positions[0] == START and around.positions[-1] == GOAL
+    assert around.times[0] == 0.0 and around.duration > 0.9      # 2 rad of joint_1 at <= 2.09 rad/s
+    assert chords_valid(around, wall) is None
+    assert max(q[1] for q in around.positions) >= 1.2            # it went over the wall
+    assert around.planner == "RRTConnect" and around.timings["plan"] > 0.0
+
+
+def test_the_sampled_result_keeps_the_limits(kin, around):
+    lim = kin.limits
+    vmax, amax = np.array(lim.velocity), np.array(lim.acceleration)
+    pos, vel, acc = np.array(around.positions), np.array(around.velocities), np.array(around.accelerations)
+    times = np.array(around.times)
+    assert np.all(pos >= np.array(lim.lower) - 1e-9) and np.all(pos <= np.array(lim.upper) + 1e-9)
+    assert np.all(np.abs(vel) <= vmax * (1 + 1e-6)) and np.all(np.abs(acc) <= amax * (1 + 1e-6))
+    dt = np.diff(times)
+    assert np.all(dt > 0) and dt.max() <= 0.05 + 1e-12
+    assert np.all(np.abs(np.diff(pos, axis=0)) <= dt[:, None] * vmax * (1 + 1e-9))
+    # finite differences agree with the reported velocities (the samples are one trajectory)
+    mid = (pos[2:] - pos[:-2]) / (times[2:] - times[:-2])[:, None]
+    assert np.max(np.abs(mid - vel[1:-1])) < 0.1 * vmax.max()
+    assert np.all(vel[0] == 0.0) and np.all(vel[-1] == 0.0)
+    # time-optimal: some joint reaches (nearly) its speed or acceleration limit
+    assert max(np.max(np.abs(vel) / vmax), np.max(np.abs(acc) / amax)) > 0.9
+
+
+def test_velocity_scaling_slows_the_plan_within_the_scaled_limits(kin, walled, around):
+    slow = walled.plan(START, GOAL, velocity_scaling=0.5)
+    vmax = np.array(kin.limits.velocity)
+    assert np.all(np.abs(np.array(slow.velocities)) <= 0.5 * vmax * (1 + 1e-6))
+    assert slow.duration > 1.5 * around.duration
+    assert chords_valid(slow, wall) is None
+
+
+def test_a_seed_gives_one_plan_and_another_seed_another(kin, walled, around):
+    again = Planner(kin, wall, seed=7).plan(START, GOAL)
+    assert again.positions == around.positions and again.times == around.times
+    assert walled.plan(START, GOAL).path == around.path
+    other = [walled.plan(START, GOAL, seed=s).path for s in (1, 2, 3)]
+    assert any(p != around.path for p in other)
+
+
+def test_a_free_straight_move_is_one_segment(kin):
+    plan = Planner(kin, None, seed=1).plan(START, GOAL)
+    assert plan.path == (START, GOAL)
+    for q in plan.positions:                                     # on the straight line
+        f = (q[0] - START[0]) / (GOAL[0] - START[0])
+        assert max(abs(a + f * (b - a) - v) for a, b, v in zip(START, GOAL, q)) < 1e-6
+
+
+def test_start_equal_to_goal_is_one_point(kin):
+    plan = Planner(kin, wall, seed=1).plan(START, START)
+    assert plan.positions == (START,) and plan.times == (0.0,) and plan.duration == 0.0
+
+
+# ---------------------------------------------------------------------------------------- goals
+
+def test_named_state_goal_ends_at_the_srdf_state(kin):
+    plan = Planner(kin, lambda q: q[0] < 0.5, seed=1).plan(START, "home")
+    assert plan.goal == tuple(kin.named_states["home"])
+    with pytest.raises(PlanningError, match=r"unknown named state 'nowhere'.*home.*zero"):
+        Planner(kin, wall).plan(START, "nowhere")
+
+
+def test_pose_goal_takes_the_nearest_ik_branch(kin):
+    q_goal = (0.4, 0.6, -0.5, 0.8, 0.7, -0.3)
+    target = kin.fk(q_goal)
+    plan = Planner(kin, None, seed=1).plan(START, target)
+    assert np.allclose(plan.goal, q_goal, atol=1e-6)             # the branch nearest the start
+    assert np.allclose(kin.fk(plan.goal), target, atol=1e-6)
+    # the same goal as a controller pose (mm / deg) and as position + quaternion
+    pose = kin.fk_pose(q_goal)
+    assert np.allclose(Planner(kin, None, seed=1).plan(START, pose).goal, q_goal, atol=1e-4)
+    from vr_driver.poses import matrix_to_ros
+    assert np.allclose(Planner(kin, None, seed=1).plan(START, matrix_to_ros(target)).goal, q_goal, atol=1e-6)
+
+
+def test_pose_goal_skips_branches_in_collision_for_the_nearest_valid_one(kin):
+    q_goal = (0.4, 0.6, -0.5, 0.8, 0.7, -0.3)
+    target = kin.fk(q_goal)
+    branches = kin.ik_solutions(target, seed=START)
+
+    def not_near_goal(q):                                        # the nearest branch is blocked
+        return max(abs(a - b) for a, b in zip(q, q_goal)) > 0.2
+
+    planner = Planner(kin, not_near_goal, seed=1)
+    plan = planner.plan(START, target)
+    valid = [q for q in branches if not_near_goal(q)]
+    nearest = min(valid, key=lambda q: max(abs(a - b) / v for a, b, v in zip(START, q, kin.limits.velocity)))
+    assert np.allclose(plan.goal, nearest, atol=1e-9)
+    assert np.allclose(kin.fk(plan.goal), target, atol=1e-6)
+    assert chords_valid(plan, not_near_goal) is None
+
+
+def test_ik_solutions_are_every_branch_and_wrist_turn(kin):
+    q = (0.3, 0.5, -0.4, 0.7, 0.8, -0.2)
+    sols = kin.ik_solutions(kin.fk(q), seed=q)
+    assert np.allclose(sols[0], q, atol=1e-9)                    # the seed's own branch first
+    assert len(sols) > 8                                         # 8 branches, and wrist turns
+    assert len({tuple(np.round(s, 6)) for s in sols}) == len(sols)
+    for s in sols:
+        assert not kin.limit_violations(s)
+        assert np.allclose(kin.fk(s), kin.fk(q), atol=1e-6)
+    dist = [sum((a - b) ** 2 for a, b in zip(s, q)) for s in sols]
+    assert dist == sorted(dist)
+    # joint_6 spans 4 pi: its other full turn is among them
+    assert any(abs(s[5] - (q[5] + 2 * math.pi)) < 1e-6 and np.allclose(s[:5], q[:5]) for s in sols)
+
+
+# --------------------------------------------------------------------------------------- errors
+
+def test_start_in_collision_is_refused(kin):
+    with pytest.raises(PlanningError, match=r"start \(0\.0, .*\) deg is in collision") as info:
+        Planner(kin, wall).plan((0.0, 0.3, -0.3, 0.0, 0.4, 0.0), GOAL)
+    assert info.value.step == "start" and isinstance(info.value, MotionError)
+
+
+def test_start_outside_the_limits_is_refused(kin):
+    with pytest.raises(PlanningError, match=r"start .* outside the joint limits: joint_3 = 2\.0000"):
+        Planner(kin, wall).plan((-1.0, 0.3, 2.0, 0.0, 0.4, 0.0), GOAL)
+
+
+def test_goal_in_collision_is_refused(kin):
+    with pytest.raises(PlanningError, match=r"goal \(0\.0, .*\) deg is in collision") as info:
+        Planner(kin, wall).plan(START, (0.0, 0.3, -0.3, 0.0, 0.4, 0.0))
+    assert info.value.step == "goal"
+
+
+def test_pose_goal_all_in_collision_or_unreachable_is_refused(kin):
+    target = kin.fk((0.4, 0.6, -0.5, 0.8, 0.7, -0.3))
+    branches = kin.ik_solutions(target)
+
+    def blocked(q):                                              # every branch, and near it
+        return min(max(abs(a - b) for a, b in zip(q, s)) for s in branches) > 0.1
+
+    with pytest.raises(PlanningError, match=r"all %d joint solutions of the goal pose are in collision; the "
+                       r"nearest, \(" % len(branches)):
+        Planner(kin, blocked).plan(START, target)
+    far = np.eye(4)
+    far[:3, 3] = (3.0, 0.0, 0.5)
+    with pytest.raises(PlanningError, match="goal pose unreachable"):
+        Planner(kin, wall).plan(START, far)
+
+
+def test_no_path_within_the_budget_is_refused(kin):
+    def caged(q):                                                # the goal is valid, enclosed by a shell
+        d = max(abs(a - b) for a, b in zip(q, GOAL))
+        return not 0.05 < d < 0.15
+
+    with pytest.raises(PlanningError, match=r"RRTConnect found no path within 0\.2 s") as info:
+        Planner(kin, caged, time_budget=0.2, seed=1).plan(START, GOAL)
+    assert info.value.step == "plan"
+
+
+def test_bad_parameters_are_refused(kin):
+    with pytest.raises(PlanningError, match="unknown planner 'RRTFast': the planners are RRTConnect, RRT, "):
+        Planner(kin, wall, planner="RRTFast")
+    with pytest.raises(ValueError, match="velocity_scaling"):
+        Planner(kin, wall, velocity_scaling=1.5)
+    with pytest.raises(ValueError, match="time_budget"):
+        Planner(kin, wall, time_budget=0)
+    with pytest.raises(TypeError, match="validity must be"):
+        Planner(kin, 42)
+
+
+@pytest.mark.parametrize("name", ["RRT", "BKPIECE1"])
+def test_other_planners_by_name(kin, name):
+    plan = Planner(kin, wall, planner=name, time_budget=2.0, seed=3).plan(START, GOAL)
+    assert plan.planner == name and chords_valid(plan, wall) is None
+    assert set(PLANNERS) >= {"RRTConnect", name}
+
+
+# ------------------------------------------------------------------------- the driver's own checks
+
+def test_the_driver_validation_accepts_the_plan(kin, around):
+    traj = validate(around.to_goal(), kin.joint_names, around.start, kin.limits.lower, kin.limits.upper, now=0.0)
+    assert traj.positions == around.positions and traj.times == around.times
+    speeds = segment_speeds(traj, kin.limits.velocity, kin.joint_names)
+    assert max(speeds) <= 1.0 and max(speeds) > 0.5
+
+
+def test_converts_to_a_joint_trajectory_message(around):
+    class Msg:
+        def __init__(self, **kw):
+            self.__dict__.update(kw)
+
+    msg = around.to_msg(Msg, Msg, lambda t: ("dur", t))
+    assert msg.joint_names == list(around.joint_names)
+    assert len(msg.points) == len(around.times)
+    last = msg.points[-1]
+    assert last.positions == list(around.goal) and last.time_from_start == ("dur", around.duration)
+    assert last.velocities == [0.0] * 6 and len(last.accelerations) == 6
+
+
+# ---------------------------------------------------------------------------- the example cell
+
+@pytest.fixture(scope="module")
+def cell_checker():
+    missing = deps.missing_dependencies(("pinocchio", "coal"))
+    if missing:
+        pytest.skip("; ".join(r for _, r in missing))
+    from vr_driver.kinematics.collision import CollisionChecker
+    from vr_driver.kinematics.scene import load_scene
+    return CollisionChecker.default(scene=load_scene(CELL), padding=0.0)
+
+
+def test_plans_around_the_pillar_of_the_example_cell(kin, cell_checker):
+    """Home, then joint_1 to the left with the arm stretched out: the pillar stands in the way."""
+    home = tuple(kin.named_states["home"])
+    start = (-0.3,) + home[1:]
+    goal = (1.3,) + home[1:]
+    planner = Planner(kin, cell_checker, seed=2)
+    blocked = planner.motion_valid(start, goal)
+    assert blocked is not None and any(c.other == "pillar" for c in cell_checker.contacts(blocked))
+    plan = planner.plan(start, goal)
+    dense = []
+    for a, b in zip(plan.positions, plan.positions[1:]):
+        dense.extend(tuple(x + (y - x) * k / 20 for x, y in zip(a, b)) for k in range(20))
+    dense.append(plan.goal)
+    assert cell_checker.check_path(dense) is None
+    traj = validate(plan.to_goal(), kin.joint_names, start, kin.limits.lower, kin.limits.upper, now=0.0)
+    assert max(segment_speeds(traj, kin.limits.velocity, kin.joint_names)) <= 1.0
+
+
+def test_start_in_collision_with_the_cell_names_the_link_and_object(kin, cell_checker):
+    into_table = (0.0, 1.2, -0.3, 0.0, 0.4, 0.0)                 # the arm reaching down into the table
+    assert cell_checker.in_collision(into_table)
+    with pytest.raises(PlanningError, match=r"start .* is in collision: link_\d with object table") as info:
+        Planner(kin, cell_checker).plan(into_table, "home")
+    assert any(c.other == "table" for c in info.value.contacts)
+
+
+# ------------------------------------------------------------------------- without the libraries
+
+def test_without_ompl_the_module_imports_and_the_planner_names_the_package():
+    script = ("import sys; sys.modules['ompl'] = None; sys.modules['rospy'] = None; sys.path[:0] = %r\n"
+              "import vr_driver.kinematics.planner as p\n"
+              "from vr_driver.kinematics.solver import Kinematics\n"
+              "try:\n    p.Planner(Kinematics.default(), None)\n"
+              "except p.MissingDependency as exc:\n    print('missing', exc.package, '|', exc)\n"
+              % ([SRC, os.path.join(REPO, "panasonic_vr006l_support", "src")],))
+    proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.startswith("missing ompl |") and "scripts/setup" in proc.stdout
+    assert issubclass(MissingDependency, ImportError)
