@@ -15,10 +15,10 @@ CORE = ("errors", "validate", "poses", "params", "io_signals",
         "protocol", "protocol.base", "protocol.registry", "protocol.v1", "protocol.v2", "kinematics", "kinematics.solver", "kinematics.preview",
         "kinematics.deps", "kinematics.scene", "kinematics.collision",
         "driver", "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
-        "driver.stations", "driver.streaming", "driver.record_clock", "driver.supervision",
+        "driver.stations", "driver.streaming", "driver.record_clock", "driver.supervision", "driver.joint_command",
         "controller", "controller.program", "controller.session", "controller.program_v2", "controller.arm",
         "controller.stream_arm", "controller.io_island", "controller.line",
-        "terminal", "terminal.pose_input", "csr") + tuple("csr." + m for m in CSR_MODULES)
+        "terminal", "terminal.pose_input", "terminal.jog", "csr") + tuple("csr." + m for m in CSR_MODULES)
 BLOCKED = ("rospy", "rospkg", "roslib", "std_msgs", "sensor_msgs", "geometry_msgs", "industrial_msgs",
            "trajectory_msgs", "visualization_msgs", "actionlib")
 

@@ -286,3 +286,35 @@ def test_joint_command_timeout_parameter():
     with pytest.raises(ParamError) as info:                     # two bus cycles at 20 Hz: 0.1 s
         DriverParams.from_dict({"joint_command_timeout": 0.05})
     assert "two bus cycles" in str(info.value)
+
+
+class _Point:
+    def __init__(self, positions, time_from_start=0.0):
+        self.positions = positions
+        self.time_from_start = time_from_start
+
+
+class _Duration:
+    def __init__(self, s):
+        self.s = s
+
+    def to_sec(self):
+        return self.s
+
+
+def test_a_message_has_exactly_one_point(kin):
+    world = make(kin, "v2")
+    q = list(world.arm.joints)
+    commander = world.core.joint_commander
+    for points in ([], [_Point(q), _Point(q)]):
+        with pytest.raises(JointCommandRefused) as info:
+            commander.trajectory(NAMES, points)
+        assert info.value.kind == "message" and "exactly one point" in str(info.value)
+    assert commander.counters().refused["message"] == 2
+    assert world.log.entries() == []
+    q[0] += 0.1                                     # 0.1 rad: needs time_from_start 0.1 s
+    with pytest.raises(JointCommandRefused):
+        commander.trajectory(NAMES, [_Point(q, _Duration(0.02))])
+    job = commander.trajectory(NAMES, [_Point(q, _Duration(0.1))])
+    world.run_until(lambda: job.done, 1.0)
+    assert job.result.success

@@ -56,7 +56,7 @@ log = logging.getLogger("vr_driver.driver")
 __all__ = ["JointCommandRefused", "JointCommander", "REFUSAL_KINDS"]
 
 #: the rules a command can break (JointCommandRefused.kind; the diagnostics count each)
-REFUSAL_KINDS = ("protocol", "names", "not_finite", "limits", "speed", "workspace", "configuration",
+REFUSAL_KINDS = ("message", "protocol", "names", "not_finite", "limits", "speed", "workspace", "configuration",
                  "state", "busy")
 
 
@@ -101,6 +101,29 @@ class JointCommander:
     def counters(self) -> CommandCounters:
         with self._lock:
             return CommandCounters(self._accepted, dict(self._refused), self._streams, self._last_refusal)
+
+    def refuse(self, kind: str, reason: str) -> JointCommandRefused:
+        """Count a refusal made before :meth:`command` (e.g. a message that is not one point) and
+        return its exception to raise."""
+        exc = JointCommandRefused(kind, reason)
+        with self._lock:
+            self._refused[kind] += 1
+            self._last_refusal = str(exc)
+        return exc
+
+    def trajectory(self, names: Sequence[str], points: Sequence[Any]) -> MoveJob:
+        """A trajectory_msgs/JointTrajectory-like command (``points``: objects with ``positions``
+        and ``time_from_start``, a duration with ``to_sec()`` or seconds): exactly one point, as
+        industrial_robot_client's streamer and MoveIt Servo send; velocities, accelerations and
+        efforts are not used (the speed comes from the step and its time)."""
+        if len(points) != 1:
+            raise self.refuse("message", "a joint command has exactly one point, this one has %d (a "
+                              "whole path goes to joint_path_command or joint_trajectory_action)"
+                              % len(points))
+        point = points[0]
+        tfs = getattr(point, "time_from_start", 0.0)
+        tfs = tfs.to_sec() if hasattr(tfs, "to_sec") else tfs
+        return self.command(names, getattr(point, "positions", ()), tfs)
 
     def command(self, names: Sequence[str], positions: Sequence[Any], time_from_start: float = 0.0
                 ) -> MoveJob:

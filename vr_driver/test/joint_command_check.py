@@ -1,0 +1,287 @@
+#!/usr/bin/python3
+"""rostest of the joint_command topic (test/joint_command.test: protocol v3; joint_command_v1.test:
+protocol v1), written against the ROS-Industrial driver specification, not against this driver's
+code: it publishes trajectory_msgs/JointTrajectory of one point on ``joint_command`` and reads
+``joint_states``, the ``robot_description`` (joint limits) and standard ``/diagnostics``.
+
+Streaming protocol (~streams true):
+- a sine on joint_1 (10 deg, 0.5 Hz) commanded at 50 Hz for 3 s: the arm follows it within 1 deg once
+  the commanded sine is shifted by the measured lag, the lag is bounded (printed), nothing refused;
+- after the last command the arm is at rest at the last target within the command timeout plus one
+  bus cycle;
+- bad commands (a NaN, a jump beyond the joint speed limit, an unknown joint, a target outside the
+  workspace) are refused, counted, and change nothing: the arm stays put.
+Protocol v1 (~streams false): commands are refused with the reason (log and diagnostics); the arm
+stays put.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+import unittest
+
+import rospy
+import rostest
+from diagnostic_msgs.msg import DiagnosticArray
+from rosgraph_msgs.msg import Log
+from sensor_msgs.msg import JointState
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+PKG = "vr_driver"
+DEG = math.pi / 180.0
+AMPLITUDE = 10.0 * DEG
+FREQUENCY = 0.5
+RATE = 50.0
+DURATION = 3.0
+
+
+class Samples:
+    """joint_states as (stamp [s], positions) in the order of ``names`` once known."""
+
+    def __init__(self):
+        self.cond = threading.Condition()
+        self.names = None
+        self.items = []
+        self.sub = rospy.Subscriber("/joint_states", JointState, self._cb, queue_size=200, tcp_nodelay=True)
+
+    def _cb(self, msg):
+        with self.cond:
+            if self.names is None:
+                self.names = list(msg.name)
+            index = [msg.name.index(n) for n in self.names]
+            self.items.append((msg.header.stamp.to_sec(), [msg.position[i] for i in index]))
+            self.cond.notify_all()
+
+    def wait(self, predicate, timeout):
+        end = time.monotonic() + timeout
+        with self.cond:
+            while not predicate(self.items):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return False
+                self.cond.wait(left)
+            return True
+
+    def since(self, t):
+        with self.cond:
+            return [(s, q) for s, q in self.items if s >= t]
+
+    def latest(self):
+        with self.cond:
+            return list(self.items[-1][1])
+
+
+class Diagnostics:
+    """The values of the diagnostic status whose name ends in 'joint_command'."""
+
+    def __init__(self):
+        self.cond = threading.Condition()
+        self.values = None
+        self.sub = rospy.Subscriber("/diagnostics", DiagnosticArray, self._cb, queue_size=50)
+
+    def _cb(self, msg):
+        for status in msg.status:
+            if status.name.endswith("joint_command"):
+                with self.cond:
+                    self.values = {kv.key: kv.value for kv in status.values}
+                    self.cond.notify_all()
+
+    def wait(self, predicate, timeout):
+        end = time.monotonic() + timeout
+        with self.cond:
+            while self.values is None or not predicate(self.values):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return self.values
+                self.cond.wait(left)
+            return self.values
+
+
+class Rosout:
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.lines = []
+        self.sub = rospy.Subscriber("/rosout", Log, self._cb, queue_size=200)
+
+    def _cb(self, msg):
+        with self.lock:
+            self.lines.append(msg.msg)
+
+    def matching(self, text):
+        with self.lock:
+            return [line for line in self.lines if text in line]
+
+
+def urdf_limits(names):
+    """(lower, upper, velocity) per joint from robot_description."""
+    from urdf_parser_py.urdf import URDF
+    robot = URDF.from_xml_string(rospy.get_param("/robot_description"))
+    joints = {j.name: j for j in robot.joints}
+    return ([joints[n].limit.lower for n in names], [joints[n].limit.upper for n in names],
+            [joints[n].limit.velocity for n in names])
+
+
+class JointCommandTest(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        rospy.init_node("joint_command_check")
+        cls.bus_rate = rospy.get_param("~bus_rate")
+        cls.streams = rospy.get_param("~streams")
+        cls.js = Samples()
+        cls.diag = Diagnostics()
+        cls.rosout = Rosout()
+        cls.pub = rospy.Publisher("/joint_command", JointTrajectory, queue_size=10, tcp_nodelay=True)
+        assert cls.js.wait(lambda items: len(items) > 10, 30.0), "no joint_states"
+        cls.names = list(cls.js.names)
+        cls.lower, cls.upper, cls.vmax = urdf_limits(cls.names)
+        cls.timeout = rospy.get_param("/interface/joint_command_timeout")
+        end = time.monotonic() + 20.0
+        while cls.pub.get_num_connections() == 0 and time.monotonic() < end:
+            time.sleep(0.05)                  # (polling the connection count: no event for it)
+        assert cls.pub.get_num_connections() > 0, "nobody subscribes joint_command"
+        assert cls.diag.wait(lambda v: True, 10.0) is not None, "no joint_command diagnostics"
+
+    # ------------------------------------------------------------------ helpers
+    def command(self, positions, names=None, time_from_start=0.0):
+        msg = JointTrajectory()
+        msg.header.stamp = rospy.Time.now()
+        msg.joint_names = list(names or self.names)
+        msg.points = [JointTrajectoryPoint(positions=list(positions),
+                                           time_from_start=rospy.Duration(time_from_start))]
+        self.pub.publish(msg)
+        return msg.header.stamp.to_sec()
+
+    def refused(self):
+        values = self.diag.wait(lambda v: True, 5.0)
+        return int(values["refused"])
+
+    def at_rest(self, seconds=0.4):
+        """The arm's joints once it stood still for ``seconds`` (joint_states within 0.0005 deg)."""
+        def still(items):
+            if not items:
+                return False
+            t_end = items[-1][0]
+            recent = [q for s, q in items if s >= t_end - seconds]
+            first = [s for s, _q in items if s >= t_end - seconds]
+            return (first and first[0] - items[0][0] >= seconds and len(recent) >= 3 and
+                    max(abs(a - b) for q in recent for a, b in zip(q, recent[0])) <= 0.0005 * DEG)
+        self.assertTrue(self.js.wait(still, 10.0), "the arm never came to rest")
+        return self.js.latest()
+
+    # ------------------------------------------------------------------ streaming protocols
+    def test_01_a_sine_on_joint_1_at_50_hz_is_followed(self):
+        if not self.streams:
+            self.skipTest("protocol v1: see test_10")
+        q0 = self.at_rest()
+        refused_before = self.refused()
+        sent = []                                                  # (publish time, positions)
+        period = 1.0 / RATE
+        start = time.monotonic()
+        t0 = None
+        k = 0
+        while k * period <= DURATION + 1e-9:
+            wait = start + k * period - time.monotonic()
+            if wait > 0:
+                time.sleep(wait)                                   # the publishing rate itself
+            now = rospy.Time.now().to_sec()
+            t0 = now if t0 is None else t0
+            q = list(q0)
+            q[0] = q0[0] + AMPLITUDE * math.sin(2 * math.pi * FREQUENCY * (now - t0))
+            self.command(q, time_from_start=period)
+            sent.append((now, q))
+            k += 1
+        t_last = sent[-1][0]
+
+        def commanded(t):
+            return q0[0] + AMPLITUDE * math.sin(2 * math.pi * FREQUENCY * (min(max(t, t0), t_last) - t0))
+        # the arm at rest at the last target within the command timeout plus one bus cycle
+        settle = t_last + self.timeout + 1.0 / self.bus_rate
+        self.assertTrue(self.js.wait(lambda items: items[-1][0] >= settle + 0.3, 5.0))
+        after = [q for s, q in self.js.since(settle)]
+        self.assertGreaterEqual(len(after), 10)
+        last = sent[-1][1]
+        off = max(abs(a - b) for q in after for a, b in zip(q, last))
+        self.assertLessEqual(off, 0.1 * DEG, "%.4f deg from the last target after %.3f s"
+                             % (off / DEG, settle - t_last))
+        spread = max(abs(a - b) for q in after for a, b in zip(q, after[0]))
+        self.assertLessEqual(spread, 0.0005 * DEG, "still moving %.3f s after the last command"
+                             % (settle - t_last))
+        # followed: the samples during the stream against the commanded sine shifted by the lag
+        during = [(s, q) for s, q in self.js.since(t0 + 0.3) if s <= t_last]
+        self.assertGreaterEqual(len(during), int(0.5 * self.bus_rate * (t_last - t0 - 0.3)),
+                                "too few joint_states samples")
+
+        def error(lag):
+            return max(abs(q[0] - commanded(s - lag)) for s, q in during)
+        lags = [0.002 * i for i in range(0, 101)]
+        lag = min(lags, key=error)
+        worst = error(lag)
+        others = max(abs(a - b) for _s, q in during for a, b in zip(q[1:], q0[1:]))
+        cycle = 1.0 / self.bus_rate
+        print("joint_command: %d commands at %g Hz over %.2f s on a %g Hz bus; lag %.3f s "
+              "(= the %.3f s step + %.1f bus cycles), %.3f deg off the shifted sine, other joints "
+              "%.4f deg; at rest at the last target %.3f s after it (%.4f deg off)"
+              % (len(sent), RATE, t_last - t0, self.bus_rate, lag, period, (lag - period) / cycle,
+                 worst / DEG, others / DEG, settle - t_last, off / DEG))
+        self.assertLessEqual(worst, 1.0 * DEG, "%.3f deg off the sine shifted by %.3f s" % (worst / DEG, lag))
+        self.assertLessEqual(others, 0.1 * DEG)
+        # the lag: the command's own step (time_from_start) plus at most 4 bus cycles (one to reach
+        # the bus, one for the controller's acknowledgement, its program loop, the feedback)
+        self.assertLessEqual(lag, period + 4.0 * cycle, "lag %.3f s" % lag)
+        self.assertEqual(self.refused(), refused_before, self.diag.values)
+
+    def assert_refused(self, positions, kind, names=None, time_from_start=0.0):
+        q_before = self.at_rest()
+        key = "refused %s" % kind
+        n = int(self.diag.wait(lambda v: True, 5.0)[key])
+        self.command(positions, names, time_from_start)
+        values = self.diag.wait(lambda v: int(v[key]) >= n + 1, 5.0)
+        self.assertEqual(int(values[key]), n + 1, values)
+        self.assertIn(kind, values["last refusal"])
+        t = rospy.Time.now().to_sec()
+        self.assertTrue(self.js.wait(lambda items: items[-1][0] >= t + 0.5, 5.0))
+        moved = max(abs(a - b) for _s, q in self.js.since(t - 0.5) for a, b in zip(q, q_before))
+        self.assertLessEqual(moved, 0.0005 * DEG, "the arm moved %.4f deg after a refused command"
+                             % (moved / DEG))
+        return values["last refusal"]
+
+    def test_02_bad_commands_are_refused_and_change_nothing(self):
+        if not self.streams:
+            self.skipTest("protocol v1: see test_10")
+        q = self.at_rest()
+        bad = list(q)
+        bad[3] = float("nan")
+        self.assert_refused(bad, "not_finite")
+        jump = list(q)
+        jump[1] += 0.6                                          # 0.6 rad in 0.02 s: 30 rad/s
+        text = self.assert_refused(jump, "speed", time_from_start=0.02)
+        self.assertIn(self.names[1], text)
+        names = list(self.names)
+        names[5] = "joint_7"
+        text = self.assert_refused(q, "names", names=names)
+        self.assertIn("joint_7", text)
+        outside = list(q)
+        outside[0] += 0.3                                       # Y = 1120 mm sin(0.3) = 331 > 300
+        self.assert_refused(outside, "workspace", time_from_start=0.2)
+        above = list(q)
+        above[0] = self.upper[0] + 0.01
+        self.assert_refused(above, "limits", time_from_start=0.2)
+
+    # ------------------------------------------------------------------ protocol v1
+    def test_10_v1_refuses_with_the_reason(self):
+        if self.streams:
+            self.skipTest("a streaming protocol: see test_01")
+        q = self.at_rest()
+        target = list(q)
+        target[0] += 0.01
+        text = self.assert_refused(target, "protocol", time_from_start=0.1)
+        self.assertIn("cannot stream", text)
+        end = time.monotonic() + 5.0
+        while not self.rosout.matching("cannot stream") and time.monotonic() < end:
+            time.sleep(0.05)                      # (rosout has no event to wait for a given line)
+        self.assertTrue(self.rosout.matching("cannot stream"), "no log line with the reason")
+
+
+if __name__ == "__main__":
+    rostest.rosrun(PKG, "joint_command_check", JointCommandTest)
