@@ -82,6 +82,7 @@ def test_a_quaternion_is_normalised_and_gives_the_same_rotation_as_rpy():
     (with_(CYL, length=float("nan")), ["pillar", "length", "finite"]),
     (with_(CYL, length=None), ["pillar", "missing key length"]),
     (with_(SPH, radius=0.0), ["ball", "radius", "> 0"]),
+    (with_(SPH, name="a: b", radius=-1), ["objects[0] (a: b): radius must be > 0"]),
     (with_(SPH, type="cone"), ["objects[0] (ball)", "type", "box, cylinder, sphere"]),
     (with_(SPH, name=""), ["objects[0]", "name"]),
     (with_(SPH, name=None), ["objects[0]", "name"]),

@@ -81,15 +81,18 @@ class SceneObject:
     __slots__ = ("name", "shape", "size", "position", "quaternion")
 
     def __init__(self, name: str, shape: str, size: Sequence[float], position: Sequence[float] = (0.0, 0.0, 0.0),
-                 rpy: Optional[Sequence[float]] = None, quaternion: Optional[Sequence[float]] = None):
+                 rpy: Optional[Sequence[float]] = None, quaternion: Optional[Sequence[float]] = None,
+                 *, where: Optional[str] = None):
+        # where: what each message starts with (default "scene object 'NAME'"; a file's entry from from_dict)
         if not isinstance(name, str) or not name.strip():
-            raise SceneError("scene object: name must be a non-empty string, got %r" % (name,))
-        where = "scene object %r" % name
+            raise SceneError("%s: name must be a non-empty string, got %r" % (where or "scene object", name))
+        where = where or "scene object %r" % name
         if shape not in SHAPES:
             raise SceneError("%s: type must be one of %s, got %r" % (where, ", ".join(SHAPES), shape))
         keys = SHAPES[shape] if shape != "box" else ("x", "y", "z")
         if not _seq(size) or len(size) != len(keys):
-            raise SceneError("%s: a %s's size is (%s), got %r" % (where, shape, ", ".join(keys), size))
+            raise SceneError("%s: a %s's size must be a list of %d numbers (%s), got %r"
+                             % (where, shape, len(keys), ", ".join(keys), size))
         size_t = tuple(_positive(v, where, "size[%d]" % i if shape == "box" else k)
                        for i, (k, v) in enumerate(zip(keys, size)))
         pos = _vector(position, 3, where, "position")
@@ -164,14 +167,8 @@ class SceneObject:
         for key in SHAPES[shape] + ("position",):
             if key not in entry:
                 raise SceneError("%s: missing key %s" % (where, key))
-        if shape == "box":
-            size = _vector(entry["size"], 3, where, "size", positive=True)
-        else:
-            size = tuple(_positive(entry[k], where, k) for k in SHAPES[shape])
-        try:
-            return cls(name, shape, size, entry["position"], entry.get("rpy"), entry.get("quaternion"))
-        except SceneError as exc:
-            raise SceneError("%s: %s" % (where, str(exc).split(": ", 1)[-1])) from None
+        size = entry["size"] if shape == "box" else [entry[k] for k in SHAPES[shape]]
+        return cls(name, shape, size, entry["position"], entry.get("rpy"), entry.get("quaternion"), where=where)
 
     def to_dict(self) -> Dict[str, Any]:
         """The entry of a cell file that gives this object back (orientation as a quaternion)."""
