@@ -138,6 +138,16 @@ def test_turning_the_stretched_arm_left_hits_the_pillar(checker):
 
 
 @needs_libs
+def test_raising_the_forearm_turned_right_hits_the_shelf(checker):
+    q = HOME.copy()
+    q[0], q[2] = -0.9, -0.5                        # turned 52 degrees right, forearm raised 13 degrees
+    assert checker.in_collision(q)
+    assert {c.other for c in checker.contacts(q)} == {"shelf"}
+    q[2] = HOME[2] + 0.3                           # the same turn with the forearm lowered passes under it
+    assert not checker.in_collision(q)
+
+
+@needs_libs
 def test_a_folded_wrist_hits_the_forearm_unless_the_srdf_disables_the_pair(urdf, srdf, checker):
     from vr_driver.kinematics.collision import CollisionChecker
 
