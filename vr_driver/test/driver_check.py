@@ -25,7 +25,7 @@ from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from std_srvs.srv import SetBool, Trigger
+from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
@@ -33,8 +33,9 @@ from vr_driver.controller.program import SimDeviceError, VirtualController, auto
 from vr_driver.kinematics.solver import Kinematics
 from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJointTrajectoryGoal,
                            FollowJointTrajectoryResult, JointTolerance, MoveToPoseAction, MoveToPoseGoal,
-                           RobotStatus, TriState)
+                           RobotStatus, ServiceReturnCode, TriState)
 from vr_driver.poses import ControllerPose
+from vr_driver.srv import StopMotion
 
 PKG = "vr_driver"
 HOME = (1120, 0, 725, 0, 45, 0)
@@ -117,7 +118,7 @@ class DriverTestBase(unittest.TestCase):
         rospy.wait_for_service("/virtual_controller/set_estop", 20.0)
         cls.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
         cls.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
-        cls.stop_motion = rospy.ServiceProxy("/stop_motion", Trigger)
+        cls.stop_motion = rospy.ServiceProxy("/stop_motion", StopMotion)
         cls.path_pub = rospy.Publisher("/joint_path_command", JointTrajectory, queue_size=1)
 
     # -------------------------------------------------------------------- helpers
@@ -400,7 +401,7 @@ class DriverTest(DriverTestBase):
                                              move_type=MoveToPoseGoal.PTP))
         self.status.wait_for(lambda m: m.in_motion.val == TriState.TRUE, 10.0, after=time.monotonic())
         response = self.stop_motion()
-        self.assertTrue(response.success)
+        self.assertEqual(response.code.val, ServiceReturnCode.SUCCESS)
         self.assertTrue(self.client.wait_for_result(rospy.Duration(10.0)))
         self.assertIn(self.client.get_state(), (GoalStatus.PREEMPTED, GoalStatus.ABORTED))
         msg = self.status.wait_for(lambda m: m.in_motion.val == TriState.FALSE, 3.0, after=time.monotonic())

@@ -321,7 +321,7 @@ class PoseTerminalTest(unittest.TestCase):
         self.expect(t, r"joints \[deg\]: +J1 ")
         self.expect(t, FIRST_PROMPT)
         t.sendline("stop")
-        self.expect(t, r"Stop sent: stop sent; 0 job\(s\) ended")
+        self.expect(t, r"Stop sent: stop sent")           # industrial_msgs/StopMotion: SUCCESS
         self.expect(t, FIRST_PROMPT)
         self.quit(t)
 

@@ -155,3 +155,61 @@ def test_io_messages_and_services_carry_what_the_io_line_shows():
     back = msg.IOStates()
     back.deserialize(buf.getvalue())
     assert (back.signals[0].name, back.signals[0].value, back.signals[0].online) == ("gripper_closed", "1", True)
+
+
+# issue 26, the ROS-Industrial driver interface: industrial_msgs 0.7.x (ROS-Industrial industrial_core,
+# the `industrial_msgs` package). Source: the `_md5sum` attributes of the genpy-generated Python of
+# industrial_msgs (`industrial_msgs/msg/_ServiceReturnCode.py`, `_DeviceInfo.py`,
+# `industrial_msgs/srv/_StopMotion.py`, `_StartMotion.py`, `_CmdJointTrajectory.py`,
+# `_GetRobotInfo.py`: the service class's own `_md5sum` and its request / response classes'),
+# the same sums as the `getMD5()` strings of rosserial's ros_lib headers `industrial_msgs/<Type>.h`
+# and the `md5sum()` of gennodejs's industrial_msgs/msg/*.js. A service's MD5 covers its request
+# and response text (nested types by their own MD5), so StopMotion and StartMotion (empty request,
+# one ServiceReturnCode) share one sum.
+INDUSTRIAL_MSGS_MSG_MD5 = {
+    "ServiceReturnCode": "85a4e241266be66b1e1426b03083a412",
+    "DeviceInfo": "373ed7fa0fac92d443be9cd5198e80f0",
+}
+INDUSTRIAL_MSGS_SRV_MD5 = {
+    # service: (service, request, response)
+    "StopMotion": ("50b1f38f75f5677e5692f3b3e7e1ea48", "d41d8cd98f00b204e9800998ecf8427e",
+                   "50b1f38f75f5677e5692f3b3e7e1ea48"),
+    "StartMotion": ("50b1f38f75f5677e5692f3b3e7e1ea48", "d41d8cd98f00b204e9800998ecf8427e",
+                    "50b1f38f75f5677e5692f3b3e7e1ea48"),
+    "CmdJointTrajectory": ("94fdf82abbbb1071bc31be1a2aea4fcd", "2a0eff76c870e8595636c2a562ca298e",
+                           "50b1f38f75f5677e5692f3b3e7e1ea48"),
+    "GetRobotInfo": ("5db3230b3e61c85a320b999ffd7f3b3f", "d41d8cd98f00b204e9800998ecf8427e",
+                     "5db3230b3e61c85a320b999ffd7f3b3f"),
+}
+
+
+@pytest.mark.parametrize("name", sorted(INDUSTRIAL_MSGS_MSG_MD5))
+def test_ros_industrial_messages_have_the_industrial_msgs_md5(name):
+    assert getattr(msg, name)._md5sum == INDUSTRIAL_MSGS_MSG_MD5[name]
+
+
+@pytest.mark.parametrize("name", sorted(INDUSTRIAL_MSGS_SRV_MD5))
+def test_ros_industrial_services_have_the_industrial_msgs_md5(name):
+    srv = pytest.importorskip("vr_driver.srv", reason="vr_driver services not built (run scripts/test)")
+    service = getattr(srv, name)
+    assert (service._md5sum, service._request_class._md5sum, service._response_class._md5sum) == \
+        INDUSTRIAL_MSGS_SRV_MD5[name]
+
+
+def test_feedback_states_uses_the_control_msgs_feedback_type():
+    """feedback_states publishes the action's own feedback message: its MD5 is
+    control_msgs/FollowJointTrajectoryFeedback's (pinned above with the action), which is what
+    ROS-Industrial's industrial_robot_client subscribes to."""
+    from vr_driver.ros.industrial import FEEDBACK_STATES_TYPE
+    assert FEEDBACK_STATES_TYPE._md5sum == CONTROL_MSGS_MD5["FollowJointTrajectoryFeedback"]
+    assert FEEDBACK_STATES_TYPE._type == "vr_driver/FollowJointTrajectoryFeedback"
+
+
+def test_service_return_code_and_robot_info_fields():
+    srv = pytest.importorskip("vr_driver.srv", reason="vr_driver services not built (run scripts/test)")
+    assert (msg.ServiceReturnCode.SUCCESS, msg.ServiceReturnCode.FAILURE) == (1, -1)
+    assert msg.ServiceReturnCode._slot_types == ["int8"]
+    assert msg.DeviceInfo.__slots__ == ["model", "serial_number", "hw_version", "sw_version", "address"]
+    assert srv.GetRobotInfoResponse.__slots__ == ["controller", "robots", "code"]
+    assert srv.CmdJointTrajectoryRequest._slot_types == ["trajectory_msgs/JointTrajectory"]
+    assert srv.StopMotionRequest.__slots__ == [] and srv.StopMotionResponse.__slots__ == ["code"]

@@ -23,14 +23,15 @@ from geometry_msgs.msg import PoseStamped
 from rosgraph_msgs.msg import Log
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
-from std_srvs.srv import Trigger
 from tf2_msgs.msg import TFMessage
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
 from driver_check import Recorder, cp
 from vr_driver.msg import (FollowJointTrajectoryAction, FollowJointTrajectoryGoal, FollowJointTrajectoryResult,
-                           MoveToPoseAction, MoveToPoseFeedback, MoveToPoseGoal, RobotStatus, TriState)
+                           MoveToPoseAction, MoveToPoseFeedback, MoveToPoseGoal, RobotStatus, ServiceReturnCode,
+                           TriState)
+from vr_driver.srv import StopMotion
 
 PKG = "vr_driver"
 ARMS = ("arm1", "arm2")
@@ -54,7 +55,7 @@ class Arm:
         self.executed = Recorder(ns + "virtual_controller/executed", String)
         self.move_client = actionlib.ActionClient(ns + "move_to_pose", MoveToPoseAction)
         self.trajectory_client = actionlib.ActionClient(ns + "joint_trajectory_action", FollowJointTrajectoryAction)
-        self.stop_motion = rospy.ServiceProxy(ns + "stop_motion", Trigger)
+        self.stop_motion = rospy.ServiceProxy(ns + "stop_motion", StopMotion)
         self.path_pub = rospy.Publisher(ns + "joint_path_command", JointTrajectory, queue_size=1)
 
     def wait_up(self, timeout):
@@ -209,7 +210,7 @@ class TwoArmsTest(unittest.TestCase):
         self.assertTrue(moving["arm2"].wait(15.0), "arm2 never moving")
         self.assertTrue(moving["arm1"].wait(15.0), "arm1 never moving")
         response = arm2.stop_motion()
-        self.assertTrue(response.success, response.message)
+        self.assertEqual(response.code.val, ServiceReturnCode.SUCCESS)
         self.assertTrue(done2.wait(20.0), "arm2's goal did not end")
         self.assertTrue(done1.wait(30.0), "arm1's goal did not end")
         self.assertNotEqual(h2.get_goal_status(), GoalStatus.SUCCEEDED)

@@ -1,7 +1,9 @@
 """ROS node `interface`: the thin ROS edge of :class:`vr_driver.driver.DriverCore`.
 
 Publishes robot_status, joint_states, tool_pose, /diagnostics and ~markers; serves the
-move_to_pose action and the stop_motion service; subscribes joint_path_command. The I/O line
+move_to_pose action; subscribes joint_path_command. The ROS-Industrial part (feedback_states,
+stop_motion, start_motion, the joint_path_command service, get_robot_info) is
+:mod:`vr_driver.ros.industrial`. The I/O line
 (set_io, get_io, io_states) is :mod:`vr_driver.ros.io_server`. All decisions
 (validation, preview, handshake, reconnect) are in the ROS-free core.
 """
@@ -11,7 +13,7 @@ import faulthandler
 import signal
 import sys
 import threading
-from typing import Dict, List, Optional
+from typing import Dict, List, Optional, Tuple
 
 import actionlib
 import diagnostic_updater
@@ -19,7 +21,6 @@ import rospy
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point, PoseStamped
 from sensor_msgs.msg import JointState
-from std_srvs.srv import Trigger, TriggerResponse
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -29,8 +30,8 @@ from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, 
 from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
                      SubmitMode)
 from ..errors import VrDriverError
+from .industrial import IndustrialInterface
 from .io_server import IoServer
-from .joint_command import JointCommandSubscriber
 from ..params import DriverParams, ParamError
 from ..poses import ControllerPose, MoveType
 from ..protocol.v1 import StatusBits
@@ -108,14 +109,14 @@ class InterfaceNode:
         self._cancel: Dict[str, threading.Event] = {}        # goal id -> cancel requested
         self._tickets: Dict[str, int] = {}                   # motion goal id -> arrival ticket
         self._motion_goal: Optional[str] = None
-        self.stop_srv = rospy.Service("stop_motion", Trigger, self._stop_motion)
+        # feedback_states, stop_motion, start_motion, joint_path_command (service), get_robot_info
+        self.industrial = IndustrialInterface(self.core, params, self.joint_path)
         # FollowJointTrajectory under the ROS-Industrial name (MoveIt's controller manager)
         self.trajectory_server = TrajectoryServer(self.core, params.joint_states_rate,
                                                   show=self._line_marker if params.publish_markers else None)
+        self.trajectory_server.on_run = self.industrial.follow
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
-        # joint targets streamed on the fly (ros/joint_command.py)
-        self.joint_command = JointCommandSubscriber(self.core, self.diag)
         self._last_link = None
         self._last_status_key = None
         self._last_record: Optional[float] = None     # record_time of the last joint_states sample
@@ -193,6 +194,7 @@ class InterfaceNode:
         js.name = self.names
         js.position = list(status.joints)
         self.joint_pub.publish(js)
+        self.industrial.publish_feedback(status, stamp)
         (px, py, pz), (qx, qy, qz, qw) = status.pose.to_ros()
         ps = PoseStamped()
         ps.header.stamp = stamp
@@ -418,35 +420,39 @@ class InterfaceNode:
             rospy.logwarn("move_to_pose failed: %s", result.reason)
             handle.set_aborted(result, result.reason)
 
-    def _stop_motion(self, _req) -> TriggerResponse:
-        n = self.core.stop_motion("stop_motion service called")
-        return TriggerResponse(success=True, message="stop sent; %d job(s) ended" % n)
-
     def _joint_path(self, msg: JointTrajectory) -> None:
+        """The joint_path_command topic: :meth:`joint_path`, a refusal logged."""
+        self.joint_path(msg)
+
+    def joint_path(self, msg: JointTrajectory) -> Tuple[bool, str]:
+        """The one validated joint path of the joint_path_command topic and service: (accepted,
+        what happened / why refused); a refusal sends nothing. Empty = stop."""
+        if not msg.points:
+            self.core.stop_motion("empty joint path: stop requested")
+            return True, "empty joint path: stop requested"
         if self.core.streaming:
-            # protocol v2: the same path as joint_trajectory_action (validated with its timing,
-            # streamed; it replaces the rest of a running path)
+            # protocol v2 / v3: the same path as joint_trajectory_action (validated with its
+            # timing, streamed; it replaces the rest of a running path)
             try:
-                if not msg.points:
-                    self.core.stop_motion("empty joint path: stop requested")
-                    return
                 traj = self.trajectory_server.check(trajectory_from_msg(msg))
                 run = self.core.submit_trajectory(traj)
             except (VrDriverError, ValueError, TypeError) as exc:
                 rospy.logerr("joint_path_command refused: %s", exc)
-                return
-            rospy.loginfo("joint_path_command: %d points over %.2f s streamed", len(traj.positions) - 1,
-                          run.traj.duration)
-            return
+                return False, "refused: %s" % exc
+            self.industrial.follow(run)
+            text = "%d points over %.2f s streamed" % (len(traj.positions) - 1, run.traj.duration)
+            rospy.loginfo("joint_path_command: %s", text)
+            return True, text
         points = [list(p.positions) for p in msg.points]
         try:
             jobs = self.core.submit_joint_path(msg.joint_names, points)
         except (VrDriverError, ValueError, TypeError) as exc:
             rospy.logerr("joint_path_command refused: %s", exc)
-            return
+            return False, "refused: %s" % exc
         if jobs:
             rospy.loginfo("joint_path_command: %d points queued", len(jobs))
             self._publish_markers(jobs[-1])
+        return True, "%d points queued" % len(jobs)
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -141,7 +141,7 @@ class RosBackend(Backend):
         from geometry_msgs.msg import PoseStamped
         from sensor_msgs.msg import JointState
         from diagnostic_msgs.msg import DiagnosticArray
-        from std_srvs.srv import Trigger
+        from vr_driver.srv import StopMotion
 
         end = time.monotonic() + wait
         master = rosgraph.Master("/pose_terminal")
@@ -171,7 +171,7 @@ class RosBackend(Backend):
         rospy.Subscriber(name("joint_states"), JointState, self._on_joints, queue_size=1)
         rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=10)
         self.client = actionlib.ActionClient(name("move_to_pose"), MoveToPoseAction)
-        self.stop_proxy = rospy.ServiceProxy(name("stop_motion"), Trigger)
+        self.stop_proxy = rospy.ServiceProxy(name("stop_motion"), StopMotion)   # industrial_msgs/StopMotion
         announced = False
         while not self.client.wait_for_server(rospy.Duration(0.5)):
             if not _pid_alive(launch_pid):
@@ -338,7 +338,10 @@ class RosBackend(Backend):
             response = self.stop_proxy()
         except (rospy.ROSException, rospy.ServiceException) as exc:
             return False, "stop_motion is not available: %s" % exc
-        return bool(response.success), response.message
+        from vr_driver.msg import ServiceReturnCode
+        if response.code.val == ServiceReturnCode.SUCCESS:
+            return True, "stop sent"
+        return False, "the driver could not take the stop (code %d; see its log)" % response.code.val
 
 
 # ---------------------------------------------------------------------------------------- main

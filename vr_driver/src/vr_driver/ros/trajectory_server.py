@@ -66,6 +66,7 @@ class TrajectoryServer:
                                          None]] = None):
         """``show(ns, points_m, rgb)``: draw a TCP line strip (the plan, the executed path)."""
         self.show = show
+        self.on_run: Optional[Callable[[object], None]] = None     # told each run it starts
         self.core = core
         self.names = list(core.joint_names)
         self.period = 1.0 / max(1.0, feedback_rate)
@@ -165,6 +166,8 @@ class TrajectoryServer:
             result = FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=str(exc))
             handle.set_aborted(result, str(exc))
             return
+        if self.on_run is not None:
+            self.on_run(run)                 # feedback_states: desired = this plan from now on
         sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names)
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
         last_draw = rospy.get_time()
