@@ -32,6 +32,7 @@ from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState
 from ..errors import VrDriverError
 from .industrial import IndustrialInterface
 from .io_server import IoServer
+from .joint_command import JointCommandSubscriber
 from ..params import DriverParams, ParamError
 from ..poses import ControllerPose, MoveType
 from ..protocol.v1 import StatusBits
@@ -117,6 +118,8 @@ class InterfaceNode:
         self.trajectory_server.on_run = self.industrial.follow
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
+        # joint targets streamed on the fly (ros/joint_command.py)
+        self.joint_command = JointCommandSubscriber(self.core, self.diag)
         self._last_link = None
         self._last_status_key = None
         self._last_record: Optional[float] = None     # record_time of the last joint_states sample
