@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 import os
 
-import pytest
 
 from vr_driver.csr import read_program
 from vr_driver.csr.calibration import PairRecorder, RestDetector, model_errors, taught_points

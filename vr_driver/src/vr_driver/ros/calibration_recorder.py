@@ -19,7 +19,7 @@ import argparse
 import math
 import sys
 import threading
-from typing import Any, List, Optional, Sequence
+from typing import Any, Optional, Sequence
 
 from ..csr.calibration import (REST_HOLD, REST_STILL_DEG, REST_STILL_MM, PairRecorder, RestDetector,
                                model_errors, taught_points)
