@@ -7,6 +7,8 @@ import threading
 import time
 import unittest
 
+import yaml
+
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
@@ -66,6 +68,22 @@ class InterfaceNodeTest(unittest.TestCase):
             res = self.node(arg)
             self.assertEqual(res.returncode, 2, arg + res.stdout + res.stderr)
             self.assertIn(words, res.stderr, arg)
+
+    def test_other_controller_joint_names_in_its_namespace_stop_the_node(self):
+        """ROS-Industrial nodes read controller_joint_names in the driver's namespace: the driver
+        sets it there, and refuses to start beside a different list (the arm would be driven by the
+        wrong names). The same list is fine: rostest ros_industrial starts the driver after its
+        launch loaded joint_names_vr006l.yaml there, as ROS-Industrial launch files do."""
+        ns = "/ri_names_%d" % time.monotonic_ns()
+        subprocess.run(["rosparam", "set", ns + "/controller_joint_names", "[a, b, c, d, e, f]"],
+                       check=True, env=env(), capture_output=True, timeout=30)
+        res = self.node("__ns:=" + ns, "_port:=/dev/vr006l_no_such_port")
+        self.assertEqual(res.returncode, 2, res.stdout + res.stderr)
+        self.assertIn(ns + "/controller_joint_names is already set", res.stderr)
+        self.assertIn("rosparam delete", res.stderr)
+        got = subprocess.run(["rosparam", "get", ns + "/controller_joint_names"], env=env(),
+                             capture_output=True, text=True, timeout=30).stdout
+        self.assertEqual(yaml.safe_load(got), list("abcdef"))    # left as it was: nothing changed
 
     def test_missing_port_is_reported_and_retried_without_exiting(self):
         proc = subprocess.Popen(["rosrun", "vr_driver", "interface", "__name:=interface_noport",
