@@ -12,6 +12,8 @@
     │   └── JointLimitError      the only solutions (or the given joints) violate a joint limit
     ├── MotionError              a motion cannot be generated (joint jump, bad via point, ...)
     │   ├── EnvelopeError        a previewed path leaves the workspace box (names the sample)
+    │   ├── CollisionError       a path would make the arm hit itself or an object of the scene
+    │   │                        (names the sample, the links and the object)
     │   └── PathDeviationError   the interpolated path leaves its tolerance
     ├── ProtocolError            a 14-byte controller record cannot be encoded / decoded, or a
     │   │                        protocol parameter (byte order, move type) is invalid
@@ -50,6 +52,7 @@ __all__ = [
     "JointLimitError",
     "MotionError",
     "EnvelopeError",
+    "CollisionError",
     "PathDeviationError",
     "ProtocolError",
     "HandshakeError",
@@ -104,6 +107,21 @@ class MotionError(VrDriverError):
 
 class EnvelopeError(MotionError):
     """A previewed path leaves the workspace box (the message names the first sample outside)."""
+
+
+class CollisionError(MotionError):
+    """A path (a move's preview, a trajectory, a joint_command step) would make the arm collide with
+    itself (a link pair the SRDF does not disable) or with an object of the scene, within the
+    collision padding. The message names where (the sample, or the chord between two samples, and
+    its time when known), the link(s) and the other link or object. ``contacts``: the checker's
+    Contact tuples at the first colliding configuration; ``sample``: the index of the sample at or
+    after which it collides (None: not known); ``time`` [s] from the path's start (None: not known)."""
+
+    def __init__(self, message: str, contacts=(), sample=None, time=None):
+        super().__init__(message)
+        self.contacts = tuple(contacts)
+        self.sample = sample
+        self.time = time
 
 
 class PathDeviationError(MotionError):

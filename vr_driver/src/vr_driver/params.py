@@ -137,6 +137,23 @@ def _model(params: Mapping[str, Any], default: str) -> str:
     return value
 
 
+def _scene(params: Mapping[str, Any], default: str) -> str:
+    """``scene``: "" or a cell YAML that kinematics.scene.load_scene accepts (checked here, at
+    start: a missing or bad file is a ParamError naming ``scene`` with the file's entry and key)."""
+    value = _string(params, "scene", default)
+    if not value:
+        return value
+    if not os.path.isfile(value):
+        raise ParamError("scene", value, "no such file")
+    from .errors import SceneError
+    from .kinematics.scene import load_scene
+    try:
+        load_scene(value)
+    except SceneError as exc:
+        raise ParamError("scene", value, str(exc)) from None
+    return value
+
+
 @dataclass(frozen=True)
 class DriverParams:
     """Everything the driver reads at start (see config/vr_driver.yaml for the documentation)."""
@@ -189,6 +206,10 @@ class DriverParams:
     model: str = ""                      # kinematics YAML (the layout of kinematics_vr006l.yaml, e.g.
     #                                      `calibrate fit --write`'s); "" = the package's model
     base_frame: str = "base"
+    # collision checking (issue 27; doc/collision_scene.md)
+    scene: str = ""                      # cell YAML of the objects around the arm; "" = none
+    collision_padding: float = 0.01      # [m] every shape inflated by this for the verdict
+    collision_check: bool = True         # check every path against the arm itself (SRDF) and the scene
     # publishing
     status_rate: float = 10.0
     joint_states_rate: float = 20.0
@@ -237,6 +258,7 @@ class DriverParams:
             raise ParamError("base_frame", base_frame, "must not be empty")
         prefix = _prefix(params, d.prefix)
         model = _model(params, d.model)
+        scene = _scene(params, d.scene)
         out = cls(
             protocol=_string(params, "protocol", d.protocol, _protocols()),
             bus_config=bus_config,
@@ -272,6 +294,9 @@ class DriverParams:
             tcp_offset=tcp,
             model=model,
             base_frame=prefix + base_frame,
+            scene=scene,
+            collision_padding=_number(params, "collision_padding", d.collision_padding, 0.0, 1.0),
+            collision_check=_boolean(params, "collision_check", d.collision_check),
             status_rate=_number(params, "status_rate", d.status_rate, 0.0, 1000.0, lo_open=True),
             joint_states_rate=_number(params, "joint_states_rate", d.joint_states_rate, 0.0, 1000.0,
                                       lo_open=True),

@@ -40,13 +40,14 @@ from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from pyprofibus_vendor.phy import Link
 
-from ..errors import VrDriverError
+from ..errors import CollisionError, VrDriverError
 from ..kinematics.solver import Kinematics
 from ..kinematics.preview import MotionPlanner, check_envelope
 from ..params import DriverParams
 from ..poses import ControllerPose, MoveType
 from ..protocol.v1 import Feedback, StatusBits, commands_for
 from .joint_command import JointCommander
+from .scene_guard import SceneGuard
 from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkCounters, LinkSample, LinkState,
                    LinkSupervisor, open_serial_link)
@@ -328,6 +329,11 @@ class DriverCore:
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
         self.joint_commander = JointCommander(self)
+        # the cell and the collision checks (scene_guard; MissingDependency: a scene but no libraries)
+        from ..kinematics.scene import load_scene
+        self.scene_guard = SceneGuard(self.kin, self._planning_gate,
+                                      load_scene(params.scene) if params.scene else None,
+                                      params.collision_padding, params.collision_check, params.prefix)
 
     @property
     def handshake(self):
@@ -394,6 +400,7 @@ class DriverCore:
         with self._planning_gate:
             trajectory = self.planner.plan(request.move_type, start_joints, target, via)
         check_envelope(trajectory, self.params.workspace)
+        self.check_collision_path(trajectory.positions, "%s path" % request.move_type.name, trajectory.times)
         return Preview(request, commands, trajectory, tuple(trajectory.goal))
 
     def claim_ticket(self) -> int:
@@ -478,7 +485,12 @@ class DriverCore:
         that keep the path within its path tolerance (:func:`trajectories.thin`), each kept point
         a PTP target of a joint path (it replaces the queued targets of an earlier path). The v1
         program stops at every point and moves at its own speed: the result says how much slower
-        than planned it ran. Raises DriverError (nothing queued) as :meth:`submit_joint_path`."""
+        than planned it ran. Raises DriverError (nothing queued) as :meth:`submit_joint_path`, and
+        CollisionError when a sample or a chord between two collides."""
+        try:
+            self.check_collision_path(traj.positions, "trajectory", traj.times)
+        except CollisionError as exc:
+            raise CollisionError("%s; nothing was sent" % exc, exc.contacts, exc.sample, exc.time) from None
         if self.streaming:
             return self._submit_stream(traj, on_update, mode)
         kept = thin(traj)
@@ -565,7 +577,9 @@ class DriverCore:
     def check_segments(self, start: Sequence[float], points: Sequence[StreamPoint]) -> None:
         """Every straight joint move of the stream (from ``start``) inside the joint limits and the
         workspace box, sampled as a PTP preview; raises (EnvelopeError, KinematicsError...) naming
-        the segment."""
+        the segment; CollisionError naming the point where a chord collides."""
+        self.check_collision_path([tuple(start)] + [p.joints for p in points],
+                                  "the stream's straight joint moves", [0.0] + [p.time for p in points])
         prev = tuple(start)
         for i, point in enumerate(points):
             try:
@@ -631,6 +645,47 @@ class DriverCore:
         self._wake.set()
         log.info("stop motion: %s (%d job(s) to end)", reason, n)
         return n
+
+    # ------------------------------------------------------------------------ collision checking
+    @property
+    def collision(self):
+        """The CollisionChecker of the current scene (kinematics.collision), or None when nothing is
+        checked (collision_check false, or pinocchio / coal missing with no scene). Replaced as a
+        whole on every scene change; not thread-safe: use it under :attr:`planning_gate`, or
+        ``copy()`` it (a planner of its own)."""
+        return self.scene_guard.checker
+
+    def scene(self):
+        """A copy of the scene (kinematics.scene.Scene)."""
+        return self.scene_guard.scene()
+
+    def add_scene_object(self, obj, replace: bool = False) -> None:
+        """Add ``obj`` (a SceneObject in base_link); ``replace``: in place of the object of its name
+        (added when there is none). SceneError (nothing changes) for a taken name without
+        ``replace``; an object the arm stands in now is added with a warning (scene_guard)."""
+        self.scene_guard.add(obj, replace, self._joints_now())
+
+    def remove_scene_object(self, name: str):
+        """Remove the object ``name`` and return it; SceneError naming the objects when absent."""
+        return self.scene_guard.remove(name)
+
+    def clear_scene(self) -> None:
+        self.scene_guard.clear()
+
+    def load_scene(self, path: str):
+        """Replace the scene by the cell file ``path``; SceneError (nothing changes) when it is bad."""
+        return self.scene_guard.load(path, self._joints_now())
+
+    def check_collision_path(self, samples: Sequence[Sequence[float]], what: str,
+                             times: Optional[Sequence[float]] = None) -> None:
+        """Raise CollisionError when ``samples`` (joint vectors, controller order) or a straight
+        chord between two of them would collide (scene_guard: the chords checked at most the
+        planner's max_sweep of arm motion apart); ``what`` names the path in the message."""
+        self.scene_guard.check_path(samples, what, times)
+
+    def _joints_now(self) -> Optional[Tuple[float, ...]]:
+        status = self.status()
+        return status.joints if status.joints is not None and status.joints_valid else None
 
     # ------------------------------------------------------------------------ request helpers
     @property

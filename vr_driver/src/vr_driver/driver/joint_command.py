@@ -20,7 +20,8 @@ and by how much -- when:
   ``joint_command_timeout``. Refused, never clipped: the message names the joint, its speed and the
   limit. The controller runs the step at the speed that takes ``T`` (0.1 % steps, rounded up);
 - the straight joint move of the step leaves the workspace box (sampled as a PTP preview, like
-  every stream segment);
+  every stream segment), or collides with the arm itself or the scene (``collision``; the driver's
+  collision checks, driver/scene_guard.py);
 - a Cartesian protocol (``protocol.joint_targets`` false: v3): the pose the wire carries (FK,
   rounded to its resolution) is solved by the controller as the solution nearest the previous
   target's joints; that must be the commanded joints within the stream's configuration tolerance;
@@ -44,7 +45,7 @@ import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Tuple
 
-from ..errors import VrDriverError
+from ..errors import CollisionError, VrDriverError
 from ..kinematics.preview import check_envelope
 from .jobs import MoveJob, StreamPoint, SubmitMode
 
@@ -57,7 +58,7 @@ __all__ = ["JointCommandRefused", "JointCommander", "REFUSAL_KINDS"]
 
 #: the rules a command can break (JointCommandRefused.kind; the diagnostics count each)
 REFUSAL_KINDS = ("message", "protocol", "names", "not_finite", "limits", "speed", "workspace", "configuration",
-                 "state", "busy")
+                 "state", "busy", "collision")
 
 
 class JointCommandRefused(VrDriverError):
@@ -285,6 +286,10 @@ class JointCommander:
                 check_envelope(core.planner.ptp_joints(prev, q), core.params.workspace)
         except VrDriverError as exc:
             raise JointCommandRefused("workspace", "the step from %s: %s" % (origin, exc)) from None
+        try:         # one chord: a few checks of ~10 us each (scene_guard)
+            core.check_collision_path((prev, q), "the step from %s" % origin)
+        except CollisionError as exc:
+            raise JointCommandRefused("collision", str(exc)) from None
         if core.protocol.joint_targets:
             return None
         error = core.configuration_error(prev, q)
