@@ -18,7 +18,8 @@ step and why, and nothing else happens:
 2. The goal: joints inside the limits and valid; a named state looked up in the SRDF's group states
    (``Kinematics.named_states``); a pose solved for *every* IK branch and full wrist turn
    (``Kinematics.ik_solutions``), those inside the limits and valid kept, the nearest to the start
-   chosen ("nearest": the shortest synchronous joint move, max over joints of |dq| / speed limit).
+   chosen ("nearest": the shortest synchronous joint move, max over joints of |dq| / speed limit);
+   only when the planner finds no path to it within half the budget may it end at another of them.
 3. Planning: when the straight joint-space move is valid it is the path; otherwise OMPL's planner
    (``planner``, one of :data:`PLANNERS`) within ``time_budget`` seconds. The planner keeps
    ``clearance`` more than the validity asks (a checker: a copy of it padded by that much more;
@@ -74,7 +75,7 @@ from ..poses import ControllerPose, ros_to_matrix
 from . import deps
 
 __all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER",
-           "DEFAULT_MAX_SWEEP", "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "LINK_ALLOWANCE", "TOPP_MARGIN", "joint_weights"]
+           "DEFAULT_MAX_SWEEP", "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN", "joint_weights"]
 
 #: the planners one may name (OMPL geometric planners); RRTConnect is MoveIt's default, too
 PLANNERS = ("RRTConnect", "RRT", "RRTstar", "InformedRRTstar", "BITstar", "PRM", "PRMstar",
@@ -89,6 +90,8 @@ DEFAULT_DT = 0.05
 #: configurations (half of ``max_sweep``) and what the timing spline and the chords between the
 #: samples deviate from the checked path stay inside it, so the check of the result passes
 DEFAULT_CLEARANCE = 0.01
+#: the share of the budget spent on the nearest IK solution of a pose before any other is allowed
+NEAREST_SHARE = 0.5
 #: [m] near the start and the goal (this far by the sweep bound) the clearance is not asked for
 ESCAPE_SWEEP = 0.2
 #: [m] added to each joint's lever arm: the links' own size (their collision shapes stand out of
@@ -398,9 +401,8 @@ class Planner:
                     "all %d joint solutions of the goal pose are in collision; the nearest, %s"
                     % (len(candidates), _fmt(candidates[0])))
             raise PlanningError("goal", what + why, contacts)
-        q1 = valid[0]
         timings = {"goal": time.perf_counter() - t0}
-        path = self._geometric_path(q0, q1, budget, seed, timings)
+        path = self._geometric_path(q0, valid, budget, seed, timings)
         t = time.perf_counter()
         timings["time"] = timings["check"] = 0.0
         for attempt, (step, dt) in enumerate(_TIMING_ATTEMPTS):
@@ -449,10 +451,19 @@ class Planner:
             s[i] = w * v
         return s
 
-    def _geometric_path(self, q0, q1, budget: float, seed: Optional[int], timings: Dict[str, float]
-                        ) -> List[Tuple[float, ...]]:
+    def _geometric_path(self, q0, goals: Sequence[Tuple[float, ...]], budget: float, seed: Optional[int],
+                        timings: Dict[str, float]) -> List[Tuple[float, ...]]:
+        """A valid path from ``q0`` to the first of ``goals`` (the nearest) -- or, when there are
+        several (the IK solutions of a pose) and the planner finds none to the first within
+        ``NEAREST_SHARE`` of the budget, to any of them in the rest of it: the nearest solution may
+        lie in a part of the free space the start is not in (e.g. the wrist folded past its own
+        housing), as MoveIt, too, plans to any of a pose's IK solutions. (Not the first again: OMPL's
+        RRTConnect takes a further goal only when its goal tree has grown, which it cannot where the
+        first goal is walled in.)"""
         t = time.perf_counter()
-        self._ends = (tuple(q0), tuple(q1))
+        goals = [tuple(g) for g in goals]
+        q1 = goals[0]
+        self._ends = (tuple(q0),) + tuple(goals)
         if self.motion_valid(q0, q1, self.planning_valid) is None:
             timings["plan"] = time.perf_counter() - t
             timings["simplify"] = 0.0
@@ -467,22 +478,41 @@ class Planner:
         finally:
             ou.setLogLevel(previous)
         si = self._space()
-        pdef = ob.ProblemDefinition(si)
-        pdef.setStartAndGoalStates(self._state(si, q0), self._state(si, q1))
-        planner = getattr(og, self.planner_name)(si)
-        planner.setProblemDefinition(pdef)
-        planner.setup()
-        status = planner.solve(budget)
+        stages = [(goals[:1], budget)] if len(goals) == 1 else [(goals[:1], budget * NEAREST_SHARE), (goals[1:], None)]
+        for n_stage, (targets, share) in enumerate(stages):
+            if n_stage:
+                # the others: a straight move first (nearest first); then the planner to any of them
+                for g in targets:
+                    if self.motion_valid(q0, g, self.planning_valid) is None:
+                        timings["plan"] = time.perf_counter() - t
+                        timings["simplify"] = 0.0
+                        return [q0, g]
+            pdef = ob.ProblemDefinition(si)
+            pdef.addStartState(self._state(si, q0))
+            goal = ob.GoalStates(si)
+            for g in targets:
+                goal.addState(self._state(si, g))
+            pdef.setGoal(goal)
+            planner = getattr(og, self.planner_name)(si)
+            planner.setProblemDefinition(pdef)
+            planner.setup()
+            left = budget - (time.perf_counter() - t) if share is None else share
+            status = planner.solve(max(left, 1e-3))
+            if status.getStatus() == ob.PlannerStatus.EXACT_SOLUTION and pdef.hasExactSolution():
+                break
         timings["plan"] = time.perf_counter() - t
         if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION or not pdef.hasExactSolution():
-            raise PlanningError("plan", "%s found no path within %.3g s (%s) from %s to %s"
-                                % (self.planner_name, budget, status.asString(), _fmt(q0), _fmt(q1)))
+            raise PlanningError("plan", "%s found no path within %.3g s (%s) from %s to %s%s"
+                                % (self.planner_name, budget, status.asString(), _fmt(q0), _fmt(q1),
+                                   " nor to any other of its %d valid joint solutions" % (len(goals) - 1)
+                                   if len(goals) > 1 else ""))
         path = pdef.getSolutionPath()
         t = time.perf_counter()
         self._simplify(path, og, si)
         timings["simplify"] = time.perf_counter() - t
         out = [tuple(s[i] / self.weights[i] for i in range(self.dof)) for s in path.getStates()]
-        out[0], out[-1] = tuple(q0), tuple(q1)
+        reached = min(goals, key=lambda g: sum((a - b) ** 2 for a, b in zip(g, out[-1])))
+        out[0], out[-1] = tuple(q0), reached
         # the simplifier keeps the path valid; the check here is the planner's own guarantee
         for a, b in zip(out, out[1:]):
             bad = self.motion_valid(a, b)

@@ -1,0 +1,254 @@
+#!/usr/bin/python3
+"""Collision-aware planning in the example cell (issue 27; printed, never asserted).
+
+    scripts/env python3 bench/planning.py [--n 100] [--seed 1] [--budget 1.0] [--planner RRTConnect]
+                                          [--no-execute] [--protocol v2] [--quick]
+
+The VR-006L (support package's xacro, moveit_config's SRDF) in the example cell
+(panasonic_vr006l_support/config/cell_example.yaml: table, pillar, shelf), collision padding the
+driver's (``collision_padding``, 10 mm; the planner keeps its clearance, 10 mm, on top). N
+queries, chained: the first starts at the arm's home, each next one where the previous one ended.
+Each goal is a random configuration free with the padding (uniform within the joint limits,
+joint_5 within +-100 deg: the wrist folds onto itself between 105 and 255 deg, which cuts the free
+space into parts no path joins -- a query between two of them has no answer for any planner);
+every other query asks for it as a pose (the controller pose of its TCP, mm / deg: the planner
+solves every IK branch and takes the nearest collision-free one), the others as joints.
+
+Each query: kinematics.planner.Planner.plan (OMPL RRTConnect, shortcutting and smoothing, TOPP-RA at
+the full speed and acceleration limits, samples every 0.05 s, every sample and chord re-checked),
+the time of the whole call; then, independently of the planner, every sample and every straight
+chord between two samples (0.25 deg steps) checked with a CollisionChecker of the true shapes
+(padding 0: collisions) and with the padded one (inside the padding).
+
+Execution (unless --no-execute): each plan, validated as joint_trajectory_action validates it
+(driver.trajectories.validate from the arm's reported joints, segment_speeds), runs on the in-memory
+driver rig of the tests (vr_driver/test/driver/_world.py: DriverCore with the cell as its scene --
+it checks every sample and chord itself and refuses a path that collides --, our DP master, the
+virtual controller's slave, program and simulated arm, one fake clock; ``--protocol v2`` joint
+targets streamed on the plan's timing by default; its workspace box widened to the arm's whole
+reach, ``REACH_BOX``, as the driver's default box is an envelope of its own); every tick of the
+fake clock the driver's reported joints (what joint_states publishes) and the simulated arm's own
+joints are checked for collisions (true shapes). The next query starts from the reported joints.
+
+Figures: success rate (a plan) and success within the budget (the whole call <= --budget),
+median / p95 / max planning time (the whole call, and the OMPL part alone), the share of queries
+the straight move solved, path duration (median / p95), collisions of the planned samples and
+chords, and in execution: runs that succeeded, samples checked, collisions. --quick: N = 10.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import random
+import statistics
+import sys
+import time
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+for _pkg in ("vr_driver", "panasonic_vr006l_support", "pyprofibus_vendor"):
+    _src = os.path.join(REPO, _pkg, "src")
+    if _src not in sys.path:
+        sys.path.insert(0, _src)
+
+from vr_driver.errors import MissingDependency  # noqa: E402
+from vr_driver.params import DriverParams  # noqa: E402
+
+CELL = os.path.join(REPO, "panasonic_vr006l_support", "config", "cell_example.yaml")
+#: joint_5 stays within this (deg): the part of the free space home is in (module text)
+WRIST_FOLD = 100.0
+#: the rig's workspace box (mm, deg): the arm's whole reach. The driver's default box (vr_driver.yaml,
+#: X 100..1400, Y -900..900, Z 0..1400 mm) is a safety envelope of its own that random motions in the
+#: cell leave (behind the robot, under the table's height); the bench measures collisions, not that
+REACH_BOX = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
+#: [rad] the largest joint step when a chord between two samples is checked
+CHORD_STEP = math.radians(0.25)
+
+
+def percentile(values, p):
+    s = sorted(values)
+    if not s:
+        return float("nan")
+    return s[min(len(s) - 1, max(0, int(math.ceil(p / 100.0 * len(s))) - 1))]
+
+
+def random_free(kin, checker, rng):
+    while True:
+        q = kin.random_joints(rng)
+        if abs(q[4]) <= math.radians(WRIST_FOLD) and not checker.in_collision(q):
+            return q
+
+
+def chord_collisions(checker, positions):
+    """(samples or chord points in collision, the first one's contacts as text)."""
+    hits, first = 0, ""
+    for k, q in enumerate(positions):
+        pts = [q]
+        if k:
+            a = positions[k - 1]
+            n = max(1, int(math.ceil(max(abs(x - y) for x, y in zip(a, q)) / CHORD_STEP)))
+            pts = [tuple(x + (y - x) * j / n for x, y in zip(a, q)) for j in range(1, n + 1)]
+        for p in pts:
+            if checker.in_collision(p):
+                hits += 1
+                if not first:
+                    first = "; ".join(str(c) for c in checker.contacts(p))
+    return hits, first
+
+
+class Executor:
+    """The in-memory driver rig; :meth:`run` executes one plan and checks every tick's joints."""
+
+    def __init__(self, kin, checker, protocol):
+        sys.path.insert(0, os.path.join(REPO, "vr_driver", "test", "driver"))
+        from _world import World
+        self.world = World(kin, {"workspace": REACH_BOX, "scene": CELL}, protocol=protocol)
+        self.world.ready()
+        self.kin, self.checker = kin, checker
+        self.samples = self.collisions = 0
+        self.first = ""
+
+    @property
+    def joints(self):
+        return tuple(self.world.status().joints)
+
+    def check(self, q, what):
+        self.samples += 1
+        if self.checker.in_collision(q):
+            self.collisions += 1
+            if not self.first:
+                self.first = "%s: %s" % (what, "; ".join(str(c) for c in self.checker.contacts(q)))
+
+    def run(self, plan):
+        """(succeeded, reason) of one plan on the rig."""
+        from vr_driver.driver.trajectories import TrajectoryError, segment_speeds, validate
+        from vr_driver.driver import DriverError
+        w, lim = self.world, self.kin.limits
+        try:
+            traj = validate(plan.to_goal(), w.core.joint_names, self.joints, lim.lower, lim.upper, w.now)
+            segment_speeds(traj, lim.velocity, w.core.joint_names)
+            run = w.core.submit_trajectory(traj)
+        except (TrajectoryError, DriverError) as exc:
+            return False, "refused: %s" % exc
+
+        def done():
+            self.check(self.joints, "joint_states")
+            self.check(tuple(w.arm.joints), "arm")
+            return run.done
+        try:
+            w.run_until(done, 3.0 * plan.duration + 10.0, "trajectory done")
+        except Exception as exc:  # the rig's timeout: reported, the bench goes on
+            return False, "did not finish: %s" % exc
+        if not run.success:
+            job = run.failure()
+            return False, "failed: %s" % (job.result.reason if job is not None and job.result else "?")
+        return True, ""
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--n", type=int, default=100, help="number of queries (default 100)")
+    parser.add_argument("--seed", type=int, default=1, help="random seed of the queries and the planner (default 1)")
+    parser.add_argument("--budget", type=float, default=1.0, help="planner time budget [s] (default 1.0)")
+    parser.add_argument("--planner", default="RRTConnect", help="OMPL planner (default RRTConnect)")
+    parser.add_argument("--no-execute", action="store_true", help="plan and check only, no driver rig")
+    parser.add_argument("--protocol", default="v2", help="the rig's protocol (default v2: joint targets)")
+    parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
+    args = parser.parse_args()
+    n = 10 if args.quick else args.n
+    started = time.perf_counter()
+    try:
+        from vr_driver.kinematics.collision import CollisionChecker
+        from vr_driver.kinematics.planner import Planner, PlanningError
+        from vr_driver.kinematics.scene import load_scene
+        padding = getattr(DriverParams(), "collision_padding", 0.01)
+        checker = CollisionChecker.default(scene=load_scene(CELL), padding=padding)
+        exact = CollisionChecker.default(scene=load_scene(CELL), padding=0.0)
+        from vr_driver.kinematics.solver import Kinematics
+        kin = Kinematics.default()
+        planner = Planner(kin, checker, planner=args.planner, time_budget=args.budget, seed=args.seed)
+    except MissingDependency as exc:
+        print("planning benchmark skipped: %s" % exc)
+        return 0
+    executor = None if args.no_execute else Executor(kin, exact, args.protocol)
+    rng = random.Random(args.seed)
+    print("planning benchmark: %d queries, seed %d, cell %s (%s), padding %.0f mm (the driver's), planner %s, "
+          "budget %.2f s, clearance %.0f mm, max sweep %.0f mm, dt %.2f s%s"
+          % (n, args.seed, os.path.relpath(CELL, REPO), ", ".join(checker.scene.names()), padding * 1e3, args.planner,
+             args.budget, planner.clearance * 1e3, planner.max_sweep * 1e3, planner.dt,
+             "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol))
+    start = executor.joints if executor is not None else tuple(kin.named_states["home"])
+    total, solved, ompl_times, durations, failures, direct = [], [], [], [], [], 0
+    plan_hits = padding_hits = executed = 0
+    first_hit = first_pad = ""
+    exec_fail = []
+    kinds = {"joints": [0, 0], "pose": [0, 0]}
+    for i in range(n):
+        target = random_free(kin, checker, rng)
+        kind = "pose" if i % 2 else "joints"
+        goal = kin.fk_pose(target) if kind == "pose" else target
+        kinds[kind][1] += 1
+        t = time.perf_counter()
+        try:
+            plan = planner.plan(start, goal)
+        except PlanningError as exc:
+            total.append(time.perf_counter() - t)
+            solved.append(False)
+            failures.append("query %d (%s): %s" % (i, kind, exc))
+            continue
+        total.append(time.perf_counter() - t)
+        solved.append(True)
+        kinds[kind][0] += 1
+        ompl_times.append(plan.timings["plan"] + plan.timings["simplify"])
+        direct += len(plan.path) == 2
+        durations.append(plan.duration)
+        hits, text = chord_collisions(exact, plan.positions)
+        plan_hits += hits
+        first_hit = first_hit or (text and "query %d: %s" % (i, text))
+        hits, text = chord_collisions(checker, plan.positions)
+        padding_hits += hits
+        first_pad = first_pad or (text and "query %d: %s" % (i, text))
+        if executor is not None:
+            ok, why = executor.run(plan)
+            executed += ok
+            if not ok:
+                exec_fail.append("query %d: %s" % (i, why))
+            start = executor.joints
+        else:
+            start = plan.goal
+    ok = len(durations)
+    within = sum(1 for t, good in zip(total, solved) if good and t <= args.budget)
+    print("success: %d / %d (%.1f %%); joint goals %d / %d, pose goals %d / %d"
+          % (ok, n, 100.0 * ok / max(1, n), kinds["joints"][0], kinds["joints"][1], kinds["pose"][0], kinds["pose"][1]))
+    print("success within the %.2f s budget (the whole call): %d / %d (%.1f %%)"
+          % (args.budget, within, n, 100.0 * within / max(1, n)))
+    print("planning time [ms]: median %.1f  p95 %.1f  max %.1f (the whole call: goal, plan, simplify, time, check)"
+          % (1e3 * statistics.median(total), 1e3 * percentile(total, 95), 1e3 * max(total)))
+    if ompl_times:
+        print("OMPL part [ms] (plan + simplify): median %.1f  p95 %.1f  max %.1f; straight move free: %d / %d"
+              % (1e3 * statistics.median(ompl_times), 1e3 * percentile(ompl_times, 95), 1e3 * max(ompl_times),
+                 direct, ok))
+        print("path duration [s]: median %.2f  p95 %.2f  max %.2f"
+              % (statistics.median(durations), percentile(durations, 95), max(durations)))
+    print("planned samples and chord points in collision: %d%s; inside the padding: %d%s"
+          % (plan_hits, " (first: %s)" % first_hit if first_hit else "", padding_hits,
+             " (first: %s)" % first_pad if first_pad else ""))
+    if executor is not None:
+        print("execution: %d / %d plans succeeded on the rig; %d joint samples checked (joint_states and the arm), "
+              "%d in collision%s" % (executed, ok, executor.samples, executor.collisions,
+                                     " (first: %s)" % executor.first if executor.first else ""))
+        for line in exec_fail[:5]:
+            print("  not executed: %s" % line)
+    for line in failures[:10]:
+        print("  failed: %s" % line)
+    median_ms = 1e3 * statistics.median(total)
+    print("%s success >= 99 %%: %.1f %%" % ("PASS" if ok >= 0.99 * n else "MISS", 100.0 * ok / max(1, n)))
+    print("%s median <= 100 ms: %.1f ms" % ("PASS" if median_ms <= 100.0 else "MISS", median_ms))
+    if executor is not None:
+        print("%s 0 collisions in execution: %d" % ("PASS" if executor.collisions == 0 else "MISS", executor.collisions))
+    print("python %s, wall time %.1f s" % (sys.version.split()[0], time.perf_counter() - started))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
