@@ -139,5 +139,25 @@ class CollisionBenchTest(BenchRun):
         self.line(r"^free [0-9]+, colliding [0-9]+ \(%s %% free\)$" % NUM)
 
 
+class PlanningBenchTest(BenchRun):
+    """bench/planning.py --quick: 10 chained queries in the example cell, planned, re-checked and
+    executed on the in-memory driver rig (skipped with a line naming the package where OMPL,
+    TOPP-RA, pinocchio or coal are missing)."""
+    BENCH = "planning"
+
+    def test_figures(self):
+        self.assertEqual(self.res.returncode, 0, self.out + self.res.stderr[-3000:])
+        if "planning benchmark skipped:" in self.out:
+            self.skipTest(self.out.strip().splitlines()[-1])
+        self.line(r"^success: [0-9]+ / 10 \(%s %%\); joint goals [0-9]+ / 5, pose goals [0-9]+ / 5$" % NUM)
+        self.line(r"^planning time \[ms\]: median %s  p95 %s  max %s " % (NUM, NUM, NUM))
+        self.line(r"^path duration \[s\]: median %s  p95 %s  max %s$" % (NUM, NUM, NUM))
+        self.line(r"^planned samples and chord points in collision: 0; inside the padding: 0$")
+        self.line(r"^execution: [0-9]+ / [0-9]+ plans succeeded on the rig; [1-9][0-9]* joint samples checked .*, "
+                  r"0 in collision$")
+        self.line(r"^(PASS|MISS) success >= 99 %%: %s %%$" % NUM)
+        self.line(r"^(PASS|MISS) median <= 100 ms: %s ms$" % NUM)
+
+
 if __name__ == "__main__":
     unittest.main()
