@@ -13,6 +13,7 @@ REPO = os.path.dirname(os.path.dirname(SRC))
 CSR_MODULES = ("fields", "inputs", "model", "writer", "parser", "conventions", "waypoints", "export", "cli")
 CORE = ("errors", "validate", "poses", "params", "io_signals",
         "protocol", "protocol.base", "protocol.registry", "protocol.v1", "protocol.v2", "kinematics", "kinematics.solver", "kinematics.preview",
+        "kinematics.planner",
         "kinematics.deps", "kinematics.scene", "kinematics.collision",
         "driver", "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
         "driver.stations", "driver.streaming", "driver.record_clock", "driver.supervision", "driver.joint_command",

@@ -252,6 +252,19 @@ def test_converts_to_a_joint_trajectory_message(around):
     assert last.velocities == [0.0] * 6 and len(last.accelerations) == 6
 
 
+def test_converts_to_a_real_joint_trajectory_message(around):
+    msgs = pytest.importorskip("trajectory_msgs.msg")
+    genpy = pytest.importorskip("genpy")
+    import io
+    msg = around.to_msg(msgs.JointTrajectory, msgs.JointTrajectoryPoint, genpy.Duration.from_sec)
+    buf = io.BytesIO()
+    msg.serialize(buf)                                           # the types are right
+    back = msgs.JointTrajectory().deserialize(buf.getvalue())
+    assert tuple(back.joint_names) == around.joint_names
+    assert [p.time_from_start.to_sec() for p in back.points] == pytest.approx(around.times, abs=1e-9)
+    assert tuple(back.points[-1].positions) == around.goal
+
+
 # ---------------------------------------------------------------------------- the example cell
 
 @pytest.fixture(scope="module")
@@ -280,6 +293,26 @@ def test_plans_around_the_pillar_of_the_example_cell(kin, cell_checker):
     assert cell_checker.check_path(dense) is None
     traj = validate(plan.to_goal(), kin.joint_names, start, kin.limits.lower, kin.limits.upper, now=0.0)
     assert max(segment_speeds(traj, kin.limits.velocity, kin.joint_names)) <= 1.0
+
+
+def test_the_driver_collision_guard_accepts_a_plan_made_with_its_padding(kin, cell_checker):
+    """The driver's own path check (driver.scene_guard, collision_padding 10 mm, the cell as its
+    scene) accepts what the planner plans with a checker of the same padding -- and refuses the
+    straight move the planner went around."""
+    import threading
+
+    from vr_driver.driver.scene_guard import SceneGuard
+    from vr_driver.errors import CollisionError
+    from vr_driver.kinematics.scene import load_scene
+    guard = SceneGuard(kin, threading.Lock(), scene=load_scene(CELL), padding=0.01)
+    padded = cell_checker.copy()
+    padded.set_padding(0.01)
+    home = tuple(kin.named_states["home"])
+    start, goal = (-0.3,) + home[1:], (1.3,) + home[1:]
+    plan = Planner(kin, padded, seed=5).plan(start, goal)
+    guard.check_path(plan.positions, "trajectory", plan.times)
+    with pytest.raises(CollisionError, match="pillar"):
+        guard.check_path([start, goal], "PTP path")
 
 
 def test_start_in_collision_with_the_cell_names_the_link_and_object(kin, cell_checker):
