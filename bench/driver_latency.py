@@ -2,6 +2,7 @@
 """Latencies and rates of the driver node against the virtual controller (printed, never asserted).
 
     scripts/bench driver_latency [-- --goals 20 --estops 20 --window 10 --baud B --cycle-rate R --both | --quick]
+    scripts/bench driver_latency -- --protocol v3 --joint-only --paced --both     (d) alone, paced line
 
 Each configuration runs in a worker process of its own that starts a private roscore on a free port
 (from 11700 up, or --ros-port) and vr_driver/launch/driver.launch (sim:=true, the pty linked in a
@@ -27,6 +28,18 @@ until robot_status says motion_possible, then measures, in this order:
       controller's own log line ("e-stop pressed" / "released", its rosout stamp, written just
       before the simulated arm takes the e-stop) and from the service call's return to the first
       robot_status with e_stopped TRUE / FALSE received here (and published by the driver).
+
+  (d) with a streaming protocol (--protocol v2 / v3): --joint-commands joint_command messages
+      (trajectory_msgs/JointTrajectory of one point: joint_1 +-1 deg from where the arm rests,
+      time_from_start 0.05 s), each from rest -- a new stream every time: after the previous
+      command's execution-log entry, joint_command_timeout + 0.1 s and a random pause of 0..100 ms.
+      From publish(): the controller taking the target (the taken_time of its execution-log entry),
+      and joint_states showing motion (joint_1 more than 0.001 deg from the rest value): its header
+      stamp (the record's time) and its arrival here. With protocol v1 the topic refuses every
+      command and (d) is skipped. --joint-only skips (a) and (b).
+
+--paced puts the virtual line between the driver and the controller (io:=true, line_baud = --baud):
+the bytes take their wire time, as on the real bus; without it the pty carries them at once.
 
 Clocks. The virtual controller's start_time is Python's time.monotonic() in its own process; on
 Linux that is CLOCK_MONOTONIC, one clock for the whole machine, so it is compared with this
@@ -65,6 +78,8 @@ HOME = (1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
 A_POSE = (1120.0, 50.0, 725.0, 0.0, 45.0, 0.0)
 B_POSE = (1120.0, -50.0, 725.0, 0.0, 45.0, 0.0)
 FAST = (187500, 50.0)
+#: deg: the joint_1 step of each joint_command measured in (d)
+JOG_STEP_DEG = 1.0
 READY_TIMEOUT = 90.0
 
 
@@ -398,9 +413,12 @@ def worker(cfg: Dict[str, Any]) -> int:
         return True
     return stack_worker(
         cfg, "vr_driver_latency_", "driver_latency_bench",
-        "--- %d bit/s, %g Hz bus cycle (ROS master port {port}, pty {tmp}/g2, speed_factor %g)"
-        % (cfg["baud"], cfg["cycle_rate"], cfg["speed_factor"]),
-        ["baud:=%d" % cfg["baud"], "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"]],
+        "--- %d bit/s, %g Hz bus cycle, protocol %s%s (ROS master port {port}, pty {tmp}/g2, speed_factor %g)"
+        % (cfg["baud"], cfg["cycle_rate"], cfg["protocol"], ", paced line" if cfg["paced"] else "",
+           cfg["speed_factor"]),
+        ["baud:=%d" % cfg["baud"], "cycle_rate:=%g" % cfg["cycle_rate"], "speed_factor:=%g" % cfg["speed_factor"],
+         "protocol:=%s" % cfg["protocol"]]
+        + (["io:=true", "line_baud:=%d" % cfg["baud"]] if cfg["paced"] else []),
         measure, failed)
 
 
@@ -450,6 +468,8 @@ class Measure:
         self.client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
         self.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
         self.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
+        from trajectory_msgs.msg import JointTrajectory
+        self.joint_command = rospy.Publisher("/joint_command", JointTrajectory, queue_size=1, tcp_nodelay=True)
 
     def mono(self, stamp: Any) -> float:
         """A rospy wall-clock stamp on this process's time.monotonic()."""
@@ -640,6 +660,48 @@ class Measure:
         self.wait_motion_possible("after the e-stops")
         return out
 
+    # -------------------------------------------------------------------------------- (d)
+    def joint_command_once(self, sign: float) -> Dict[str, Optional[float]]:
+        from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+        rest = self.joints.last()
+        if rest is None:
+            raise Failure("no joint_states")
+        q0 = list(rest.position)
+        target = list(q0)
+        target[0] += sign * math.radians(JOG_STEP_DEG)
+        msg = JointTrajectory()
+        msg.joint_names = list(rest.name)
+        msg.points = [JointTrajectoryPoint(positions=target, time_from_start=self.rospy.Duration(0.05))]
+        i_js, i_exec = self.joints.mark(), self.executed.mark()
+        msg.header.stamp = self.rospy.Time.now()
+        t_pub = time.monotonic()
+        self.joint_command.publish(msg)
+        moved = self.joints.wait_for(lambda m: abs(m.position[0] - q0[0]) > math.radians(0.001), 3.0, i_js)
+        entry = self.executed.wait_for(lambda m: True, 3.0, i_exec)
+        if moved is None or entry is None:
+            raise Failure("joint_command to joint_1 %+g deg: %s" % (
+                sign * JOG_STEP_DEG, "joint_states never showed motion" if moved is None
+                else "no execution-log entry (the controller never took it)"))
+        data = json.loads(entry[1].data)
+        return {"taken": (float(data["taken_time"]) - t_pub) * 1e3,
+                "js_stamp": (self.mono(moved[1].header.stamp) - t_pub) * 1e3,
+                "js_arrival": (moved[0] - t_pub) * 1e3,
+                "taken_to_js": (self.mono(moved[1].header.stamp) - float(data["taken_time"])) * 1e3,
+                "outcome": data["outcome"]}
+
+    def joint_commands(self) -> Dict[str, Any]:
+        timeout = float(self.rospy.get_param("/interface/joint_command_timeout", 0.2))
+        recs = []
+        for i in range(self.cfg["joint_commands"]):
+            self.wait_motion_possible("before joint command %d" % (i + 1))
+            time.sleep(timeout + 0.1 + self.rng.uniform(0.0, 0.1))      # the previous stream ended
+            recs.append(self.joint_command_once(1.0 if i % 2 == 0 else -1.0))
+        out: Dict[str, Any] = {"n": len(recs), "timeout": timeout}
+        for key in ("taken", "js_stamp", "js_arrival", "taken_to_js"):
+            out[key] = stats([r[key] for r in recs])
+        out["outcomes"] = sorted({r["outcome"] for r in recs})
+        return out
+
     # -------------------------------------------------------------------------------- report
     def run(self) -> Dict[str, Any]:
         started = time.monotonic()
@@ -650,15 +712,37 @@ class Measure:
         time.sleep(1.0)                                          # let the start-up settle
         idle = self.idle_window()
         self.print_idle(idle)
-        goals = self.goals()
-        self.print_goals(goals)
-        estops = self.estops()
-        self.print_estops(estops)
+        goals = estops = None
+        if not self.cfg["joint_only"]:
+            goals = self.goals()
+            self.print_goals(goals)
+            estops = self.estops()
+            self.print_estops(estops)
+        joint = None
+        if self.cfg["protocol"] != "v1" and self.cfg["joint_commands"] > 0:
+            joint = self.joint_commands()
+            self.print_joint_commands(joint)
+        else:
+            print("(d) joint_command: skipped (protocol %s cannot stream: the topic refuses every "
+                  "command)\n" % self.cfg["protocol"], flush=True)
         for failure in self.failures:
             print("FAILED: %s" % failure)
         print("this configuration: %.1f s" % (time.monotonic() - started), flush=True)
         return {"baud": self.cfg["baud"], "cycle_rate": self.cfg["cycle_rate"], "idle": idle, "goals": goals,
-                "estops": estops, "failures": self.failures}
+                "estops": estops, "joint": joint, "protocol": self.cfg["protocol"], "paced": self.cfg["paced"],
+                "failures": self.failures}
+
+    @staticmethod
+    def print_joint_commands(j: Dict[str, Any]) -> None:
+        print("(d) joint_command -> controller -> joint_states: %d commands, joint_1 +-%g deg from rest, "
+              "a new stream each (joint_command_timeout %g s)" % (j["n"], JOG_STEP_DEG, j["timeout"]))
+        print(header())
+        print(row("publish -> controller takes it (execution-log taken_time)", j["taken"]))
+        print(row("publish -> joint_states shows motion (its stamp)", j["js_stamp"]))
+        print(row("publish -> joint_states shows motion (arrival here)", j["js_arrival"]))
+        print(row("controller takes it -> joint_states shows motion (stamp)", j["taken_to_js"]))
+        print("outcomes in the execution log: %s" % ", ".join(j["outcomes"]))
+        print(flush=True)
 
     @staticmethod
     def print_idle(idle: Dict[str, Any]) -> None:
@@ -726,20 +810,28 @@ class Measure:
 # ------------------------------------------------------------------------------------------ parent
 
 def summary(results: List[Dict[str, Any]]) -> None:
-    cols = ["%d Bd, %g Hz" % (r["baud"], r["cycle_rate"]) for r in results]
+    cols = ["%d Bd, %g Hz, %s%s" % (r["baud"], r["cycle_rate"], r["protocol"], " paced" if r["paced"] else "")
+            for r in results]
     width = max(32, *(len(c) for c in cols))
     print("=== summary: median / p95 / max ms (n); rates over the idle window")
     print(("%-44s" % "metric" + "".join(" %-*s" % (width, c) for c in cols)).rstrip())
 
     def line(label: str, cells: List[str]) -> None:
         print(("%-44s" % label + "".join(" %-*s" % (width, c) for c in cells)).rstrip())
-    line("goal -> driver hands target to the bus", [fmt(r["goals"]["sent"]) for r in results])
-    line("goal -> controller BUSY", [fmt(r["goals"]["busy"]) for r in results])
-    line("goal -> feedback moving", [fmt(r["goals"]["fb_moving"]) for r in results])
-    line("goal -> robot_status in_motion", [fmt(r["goals"]["status_motion"]) for r in results])
-    line("e-stop press (ctrl log) -> robot_status", [fmt(r["estops"]["set_from_log"]) for r in results])
-    line("e-stop press (svc return) -> robot_status", [fmt(r["estops"]["set_from_ret"]) for r in results])
-    line("e-stop release (ctrl log) -> robot_status", [fmt(r["estops"]["clear_from_log"]) for r in results])
+    def part(key: str, field: str) -> List[str]:
+        return [fmt(r[key][field]) if r.get(key) else "-" for r in results]
+    if any(r.get("goals") for r in results):
+        line("goal -> driver hands target to the bus", part("goals", "sent"))
+        line("goal -> controller BUSY", part("goals", "busy"))
+        line("goal -> feedback moving", part("goals", "fb_moving"))
+        line("goal -> robot_status in_motion", part("goals", "status_motion"))
+        line("e-stop press (ctrl log) -> robot_status", part("estops", "set_from_log"))
+        line("e-stop press (svc return) -> robot_status", part("estops", "set_from_ret"))
+        line("e-stop release (ctrl log) -> robot_status", part("estops", "clear_from_log"))
+    if any(r.get("joint") for r in results):
+        line("joint_command -> controller takes it", part("joint", "taken"))
+        line("joint_command -> joint_states motion (stamp)", part("joint", "js_stamp"))
+        line("joint_command -> joint_states motion (here)", part("joint", "js_arrival"))
 
     def rate(r: Dict[str, Any], key: str) -> str:
         t = r["idle"][key]
@@ -808,9 +900,17 @@ def main(argv: Optional[List[str]] = None) -> int:
     p.add_argument("--seed", type=int, default=1, help="random pauses' seed (default 1)")
     p.add_argument("--keep-logs", action="store_true", help="keep the ROS logs (roslaunch, nodes) and print where")
     p.add_argument("--quick", action="store_true", help="smoke run: 3 goals, 2 e-stops, a 2 s window")
+    p.add_argument("--protocol", default="v1", choices=("v1", "v2", "v3"),
+                   help="controller protocol (default v1; (d) joint_command needs v2 or v3)")
+    p.add_argument("--joint-commands", type=int, default=20,
+                   help="(d) joint_command messages measured with v2 / v3 (default 20; 0: none)")
+    p.add_argument("--joint-only", action="store_true", help="skip (a) goals and (b) e-stops")
+    p.add_argument("--paced", action="store_true",
+                   help="the virtual line carries the bytes at --baud (io:=true line_baud:=BAUD)")
     args = p.parse_args(argv)
     if args.quick:
         args.goals, args.estops, args.window = 3, 2, 2.0
+        args.joint_commands = min(args.joint_commands, 3)
     if args.goals < 1 or args.estops < 1 or args.window <= 0:
         p.error("--goals and --estops must be >= 1, --window > 0")
     configs = [(args.baud, args.cycle_rate)]
@@ -828,7 +928,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     for i, (baud, rate) in enumerate(configs):
         cfg = {"baud": baud, "cycle_rate": rate, "goals": args.goals, "estops": args.estops, "window": args.window,
                "speed_factor": args.speed_factor, "ros_port": args.ros_port, "seed": args.seed + i,
-               "keep_logs": args.keep_logs}
+               "keep_logs": args.keep_logs, "protocol": args.protocol, "joint_commands": args.joint_commands,
+               "joint_only": args.joint_only, "paced": args.paced}
         code, result = run_worker(cfg)
         if code == 130:
             print("interrupted")

@@ -220,15 +220,17 @@ class JointCommandTest(unittest.TestCase):
         others = max(abs(a - b) for _s, q in during for a, b in zip(q[1:], q0[1:]))
         cycle = 1.0 / self.bus_rate
         print("joint_command: %d commands at %g Hz over %.2f s on a %g Hz bus; lag %.3f s "
-              "(= the %.3f s step + %.1f bus cycles), %.3f deg off the shifted sine, other joints "
+              "(= two %.3f s steps + %.1f bus cycles), %.3f deg off the shifted sine, other joints "
               "%.4f deg; at rest at the last target %.3f s after it (%.4f deg off)"
-              % (len(sent), RATE, t_last - t0, self.bus_rate, lag, period, (lag - period) / cycle,
+              % (len(sent), RATE, t_last - t0, self.bus_rate, lag, period, (lag - 2 * period) / cycle,
                  worst / DEG, others / DEG, settle - t_last, off / DEG))
         self.assertLessEqual(worst, 1.0 * DEG, "%.3f deg off the sine shifted by %.3f s" % (worst / DEG, lag))
         self.assertLessEqual(others, 0.1 * DEG)
-        # the lag: the command's own step (time_from_start) plus at most 4 bus cycles (one to reach
-        # the bus, one for the controller's acknowledgement, its program loop, the feedback)
-        self.assertLessEqual(lag, period + 4.0 * cycle, "lag %.3f s" % lag)
+        # the lag: the controller blends only into a target it already has, so the arm runs one
+        # command behind -- two steps (time_from_start) -- plus the way there and back (the bus
+        # cycle that carries it, the program loop that reads it, the record that reports it): at
+        # most 4 bus cycles (measured: 3 to 4 at 100 Hz)
+        self.assertLessEqual(lag, 2 * period + 4.0 * cycle, "lag %.3f s" % lag)
         self.assertEqual(self.refused(), refused_before, self.diag.values)
 
     def assert_refused(self, positions, kind, names=None, time_from_start=0.0):

@@ -87,7 +87,9 @@ def test_a_sine_at_50_hz_is_followed_and_ends_at_rest_at_the_last_target(kin, pr
     lags = [i * 0.005 for i in range(0, 41)]
     lag = min(lags, key=err)
     assert err(lag) <= 0.2 * DEG, "%.3f deg off at the best lag %.3f s" % (err(lag) / DEG, lag)
-    assert lag <= 0.06, lag       # one command period + two bus cycles + the controller loop
+    # the arm runs one command behind (it blends only into a target it has): two command periods,
+    # plus the bus cycle and the program loop on the way there and the record on the way back
+    assert lag <= 2 * 0.02 + 3 * world.bus_period, lag
     # (the other joints stay: within the wire's rounding, v3 the controller's IK of the rounded pose)
     still = 0.001 * DEG if protocol == "v2" else world.core.protocol.target_error
     assert all(max(abs(a - b) for a, b in zip(q[1:], q0[1:])) <= still for _t, q in samples)
