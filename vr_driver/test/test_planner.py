@@ -167,6 +167,23 @@ def test_ik_solutions_are_every_branch_and_wrist_turn(kin):
     assert any(abs(s[5] - (q[5] + 2 * math.pi)) < 1e-6 and np.allclose(s[:5], q[:5]) for s in sols)
 
 
+def test_joint_weights_bound_how_far_the_arm_moves(kin):
+    """The motion-check resolution rests on it: a joint move dq moves tool0 (and any point of the
+    arm) by at most sum_i w_i |dq_i|."""
+    import random
+    from vr_driver.kinematics.planner import joint_weights
+    w = joint_weights(kin)
+    assert len(w) == 6 and w[0] > w[1] > w[2] > w[3] > w[4] == w[5] > 0.3
+    rng = random.Random(4)
+    worst = 0.0
+    for _ in range(300):
+        q = kin.random_joints(rng)
+        dq = [rng.uniform(-0.05, 0.05) for _ in range(6)]
+        moved = np.linalg.norm(kin.fk([a + b for a, b in zip(q, dq)])[:3, 3] - kin.fk(q)[:3, 3])
+        worst = max(worst, moved / sum(wi * abs(d) for wi, d in zip(w, dq)))
+    assert 0.2 < worst < 1.0
+
+
 # --------------------------------------------------------------------------------------- errors
 
 def test_start_in_collision_is_refused(kin):

@@ -50,6 +50,11 @@ every 0.22 deg, of joint 6 alone every 1.2 deg; the check of the result (which s
 by the sum itself, not the sqrt(n) bound) every 0.55 and 2.9 deg. The scaled space also
 makes the planner's distance (which tree node is nearest) a measure of how far the arm moves.
 
+``time_budget`` bounds the planner's search (OMPL's solve); the goal's IK, the simplification, the
+timing and the checks come on top (milliseconds to a few tens of them: bench/planning.py).
+
+Not thread-safe: a Planner keeps a copy of its checker and the plan it is making; one per thread.
+
 Determinism: OMPL's random numbers come from one process-wide seed generator; :meth:`Planner.plan`
 reseeds it with ``seed`` (when given) before it makes its planner and simplifier, so one seed and
 one problem give one path (as long as the planner finishes within its budget: a planner cut off by
@@ -74,8 +79,9 @@ from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
 
-__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER",
-           "DEFAULT_MAX_SWEEP", "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN", "joint_weights"]
+__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
+           "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN",
+           "joint_weights"]
 
 #: the planners one may name (OMPL geometric planners); RRTConnect is MoveIt's default, too
 PLANNERS = ("RRTConnect", "RRT", "RRTstar", "InformedRRTstar", "BITstar", "PRM", "PRMstar",
