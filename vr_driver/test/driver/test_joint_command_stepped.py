@@ -252,6 +252,11 @@ def test_stop_motion_ends_the_stream_at_rest(kin):
     q0 = tuple(world.arm.joints)
     _t0, _times, _commands, job = stream(world, sine(q0), duration=0.5)
     world.core.stop_motion("test stop")
+    run_to(world, world.now + world.bus_period)                 # the sequencer took the stop
+    assert job.closed and not job.done
+    with pytest.raises(JointCommandRefused) as info:            # the arm is still braking
+        world.core.joint_command(NAMES, list(world.status().joints))
+    assert info.value.kind == "busy"
     world.run_until(lambda: job.done, 2.0)
     assert job.result.phase is JobPhase.CANCELLED and job.result.reached is not None
     q = list(world.arm.joints)

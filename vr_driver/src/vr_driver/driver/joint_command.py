@@ -177,6 +177,9 @@ class JointCommander:
                                       "first)" % (other.id, other.phase.value))
         alive = (job is not None and not job.done and not job.closed
                  and now - self._stamp <= timeout)
+        if alive and view.settling:
+            raise JointCommandRefused("busy", "the stream was stopped and the arm is coming to rest; "
+                                      "the next command starts a new stream from there")
         if alive:
             assert job is not None
             prev = self._last
@@ -196,9 +199,10 @@ class JointCommander:
             dt = dt_given if dt_given > 0.0 else timeout
             anchor = prev
         step_time = max(min(dt, timeout), 1e-6)
-        speed = self._speed(prev, q, step_time, refuse=True)
-        anchored_speed = self._speed(anchor, q, step_time, refuse=False)
-        pose = self._check_path(prev, q, "the last accepted command" if alive else "the arm's joints")
+        origin = "the last accepted command" if alive else "the arm's joints"
+        speed = self._speed(prev, q, step_time, origin)
+        anchored_speed = self._speed(anchor, q, step_time, "")
+        pose = self._check_path(prev, q, origin)
         if anchor != prev:
             self._check_path(anchor, q, "the last target on the wire")
         smooth = core.params.stream_smooth
@@ -257,10 +261,12 @@ class JointCommander:
             q[expected.index(name)] = v
         return tuple(q)
 
-    def _speed(self, prev: Sequence[float], q: Sequence[float], step_time: float, refuse: bool) -> int:
+    def _speed(self, prev: Sequence[float], q: Sequence[float], step_time: float, origin: str) -> int:
         """The wire speed (0.1 % of the joint speed limits, 1..1000) that moves ``prev`` -> ``q`` in
-        ``step_time``. ``refuse``: a step that needs more than a joint's limit is refused, naming the
-        joint (else: full speed, the arm just takes longer)."""
+        ``step_time``. With ``origin`` (what ``prev`` is, for the message) a step that needs more
+        than a joint's limit is refused, naming the joint; without, it gets full speed (the arm just
+        takes longer)."""
+        refuse = bool(origin)
         vmax = self.core.kin.limits.velocity
         ratios = [abs(b - a) / (step_time * v) for a, b, v in zip(prev, q, vmax)]
         worst = max(range(len(ratios)), key=ratios.__getitem__)
@@ -271,9 +277,7 @@ class JointCommander:
                 "limit (%.3g rad/s too fast; the step from %s)"
                 % (names[worst], abs(q[worst] - prev[worst]), step_time,
                    ratios[worst] * vmax[worst], 100.0 * ratios[worst], vmax[worst],
-                   (ratios[worst] - 1.0) * vmax[worst],
-                   "the last accepted command" if self._job is not None and prev == self._last
-                   else "the arm's joints"))
+                   (ratios[worst] - 1.0) * vmax[worst], origin))
         return min(1000, max(1, int(math.ceil(1000.0 * ratios[worst] - 1e-9))))
 
     def _check_path(self, prev: Tuple[float, ...], q: Tuple[float, ...], origin: str) -> Any:

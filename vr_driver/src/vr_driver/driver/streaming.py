@@ -342,6 +342,7 @@ class StreamSequencer(SequencerBase):
 
     def stop_job(self, job: MoveJob, reason: str, now: float) -> None:
         self._end_current()
+        job.closed = True                     # a live stream takes no more points
         if job.sent:
             self._stopping = True
             if job.points_taken > job.points_done:
