@@ -58,6 +58,7 @@ KNOWN = {
     ("vr_driver.params", "vr_driver.controller.program"): "port: auto resolves like the virtual controller's link",
     ("vr_driver.params", "vr_driver.protocol"): "the protocol object (names, GSD modules, record length, I/O)",
     ("vr_driver.params", "vr_driver.driver.stations"): "the controller's own I/O length in the v2 records",
+    ("vr_driver.params", "vr_driver.kinematics.planner"): "planner_id: the OMPL planners the planner knows",
     ("vr_driver.csr.cli", "rosgraph"): "csr_export --from-topic",
     ("vr_driver.csr.cli", "rospy"): "csr_export --from-topic",
     ("vr_driver.csr.cli", "trajectory_msgs.msg"): "csr_export --from-topic",

@@ -206,3 +206,26 @@ def test_model_file_is_checked_at_start_naming_the_parameter(tmp_path):
     assert err.value.name == "model"
     params = DriverParams.from_dict({"model": TRUE_MODEL})
     assert params.model == TRUE_MODEL
+
+
+@pytest.mark.parametrize("name, value, words", [
+    ("planner_id", "Dijkstra", "must be one of RRTConnect"),
+    ("planner_id", 3, "expected a string"),
+    ("planning_time", 0, "(0, 60]"),
+    ("planning_time", math.nan, "finite"),
+    ("planning_time", 61, "(0, 60]"),
+    ("velocity_scaling", 0.0, "(0, 1]"),
+    ("velocity_scaling", 1.5, "(0, 1]"),
+    ("velocity_scaling", "fast", "finite"),
+])
+def test_plan_action_defaults_are_checked(name, value, words):
+    """The plan action's defaults (planner_id, planning_time, velocity_scaling): a bad one stops the
+    node naming it; good ones are kept."""
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({name: value})
+    assert err.value.name == name
+    assert words in str(err.value)
+    p = DriverParams.from_dict({"planner_id": "PRM", "planning_time": 2.5, "velocity_scaling": 0.5})
+    assert (p.planner_id, p.planning_time, p.velocity_scaling) == ("PRM", 2.5, 0.5)
+    d = DriverParams()
+    assert (d.planner_id, d.planning_time, d.velocity_scaling) == ("RRTConnect", 1.0, 1.0)

@@ -92,6 +92,13 @@ def _port(params: Mapping[str, Any], default: str) -> str:
         raise ParamError("port", value, str(exc)) from None
 
 
+def _planner_id(params: Mapping[str, Any], default: str) -> str:
+    """``planner_id``: one of the OMPL planners kinematics.planner knows (its list; importing it
+    needs no OMPL)."""
+    from .kinematics.planner import PLANNERS
+    return _string(params, "planner_id", default, PLANNERS)
+
+
 def _prefix(params: Mapping[str, Any], default: str) -> str:
     value = _string(params, "prefix", default)
     if not PREFIX_PATTERN.match(value):
@@ -196,6 +203,10 @@ class DriverParams:
     # the model against the controller (protocols that report joints and pose: v2)
     model_check_position: float = 0.5    # [mm] the reported pose may differ this much from our FK of
     model_check_angle: float = 0.05      # [deg] the reported joints before the model is called off
+    # the plan action (issue 27; vr_driver.kinematics.planner): what a goal that leaves them 0 / empty gets
+    planner_id: str = "RRTConnect"       # the OMPL planner (kinematics.planner.PLANNERS)
+    planning_time: float = 1.0           # [s] the planner's time budget
+    velocity_scaling: float = 1.0        # (0, 1] fraction of the joint speed and acceleration limits
     # safety and model
     prefix: str = ""                     # of every link, joint and frame name of this robot (the
     #                                      URDF's xacro prefix); from_dict puts it in front of
@@ -288,6 +299,9 @@ class DriverParams:
                                          lo_open=True),
             model_check_angle=_number(params, "model_check_angle", d.model_check_angle, 0.0, 180.0,
                                       lo_open=True),
+            planner_id=_planner_id(params, d.planner_id),
+            planning_time=_number(params, "planning_time", d.planning_time, 0.0, 60.0, lo_open=True),
+            velocity_scaling=_number(params, "velocity_scaling", d.velocity_scaling, 0.0, 1.0, lo_open=True),
             prefix=prefix,
             workspace=workspace,
             controller_joint_names=prefixed(prefix, tuple(names)),

@@ -33,6 +33,7 @@ from ..errors import VrDriverError
 from .industrial import IndustrialInterface
 from .io_server import IoServer
 from .joint_command import JointCommandSubscriber
+from .plan_server import PlanServer
 from ..params import DriverParams, ParamError
 from ..poses import ControllerPose, MoveType
 from ..protocol.v1 import StatusBits
@@ -116,6 +117,8 @@ class InterfaceNode:
         self.trajectory_server = TrajectoryServer(self.core, params.joint_states_rate,
                                                   show=self._line_marker if params.publish_markers else None)
         self.trajectory_server.on_run = self.industrial.follow
+        # collision-aware planning (ros/plan_server.py): advertised in start() when OMPL etc. are there
+        self.plan_server = PlanServer(self.core, params, "joint_trajectory_action")
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
         # joint targets streamed on the fly (ros/joint_command.py)
@@ -130,6 +133,7 @@ class InterfaceNode:
         self.core.start()
         self.server.start()
         self.trajectory_server.start()
+        self.plan_server.start()
         self.io_server.start()
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),

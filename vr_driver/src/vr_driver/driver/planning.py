@@ -1,0 +1,310 @@
+"""The plan action's core, ROS-free: a goal (joints, a named state of the SRDF, or a TCP pose in the
+controller's units) planned from the arm's joints with :class:`vr_driver.kinematics.planner.Planner`
+against a snapshot of the driver's collision checker and scene, inside the driver's workspace box,
+and the outcome as a code and words (the node vr_driver.ros.plan_server only translates messages).
+
+    planning = DriverPlanning(core)          # MissingDependency when OMPL / TOPP-RA / the checker's
+                                             # libraries cannot be imported (the action is then not served)
+    outcome = planning.plan(PlanGoal(pose=ControllerPose(500, 866, 725, 0, 45, 60)))
+    outcome.ok, outcome.code, outcome.text, outcome.trajectory (a PlannedTrajectory), outcome.target
+
+- **Consistent snapshot**: each plan takes its own copy of the driver's checker (CollisionChecker.copy:
+  the scene and padding of that moment, own pinocchio data), so a scene changed while it plans does
+  not change what it plans against; the next plan sees the change.
+- **The workspace box**: every configuration the planner accepts also has its TCP inside the driver's
+  workspace box (what the driver checks the stream's segments against), with the planner's clearance
+  as a margin on the box too, so the trajectory it returns is one the driver's own checks accept.
+- **Off the bus thread**: planning runs in the caller's thread, holding the driver's planning gate
+  (one planner at a time, as previews do), on a Kinematics of its own (the driver's model).
+- **Words**: a start or goal in collision names the link and the object (the checker's contacts);
+  a TCP outside the box says which field and by how much.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, List, Optional, Sequence, Tuple
+
+from ..errors import MissingDependency, VrDriverError
+from ..kinematics import deps
+from ..kinematics.planner import PLANNERS, PlannedTrajectory, Planner, PlanningError
+from ..poses import ControllerPose, Workspace
+
+__all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
+           "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
+           "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "DriverPlanning",
+           "arm_points", "code_of"]
+
+# the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
+SUCCESS = 1
+PLANNING_FAILED = -1
+INVALID_MOTION_PLAN = -2
+CONTROL_FAILED = -4
+PREEMPTED = -7
+START_STATE_IN_COLLISION = -10
+GOAL_IN_COLLISION = -12
+INVALID_GOAL = -16
+INVALID_ROBOT_STATE = -17
+NO_IK_SOLUTION = -31
+
+_FEATURE = "the plan action (vr_driver.driver.planning)"
+
+
+@dataclass(frozen=True)
+class PlanGoal:
+    """One goal: exactly one of ``joints`` ((names, positions [rad])), ``named`` (an SRDF state) and
+    ``pose`` (TCP in ``base``, mm / deg). ``planner_id`` "" / ``planning_time`` 0 /
+    ``velocity_scaling`` 0 take the driver's parameters."""
+
+    joints: Optional[Tuple[Tuple[str, ...], Tuple[float, ...]]] = None
+    named: str = ""
+    pose: Optional[ControllerPose] = None
+    planner_id: str = ""
+    planning_time: float = 0.0
+    velocity_scaling: float = 0.0
+
+    def describe(self) -> str:
+        if self.pose is not None:
+            return "the pose X %g  Y %g  Z %g  Rx %g  Ry %g  Rz %g" % self.pose.as_tuple()
+        if self.named:
+            return "the named state %r" % self.named
+        if self.joints is not None:
+            return "the joints (%s) deg" % ", ".join("%.1f" % math.degrees(v) for v in self.joints[1])
+        return "no goal"
+
+
+@dataclass(frozen=True)
+class PlanOutcome:
+    """``code`` one of the result codes, ``text`` in words; on success ``trajectory`` and ``target``
+    (the TCP pose at its end), ``planning_time`` [s] (also on failure: how long it tried)."""
+
+    code: int
+    text: str
+    trajectory: Optional[PlannedTrajectory] = None
+    planning_time: float = 0.0
+    planner_id: str = ""
+    target: Optional[ControllerPose] = None
+    contacts: Tuple[Any, ...] = field(default=())
+
+    @property
+    def ok(self) -> bool:
+        return self.code == SUCCESS
+
+
+class WorkspaceContact:
+    """A 'contact' with the workspace box: the TCP outside it (a field and by how much), in the form of
+    the checker's Contact (``link_a``, ``other``, ``distance`` [m], ``world``)."""
+
+    def __init__(self, link: str, field_name: str, excess: float, unit: str) -> None:
+        self.link_a = link
+        self.other = "workspace box"
+        self.world = True
+        self.distance = -excess / 1000.0 if unit == "mm" else 0.0
+        self._text = "%s outside the workspace box (%s by %.1f %s)" % (link, field_name, excess, unit)
+
+    def __str__(self) -> str:
+        return self._text
+
+
+class CellValidity:
+    """A collision checker (or None: nothing to collide with) and the workspace box as one validity
+    the planner takes like a checker: ``in_collision(q)`` (the arm hits something, or its TCP is
+    outside the box shrunk by ``margin`` [mm]), ``contacts(q)`` naming them, ``copy()``, ``padding`` /
+    ``set_padding`` (the planner's clearance: raising the padding by x also shrinks the box by x)."""
+
+    def __init__(self, checker: Any, kinematics: Any, workspace: Workspace, margin: float = 0.0,
+                 padding: float = 0.0) -> None:
+        self.checker = checker
+        self.kin = kinematics
+        self.workspace = workspace
+        self.margin = float(margin)
+        self._padding = float(checker.padding) if checker is not None else float(padding)
+
+    @property
+    def padding(self) -> float:
+        return self._padding
+
+    def set_padding(self, padding: float) -> None:
+        self.margin += (padding - self._padding) * 1000.0
+        self._padding = padding
+        if self.checker is not None:
+            self.checker.set_padding(padding)
+
+    def copy(self) -> "CellValidity":
+        return CellValidity(self.checker.copy() if self.checker is not None else None, self.kin, self.workspace,
+                            self.margin, self._padding)
+
+    def _outside(self, q: Sequence[float]) -> Optional[Tuple[str, float, str]]:
+        """(field, excess, unit) of the TCP's worst field beyond the box less the margin, or None."""
+        pose = self.kin.fk_pose(q)
+        worst = None
+        for name, unit in (("x", "mm"), ("y", "mm"), ("z", "mm")):
+            lo, hi = getattr(self.workspace, name)
+            value = getattr(pose, name)
+            excess = max(lo + self.margin - value, value - (hi - self.margin))
+            if excess > 0 and (worst is None or excess > worst[1]):
+                worst = (name.upper(), excess, unit)
+        return worst
+
+    def in_collision(self, q: Sequence[float]) -> bool:
+        if self.checker is not None and self.checker.in_collision(q):
+            return True
+        return self._outside(q) is not None
+
+    def contacts(self, q: Sequence[float]) -> List[Any]:
+        out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
+        outside = self._outside(q)
+        if outside is not None:
+            out.append(WorkspaceContact("the TCP", *outside))
+        return out
+
+
+def code_of(exc: PlanningError) -> int:
+    """The result code of a planner's refusal (its step and whether it named contacts)."""
+    text = str(exc)
+    if exc.step == "start":
+        return START_STATE_IN_COLLISION if exc.contacts or "in collision" in text else INVALID_ROBOT_STATE
+    if exc.step == "goal":
+        if exc.contacts or "in collision" in text:
+            return GOAL_IN_COLLISION
+        if "unreachable" in text:
+            return NO_IK_SOLUTION
+        return INVALID_GOAL
+    if exc.step == "plan":
+        return PLANNING_FAILED
+    return INVALID_MOTION_PLAN
+
+
+def arm_points(kinematics: Any, q: Sequence[float]) -> List[Tuple[float, float, float]]:
+    """The origins of the chain's segments at ``q`` in the chain root [m], base to tip, repeated points
+    left out: a stick figure of the arm (the planned sweep in RViz)."""
+    import PyKDL as kdl
+    chain = kinematics.chain
+    solver = kdl.ChainFkSolverPos_recursive(chain)
+    jnt = kdl.JntArray(len(q))
+    for i, v in enumerate(q):
+        jnt[i] = float(v)
+    out: List[Tuple[float, float, float]] = [(0.0, 0.0, 0.0)]
+    for seg in range(1, chain.getNrOfSegments() + 1):
+        f = kdl.Frame()
+        if solver.JntToCart(jnt, f, seg) < 0:
+            continue
+        p = (f.p[0], f.p[1], f.p[2])
+        if math.dist(p, out[-1]) > 1e-6:
+            out.append(p)
+    return out
+
+
+class DriverPlanning:
+    """Plans for a :class:`~vr_driver.driver.core.DriverCore` (see the module text). Raises
+    MissingDependency when the planner's libraries (OMPL, TOPP-RA) cannot be imported, or when the
+    driver checks collisions (``collision_check``) but has no checker (its libraries are missing)."""
+
+    def __init__(self, core: Any, kinematics: Any = None, clock=time.perf_counter) -> None:
+        for module in ("ompl", "toppra"):
+            deps.require(module, _FEATURE)
+        self.core = core
+        self.params = core.params
+        if getattr(self.params, "collision_check", True) and getattr(core, "collision", None) is None:
+            # the core leaves it None only when its libraries are missing: say which
+            for module in ("pinocchio", "coal"):
+                deps.require(module, _FEATURE)
+            raise MissingDependency("pin", "pinocchio", _FEATURE, "the driver has no collision checker")
+        if kinematics is None:
+            from .core import driver_kinematics
+            kinematics = driver_kinematics(self.params)   # its own: no solver shared with the bus thread
+        self.kin = kinematics
+        self.clock = clock
+        # a Planner is cheap; making one checks its libraries and the limits once, here
+        Planner(self.kin, None, planner=self.params.planner_id)
+
+    @property
+    def collision_checked(self) -> bool:
+        return getattr(self.core, "collision", None) is not None and getattr(self.params, "collision_check", True)
+
+    def snapshot(self) -> CellValidity:
+        """The validity a plan uses: a copy of the driver's checker (its scene and padding now) and the
+        workspace box."""
+        checker = getattr(self.core, "collision", None) if self.collision_checked else None
+        return CellValidity(checker.copy() if checker is not None else None, self.kin, self.params.workspace)
+
+    def resolve(self, goal: PlanGoal) -> Tuple[Any, str, float, float]:
+        """(the planner's goal, planner, budget [s], velocity scaling) or PlanningError('goal', ...)."""
+        given = [goal.joints is not None, bool(goal.named), goal.pose is not None]
+        if sum(given) != 1:
+            raise PlanningError("request", "a goal is exactly one of joints, a named state or a pose (got %d)"
+                                % sum(given))
+        planner_id = goal.planner_id or self.params.planner_id
+        if planner_id not in PLANNERS:
+            raise PlanningError("request", "unknown planner_id %r: the planners are %s"
+                                % (planner_id, ", ".join(PLANNERS)))
+        budget = goal.planning_time if goal.planning_time else self.params.planning_time
+        if not (isinstance(budget, (int, float)) and math.isfinite(budget) and 0.0 < budget <= 60.0):
+            raise PlanningError("request", "allowed_planning_time must be in (0, 60] s (0: the parameter "
+                                "planning_time), got %r" % (goal.planning_time,))
+        scaling = goal.velocity_scaling if goal.velocity_scaling else self.params.velocity_scaling
+        if not (isinstance(scaling, (int, float)) and math.isfinite(scaling) and 0.0 < scaling <= 1.0):
+            raise PlanningError("request", "velocity_scaling must be in (0, 1] (0: the parameter "
+                                "velocity_scaling), got %r" % (goal.velocity_scaling,))
+        if goal.pose is not None:
+            try:
+                target = self.params.workspace.check(goal.pose)
+            except VrDriverError as exc:
+                raise PlanningError("request", "goal pose: %s" % exc) from None
+        elif goal.named:
+            target = goal.named
+        else:
+            names, positions = goal.joints
+            if len(names) != len(positions) or len(set(names)) != len(names):
+                raise PlanningError("request", "a joint goal needs one position per joint name, each name once "
+                                    "(got %d names, %d positions)" % (len(names), len(positions)))
+            expected = tuple(self.core.joint_names)
+            if set(names) != set(expected):
+                raise PlanningError("request", "a joint goal names every joint of the arm (%s), got %s"
+                                    % (", ".join(expected), ", ".join(names) or "none"))
+            by_name = dict(zip(names, positions))
+            target = tuple(float(by_name[n]) for n in expected)
+            if not all(math.isfinite(v) for v in target):
+                raise PlanningError("request", "joint goal: every position must be a finite number, got %r"
+                                    % (target,))
+        return target, planner_id, float(budget), float(scaling)
+
+    def plan(self, goal: PlanGoal, start: Optional[Sequence[float]] = None, seed: Optional[int] = None
+             ) -> PlanOutcome:
+        """Plan ``goal`` from ``start`` (default: the arm's joints now; motion need not be possible:
+        a preview is allowed while the arm cannot move). Never raises for a bad goal: the outcome says."""
+        t0 = self.clock()
+        try:
+            target, planner_id, budget, scaling = self.resolve(goal)
+        except PlanningError as exc:
+            return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planner_id=goal.planner_id)
+        if start is None:
+            status = self.core.status()
+            if status.joints is None or not getattr(status, "joints_valid", True):
+                return PlanOutcome(INVALID_ROBOT_STATE, "refused: the arm's joints are not known (%s)"
+                                   % (status.why_no_motion() or "no feedback from the controller"),
+                                   planner_id=planner_id)
+            start = status.joints
+        try:
+            with self.core.planning_gate:     # the checker is replaced as a whole under it: copy it here
+                validity = self.snapshot()
+                planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget, seed=seed,
+                                  velocity_scaling=scaling, acceleration_scaling=scaling)
+                plan = planner.plan(tuple(start), target)
+        except PlanningError as exc:
+            return PlanOutcome(code_of(exc), "%s: %s" % (_STEP_WORDS.get(exc.step, "refused"), exc),
+                               planning_time=self.clock() - t0, planner_id=planner_id, contacts=exc.contacts)
+        except (VrDriverError, ValueError, TypeError) as exc:
+            return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planning_time=self.clock() - t0,
+                               planner_id=planner_id)
+        elapsed = self.clock() - t0
+        end = self.kin.fk_pose(plan.goal)
+        text = ("planned with %s in %.0f ms: %d points over %.2f s (velocity scaling %g)%s"
+                % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling,
+                   "" if self.collision_checked else "; collisions NOT checked (collision_check: false)"))
+        return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end)
+
+
+_STEP_WORDS = {"start": "cannot plan from here", "goal": "goal refused", "plan": "no path found",
+               "time": "no timing found", "check": "the planned trajectory failed its check"}

@@ -1,0 +1,272 @@
+"""`plan`: the collision-aware planning action of the node `interface` (vr_driver/Plan.action). ROS
+adapter only: the planning is :class:`vr_driver.driver.planning.DriverPlanning` (OMPL, TOPP-RA, a
+snapshot of the driver's collision checker and scene, the workspace box); execution is the node's own
+``joint_trajectory_action`` -- the planned trajectory is sent to it as a FollowJointTrajectory goal, as
+MoveIt's controller manager would, so it is validated, collision-checked, streamed and supervised by
+the trajectory server and its result is the driver's.
+
+- goal -> PlanGoal (joints / named state / CartesianPose in mm, deg) -> plan in this goal's thread
+  (never the bus thread; one planner at a time through the driver's planning gate);
+- feedback: phase ``planning`` (progress 0), ``previewing`` (the plan is drawn on the latched
+  ``~plan_markers``: the TCP path, the arm's sweep as stick figures at a few samples, the end),
+  ``executing`` (progress = the elapsed fraction of the planned duration);
+- result: the trajectory, planning time, duration, the TCP pose at the end, error_code (the values of
+  moveit_msgs/MoveItErrorCodes) and error_string in words (a start or goal in collision names the
+  link and the object); on execution the trajectory action's error_code and error_string;
+- cancel while planning: the plan is dropped when it ends (OMPL's budget bounds the wait); while
+  executing: the trajectory goal is cancelled (the arm stops, the goal ends at rest).
+
+Without OMPL or TOPP-RA (or, with collision_check on, without the checker's libraries) the action is
+not advertised and the node says why once (MissingDependency's words); nothing else changes.
+"""
+from __future__ import annotations
+
+import threading
+import time
+from typing import Dict, Optional
+
+import actionlib
+import rospy
+from actionlib_msgs.msg import GoalStatus
+from geometry_msgs.msg import Point
+from std_msgs.msg import ColorRGBA
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker, MarkerArray
+
+from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJointTrajectoryGoal, PlanAction,
+                           PlanFeedback, PlanGoal as PlanGoalMsg, PlanResult)
+
+from ..driver import planning as core_planning
+from ..driver.planning import DriverPlanning, PlanGoal, PlanOutcome, arm_points
+from ..errors import MissingDependency, VrDriverError
+from ..poses import ControllerPose
+
+#: stick figures of the arm drawn along a plan (start and end included)
+SWEEP_POSES = 7
+
+
+def goal_from_msg(msg) -> PlanGoal:
+    """The action goal as a PlanGoal; VrDriverError / ValueError for a goal_type that is none of
+    JOINTS, NAMED, POSE or a pose that is not finite."""
+    common = dict(planner_id=msg.planner_id, planning_time=msg.allowed_planning_time,
+                  velocity_scaling=msg.velocity_scaling)
+    if msg.goal_type == PlanGoalMsg.JOINTS:
+        return PlanGoal(joints=(tuple(msg.joint_names), tuple(msg.positions)), **common)
+    if msg.goal_type == PlanGoalMsg.NAMED:
+        if not msg.named_state:
+            raise ValueError("goal_type NAMED needs named_state (e.g. home)")
+        return PlanGoal(named=msg.named_state, **common)
+    if msg.goal_type == PlanGoalMsg.POSE:
+        p = msg.pose
+        return PlanGoal(pose=ControllerPose.from_sequence((p.x, p.y, p.z, p.rx, p.ry, p.rz)), **common)
+    raise ValueError("goal_type %d is unknown (1 JOINTS, 2 NAMED, 3 POSE)" % msg.goal_type)
+
+
+class PlanServer:
+    """The ``plan`` action (see the module text). :meth:`start` advertises it, or says why not."""
+
+    def __init__(self, core, params, trajectory_action: str = "joint_trajectory_action",
+                 name: str = "plan") -> None:
+        self.core = core
+        self.params = params
+        self.name = name
+        self.trajectory_action = trajectory_action
+        self.planning: Optional[DriverPlanning] = None
+        self.unavailable = ""                 # why the action is not served ("" when it is)
+        self.server = None
+        self.client = None
+        self.marker_pub = None
+        self._lock = threading.Lock()
+        self._cancel: Dict[str, threading.Event] = {}
+
+    def start(self) -> bool:
+        """Advertise the action; False (and one warning saying why) when planning is not possible here."""
+        try:
+            self.planning = DriverPlanning(self.core)
+        except MissingDependency as exc:
+            self.unavailable = str(exc)
+            rospy.logwarn("interface: the plan action is not served: %s", exc)
+            return False
+        except VrDriverError as exc:            # a model the planner cannot plan for (limits)
+            self.unavailable = str(exc)
+            rospy.logwarn("interface: the plan action is not served: %s", exc)
+            return False
+        self.marker_pub = rospy.Publisher("~plan_markers", MarkerArray, queue_size=2, latch=True)
+        self.client = actionlib.ActionClient(self.trajectory_action, FollowJointTrajectoryAction)
+        self.server = actionlib.ActionServer(self.name, PlanAction, goal_cb=self._on_goal,
+                                             cancel_cb=self._on_cancel, auto_start=False)
+        self.server.start()
+        if not self.planning.collision_checked:
+            rospy.logwarn("interface: the plan action plans WITHOUT collision checks (collision_check: false): "
+                          "only the joint limits and the workspace box")
+        rospy.loginfo("interface: plan action ready (default planner %s, %g s budget, velocity scaling %g)",
+                      self.params.planner_id, self.params.planning_time, self.params.velocity_scaling)
+        return True
+
+    # ------------------------------------------------------------------ callbacks
+    def _on_goal(self, handle) -> None:
+        goal_id = handle.get_goal_id().id
+        with self._lock:
+            self._cancel[goal_id] = threading.Event()
+        handle.set_accepted()
+        threading.Thread(target=self._run, args=(handle, goal_id), name="plan-" + goal_id[-8:],
+                         daemon=True).start()
+
+    def _on_cancel(self, handle) -> None:
+        with self._lock:
+            event = self._cancel.get(handle.get_goal_id().id)
+        if event is not None:
+            event.set()
+
+    def _run(self, handle, goal_id: str) -> None:
+        try:
+            self._execute(handle, handle.get_goal(), self._cancel[goal_id])
+        except Exception as exc:  # never leave a goal hanging
+            rospy.logerr("plan: internal error: %s", exc)
+            handle.set_aborted(PlanResult(error_code=core_planning.INVALID_MOTION_PLAN,
+                                          error_string="internal error: %s" % exc))
+        finally:
+            with self._lock:
+                self._cancel.pop(goal_id, None)
+
+    # ------------------------------------------------------------------ one goal
+    def _execute(self, handle, msg, cancel: threading.Event) -> None:
+        handle.publish_feedback(PlanFeedback(phase=PlanFeedback.PHASE_PLANNING, progress=0.0))
+        try:
+            goal = goal_from_msg(msg)
+        except (VrDriverError, ValueError) as exc:
+            self._end(handle, PlanResult(error_code=core_planning.INVALID_GOAL, error_string="refused: %s" % exc))
+            return
+        outcome = self.planning.plan(goal)
+        result = self._result(outcome)
+        if not outcome.ok:
+            rospy.logwarn("plan to %s: %s", goal.describe(), outcome.text)
+            self._end(handle, result)
+            return
+        rospy.loginfo("plan to %s: %s", goal.describe(), outcome.text)
+        handle.publish_feedback(PlanFeedback(phase=PlanFeedback.PHASE_PREVIEWING, progress=1.0))
+        self.show(outcome)
+        if cancel.is_set():
+            result.error_code = core_planning.PREEMPTED
+            result.error_string = "cancelled before it ran: %s" % outcome.text
+            handle.set_canceled(result, result.error_string)
+            return
+        if msg.preview_only:
+            result.error_string = "preview only (nothing sent): " + outcome.text
+            handle.set_succeeded(result, result.error_string)
+            return
+        self._follow(handle, result, outcome, cancel)
+
+    def _result(self, outcome: PlanOutcome) -> PlanResult:
+        result = PlanResult(error_code=outcome.code, error_string=outcome.text, planning_time=outcome.planning_time,
+                            planner_id=outcome.planner_id)
+        if outcome.trajectory is not None:
+            result.trajectory = self.trajectory_msg(outcome)
+            result.duration = outcome.trajectory.duration
+        if outcome.target is not None:
+            result.target = CartesianPose(*outcome.target.as_tuple())
+        return result
+
+    def trajectory_msg(self, outcome: PlanOutcome) -> JointTrajectory:
+        """The plan as trajectory_msgs/JointTrajectory under the driver's joint names (the planner's
+        chain order is J1..J6, the order of controller_joint_names); stamp 0: start on arrival."""
+        msg = outcome.trajectory.to_msg(JointTrajectory, JointTrajectoryPoint, rospy.Duration.from_sec)
+        msg.joint_names = list(self.core.joint_names)
+        return msg
+
+    def _end(self, handle, result: PlanResult) -> None:
+        handle.set_aborted(result, result.error_string)
+
+    def _follow(self, handle, result: PlanResult, outcome: PlanOutcome, cancel: threading.Event) -> None:
+        """Run the plan through joint_trajectory_action; the goal ends with its result."""
+        if not self.client.wait_for_server(rospy.Duration(5.0)):
+            result.error_code = core_planning.CONTROL_FAILED
+            result.error_string = "%s is not served: nothing was sent (%s)" % (self.trajectory_action, outcome.text)
+            self._end(handle, result)
+            return
+        done = threading.Event()
+
+        def transition(gh) -> None:
+            if gh.get_comm_state() == actionlib.CommState.DONE:
+                done.set()
+        gh = self.client.send_goal(FollowJointTrajectoryGoal(trajectory=result.trajectory), transition_cb=transition)
+        started = time.monotonic()
+        duration = max(outcome.trajectory.duration, 1e-3)
+        feedback = PlanFeedback(phase=PlanFeedback.PHASE_EXECUTING)
+        cancelled = False
+        while not done.wait(0.1):
+            if cancel.is_set() and not cancelled:
+                cancelled = True
+                gh.cancel()                      # the trajectory server stops the arm, ends at rest
+            if rospy.is_shutdown():
+                break
+            feedback.progress = min(1.0, (time.monotonic() - started) / duration)
+            handle.publish_feedback(feedback)
+        state, fjt = gh.get_goal_status(), gh.get_result()
+        result.execution_error_code = fjt.error_code if fjt is not None else 0
+        words = fjt.error_string if fjt is not None and fjt.error_string else "goal state %d" % state
+        if state == GoalStatus.SUCCEEDED:
+            result.error_code = core_planning.SUCCESS
+            result.error_string = "%s; executed: %s" % (outcome.text, words)
+            handle.set_succeeded(result, result.error_string)
+            return
+        if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED) or cancelled:
+            result.error_code = core_planning.PREEMPTED
+            result.error_string = "%s; stopped: %s" % (outcome.text, words)
+            handle.set_canceled(result, result.error_string)
+            return
+        result.error_code = core_planning.CONTROL_FAILED
+        result.error_string = "%s; %s by %s: %s" % (
+            outcome.text, "refused" if state == GoalStatus.REJECTED else "failed", self.trajectory_action, words)
+        rospy.logwarn("plan: %s", result.error_string)
+        self._end(handle, result)
+
+    # ------------------------------------------------------------------ RViz
+    def show(self, outcome: PlanOutcome) -> None:
+        """The plan on ~plan_markers (latched; each plan replaces the last): the TCP path (line strip,
+        frame ``base_frame``), the arm as stick figures at SWEEP_POSES samples fading from start to
+        end and the end's TCP (frame: the chain root, base_link)."""
+        if not self.params.publish_markers or self.marker_pub is None:
+            return
+        try:
+            self.marker_pub.publish(self.markers(outcome))
+        except Exception as exc:  # a display aid only
+            rospy.logwarn("could not publish the plan markers: %s", exc)
+
+    def markers(self, outcome: PlanOutcome) -> MarkerArray:
+        kin = self.planning.kin
+        stamp = rospy.Time.now()
+        plan = outcome.trajectory
+        clear = Marker(action=Marker.DELETEALL)
+        clear.header.frame_id = self.params.base_frame
+        tcp = Marker()
+        tcp.header.stamp, tcp.header.frame_id = stamp, self.params.base_frame
+        tcp.ns, tcp.id, tcp.type, tcp.action = "plan_tcp_path", 0, Marker.LINE_STRIP, Marker.ADD
+        tcp.pose.orientation.w = 1.0
+        tcp.scale.x = 0.005
+        tcp.color = ColorRGBA(1.0, 0.4, 0.0, 1.0)
+        for q in plan.positions:
+            x, y, z = kin.fk_pose(q).position_m
+            tcp.points.append(Point(x, y, z))
+        out = [clear, tcp]
+        n = len(plan.positions)
+        picks = sorted(set(round(k * (n - 1) / (SWEEP_POSES - 1)) for k in range(SWEEP_POSES))) if n > 1 else [0]
+        for i, k in enumerate(picks):
+            ghost = Marker()
+            ghost.header.stamp, ghost.header.frame_id = stamp, kin.base
+            ghost.ns, ghost.id, ghost.type, ghost.action = "plan_sweep", i, Marker.LINE_STRIP, Marker.ADD
+            ghost.pose.orientation.w = 1.0
+            ghost.scale.x = 0.03
+            f = i / max(1, len(picks) - 1)
+            ghost.color = ColorRGBA(0.3 + 0.7 * f, 0.6, 1.0 - 0.7 * f, 0.35 if 0 < i < len(picks) - 1 else 0.7)
+            ghost.points = [Point(*p) for p in arm_points(kin, plan.positions[k])]
+            out.append(ghost)
+        end = Marker()
+        end.header.stamp, end.header.frame_id = stamp, self.params.base_frame
+        end.ns, end.id, end.type, end.action = "plan_goal", 0, Marker.SPHERE, Marker.ADD
+        end.pose.position = tcp.points[-1]
+        end.pose.orientation.w = 1.0
+        end.scale.x = end.scale.y = end.scale.z = 0.04
+        end.color = ColorRGBA(1.0, 0.4, 0.0, 0.9)
+        out.append(end)
+        return MarkerArray(markers=out)

@@ -1,0 +1,205 @@
+"""The plan action's core (driver/planning.py) on a stepped world of the example cell with the fake
+clock: a pose behind the pillar is planned from the arm's joints against a snapshot of the driver's
+checker, inside the workspace box, and what it plans is accepted and run by the driver's own
+trajectory path (protocol v3) with every sample free; refusals come back as codes and words naming
+the link and the object; a scene change reaches the next plan; missing libraries give
+MissingDependency. Skipped, with the reason, where OMPL, TOPP-RA, pinocchio or coal are missing."""
+from __future__ import annotations
+
+import os
+
+import pytest
+
+from _world import World
+from vr_driver.driver import planning as P
+from vr_driver.driver.planning import CellValidity, DriverPlanning, PlanGoal, arm_points, code_of
+from vr_driver.driver.trajectories import TrajectoryGoal, validate
+from vr_driver.errors import MissingDependency
+from vr_driver.kinematics import deps
+from vr_driver.kinematics.planner import PlanningError
+from vr_driver.kinematics.scene import SceneObject
+from vr_driver.poses import ControllerPose
+
+_MISSING = deps.missing_dependencies(("ompl", "toppra", "pinocchio", "coal"))
+pytestmark = pytest.mark.skipif(bool(_MISSING), reason="; ".join(r for _, r in _MISSING))
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+CELL = os.path.join(REPO, "panasonic_vr006l_support", "config", "cell_example.yaml")
+#: behind the pillar (45 deg left, 0.88 m out) at home's height and tool tilt: a straight PTP from
+#: home sweeps link_4 160 mm deep through the pillar
+BEHIND = ControllerPose(500, 866, 725, 0, 45, 60)
+
+
+def world(kin, protocol="v3", **params):
+    w = World(kin, dict(dict(scene=CELL), **params), protocol=protocol)
+    w.ready()
+    return w
+
+
+def free_with(checker, positions):
+    return [k for k, q in enumerate(positions) if checker.in_collision(q)]
+
+
+def test_a_pose_behind_the_pillar_is_planned_accepted_and_run_by_the_driver(kin):
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    start = w.status().joints
+    out = planning.plan(PlanGoal(pose=BEHIND), seed=1)
+    assert out.ok and out.code == P.SUCCESS, out.text
+    plan = out.trajectory
+    assert out.text.startswith("planned with RRTConnect in ") and "over %.2f s" % plan.duration in out.text
+    assert plan.positions[0] == pytest.approx(start, abs=1e-9)
+    dp, da = out.target.distance_to(BEHIND)
+    assert dp < 0.01 and da < 0.01
+    # every sample free of the cell (the driver's padding) and its TCP inside the workspace box
+    assert free_with(w.core.collision.copy(), plan.positions) == []
+    assert all(w.core.params.workspace.contains(kin.fk_pose(q)) for q in plan.positions)
+    # the straight move there is not: the planner had something to do
+    straight = [tuple(a + (b - a) * k / 50 for a, b in zip(start, plan.goal)) for k in range(51)]
+    assert free_with(w.core.collision.copy(), straight) != []
+    # the driver's own checks accept it and run it (v3: Cartesian targets streamed) to the end
+    names = w.core.joint_names
+    lim = kin.limits
+    traj = validate(TrajectoryGoal(names, plan.positions, plan.times), names, w.status().joints, lim.lower,
+                    lim.upper, w.now)
+    run = w.core.submit_trajectory(traj)
+    w.run_until(lambda: run.done, 30.0, "trajectory done")
+    assert run.success
+    final = w.status().joints
+    assert max(abs(a - b) for a, b in zip(final, plan.goal)) < 0.01
+
+
+def test_the_workspace_box_bounds_every_sample(kin):
+    """With the top of the box at 1000 mm the plan stays under it (less the clearance), where the
+    plan with the default box rises higher: the box is part of the planner's validity."""
+    w = world(kin, workspace={"z": [0.0, 1000.0]})
+    out = DriverPlanning(w.core, kinematics=kin).plan(PlanGoal(pose=BEHIND), seed=1)
+    assert out.ok, out.text
+    top = max(kin.fk_pose(q).z for q in out.trajectory.positions)
+    assert top <= 1000.0 - 9.0, top
+
+
+def test_a_goal_in_collision_names_the_link_and_the_object(kin):
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    out = planning.plan(PlanGoal(pose=ControllerPose(1100, 0, 200, 0, 90, 0)))     # into the table
+    assert out.code == P.GOAL_IN_COLLISION and out.trajectory is None
+    assert out.text.startswith("goal refused: ") and "with object table" in out.text, out.text
+    assert any(c.other == "table" for c in out.contacts)
+
+
+def test_a_scene_change_reaches_the_next_plan(kin):
+    """A box where the goal is: the next plan is refused naming it; removed: planned again."""
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    goal = PlanGoal(named="zero")
+    assert planning.plan(goal).ok
+    x, y, z = kin.fk_pose(kin.named_states["zero"]).position_m
+    w.core.add_scene_object(SceneObject("crate", "box", (0.1, 0.1, 0.1), (x, y, z)))
+    out = planning.plan(goal)
+    assert out.code == P.GOAL_IN_COLLISION and "with object crate" in out.text, out.text
+    w.core.remove_scene_object("crate")
+    assert planning.plan(goal).ok
+
+
+def test_a_start_in_collision_is_refused_naming_it(kin):
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    inside = (0.0, 1.0, 0.0, 0.0, 1.0, 0.0)            # leaning forward, the wrist in the table
+    out = planning.plan(PlanGoal(named="home"), start=inside)
+    assert out.code == P.START_STATE_IN_COLLISION, out.text
+    assert out.text.startswith("cannot plan from here: ") and "table" in out.text
+
+
+@pytest.mark.parametrize("goal, words", [
+    (PlanGoal(named="nowhere"), "unknown named state 'nowhere'"),
+    (PlanGoal(named="home", velocity_scaling=1.5), "velocity_scaling must be in (0, 1]"),
+    (PlanGoal(named="home", planning_time=-1.0), "allowed_planning_time must be in (0, 60]"),
+    (PlanGoal(named="home", planner_id="Dijkstra"), "unknown planner_id 'Dijkstra'"),
+    (PlanGoal(), "exactly one of joints, a named state or a pose (got 0)"),
+    (PlanGoal(named="home", pose=BEHIND), "exactly one of joints, a named state or a pose (got 2)"),
+    (PlanGoal(pose=ControllerPose(1500, 0, 700, 0, 45, 0)), "X = 1500 mm is outside the workspace"),
+    (PlanGoal(joints=(("joint_1", "joint_2"), (0.0, 0.0))), "names every joint of the arm"),
+    (PlanGoal(joints=(tuple("joint_%d" % i for i in range(1, 7)), (0.0,) * 5)), "one position per joint name"),
+    (PlanGoal(joints=(tuple("joint_%d" % i for i in range(1, 7)), (0.0, 0.0, float("nan"), 0, 0, 0))),
+     "finite"),
+    (PlanGoal(joints=(tuple("joint_%d" % i for i in range(1, 7)), (9.0, 0.0, 0.0, 0, 0, 0))),
+     "outside the joint limits"),
+])
+def test_bad_goals_are_refused_in_words(kin, goal, words):
+    w = world(kin)
+    out = DriverPlanning(w.core, kinematics=kin).plan(goal)
+    assert out.code == P.INVALID_GOAL and out.trajectory is None
+    assert words in out.text, out.text
+    w.run_for(0.5)
+    assert w.executed() == []
+
+
+def test_a_joint_goal_in_any_name_order(kin):
+    w = world(kin)
+    names = tuple("joint_%d" % i for i in range(6, 0, -1))
+    zero = (0.0,) * 6
+    out = DriverPlanning(w.core, kinematics=kin).plan(PlanGoal(joints=(names, zero)))
+    assert out.ok, out.text
+    assert out.trajectory.goal == pytest.approx(zero, abs=1e-9)
+
+
+def test_codes_of_the_planner_refusals():
+    assert code_of(PlanningError("start", "start (...) is in collision: x", ("c",))) == P.START_STATE_IN_COLLISION
+    assert code_of(PlanningError("start", "start is outside the joint limits")) == P.INVALID_ROBOT_STATE
+    assert code_of(PlanningError("goal", "goal pose unreachable: far")) == P.NO_IK_SOLUTION
+    assert code_of(PlanningError("goal", "all 8 joint solutions of the goal pose are in collision")) \
+        == P.GOAL_IN_COLLISION
+    assert code_of(PlanningError("goal", "unknown named state 'x'")) == P.INVALID_GOAL
+    assert code_of(PlanningError("plan", "RRTConnect found no path")) == P.PLANNING_FAILED
+    assert code_of(PlanningError("check", "sample 3 ...")) == P.INVALID_MOTION_PLAN
+
+
+def test_cell_validity_is_a_padded_copy_and_names_the_box(kin):
+    w = world(kin)
+    v = CellValidity(w.core.collision.copy(), kin, w.core.params.workspace)
+    home = kin.named_states["home"]
+    assert not v.in_collision(home)
+    strict = v.copy()
+    strict.set_padding(v.padding + 0.01)
+    assert strict.margin == pytest.approx(10.0) and v.margin == 0.0
+    assert strict.checker is not v.checker and strict.checker.padding == pytest.approx(v.padding + 0.01)
+    up = (0.0, 0.0, -1.5, 0.0, 0.0, 0.0)          # the forearm raised: the flange above z = 1400 mm
+    assert kin.fk_pose(up).z > 1400.0
+    assert v.in_collision(up)
+    words = [str(c) for c in v.contacts(up)]
+    assert any(t.startswith("the TCP outside the workspace box (Z by ") for t in words), words
+
+
+def test_arm_points_run_from_the_base_to_the_tcp(kin):
+    home = kin.named_states["home"]
+    pts = arm_points(kin, home)
+    assert pts[0] == (0.0, 0.0, 0.0) and len(pts) >= 5
+    assert pts[-1] == pytest.approx(tuple(kin.fk(home)[:3, 3]), abs=1e-9)
+
+
+def test_missing_libraries_are_named(kin, monkeypatch):
+    w = world(kin)
+    real = deps.require
+
+    def without_ompl(module, feature=""):
+        if module == "ompl":
+            raise MissingDependency("ompl", "ompl", feature, "ModuleNotFoundError: No module named 'ompl'")
+        return real(module, feature)
+    monkeypatch.setattr(deps, "require", without_ompl)
+    with pytest.raises(MissingDependency) as err:
+        DriverPlanning(w.core, kinematics=kin)
+    assert "ompl" in str(err.value)
+
+
+def test_no_checker_while_collisions_are_to_be_checked_is_a_missing_dependency(kin, monkeypatch):
+    w = world(kin, scene="")
+    monkeypatch.setattr(type(w.core), "collision", property(lambda self: None))
+    with pytest.raises(MissingDependency, match="no collision checker"):
+        DriverPlanning(w.core, kinematics=kin)
+
+
+def test_collision_check_off_plans_with_the_box_only_and_says_so(kin):
+    w = world(kin, scene="", collision_check=False)
+    out = DriverPlanning(w.core, kinematics=kin).plan(PlanGoal(named="zero"))
+    assert out.ok and out.text.endswith("collisions NOT checked (collision_check: false)"), out.text
