@@ -17,6 +17,7 @@ CORE = ("errors", "validate", "poses", "params", "io_signals",
         "kinematics.deps", "kinematics.scene", "kinematics.collision",
         "driver", "driver.link", "driver.sequencer", "driver.jobs", "driver.core", "driver.trajectories",
         "driver.stations", "driver.streaming", "driver.record_clock", "driver.supervision", "driver.joint_command",
+        "driver.scene_guard",
         "controller", "controller.program", "controller.session", "controller.program_v2", "controller.arm",
         "controller.stream_arm", "controller.io_island", "controller.line",
         "terminal", "terminal.pose_input", "terminal.jog", "csr") + tuple("csr." + m for m in CSR_MODULES)

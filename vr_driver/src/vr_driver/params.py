@@ -145,19 +145,11 @@ def _model(params: Mapping[str, Any], default: str) -> str:
 
 
 def _scene(params: Mapping[str, Any], default: str) -> str:
-    """``scene``: "" or a cell YAML that kinematics.scene.load_scene accepts (checked here, at
-    start: a missing or bad file is a ParamError naming ``scene`` with the file's entry and key)."""
+    """``scene``: "" or a cell YAML file (a missing file is a ParamError here; its content is
+    checked when the driver core loads it, a ParamError naming ``scene`` with the entry and key)."""
     value = _string(params, "scene", default)
-    if not value:
-        return value
-    if not os.path.isfile(value):
+    if value and not os.path.isfile(value):
         raise ParamError("scene", value, "no such file")
-    from .errors import SceneError
-    from .kinematics.scene import load_scene
-    try:
-        load_scene(value)
-    except SceneError as exc:
-        raise ParamError("scene", value, str(exc)) from None
     return value
 
 

@@ -202,7 +202,9 @@ def test_an_object_where_the_arm_stands_is_added_with_a_warning_and_the_arm_may_
     w = world(kin, scene="")
     tcp = kin.fk(w.status().joints)[:3, 3]
     with caplog.at_level(logging.WARNING, logger="vr_driver.driver"):
-        w.core.add_scene_object(SceneObject("bin", "sphere", (0.12,), position=tuple(tcp)))
+        warning = w.core.add_scene_object(SceneObject("bin", "sphere", (0.12,), position=tuple(tcp)))
+    assert "current configuration collides" in warning and "link_6 with bin (penetration" in warning
+    assert w.core.scene().names() == ["bin"]
     assert any("current configuration collides" in r.getMessage() and "with bin" in r.getMessage()
                for r in caplog.records)
     # deeper into something else (the wrist folded onto the forearm): refused
@@ -238,7 +240,7 @@ def test_bad_scene_parameters_are_refused_naming_them(tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("objects:\n  - {name: a, type: cone, radius: 1, position: [0, 0, 0]}\n")
     with pytest.raises(ParamError, match=r"~scene .*objects\[0\] \(a\): type must be one of"):
-        DriverParams.from_dict({"scene": str(bad)})
+        DriverCore(DriverParams.from_dict({"scene": str(bad), "port": "x"}))
     for value in (-0.01, float("nan"), "0.1", True):
         with pytest.raises(ParamError, match="collision_padding"):
             DriverParams.from_dict({"collision_padding": value})

@@ -277,6 +277,20 @@ def driver_kinematics(params: DriverParams) -> Kinematics:
     return kin
 
 
+def _load_cell(path: str):
+    """The Scene of the cell file ``path`` (None for ""); ParamError naming ``scene`` with the
+    SceneError's words (the file, the entry and the key) when it is bad."""
+    if not path:
+        return None
+    from ..errors import SceneError
+    from ..kinematics.scene import load_scene
+    from ..params import ParamError
+    try:
+        return load_scene(path)
+    except SceneError as exc:
+        raise ParamError("scene", path, str(exc)) from None
+
+
 class DriverCore:
     """See the module docstring. ``open_link(device, baud)`` makes the link (tests may pass a
     factory for an in-memory or fault-injecting link)."""
@@ -330,9 +344,7 @@ class DriverCore:
         self._status = self._snapshot(self.clock(), None)
         self.joint_commander = JointCommander(self)
         # the cell and the collision checks (scene_guard; MissingDependency: a scene but no libraries)
-        from ..kinematics.scene import load_scene
-        self.scene_guard = SceneGuard(self.kin, self._planning_gate,
-                                      load_scene(params.scene) if params.scene else None,
+        self.scene_guard = SceneGuard(self.kin, self._planning_gate, _load_cell(params.scene),
                                       params.collision_padding, params.collision_check, params.prefix)
 
     @property
@@ -659,11 +671,12 @@ class DriverCore:
         """A copy of the scene (kinematics.scene.Scene)."""
         return self.scene_guard.scene()
 
-    def add_scene_object(self, obj, replace: bool = False) -> None:
+    def add_scene_object(self, obj, replace: bool = False) -> str:
         """Add ``obj`` (a SceneObject in base_link); ``replace``: in place of the object of its name
         (added when there is none). SceneError (nothing changes) for a taken name without
-        ``replace``; an object the arm stands in now is added with a warning (scene_guard)."""
-        self.scene_guard.add(obj, replace, self._joints_now())
+        ``replace``; an object the arm stands in now is added with a warning (scene_guard), which
+        is returned ("" when none)."""
+        return self.scene_guard.add(obj, replace, self._joints_now())
 
     def remove_scene_object(self, name: str):
         """Remove the object ``name`` and return it; SceneError naming the objects when absent."""

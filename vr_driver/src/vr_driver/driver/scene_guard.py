@@ -144,7 +144,8 @@ class SceneGuard:
 
     def _change(self, edit: Callable[[Scene], Any], what: str, current: Optional[Sequence[float]] = None) -> Any:
         """Apply ``edit`` to a copy of the scene; when it passes, build its checker and swap both
-        in (under the planning gate). Returns what ``edit`` returned. Without the libraries
+        in (under the planning gate). Returns (what ``edit`` returned, a warning: "" or the
+        contacts of ``current``, the arm's joints, with the new scene). Without the libraries
         (collision_check true): MissingDependency -- objects that would not be checked are refused."""
         if self._missing is not None:
             raise MissingDependency(self._missing.package, self._missing.module, "the scene's objects",
@@ -158,6 +159,7 @@ class SceneGuard:
                 self._scene, self._checker = scene, new
             listeners = list(self._listeners)
         log.info("scene: %s (%d object(s): %s)", what, len(scene), ", ".join(scene.names()) or "none")
+        warning = ""
         if new is not None and current is not None:
             try:
                 with self._gate:
@@ -165,19 +167,21 @@ class SceneGuard:
             except Exception:  # the warning is an aid; a joint vector the checker cannot take is ignored
                 hits = []
             if hits:
-                log.warning("scene: the arm's current configuration collides: %s -- only a motion that "
-                            "leaves the collision (and ends free) is accepted",
-                            "; ".join(describe_contact(c, new.padding) for c in hits))
+                warning = ("the arm's current configuration collides: %s -- only a motion that leaves the "
+                           "collision (and ends free) is accepted"
+                           % "; ".join(describe_contact(c, new.padding) for c in hits))
+                log.warning("scene: %s", warning)
         for callback in listeners:
             try:
                 callback(scene.copy())
             except Exception:
                 log.exception("scene listener failed")
-        return result
+        return result, warning
 
-    def add(self, obj: SceneObject, replace: bool = False, current: Optional[Sequence[float]] = None) -> None:
+    def add(self, obj: SceneObject, replace: bool = False, current: Optional[Sequence[float]] = None) -> str:
         """Add ``obj`` (``replace``: put it in place of the object of its name, or add it when there
-        is none); SceneError (nothing changes) for a taken name without ``replace`` or a bad object."""
+        is none); SceneError (nothing changes) for a taken name without ``replace`` or a bad object.
+        Returns a warning ("" or: the arm at ``current`` collides with the new scene)."""
         if not isinstance(obj, SceneObject):
             raise SceneError("scene: can only add a SceneObject, got %r" % (obj,))
 
@@ -186,12 +190,12 @@ class SceneGuard:
                 scene.replace(obj)
             else:
                 scene.add(obj)
-        self._change(edit, "%s %s %s" % ("replaced" if replace and obj.name in self._scene else "added",
-                                         obj.shape, obj.name), current)
+        return self._change(edit, "%s %s %s" % ("replaced" if replace and obj.name in self._scene else "added",
+                                                obj.shape, obj.name), current)[1]
 
     def remove(self, name: str) -> SceneObject:
         """Remove the object ``name`` and return it; SceneError naming the objects when absent."""
-        return self._change(lambda scene: scene.remove(name), "removed %s" % name)
+        return self._change(lambda scene: scene.remove(name), "removed %s" % name)[0]
 
     def clear(self) -> None:
         self._change(lambda scene: scene.clear(), "cleared")

@@ -29,10 +29,11 @@ from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, 
 
 from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
                      SubmitMode)
-from ..errors import VrDriverError
+from ..errors import MissingDependency, VrDriverError
 from .industrial import IndustrialInterface
 from .io_server import IoServer
 from .joint_command import JointCommandSubscriber
+from .scene_server import SceneServer
 from .plan_server import PlanServer
 from ..params import DriverParams, ParamError
 from ..poses import ControllerPose, MoveType
@@ -123,6 +124,8 @@ class InterfaceNode:
                                          queue_size=1)
         # joint targets streamed on the fly (ros/joint_command.py)
         self.joint_command = JointCommandSubscriber(self.core, self.diag)
+        # the collision scene: ~scene/add, remove, list, load, ~scene_markers (ros/scene_server.py)
+        self.scene_server = SceneServer(self.core, params, self.diag)
         self._last_link = None
         self._last_status_key = None
         self._last_record: Optional[float] = None     # record_time of the last joint_states sample
@@ -474,7 +477,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         params = DriverParams.from_dict(rospy.get_param("~", {}))
         node = InterfaceNode(params)
-    except ParamError as exc:
+    except (ParamError, MissingDependency) as exc:     # MissingDependency: a scene without pinocchio / coal
         rospy.logfatal("interface: %s", exc)
         sys.stderr.write("interface: %s\n" % exc)
         return 2
