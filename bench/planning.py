@@ -121,11 +121,11 @@ class Executor:
 
     def run(self, plan):
         """(succeeded, reason) of one plan on the rig."""
-        from vr_driver.driver.trajectories import TrajectoryError, segment_speeds, validate
+        from vr_driver.driver.trajectories import TrajectoryError, TrajectoryGoal, segment_speeds, validate
         from vr_driver.driver import DriverError
         w, lim = self.world, self.kin.limits
         try:
-            traj = validate(plan.to_goal(), w.core.joint_names, self.joints, lim.lower, lim.upper, w.now)
+            traj = validate(TrajectoryGoal.of(plan), w.core.joint_names, self.joints, lim.lower, lim.upper, w.now)
             segment_speeds(traj, lim.velocity, w.core.joint_names)
             run = w.core.submit_trajectory(traj)
         except (TrajectoryError, DriverError) as exc:

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from vr_driver.driver.trajectories import segment_speeds, validate
+from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
 from vr_driver.errors import MissingDependency, MotionError
 from vr_driver.kinematics import deps
 from vr_driver.kinematics.planner import PLANNERS, Planner, PlanningError
@@ -250,7 +250,7 @@ def test_other_planners_by_name(kin, name):
 # ------------------------------------------------------------------------- the driver's own checks
 
 def test_the_driver_validation_accepts_the_plan(kin, around):
-    traj = validate(around.to_goal(), kin.joint_names, around.start, kin.limits.lower, kin.limits.upper, now=0.0)
+    traj = validate(TrajectoryGoal.of(around), kin.joint_names, around.start, kin.limits.lower, kin.limits.upper, now=0.0)
     assert traj.positions == around.positions and traj.times == around.times
     speeds = segment_speeds(traj, kin.limits.velocity, kin.joint_names)
     assert max(speeds) <= 1.0 and max(speeds) > 0.5
@@ -308,7 +308,7 @@ def test_plans_around_the_pillar_of_the_example_cell(kin, cell_checker):
         dense.extend(tuple(x + (y - x) * k / 20 for x, y in zip(a, b)) for k in range(20))
     dense.append(plan.goal)
     assert cell_checker.check_path(dense) is None
-    traj = validate(plan.to_goal(), kin.joint_names, start, kin.limits.lower, kin.limits.upper, now=0.0)
+    traj = validate(TrajectoryGoal.of(plan), kin.joint_names, start, kin.limits.lower, kin.limits.upper, now=0.0)
     assert max(segment_speeds(traj, kin.limits.velocity, kin.joint_names)) <= 1.0
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from ..errors import VrDriverError
 
@@ -66,6 +66,13 @@ class TrajectoryGoal:
     goal_tolerance: Dict[str, float] = field(default_factory=dict)
     goal_time_tolerance: float = 0.0
     start_time: Optional[float] = None               # header.stamp, seconds (None: now)
+
+    @classmethod
+    def of(cls, trajectory: Any, **kwargs: Any) -> "TrajectoryGoal":
+        """The goal of a timed joint trajectory that has ``joint_names``, ``positions`` and ``times``
+        (e.g. kinematics.planner's PlannedTrajectory); ``kwargs``: tolerances and start time."""
+        return cls(tuple(trajectory.joint_names), tuple(tuple(p) for p in trajectory.positions),
+                   tuple(trajectory.times), **kwargs)
 
 
 @dataclass(frozen=True)

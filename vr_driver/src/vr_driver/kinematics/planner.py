@@ -8,7 +8,7 @@ part of the MoveIt stand-in (issue 27).
     plan = planner.plan(start, ControllerPose(...))   # TCP in ``base``, mm / deg (the controller's)
     plan = planner.plan(start, ((x, y, z), (qx, qy, qz, qw)))  # tool0 in base_link, m / quaternion
     plan.joint_names, plan.times, plan.positions, plan.velocities, plan.accelerations
-    plan.to_goal()                                     # the driver's TrajectoryGoal
+    TrajectoryGoal.of(plan)                            # the driver's goal (driver.trajectories)
     plan.to_msg(JointTrajectory, JointTrajectoryPoint, rospy.Duration.from_sec)
 
 What :meth:`Planner.plan` does, in order; every failure is a :class:`PlanningError` saying which
@@ -161,12 +161,6 @@ class PlannedTrajectory:
     @property
     def goal(self) -> Tuple[float, ...]:
         return self.positions[-1]
-
-    def to_goal(self, **kwargs: Any):
-        """The driver's :class:`~vr_driver.driver.trajectories.TrajectoryGoal` of this trajectory
-        (``kwargs``: its tolerances and start time)."""
-        from ..driver.trajectories import TrajectoryGoal
-        return TrajectoryGoal(joint_names=self.joint_names, positions=self.positions, times=self.times, **kwargs)
 
     def to_msg(self, trajectory_type: Callable[..., Any], point_type: Callable[..., Any],
                duration: Callable[[float], Any]) -> Any:
