@@ -7,16 +7,14 @@ and the object, and the controller executes only the motions that were accepted.
 from __future__ import annotations
 
 import json
-import unittest
 
 import rospy
 import rostest
 from actionlib_msgs.msg import GoalStatus
-from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose
 from visualization_msgs.msg import Marker, MarkerArray
 
-from driver_check import HOME, DriverTestBase, Recorder
+from driver_check import DriverTestBase, Recorder
 from vr_driver.msg import MoveToPoseGoal, SceneObject
 from vr_driver.srv import AddSceneObject, ListSceneObjects, LoadScene, RemoveSceneObject
 

@@ -7,7 +7,6 @@ reason) where pinocchio / coal are missing, except the tests of what the driver 
 from __future__ import annotations
 
 import logging
-import math
 import os
 
 import pytest
@@ -19,7 +18,7 @@ from vr_driver.driver.joint_command import JointCommandRefused
 from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.errors import CollisionError, MissingDependency, SceneError
 from vr_driver.kinematics.deps import missing_dependencies
-from vr_driver.kinematics.scene import SceneObject, load_scene
+from vr_driver.kinematics.scene import SceneObject
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.poses import MoveType
 
