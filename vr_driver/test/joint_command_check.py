@@ -82,9 +82,11 @@ class Diagnostics:
 
     def _cb(self, msg):
         for status in msg.status:
-            if status.name.endswith("joint_command"):
+            values = {kv.key: kv.value for kv in status.values}
+            # (diagnostic_updater first sends every task as "Node starting up", without values)
+            if status.name.endswith("joint_command") and "refused" in values:
                 with self.cond:
-                    self.values = {kv.key: kv.value for kv in status.values}
+                    self.values = values
                     self.cond.notify_all()
 
     def wait(self, predicate, timeout):
