@@ -203,3 +203,50 @@ def test_collision_check_off_plans_with_the_box_only_and_says_so(kin):
     w = world(kin, scene="", collision_check=False)
     out = DriverPlanning(w.core, kinematics=kin).plan(PlanGoal(named="zero"))
     assert out.ok and out.text.endswith("collisions NOT checked (collision_check: false)"), out.text
+
+
+def test_a_cartesian_protocol_plans_away_from_the_wrist_singularity(kin):
+    """v3: the planner's own validity (away from the start and the goal) keeps |joint_5| >= the
+    margin, where the controller's nearest-solution IK could pick another wrist; v2 (joint targets)
+    does not need it."""
+    bent = (0.3, 0.3, -0.3, 0.0, P.WRIST_MARGIN / 2, 0.0)
+    for protocol, expected in (("v3", False), ("v2", True)):
+        w = world(kin, protocol=protocol)
+        planning = DriverPlanning(w.core, kinematics=kin)
+        valid = planning._planning_validity(planning.snapshot())
+        assert valid(bent) is expected, protocol
+        assert valid(bent[:4] + (2 * P.WRIST_MARGIN, 0.0))
+
+
+def test_a_plan_the_driver_would_refuse_is_planned_again(kin, monkeypatch):
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    answers = ["point 3 of 9: the controller would reach its pose in another configuration", ""]
+    seen = []
+
+    def refusal(plan):
+        seen.append(plan)
+        return answers.pop(0) if answers else ""
+    monkeypatch.setattr(planning, "driver_refusal", refusal)
+    out = planning.plan(PlanGoal(pose=BEHIND), seed=3)
+    assert out.ok, out.text
+    assert len(seen) == 2 and out.trajectory is seen[1]
+    # refused every time: no plan, the last refusal in words
+    monkeypatch.setattr(planning, "driver_refusal", lambda plan: "segment 2 of 5: refused")
+    out = planning.plan(PlanGoal(pose=BEHIND), seed=3)
+    assert out.code == P.INVALID_MOTION_PLAN and out.trajectory is None
+    assert out.text == "the driver would refuse each of %d plans, the last: segment 2 of 5: refused" % P.ATTEMPTS
+
+
+def test_the_driver_refusal_is_the_stream_check(kin):
+    """A plan the v3 stream check accepts is "" (the plans above run); a jump of the wrist between
+    two points of a short plan is refused in the driver's words."""
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    out = planning.plan(PlanGoal(named="zero"))
+    assert out.ok and planning.driver_refusal(out.trajectory) == ""
+    start = w.status().joints
+    flipped = (start[0], start[1], start[2], start[3] + 3.14159, -start[4], start[5] + 3.14159)
+    fake = out.trajectory.__class__(out.trajectory.joint_names, (0.0, 2.0, 4.0), (start, flipped, start),
+                                    ((0.0,) * 6,) * 3, ((0.0,) * 6,) * 3, (start, start), "RRTConnect")
+    assert "configuration" in planning.driver_refusal(fake)

@@ -16,6 +16,15 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   as a margin on the box too, so the trajectory it returns is one the driver's own checks accept.
 - **Off the bus thread**: planning runs in the caller's thread, holding the driver's planning gate
   (one planner at a time, as previews do), on a Kinematics of its own (the driver's model).
+- **What the driver will accept**: with a Cartesian protocol (v1, v3) the controller solves each
+  target's pose itself, taking the solution nearest the previous target: near the wrist singularity
+  (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another
+  configuration than planned"). So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` away from the
+  start and the goal (as it keeps its clearance), and a plan is checked by the driver's own stream
+  checks (its points, their configurations and segments) before it is returned; one they refuse,
+  no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
+  all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
+  what will run. The planning time is then at most ATTEMPTS x the budget.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
 """
@@ -28,7 +37,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 
 from ..errors import MissingDependency, VrDriverError
 from ..kinematics import deps
-from ..kinematics.planner import PLANNERS, PlannedTrajectory, Planner, PlanningError
+from ..kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError
 from ..poses import ControllerPose, Workspace
 
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
@@ -49,6 +58,14 @@ INVALID_ROBOT_STATE = -17
 NO_IK_SOLUTION = -31
 
 _FEATURE = "the plan action (vr_driver.driver.planning)"
+#: [rad] a Cartesian protocol's plan keeps |joint_5| at least this far from the wrist singularity
+#: (except near its start and goal: the planner's escape zone)
+WRIST_MARGIN = 0.0524          # 3 deg
+#: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
+#: stream the driver refuses is planned again (a sampling planner's next path differs)
+ATTEMPTS = 3
+#: the chain index of the wrist bend (joint_5)
+_WRIST = 4
 
 
 @dataclass(frozen=True)
@@ -286,24 +303,62 @@ class DriverPlanning:
                                    % (status.why_no_motion() or "no feedback from the controller"),
                                    planner_id=planner_id)
             start = status.joints
-        try:
-            with self.core.planning_gate:     # the checker is replaced as a whole under it: copy it here
-                validity = self.snapshot()
-                planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget, seed=seed,
-                                  velocity_scaling=scaling, acceleration_scaling=scaling)
-                plan = planner.plan(tuple(start), target)
-        except PlanningError as exc:
-            return PlanOutcome(code_of(exc), "%s: %s" % (_STEP_WORDS.get(exc.step, "refused"), exc),
-                               planning_time=self.clock() - t0, planner_id=planner_id, contacts=exc.contacts)
-        except (VrDriverError, ValueError, TypeError) as exc:
-            return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planning_time=self.clock() - t0,
-                               planner_id=planner_id)
+        refusal = ""
+        for attempt in range(ATTEMPTS):
+            try:
+                with self.core.planning_gate:     # the checker is replaced as a whole under it: copy it here
+                    validity = self.snapshot()
+                    planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
+                                      seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
+                                      acceleration_scaling=scaling, planning_validity=self._planning_validity(validity))
+                    plan = planner.plan(tuple(start), target)
+            except PlanningError as exc:
+                if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
+                    continue
+                return PlanOutcome(code_of(exc), "%s: %s" % (_STEP_WORDS.get(exc.step, "refused"), exc),
+                                   planning_time=self.clock() - t0, planner_id=planner_id, contacts=exc.contacts)
+            except (VrDriverError, ValueError, TypeError) as exc:
+                return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planning_time=self.clock() - t0,
+                                   planner_id=planner_id)
+            refusal = self.driver_refusal(plan)
+            if not refusal:
+                break
+        else:
+            return PlanOutcome(INVALID_MOTION_PLAN, "the driver would refuse each of %d plans, the last: %s"
+                               % (ATTEMPTS, refusal), planning_time=self.clock() - t0, planner_id=planner_id)
         elapsed = self.clock() - t0
         end = self.kin.fk_pose(plan.goal)
         text = ("planned with %s in %.0f ms: %d points over %.2f s (velocity scaling %g)%s"
                 % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling,
                    "" if self.collision_checked else "; collisions NOT checked (collision_check: false)"))
         return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end)
+
+
+    def _planning_validity(self, validity: CellValidity):
+        """What the planner plans with (away from the start and the goal): ``validity`` padded by the
+        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN."""
+        strict = validity.copy()
+        strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
+        if getattr(self.core.protocol, "joint_targets", True):
+            return lambda q: not strict.in_collision(q)
+        return lambda q: abs(q[_WRIST]) >= WRIST_MARGIN and not strict.in_collision(q)
+
+    def driver_refusal(self, plan: PlannedTrajectory) -> str:
+        """Why the driver would refuse to stream ``plan`` (its stream's points: their configurations
+        with a Cartesian protocol, and their segments), "" when it would not (or does not stream: v1
+        runs a trajectory as PTP moves, each previewed when it is sent). Call it without the planning
+        gate: the checks take it."""
+        if not getattr(self.core, "streaming", False) or len(plan.positions) < 2:
+            return ""
+        from .streaming import MAX_STREAM_TOLERANCE
+        tol = math.radians(self.params.stream_path_tolerance)
+        try:
+            points = self.core._stream(plan.times, plan.positions, tol, max(tol, MAX_STREAM_TOLERANCE))
+            if points:
+                self.core.check_segments(plan.positions[0], points)
+        except VrDriverError as exc:
+            return str(exc)
+        return ""
 
 
 _STEP_WORDS = {"start": "cannot plan from here", "goal": "goal refused", "plan": "no path found",

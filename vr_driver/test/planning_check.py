@@ -1,0 +1,234 @@
+#!/usr/bin/python3
+"""rostest of collision-aware planning (test/planning.test): the driver with the example cell (table,
+pillar, shelf) and protocol v3 against the virtual controller. A pose behind the pillar: the straight
+PTP through move_to_pose is refused naming the link and the pillar, nothing sent; the plan action
+plans and previews it (nothing sent; ~plan_markers shows it), the planned trajectory sent to
+joint_trajectory_action as MoveIt would runs SUCCESSFUL with every joint_states sample free of the
+cell (a CollisionChecker of the same URDF and scene, no padding); a box added on the next plan's path
+through ~scene/add makes the plan after it go around the box, and that one runs through the plan
+action's own execution. Waits are on messages with deadlines."""
+from __future__ import annotations
+
+import math
+import os
+import re
+import threading
+import time
+
+import actionlib
+import rospkg
+import rospy
+import rostest
+from actionlib_msgs.msg import GoalStatus
+from geometry_msgs.msg import Pose
+from visualization_msgs.msg import MarkerArray
+
+from driver_check import DriverTestBase, Recorder, cp
+from vr_driver.kinematics.collision import CollisionChecker
+from vr_driver.kinematics.scene import SceneObject, load_scene
+from vr_driver.msg import (FollowJointTrajectoryGoal, FollowJointTrajectoryResult, MoveToPoseGoal, PlanAction,
+                           PlanFeedback, PlanGoal, PlanResult, SceneObject as SceneObjectMsg)
+from vr_driver.poses import ControllerPose
+from vr_driver.srv import AddSceneObject, RemoveSceneObject
+
+#: behind the pillar (45 deg left, 0.88 m out), at home's height and tool tilt: the straight PTP from
+#: home sweeps link_4 through the pillar (160 mm deep); a plan lifts the forearm over it
+BEHIND = (500, 866, 725, 0, 45, 60)
+#: the box put on the path of the plan back home [m]
+BOX = 0.15
+
+
+class PlanningTest(DriverTestBase):
+    @classmethod
+    def setUpClass(cls):
+        super().setUpClass()
+        cls.plan_client = actionlib.ActionClient("/plan", PlanAction)
+        assert cls.plan_client.wait_for_server(rospy.Duration(20.0)), "the plan action is not served"
+        cls.plan_markers = Recorder("/interface/plan_markers", MarkerArray)
+        rospy.wait_for_service("/interface/scene/add", 20.0)
+        cls.scene_add = rospy.ServiceProxy("/interface/scene/add", AddSceneObject)
+        cls.scene_remove = rospy.ServiceProxy("/interface/scene/remove", RemoveSceneObject)
+        # the test's own judge: the same URDF (robot_description) and cell, the true shapes (no padding)
+        srdf = os.path.join(rospkg.RosPack().get_path("panasonic_vr006l_moveit_config"), "config",
+                            "panasonic_vr006l.srdf")
+        with open(srdf) as f:
+            srdf_xml = f.read()
+        cls.cell = load_scene(rospy.get_param("/interface/scene"))
+        cls.checker = CollisionChecker.from_urdf(rospy.get_param("/robot_description"), srdf_xml, padding=0.0,
+                                                 scene=cls.cell)
+
+    # -------------------------------------------------------------------- helpers
+    def plan(self, goal, timeout=60.0):
+        """(state, result, feedback phases seen) of one plan goal."""
+        done = threading.Event()
+        phases = []
+
+        def transition(handle):
+            if handle.get_comm_state() == actionlib.CommState.DONE:
+                done.set()
+
+        def feedback(_handle, fb):
+            if not phases or phases[-1] != fb.phase:
+                phases.append(fb.phase)
+        handle = self.plan_client.send_goal(goal, transition_cb=transition, feedback_cb=feedback)
+        self.assertTrue(done.wait(timeout), "no result from the plan action")
+        return handle.get_goal_status(), handle.get_result(), phases
+
+    def pose_goal(self, pose, preview_only):
+        return PlanGoal(goal_type=PlanGoal.POSE, pose=cp(pose), preview_only=preview_only,
+                        allowed_planning_time=5.0)
+
+    def named_goal(self, name, preview_only):
+        return PlanGoal(goal_type=PlanGoal.NAMED, named_state=name, preview_only=preview_only,
+                        allowed_planning_time=5.0)
+
+    @staticmethod
+    def points(result):
+        return [tuple(p.positions) for p in result.trajectory.points]
+
+    def colliding(self, checker, samples):
+        return [k for k, q in enumerate(samples) if checker.in_collision(q)]
+
+    def samples_since(self, start):
+        with self.joints.cond:
+            return [tuple(m.position) for m in self.joints.messages[start:]]
+
+    def assert_free_run(self, checker, start, duration):
+        """Every joint_states sample from message ``start`` on is free of ``checker``'s scene; enough of
+        them were seen to cover the motion."""
+        seen = self.samples_since(start)
+        self.assertGreaterEqual(len(seen), max(5, int(0.5 * duration * 20.0)), "too few joint_states samples")
+        bad = [(k, [str(c) for c in checker.contacts(q)]) for k, q in enumerate(seen) if checker.in_collision(q)]
+        self.assertEqual(bad, [], "joint_states samples in collision")
+        return min(checker.min_distance(q) for q in seen)
+
+    # -------------------------------------------------------------------- tests (in name order)
+    def test_01_the_straight_ptp_behind_the_pillar_is_refused_naming_link_and_object(self):
+        self.at_home()
+        before = len(self.entries())
+        state, result = self.move(MoveToPoseGoal.PTP, BEHIND)
+        self.assertEqual(state, GoalStatus.ABORTED, result.reason)
+        self.assertIn("pillar", result.reason)
+        self.assertRegex(result.reason, r"link_[1-6]")
+        self.status.wait_for(lambda m: False, 0.5)
+        self.assertEqual(len(self.entries()), before, "the refused PTP reached the controller")
+
+    def test_02_planned_previewed_and_executed_successful_through_joint_trajectory_action(self):
+        q0 = tuple(self.at_home())
+        before = len(self.entries())
+        t0 = time.monotonic()
+        state, result, phases = self.plan(self.pose_goal(BEHIND, preview_only=True))
+        self.assertEqual(state, GoalStatus.SUCCEEDED, result.error_string)
+        self.assertEqual(result.error_code, PlanResult.SUCCESS, result.error_string)
+        self.assertTrue(result.error_string.startswith("preview only (nothing sent): planned with RRTConnect"),
+                        result.error_string)
+        self.assertEqual(phases[:2], [PlanFeedback.PHASE_PLANNING, PlanFeedback.PHASE_PREVIEWING])
+        points = self.points(result)
+        self.assertGreater(len(points), 10)
+        self.assertEqual(list(result.trajectory.joint_names), ["joint_%d" % i for i in range(1, 7)])
+        self.assertAlmostEqual(result.duration, result.trajectory.points[-1].time_from_start.to_sec(), places=6)
+        self.assertGreater(result.planning_time, 0.0)
+        self.assertLess(max(abs(a - b) for a, b in zip(points[0], q0)), 0.01)
+        end = self.kin.fk_pose(points[-1])
+        dp, da = end.distance_to(ControllerPose(*BEHIND))
+        self.assertLess(dp, 0.1)
+        self.assertLess(da, 0.01)
+        # every planned sample free of the cell; the straight joint move there is not
+        self.assertEqual(self.colliding(self.checker, points), [])
+        straight = [tuple(a + (b - a) * k / 50 for a, b in zip(q0, points[-1])) for k in range(51)]
+        self.assertNotEqual(self.colliding(self.checker, straight), [])
+        # previewed: the TCP path and the sweep on ~plan_markers, nothing sent
+        shown = self.plan_markers.wait_for(lambda m: any(k.ns == "plan_tcp_path" for k in m.markers), 5.0,
+                                           after=t0)
+        self.assertIsNotNone(shown, "no plan on ~plan_markers")
+        path = [k for k in shown.markers if k.ns == "plan_tcp_path"][0]
+        self.assertEqual(len(path.points), len(points))
+        self.assertAlmostEqual(path.points[-1].x, end.x / 1000.0, places=4)
+        self.assertGreaterEqual(len([k for k in shown.markers if k.ns == "plan_sweep"]), 3)
+        self.status.wait_for(lambda m: False, 0.3)
+        self.assertEqual(len(self.entries()), before, "a preview reached the controller")
+        # executed as MoveIt would: the trajectory to joint_trajectory_action
+        start = len(self.joints.messages)
+        state, fjt = self.follow(FollowJointTrajectoryGoal(trajectory=result.trajectory), 60.0)
+        self.assertEqual(state, GoalStatus.SUCCEEDED, fjt.error_string)
+        self.assertEqual(fjt.error_code, FollowJointTrajectoryResult.SUCCESSFUL, fjt.error_string)
+        self.assertGreater(len(self.entries()), before)
+        final = self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position
+        self.assertLess(max(abs(a - b) for a, b in zip(final, points[-1])), math.radians(0.5))
+        closest = self.assert_free_run(self.checker, start, result.duration)
+        rospy.loginfo("planning_check: the executed plan came within %.1f mm of the cell", closest * 1e3)
+
+    def test_03_a_box_on_the_path_makes_the_next_plan_go_around_it(self):
+        here = tuple(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
+        self.assertEqual(self.colliding(self.checker, [here]), [])
+        state, first, _ = self.plan(self.named_goal("home", preview_only=True))
+        self.assertEqual(first.error_code, PlanResult.SUCCESS, first.error_string)
+        old = self.points(first)
+        # a box on that path: at the TCP of a sample near its middle, clear of its start and its end
+        n = len(old)
+        box = None
+        for k in sorted(range(n // 4, 3 * n // 4 + 1), key=lambda i: abs(i - n // 2)):
+            x, y, z = (float(v) for v in self.kin.fk(old[k])[:3, 3])
+            candidate = SceneObject("crate", "box", (BOX, BOX, BOX), (x, y, z))
+            judge = self.checker.copy()
+            scene = self.cell.copy()
+            scene.add(candidate)
+            judge.set_scene(scene)
+            judge.set_padding(0.05)
+            if not judge.in_collision(old[0]) and not judge.in_collision(old[-1]):
+                box = candidate
+                break
+        self.assertIsNotNone(box, "no place for the box on the path")
+        msg = SceneObjectMsg(name=box.name, shape=SceneObjectMsg.BOX, dimensions=list(box.size),
+                             pose=Pose())
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = box.position
+        msg.pose.orientation.w = 1.0
+        response = self.scene_add(object=msg, replace=False)
+        self.assertTrue(response.success, response.message)
+        try:
+            with_box = self.checker.copy()
+            scene = self.cell.copy()
+            scene.add(box)
+            with_box.set_scene(scene)
+            self.assertNotEqual(self.colliding(with_box, old), [], "the old plan should pass through the box")
+            # the next plan goes around it
+            state, second, _ = self.plan(self.named_goal("home", preview_only=True))
+            self.assertEqual(second.error_code, PlanResult.SUCCESS, second.error_string)
+            new = self.points(second)
+            self.assertEqual(self.colliding(with_box, new), [])
+            self.assertLess(max(abs(a - b) for a, b in zip(new[0], here)), 0.01)
+            self.assertNotEqual(new, old)
+            # and one runs through the plan action's own execution (joint_trajectory_action inside)
+            before = len(self.entries())
+            start = len(self.joints.messages)
+            state, ran, phases = self.plan(self.named_goal("home", preview_only=False))
+            self.assertEqual(state, GoalStatus.SUCCEEDED, ran.error_string)
+            self.assertEqual(ran.error_code, PlanResult.SUCCESS, ran.error_string)
+            self.assertEqual(ran.execution_error_code, FollowJointTrajectoryResult.SUCCESSFUL)
+            self.assertIn("; executed: ", ran.error_string)
+            self.assertEqual(phases, [PlanFeedback.PHASE_PLANNING, PlanFeedback.PHASE_PREVIEWING,
+                                      PlanFeedback.PHASE_EXECUTING])
+            self.assertGreater(len(self.entries()), before)
+            self.assertEqual(self.colliding(with_box, self.points(ran)), [])
+            closest = self.assert_free_run(with_box, start, ran.duration)
+            rospy.loginfo("planning_check: around the box, within %.1f mm of the cell", closest * 1e3)
+            final = self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position
+            home = self.kin.named_states["home"]
+            self.assertLess(max(abs(a - b) for a, b in zip(final, home)), math.radians(0.5))
+        finally:
+            response = self.scene_remove(name=box.name)
+            self.assertTrue(response.success, response.message)
+
+    def test_04_a_goal_in_collision_is_refused_naming_link_and_object(self):
+        before = len(self.entries())
+        state, result, _ = self.plan(self.pose_goal((1100, 0, 200, 0, 90, 0), preview_only=False))
+        self.assertEqual(state, GoalStatus.ABORTED)
+        self.assertEqual(result.error_code, PlanResult.GOAL_IN_COLLISION, result.error_string)
+        self.assertTrue(re.search(r"link_[1-6] with object table", result.error_string), result.error_string)
+        self.assertEqual(len(result.trajectory.points), 0)
+        self.status.wait_for(lambda m: False, 0.3)
+        self.assertEqual(len(self.entries()), before)
+
+
+if __name__ == "__main__":
+    rostest.rosrun("vr_driver", "planning", PlanningTest)
