@@ -269,3 +269,31 @@ def test_without_the_libraries_a_scene_stops_the_driver_and_no_scene_warns(kin, 
     with pytest.raises(MissingDependency):
         core.add_scene_object(SceneObject("box", "box", (0.1, 0.1, 0.1)))
     assert len(core.scene()) == 0
+
+
+@needs_libs
+def test_an_arm_that_stands_in_an_object_may_only_move_out_of_it(kin):
+    """joint_command steps from inside a box that was added beside the wrist: a step towards it is
+    refused (deeper), a step away is accepted although the arm is still inside the padding after it
+    (farther out than it started), the next step away ends free."""
+    w = world(kin, scene="", protocol="v2")
+    names = w.core.joint_names
+    start = w.status().joints
+    tcp = kin.fk(start)[:3, 3]
+    # the wrist's left side 20 mm into a box that stands beside it (y from 15 mm to 415 mm)
+    warning = w.core.add_scene_object(SceneObject("box", "box", (0.3, 0.4, 0.3),
+                                                  position=(tcp[0], 0.215, tcp[2])))
+    assert "with box (penetration" in warning
+    with pytest.raises(JointCommandRefused) as err:
+        w.core.joint_command(names, joints(j1=start[0] + 0.02), 0.2)      # towards it: deeper
+    assert err.value.kind == "collision" and "it starts in collision" in str(err.value)
+    w.core.joint_command(names, joints(j1=start[0] - 0.02), 0.2)          # away: out by ~22 mm
+    w.run_until(lambda: abs(w.status().joints[0] - (start[0] - 0.02)) < 1e-4, 2.0, "first step done")
+    assert w.core.collision.in_collision(w.status().joints)                # still inside the padding
+    w.core.joint_command(names, joints(j1=start[0] - 0.06), 0.2)
+    w.run_until(lambda: abs(w.status().joints[0] - (start[0] - 0.06)) < 1e-4, 2.0, "second step done")
+    assert not w.core.collision.in_collision(w.status().joints)
+    # out: from here on the box is an obstacle like any other
+    with pytest.raises(JointCommandRefused, match="collides .*with box") as err:
+        w.core.joint_command(names, joints(j1=start[0] + 0.1), 0.2)
+    assert "starts in collision" not in str(err.value)

@@ -21,10 +21,11 @@ Scene changes (add, replace, remove, clear, load) are checked whole first (Scene
 changes), then the new checker is built beside the old one and swapped in under the core's
 planning gate, so that a check runs either wholly before or wholly after a change. An object may
 be added where the arm stands now: it is added, with a warning naming it. A path that starts in
-collision is then accepted only if it leaves the collision -- until its first free configuration it
-touches nothing but what the start touches (the same link / link-or-object pairs), from there on
-everything is free, and it ends free -- so the arm can be moved out, never deeper into something
-else. Refusing the object instead would hide a real obstacle from every later check.
+collision is then accepted only if it moves out of it -- until its first free configuration it
+touches nothing but what the start touches (the same link / link-or-object pairs) and never goes
+deeper, from there on everything is free, and a path that never gets free (a short jog step) ends
+farther out than it started -- so the arm can be moved out, never deeper or into something else.
+Refusing the object instead would hide a real obstacle from every later check.
 
 Without the optional libraries (pinocchio, coal; kinematics.deps) and with an empty scene the
 driver runs with a warning that nothing is checked (``collision`` is None); with a scene it refuses
@@ -167,8 +168,8 @@ class SceneGuard:
             except Exception:  # the warning is an aid; a joint vector the checker cannot take is ignored
                 hits = []
             if hits:
-                warning = ("the arm's current configuration collides: %s -- only a motion that leaves the "
-                           "collision (and ends free) is accepted"
+                warning = ("the arm's current configuration collides: %s -- only a motion that moves out "
+                           "of it is accepted (touching nothing else, never deeper)"
                            % "; ".join(describe_contact(c, new.padding) for c in hits))
                 log.warning("scene: %s", warning)
         for callback in listeners:
@@ -234,20 +235,33 @@ class SceneGuard:
                         ) -> Optional[Tuple[int, float, Tuple[float, ...]]]:
         """(k, f, q): the first configuration in collision (:meth:`configurations`); None when the
         path is free. A path that starts in collision (an object added where the arm stands) may
-        leave it: until its first free configuration it may touch only what the start touches (the
-        same link / link-or-object pairs); from there on everything must be free, and it must end
-        free."""
+        move out of it: until its first free configuration it may touch only what the start
+        touches (the same link / link-or-object pairs) and never deeper than it was at the previous
+        check (the smallest signed distance over the checked pairs); from there on everything
+        must be free. One that never gets free (a short jog step) must end farther out than it
+        started."""
         escaping: Optional[set] = None
+        depth = start_depth = 0.0
         last = None
         for k, f, q in self.configurations(samples):
             last = (k, f, q)
             if not checker.in_collision(q):
                 escaping = None
-            elif f == 0.0:
-                escaping = {(c.link_a, c.other) for c in checker.contacts(q)}
-            elif escaping is None or not {(c.link_a, c.other) for c in checker.contacts(q)} <= escaping:
+                continue
+            pairs = {(c.link_a, c.other) for c in checker.contacts(q)}
+            if f == 0.0:                                   # the start
+                escaping, depth = pairs, checker.min_distance(q)
+                start_depth = depth
+                continue
+            if escaping is None or not pairs <= escaping:
                 return k, f, q
-        return last if escaping is not None else None      # never got out
+            d = checker.min_distance(q)
+            if d < depth - 1e-6:                           # deeper in again
+                return k, f, q
+            depth = d
+        if escaping is not None and not depth > start_depth + 1e-6:
+            return last                                    # never got out, and no farther out
+        return None
 
     def _deepest(self, checker: Any, samples: Sequence[Sequence[float]], first: Tuple[int, float]
                  ) -> Tuple[int, float, Tuple[float, ...], float]:
@@ -300,9 +314,13 @@ class SceneGuard:
             dk, df, dq, depth = self._deepest(checker, samples, (k, f))
             deep = checker.contacts(dq) if (dk, df) != (k, f) and depth < min(
                 (c.distance for c in contacts), default=0.0) - 1e-4 else []
+            starts_in = checker.in_collision(samples[0])
         where, index, t = self._where(k, f, n, times)
         why = "; ".join(describe_contact(c, checker.padding) for c in contacts) or "in collision"
         message = "%s collides %s: %s" % (what, where, why)
+        if starts_in:
+            message += (" (it starts in collision: a path may only move out of that, touching nothing else and "
+                        "never going deeper, and end free or farther out than it started)")
         if deep:
             message += "; deepest %s: %s" % (self._where(dk, df, n, times)[0],
                                              "; ".join(describe_contact(c, checker.padding) for c in deep))
