@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 import os
 import re
+import subprocess
 import threading
 import time
 
@@ -228,6 +229,21 @@ class PlanningTest(DriverTestBase):
         self.assertEqual(len(result.trajectory.points), 0)
         self.status.wait_for(lambda m: False, 0.3)
         self.assertEqual(len(self.entries()), before)
+
+    def test_05_the_pose_terminal_plans_around_the_pillar_and_back(self):
+        """`pose_terminal --pose ... --type plan --yes` and `--plan home --yes`: the terminal's plan
+        through the plan action and joint_trajectory_action, exit 0, the arm where it was sent."""
+        self.at_home()
+        for argv, where in ((["--pose"] + [str(v) for v in BEHIND] + ["--type", "plan", "--yes"], BEHIND),
+                            (["--plan", "home", "--yes"], (1120, 0, 725, 0, 45, 0))):
+            start = len(self.joints.messages)
+            done = subprocess.run(["rosrun", "vr_driver", "pose_terminal"] + argv, stdout=subprocess.PIPE,
+                                  stderr=subprocess.STDOUT, universal_newlines=True, timeout=60)
+            self.assertEqual(done.returncode, 0, done.stdout)
+            self.assertRegex(done.stdout, r"Plan: collision-free; duration [0-9.]+ s \([0-9]+ points\), planned in "
+                                          r"[0-9]+ ms by RRTConnect")
+            self.assertIn("Reached X %g  Y %g  Z %g" % where[:3], done.stdout)
+            self.assert_free_run(self.checker, start, 1.0)
 
 
 if __name__ == "__main__":

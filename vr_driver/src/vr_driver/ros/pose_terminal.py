@@ -1,7 +1,8 @@
 """ROS node `pose_terminal`: the thin ROS edge of :mod:`vr_driver.terminal.pose_input`.
 
 Talks to the driver node through its public API only: the ``move_to_pose`` action (preview with
-preview_only, then the move; cancel = stop), the ``stop_motion`` service, ``robot_status``,
+preview_only, then the move; cancel = stop), the ``plan`` action (preview_only: the terminal's
+``plan``) and ``joint_trajectory_action`` (runs the previewed plan), the ``stop_motion`` service, ``robot_status``,
 ``tool_pose``, ``joint_states`` and ``/diagnostics`` (for the driver's "why no motion" in words).
 The workspace is the driver's parameter ``/<driver>/workspace`` (defaults when it is not set).
 
@@ -19,8 +20,8 @@ from typing import List, Optional, Tuple
 
 from ..errors import VrDriverError
 from ..terminal.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_USAGE, Backend, InputError, MoveHandle,
-                         MoveProgress, MoveResult, PoseRequest, PreviewResult, RangeError, StatusInfo, Terminal,
-                         build_arg_parser, fmt_pose, in_namespace, request_from_args)
+                         MoveProgress, MoveResult, PlanPreview, PlanRequest, PoseRequest, PreviewResult, RangeError,
+                         StatusInfo, Terminal, build_arg_parser, fmt_pose, in_namespace, request_from_args)
 from ..kinematics.preview import MoveType
 from ..poses import ControllerPose, Workspace
 
@@ -113,6 +114,86 @@ class RosMoveHandle(MoveHandle):
         return MoveResult("failed", reason or "the driver ended the goal (action state %d)" % state, reached)
 
 
+class RosTrajectoryHandle(MoveHandle):
+    """A previewed plan running through joint_trajectory_action: progress is the TCP's distance to the
+    plan's end (``pose_now()``: the last tool_pose), the result the trajectory action's."""
+
+    def __init__(self, client, goal, target: Optional[ControllerPose], pose_now, pose_after=None):
+        from actionlib import CommState
+        self.pose_after = pose_after          # (time, timeout) -> the first tool_pose received after time
+        self._done_at: Optional[float] = None
+        self._DONE = CommState.DONE
+        self._lock = threading.Lock()
+        self._done = threading.Event()
+        self._moving = False
+        self._state: Optional[int] = None
+        self._result = None
+        self.target = target
+        self.pose_now = pose_now
+        self.gh = client.send_goal(goal, transition_cb=self._on_transition, feedback_cb=self._on_feedback)
+
+    def _on_transition(self, gh) -> None:
+        if gh.get_comm_state() == self._DONE:
+            with self._lock:
+                self._state, self._result = gh.get_goal_status(), gh.get_result()
+                self._done_at = time.monotonic()
+            self._done.set()
+
+    def _on_feedback(self, _gh, _fb) -> None:
+        with self._lock:
+            self._moving = True
+
+    def wait(self, timeout: float) -> bool:
+        return self._done.wait(timeout)
+
+    def progress(self) -> Optional[MoveProgress]:
+        pose = self.pose_now()
+        with self._lock:
+            phase = "moving" if self._moving else "sending"
+        if pose is None or self.target is None:
+            return MoveProgress(phase)
+        dp, da = pose.distance_to(self.target)
+        return MoveProgress(phase, dp, da, pose)
+
+    def cancel(self) -> None:
+        self.gh.cancel()
+
+    def result(self) -> MoveResult:
+        from actionlib_msgs.msg import GoalStatus
+        with self._lock:
+            state, result, done_at = self._state, self._result, self._done_at
+        # where the arm is: the first tool_pose after the result (the last one may predate the end)
+        reached = self.pose_after(done_at, 1.0) if self.pose_after is not None and done_at is not None else None
+        reached = reached or self.pose_now()
+        if state is None:
+            return MoveResult("failed", "no result from the driver", reached)
+        words = result.error_string if result is not None else ""
+        if state == GoalStatus.SUCCEEDED and result is not None and result.error_code == 0:
+            return MoveResult("succeeded", words, reached)
+        if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED):
+            return MoveResult("cancelled", words or "cancelled", reached)
+        return MoveResult("failed", words or "the driver ended the goal (action state %d)" % state, reached)
+
+
+class _Failed(MoveHandle):
+    """A move that could not be started (its reason as the result)."""
+
+    def __init__(self, reason: str) -> None:
+        self.reason = reason
+
+    def wait(self, timeout: float) -> bool:
+        return True
+
+    def progress(self) -> Optional[MoveProgress]:
+        return None
+
+    def cancel(self) -> None:
+        pass
+
+    def result(self) -> MoveResult:
+        return MoveResult("failed", self.reason)
+
+
 class RosBackend(Backend):
     """The driver through ROS. :meth:`connect` first."""
 
@@ -125,6 +206,7 @@ class RosBackend(Backend):
         self._status = None
         self._status_time: Optional[float] = None
         self._tool_pose: Optional[ControllerPose] = None
+        self._tool_pose_time: Optional[float] = None
         self._joints: Optional[Tuple[float, ...]] = None
         self._diag = {}
         self.client = None
@@ -171,6 +253,10 @@ class RosBackend(Backend):
         rospy.Subscriber(name("joint_states"), JointState, self._on_joints, queue_size=1)
         rospy.Subscriber("/diagnostics", DiagnosticArray, self._on_diag, queue_size=10)
         self.client = actionlib.ActionClient(name("move_to_pose"), MoveToPoseAction)
+        from vr_driver.msg import FollowJointTrajectoryAction, PlanAction
+        self.plan_client = actionlib.ActionClient(name("plan"), PlanAction)
+        self.plan_name = name("plan")
+        self.trajectory_client = actionlib.ActionClient(name("joint_trajectory_action"), FollowJointTrajectoryAction)
         self.stop_proxy = rospy.ServiceProxy(name("stop_motion"), StopMotion)   # industrial_msgs/StopMotion
         announced = False
         while not self.client.wait_for_server(rospy.Duration(0.5)):
@@ -236,7 +322,7 @@ class RosBackend(Backend):
         except VrDriverError:
             return
         with self._changed:
-            self._tool_pose = pose
+            self._tool_pose, self._tool_pose_time = pose, time.monotonic()
             self._updates += 1
             self._changed.notify_all()
 
@@ -331,6 +417,55 @@ class RosBackend(Backend):
     def start_move(self, request: PoseRequest) -> MoveHandle:
         return RosMoveHandle(self.client, self._goal(request, preview_only=False))
 
+    def plan(self, request: PlanRequest) -> PlanPreview:
+        """The plan action with preview_only (the driver shows it on ~plan_markers)."""
+        import rospy
+        from actionlib_msgs.msg import GoalStatus
+        from vr_driver.msg import CartesianPose, PlanGoal
+        if not self.plan_client.wait_for_server(rospy.Duration(2.0)):
+            return PlanPreview(False, "the driver does not plan: the action %s is not served (it needs OMPL, "
+                               "TOPP-RA, pinocchio and coal: the driver's log says which is missing)" % self.plan_name)
+        goal = PlanGoal(preview_only=True)
+        if request.target is not None:
+            goal.goal_type, goal.pose = PlanGoal.POSE, CartesianPose(*request.target.as_tuple())
+        else:
+            goal.goal_type, goal.named_state = PlanGoal.NAMED, request.state
+        handle = RosMoveHandle(self.plan_client, goal)
+        if not handle.wait(PREVIEW_TIMEOUT):
+            handle.cancel()
+            return PlanPreview(False, "no answer from the planner within %.0f s" % PREVIEW_TIMEOUT, unavailable=True)
+        state, result = handle.outcome()
+        if state == GoalStatus.SUCCEEDED and result is not None and result.error_code == result.SUCCESS \
+                and result.trajectory.points:
+            return PlanPreview(True, "", result.duration, result.planning_time,
+                               tuple(result.trajectory.points[-1].positions), _pose_from_msg(result.target),
+                               len(result.trajectory.points), result.planner_id, token=result.trajectory)
+        reason = result.error_string if result is not None and result.error_string else "the planner refused the goal"
+        if reason.startswith("refused: "):
+            reason = reason[len("refused: "):]
+        return PlanPreview(False, reason)
+
+    def start_plan(self, preview: PlanPreview) -> MoveHandle:
+        """Exactly the previewed trajectory, through joint_trajectory_action (the plan action's own
+        execution path)."""
+        import rospy
+        from vr_driver.msg import FollowJointTrajectoryGoal
+        if not self.trajectory_client.wait_for_server(rospy.Duration(2.0)):
+            return _Failed("the driver's joint_trajectory_action is not served: nothing was sent")
+
+        def pose_now() -> Optional[ControllerPose]:
+            with self._lock:
+                return self._tool_pose
+        return RosTrajectoryHandle(self.trajectory_client, FollowJointTrajectoryGoal(trajectory=preview.token),
+                                   preview.target, pose_now, self._pose_after)
+
+    def _pose_after(self, since: float, timeout: float) -> Optional[ControllerPose]:
+        """The first tool_pose received after ``since`` (time.monotonic), waiting up to ``timeout``; None."""
+        with self._changed:
+            self._changed.wait_for(lambda: self._tool_pose_time is not None and self._tool_pose_time > since,
+                                   timeout)
+            return self._tool_pose if self._tool_pose_time is not None and self._tool_pose_time > since else None
+
     def stop(self) -> Tuple[bool, str]:
         import rospy
         try:
@@ -365,10 +500,11 @@ def main(argv: Optional[List[str]] = None) -> int:
             argv = sys.argv[1:]
     parser = build_arg_parser()
     args = parser.parse_args(argv)
-    if args.pose is None and (args.move_type is not None or args.via is not None or args.preview):
+    one_shot = args.pose is not None or args.plan is not None
+    if not one_shot and (args.move_type is not None or args.via is not None or args.preview):
         parser.error("--type, --via and --preview go with --pose")
     # syntax before connecting: a typo is a usage error, whatever the driver's workspace
-    if args.pose is not None:
+    if one_shot:
         try:
             request_from_args(args, Workspace())
         except RangeError:
@@ -389,7 +525,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_NO_DRIVER
     try:
         terminal = Terminal(backend, backend.workspace, out=out, input_fn=_readline_input(), assume_yes=args.yes)
-        if args.pose is not None:
+        if one_shot:
             try:
                 request = request_from_args(args, backend.workspace)
             except RangeError as exc:

@@ -11,6 +11,8 @@ What is typed, at the first prompt of an entry (the X prompt)::
                               1120 0 725 0 45 0 and PTP at first, then the last entry's)
     x y z rx ry rz [type]     a whole pose on one line (type ptp, lin or circ; default ptp)
     ... circ via x y z [rx ry rz]   a circular move through a via point
+    plan x y z rx ry rz       a collision-free motion there, planned around the cell (the driver's
+    plan NAME                 plan action), or to a named state of the SRDF (home, zero)
     home stop status history help quit
 
 At every later prompt of the entry (Y ... Rz, move type, via point, the confirmation) ``cancel`` or
@@ -20,7 +22,9 @@ a move that was sent becomes the next entry's defaults (a refused or abandoned o
 
 Every value is checked before anything goes to the driver: a finite number, inside the driver's
 workspace box (also after rounding to the controller's whole mm / deg), then the driver previews the
-move (reachability, joint limits, the path) and only a confirmed, previewed move is sent.
+move (reachability, joint limits, the path) and only a confirmed, previewed move is sent. A plan is
+previewed by the plan action (preview_only: its duration and planning time shown, the path in RViz)
+and, confirmed, exactly the previewed trajectory runs (through joint_trajectory_action).
 """
 from __future__ import annotations
 
@@ -39,6 +43,7 @@ from ..protocol.v1 import round_half_away
 __all__ = [
     "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
     "FIELDS", "COMMANDS", "InputError", "RangeError", "PoseRequest", "PreviewResult", "MoveProgress", "MoveResult",
+    "PlanRequest", "PlanPreview", "parse_plan_line",
     "StatusInfo", "Backend", "MoveHandle", "Terminal", "ProgressPrinter",
     "fmt_number", "fmt_pose", "fmt_joints_deg", "field_range", "prompt_text", "parse_number",
     "check_value", "parse_move_type", "check_pose", "parse_pose_line", "parse_command",
@@ -260,6 +265,48 @@ def parse_pose_line(text: str, workspace: Workspace) -> PoseRequest:
     return PoseRequest(kind, target, via)
 
 
+_STATE_NAME = re.compile(r"\A[A-Za-z_][A-Za-z0-9_]*\Z")
+_PLAN_SYNTAX = "plan x y z rx ry rz, or plan NAME (a named state of the SRDF, e.g. home)"
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """A collision-free motion to plan: to ``target`` (checked: inside the workspace) or to the named
+    state ``state`` of the SRDF."""
+
+    target: Optional[ControllerPose] = None
+    state: str = ""
+
+    def __post_init__(self) -> None:
+        if (self.target is None) == (not self.state):
+            raise InputError("a plan goes to a pose or to a named state: %s" % _PLAN_SYNTAX)
+
+    def describe(self) -> str:
+        if self.target is not None:
+            return "PLAN to %s" % fmt_pose(self.target)
+        return "PLAN to the named state %s" % self.state
+
+
+def is_plan_line(text: str) -> bool:
+    tokens = _tokens(text)
+    return bool(tokens) and tokens[0].lower() == "plan"
+
+
+def parse_plan_line(text: str, workspace: Workspace) -> PlanRequest:
+    """``plan x y z rx ry rz`` or ``plan NAME`` -> PlanRequest; InputError says what is wrong."""
+    tokens = _tokens(text)
+    if not tokens or tokens[0].lower() != "plan":
+        raise InputError("a plan line starts with 'plan': %s" % _PLAN_SYNTAX)
+    rest = tokens[1:]
+    if len(rest) == 1 and not _NUMBER.match(rest[0]) and not _NOT_FINITE.match(rest[0]):
+        if not _STATE_NAME.match(rest[0]):
+            raise InputError("plan: %r is not a state name (letters, digits, _): %s" % (rest[0], _PLAN_SYNTAX))
+        return PlanRequest(state=rest[0])
+    if len(rest) != 6:
+        raise InputError("%s; got %d value(s) after 'plan'" % (_PLAN_SYNTAX, len(rest)))
+    return PlanRequest(target=check_pose(rest, workspace))
+
+
 def parse_command(text: str) -> Optional[str]:
     """The command named by ``text`` (one of COMMANDS), or None when it is not a command."""
     word = text.strip().lower()
@@ -311,6 +358,22 @@ class StatusInfo:
     age: Optional[float] = None                       # s since the last robot_status
 
 
+@dataclass(frozen=True)
+class PlanPreview:
+    """What the driver planned (Backend.plan): ``token`` is the backend's own copy of the trajectory,
+    the one :meth:`Backend.start_plan` runs."""
+    ok: bool
+    reason: str = ""                                  # why not, when not ok
+    duration: float = 0.0                             # s, the trajectory's
+    planning_time: float = 0.0                        # s
+    joint_target: Tuple[float, ...] = ()              # rad, J1..J6: the trajectory's end
+    target: Optional[ControllerPose] = None           # the TCP at the end
+    points: int = 0
+    planner: str = ""
+    unavailable: bool = False                         # no answer (not a refusal)
+    token: object = None
+
+
 class MoveHandle:
     """A move on its way (returned by Backend.start_move)."""
 
@@ -336,6 +399,14 @@ class Backend:
         raise NotImplementedError
 
     def start_move(self, request: PoseRequest) -> MoveHandle:
+        raise NotImplementedError
+
+    def plan(self, request: PlanRequest) -> PlanPreview:
+        """Plan (and show) a collision-free motion; sends nothing."""
+        return PlanPreview(False, "this driver does not plan")
+
+    def start_plan(self, preview: PlanPreview) -> MoveHandle:
+        """Run exactly the previewed trajectory."""
         raise NotImplementedError
 
     def stop(self) -> Tuple[bool, str]:
@@ -406,8 +477,11 @@ HELP = """\
 Enter a pose field by field (Enter keeps the value in brackets), or a whole line:
   x y z rx ry rz [ptp|lin|circ]              e.g. 1000 200 800 0 45 0 lin
   x y z rx ry rz circ via x y z [rx ry rz]   a circular move through a via point
+  plan x y z rx ry rz                        a collision-free motion around the cell (the driver's planner)
+  plan NAME                                  the same to a named state of the SRDF (home, zero)
 X Y Z in mm, Rx Ry Rz in degrees (R = Rz*Ry*Rx), the TCP in frame `base`; the controller
-takes whole mm / deg. Every move is previewed by the driver and sent only when you confirm.
+takes whole mm / deg. Every move is previewed by the driver and sent only when you confirm; a plan's preview shows its
+duration and planning time (the path in RViz), and exactly that trajectory runs when you confirm.
 Commands:
   home      move (PTP) to the home pose 1120 0 725 0 45 0
   stop      stop the arm now (the driver's stop_motion)
@@ -432,7 +506,7 @@ class _EntryEnd(Exception):
 
 @dataclass
 class HistoryEntry:
-    request: PoseRequest
+    request: "PoseRequest | PlanRequest"
     outcome: str
     when: float = field(default_factory=time.time)
 
@@ -489,7 +563,7 @@ class Terminal:
                     self.command("home")
                     continue
                 request = self._read_request()
-                if isinstance(request, PoseRequest):
+                if isinstance(request, (PoseRequest, PlanRequest)):
                     self.execute_guarded(request)
                 elif request == "quit":
                     raise _EntryEnd("quit")
@@ -539,6 +613,12 @@ class Terminal:
                 return None
             self.command(command)
             return command
+        if is_plan_line(first):
+            try:
+                return parse_plan_line(first, self.workspace)
+            except InputError as exc:
+                self.say("  %s" % exc)
+                return None
         if len(_tokens(first)) > 1:
             try:
                 return parse_pose_line(first, self.workspace)
@@ -597,8 +677,13 @@ class Terminal:
             except InputError as exc:
                 self.say("  %s" % exc)
 
-    def _remember(self, request: PoseRequest) -> None:
-        """The next entry's defaults: this one's target and move type (called once it was sent)."""
+    def _remember(self, request, target: Optional[ControllerPose] = None) -> None:
+        """The next entry's defaults: this one's target and move type (called once it was sent; a
+        plan leaves the move type and gives the TCP pose it ends at)."""
+        if isinstance(request, PlanRequest):
+            if target is not None:
+                self.defaults = target
+            return
         self.defaults = request.target
         self.default_type = request.move_type
 
@@ -651,9 +736,11 @@ class Terminal:
     def _record(self, request: PoseRequest, outcome: str) -> None:
         self.history.append(HistoryEntry(request, outcome))
 
-    def execute(self, request: PoseRequest, confirm: bool = True, preview_only: bool = False,
+    def execute(self, request, confirm: bool = True, preview_only: bool = False,
                 move_timeout: Optional[float] = None) -> int:
         """Preview, confirm, send, show progress, report. Returns an EXIT_* code."""
+        if isinstance(request, PlanRequest):
+            return self.execute_plan(request, confirm, preview_only, move_timeout)
         self.say("Checking %s" % request.describe())
         if request.is_rounded():
             self.say("  (the controller takes whole mm / deg: sent as %s)"
@@ -669,36 +756,80 @@ class Terminal:
         if preview_only:
             self._record(request, "previewed (not sent)")
             return EXIT_OK
+        if not self._motion_possible(request):
+            return EXIT_REFUSED
+        if confirm and not self.assume_yes and not self._confirm(
+                request, "Send this %s move to the robot? [y/N]: " % request.move_type.name):
+            return EXIT_REFUSED
+        return self._run_move(request, preview, move_timeout)
+
+    def _motion_possible(self, request) -> bool:
         status = self.backend.status()
         if status is not None and status.motion_possible is False:
             why = status.why_no_motion or "the driver says motion is not possible"
             self.say("Not sent: motion is not possible now: %s" % why)
             self._record(request, "not sent: motion not possible (%s)" % why)
-            return EXIT_REFUSED
-        if confirm and not self.assume_yes:
-            then = None
-            try:
-                answer = self._ask_in_entry("Send this %s move to the robot? [y/N]: " % request.move_type.name)
-            except EOFError:
-                answer = ""
-                self.say()
-            except _EntryEnd as end:
-                answer, then = "", end
-            if not _yes(answer):
-                self.say("Not sent.")
-                self._record(request, "not sent (not confirmed)")
-                if then is not None and then.then != "cancel":
-                    raise then                    # home / quit: the dialogue acts on it
-                return EXIT_REFUSED
-        return self._run_move(request, preview, move_timeout)
+            return False
+        return True
 
-    def _run_move(self, request: PoseRequest, preview: PreviewResult, move_timeout: Optional[float]) -> int:
+    def _confirm(self, request, question: str) -> bool:
+        """Ask ``question``; True on yes. home / quit typed here end the entry after 'Not sent.'."""
+        then = None
+        try:
+            answer = self._ask_in_entry(question)
+        except EOFError:
+            answer = ""
+            self.say()
+        except _EntryEnd as end:
+            answer, then = "", end
+        if not _yes(answer):
+            self.say("Not sent.")
+            self._record(request, "not sent (not confirmed)")
+            if then is not None and then.then != "cancel":
+                raise then                    # home / quit: the dialogue acts on it
+            return False
+        return True
+
+    def execute_plan(self, request: PlanRequest, confirm: bool = True, preview_only: bool = False,
+                     move_timeout: Optional[float] = None) -> int:
+        """Plan (the driver's plan action, preview only), show it, confirm, run exactly that
+        trajectory, show progress, report. Returns an EXIT_* code."""
+        self.say("Planning a collision-free motion: %s" % request.describe())
+        preview = self.backend.plan(request)
+        if not preview.ok:
+            self.say("Refused, nothing was sent: %s" % preview.reason)
+            self._record(request, "refused: %s" % preview.reason)
+            return EXIT_NO_DRIVER if preview.unavailable else EXIT_REFUSED
+        if preview.points <= 1:
+            self.say("Plan: the arm is at the goal already (planned in %.0f ms); nothing to run."
+                     % (preview.planning_time * 1000.0))
+            self._record(request, "already there")
+            return EXIT_OK
+        self.say("Plan: collision-free; duration %.1f s (%d points), planned in %.0f ms%s"
+                 % (preview.duration, preview.points, preview.planning_time * 1000.0,
+                    " by %s" % preview.planner if preview.planner else ""))
+        self.say("  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target))
+        if preview.target is not None:
+            self.say("  TCP at the end: %s" % fmt_pose(preview.target))
+        if preview_only:
+            self._record(request, "planned (not run)")
+            return EXIT_OK
+        if not self._motion_possible(request):
+            return EXIT_REFUSED
+        if confirm and not self.assume_yes and not self._confirm(
+                request, "Run this planned motion on the robot? [y/N]: "):
+            return EXIT_REFUSED
+        return self._run_move(request, preview, move_timeout, start=lambda: self.backend.start_plan(preview))
+
+    def _run_move(self, request, preview, move_timeout: Optional[float],
+                  start: Optional[Callable[[], MoveHandle]] = None) -> int:
         started = self.clock()
         timeout = move_timeout if move_timeout is not None else 3.0 * preview.duration + 15.0
+        target = getattr(request, "target", None) or getattr(preview, "target", None)
         self._sending = True
-        handle = self.backend.start_move(request)
+        handle = start() if start is not None else self.backend.start_move(request)
         self._sending = False
-        self._remember(request)
+        self._remember(request, target)
         self.say("Sent. Ctrl-C stops the arm.")
         printer = ProgressPrinter(self.out, self.tty, clock=self.clock)
         timed_out = False
@@ -731,8 +862,8 @@ class Terminal:
         where = fmt_pose(result.reached) if result.reached is not None else "unknown"
         if result.outcome == "succeeded":
             off = ""
-            if result.reached is not None:
-                dp, da = result.reached.distance_to(request.target)
+            if result.reached is not None and target is not None:
+                dp, da = result.reached.distance_to(target)
                 off = " (%.1f mm, %.1f deg from the target)" % (dp, da)
             self.say("Reached %s%s in %.1f s." % (where, off, elapsed))
             self._record(request, "reached")
@@ -822,8 +953,11 @@ def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
     p = _ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--pose", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
                    help="move to this pose (mm, deg) and exit")
-    p.add_argument("--type", dest="move_type", default=None, metavar="ptp|lin|circ",
-                   help="move type for --pose (default ptp)")
+    p.add_argument("--type", dest="move_type", default=None, metavar="ptp|lin|circ|plan",
+                   help="move type for --pose (default ptp); plan: a collision-free motion planned around "
+                        "the cell (the driver's plan action)")
+    p.add_argument("--plan", default=None, metavar="NAME",
+                   help="plan a collision-free motion to this named state of the SRDF (home, zero) and exit")
     p.add_argument("--via", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
                    help="via point of a circular move (--type circ)")
     p.add_argument("-y", "--yes", action="store_true", help="send without asking for confirmation")
@@ -841,12 +975,27 @@ def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
     return p
 
 
-def request_from_args(args: argparse.Namespace, workspace: Workspace) -> PoseRequest:
-    """The --pose / --type / --via request; InputError (a usage error) when it is not valid."""
+def request_from_args(args: argparse.Namespace, workspace: Workspace):
+    """The --pose / --type / --via request, or --plan NAME's / --type plan's PlanRequest; InputError
+    (a usage error) when it is not valid."""
+    plan_type = (args.move_type or "").strip().lower() == "plan"
+    if args.plan is not None:
+        if args.pose is not None or args.move_type is not None or args.via is not None:
+            raise InputError("--plan NAME goes alone (or with --preview / --yes); for a pose: --pose ... --type plan")
+        return parse_plan_line("plan " + args.plan, workspace)
+    if plan_type and args.via is not None:
+        raise InputError("--via is only for --type circ")
     if args.pose is None:
         if args.move_type is not None or args.via is not None or args.preview:
             raise InputError("--type, --via and --preview go with --pose")
         raise InputError("no --pose given")
+    if plan_type:
+        for text, fld in zip(args.pose, FIELDS):
+            try:
+                parse_number(text, fld, workspace)
+            except RangeError:
+                pass
+        return PlanRequest(target=check_pose(list(args.pose), workspace))
     kind = parse_move_type(args.move_type or "", default=MoveType.CIRC if args.via else MoveType.PTP)
     if kind is MoveType.CIRC and args.via is None:
         raise InputError("--type circ needs --via X Y Z RX RY RZ")
