@@ -49,7 +49,7 @@ import os
 import sys
 import tempfile
 from dataclasses import dataclass, field
-from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 import yaml
@@ -676,7 +676,8 @@ def _feasible(p: np.ndarray, q: np.ndarray, min_z: float, min_radius: float, min
 
 def propose_poses(n: int = DEFAULT_POSES, nominal: Optional[Mapping[str, float]] = None, seed: int = 0,
                   pool: int = 1500, margin_deg: float = 10.0, max_abs_deg: float = 180.0, min_z: float = 0.3, min_radius: float = 0.4,
-                  min_bend_deg: float = 15.0, lever_mm: float = LEVER_MM) -> List[Tuple[float, ...]]:
+                  min_bend_deg: float = 15.0, lever_mm: float = LEVER_MM,
+                  valid: Optional[Callable[[np.ndarray], bool]] = None) -> List[Tuple[float, ...]]:
     """``n`` joint configurations (degrees, whole degrees: what the operator jogs to, as the pendant
     shows them) that determine every determinable parameter well.
 
@@ -684,7 +685,8 @@ def propose_poses(n: int = DEFAULT_POSES, nominal: Optional[Mapping[str, float]]
     +-``max_abs_deg`` (a wider turn of joints 4 to 6 adds nothing and is awkward to jog), the flange and
     the wrist centre at least ``min_z`` above the mounting surface, the wrist centre ``min_radius`` from
     the joint_1 axis, joint_5 and the elbow bent at least ``min_bend_deg`` (away from the wrist, shoulder
-    and elbow singularities). Selection: greedy, each step the candidate that maximises the smallest
+    and elbow singularities), and ``valid(q)`` (radians, when given: e.g. vr_driver's check of the arm
+    against itself, which this package cannot import). Selection: greedy, each step the candidate that maximises the smallest
     eigenvalue of the information matrix J^T J of the free parameters (log det until it has full rank),
     then exchange passes. The default 12 poses (72 equations for 12 parameters) predict standard
     uncertainties of about 0.02 mm / 0.002 deg with the pendant's 0.01 display rounding
@@ -699,7 +701,16 @@ def propose_poses(n: int = DEFAULT_POSES, nominal: Optional[Mapping[str, float]]
     hi = np.minimum(upper - m, math.radians(max_abs_deg))
     rng = np.random.default_rng(seed)
     cand = np.round(np.degrees(rng.uniform(lo, hi, size=(pool * 4, 6))))
-    cand = cand[_feasible(p, np.radians(cand), min_z, min_radius, min_bend_deg)][:pool]
+    cand = cand[_feasible(p, np.radians(cand), min_z, min_radius, min_bend_deg)]
+    if valid is not None:
+        keep = []
+        for k in range(len(cand)):
+            if len(keep) >= pool:
+                break
+            if valid(np.radians(cand[k])):
+                keep.append(k)
+        cand = cand[keep]
+    cand = cand[:pool]
     if len(cand) < n:
         raise CalibrationError("only %d feasible candidate poses; relax the constraints" % len(cand))
     free = [i for i, name in enumerate(PARAMETERS)
@@ -901,6 +912,18 @@ def write_yaml(result: FitResult, path: str, model_path: str = YAML_PATH, date: 
 
 # =============================================================================================== CLI
 
+def proposal_text(poses: Sequence[Sequence[float]], checked: str = "") -> str:
+    """The proposed poses as ``propose`` prints them, with the predicted uncertainty (and ``checked``:
+    a note on what the selection checked)."""
+    lines = ["# %d poses: J1..J6 [deg] as the pendant shows them%s" % (len(poses), "; " + checked if checked else "")]
+    lines += ["%2d: %s" % (i, " ".join("%7.1f" % v for v in q)) for i, q in enumerate(poses)]
+    std = predicted_uncertainty(poses)
+    lines.append("# predicted standard uncertainty with 0.01 display rounding: max %.3f mm, %.4f deg"
+                 % (max(v for k, v in std.items() if k in GEOMETRY) * 1000.0,
+                    math.degrees(max(v for k, v in std.items() if k in OFFSETS))))
+    return "\n".join(lines)
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python3 -m panasonic_vr006l_support.kinematic_calibration",
@@ -922,14 +945,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     try:
         if args.command == "propose":
-            poses = propose_poses(args.n, seed=args.seed)
-            print("# %d poses: J1..J6 [deg] as the pendant shows them" % len(poses))
-            for i, q in enumerate(poses):
-                print("%2d: %s" % (i, " ".join("%7.1f" % v for v in q)))
-            std = predicted_uncertainty(poses)
-            print("# predicted standard uncertainty with 0.01 display rounding: max %.3f mm, %.4f deg"
-                  % (max(v for k, v in std.items() if k in GEOMETRY) * 1000.0,
-                     math.degrees(max(v for k, v in std.items() if k in OFFSETS))))
+            print(proposal_text(propose_poses(args.n, seed=args.seed), checked="not checked against the arm's "
+                                "collision geometry: `rosrun vr_driver calibrate propose` is"))
             return 0
         if args.xacro and not args.write:
             raise CalibrationError("--xacro needs --write (the xacro is generated from the written YAML)")

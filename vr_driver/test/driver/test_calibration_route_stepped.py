@@ -54,10 +54,7 @@ def test_the_csr_route_recovers_the_controllers_dimensions(tmp_path):
     points = taught_points(read_program(csr))
     assert len(points) == kc.DEFAULT_POSES
 
-    # the driver stands in for the pendant here, which runs the .csr and checks no collision model:
-    # 7 of the 12 proposed poses bend joint_5 beyond ~105 deg, where the URDF's collision geometry has
-    # link_6 inside link_4 (6-44 mm), and the driver's collision check (on by default) would refuse them
-    world = World(None, {"workspace": REACH, "collision_check": False}, protocol="v2",
+    world = World(None, {"workspace": REACH}, protocol="v2",
                   controller_kin=Kinematics.from_true_model(TRUE_MODEL))
     world.ready()
     said = []

@@ -19,7 +19,7 @@ import argparse
 import math
 import sys
 import threading
-from typing import Any, Optional, Sequence
+from typing import Any, List, Optional, Sequence, Tuple
 
 from ..csr.calibration import (REST_HOLD, REST_STILL_DEG, REST_STILL_MM, PairRecorder, RestDetector,
                                model_errors, taught_points)
@@ -38,16 +38,47 @@ PROG = "calibrate"
 REACH = Workspace(x=(-2000.0, 2000.0), y=(-2000.0, 2000.0), z=(-2000.0, 2000.0))
 
 
+#: the clearance [m] between the arm's own links that proposed poses keep (the collision geometry is
+#: the URDF's primitives, the real arm's housings are not modelled more closely)
+SELF_PADDING = 0.01
+
+
 def _support_main(argv: Sequence[str]) -> int:
     from panasonic_vr006l_support import kinematic_calibration as kc
     return kc.main(list(argv))
+
+
+def proposed_poses(n: Optional[int] = None, seed: int = 0) -> Tuple[List[Tuple[float, ...]], str]:
+    """``propose_poses`` whose poses also keep the arm clear of itself (the URDF's collision geometry,
+    the SRDF's pairs, SELF_PADDING): the pendant checks no collision model. Returns the poses and a
+    note saying what was checked (without the planning libraries: not the collision geometry)."""
+    from panasonic_vr006l_support import kinematic_calibration as kc
+    from ..errors import MissingDependency
+    from ..kinematics.collision import CollisionChecker
+    try:
+        checker = CollisionChecker.default(padding=SELF_PADDING)
+        valid, note = (lambda q: not checker.in_collision(q)), \
+            "clear of the arm's own collision geometry by %g mm" % (SELF_PADDING * 1000.0)
+    except MissingDependency as exc:
+        valid, note = None, "NOT checked against the arm's collision geometry (%s)" % exc
+    poses = kc.propose_poses(kc.DEFAULT_POSES if n is None else n, seed=seed, valid=valid)
+    return poses, note
+
+
+def _propose(args: argparse.Namespace) -> int:
+    from panasonic_vr006l_support import kinematic_calibration as kc
+    poses, note = proposed_poses(args.n, args.seed)
+    print(kc.proposal_text(poses, note))
+    return 0
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command")
-    sub.add_parser("propose", help="the joint configurations to measure (calibrate propose --help)", add_help=False)
+    prop = sub.add_parser("propose", help="print the joint configurations to measure (deg), clear of the arm itself")
+    prop.add_argument("-n", type=int, default=None, help="number of poses (default 12)")
+    prop.add_argument("--seed", type=int, default=0)
     sub.add_parser("fit", help="fit the model to pairs (calibrate fit --help)", add_help=False)
     prog = sub.add_parser("program", help="write the proposed poses as a .csr program in joint form")
     prog.add_argument("output", help="the .csr file to write")
@@ -80,12 +111,10 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _program(args: argparse.Namespace) -> int:
-    from panasonic_vr006l_support import kinematic_calibration as kc
     params = load_params(args.driver_config)
     kin = kinematics_for(params)
     convention = convention_from(args, kin)
-    n = kc.DEFAULT_POSES if args.n is None else args.n
-    poses = kc.propose_poses(n, seed=args.seed)
+    poses, note = proposed_poses(args.n, args.seed)
     waypoints = [Waypoint(joints=tuple(math.radians(v) for v in q), label="pose %d" % (i + 1))
                  for i, q in enumerate(poses)]
     settings = ExportSettings(description=Description(comment="kinematic calibration", creator="vr_driver"),
@@ -97,9 +126,9 @@ def _program(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise CsrError("cannot write: %s" % (exc.strerror or exc), 0, "output", args.output) from None
     print("%s: wrote %s: %d poses (P001..P%03d) in joint form, one MOVEP each at %g m/min; convention: %s; "
-          "checked: joint limits, %s (not the cell: look at each pose in RViz first)"
+          "checked: joint limits, %s, %s (not the cell: look at each pose in RViz first)"
           % (PROG, args.output, len(poses), len(poses), args.speed, convention.describe(),
-             "the workspace box" if args.workspace_box else "the flange 0.3 m above the floor"))
+             "the workspace box" if args.workspace_box else "the flange 0.3 m above the floor", note))
     print("%s: at each point the arm must stand still %g s or more for `calibrate record` (step mode)"
           % (PROG, REST_HOLD))
     return 0
@@ -189,13 +218,15 @@ def _record(args: argparse.Namespace) -> int:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] in ("propose", "fit"):
+    if argv and argv[0] == "fit":
         return _support_main(argv)
     args = _parser().parse_args(argv)
     if args.command is None:
         _parser().print_help(sys.stderr)
         return 2
     try:
+        if args.command == "propose":
+            return _propose(args)
         return _program(args) if args.command == "program" else _record(args)
     except (CsrError, VrDriverError) as exc:
         print("%s: error: %s" % (PROG, exc), file=sys.stderr)
