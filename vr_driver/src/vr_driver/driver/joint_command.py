@@ -47,7 +47,7 @@ from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Tuple
 
 from ..errors import CollisionError, VrDriverError
 from ..kinematics.preview import check_envelope
-from .jobs import MoveJob, StreamPoint, SubmitMode
+from .jobs import MoveJob, StreamPoint
 
 if TYPE_CHECKING:  # pragma: no cover
     from .core import DriverCore
