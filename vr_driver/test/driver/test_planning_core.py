@@ -250,3 +250,21 @@ def test_the_driver_refusal_is_the_stream_check(kin):
     fake = out.trajectory.__class__(out.trajectory.joint_names, (0.0, 2.0, 4.0), (start, flipped, start),
                                     ((0.0,) * 6,) * 3, ((0.0,) * 6,) * 3, (start, start), "RRTConnect")
     assert "configuration" in planning.driver_refusal(fake)
+
+
+def test_planning_leaves_the_drivers_planning_gate_free(kin, monkeypatch):
+    """The gate is taken only to copy the checker: while OMPL plans, previews, trajectory checks and
+    joint_command steps (which take the gate) are not held up; one plan at a time is the planner's
+    own lock."""
+    from vr_driver.kinematics import planner as planner_module
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    seen = []
+    real = planner_module.Planner.plan
+
+    def plan(self, start, goal, **kw):
+        seen.append((w.core.planning_gate.locked(), planning._lock.locked()))
+        return real(self, start, goal, **kw)
+    monkeypatch.setattr(planner_module.Planner, "plan", plan)
+    assert planning.plan(PlanGoal(named="zero")).ok
+    assert seen == [(False, True)]

@@ -14,8 +14,11 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
 - **The workspace box**: every configuration the planner accepts also has its TCP inside the driver's
   workspace box (what the driver checks the stream's segments against), with the planner's clearance
   as a margin on the box too, so the trajectory it returns is one the driver's own checks accept.
-- **Off the bus thread**: planning runs in the caller's thread, holding the driver's planning gate
-  (one planner at a time, as previews do), on a Kinematics of its own (the driver's model).
+- **Off the bus thread**: planning runs in the caller's thread, one plan at a time (a lock of its
+  own: OMPL's random numbers are process-wide, and two planners would share the interpreter with the
+  bus thread), on a Kinematics and a checker of its own. The driver's planning gate is taken only to
+  copy the checker: a plan's budget does not hold up previews, trajectory checks or joint_command
+  steps (a stream's commands would time out behind it).
 - **What the driver will accept**: with a Cartesian protocol (v1, v3) the controller solves each
   target's pose itself, taking the solution nearest the previous target: near the wrist singularity
   (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another
@@ -31,6 +34,7 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
 from __future__ import annotations
 
 import math
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, List, Optional, Sequence, Tuple
@@ -223,6 +227,7 @@ class DriverPlanning:
             deps.require(module, _FEATURE)
         self.core = core
         self.params = core.params
+        self._lock = threading.Lock()        # one plan at a time
         if getattr(self.params, "collision_check", True) and getattr(core, "collision", None) is None:
             # the core leaves it None only when its libraries are missing: say which
             for module in ("pinocchio", "coal"):
@@ -306,8 +311,9 @@ class DriverPlanning:
         refusal = ""
         for attempt in range(ATTEMPTS):
             try:
-                with self.core.planning_gate:     # the checker is replaced as a whole under it: copy it here
-                    validity = self.snapshot()
+                with self._lock:
+                    with self.core.planning_gate:     # the checker is replaced as a whole under it
+                        validity = self.snapshot()
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(validity))
