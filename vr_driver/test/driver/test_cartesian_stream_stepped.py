@@ -134,6 +134,54 @@ def test_a_flipping_trajectory_is_refused_and_nothing_is_sent(world):
     assert world.status().counters.targets_sent == sent and not world.log.entries()
 
 
+def test_a_wrist_turn_past_half_a_turn_is_streamed_in_steps_the_controller_solves_as_planned(world):
+    """A straight joint move turning joint_6 by 270 deg thins to one segment; its end pose is the
+    start's turned by -90 deg, which the controller (nearest the previous target) would run. The
+    stream puts planned points back so no joint moves more than CARTESIAN_MAX_STEP between two
+    targets: accepted, run, and the arm ends 270 deg on."""
+    from vr_driver.driver.core import CARTESIAN_MAX_STEP
+    q0 = tuple(world.arm.joints)
+    turn = 1.5 * math.pi
+    end = q0[:5] + (q0[5] + turn,)
+    lim = world.kin.limits
+    if not lim.lower[5] <= end[5] <= lim.upper[5]:
+        end = q0[:5] + (q0[5] - turn,)
+    n = 40
+    times = [6.0 * k / n for k in range(1, n + 1)]
+    points = [tuple(a + (b - a) * k / n for a, b in zip(q0, end)) for k in range(1, n + 1)]   # one straight line
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    job = run.jobs[0]
+    steps = [max(abs(a - b) for a, b in zip(p.joints, q)) for p, q in
+             zip(job.points, [q0] + [p.joints for p in job.points[:-1]])]
+    assert len(job.points) >= 4 and max(steps) <= CARTESIAN_MAX_STEP + 1e-9, [round(s / DEG, 1) for s in steps]
+    record(world, job)
+    assert job.result.success, job.result.reason
+    assert abs(world.arm.joints[5] - end[5]) <= V3.target_error, (world.arm.joints[5] / DEG, end[5] / DEG)
+
+
+def test_the_plan_seed_is_looked_up_with_the_reported_pose_in_mm_and_deg(world, monkeypatch):
+    """Where the reported pose lies on the plan, the joints are solved from the plan's joints there
+    (PlanSeed; it matters where rounding pushes a pose past a reach or joint limit: the last solution
+    may be a bus cycle behind). It was once looked up with the record's raw integers (0.1 mm /
+    0.01 deg on v3), which never lay near the plan: every lookup missed."""
+    from vr_driver.driver.core import PlanSeed
+    calls = []
+    original = PlanSeed.at
+
+    def at(self, values):
+        found = original(self, values)
+        calls.append((tuple(values), found))
+        return found
+    monkeypatch.setattr(PlanSeed, "at", at)
+    _traj, run, job, _samples, _elapsed = run_path(world)
+    assert job.result.success, job.result.reason
+    assert calls
+    reported = world.status().pose.as_tuple()
+    assert max(abs(a - b) for a, b in zip(calls[-1][0], reported)) < 1.0      # mm / deg, not 0.1 mm
+    hits = sum(1 for _v, found in calls if found is not None)
+    assert hits >= 0.9 * len(calls), (hits, len(calls))
+
+
 def test_a_move_to_where_the_arm_already_is_runs_as_one_target(world):
     """(It once sent a point without a pose: the bus thread raised and dropped the link.)"""
     from vr_driver.driver import MoveRequest

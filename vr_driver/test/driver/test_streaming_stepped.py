@@ -67,6 +67,17 @@ def record(world, job, timeout=30.0):
 
 
 # ------------------------------------------------------------------------------ pure functions
+def test_split_long_puts_planned_points_back_where_a_joint_would_turn_too_far():
+    from vr_driver.driver.streaming import split_long
+    line = [(0.0, 0.1 * k) for k in range(11)]                 # joint 2 turns 1.0 in steps of 0.1
+    assert split_long(line, [0, 10], 2.0) == [0, 10]           # within the step: unchanged
+    out = split_long(line, [0, 10], 0.35)
+    assert out == [0, 3, 6, 9, 10]                             # the farthest point within 0.35 each time
+    assert split_long(line, [0, 5, 10], 0.25) == [0, 2, 4, 5, 7, 9, 10]
+    wide = [(0.0,), (1.0,), (2.0,)]                            # planned steps wider than max_step stay
+    assert split_long(wide, [0, 2], 0.5) == [0, 1, 2]
+
+
 def test_thin_timed_keeps_ends_and_timing():
     times = [0.0, 1.0, 2.0, 3.0, 4.0]
     line = [(0.1 * k,) * 6 for k in range(5)]                  # constant speed: nothing in between

@@ -67,6 +67,10 @@ PLAN_SEED_NEAR = 30.0
 #: previous target's joints), must land this near the planned point (every joint); farther, the
 #: controller would run another configuration than the one planned and checked
 CONFIGURATION_TOLERANCE = math.radians(1.0)
+#: [rad] the widest joint step between two points of a Cartesian stream (streaming.split_long): the
+#: controller takes the solution nearest the previous target, the planned one only while a joint
+#: turns by well under half a turn between them
+CARTESIAN_MAX_STEP = math.radians(90.0)
 
 Clock = Callable[[], float]
 
@@ -532,7 +536,8 @@ class DriverCore:
                 max_tolerance: float) -> Tuple[StreamPoint, ...]:
         points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
                                tolerance, self._min_segment(), max_tolerance,
-                               corner_tolerance=math.radians(self.params.stream_path_tolerance))
+                               corner_tolerance=math.radians(self.params.stream_path_tolerance),
+                               max_step=None if self.protocol.joint_targets else CARTESIAN_MAX_STEP)
         if self.protocol.joint_targets or not points:
             return points
         return self.cartesian_points(positions[0], points)
@@ -900,7 +905,10 @@ class DriverCore:
         if values == self._joints_pose and self._joints_valid:
             return self._joints
         try:
-            seed = self._plan_seed.at(values) or self._joints
+            # the plan's poses are mm / deg: the reported pose, not the record's values (v3 carries
+            # 0.1 mm / 0.01 deg integers there, which never lay near the plan, so the seed fell back
+            # to the last solution and a stretched-out pose rounded past the reach was lost)
+            seed = self._plan_seed.at(fb.pose.as_tuple()) or self._joints
             self._joints = (self.kin.ik_pose(fb.pose) if seed is None
                             else self.kin.track_pose(fb.pose, seed))
             self._joints_valid = True

@@ -199,13 +199,38 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
     return stream, tight
 
 
+def split_long(positions: Sequence[Sequence[float]], kept: Sequence[int], max_step: float) -> List[int]:
+    """``kept`` with planned points added between two kept ones whose joints differ by more than
+    ``max_step`` [rad] (any joint): from each kept point the farthest planned point still within
+    ``max_step`` of it, until the next kept one is (a planned step wider than ``max_step`` stays)."""
+    out = [kept[0]]
+    for b in kept[1:]:
+        a = out[-1]
+        while max(abs(x - y) for x, y in zip(positions[a], positions[b])) > max_step:
+            j = a + 1
+            while j + 1 < b and max(abs(x - y) for x, y in zip(positions[a], positions[j + 1])) <= max_step:
+                j += 1
+            if j >= b:
+                break
+            out.append(j)
+            a = j
+        out.append(b)
+    return out
+
+
 def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
                   smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None,
-                  corner_tolerance: Optional[float] = None) -> Tuple[StreamPoint, ...]:
+                  corner_tolerance: Optional[float] = None, max_step: Optional[float] = None
+                  ) -> Tuple[StreamPoint, ...]:
     """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
     thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point but the last blended
     with the level :func:`corner_levels` gives for ``corner_tolerance`` (default: ``tolerance``;
     the last point: 0, an exact stop).
+
+    ``max_step`` [rad] (a Cartesian protocol): no joint moves farther than that between two stream
+    points (:func:`split_long` puts planned points back): the controller solves each pose nearest the
+    previous target, which is the planned joints only while a wrist joint turns by well under half a
+    turn -- a thinned straight segment turning joint_6 by 270 deg would be run as -90 deg.
 
     A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
     point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
@@ -226,7 +251,7 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     if len(kept) < 2:
         return ()
     corner_tol = tolerance if corner_tolerance is None else corner_tolerance
-    chosen = set(kept)
+    chosen = set(kept if max_step is None else split_long(positions, kept, max_step))
     while True:
         order = sorted(chosen)
         stream, tight = _timed(times, positions, order[1:], vmax, smooth, corner_tol)
