@@ -367,6 +367,7 @@ class _AnalyticSolver:
         rejected = []
         n_raw = 0
         reason = ""
+        miss = math.inf
         s0, s1, s2, s3, s4, s5 = seed
         for q1 in q1s:
             x = _rotate(a1, -q1, u)
@@ -375,8 +376,14 @@ class _AnalyticSolver:
             dist2 = xp0 * xp0 + xp1 * xp1
             cos_psi = (l2 * l2 + r3 * r3 - dist2) / (2.0 * l2 * r3)
             if cos_psi > 1.0 + 1e-12 or cos_psi < -1.0 - 1e-12:
-                reason = ("the wrist centre is %.4f m from the shoulder (joint_2 axis); the arm reaches "
-                          "%.4f ... %.4f m" % (math.sqrt(dist2), self.reach_min, self.reach_max))
+                # the branch that misses by least says why (J1 turned back is often far off)
+                if abs(cos_psi) - 1.0 < miss:
+                    miss = abs(cos_psi) - 1.0
+                    dist = math.sqrt(dist2)
+                    off = dist - self.reach_max if cos_psi < 0.0 else self.reach_min - dist
+                    reason = ("the wrist centre is %.4f m from the shoulder (joint_2 axis), %.2f mm %s; the arm "
+                              "reaches %.4f ... %.4f m" % (dist, off * 1000.0, "beyond its reach" if cos_psi < 0.0
+                                                           else "too close", self.reach_min, self.reach_max))
                 continue
             psi = math.acos(max(-1.0, min(1.0, cos_psi)))
             j1 = _turn(q1, s0, lower[0], upper[0])
