@@ -15,6 +15,7 @@ import re
 import subprocess
 import threading
 import time
+import unittest
 
 import actionlib
 import rospkg
@@ -26,6 +27,7 @@ from visualization_msgs.msg import MarkerArray
 
 from driver_check import DriverTestBase, Recorder, cp
 from vr_driver.kinematics.collision import CollisionChecker
+from vr_driver.kinematics.deps import missing_dependencies
 from vr_driver.kinematics.scene import SceneObject, load_scene
 from vr_driver.msg import (FollowJointTrajectoryGoal, FollowJointTrajectoryResult, MoveToPoseGoal, PlanAction,
                            PlanFeedback, PlanGoal, PlanResult, SceneObject as SceneObjectMsg)
@@ -42,6 +44,11 @@ BOX = 0.15
 class PlanningTest(DriverTestBase):
     @classmethod
     def setUpClass(cls):
+        # without the planning libraries the driver refuses the cell (pinocchio, coal) or serves no
+        # plan action (OMPL, TOPP-RA): skip with the reason, as the unit tests do
+        missing = missing_dependencies()
+        if missing:
+            raise unittest.SkipTest("; ".join(reason for _, reason in missing))
         super().setUpClass()
         cls.plan_client = actionlib.ActionClient("/plan", PlanAction)
         assert cls.plan_client.wait_for_server(rospy.Duration(20.0)), "the plan action is not served"
