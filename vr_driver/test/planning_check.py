@@ -252,6 +252,41 @@ class PlanningTest(DriverTestBase):
             self.assertIn("Reached X %g  Y %g  Z %g" % where[:3], done.stdout)
             self.assert_free_run(self.checker, start, 1.0)
 
+    def test_06_cancelling_a_running_plan_stops_the_arm(self):
+        """Cancel while the plan runs: joint_trajectory_action stops the arm, the plan goal ends
+        cancelled (PREEMPTED) once it is at rest, short of the goal."""
+        self.at_home()
+        done, running = threading.Event(), threading.Event()
+        progress = []
+
+        def transition(handle):
+            if handle.get_comm_state() == actionlib.CommState.DONE:
+                done.set()
+
+        def feedback(_handle, fb):
+            if fb.phase == PlanFeedback.PHASE_EXECUTING:
+                progress.append(fb.progress)
+                if fb.progress > 0.3:
+                    running.set()
+        goal = self.pose_goal(BEHIND, preview_only=False)
+        goal.velocity_scaling = 0.3                       # slow enough to stop half-way
+        handle = self.plan_client.send_goal(goal, transition_cb=transition, feedback_cb=feedback)
+        self.assertTrue(running.wait(30.0), "the plan never ran a third of its way: %s" % progress[-3:])
+        self.assertFalse(done.is_set(), "the plan ended before the cancel")
+        handle.cancel()
+        self.assertTrue(done.wait(20.0), "no result after the cancel")
+        result = handle.get_result()
+        self.assertEqual(handle.get_goal_status(), GoalStatus.PREEMPTED, result.error_string)
+        self.assertEqual(result.error_code, PlanResult.PREEMPTED, result.error_string)
+        self.assertIn("; stopped: ", result.error_string)
+        self.assertTrue(all(b >= a for a, b in zip(progress, progress[1:])), progress)
+        # at rest, short of the goal
+        first = self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position
+        self.status.wait_for(lambda m: False, 0.5)
+        later = self.joints.last().position
+        self.assertLess(max(abs(a - b) for a, b in zip(first, later)), 1e-3)
+        self.assertGreater(self.kin.fk_pose(later).distance_to(ControllerPose(*BEHIND))[0], 50.0)
+
 
 if __name__ == "__main__":
     rostest.rosrun("vr_driver", "planning", PlanningTest)
