@@ -268,3 +268,19 @@ def test_planning_leaves_the_drivers_planning_gate_free(kin, monkeypatch):
     monkeypatch.setattr(planner_module.Planner, "plan", plan)
     assert planning.plan(PlanGoal(named="zero")).ok
     assert seen == [(False, True)]
+
+
+def test_a_prefixed_arm_plans_under_its_own_names():
+    """prefix left_: the joint goal names the prefixed joints, the markers' chain root is left_base_link."""
+    from vr_driver.driver.core import driver_kinematics
+    from vr_driver.params import DriverParams
+    kin = driver_kinematics(DriverParams.from_dict({"prefix": "left_"}))
+    w = World(kin, {"prefix": "left_", "scene": CELL}, protocol="v3")
+    w.ready()
+    planning = DriverPlanning(w.core)
+    assert planning.kin.base == "left_base_link"
+    names = tuple("left_joint_%d" % i for i in range(1, 7))
+    assert w.core.joint_names == names
+    assert planning.plan(PlanGoal(joints=(names, (0.0,) * 6))).ok
+    out = planning.plan(PlanGoal(joints=(tuple("joint_%d" % i for i in range(1, 7)), (0.0,) * 6)))
+    assert out.code == P.INVALID_GOAL and "left_joint_1" in out.text
