@@ -284,3 +284,23 @@ def test_a_prefixed_arm_plans_under_its_own_names():
     assert planning.plan(PlanGoal(joints=(names, (0.0,) * 6))).ok
     out = planning.plan(PlanGoal(joints=(tuple("joint_%d" % i for i in range(1, 7)), (0.0,) * 6)))
     assert out.code == P.INVALID_GOAL and "left_joint_1" in out.text
+
+
+def test_a_goal_where_the_arm_is_is_one_point_at_rest(kin):
+    """The arm reported at home is within 1e-6 rad of the SRDF's home (the IK of its reported pose):
+    'plan home' there is one point where the arm is -- the planner's timing finds none for such a
+    move -- and the driver takes it as nothing to do."""
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    here = w.status().joints
+    home = kin.named_states["home"]
+    assert 0.0 < max(abs(a - b) for a, b in zip(here, home)) < P.AT_GOAL
+    out = planning.plan(PlanGoal(named="home"))
+    assert out.ok, out.text
+    assert out.trajectory.times == (0.0,) and out.trajectory.positions == (tuple(here),)
+    assert out.text.startswith("planned with RRTConnect in ") and out.text.endswith(": the arm is at the goal, "
+                                                                                   "nothing to move")
+    # a goal just beyond AT_GOAL is planned as a move
+    beyond = tuple(v + 2 * P.AT_GOAL for v in here)
+    out = planning.plan(PlanGoal(joints=(w.core.joint_names, beyond)))
+    assert out.ok and len(out.trajectory.times) >= 2, out.text

@@ -68,6 +68,8 @@ WRIST_MARGIN = 0.0524          # 3 deg
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
+#: [rad] a goal this close to the arm's joints on every joint is where the arm is: nothing to move
+AT_GOAL = 1e-4
 #: the chain index of the wrist bend (joint_5)
 _WRIST = 4
 
@@ -317,7 +319,7 @@ class DriverPlanning:
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(validity))
-                    plan = planner.plan(tuple(start), target)
+                    plan = self._at_goal(planner, tuple(start), target) or planner.plan(tuple(start), target)
             except PlanningError as exc:
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
                     continue
@@ -334,11 +336,28 @@ class DriverPlanning:
                                % (ATTEMPTS, refusal), planning_time=self.clock() - t0, planner_id=planner_id)
         elapsed = self.clock() - t0
         end = self.kin.fk_pose(plan.goal)
-        text = ("planned with %s in %.0f ms: %d points over %.2f s (velocity scaling %g)%s"
-                % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling,
-                   "" if self.collision_checked else "; collisions NOT checked (collision_check: false)"))
+        if len(plan.times) == 1:
+            text = "planned with %s in %.0f ms: the arm is at the goal, nothing to move" % (planner_id, elapsed * 1e3)
+        else:
+            text = ("planned with %s in %.0f ms: %d points over %.2f s (velocity scaling %g)"
+                    % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling))
+        if not self.collision_checked:
+            text += "; collisions NOT checked (collision_check: false)"
         return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end)
 
+
+    def _at_goal(self, planner: Planner, start: Tuple[float, ...], target: Any) -> Optional[PlannedTrajectory]:
+        """A one-point trajectory (at rest where the arm is) when a joint solution of the goal is within
+        AT_GOAL of ``start`` on every joint, else None. The planner times such a move of 1e-6..1e-5 rad
+        not at all (TOPP-RA finds no timing), and the arm reported at a named state is that close to it
+        (its joints are the IK of the reported pose)."""
+        near = [q for q in planner.goal_candidates(start, target)
+                if max(abs(a - b) for a, b in zip(q, start)) <= AT_GOAL]
+        if not near:
+            return None
+        zero = (0.0,) * len(start)
+        return PlannedTrajectory(tuple(planner.names), (0.0,), (start,), (zero,), (zero,), (start,),
+                                 planner.planner_name, {"total": 0.0})
 
     def _planning_validity(self, validity: CellValidity):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the
