@@ -96,3 +96,23 @@ def test_no_joint_states_no_motion(jog):
 def test_quit_keys(jog, key):
     jog.key("+")
     assert jog.key(key) == "quit" and jog.done and jog.tick(HOME) == (None, "")
+
+
+def test_hold_to_run_a_move_stops_when_its_key_stops_repeating():
+    jog = Jogger(NAMES, LOWER, UPPER, rate=20.0, hold=0.6)
+    assert "+" in jog.key("+", now=10.0)
+    t1, _ = jog.tick(HOME, now=10.05)
+    assert t1 is not None and t1[0] > HOME[0]
+    assert jog.key("+", now=10.5) == ""               # the terminal repeats the held key: keep moving
+    t2, _ = jog.tick(HOME, now=11.0)
+    assert t2 is not None and t2[0] > t1[0]
+    target, line = jog.tick(HOME, now=11.2)           # 0.7 s after the last repeat: released
+    assert target is None and "key released" in line and jog.direction == 0
+    assert jog.tick(HOME, now=11.25) == (None, "")
+
+
+def test_hold_0_latches_the_move():
+    jog = Jogger(NAMES, LOWER, UPPER, rate=20.0, hold=0.0)
+    jog.key("+", now=0.0)
+    t, _ = jog.tick(HOME, now=100.0)
+    assert t is not None and jog.direction == 1

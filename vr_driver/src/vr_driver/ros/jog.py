@@ -4,6 +4,8 @@
     rosrun vr_driver jog                    the driver in this namespace
     rosrun vr_driver jog __ns:=arm1         the driver in /arm1 (two_arms.launch)
     rosrun vr_driver jog _rate:=20          publish at 20 Hz (default)
+    rosrun vr_driver jog _hold:=0.6         a move stops 0.6 s after its key's last repeat (default;
+                                            0: latched -- it runs until space, a limit or the reverse key)
 
 It reads the arm's joints from ``joint_states``, the joint names from ``controller_joint_names``
 (the driver's namespace; default joint_1..joint_6), the limits from the model, and publishes a
@@ -18,6 +20,7 @@ import select
 import sys
 import termios
 import threading
+import time
 import tty
 from typing import List, Optional
 
@@ -33,12 +36,12 @@ HELP = ("keys: 1-6 joint, +/- (or arrows left/right) move, [ ] (or arrows down/u
 
 
 class JogNode:
-    def __init__(self, rate: float) -> None:
+    def __init__(self, rate: float, hold: float = 0.6) -> None:
         from ..kinematics.solver import Kinematics
         names = rospy.get_param("controller_joint_names", list(DEFAULT_JOINT_NAMES))
         self.names = tuple(str(n) for n in names)
         limits = Kinematics.default().limits
-        self.jogger = Jogger(self.names, tuple(limits.lower), tuple(limits.upper), rate)
+        self.jogger = Jogger(self.names, tuple(limits.lower), tuple(limits.upper), rate, hold=hold)
         self.rate = rate
         self._lock = threading.Lock()
         self._joints: Optional[List[float]] = None
@@ -74,10 +77,10 @@ class JogNode:
                 if not data:                          # end of input
                     self.jogger.key("ctrl-d")
                 for key in decode_keys(data):
-                    line = self.jogger.key(key)
+                    line = self.jogger.key(key, time.monotonic())
                     if line:
                         say(line)
-            target, line = self.jogger.tick(self.joints())
+            target, line = self.jogger.tick(self.joints(), time.monotonic())
             if target is not None:
                 self.publish(target)
             if line:
@@ -95,10 +98,14 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not 1.0 <= rate <= 200.0:
         sys.stderr.write("jog: ~rate %g must be in [1, 200] Hz\n" % rate)
         return 2
+    hold = float(rospy.get_param("~hold", 0.6))
+    if not 0.0 <= hold <= 5.0:
+        sys.stderr.write("jog: ~hold %g must be in [0, 5] s (0: latched)\n" % hold)
+        return 2
     if not sys.stdin.isatty():
         sys.stderr.write("jog: needs a terminal (stdin is not one)\n")
         return 2
-    node = JogNode(rate)
+    node = JogNode(rate, hold)
     fd = sys.stdin.fileno()
     saved = termios.tcgetattr(fd)
     try:

@@ -6,8 +6,10 @@ terminal, the arm's joints from ``joint_states`` and publishes what :meth:`Jogge
 Keys:
 
 - ``1`` .. ``6``: select the joint (the arm holds);
-- ``+`` / ``=`` / right arrow / ``l``: move the selected joint up; ``-`` / left arrow / ``h``: down
-  (it keeps moving at the jog speed until space, another joint, a limit or the reverse key);
+- ``+`` / ``=`` / right arrow / ``l``: move the selected joint up; ``-`` / left arrow / ``h``: down,
+  hold to run: the joint moves while the key is held (the terminal repeats it) and stops ``hold``
+  seconds (0.6) after the last repeat -- a jog never runs on by itself, as a teach pendant's does not
+  (``hold`` 0: latched, it keeps moving until space, another joint, a limit or the reverse key);
 - ``]`` / up arrow / ``k``: faster; ``[`` / down arrow / ``j``: slower (the steps of ``SPEEDS``);
 - space: stop -- the arm holds where it is (nothing more is published: the driver's stream ends
   at rest at the last target after its joint_command_timeout);
@@ -70,15 +72,17 @@ class Jogger:
     direction: int = 0                     # -1, 0 (holding), +1
     target: Optional[List[float]] = None   # the last target sent (None: holding, none)
     done: bool = False
+    hold: float = 0.6                      # [s] a move stops this long after its key's last repeat (0: latched)
+    until: float = 0.0                     # when the move stops unless its key repeats
 
     @property
     def speed(self) -> float:
         """The jog speed [rad/s]."""
         return math.radians(SPEEDS[self.speed_index])
 
-    def key(self, name: str) -> str:
-        """Apply one key (a name from :func:`decode_keys`); returns a line saying what it did
-        ("" for a key that does nothing)."""
+    def key(self, name: str, now: float = 0.0) -> str:
+        """Apply one key (a name from :func:`decode_keys`) at time ``now`` [s]; returns a line saying
+        what it did ("" for a key that does nothing)."""
         if name in "123456" and len(name) == 1 and int(name) <= len(self.names):
             self._hold()
             self.joint = int(name) - 1
@@ -89,6 +93,9 @@ class Jogger:
             if self.direction == -new:
                 self._hold()
                 return "%s: stop" % self.names[self.joint]
+            self.until = now + self.hold
+            if self.direction == new:
+                return ""                              # the key repeats: keep moving
             self.direction = new
             return "%s %s at %g deg/s" % (self.names[self.joint], "+" if new > 0 else "-",
                                          SPEEDS[self.speed_index])
@@ -109,11 +116,14 @@ class Jogger:
         self.direction = 0
         self.target = None
 
-    def tick(self, joints: Optional[Sequence[float]]) -> Tuple[Optional[List[float]], str]:
+    def tick(self, joints: Optional[Sequence[float]], now: float = 0.0) -> Tuple[Optional[List[float]], str]:
         """The next target to publish (None: nothing, the arm holds) and a line to show ("" for
-        none). ``joints``: the arm's joints now (None: unknown -- nothing moves)."""
+        none) at time ``now`` [s]. ``joints``: the arm's joints now (None: unknown -- nothing moves)."""
         if self.direction == 0:
             return None, ""
+        if self.hold > 0.0 and now > self.until:
+            self._hold()
+            return None, "%s: key released: stop" % self.names[self.joint]
         if self.target is None:
             if joints is None:
                 self._hold()
