@@ -4,7 +4,7 @@
     rosrun vr_driver jog                    the driver in this namespace
     rosrun vr_driver jog __ns:=arm1         the driver in /arm1 (two_arms.launch)
     rosrun vr_driver jog _rate:=20          publish at 20 Hz (default)
-    rosrun vr_driver jog _hold:=0.6         a move stops 0.6 s after its key's last repeat (default;
+    rosrun vr_driver jog _hold:=0.8         a move stops 0.8 s after its key's last repeat (default;
                                             0: latched -- it runs until space, a limit or the reverse key)
 
 It reads the arm's joints from ``joint_states``, the joint names from ``controller_joint_names``
@@ -36,7 +36,7 @@ HELP = ("keys: 1-6 joint, +/- (or arrows left/right) move, [ ] (or arrows down/u
 
 
 class JogNode:
-    def __init__(self, rate: float, hold: float = 0.6) -> None:
+    def __init__(self, rate: float, hold: float = 0.8) -> None:
         from ..kinematics.solver import Kinematics
         names = rospy.get_param("controller_joint_names", list(DEFAULT_JOINT_NAMES))
         self.names = tuple(str(n) for n in names)
@@ -98,7 +98,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if not 1.0 <= rate <= 200.0:
         sys.stderr.write("jog: ~rate %g must be in [1, 200] Hz\n" % rate)
         return 2
-    hold = float(rospy.get_param("~hold", 0.6))
+    hold = float(rospy.get_param("~hold", 0.8))
     if not 0.0 <= hold <= 5.0:
         sys.stderr.write("jog: ~hold %g must be in [0, 5] s (0: latched)\n" % hold)
         return 2

@@ -8,7 +8,8 @@ Keys:
 - ``1`` .. ``6``: select the joint (the arm holds);
 - ``+`` / ``=`` / right arrow / ``l``: move the selected joint up; ``-`` / left arrow / ``h``: down,
   hold to run: the joint moves while the key is held (the terminal repeats it) and stops ``hold``
-  seconds (0.6) after the last repeat -- a jog never runs on by itself, as a teach pendant's does not
+  seconds (0.8: longer than the usual 0.5-0.66 s delay before a held key repeats) after the last
+  repeat -- a jog never runs on by itself, as a teach pendant's does not
   (``hold`` 0: latched, it keeps moving until space, another joint, a limit or the reverse key);
 - ``]`` / up arrow / ``k``: faster; ``[`` / down arrow / ``j``: slower (the steps of ``SPEEDS``);
 - space: stop -- the arm holds where it is (nothing more is published: the driver's stream ends
@@ -72,7 +73,7 @@ class Jogger:
     direction: int = 0                     # -1, 0 (holding), +1
     target: Optional[List[float]] = None   # the last target sent (None: holding, none)
     done: bool = False
-    hold: float = 0.6                      # [s] a move stops this long after its key's last repeat (0: latched)
+    hold: float = 0.8                      # [s] a move stops this long after its key's last repeat (0: latched)
     until: float = 0.0                     # when the move stops unless its key repeats
 
     @property
