@@ -30,7 +30,7 @@ from vr_driver.kinematics.collision import CollisionChecker
 from vr_driver.kinematics.deps import missing_dependencies
 from vr_driver.kinematics.scene import SceneObject, load_scene
 from vr_driver.msg import (FollowJointTrajectoryGoal, FollowJointTrajectoryResult, MoveToPoseGoal, PlanAction,
-                           PlanFeedback, PlanGoal, PlanResult, SceneObject as SceneObjectMsg)
+                           PlanFeedback, PlanGoal, PlanResult, SceneObject as SceneObjectMsg, TriState)
 from vr_driver.poses import ControllerPose
 from vr_driver.srv import AddSceneObject, RemoveSceneObject
 
@@ -286,6 +286,37 @@ class PlanningTest(DriverTestBase):
         later = self.joints.last().position
         self.assertLess(max(abs(a - b) for a, b in zip(first, later)), 1e-3)
         self.assertGreater(self.kin.fk_pose(later).distance_to(ControllerPose(*BEHIND))[0], 50.0)
+
+    def test_07_under_the_emergency_stop_a_plan_is_shown_but_not_run(self):
+        """E-stop: a preview still plans (from the joints the driver reports); executing is refused by
+        joint_trajectory_action in words, nothing reaches the controller; released, it runs."""
+        self.wait_motion_possible()
+        before = len(self.entries())
+        self.assertTrue(self.set_estop(True).success)
+        try:
+            self.assertIsNotNone(self.status.wait_for(lambda m: m.e_stopped.val == TriState.TRUE, 2.0,
+                                                      after=time.monotonic()), "robot_status.e_stopped never TRUE")
+            # a joint goal clear of the wrist singularity (the SRDF's zero has joint_5 = 0: with v3 the
+            # controller may take another wrist there, and the driver refuses every plan to it)
+            goal = PlanGoal(goal_type=PlanGoal.JOINTS, joint_names=["joint_%d" % i for i in range(1, 7)],
+                            positions=[0.3, 0.5, -0.2, 0.0, 0.5, 0.0], allowed_planning_time=5.0, preview_only=True)
+            state, result, _ = self.plan(goal)
+            self.assertEqual(result.error_code, PlanResult.SUCCESS, result.error_string)
+            goal.preview_only = False
+            state, result, phases = self.plan(goal)
+            self.assertEqual(state, GoalStatus.ABORTED, result.error_string)
+            self.assertEqual(result.error_code, PlanResult.CONTROL_FAILED, result.error_string)
+            self.assertIn("refused by joint_trajectory_action: motion is not possible", result.error_string)
+            self.assertIn("emergency stop", result.error_string)
+            self.assertEqual(result.execution_error_code, FollowJointTrajectoryResult.INVALID_GOAL)
+            self.status.wait_for(lambda m: False, 0.3)
+            self.assertEqual(len(self.entries()), before)
+        finally:
+            self.assertTrue(self.set_estop(False).success)
+            self.assertTrue(self.set_drives(True).success)
+        self.wait_motion_possible()
+        state, result, _ = self.plan(self.named_goal("home", preview_only=False))
+        self.assertEqual(result.error_code, PlanResult.SUCCESS, result.error_string)
 
 
 if __name__ == "__main__":
