@@ -113,6 +113,21 @@ def test_start_equal_to_goal_is_one_point(kin):
     assert plan.positions == (START,) and plan.times == (0.0,) and plan.duration == 0.0
 
 
+@pytest.mark.parametrize("eps", [4e-7, 3e-6, 5e-5])
+def test_a_tiny_move_is_timed_rest_to_rest_within_the_limits(kin, eps):
+    """TOPP-RA's grid finds no timing for a move of 1e-6 .. 1e-5 rad (an arm reported at home is
+    4e-7 rad from the SRDF's home): such a move is timed in closed form."""
+    start = tuple(v + eps for v in kin.named_states["home"])
+    plan = Planner(kin, None, seed=1).plan(start, "home")
+    assert plan.positions[0] == start and plan.positions[-1] == tuple(kin.named_states["home"])
+    assert plan.velocities[0] == plan.velocities[-1] == (0.0,) * 6
+    lim = kin.limits
+    for v, a in zip(plan.velocities, plan.accelerations):
+        assert all(abs(x) <= m + 1e-12 for x, m in zip(v, lim.velocity))
+        assert all(abs(x) <= m * (1 + 1e-9) for x, m in zip(a, lim.acceleration))
+    assert list(plan.times) == sorted(plan.times) and plan.duration > 0.0
+
+
 # ---------------------------------------------------------------------------------------- goals
 
 def test_named_state_goal_ends_at_the_srdf_state(kin):

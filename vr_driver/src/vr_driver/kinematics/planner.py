@@ -175,6 +175,11 @@ class PlannedTrajectory:
         return msg
 
 
+#: [rad] a path whose joints move less than this is timed in closed form (TOPP-RA's grid finds no
+#: timing for moves of 1e-6 .. 1e-5 rad: an arm reported at home is 4e-7 rad from the SRDF's home)
+TINY_MOVE = 1e-4
+
+
 def joint_weights(kinematics: Any, allowance: float = LINK_ALLOWANCE) -> Tuple[float, ...]:
     """Per movable joint [m/rad]: a bound on the distance from the joint's axis to any point of the
     arm beyond it -- the lengths of the chain's joint offsets after it (whatever the pose: the
@@ -544,6 +549,28 @@ class Planner:
         simplifier.smoothBSpline(path, 3)
 
     # ---------------------------------------------------------------------------- timing part
+    def _time_tiny(self, a: np.ndarray, b: np.ndarray, vs: float, acs: float, dt: float):
+        """A move shorter than TINY_MOVE (TOPP-RA's grid finds no timing for it): the straight move
+        from rest to rest at the acceleration limits, accelerating for half its time and braking for
+        the other half (at that length no joint comes near its speed limit)."""
+        d = b - a
+        amax = np.array(self.limits.acceleration) * acs
+        vmax = np.array(self.limits.velocity) * vs
+        total = max(float(np.max(2.0 * np.sqrt(np.abs(d) / amax))), float(np.max(2.0 * np.abs(d) / vmax)), 1e-3)
+        n = max(2, int(math.ceil(total / dt)))
+        ts = np.linspace(0.0, total, n + 1)
+        u = ts / total
+        shape = np.where(u < 0.5, 2.0 * u * u, 1.0 - 2.0 * (1.0 - u) ** 2)
+        rate = np.where(u < 0.5, 4.0 * u, 4.0 * (1.0 - u)) / total
+        curve = np.where(u < 0.5, 4.0, -4.0) / (total * total)
+        pos = a[None, :] + shape[:, None] * d[None, :]
+        vel = rate[:, None] * d[None, :]
+        acc = curve[:, None] * d[None, :]
+        pos[0], pos[-1] = a, b
+        vel[0] = vel[-1] = 0.0
+        return (tuple(float(t) for t in ts), tuple(tuple(float(v) for v in p) for p in pos),
+                tuple(tuple(float(v) for v in p) for p in vel), tuple(tuple(float(v) for v in p) for p in acc))
+
     def _time(self, path: Sequence[Tuple[float, ...]], vs: float, acs: float, spline_step: float, dt: float):
         """TOPP-RA along a spline through the (densified) path; sampled evenly every <= dt."""
         ta = self._toppra
@@ -559,6 +586,8 @@ class Planner:
             q = tuple(float(v) for v in path[0])
             zero = (0.0,) * self.dof
             return (0.0,), (q,), (zero,), (zero,)
+        if float(np.max(np.abs(wp - wp[0]))) < TINY_MOVE:
+            return self._time_tiny(wp[0], wp[-1], vs, acs, dt)
         s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))))
         s = s / s[-1]
         curve = ta.SplineInterpolator(s, wp)
