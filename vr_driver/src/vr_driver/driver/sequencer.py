@@ -125,6 +125,12 @@ class _Extend:
 _Request = Union[_Add, _Cancel, _Replanned, _Extend]
 
 
+def _pose_text(pose: Any) -> str:
+    """A reported pose in a log line, in controller units (a record's values are the wire's
+    integers: 0.1 mm / 0.01 deg on v3, 0.01 mm / 0.001 deg on v2)."""
+    return "(%.1f, %.1f, %.1f mm, %.2f, %.2f, %.2f deg)" % pose.as_tuple()
+
+
 class _Settle:
     """A job that ends when the arm is at rest."""
 
@@ -420,13 +426,13 @@ class SequencerBase:
         if self.at_rest(now, fb):
             self._settle = None
             if job is not None:
-                log.info("job %d: the arm is at rest at %s", job.id, fb.values)
+                log.info("job %d: the arm is at rest at %s", job.id, _pose_text(fb.pose))
                 job.finish(False, settle.phase, settle.reason, fb.pose)
             return
         if now - settle.since > self.params.stop_timeout:
             self._settle = None
             why = ("%s; the arm did not come to rest within %.3g s (stop_timeout); last reported "
-                   "pose %s" % (settle.reason, self.params.stop_timeout, fb.values))
+                   "pose %s" % (settle.reason, self.params.stop_timeout, _pose_text(fb.pose)))
             log.error("job %s: %s", job.id if job is not None else "-", why)
             if job is not None:
                 job.finish(False, JobPhase.FAILED, why, fb.pose)
@@ -570,7 +576,7 @@ class MotionSequencer(SequencerBase):
             if job.next_command < len(job.preview.commands):
                 return                       # the via point of a CIRC: the end point follows
             self._job = None
-            log.info("job %d done at %s", job.id, fb.values)
+            log.info("job %d done at %s", job.id, _pose_text(fb.pose))
             job.finish(True, JobPhase.SUCCEEDED, "", fb.pose)
             return
         if isinstance(event, TimedOut) and not event.final:
