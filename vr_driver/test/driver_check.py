@@ -263,7 +263,9 @@ class DriverTest(DriverTestBase):
         dp, da = self.kin.fk_pose(js.position).distance_to(reported)
         self.assertLess(dp, 1.0)
         self.assertLess(da, 1.0)
-        diag = self.diag.wait_for(lambda m: any("link" in s.name for s in m.status), 5.0)
+        # (diagnostic_updater's first message says "Node starting up" with no values: wait for the task's)
+        diag = self.diag.wait_for(lambda m: any("link" in s.name and any(kv.key == "bus retries" for kv in s.values)
+                                                for s in m.status), 5.0)
         self.assertIsNotNone(diag, "no link diagnostics")
         link = [s for s in diag.status if "link" in s.name][0]
         keys = {kv.key for kv in link.values}

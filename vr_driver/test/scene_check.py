@@ -77,7 +77,11 @@ class SceneTest(DriverTestBase):
         self.assertEqual([m.type for m in solids], [Marker.CUBE, Marker.CYLINDER, Marker.CUBE])
         self.assertEqual({m.header.frame_id for m in solids}, {"base_link"})
         self.assertAlmostEqual(solids[1].scale.x, 0.2)
-        diag = self.diag.wait_for(lambda m: any(s.name.endswith("collision") for s in m.status), 10.0)
+        # (diagnostic_updater's first message says "Node starting up" with no values: wait for the task's)
+        def filled(m):
+            return any(s.name.endswith("collision") and any(kv.key == "collision checking" for kv in s.values)
+                       for s in m.status)
+        diag = self.diag.wait_for(filled, 10.0)
         self.assertIsNotNone(diag, "no collision diagnostics")
         status = [s for s in diag.status if s.name.endswith("collision")][0]
         values = {kv.key: kv.value for kv in status.values}
