@@ -250,7 +250,7 @@ def test_bad_scene_parameters_are_refused_naming_them(tmp_path):
     assert (d.scene, d.collision_padding, d.collision_check) == ("", 0.01, True)
 
 
-def _no_libraries(prefix):
+def _no_libraries(prefix, model=""):
     raise MissingDependency("coal", "coal", "collision-aware planning", "ModuleNotFoundError: No module named 'coal'")
 
 
@@ -297,3 +297,22 @@ def test_an_arm_that_stands_in_an_object_may_only_move_out_of_it(kin):
     with pytest.raises(JointCommandRefused, match="collides .*with box") as err:
         w.core.joint_command(names, joints(j1=start[0] + 0.1), 0.2)
     assert "starts in collision" not in str(err.value)
+
+
+@needs_libs
+def test_with_a_calibrated_model_the_collision_model_has_its_dimensions():
+    """The driver's ``model`` (calibrate fit --write) sets its kinematics; the arm it checks for
+    collisions is the same arm (the links at the model's dimensions and joint zero offsets), not the
+    package's: tool0 of the collision model is the driver's FK."""
+    import numpy as np
+    import pinocchio as pin
+    from vr_driver.kinematics.solver import Kinematics
+    path = os.path.join(REPO, "vr_driver", "test", "data", "true_model_example.yaml")
+    core = DriverCore(DriverParams.from_dict({"port": "unused", "model": path}))
+    checker = core.scene_guard.checker
+    tool0 = checker.model.getFrameId("tool0")
+    package = Kinematics.default()
+    q = (0.3, 0.4, -0.2, 0.5, 0.6, 0.7)
+    pin.framesForwardKinematics(checker.model, checker.data, checker._config(q))
+    np.testing.assert_allclose(checker.data.oMf[tool0].homogeneous, core.kin.fk(q), atol=1e-9)
+    assert np.abs(core.kin.fk(q)[:3, 3] - package.fk(q)[:3, 3]).max() > 0.003    # the models differ

@@ -349,7 +349,8 @@ class DriverCore:
         self.joint_commander = JointCommander(self)
         # the cell and the collision checks (scene_guard; MissingDependency: a scene but no libraries)
         self.scene_guard = SceneGuard(self.kin, self._planning_gate, _load_cell(params.scene),
-                                      params.collision_padding, params.collision_check, params.prefix)
+                                      params.collision_padding, params.collision_check, params.prefix,
+                                      model=params.model)
 
     @property
     def handshake(self):

@@ -48,18 +48,18 @@ __all__ = ["SceneGuard", "describe_contact"]
 
 # the robot's collision model (rendered xacro, SRDF pairs) per name prefix, built once per process:
 # building it takes ~0.3 s, a copy ~1 ms (tests build many cores)
-_MODELS: Dict[str, Any] = {}
+_MODELS: Dict[Tuple[str, str], Any] = {}
 _MODELS_LOCK = threading.Lock()
 
 
-def _robot_checker(prefix: str) -> Any:
-    """A fresh CollisionChecker of the VR-006L with ``prefix`` and no scene; MissingDependency
-    without pinocchio / coal."""
+def _robot_checker(prefix: str, model: str = "") -> Any:
+    """A fresh CollisionChecker of the VR-006L with ``prefix`` and no scene (``model``: the driver's
+    kinematics YAML, "" the package's); MissingDependency without pinocchio / coal."""
     from ..kinematics.collision import CollisionChecker
     with _MODELS_LOCK:
-        base = _MODELS.get(prefix)
+        base = _MODELS.get((prefix, model))
         if base is None:
-            base = _MODELS[prefix] = CollisionChecker.default(prefix=prefix)
+            base = _MODELS[(prefix, model)] = CollisionChecker.default(prefix=prefix, model=model)
         return base.copy()
 
 
@@ -76,12 +76,13 @@ def describe_contact(contact: Any, padding: float) -> str:
 class SceneGuard:
     """The scene, the checker built on it and the path checks of one driver core (module text).
     ``gate``: the core's planning gate (held while a check runs, and while a change is swapped in).
-    ``prefix``: the robot's name prefix; ``checker``: a CollisionChecker to use instead of the
-    package's model (tests)."""
+    ``prefix``: the robot's name prefix; ``model``: the driver's kinematics YAML (``model``
+    parameter: the links at its dimensions; "" the package's); ``checker``: a CollisionChecker to use
+    instead (tests)."""
 
     def __init__(self, kinematics: Any, gate: threading.Lock, scene: Optional[Scene] = None,
                  padding: float = 0.01, enabled: bool = True, prefix: str = "",
-                 max_sweep: float = DEFAULT_MAX_SWEEP, checker: Any = None) -> None:
+                 max_sweep: float = DEFAULT_MAX_SWEEP, checker: Any = None, model: str = "") -> None:
         self._gate = gate
         self._lock = threading.Lock()            # the scene and the listeners (readers never wait on planning)
         self._scene = scene.copy() if scene is not None else Scene()
@@ -101,7 +102,7 @@ class SceneGuard:
                             "paths are not checked against the arm itself either", len(self._scene))
             return
         try:
-            base = checker.copy() if checker is not None else _robot_checker(prefix)
+            base = checker.copy() if checker is not None else _robot_checker(prefix, model)
         except MissingDependency as exc:
             if len(self._scene):
                 raise       # a cell given and silently not checked would be worse than none

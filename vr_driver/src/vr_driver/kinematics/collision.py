@@ -129,14 +129,21 @@ class CollisionChecker:
         return cls(model, geom, joint_names, disabled, padding, scene, adjacent_free=srdf_xml is None)
 
     @classmethod
-    def default(cls, padding: float = 0.0, scene: Optional[Scene] = None, prefix: str = "") -> "CollisionChecker":
-        """The VR-006L: the support package's xacro (rendered), the moveit_config's SRDF."""
+    def default(cls, padding: float = 0.0, scene: Optional[Scene] = None, prefix: str = "",
+                model: str = "") -> "CollisionChecker":
+        """The VR-006L: the support package's xacro (rendered; with ``model``, a kinematics YAML such as
+        ``calibrate fit --write`` gives, the links at its dimensions and joint zero offsets, as the
+        driver's kinematics then are), the moveit_config's SRDF."""
         import os
 
+        from panasonic_vr006l_support import true_model
         from panasonic_vr006l_support.description import DescriptionError, default_xacro_path, package_dir, render_urdf
         try:
-            xml = render_urdf(default_xacro_path(), {"prefix": prefix} if prefix else None)
-        except DescriptionError as exc:
+            if model:
+                xml = true_model.render_urdf(model, prefix)
+            else:
+                xml = render_urdf(default_xacro_path(), {"prefix": prefix} if prefix else None)
+        except (DescriptionError, true_model.TrueModelError) as exc:
             raise ModelError(str(exc)) from exc
         srdf = os.path.join(os.path.dirname(package_dir()), "panasonic_vr006l_moveit_config", "config",
                             "panasonic_vr006l.srdf")
