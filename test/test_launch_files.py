@@ -5,6 +5,7 @@
 """
 import glob
 import os
+import re
 import subprocess
 import unittest
 
@@ -174,6 +175,22 @@ class DriverLaunchParamsTest(unittest.TestCase):
         own = {k[len("/virtual_controller/"):]: v for k, v in plain.items() if k.startswith("/virtual_controller/")}
         self.assertEqual(SimOptions.from_mapping(own).true_model, example)
         self.assertEqual(plain["/robot_description"], params["/robot_description"])
+
+    def test_model_reaches_the_driver_and_the_robot_description(self):
+        """model:=FILE (a calibrated kinematics YAML) is the driver's model and robot_description's
+        (RViz, robot_state_publisher, MoveIt show the arm the driver computes with); the virtual
+        controller keeps its own."""
+        example = os.path.join(REPO, "vr_driver", "test", "data", "true_model_example.yaml")
+        _, params = self.check()
+        p, plain = self.check("model:=" + example, "prefix:=left_")
+        self.assertEqual(p.model, example)
+        self.assertFalse(any(k.endswith("/true_model") for k in plain))
+
+        def joint_3_origin(urdf, prefix=""):
+            i = urdf.index('name="%sjoint_3"' % prefix)
+            return re.search(r'<origin[^>]*xyz="([^"]*)"', urdf[i:]).group(1).split()
+        self.assertAlmostEqual(float(joint_3_origin(params["/robot_description"])[2]), 0.560)
+        self.assertAlmostEqual(float(joint_3_origin(plain["/robot_description"], "left_")[2]), 0.570)   # upper arm +10 mm
 
     def test_real_port(self):
         p, params = self.check("sim:=false", "port:=/dev/ttyUSB7", "baud:=187500")
