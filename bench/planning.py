@@ -153,6 +153,10 @@ def main() -> int:
     parser.add_argument("--planner", default="RRTConnect", help="OMPL planner (default RRTConnect)")
     parser.add_argument("--no-execute", action="store_true", help="plan and check only, no driver rig")
     parser.add_argument("--protocol", default="v2", help="the rig's protocol (default v2: joint targets)")
+    parser.add_argument("--driver", action="store_true",
+                        help="plan as the plan action does (driver.planning.DriverPlanning on the rig's driver: "
+                             "its checker, the workspace box, with v1 / v3 the wrist margin, the driver's own "
+                             "stream check and re-plans) instead of the bare planner")
     parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
     args = parser.parse_args()
     n = 10 if args.quick else args.n
@@ -170,16 +174,23 @@ def main() -> int:
     except MissingDependency as exc:
         print("planning benchmark skipped: %s" % exc)
         return 0
+    if args.driver and args.no_execute:
+        parser.error("--driver plans on the rig's driver: it cannot go with --no-execute")
     executor = None if args.no_execute else Executor(kin, exact, args.protocol)
+    driver_planning = None
+    if args.driver:
+        from vr_driver.driver.planning import DriverPlanning, PlanGoal
+        driver_planning = DriverPlanning(executor.world.core)
     rng = random.Random(args.seed)
     print("planning benchmark: %d queries, seed %d, cell %s (%s), padding %.0f mm (the driver's), planner %s, "
           "budget %.2f s, clearance %.0f mm, max sweep %.0f mm, dt %.2f s%s"
           % (n, args.seed, os.path.relpath(CELL, REPO), ", ".join(checker.scene.names()), padding * 1e3, args.planner,
              args.budget, planner.clearance * 1e3, planner.max_sweep * 1e3, planner.dt,
-             "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol))
+             "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol)
+          + ("; planned by the plan action's core (driver.planning)" if driver_planning is not None else ""))
     start = executor.joints if executor is not None else tuple(kin.named_states["home"])
     total, solved, ompl_times, durations, failures, direct = [], [], [], [], [], 0
-    plan_hits = padding_hits = executed = 0
+    plan_hits = padding_hits = executed = crossing = 0
     first_hit = first_pad = ""
     exec_fail = []
     kinds = {"joints": [0, 0], "pose": [0, 0]}
@@ -190,11 +201,20 @@ def main() -> int:
         kinds[kind][1] += 1
         t = time.perf_counter()
         try:
-            plan = planner.plan(start, goal)
+            if driver_planning is not None:
+                outcome = driver_planning.plan(
+                    PlanGoal(pose=goal) if kind == "pose" else PlanGoal(joints=(kin.joint_names, tuple(goal))),
+                    start=start, seed=args.seed + i)
+                if not outcome.ok:
+                    raise PlanningError("plan", outcome.text)
+                plan = outcome.trajectory
+            else:
+                plan = planner.plan(start, goal)
         except PlanningError as exc:
             total.append(time.perf_counter() - t)
             solved.append(False)
             failures.append("query %d (%s): %s" % (i, kind, exc))
+            crossing += start[4] * target[4] < 0.0
             continue
         total.append(time.perf_counter() - t)
         solved.append(True)
@@ -239,6 +259,10 @@ def main() -> int:
                                      " (first: %s)" % executor.first if executor.first else ""))
         for line in exec_fail[:5]:
             print("  not executed: %s" % line)
+    if failures:
+        print("failed: %d, of which %d ask joint_5 to change sign (the goal's joints; a pose goal may have "
+              "other solutions): a Cartesian protocol's plan keeps |joint_5| >= 3 deg, it cannot cross the "
+              "wrist singularity" % (len(failures), crossing))
     for line in failures[:10]:
         print("  failed: %s" % line)
     median_ms = 1e3 * statistics.median(total)
