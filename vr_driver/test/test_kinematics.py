@@ -191,6 +191,27 @@ def test_a_reported_pose_rounded_out_of_the_arms_configuration_keeps_the_seed(ki
         kin.track_pose((1400.0, 0.0, 1400.0, 0.0, 0.0, 0.0), q_true)
 
 
+def test_a_pose_rounded_past_the_reach_of_a_moving_arm_is_tracked_from_a_seed_degrees_away(kin):
+    """v3 reports 0.1 mm / 0.01 deg. The elbow stretched out and the wrist near its singularity: the
+    rounded pose lies 0.03 mm past the arm's reach, and the seed (the last solution, a bus cycle
+    behind a fast arm) is degrees away, too far to stand for the pose. track_pose finds the nearest
+    configuration that puts the tip within the rounding (it once lost the joints for that record)."""
+    from vr_driver.poses import ControllerPose
+    q_true = tuple(math.radians(v) for v in (87.32, 52.7, -77.52, -99.35, 1.52, -80.44))
+    reported = ControllerPose(55.2, 1129.4, 1150.5, -179.08, -25.05, 85.67)      # FK, v3-rounded
+    assert kin.fk_pose(q_true).distance_to(reported)[0] < 0.1
+    with pytest.raises(UnreachableError, match="0.03 mm beyond its reach"):
+        kin.ik_pose(reported, seed=q_true)
+    seed = tuple(math.radians(v) for v in (89.34, 55.76, -72.25, -102.31, -1.5, -90.78))
+    q = kin.track_pose(reported, seed)
+    dp, da = kin.fk_pose(q).distance_to(reported)
+    assert dp <= 0.2 and da <= 0.02
+    # the arm's joints (joint_4 and joint_6 only in their sum, at the wrist singularity)
+    for i in (0, 1, 2, 4):
+        assert abs(q[i] - q_true[i]) < math.radians(1.5), (i, math.degrees(q[i]), math.degrees(q_true[i]))
+    assert abs((q[3] + q[5]) - (q_true[3] + q_true[5])) < math.radians(0.5)
+
+
 def test_jacobian_matches_finite_differences_of_fk(kin):
     q = np.array([0.3, 0.2, -0.4, 0.5, 0.6, -0.7])
     jac = kin.jacobian(q)

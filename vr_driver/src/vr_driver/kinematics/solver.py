@@ -80,6 +80,9 @@ TRACK_JUMP = math.radians(15.0)
 #: [mm, deg] track_pose: how near the seed's pose must be to the reported one to stand for it (the
 #: report is rounded to whole mm / deg: within 0.5 of the truth; 1 leaves room for Euler noise)
 TRACK_NEAR = (1.0, 1.0)
+#: [m, rad] track_pose: how near the configuration nearest an unreachable reported pose must put the
+#: tip to stand for it (a pose rounded past the reach of the stretched-out arm: v3's 0.1 mm rounding)
+TRACK_ROUNDING = (0.2e-3, math.radians(0.02))
 
 
 # =========================================================================================== the URDF
@@ -798,12 +801,36 @@ class Kinematics:
         try:
             q = self.ik_pose(pose, seed=seed)
         except KinematicsError:
-            if not self._near_pose(seed, pose, near):
+            if self._near_pose(seed, pose, near):
+                return seed
+            nearest = self._nearest_configuration(pose, seed)
+            if nearest is None:
                 raise
-            return seed
+            return nearest
         if max(abs(a - b) for a, b in zip(q, seed)) > TRACK_JUMP and self._near_pose(seed, pose, near):
             return seed
         return q
+
+    def _nearest_configuration(self, pose: ControllerPose, seed: Sequence[float],
+                               steps: int = 60) -> Optional[Tuple[float, ...]]:
+        """Joints whose tip is within TRACK_ROUNDING of ``pose`` though no joints reach it exactly (a
+        pose rounded just past the reach), found by damped least squares from ``seed``; None when
+        the nearest configuration is farther (a pose really out of reach) or outside the limits."""
+        target = self.conventions.controller_to_tip(pose)
+        q = np.array(seed, dtype=float)
+        damping = 0.03                  # near the wrist singularity J4 / J6 drift along J4 + J6 = const: stay near the seed
+        for _ in range(steps):
+            t = self.fk(q)
+            dp = target[:3, 3] - t[:3, 3]
+            r = target[:3, :3] @ t[:3, :3].T
+            dr = 0.5 * np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+            if np.linalg.norm(dp) <= TRACK_ROUNDING[0] and np.linalg.norm(dr) <= TRACK_ROUNDING[1]:
+                out = tuple(float(v) for v in q)
+                return out if not self.limit_violations(out) else None
+            jac = self.jacobian(q)
+            err = np.concatenate([dp, dr])
+            q = q + jac.T @ np.linalg.solve(jac @ jac.T + damping ** 2 * np.eye(6), err)
+        return None
 
     def _near_pose(self, q: Sequence[float], pose: ControllerPose, near: Tuple[float, float]) -> bool:
         at = self.fk_pose(q)
