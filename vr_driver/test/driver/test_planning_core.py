@@ -308,3 +308,25 @@ def test_a_goal_where_the_arm_is_is_one_point_at_rest(kin):
     beyond = tuple(v + 2 * P.AT_GOAL for v in here)
     out = planning.plan(PlanGoal(joints=(w.core.joint_names, beyond)))
     assert out.ok and len(out.trajectory.times) >= 2, out.text
+
+
+def test_on_v1_the_driver_refusal_is_the_ptp_moves_between_the_stop_points(kin):
+    """v1 runs a plan as straight joint moves (PTP) between its thinned stop points, not along the
+    plan's samples: a plan whose samples go round the pillar but whose stop points leave a straight
+    move through it is refused in the driver's words (and planned again), one that runs is ""."""
+    w = world(kin, protocol="v1", workspace={"y": [-1200.0, 1200.0]})     # the goal is 1104 mm out
+    planning = DriverPlanning(w.core, kinematics=kin)
+    out = planning.plan(AWAY)
+    assert out.ok and planning.driver_refusal(out.trajectory) == ""
+    # a plan (made up: straight from home to joint_1 at 1.4 rad, beyond the pillar) that thins to one
+    # stop point: v1 would run the straight PTP through the pillar
+    start = tuple(w.status().joints)
+    beyond = (1.4,) + start[1:]
+    n = 8
+    times = tuple(0.5 * k for k in range(n + 1))
+    positions = tuple(tuple(a + (b - a) * k / n for a, b in zip(start, beyond)) for k in range(n + 1))
+    zero = ((0.0,) * 6,) * (n + 1)
+    fake = out.trajectory.__class__(out.trajectory.joint_names, times, positions, zero, zero,
+                                    (start, beyond), "RRTConnect")
+    text = planning.driver_refusal(fake)
+    assert text.startswith("PTP 1 to stop point %d of the plan" % n) and "pillar" in text, text
