@@ -90,6 +90,19 @@ class PlanningTest(DriverTestBase):
         return PlanGoal(goal_type=PlanGoal.NAMED, named_state=name, preview_only=preview_only,
                         allowed_planning_time=5.0)
 
+    def at_home(self):
+        """The arm at home from wherever an earlier test left it: through the plan action (the cell's
+        way home; the base class's straight PTP is refused from behind the pillar, so one failed
+        test made every later one fail); then the base class's PTP there, which also waits for motion
+        to be possible and returns the joints."""
+        self.wait_motion_possible()
+        here = tuple(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)
+        home = self.kin.named_states["home"]
+        if max(abs(a - b) for a, b in zip(here, home)) > 1e-3:
+            state, result, _ = self.plan(self.named_goal("home", preview_only=False))
+            self.assertEqual(state, GoalStatus.SUCCEEDED, result.error_string)
+        return super().at_home()
+
     @staticmethod
     def points(result):
         return [tuple(p.positions) for p in result.trajectory.points]
@@ -175,9 +188,12 @@ class PlanningTest(DriverTestBase):
         # a box on that path: at the TCP of a sample near its middle, clear of its start and its end
         n = len(old)
         box = None
-        for k in sorted(range(n // 4, 3 * n // 4 + 1), key=lambda i: abs(i - n // 2)):
+        # (the plan is a sampling planner's: try the samples from the middle outwards, then a smaller box)
+        candidates = [(size, k) for size in (BOX, 0.6 * BOX)
+                      for k in sorted(range(n // 6, 5 * n // 6 + 1), key=lambda i: abs(i - n // 2))]
+        for size, k in candidates:
             x, y, z = (float(v) for v in self.kin.fk(old[k])[:3, 3])
-            candidate = SceneObject("crate", "box", (BOX, BOX, BOX), (x, y, z))
+            candidate = SceneObject("crate", "box", (size, size, size), (x, y, z))
             judge = self.checker.copy()
             scene = self.cell.copy()
             scene.add(candidate)
