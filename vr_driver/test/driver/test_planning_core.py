@@ -330,3 +330,24 @@ def test_on_v1_the_driver_refusal_is_the_ptp_moves_between_the_stop_points(kin):
                                     (start, beyond), "RRTConnect")
     text = planning.driver_refusal(fake)
     assert text.startswith("PTP 1 to stop point %d of the plan" % n) and "pillar" in text, text
+
+
+def test_a_goal_across_the_wrist_singularity_is_planned_on_the_last_try_without_the_margin(kin):
+    """With v3 the planner keeps |joint_5| >= WRIST_MARGIN, which walls joint_5 = 0 off: from where a
+    cancelled plan left the arm (joint_5 -39.8 deg) a goal with joint_5 +28.6 deg had no path (the
+    planning rostest failed on it once). The last try plans without the margin; the driver's stream
+    check still decides, and accepts it."""
+    import math
+    w = world(kin)
+    planning = DriverPlanning(w.core, kinematics=kin)
+    validity = planning.snapshot()
+    q = (0.3, 0.5, -0.2, 0.0, 0.0, 0.0)                           # joint_5 = 0, free of the cell
+    assert not validity.in_collision(q)
+    assert not planning._planning_validity(validity)(q)
+    assert planning._planning_validity(validity, wrist_margin=False)(q)
+    start = tuple(math.radians(v) for v in (14.3, -4.9, 11.5, 11.6, -39.8, -126.0))
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, (0.3, 0.5, -0.2, 0.0, 0.5, 0.0)), planning_time=1.0),
+                        start=start, seed=0)
+    assert out.ok, out.text
+    assert planning.driver_refusal(out.trajectory) == ""
+    assert min(p[4] for p in out.trajectory.positions) < 0.0 < max(p[4] for p in out.trajectory.positions)

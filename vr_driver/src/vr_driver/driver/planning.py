@@ -318,7 +318,8 @@ class DriverPlanning:
                         validity = self.snapshot()
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
-                                      acceleration_scaling=scaling, planning_validity=self._planning_validity(validity))
+                                      acceleration_scaling=scaling, planning_validity=self._planning_validity(
+                                          validity, wrist_margin=attempt < ATTEMPTS - 1))
                     plan = self._at_goal(planner, tuple(start), target) or planner.plan(tuple(start), target)
             except PlanningError as exc:
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
@@ -359,12 +360,15 @@ class DriverPlanning:
         return PlannedTrajectory(tuple(planner.names), (0.0,), (start,), (zero,), (zero,), (start,),
                                  planner.planner_name, {"total": 0.0})
 
-    def _planning_validity(self, validity: CellValidity):
+    def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the
-        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN."""
+        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN -- except on the
+        last try: the margin walls joint_5 = 0 off, and a goal on the other side of it (joint_5 of the
+        other sign, farther than the start's and goal's own zones) then has no path at all; without
+        it the driver's stream check still decides whether the controller would run the plan."""
         strict = validity.copy()
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
-        if getattr(self.core.protocol, "joint_targets", True):
+        if getattr(self.core.protocol, "joint_targets", True) or not wrist_margin:
             return lambda q: not strict.in_collision(q)
         return lambda q: abs(q[_WRIST]) >= WRIST_MARGIN and not strict.in_collision(q)
 
