@@ -261,8 +261,8 @@ def main() -> int:
             print("  not executed: %s" % line)
     if failures:
         print("failed: %d, of which %d ask joint_5 to change sign (the goal's joints; a pose goal may have "
-              "other solutions): a Cartesian protocol's plan keeps |joint_5| >= 3 deg, it cannot cross the "
-              "wrist singularity" % (len(failures), crossing))
+              "other solutions): with a Cartesian protocol a plan must cross the wrist singularity, where the "
+              "controller's nearest-solution IK may take another wrist" % (len(failures), crossing))
     for line in failures[:10]:
         print("  failed: %s" % line)
     median_ms = 1e3 * statistics.median(total)
