@@ -56,10 +56,10 @@ def _pid_alive(pid: Optional[int]) -> bool:
         return True
 
 
-class RosMoveHandle(MoveHandle):
+class _GoalHandle(MoveHandle):
     """One goal through actionlib's plain ActionClient (its per-goal callbacks carry the goal
     handle, so a quick answer cannot be missed as with SimpleActionClient's "goal handle that we're
-    not tracking" race)."""
+    not tracking" race): the outcome, when it came, the last feedback."""
 
     def __init__(self, client, goal):
         from actionlib import CommState
@@ -67,69 +67,9 @@ class RosMoveHandle(MoveHandle):
         self._lock = threading.Lock()
         self._feedback = None
         self._done = threading.Event()
-        self._state: Optional[int] = None
-        self._result = None
-        self.gh = client.send_goal(goal, transition_cb=self._on_transition, feedback_cb=self._on_feedback)
-
-    def _on_transition(self, gh) -> None:
-        if gh.get_comm_state() == self._DONE:
-            with self._lock:
-                self._state, self._result = gh.get_goal_status(), gh.get_result()
-            self._done.set()
-
-    def _on_feedback(self, _gh, fb) -> None:
-        with self._lock:
-            self._feedback = fb
-
-    def wait(self, timeout: float) -> bool:
-        return self._done.wait(timeout)
-
-    def progress(self) -> Optional[MoveProgress]:
-        with self._lock:
-            fb = self._feedback
-        if fb is None:
-            return None
-        return MoveProgress(fb.phase, fb.distance_to_go, fb.angle_to_go, _pose_from_msg(fb.current))
-
-    def cancel(self) -> None:
-        self.gh.cancel()
-
-    def outcome(self):
-        """(GoalStatus state, result message) once done, else (None, None)."""
-        with self._lock:
-            return self._state, self._result
-
-    def result(self) -> MoveResult:
-        from actionlib_msgs.msg import GoalStatus
-        with self._lock:
-            state, result = self._state, self._result
-        if state is None:
-            return MoveResult("failed", "no result from the driver")
-        reason = result.reason if result is not None else ""
-        reached = _pose_from_msg(result.reached) if result is not None else None
-        if state == GoalStatus.SUCCEEDED and result is not None and result.success:
-            return MoveResult("succeeded", reason, reached)
-        if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED):
-            return MoveResult("cancelled", reason or "cancelled", reached)
-        return MoveResult("failed", reason or "the driver ended the goal (action state %d)" % state, reached)
-
-
-class RosTrajectoryHandle(MoveHandle):
-    """A previewed plan running through joint_trajectory_action: progress is the TCP's distance to the
-    plan's end (``pose_now()``: the last tool_pose), the result the trajectory action's."""
-
-    def __init__(self, client, goal, target: Optional[ControllerPose], pose_now, pose_after=None):
-        from actionlib import CommState
-        self.pose_after = pose_after          # (time, timeout) -> the first tool_pose received after time
         self._done_at: Optional[float] = None
-        self._DONE = CommState.DONE
-        self._lock = threading.Lock()
-        self._done = threading.Event()
-        self._moving = False
         self._state: Optional[int] = None
         self._result = None
-        self.target = target
-        self.pose_now = pose_now
         self.gh = client.send_goal(goal, transition_cb=self._on_transition, feedback_cb=self._on_feedback)
 
     def _on_transition(self, gh) -> None:
@@ -139,40 +79,79 @@ class RosTrajectoryHandle(MoveHandle):
                 self._done_at = time.monotonic()
             self._done.set()
 
-    def _on_feedback(self, _gh, _fb) -> None:
+    def _on_feedback(self, _gh, fb) -> None:
         with self._lock:
-            self._moving = True
+            self._feedback = fb
 
     def wait(self, timeout: float) -> bool:
         return self._done.wait(timeout)
 
+    def cancel(self) -> None:
+        self.gh.cancel()
+
+    def outcome(self):
+        """(GoalStatus state, result message) once done, else (None, None)."""
+        with self._lock:
+            return self._state, self._result
+
+    @staticmethod
+    def _ended(state: Optional[int], success: bool, words: str, reached: Optional[ControllerPose]) -> MoveResult:
+        from actionlib_msgs.msg import GoalStatus
+        if state is None:
+            return MoveResult("failed", "no result from the driver", reached)
+        if state == GoalStatus.SUCCEEDED and success:
+            return MoveResult("succeeded", words, reached)
+        if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED):
+            return MoveResult("cancelled", words or "cancelled", reached)
+        return MoveResult("failed", words or "the driver ended the goal (action state %d)" % state, reached)
+
+
+class RosMoveHandle(_GoalHandle):
+    """A move_to_pose goal: progress and result from the action's own feedback and result."""
+
+    def progress(self) -> Optional[MoveProgress]:
+        with self._lock:
+            fb = self._feedback
+        if fb is None:
+            return None
+        return MoveProgress(fb.phase, fb.distance_to_go, fb.angle_to_go, _pose_from_msg(fb.current))
+
+    def result(self) -> MoveResult:
+        state, result = self.outcome()
+        if state is None:
+            return MoveResult("failed", "no result from the driver")
+        reached = _pose_from_msg(result.reached) if result is not None else None
+        return self._ended(state, result is not None and result.success,
+                           result.reason if result is not None else "", reached)
+
+
+class RosTrajectoryHandle(_GoalHandle):
+    """A previewed plan running through joint_trajectory_action: progress is the TCP's distance to the
+    plan's end (``pose_now()``: the last tool_pose), the result the trajectory action's."""
+
+    def __init__(self, client, goal, target: Optional[ControllerPose], pose_now, pose_after=None):
+        self.pose_after = pose_after          # (time, timeout) -> the first tool_pose received after time
+        self.target = target
+        self.pose_now = pose_now
+        super().__init__(client, goal)
+
     def progress(self) -> Optional[MoveProgress]:
         pose = self.pose_now()
         with self._lock:
-            phase = "moving" if self._moving else "sending"
+            phase = "moving" if self._feedback is not None else "sending"
         if pose is None or self.target is None:
             return MoveProgress(phase)
         dp, da = pose.distance_to(self.target)
         return MoveProgress(phase, dp, da, pose)
 
-    def cancel(self) -> None:
-        self.gh.cancel()
-
     def result(self) -> MoveResult:
-        from actionlib_msgs.msg import GoalStatus
         with self._lock:
             state, result, done_at = self._state, self._result, self._done_at
         # where the arm is: the first tool_pose after the result (the last one may predate the end)
         reached = self.pose_after(done_at, 1.0) if self.pose_after is not None and done_at is not None else None
         reached = reached or self.pose_now()
-        if state is None:
-            return MoveResult("failed", "no result from the driver", reached)
-        words = result.error_string if result is not None else ""
-        if state == GoalStatus.SUCCEEDED and result is not None and result.error_code == 0:
-            return MoveResult("succeeded", words, reached)
-        if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED):
-            return MoveResult("cancelled", words or "cancelled", reached)
-        return MoveResult("failed", words or "the driver ended the goal (action state %d)" % state, reached)
+        return self._ended(state, result is not None and result.error_code == 0,
+                           result.error_string if result is not None else "", reached)
 
 
 class _Failed(MoveHandle):
