@@ -100,7 +100,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 for _pkg in ("vr_driver", "pyprofibus_vendor", "panasonic_vr006l_support"):
@@ -902,6 +902,19 @@ class Run:
         status, result, _t0, _t1 = self.send(self.goal(plan, -1.0, math.radians(1.0)), 60.0 + 3 * plan.duration)
         return "reposition: state %s %s" % (status, result.error_string if result is not None else "no result")
 
+    @staticmethod
+    def stamped(recorder: Any, mark: int, joints_of: Callable[[Any], Any], t_send: float, t_done: float
+                ) -> Tuple[Optional[Tuple[float, ...]], List[Tuple[float, Any]]]:
+        """From ``recorder``'s messages since ``mark``: the joints of the first stamped at or after the
+        result (``t_done``; None if none came within 2 s) and every (stamp - ``t_send``, joints)."""
+        final = None
+        hit = recorder.wait_for(lambda m: m.header.stamp.to_sec() >= t_done and joints_of(m) is not None, 2.0, mark)
+        if hit is not None:
+            final = joints_of(hit[1])
+        with recorder.cond:
+            msgs = [m for _t, m in recorder.messages[mark:]]
+        return final, [(m.header.stamp.to_sec() - t_send, joints_of(m)) for m in msgs if joints_of(m) is not None]
+
     def one(self, index: int) -> Dict[str, Any]:
         """Trajectory ``index`` (1-based) of the set, made from where the arm is (an arm that
         ended exactly at the previous planned end gets the very trajectory :func:`generate` makes)."""
@@ -921,25 +934,10 @@ class Run:
         true_mark = self.true.mark() if self.true is not None else 0
         timeout = 30.0 + 4.0 * plan.duration + 1.5 * len(plan.points)
         status, result, t_send, t_done = self.send(self.goal(plan, cfg["path_tol"], cfg["goal_tol"]), timeout)
-        final = None
-        hit = self.joints.wait_for(lambda m: m.header.stamp.to_sec() >= t_done and self.q_of(m) is not None,
-                                   2.0, mark)
-        if hit is not None:
-            final = self.q_of(hit[1])
-        with self.joints.cond:
-            msgs = [m for _t, m in self.joints.messages[mark:]]
-        samples = [(m.header.stamp.to_sec() - t_send, self.q_of(m)) for m in msgs if self.q_of(m) is not None]
+        final, samples = self.stamped(self.joints, mark, self.q_of, t_send, t_done)
         judged = None
         if self.true is not None:             # judged on the true joints (at their stamps)
-            final = None
-            hit = self.true.wait_for(lambda m: m.header.stamp.to_sec() >= t_done and self.true_q(m) is not None,
-                                     2.0, true_mark)
-            if hit is not None:
-                final = self.true_q(hit[1])
-            with self.true.cond:
-                msgs = [m for _t, m in self.true.messages[true_mark:]]
-            judged = [(m.header.stamp.to_sec() - t_send, self.true_q(m)) for m in msgs
-                      if self.true_q(m) is not None]
+            final, judged = self.stamped(self.true, true_mark, self.true_q, t_send, t_done)
         # joint_states are stamped with the time the controller took their record: no age window
         rec = analyse(plan, samples, t_done - t_send, final,
                       min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate), age=0.0, judged=judged)
