@@ -373,10 +373,12 @@ class DriverCore:
         hook, which may interrupt a thread that holds a lock :meth:`stop` needs)."""
         self._stop.set()
         self._wake.set()
+        self.link.poke()
 
     def stop(self, timeout: float = 3.0) -> None:
         self._stop.set()
         self._wake.set()
+        self.link.poke()
         with self._planning_cond:
             self._planning_cond.notify_all()
         for attr in ("_thread", "_planning_thread"):
@@ -440,7 +442,7 @@ class DriverCore:
             job = MoveJob(preview, on_update, ticket=ticket)
         self._last_posted = job
         self.sequencer.add([job], mode)
-        self._wake.set()
+        self.wake()
         log.info("job %d queued (%s): %s %s", job.id, mode.value, request.move_type.name,
                  " then ".join(c.describe() for c in job.preview.commands))
         return job
@@ -483,7 +485,7 @@ class DriverCore:
             job.group = jobs[0].group
         self._last_posted = jobs[-1]
         self.sequencer.add(jobs, SubmitMode.REPLACE)
-        self._wake.set()
+        self.wake()
         log.info("joint path: %d PTP targets queued (jobs %d..%d)", len(jobs), jobs[0].id, jobs[-1].id)
         return jobs
 
@@ -522,7 +524,7 @@ class DriverCore:
     # ------------------------------------------------------------------------ protocol v2
     def _set_controller_outputs(self, value: int) -> None:
         self.sequencer.outputs = value      # type: ignore[attr-defined]  (StreamSequencer)
-        self._wake.set()
+        self.wake()
 
     def _min_segment(self) -> float:
         """The shortest segment the bus feeds without a gap: MIN_SEGMENT_CYCLES of the configured
@@ -623,7 +625,7 @@ class DriverCore:
         job = MoveJob(None, on_update, points=points, start=tuple(traj.positions[0]))
         self._last_posted = job
         self.sequencer.add([job], mode)
-        self._wake.set()
+        self.wake()
         log.info("trajectory: %d points planned over %.2f s streamed as %d targets (job %d)",
                  len(traj.positions) - 1, traj.duration, len(points), job.id)
         return TrajectoryRun(traj, [0] + [p.index for p in points], [job], self.clock())
@@ -653,14 +655,14 @@ class DriverCore:
         """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when
         the arm is at rest."""
         self.sequencer.cancel(job, reason)
-        self._wake.set()
+        self.wake()
 
     def stop_motion(self, reason: str = "stop requested") -> int:
         """Drop the queue and stop the target in flight; returns the number of jobs it ends."""
         view = self.sequencer.view
         n = view.queue_length + (1 if view.job is not None and not view.settling else 0)
         self.sequencer.stop_all(reason)
-        self._wake.set()
+        self.wake()
         log.info("stop motion: %s (%d job(s) to end)", reason, n)
         return n
 
@@ -721,11 +723,12 @@ class DriverCore:
         """Queue ``job`` (validated already) behind the others and run a bus cycle now."""
         self._last_posted = job
         self.sequencer.add([job], SubmitMode.APPEND)
-        self._wake.set()
+        self.wake()
 
     def wake(self) -> None:
         """Run a bus cycle now (a request was posted), not at the next tick."""
         self._wake.set()
+        self.link.poke()
 
     def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
         """A Cartesian protocol: why the controller would not reach ``joints`` when sent their pose
@@ -797,7 +800,7 @@ class DriverCore:
                 self.sequencer.replanned(job, None, str(exc))
             else:
                 self.sequencer.replanned(job, preview)
-            self._wake.set()
+            self.wake()
         with self._planning_cond:
             self._planning.append(task)
             self._planning_cond.notify_all()
@@ -837,6 +840,9 @@ class DriverCore:
                 log.exception("bus thread: unexpected error; reopening the link")
                 self.link.fail("internal error (see log)")
                 self._publish(self.clock(), None)
+            if self.link.paced:
+                continue                      # the bus process keeps the time: step() waits for
+                #                               its next cycle (or a wake), never for a period here
             next_start += period
             now = self.clock()
             if next_start < now:

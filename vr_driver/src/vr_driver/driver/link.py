@@ -218,6 +218,19 @@ class LinkSupervisor:
         slave = self._slave
         return _diag_words(slave.last_diag) if slave is not None and slave.last_diag is not None else ""
 
+    @property
+    def paced(self) -> bool:
+        """True when the master keeps the bus's time itself (a bus process): :meth:`step` then
+        waits for its next cycle, and the caller's loop must not sleep a period on top."""
+        return bool(getattr(self._master, "paced", False))
+
+    def poke(self) -> None:
+        """Wake a :meth:`step` waiting for a paced master's next cycle (a request was posted).
+        Safe from any thread and from a signal handler."""
+        master = self._master
+        if master is not None and hasattr(master, "poke"):
+            master.poke()
+
     def set_outputs(self, record: bytes) -> None:
         """The record sent in the next DP cycles."""
         if self._slave is not None:
@@ -402,8 +415,13 @@ class LinkSupervisor:
             self.counters.reconnect_attempts += 1
         connected = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
         if new in connected and old not in connected:
-            self._session_start = self.clock()    # records from before are of the old session
+            self._session_start = slave.state_since   # records from before are of the old session
             self._session_records = 0
+        elif old in connected and new not in connected:
+            # exactly once across a reset: the card's next Data_Exchange (after the watchdog or a
+            # new Set_Prm restarted the controller's program) carries the idle record, never the
+            # command that was in the outputs before -- the sequencer sends anew from there
+            slave.outputs = idle_record(self.params)
         if new is MasterSlaveState.BACKOFF:
             self._slave_reason = "controller's PROFIBUS card (slave %d): %s" % (
                 slave.address, self._explain_failure(slave, reason))
