@@ -1,7 +1,8 @@
 """The plan action's ROS adapter (vr_driver.ros.plan_server) without a ROS master: the goal message
 to PlanGoal (each goal_type, a bad one refused in words), the result of an outcome (codes, the
 trajectory under the driver's joint names, the TCP at its end), and no OMPL: the action is not
-advertised, with one warning naming the package and scripts/setup. Needs the built messages
+advertised, with one warning naming the package and scripts/setup; a goal cancelled while it was
+planned ends cancelled, nothing shown or sent. Needs the built messages
 (``scripts/env``); skipped with the reason otherwise."""
 from __future__ import annotations
 
@@ -75,17 +76,69 @@ def test_the_codes_are_the_actions():
 
 
 def test_without_ompl_the_action_is_not_advertised_and_says_why_once(monkeypatch):
-    def without_ompl(core):
-        raise MissingDependency("ompl", "ompl", "the plan action (vr_driver.driver.planning)",
-                                "ModuleNotFoundError: No module named 'ompl'")
-    monkeypatch.setattr(plan_server, "DriverPlanning", without_ompl)
+    class WithoutOmpl:
+        """The planning process whose worker cannot import OMPL (start() raises its words)."""
+
+        def __init__(self, core):
+            pass
+
+        def start(self):
+            raise MissingDependency("ompl", "ompl", "the plan action (vr_driver.driver.planning)",
+                                    "ModuleNotFoundError: No module named 'ompl'")
+    monkeypatch.setattr(plan_server, "PlanningProcess", WithoutOmpl)
     warnings = []
     monkeypatch.setattr(plan_server.rospy, "logwarn", lambda text, *args: warnings.append(text % args))
     server = plan_server.PlanServer(_Core(), DriverParams())
     assert server.start() is False
-    assert server.server is None and server.client is None and server.marker_pub is None
+    assert server.server is None and server.client is None and server.marker_pub is None and server.planning is None
     assert len(warnings) == 1
     assert warnings[0].startswith("interface: the plan action is not served: the plan action (vr_driver.driver."
                                   "planning) needs the Python package ompl"), warnings[0]
     assert "scripts/setup" in warnings[0] and "No module named 'ompl'" in warnings[0]
     assert server.unavailable and "ompl" in server.unavailable
+
+
+class _Handle:
+    """An action goal handle that records what the server did with it."""
+
+    def __init__(self, goal):
+        self.goal = goal
+        self.feedback, self.ended = [], []
+
+    def get_goal(self):
+        return self.goal
+
+    def publish_feedback(self, feedback):
+        self.feedback.append(feedback.phase)
+
+    def set_canceled(self, result, text=""):
+        self.ended.append(("canceled", result))
+
+    def set_aborted(self, result, text=""):
+        self.ended.append(("aborted", result))
+
+    def set_succeeded(self, result, text=""):
+        self.ended.append(("succeeded", result))
+
+
+def test_a_goal_cancelled_while_it_is_planned_ends_cancelled_with_nothing_shown_or_sent():
+    import threading
+    calls = []
+
+    class Planning:
+        def plan(self, goal, cancel=None):
+            calls.append((goal.named, cancel))
+            return PlanOutcome(P.PREEMPTED, "cancelled while planning (the planning process was stopped)",
+                               planning_time=0.5, planner_id="RRTConnect")
+    server = plan_server.PlanServer(_Core(), DriverParams())
+    server.planning = Planning()
+    server.show = lambda outcome: calls.append("shown")
+    cancel = threading.Event()
+    handle = _Handle(msg.PlanGoal(goal_type=msg.PlanGoal.NAMED, named_state="home"))
+    server._execute(handle, handle.goal, cancel)
+    assert calls == [("home", cancel)]                     # the goal's cancel reaches the planning
+    assert handle.feedback == [msg.PlanFeedback.PHASE_PLANNING]
+    [(how, result)] = handle.ended
+    assert how == "canceled" and result.error_code == msg.PlanResult.PREEMPTED
+    assert result.error_string == "cancelled while planning (the planning process was stopped)"
+    assert result.trajectory.points == []

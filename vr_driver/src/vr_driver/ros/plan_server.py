@@ -1,23 +1,28 @@
 """`plan`: the collision-aware planning action of the node `interface` (vr_driver/Plan.action). ROS
 adapter only: the planning is :class:`vr_driver.driver.planning.DriverPlanning` (OMPL, TOPP-RA, a
-snapshot of the driver's collision checker and scene, the workspace box); execution is the node's own
+snapshot of the driver's collision checker and scene, the workspace box), run in a worker process of
+its own by :class:`vr_driver.driver.plan_process.PlanningProcess` -- never in the node's interpreter,
+whose bus thread a plan would starve (OMPL holds the interpreter lock for seconds); execution is the node's own
 ``joint_trajectory_action`` -- the planned trajectory is sent to it as a FollowJointTrajectory goal, as
 MoveIt's controller manager would, so it is validated, collision-checked, streamed and supervised by
 the trajectory server and its result is the driver's.
 
-- goal -> PlanGoal (joints / named state / CartesianPose in mm, deg) -> plan in this goal's thread
-  (never the bus thread; one planner at a time through the driver's planning gate);
+- goal -> PlanGoal (joints / named state / CartesianPose in mm, deg) -> planned by the worker process
+  (started once, with the action; one plan at a time) against the driver's scene and the arm's
+  joints as they are when the plan starts, this goal's thread waiting for it;
 - feedback: phase ``planning`` (progress 0), ``previewing`` (the plan is drawn on the latched
   ``~plan_markers``: the TCP path, the arm's sweep as stick figures at a few samples, the end),
   ``executing`` (progress = the elapsed fraction of the planned duration);
 - result: the trajectory, planning time, duration, the TCP pose at the end, error_code (the values of
   moveit_msgs/MoveItErrorCodes) and error_string in words (a start or goal in collision names the
   link and the object); on execution the trajectory action's error_code and error_string;
-- cancel while planning: the plan is dropped when it ends (OMPL's budget bounds the wait); while
-  executing: the trajectory goal is cancelled (the arm stops, the goal ends at rest).
+- cancel while planning: the worker is stopped (a new one starts for the next goal) and the goal
+  ends cancelled at once; while executing: the trajectory goal is cancelled (the arm stops, the goal
+  ends at rest). A worker that dies ends its plan with PLANNING_FAILED, in words.
 
 Without OMPL or TOPP-RA (or, with collision_check on, without the checker's libraries) the action is
-not advertised and the node says why once (MissingDependency's words); nothing else changes.
+not advertised and the node says why once (MissingDependency's words, reported by the worker as it
+starts: the node imports none of them); nothing else changes.
 """
 from __future__ import annotations
 
@@ -37,7 +42,8 @@ from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJoi
                            PlanFeedback, PlanGoal as PlanGoalMsg, PlanResult)
 
 from ..driver import planning as core_planning
-from ..driver.planning import DriverPlanning, PlanGoal, PlanOutcome, arm_points
+from ..driver.plan_process import PlanningProcess
+from ..driver.planning import PlanGoal, PlanOutcome, arm_points
 from ..errors import MissingDependency, VrDriverError
 from ..poses import ControllerPose
 
@@ -71,7 +77,7 @@ class PlanServer:
         self.params = params
         self.name = name
         self.trajectory_action = trajectory_action
-        self.planning: Optional[DriverPlanning] = None
+        self.planning: Optional[PlanningProcess] = None
         self.unavailable = ""                 # why the action is not served ("" when it is)
         self.server = None
         self.client = None
@@ -80,14 +86,18 @@ class PlanServer:
         self._cancel: Dict[str, threading.Event] = {}
 
     def start(self) -> bool:
-        """Advertise the action; False (and one warning saying why) when planning is not possible here."""
+        """Start the planning process and advertise the action; False (and one warning saying why) when
+        planning is not possible here. Waits for the worker to be ready (about a second: its imports),
+        so that the first plan does not."""
         try:
-            self.planning = DriverPlanning(self.core)
+            planning = PlanningProcess(self.core)
+            planning.start()
+            self.planning = planning
         except MissingDependency as exc:
             self.unavailable = str(exc)
             rospy.logwarn("interface: the plan action is not served: %s", exc)
             return False
-        except VrDriverError as exc:            # a model the planner cannot plan for (limits)
+        except VrDriverError as exc:    # a model the planner cannot plan for (limits), a worker that cannot start
             self.unavailable = str(exc)
             rospy.logwarn("interface: the plan action is not served: %s", exc)
             return False
@@ -102,6 +112,12 @@ class PlanServer:
         rospy.loginfo("interface: plan action ready (default planner %s, %g s budget, velocity scaling %g)",
                       self.params.planner_id, self.params.planning_time, self.params.velocity_scaling)
         return True
+
+    def shutdown(self) -> None:
+        """Stop the planning process (a plan in progress ends PLANNING_FAILED, saying so). The worker
+        also ends by itself when the node's process does (its socket closes)."""
+        if self.planning is not None:
+            self.planning.close()
 
     # ------------------------------------------------------------------ callbacks
     def _on_goal(self, handle) -> None:
@@ -137,8 +153,12 @@ class PlanServer:
         except (VrDriverError, ValueError) as exc:
             self._end(handle, PlanResult(error_code=core_planning.INVALID_GOAL, error_string="refused: %s" % exc))
             return
-        outcome = self.planning.plan(goal)
+        outcome = self.planning.plan(goal, cancel=cancel)
         result = self._result(outcome)
+        if outcome.code == core_planning.PREEMPTED:         # cancelled while planning: nothing planned
+            rospy.loginfo("plan to %s: %s", goal.describe(), outcome.text)
+            handle.set_canceled(result, result.error_string)
+            return
         if not outcome.ok:
             rospy.logwarn("plan to %s: %s", goal.describe(), outcome.text)
             self._end(handle, result)
