@@ -191,8 +191,12 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")      # utime + stime
 
 
-def test_the_worker_runs_at_a_lower_priority(planning):
-    assert os.getpriority(os.PRIO_PROCESS, planning.pid) == min(19, os.getpriority(os.PRIO_PROCESS, 0) + 10)
+def test_the_worker_runs_at_a_lower_priority_and_leaves_a_ctrl_c_to_the_node(planning):
+    pid = planning.pid
+    assert os.getpriority(os.PRIO_PROCESS, pid) == min(19, os.getpriority(os.PRIO_PROCESS, 0) + 10)
+    os.kill(pid, signal.SIGINT)           # roslaunch's stop reaches the whole process group
+    assert planning.plan(AWAY).ok
+    assert planning.pid == pid
 
 
 def test_the_workers_core_opens_no_port_and_starts_no_thread():

@@ -25,11 +25,13 @@ delays no bus cycle: the node only sends a request and waits on a socket.
   (pickled messages: ``("start", DriverParams)`` -> ``("ready", None)`` | ``("missing", ...)`` |
   ``("error", words)``; then ``("plan", PlanRequest)`` -> ``("outcome", PlanOutcome)`` |
   ``("exception", words)``). It ends when the node's end of the socket closes (EOF: the node ended
-  or closed it), also in the middle of a plan.
+  or closed it), also in the middle of a plan; it ignores SIGINT (a Ctrl-C, roslaunch's stop of the
+  process group is the node's to act on).
 - **Started once**: :meth:`PlanningProcess.start` (the plan server calls it when it starts) waits
   until the worker has imported its libraries and built its models (about a second), so no plan pays
   for that, and so that a missing library is reported at once, by the worker, in
-  MissingDependency's words (the node never imports OMPL, TOPP-RA, pinocchio or coal).
+  MissingDependency's words (the node never imports the planner's OMPL and TOPP-RA; pinocchio and
+  coal it has for its own collision checks).
 - **The one scene**: each request carries the driver's scene as it is when the plan starts
   (:class:`SceneSnapshot`: the objects and the padding of the driver's checker, and whether it
   checks collisions, read under the driver's planning gate, the checker being replaced as a whole
@@ -421,6 +423,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="plan_process[%(process)d] %(levelname)s: %(message)s")
     os.nice(WORKER_NICE)
+    # a Ctrl-C (roslaunch's SIGINT to the process group) is the node's to act on: this process ends
+    # when the node's end of the socket closes (a SIGTERM or SIGKILL still ends it at once)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     conn = Connection(args.fd)
     _exit_with_parent(args.fd)
     try:

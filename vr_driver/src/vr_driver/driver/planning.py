@@ -14,11 +14,15 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
 - **The workspace box**: every configuration the planner accepts also has its TCP inside the driver's
   workspace box (what the driver checks the stream's segments against), with the planner's clearance
   as a margin on the box too, so the trajectory it returns is one the driver's own checks accept.
-- **Off the bus thread**: planning runs in the caller's thread, one plan at a time (a lock of its
-  own: OMPL's random numbers are process-wide, and two planners would share the interpreter with the
-  bus thread), on a Kinematics and a checker of its own. The driver's planning gate is taken only to
-  copy the checker: a plan's budget does not hold up previews, trajectory checks or joint_command
-  steps (a stream's commands would time out behind it).
+- **Where it runs**: in the caller's thread, one plan at a time (a lock of its own: OMPL's random
+  numbers are process-wide), on a Kinematics and a checker of its own. The driver's planning gate is
+  taken only to copy the checker: a plan's budget does not hold up previews, trajectory checks or
+  joint_command steps (a stream's commands would time out behind it). The node does not call it in
+  its own interpreter: OMPL's solve and the planner's other C++ calls hold the interpreter lock for
+  0.6 to 5 s, which starved the bus thread past the card's watchdog. The plan action runs it in a
+  worker process (:mod:`vr_driver.driver.plan_process`: an unstarted DriverCore of the node's
+  parameters, the node's scene, joints and bus cycle sent with each request); tests and benches
+  call it directly.
 - **What the driver will accept**: with a Cartesian protocol (v1, v3) the controller solves each
   target's pose itself, taking the solution nearest the previous target: near the wrist singularity
   (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another

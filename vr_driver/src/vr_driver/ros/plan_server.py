@@ -22,7 +22,7 @@ the trajectory server and its result is the driver's.
 
 Without OMPL or TOPP-RA (or, with collision_check on, without the checker's libraries) the action is
 not advertised and the node says why once (MissingDependency's words, reported by the worker as it
-starts: the node imports none of them); nothing else changes.
+starts: the node never imports OMPL or TOPP-RA); nothing else changes.
 """
 from __future__ import annotations
 
