@@ -25,3 +25,32 @@ def kin():
 def planner(kin):
     from vr_driver.kinematics.preview import MotionPlanner
     return MotionPlanner(kin)
+
+
+# ---------------------------------------------------------------------------------------- lanes
+# scripts/test runs the modules that compute beside each other, and the ones that run in real time
+# (real ptys, real threads, deadlines on the wall clock) in a phase of their own, beside other
+# real-time tests only (see scripts/test). `pytest --lane computation|realtime|soak` selects one
+# group; without --lane every module runs. A new module that opens a pty or waits on the wall clock
+# belongs in REALTIME.
+REALTIME = {
+    "test_driver.py": "realtime",                  # DriverCore and the virtual G2 over a real pty
+    "test_port_faults.py": "realtime",
+    "test_controller_sim_pty.py": "realtime",
+    "test_controller_v2_pty.py": "realtime",
+    "test_sim_line_pty.py": "realtime",
+    "test_soak.py": "soak",                        # the longest: a lane of its own
+}
+LANES = ("computation", "realtime", "soak")
+
+
+def pytest_addoption(parser):
+    parser.addoption("--lane", choices=LANES, default=None,
+                     help="run only this group of test modules (scripts/test runs them apart)")
+
+
+def pytest_ignore_collect(collection_path, config):
+    lane = config.getoption("--lane")
+    if lane is None or collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
+        return None
+    return True if REALTIME.get(collection_path.name, "computation") != lane else None
