@@ -49,6 +49,7 @@ class SceneTest(DriverTestBase):
         cls.cell = rospy.get_param("/interface/scene")
 
     def setUp(self):
+        self.loaded_at = rospy.Time.now()         # the markers of this load are stamped at or after it
         response = self.load(self.cell)
         self.assertTrue(response.success, response.message)
 
@@ -128,8 +129,18 @@ class SceneTest(DriverTestBase):
         state, result = self.move(MoveToPoseGoal.PTP, goal, preview_only=True)
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
 
+    def marker_index(self, predicate, timeout=5.0):
+        """The index among the scene markers received of the first that satisfies ``predicate``."""
+        msg = self.scene_markers.wait_for(predicate, timeout)
+        self.assertIsNotNone(msg, "no such scene markers within %.0f s" % timeout)
+        with self.scene_markers.cond:
+            return next(i for i, m in enumerate(self.scene_markers.messages) if m is msg)
+
     def test_4_bad_input_changes_nothing(self):
-        count = len(self.scene_markers.messages)
+        # the markers of setUp's load first: they may arrive after the load's reply (they did under
+        # load, and were counted as a republication); the next markers are those of the probe below
+        loaded = self.marker_index(lambda m: any(k.ns == "scene_names" and k.header.stamp >= self.loaded_at
+                                                 for k in m.markers))
         nan = float("nan")
         bad = [
             (SceneObject(name="cone", shape="cone", dimensions=[0.1], pose=pose(1, 0, 1)), "shape must be one of"),
@@ -155,7 +166,15 @@ class SceneTest(DriverTestBase):
         objects = self.list().objects
         self.assertEqual([o.name for o in objects], CELL_NAMES)
         self.assertEqual(objects[1].shape, "cylinder")
-        self.assertEqual(len(self.scene_markers.messages), count, "markers republished without a change")
+        # a real change after them: its markers come next, in order on the one connection, unless a
+        # refused input republished the scene before it
+        probe = SceneObject(name="probe", shape="sphere", dimensions=[0.05], pose=pose(1.0, 0.0, 1.6))
+        self.assertTrue(self.add(probe, False).success)
+        shown = self.marker_index(lambda m: "probe" in [k.text for k in m.markers if k.ns == "scene_names"])
+        with self.scene_markers.cond:
+            between = self.scene_markers.messages[loaded + 1:shown]
+        self.assertEqual(len(between), 0, "markers republished without a change: %d message(s)" % len(between))
+        self.assertTrue(self.remove("probe").success)
 
     def test_5_replace_load_and_clear(self):
         moved = SceneObject(name="pillar", shape=SceneObject.SPHERE, dimensions=[0.05], pose=pose(0.3, 0.9, 1.5))
