@@ -35,13 +35,14 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 PACKAGE = os.path.join(SRC, "vr_driver")
 
 VOCABULARY = ("errors", "poses", "params", "validate", "io_signals")
-SUBPACKAGES = ("protocol", "kinematics", "driver", "controller", "terminal", "csr", "ros")
+SUBPACKAGES = ("protocol", "kinematics", "bus", "driver", "controller", "terminal", "csr", "ros")
 #: per layer: the layers it may import (whitelist) ...
 MAY_IMPORT = {
     "vocabulary": {"vocabulary"},
     "protocol": {"vocabulary", "protocol"},
     "kinematics": {"vocabulary", "kinematics"},
-    "driver": {"vocabulary", "protocol", "kinematics", "driver"},
+    "bus": {"bus"},
+    "driver": {"vocabulary", "protocol", "kinematics", "bus", "driver"},
 }
 #: ... or the layers it must not import (blacklist)
 MUST_NOT_IMPORT = {

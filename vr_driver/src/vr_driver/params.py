@@ -175,6 +175,13 @@ class DriverParams:
     byte_order: str = "little"
     link_timeout: float = 0.5            # no good reply for this long = link lost [s]
     reconnect_period: float = 0.5        # between reopen attempts while the link is lost [s]
+    # the bus in a process of its own (vr_driver.bus.process): nothing the node computes delays a cycle
+    bus_process: bool = True             # False: the DP master in the node's bus thread (as before 0.3)
+    bus_rt_priority: int = 20            # SCHED_FIFO priority of the bus process where the system
+    #                                      allows it (README "Real-time priority"); 0: normal
+    bus_node_timeout: float = 1.0        # [s] the node silent this long is dead to the bus process
+    bus_stop_hold: float = 2.0           # [s] after the node died: the stop record this long, then the
+    #                                      bus process closes the port (the card's watchdog follows)
     # handshake
     accept_timeout: float = 1.0          # target sent -> controller busy/done [s]
     release_timeout: float = 1.0         # flag cleared -> controller ready [s]
@@ -276,6 +283,10 @@ class DriverParams:
             byte_order=_string(params, "byte_order", d.byte_order, ("little", "big")),
             link_timeout=_number(params, "link_timeout", d.link_timeout, 0.0, 10.0, lo_open=True),
             reconnect_period=_number(params, "reconnect_period", d.reconnect_period, 0.05, 1.0),
+            bus_process=_boolean(params, "bus_process", d.bus_process),
+            bus_rt_priority=_integer(params, "bus_rt_priority", d.bus_rt_priority, 0, 99),
+            bus_node_timeout=_number(params, "bus_node_timeout", d.bus_node_timeout, 0.1, 60.0),
+            bus_stop_hold=_number(params, "bus_stop_hold", d.bus_stop_hold, 0.0, 60.0),
             accept_timeout=_number(params, "accept_timeout", d.accept_timeout, 0.0, 60.0, lo_open=True),
             release_timeout=_number(params, "release_timeout", d.release_timeout, 0.0, 60.0, lo_open=True),
             motion_timeout_factor=_number(params, "motion_timeout_factor", d.motion_timeout_factor, 1.0, 100.0),
@@ -322,6 +333,10 @@ class DriverParams:
             raise ParamError("joint_command_timeout", out.joint_command_timeout,
                              "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz): a "
                              "command may wait a cycle for the bus and another for the controller"
+                             % (2.0 / out.cycle_rate, out.cycle_rate))
+        if out.bus_node_timeout < 2.0 / out.cycle_rate:
+            raise ParamError("bus_node_timeout", out.bus_node_timeout,
+                             "must cover at least two bus cycles (>= %g s at cycle_rate %g Hz)"
                              % (2.0 / out.cycle_rate, out.cycle_rate))
         if out.stop_timeout <= out.stop_settle_time:
             raise ParamError("stop_timeout", out.stop_timeout, "must be longer than stop_settle_time "

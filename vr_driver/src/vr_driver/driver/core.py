@@ -40,6 +40,7 @@ from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 from pyprofibus_vendor.phy import Link
 
+from ..bus.health import BusHealthSummary
 from ..errors import CollisionError, VrDriverError
 from ..kinematics.solver import Kinematics
 from ..kinematics.preview import MotionPlanner, check_envelope
@@ -128,6 +129,7 @@ class DriverStatus:
     #                                           time on the wire); a new value = a new sample
     settling: bool = False                    # a stopped move is waiting for the arm to be at rest
     model_check: Optional[ModelCheck] = None  # the model against the controller (v2), latest connection
+    bus_health: Optional[BusHealthSummary] = None   # the gaps between the card's replies, last minute
 
     @property
     def connected(self) -> bool:
@@ -841,8 +843,14 @@ class DriverCore:
                 self.link.fail("internal error (see log)")
                 self._publish(self.clock(), None)
             if self.link.paced:
-                continue                      # the bus process keeps the time: step() waits for
-                #                               its next cycle (or a wake), never for a period here
+                # the bus process keeps the time: step() waits for its next cycle (or a wake),
+                # never a period here; an early cycle (v2's changed record, a stream's end due) is
+                # asked of it
+                now = self.clock()
+                soon = self.next_cycle(now, math.inf)
+                if soon < math.inf:
+                    self.link.cycle_at(soon)
+                continue
             next_start += period
             now = self.clock()
             if next_start < now:
@@ -885,8 +893,12 @@ class DriverCore:
             self._repeat_now = True
         self._repeated = False
         self._last_record = record
+        # the snapshot before the outputs go out (to a bus process: a socket write, which lets
+        # other threads run): a job that ended in this step is never seen beside an older status
+        status = self._status = self._snapshot(now, sample)
         self.link.set_outputs(record)
-        return self._publish(now, sample)
+        self._notify(status)
+        return status
 
     def _update_joints(self, sample: LinkSample) -> Optional[Tuple[float, ...]]:
         """The joints of the reported pose; None while the link is down. v1 reports a pose in whole
@@ -976,13 +988,16 @@ class DriverCore:
             model_check=self._model_check,
             feedback_time=sample.feedback_time if sample is not None and fb is not None else None,
             record_time=sample.record_time if sample is not None and fb is not None else None,
-            settling=view.settling)
+            settling=view.settling, bus_health=self.link.health_summary(now))
 
     def _publish(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
         status = self._status = self._snapshot(now, sample)
+        self._notify(status)
+        return status
+
+    def _notify(self, status: DriverStatus) -> None:
         for callback in self._listeners:
             try:
                 callback(status)
             except Exception:
                 log.exception("status listener failed")
-        return status

@@ -28,15 +28,18 @@ import collections
 import enum
 import errno
 import logging
+import math
 import re
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Deque, Dict, Optional
+from typing import Any, Callable, Deque, Dict, Optional, Tuple
 
 from pyprofibus_vendor.dp import DiagStatus1
 from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState, SlaveSpec
 from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 
+from ..bus.health import BusHealth, BusHealthSummary
+from ..bus.process import BusProcessMaster, BusSettings, RemoteSlave
 from ..errors import ProtocolError
 from ..params import DriverParams
 from ..protocol.v1 import Feedback
@@ -185,7 +188,15 @@ class LinkSupervisor:
         self._port_error_logged = False
         self._error_code = ERROR_LINK
         self._error_reason = "not started"
-        self._cycle_times: Deque[float] = collections.deque(maxlen=50)
+        self._cycle_times: Deque[Tuple[float, int]] = collections.deque(maxlen=50)
+        # the serial port and the DP master in a process of their own (vr_driver.bus.process):
+        # the node's default; an injected link factory (tests' in-memory links) stays in-process
+        self.uses_bus_process = bool(params.bus_process) and open_link is open_serial_link
+        # the gaps between the card's Data_Exchange replies (in-process: fed here; a bus process
+        # measures them itself and reports its summary)
+        self.health: Optional[BusHealth] = None
+        self._health_summary: Optional[BusHealthSummary] = None
+        self._health_at = -math.inf
         # a reply's time on the wire (SD2 telegram: 9 characters of frame + the controller's record,
         # 11 bits each): a record arrives this long after the card began sending it
         self.reply_time = BusTiming.for_baud(bus.baud).chars(9 + self.slave_config.input_len)
@@ -193,6 +204,7 @@ class LinkSupervisor:
         self.record_clock = RecordClock()
         self._wire = wire
         self._record_stamp: Optional[float] = None
+        self._stop_source = b""
 
     # ----------------------------------------------------------------------- read-outs
     @property
@@ -201,10 +213,21 @@ class LinkSupervisor:
 
     @property
     def cycle_rate(self) -> float:
+        """Bus cycles per second over the last 50 (a bus process's own count where there is one)."""
         times = self._cycle_times
-        if len(times) > 1 and times[-1] > times[0]:
-            return (len(times) - 1) / (times[-1] - times[0])
+        if len(times) > 1 and times[-1][0] > times[0][0]:
+            return (times[-1][1] - times[0][1]) / (times[-1][0] - times[0][0])
         return 0.0
+
+    def health_summary(self, now: float) -> Optional[BusHealthSummary]:
+        """The bus's health over the last minute (None before the port was opened): the bus
+        process's report, or (in-process) this supervisor's own, made at most once a second."""
+        master = self._master
+        if isinstance(master, BusProcessMaster):
+            return master.health
+        if self.health is not None and now - self._health_at >= 1.0:
+            self._health_summary, self._health_at = self.health.summary(now), now
+        return self._health_summary
 
     def master_counters(self) -> Dict[str, int]:
         return dict(vars(self._master.counters)) if self._master is not None else {}
@@ -231,10 +254,28 @@ class LinkSupervisor:
         if master is not None and hasattr(master, "poke"):
             master.poke()
 
+    def cycle_at(self, when: float) -> None:
+        """Ask a paced master for its next cycle no later than ``when`` (clock time)."""
+        master = self._master
+        if isinstance(master, BusProcessMaster):
+            try:
+                master.cycle_at(when)
+            except ProfibusError:
+                pass           # the bus process is gone: the next step says so
+
     def set_outputs(self, record: bytes) -> None:
-        """The record sent in the next DP cycles."""
-        if self._slave is not None:
-            self._slave.outputs = record
+        """The record sent in the next DP cycles (to a bus process with the record that stops
+        what it sets going: sent there if the driver dies)."""
+        slave = self._slave
+        if slave is None:
+            return
+        if isinstance(slave, RemoteSlave) and record != self._stop_source:
+            self._stop_source = record
+            try:
+                slave.stop_outputs = self._wire.stop_record(record, self.params.byte_order)
+            except ProtocolError as exc:    # never: the record was encoded by the same protocol
+                log.error("no stop record for %s: %s", record.hex(), exc)
+        slave.outputs = record
 
     # ----------------------------------------------------------------------- the step
     def step(self, now: float) -> LinkSample:
@@ -247,7 +288,7 @@ class LinkSupervisor:
         master = self._master
         begin = now
         try:
-            master.cycle(timeout=max(0.2, 2.0 / self.bus.cycle_rate_hz))
+            ran = master.cycle(timeout=max(0.2, 2.0 / self.bus.cycle_rate_hz))
         except ProfibusError as exc:
             self.counters.port_errors += 1
             self.close()
@@ -256,8 +297,16 @@ class LinkSupervisor:
             self._down(LinkState.PORT_ERROR, "serial port %s failed: %s" % (self.bus.phy.device, exc))
             return self._sample(now, None, cycled=False)
         now = self.clock()
+        if self.paced:
+            # the bus process cycles on its own: its records carry their true arrival times, so a
+            # slow step here is never old news taken as fresh (no stall rule); woken without a
+            # report (a request was posted), nothing new to judge but the timers
+            if ran:
+                self.counters.cycles += 1
+                self._cycle_times.append((now, master.counters.cycles))
+            return self._sample(now, self._judge(now), cycled=bool(ran))
         self.counters.cycles += 1
-        self._cycle_times.append(now)
+        self._cycle_times.append((now, self.counters.cycles))
         stalled = now - begin > self.params.link_timeout
         if stalled:
             self.counters.stalled_cycles += 1
@@ -282,6 +331,8 @@ class LinkSupervisor:
                 and at != self._record_time
             if new:
                 self._record_time = at               # consumed (a stalled cycle's: not believed)
+                if self.health is not None and not self.paced:
+                    self.health.reply(at)
             if new and not stalled:
                 try:
                     fresh = self._decode(data)
@@ -348,8 +399,31 @@ class LinkSupervisor:
     def _open(self, now: float) -> None:
         device, baud = self.bus.phy.device, self.bus.baud
         self.counters.reconnect_attempts += 1
+        timing = BusTiming.for_baud(self.bus.baud, self.bus.retry_limit)
+        if self.bus.slot_time is not None:
+            timing = replace(timing, slot_bits=self.bus.slot_time)
+        sc = self.slave_config
+        spec = SlaveSpec(sc.address, sc.ident, sc.cfg, user_prm_data=sc.user_prm_data,
+                         group_ident=sc.group_mask,
+                         watchdog=None if not sc.watchdog_ms else sc.watchdog_ms / 1000.0)
+        # dx_tolerance: a Data_Exchange without a reply (a corrupted telegram) does not drop the
+        # slave -- and with its Set_Prm the controller's program session -- before the link counts
+        # as lost here anyway (link_timeout without a good record); retry_steps: a lost reply in
+        # the start-up sequence repeats that step instead of restarting it after a back-off
+        settings = dict(timing=timing, backoff_max=min(1.0, self.params.reconnect_period),
+                        dx_tolerance=self.params.link_timeout, retry_steps=True)
+        link: Optional[Link] = None
         try:
-            link = self.open_link(device, baud)
+            if self.uses_bus_process:
+                master: Any = BusProcessMaster(BusSettings(
+                    device=device, baud=baud, master_address=self.bus.master_address,
+                    cycle_rate_hz=self.bus.cycle_rate_hz, controller=sc.address,
+                    idle_record=idle_record(self.params), watchdog=spec.watchdog,
+                    rt_priority=self.params.bus_rt_priority, node_timeout=self.params.bus_node_timeout,
+                    stop_hold=self.params.bus_stop_hold, **settings),
+                    on_state_change=self._on_slave_state)
+            else:
+                link = self.open_link(device, baud)
         except (ProfibusError, OSError, ValueError) as exc:
             self._next_open = now + self.params.reconnect_period
             reason = "cannot open %s: %s%s" % (device, exc, _port_hint(exc))
@@ -365,21 +439,11 @@ class LinkSupervisor:
         self.counters.port_opens += 1
         self._slave_reason = ""
         self._garbage_seen = 0
-        timing = BusTiming.for_baud(self.bus.baud, self.bus.retry_limit)
-        if self.bus.slot_time is not None:
-            timing = replace(timing, slot_bits=self.bus.slot_time)
-        # dx_tolerance: a Data_Exchange without a reply (a corrupted telegram) does not drop the
-        # slave -- and with its Set_Prm the controller's program session -- before the link counts
-        # as lost here anyway (link_timeout without a good record); retry_steps: a lost reply in
-        # the start-up sequence repeats that step instead of restarting it after a back-off
-        master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
-                          timing=timing, backoff_max=min(1.0, self.params.reconnect_period),
-                          dx_tolerance=self.params.link_timeout, retry_steps=True,
-                          on_state_change=self._on_slave_state)
-        sc = self.slave_config
-        spec = SlaveSpec(sc.address, sc.ident, sc.cfg, user_prm_data=sc.user_prm_data,
-                         group_ident=sc.group_mask,
-                         watchdog=None if not sc.watchdog_ms else sc.watchdog_ms / 1000.0)
+        if link is not None:
+            master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
+                              on_state_change=self._on_slave_state, **settings)
+        self.health = BusHealth(1.0 / self.bus.cycle_rate_hz, spec.watchdog,
+                                scheduling=getattr(master, "scheduling", "") or "in the driver's process")
         self._slave = master.add_slave(spec)
         self._slave.outputs = idle_record(self.params)
         self._master = master
@@ -391,9 +455,12 @@ class LinkSupervisor:
         self._down(LinkState.CONNECTING, "port open, waiting for the controller's PROFIBUS card")
 
     def close(self) -> None:
-        link, self._link, self._master, self._slave = self._link, None, None, None
+        link, master = self._link, self._master
+        self._link, self._master, self._slave = None, None, None
         if self.stations is not None:
             self.stations.detach()
+        if isinstance(master, BusProcessMaster):
+            master.close()
         if link is not None:
             try:
                 link.close()
@@ -422,6 +489,8 @@ class LinkSupervisor:
             # new Set_Prm restarted the controller's program) carries the idle record, never the
             # command that was in the outputs before -- the sequencer sends anew from there
             slave.outputs = idle_record(self.params)
+            if self.health is not None:
+                self.health.session_ended()
         if new is MasterSlaveState.BACKOFF:
             self._slave_reason = "controller's PROFIBUS card (slave %d): %s" % (
                 slave.address, self._explain_failure(slave, reason))

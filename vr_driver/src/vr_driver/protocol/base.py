@@ -136,6 +136,12 @@ class Protocol:
         """The command object of :meth:`idle_record`."""
         raise NotImplementedError
 
+    def stop_record(self, record: bytes, byte_order: Any = "little") -> bytes:
+        """The master record that stops whatever ``record`` (the one on the wire now) set going: what
+        the bus process sends when the driver dies (vr_driver.bus.process). A streaming protocol's
+        STOP; a handshake protocol overrides it (v1: the same target with the stop flag)."""
+        return self.encode(self.stream_command((), stop=True), byte_order)
+
     def decode_feedback(self, data: Any, byte_order: Any = "little") -> Any:
         """A controller record as this protocol's feedback object; ProtocolError (with the reason)
         for bytes that are not one."""

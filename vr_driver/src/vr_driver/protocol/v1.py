@@ -990,6 +990,12 @@ class ProtocolV1(Protocol):
     def idle_record(self, byte_order: Any = ByteOrder.LITTLE) -> bytes:
         return Command.idle().encode(byte_order)
 
+    def stop_record(self, record: bytes, byte_order: Any = ByteOrder.LITTLE) -> bytes:
+        """The same target bytes with flag 2 (a controlled stop while the program is BUSY; ignored
+        otherwise); a record that is not a command (all zero) stays as it is."""
+        command = Command.decode(record, byte_order)
+        return command.with_stop().encode(byte_order) if record != self.idle_record(byte_order) else record
+
     def decode_feedback(self, data: Any, byte_order: Any = ByteOrder.LITTLE) -> Feedback:
         return Feedback.decode(data, byte_order)
 

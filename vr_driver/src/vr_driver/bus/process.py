@@ -1,0 +1,615 @@
+"""The PROFIBUS bus in a process of its own.
+
+The controller's card must hear from the master every cycle, well inside its watchdog (300 ms): at
+the watchdog the G2 stops the arm and resets its program. In one Python interpreter with planning,
+collision checks, validation and ROS callbacks, a bus thread waits for the interpreter lock behind
+C++ calls that hold it for seconds (an OMPL plan); so the serial port and the DP master live here, in
+a process that does nothing but cycle the bus.
+
+**The bus process** (``python3 -m vr_driver.bus.process FD``, started by :class:`BusProcessMaster`)
+opens the port, runs the :class:`~pyprofibus_vendor.dp_master.DpMaster` at the driver's cycle rate,
+and reports every cycle (the slaves' states, state changes, inputs with their arrival times, the
+counters, :mod:`~vr_driver.bus.health`) over a socket. It imports only the standard library and
+pyprofibus_vendor. Where the system allows it runs with real-time priority (``rt_priority``:
+SCHED_FIFO; see the README's "Real-time priority"), else at normal priority, and says which.
+
+**The driver's side** is :class:`BusProcessMaster`, a stand-in for the DpMaster that the link
+supervisor (vr_driver.driver.link) and the I/O line (vr_driver.driver.stations) use unchanged: its
+:meth:`~BusProcessMaster.cycle` waits for the bus process's next report (or a :meth:`poke`) and
+replays its state changes through ``on_state_change`` in order, its slaves' ``outputs`` go to the
+bus process at once. The driver's loop is paced by the bus (``paced``), not the other way round.
+
+Rules:
+
+- **The bus never waits for the driver.** It cycles at its rate with the outputs the driver sent
+  last. A DP master repeats its output image every cycle anyway: a record repeated is never a
+  command repeated (the protocols' handshake and sequence numbers count each command once). Reports
+  go out through a thread of their own: a driver that does not read them never blocks a cycle
+  (the newest report wins; state changes are kept in order).
+- **Exactly once across a reset.** When the controller's card leaves Data_Exchange (its watchdog, a
+  new Set_Prm), its outputs become the idle record at once, and every outputs message carries the
+  Data_Exchange session it was made for: one made before the driver learnt of the new session is
+  dropped. The card's first records of a new session are the idle record, until the driver has
+  seen the new session and decided anew.
+- **The driver dies** (its socket ends) **or falls silent** for ``node_timeout``: the bus process
+  sends the controller's stop record (the driver sends it beside each change of the outputs: the
+  protocol's stop for what runs, vr_driver.protocol ``stop_record``) for ``stop_hold`` seconds,
+  then closes the port and ends; the card's watchdog then makes the outputs safe.
+- **The bus process dies**: the driver's next :meth:`~BusProcessMaster.cycle` raises
+  :class:`~pyprofibus_vendor.errors.PhyError` naming it; the link supervisor reports a port error
+  (robot_status, /diagnostics) and its reconnection starts a new bus process.
+"""
+from __future__ import annotations
+
+import errno as errno_mod
+import logging
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from typing import Any, Callable, Dict, List, Optional, Tuple
+
+from pyprofibus_vendor.dp_master import (BusTiming, DpMaster, MasterCounters, MasterSlaveState,
+                                         SlaveCounters, SlaveSpec)
+from pyprofibus_vendor.errors import DpError, PhyError, ProfibusError
+
+from .health import BusHealth, BusHealthSummary
+
+log = logging.getLogger("vr_driver.bus")
+
+__all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "set_priority", "main"]
+
+_CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
+#: state changes kept for a driver that does not read (the oldest are dropped beyond)
+MAX_EVENTS = 1000
+#: [s] how often the health summary (a sort of the last minute's gaps) is made
+SUMMARY_PERIOD = 1.0
+
+
+@dataclass(frozen=True)
+class BusSettings:
+    """Everything the bus process needs (pickled to it at start)."""
+
+    device: str
+    baud: int
+    master_address: int
+    timing: BusTiming
+    cycle_rate_hz: float
+    controller: int                      # the controller's slave address
+    idle_record: bytes                   # the controller's record that asks nothing
+    watchdog: Optional[float]            # the card's watchdog [s] (None: off)
+    backoff_max: float = 1.0
+    dx_tolerance: float = 0.0
+    retry_steps: bool = True
+    rt_priority: int = 0                 # SCHED_FIFO priority (1..99); 0: normal scheduling
+    node_timeout: float = 1.0            # [s] no word from the driver this long: it is dead
+    stop_hold: float = 2.0               # [s] the stop record is sent this long before the end
+
+    @property
+    def period(self) -> float:
+        return 1.0 / self.cycle_rate_hz
+
+    @property
+    def cycle_timeout(self) -> float:
+        return max(0.2, 2.0 / self.cycle_rate_hz)
+
+
+def set_priority(priority: int) -> str:
+    """Ask for SCHED_FIFO at ``priority`` (0: do not ask); returns how the process is scheduled, in
+    words (with the remedy when the system refused)."""
+    if priority <= 0:
+        return "normal scheduling (rt_priority 0)"
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
+    except (PermissionError, OSError, AttributeError) as exc:
+        return ("normal scheduling: real-time priority %d refused (%s); allow it with `ulimit -r %d` "
+                "(limits.conf rtprio) or `setcap cap_sys_nice+ep` on the Python binary, or start the "
+                "driver under `chrt -f %d`" % (priority, getattr(exc, "strerror", None) or exc,
+                                               priority, priority))
+    return "SCHED_FIFO %d" % priority
+
+
+class _NodeGone(Exception):
+    """The driver's end of the socket closed, or it fell silent."""
+
+
+class _Close(Exception):
+    """The driver asked the bus process to end."""
+
+
+class _ReportSender:
+    """Sends the reports from a thread of its own: the bus loop never blocks on a driver that does
+    not read. The newest report replaces an unsent one; state changes accumulate in order."""
+
+    def __init__(self, conn: Connection) -> None:
+        self._conn = conn
+        self._cond = threading.Condition()
+        self._report: Optional[Dict[str, Any]] = None
+        self._events: List[Tuple[Any, ...]] = []
+        self._final: Optional[Tuple[Any, ...]] = None
+        self.dropped_events = 0
+        self.dead = False
+        self._thread = threading.Thread(target=self._run, name="vr_driver-bus-reports", daemon=True)
+        self._thread.start()
+
+    def post(self, report: Dict[str, Any], events: List[Tuple[Any, ...]]) -> None:
+        with self._cond:
+            self._report = report
+            self._events.extend(events)
+            if len(self._events) > MAX_EVENTS:
+                self.dropped_events += len(self._events) - MAX_EVENTS
+                del self._events[:len(self._events) - MAX_EVENTS]
+            self._cond.notify()
+
+    def final(self, message: Tuple[Any, ...], timeout: float = 0.5) -> None:
+        """Send ``message`` after what is pending, then stop; wait at most ``timeout``."""
+        with self._cond:
+            self._final = message
+            self._cond.notify()
+        self._thread.join(timeout)
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while self._report is None and self._final is None:
+                    self._cond.wait()
+                report, events, final = self._report, self._events, self._final
+                self._report, self._events = None, []
+            try:
+                if report is not None:
+                    self._conn.send(("r", report, events))
+                if final is not None:
+                    self._conn.send(final)
+                    return
+            except (OSError, ValueError, EOFError):
+                self.dead = True
+                return
+
+
+class BusServer:
+    """The bus process's loop (see the module docstring). ``link``: the open serial link; tests may
+    run it in a thread with an in-memory link and a Pipe."""
+
+    def __init__(self, conn: Connection, link: Any, settings: BusSettings, scheduling: str = "",
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.conn = conn
+        self.link = link
+        self.settings = settings
+        self.clock = clock
+        self.master = DpMaster(link, settings.master_address, settings.baud, clock=clock,
+                               timing=settings.timing, backoff_max=settings.backoff_max,
+                               dx_tolerance=settings.dx_tolerance, retry_steps=settings.retry_steps,
+                               on_state_change=self._on_state)
+        self.sessions: Dict[int, int] = {}
+        self._events: List[Tuple[Any, ...]] = []
+        self.health = BusHealth(settings.period, settings.watchdog, scheduling=scheduling)
+        now = clock()
+        self._summary: BusHealthSummary = self.health.summary(now)
+        self._summary_at = now
+        self._stop_record: Optional[bytes] = None
+        self._next = now
+        self._last_heard = now
+        self._last_reply: Optional[float] = None
+        self._sender = _ReportSender(conn)
+
+    # ------------------------------------------------------------------ the driver's messages
+    def _handle(self, msg: Tuple[Any, ...]) -> None:
+        kind = msg[0]
+        if kind == "out":
+            _, address, session, data, stop = msg
+            if address == self.settings.controller:
+                if session != self.sessions.get(address):
+                    return          # made before the driver learnt of this Data_Exchange session
+                if stop is not None:
+                    self._stop_record = stop
+            try:
+                self.master.slave(address).outputs = data
+            except (DpError, ProfibusError) as exc:
+                log.error("outputs for slave %d refused: %s", address, exc)
+        elif kind == "slave":
+            spec: SlaveSpec = msg[1]
+            handle = self.master.add_slave(spec)
+            self.sessions[spec.address] = 0
+            if spec.address == self.settings.controller:
+                handle.outputs = self.settings.idle_record
+        elif kind == "cycle_at":
+            self._next = min(self._next, float(msg[1]))
+        elif kind == "close":
+            raise _Close()
+        # "tick": only that the driver is alive
+
+    def _drain(self) -> None:
+        """Every message waiting now; _NodeGone when the driver's end closed."""
+        try:
+            while self.conn.poll(0):
+                msg = self.conn.recv()
+                self._last_heard = self.clock()
+                self._handle(msg)
+        except (EOFError, OSError) as exc:
+            raise _NodeGone("the driver's end of the bus socket closed (%s)" % (
+                type(exc).__name__ if not str(exc) else exc)) from None
+
+    # ------------------------------------------------------------------ the master's events
+    def _on_state(self, slave: Any, old: MasterSlaveState, new: MasterSlaveState, reason: str) -> None:
+        address = slave.address
+        if new in _CONNECTED and old not in _CONNECTED:
+            self.sessions[address] = self.sessions.get(address, 0) + 1
+        elif old in _CONNECTED and new not in _CONNECTED and address == self.settings.controller:
+            slave.outputs = self.settings.idle_record      # exactly once across a reset
+            self.health.session_ended()
+        self._events.append((address, old.value, new.value, reason, slave.state_since,
+                             self.sessions.get(address, 0)))
+
+    # ------------------------------------------------------------------ the loop
+    def run(self) -> int:
+        """Cycle until the driver closes (0), dies (2) or the port fails (1)."""
+        try:
+            while True:
+                self._drain()
+                if self.clock() - self._last_heard > self.settings.node_timeout:
+                    raise _NodeGone("no word from the driver for %.1f s" % (self.clock() - self._last_heard))
+                if not self._cycle():
+                    return 1
+                self._wait()
+        except _Close:
+            self._end()
+            return 0
+        except _NodeGone as exc:
+            self._stop_arm(str(exc))
+            return 2
+
+    def _cycle(self) -> bool:
+        try:
+            self.master.cycle(timeout=self.settings.cycle_timeout)
+        except ProfibusError as exc:
+            log.error("serial port %s failed: %s", self.settings.device, exc)
+            self._sender.final(("fail", "serial port %s failed: %s" % (self.settings.device, exc)))
+            self._close_link()
+            return False
+        now = self.clock()
+        try:
+            ctrl = self.master.slave(self.settings.controller)
+        except ProfibusError:
+            ctrl = None
+        if ctrl is not None and ctrl.connected and ctrl.inputs_time is not None \
+                and ctrl.inputs_time != self._last_reply:
+            self._last_reply = ctrl.inputs_time
+            self.health.reply(ctrl.inputs_time)
+        if now - self._summary_at >= SUMMARY_PERIOD:
+            self._summary, self._summary_at = self.health.summary(now), now
+        events, self._events = self._events, []
+        self._sender.post(self._report(now), events)
+        return True
+
+    def _report(self, now: float) -> Dict[str, Any]:
+        slaves = []
+        for address, sessions in self.sessions.items():
+            s = self.master.slave(address)
+            slaves.append((address, s.state.value, s.state_since, sessions, s.inputs, s.inputs_time,
+                           s.last_diag, dict(vars(s.counters))))
+        return {"time": now, "counters": dict(vars(self.master.counters)), "slaves": slaves,
+                "health": self._summary, "dropped_events": self._sender.dropped_events}
+
+    def _wait(self) -> None:
+        """Until the next cycle is due; messages are handled meanwhile (one may bring it forward)."""
+        period = self.settings.period
+        self._next += period
+        now = self.clock()
+        if self._next < now:
+            self._next = now                    # late: the rate resumes from here
+        while True:
+            left = self._next - self.clock()
+            if left <= 0:
+                return
+            if self.conn.poll(left):
+                self._drain()
+
+    def _stop_arm(self, why: str) -> None:
+        """The driver is gone: the stop record for stop_hold, then the end."""
+        record = self._stop_record
+        log.error("%s: %s, then closing the port (the card's watchdog makes the outputs safe)", why,
+                  "sending the controller's stop for %.1f s" % self.settings.stop_hold if record is not None
+                  else "nothing was running")
+        if record is not None:
+            try:
+                self.master.slave(self.settings.controller).outputs = record
+            except ProfibusError as exc:
+                log.error("cannot send the stop record: %s", exc)
+            end = self.clock() + self.settings.stop_hold
+            while self.clock() < end:
+                try:
+                    self.master.cycle(timeout=self.settings.cycle_timeout)
+                except ProfibusError as exc:
+                    log.error("serial port failed while stopping the arm: %s", exc)
+                    break
+                time.sleep(max(0.0, min(self.settings.period, end - self.clock())))
+        self._close_link()
+
+    def _end(self) -> None:
+        self._close_link()
+
+    def _close_link(self) -> None:
+        try:
+            self.link.close()
+        except Exception:  # closing a dead port may fail; nothing to do about it
+            pass
+
+
+# ---------------------------------------------------------------------------- the driver's side
+class RemoteSlave:
+    """The driver's view of one slave of the bus process (the attributes of
+    :class:`~pyprofibus_vendor.dp_master.SlaveHandle` the driver reads). Setting :attr:`outputs`
+    sends them to the bus process, tagged with the Data_Exchange session they were made in."""
+
+    def __init__(self, master: "BusProcessMaster", spec: SlaveSpec, now: float) -> None:
+        self._master = master
+        self.spec = spec
+        self.address = spec.address
+        self.state = MasterSlaveState.INIT
+        self.state_since = now
+        self.session = 0                       # the bus process's Data_Exchange session count
+        self.counters = SlaveCounters()
+        self.last_diag: Any = None
+        self.stop_outputs: Optional[bytes] = None   # the controller's: what stops the arm
+        self._outputs = bytes(spec.output_size or 0)
+        self._inputs: Optional[bytes] = None
+        self._inputs_time: Optional[float] = None
+        self._sent: Optional[Tuple[Any, ...]] = None
+
+    @property
+    def connected(self) -> bool:
+        return self.state in _CONNECTED
+
+    @property
+    def outputs(self) -> bytes:
+        return self._outputs
+
+    @outputs.setter
+    def outputs(self, data: bytes) -> None:
+        data = bytes(data)
+        if len(data) != self.spec.output_size:
+            raise DpError(f"slave {self.address}: {len(data)} output bytes, expected {self.spec.output_size}")
+        self._outputs = data
+        message = ("out", self.address, self.session, data, self.stop_outputs)
+        if message != self._sent:
+            self._sent = message
+            self._master.send(message)
+
+    @property
+    def inputs(self) -> Optional[bytes]:
+        return self._inputs
+
+    @property
+    def inputs_time(self) -> Optional[float]:
+        return self._inputs_time
+
+    def inputs_age(self, now: float) -> Optional[float]:
+        return None if self._inputs_time is None else now - self._inputs_time
+
+
+class BusProcessMaster:
+    """The DpMaster stand-in of the driver's side (see the module docstring). Raises OSError or
+    PhyError with the bus process's reason when it cannot open the port."""
+
+    #: the bus keeps its own time: the driver's loop waits in :meth:`cycle`, never a period on top
+    paced = True
+
+    def __init__(self, settings: BusSettings,
+                 on_state_change: Optional[Callable[..., None]] = None,
+                 clock: Callable[[], float] = time.monotonic, start_timeout: float = 10.0) -> None:
+        self.settings = settings
+        self.on_state_change = on_state_change
+        self.clock = clock
+        self.counters = MasterCounters()
+        self.health: Optional[BusHealthSummary] = None
+        self.scheduling = ""
+        self.reports = 0
+        self._slaves: Dict[int, RemoteSlave] = {}
+        self._urgent = False
+        self._closed = False
+        ours, theirs = socket.socketpair()
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+        try:
+            self._proc = subprocess.Popen(
+                [sys.executable, "-m", "vr_driver.bus.process", str(theirs.fileno())],
+                pass_fds=(theirs.fileno(),), env=env, start_new_session=True)
+        finally:
+            theirs.close()
+        self._conn = Connection(ours.detach())
+        self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        os.set_blocking(self._wake_w, False)
+        try:
+            self._conn.send(("config", settings))
+            if not self._conn.poll(start_timeout):
+                raise PhyError("the bus process did not answer within %.0f s" % start_timeout)
+            reply = self._conn.recv()
+        except (OSError, EOFError, PhyError) as exc:
+            self.close()
+            if isinstance(exc, PhyError):
+                raise
+            raise PhyError("the bus process ended at its start (%s)" % self._exit_status()) from None
+        if reply[0] == "error":
+            self.close()
+            _, text, code = reply
+            if code:
+                raise OSError(code, text)
+            raise PhyError(text)
+        self.scheduling = reply[1]
+        log.info("bus process %d: %s on %s at %d bit/s", self._proc.pid, self.scheduling,
+                 settings.device, settings.baud)
+
+    @property
+    def pid(self) -> int:
+        return self._proc.pid
+
+    # ------------------------------------------------------------------ what the driver calls
+    def add_slave(self, spec: SlaveSpec) -> RemoteSlave:
+        slave = RemoteSlave(self, spec, self.clock())
+        self._slaves[spec.address] = slave
+        self.send(("slave", spec))
+        return slave
+
+    def slave(self, address: int) -> RemoteSlave:
+        try:
+            return self._slaves[address]
+        except KeyError:
+            raise DpError("no slave %d configured" % address) from None
+
+    def send(self, message: Tuple[Any, ...]) -> None:
+        if self._closed:
+            return
+        try:
+            self._conn.send(message)
+        except (OSError, ValueError):
+            raise PhyError("the bus process is gone (%s)" % self._exit_status()) from None
+
+    def poke(self) -> None:
+        """Wake a :meth:`cycle` waiting for the next report (a request was posted); the cycle after
+        it is asked of the bus process at once, with the outputs decided meanwhile."""
+        try:
+            os.write(self._wake_w, b"!")
+        except (BlockingIOError, OSError):
+            pass             # a wake is pending already (or we are closed)
+
+    def cycle_at(self, when: float) -> None:
+        """Ask for the next bus cycle no later than ``when`` (clock time)."""
+        self.send(("cycle_at", when))
+
+    def cycle(self, timeout: Optional[float] = None) -> bool:
+        """Wait for the bus process's next report (at most ``timeout``) and take every report that
+        came: state changes replayed in order, then the slaves' latest state and inputs. Returns
+        False when no report came (a :meth:`poke`, or the timeout). PhyError when the bus process
+        is gone."""
+        if self._urgent:
+            self._urgent = False
+            self.send(("cycle_at", 0.0))
+        self.send(("tick",))
+        ready = wait([self._conn, self._wake_r], timeout)
+        if self._wake_r in ready:
+            try:
+                while os.read(self._wake_r, 64):
+                    pass
+            except (BlockingIOError, OSError):
+                pass
+            self._urgent = True
+        return self._receive() if self._conn in ready else False
+
+    def close(self) -> None:
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self._conn.send(("close",))
+        except (OSError, ValueError):
+            pass
+        self._conn.close()
+        for fd in (self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        proc = getattr(self, "_proc", None)
+        if proc is not None:
+            try:
+                proc.wait(1.0)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(1.0)
+
+    # ------------------------------------------------------------------ reports
+    def _exit_status(self) -> str:
+        proc = getattr(self, "_proc", None)
+        code = proc.poll() if proc is not None else None
+        if code is None:
+            return "still running"
+        if code < 0:
+            try:
+                return "killed by %s" % signal.Signals(-code).name
+            except ValueError:
+                return "killed by signal %d" % -code
+        return "exit code %d" % code
+
+    def _receive(self) -> bool:
+        got = False
+        try:
+            while self._conn.poll(0):
+                msg = self._conn.recv()
+                if msg[0] == "r":
+                    self._apply(msg[1], msg[2])
+                    got = True
+                elif msg[0] == "fail":
+                    raise PhyError(msg[1])
+        except (EOFError, OSError):
+            try:
+                self._proc.wait(0.5)
+            except subprocess.TimeoutExpired:
+                pass
+            raise PhyError("the bus process ended (%s)" % self._exit_status()) from None
+        return got
+
+    def _apply(self, report: Dict[str, Any], events: List[Tuple[Any, ...]]) -> None:
+        self.reports += 1
+        for address, old, new, reason, since, session in events:
+            slave = self._slaves.get(address)
+            if slave is None:
+                continue
+            old_state, new_state = MasterSlaveState(old), MasterSlaveState(new)
+            slave.state, slave.state_since, slave.session = new_state, since, session
+            if self.on_state_change is not None:
+                self.on_state_change(slave, old_state, new_state, reason)
+        for address, state, since, session, inputs, inputs_time, diag, counters in report["slaves"]:
+            slave = self._slaves.get(address)
+            if slave is None:
+                continue
+            slave.state, slave.state_since, slave.session = MasterSlaveState(state), since, session
+            slave._inputs, slave._inputs_time, slave.last_diag = inputs, inputs_time, diag
+            for key, value in counters.items():
+                setattr(slave.counters, key, value)
+        for key, value in report["counters"].items():
+            setattr(self.counters, key, value)
+        self.health = report["health"]
+
+
+# ---------------------------------------------------------------------------- the process
+def _open_serial(device: str, baud: int) -> Any:
+    from pyprofibus_vendor.phy_serial import SerialLink
+    return SerialLink(device, baud)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    """The bus process: ``python3 -m vr_driver.bus.process FD`` (FD: its end of the socket)."""
+    argv = sys.argv[1:] if argv is None else argv
+    signal.signal(signal.SIGINT, signal.SIG_IGN)    # the driver's Ctrl-C is the driver's: we see it end
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="[vr_driver bus %(process)d] %(levelname)s %(message)s")
+    logging.getLogger("pyprofibus_vendor").setLevel(logging.WARNING)
+    conn = Connection(int(argv[0]))
+    try:
+        kind, settings = conn.recv()
+    except (EOFError, OSError):
+        return 0
+    scheduling = set_priority(settings.rt_priority)
+    try:
+        link = _open_serial(settings.device, settings.baud)
+    except (ProfibusError, OSError, ValueError) as exc:
+        code = getattr(exc, "errno", None)
+        seen = exc.__cause__ or exc.__context__
+        if not isinstance(code, int) and seen is not None:
+            code = getattr(seen, "errno", None)
+        conn.send(("error", str(exc), code if isinstance(code, int) and code in errno_mod.errorcode else None))
+        return 1
+    conn.send(("opened", scheduling))
+    if not scheduling.startswith("SCHED_FIFO"):
+        log.warning("%s", scheduling)
+    return BusServer(conn, link, settings, scheduling).run()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
