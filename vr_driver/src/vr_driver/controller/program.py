@@ -43,6 +43,15 @@ Rules of the program (also in ``doc/controller_program.md``):
   at 0 (it arms the program when it arrives, even if the program loop never saw it: the flag may
   rise in the very next telegram). A flag still raised from before the loss is answered REJECTED (held until the flag drops,
   logged with the reason) and nothing moves, so a motion never starts from a stale request.
+- Exactly once across a reset (doc/controller_program.md §4 rule 10): after the card's watchdog or
+  a new Set_Prm the program takes a new command only after the idle record came in a Data_Exchange
+  of the new session. That the program can tell is an assumption about the G2,
+  ``data_exchange_bit`` (VirtualController / SimOptions, ``--no-data-exchange-bit``; default True:
+  it reads its card's Data_Exchange status). Without it the program reads only its input bytes
+  (:mod:`vr_driver.controller.session`): v1 cannot see a reset then -- the card's safe image is its
+  idle record -- and no link loss stops the arm; the master's idle record at the start of every
+  session is what keeps v1 exactly once; v2 and v3 see the safe image (no record of theirs) and
+  stop, disarm as with the bit.
 - Link loss (the DP watchdog expired, or the master re-parameterised the slave -- also when it
   did so between two loops): the arm stops at
   once -- at the position of the watchdog deadline, so it never moves longer than the watchdog
@@ -197,6 +206,10 @@ class SimOptions:
     #: ``zero_offset`` per joint, panasonic_vr006l_support.true_model); None: the model's. The arm
     #: (its FK, the pose it reports) and the v3 program's IK use it; v2 joints are its angles
     true_model: Optional[str] = None
+    #: the G2 program can read its card's Data_Exchange status (an assumption, doc/controller_program.md
+    #: §7 / §10.9): it sees every reset of the card and takes the master's records of the new session
+    #: only. False: it reads nothing but its input bytes (controller.session)
+    data_exchange_bit: bool = True
 
     def __post_init__(self) -> None:
         _protocol(self.protocol)
@@ -227,6 +240,8 @@ class SimOptions:
                 "got %r" % (self.ramp_time,)), 0.0, lo_open=True))
         if self.true_model:
             _check_true_model(self.true_model)
+        if not isinstance(self.data_exchange_bit, bool):
+            raise SimError("data_exchange_bit must be true or false, got %r" % (self.data_exchange_bit,))
         try:
             pose = ControllerPose.from_sequence(self.initial_pose)
         except VrDriverError as exc:
@@ -326,9 +341,10 @@ class ControllerProgram(SessionProgram):
     """
 
     def __init__(self, slave: DpSlave, arm: SimArm, *, byte_order: Any = ByteOrder.LITTLE,
-                 execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False) -> None:
+                 execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False,
+                 data_exchange_bit: bool = True) -> None:
         self.byte_order = ByteOrder.parse(byte_order)
-        super().__init__(slave, arm, confirm_records=confirm_records)
+        super().__init__(slave, arm, confirm_records=confirm_records, data_exchange_bit=data_exchange_bit)
         self.arm: SimArm = arm
         self.log = execution_log if execution_log is not None else ExecutionLog()
         self.handshake = ControllerHandshake()
@@ -681,6 +697,9 @@ class VirtualController(Simulator):
     v3; a given ``arm`` keeps its own): robot time [s] the SimStreamArm takes from rest to full
     speed; None (default) from the kinematics' joint limits, max velocity / acceleration (0.1 s for
     the model); v1's SimArm ignores it.
+    ``data_exchange_bit`` (default True): whether the program can read its card's Data_Exchange
+    status (an assumption about the G2, :mod:`vr_driver.controller.session`); False: it reads only
+    its input bytes, as a G2 whose card offers no such status would.
     ``true_model``: a YAML file of the simulated robot's own dimensions, joint limits and joint zero
     offsets (panasonic_vr006l_support.true_model; None, default: the model's). The arm (its FK: the
     pose it reports and where it really is; v1's SimArm also its IK and planner) and the v3
@@ -705,7 +724,7 @@ class VirtualController(Simulator):
                  brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT,
                  interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD, ring_size: int = DEFAULT_RING_SIZE,
                  controller_kinematics: Optional[Kinematics] = None, ramp_time: Optional[float] = None,
-                 true_model: Optional[str] = None) -> None:
+                 true_model: Optional[str] = None, data_exchange_bit: bool = True) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
@@ -713,7 +732,8 @@ class VirtualController(Simulator):
                                   byte_order=ByteOrder.parse(byte_order).value, log_file=log_file,
                                   brake_time=brake_time, protocol=_protocol(protocol).name,
                                   interpreter_lookahead=interpreter_lookahead, ring_size=ring_size,
-                                  ramp_time=ramp_time, true_model=true_model)
+                                  ramp_time=ramp_time, true_model=true_model,
+                                  data_exchange_bit=data_exchange_bit)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         if self.options.true_model:
@@ -750,19 +770,20 @@ class VirtualController(Simulator):
         self.execution_log = ExecutionLog()
         self.slave = robot_slave(self.options.address, clock, self.protocol)
         self.program: Union[ControllerProgram, ControllerProgramV2, ControllerProgramV3]
+        dx_bit = self.options.data_exchange_bit
         if cartesian_stream:
             self.program = ControllerProgramV3(self.slave, arm, kinematics=controller_kinematics,
                                                ring_size=self.options.ring_size,
                                                byte_order=self.options.byte_order,
                                                execution_log=self.execution_log,
-                                               confirm_records=confirm_records)
+                                               confirm_records=confirm_records, data_exchange_bit=dx_bit)
         elif streams:
             self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
-                                               confirm_records=confirm_records)
+                                               confirm_records=confirm_records, data_exchange_bit=dx_bit)
         else:
             self.program = ControllerProgram(self.slave, arm, byte_order=self.options.byte_order,
                                              execution_log=self.execution_log,
-                                             confirm_records=confirm_records)
+                                             confirm_records=confirm_records, data_exchange_bit=dx_bit)
         self._cond = threading.Condition()
         super().__init__()
         self.overruns = 0
@@ -987,6 +1008,10 @@ def _parser() -> argparse.ArgumentParser:
                         "the layout of kinematics_vr006l.yaml plus zero_offset [rad] per joint (reported angle "
                         "= true angle - zero_offset); default: the model's. The arm and the v3 program's IK "
                         "use it, the driver keeps the model: a robot that differs from the model")
+    p.add_argument("--no-data-exchange-bit", dest="data_exchange_bit", action="store_false",
+                   help="the program reads only its input bytes, not its card's Data_Exchange status (a G2 "
+                        "whose card offers none): v1 then cannot see a reset of the card, v2 / v3 see it in "
+                        "the card's safe image (doc/controller_program.md §4 rule 10)")
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -1053,7 +1078,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                              loop_period=args.loop_period, byte_order=args.byte_order,
                              log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
                              interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size,
-                             ramp_time=args.ramp_time, true_model=args.true_model)
+                             ramp_time=args.ramp_time, true_model=args.true_model,
+                             data_exchange_bit=args.data_exchange_bit)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -1067,7 +1093,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                        brake_time=options.brake_time, protocol=options.protocol,
                                        interpreter_lookahead=options.interpreter_lookahead,
                                        ring_size=options.ring_size, ramp_time=options.ramp_time,
-                                       true_model=options.true_model)
+                                       true_model=options.true_model,
+                                       data_exchange_bit=options.data_exchange_bit)
         controller.start()
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)

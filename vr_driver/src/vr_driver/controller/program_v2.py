@@ -75,8 +75,8 @@ class ControllerProgramV2(SessionProgram):
     waits_ahead = V2.send_ahead - V2.look_ahead_slots
 
     def __init__(self, slave: DpSlave, arm: SimStreamArm, *, execution_log: Optional[ExecutionLog] = None,
-                 confirm_records: bool = False) -> None:
-        super().__init__(slave, arm, confirm_records=confirm_records)
+                 confirm_records: bool = False, data_exchange_bit: bool = True) -> None:
+        super().__init__(slave, arm, confirm_records=confirm_records, data_exchange_bit=data_exchange_bit)
         self.arm: SimStreamArm = arm
         self.log = execution_log if execution_log is not None else ExecutionLog()
         self.last_feedback: Optional[FeedbackV2] = None

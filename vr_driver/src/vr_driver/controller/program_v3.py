@@ -89,11 +89,13 @@ class ControllerProgramV3(ControllerProgramV2):
 
     def __init__(self, slave: DpSlave, arm: SimStreamArm, *, kinematics: Optional[Kinematics] = None,
                  ring_size: int = DEFAULT_RING_SIZE, byte_order: Any = ByteOrder.LITTLE,
-                 execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False) -> None:
+                 execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False,
+                 data_exchange_bit: bool = True) -> None:
         if isinstance(ring_size, bool) or not isinstance(ring_size, int) or ring_size < 1:
             raise MotionError("ring_size must be an integer >= 1, got %r" % (ring_size,))
         self.byte_order = ByteOrder.parse(byte_order)     # before the slave's hooks may decode
-        super().__init__(slave, arm, execution_log=execution_log, confirm_records=confirm_records)
+        super().__init__(slave, arm, execution_log=execution_log, confirm_records=confirm_records,
+                         data_exchange_bit=data_exchange_bit)
         self.ring_size = ring_size
         self.kin = kinematics if kinematics is not None else Kinematics.default()
         self.ring: Deque[CartesianTarget] = collections.deque()

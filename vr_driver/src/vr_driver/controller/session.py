@@ -18,6 +18,25 @@ protocols share (doc/controller_program.md, §4 rule 9 and §9.3 rules 5 and 7):
   expired, so the arm never moves longer than the watchdog time after the master's last telegram.
 - A record that does not decode is no command, counted in :attr:`bad_records` (a warning once per
   distinct record).
+
+Exactly once across a reset (doc/controller_program.md §4 rule 10, §9.3 rule 5, §10.4 rule 3): after
+the card's watchdog or a new Set_Prm / Chk_Cfg the program takes nothing it could have read before
+the reset; it takes a new command only after an idle record read in the new session. How a program
+knows that a reset happened is an assumption about the G2 (``data_exchange_bit``):
+
+- ``data_exchange_bit=True`` (default): the program reads a status of its card that says "in
+  Data_Exchange, with the master's record of this session" -- set at the master's first
+  Data_Exchange telegram, cleared when the card leaves Data_Exchange, a loss kept until the next
+  program loop has read it. The virtual program reads it from the slave's session (its state hooks):
+  a loss between two loops is seen, and the card's safe image is never taken for a record.
+- ``data_exchange_bit=False``: the program reads nothing but its input bytes as the card holds them
+  at each loop (the two-telegram rule: read equal in two loops). The card writes its safe image
+  (all zero) into them when it leaves Data_Exchange, and the program sees a reset only there: where the safe image is no record of the protocol (v2, v3: version byte 0), a
+  loop that reads it is a link loss (the arm stops, the program disarms); where it reads as the
+  idle record (v1: flag 0, all zero) the program cannot tell a reset at all -- it releases a held
+  DONE on it like on the master's flag 0, so exactly once across a reset then rests on the master,
+  whose first record of every session is the idle record (driver/link.py). A reset over before any
+  loop read the safe image is not seen either; the records go on as if there was none.
 """
 from __future__ import annotations
 
@@ -27,7 +46,7 @@ from typing import Any, Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveState
 
-from ..errors import ProtocolError
+from ..errors import ProtocolError, VrDriverError
 from ..protocol.v1 import StatusBits
 
 __all__ = ["SessionProgram", "arm_status_bits"]
@@ -60,10 +79,15 @@ class SessionProgram:
     program loop.
     """
 
-    def __init__(self, slave: DpSlave, arm: Any, *, confirm_records: bool = False) -> None:
+    def __init__(self, slave: DpSlave, arm: Any, *, confirm_records: bool = False,
+                 data_exchange_bit: bool = True) -> None:
+        if not isinstance(data_exchange_bit, bool):
+            raise VrDriverError("data_exchange_bit must be True or False, got %r" % (data_exchange_bit,))
         self.slave = slave
         self.arm = arm
         self.confirm_records = confirm_records
+        #: the program reads its card's Data_Exchange status (True) or only its input bytes (False)
+        self.data_exchange_bit = data_exchange_bit
         self.loops = 0
         self.bad_records = 0
         self.link_losses = 0
@@ -80,6 +104,12 @@ class SessionProgram:
         self._last_arrival: Optional[bytes] = None     # the session's latest telegram (unconfirmed)
         self._zero_seen = False                         # a (confirmed) idle record came
         self._left_reason = ""
+        # data_exchange_bit=False: the input bytes read at the last loop, the record they confirmed
+        # (read equal in two loops, or at once without confirm_records), whether the link was up
+        self._last_read: Optional[bytes] = None
+        self._view: Optional[bytes] = None
+        self._bytes_link_up = False
+        self._safe_is_record = self._decodes(bytes(slave.output_size))
         self._chained_outputs = slave.on_outputs
         self._chained_state = slave.on_state_change
         slave.on_outputs = self._on_outputs
@@ -126,16 +156,33 @@ class SessionProgram:
         except ProtocolError:
             return False
 
+    def _decodes(self, record: bytes) -> bool:
+        try:
+            self.decode_record(record)
+        except ProtocolError:
+            return False
+        return True
+
     # ---------------------------------------------------------------------------- read-outs
     @property
     def connected(self) -> bool:
-        """True while the slave was in Data_Exchange at the last loop."""
+        """True while the link was up at the last loop: the slave in Data_Exchange
+        (``data_exchange_bit``), else a record in the input bytes that is not the card's safe image."""
+        if not self.data_exchange_bit:
+            return self._bytes_link_up
         return self._active_session is not None
 
     @property
     def armed(self) -> bool:
         """True once an idle record was seen in the current session."""
         return self._armed
+
+    @property
+    def sees_resets(self) -> bool:
+        """Whether this program can tell that its card was reset (watchdog, new Set_Prm): with the
+        card's Data_Exchange status always; from its input bytes only where the card's safe image
+        (all zero) is no record of the protocol (v2, v3; not v1, whose idle record it is)."""
+        return self.data_exchange_bit or not self._safe_is_record
 
     # ------------------------------------------------------------------------------ the loop
     def read_command(self, now: float) -> Tuple[Any, bool]:
@@ -144,6 +191,8 @@ class SessionProgram:
         the command (None: none, or it did not decode) and whether it is a request that came while
         the program was disarmed."""
         self.loops += 1
+        if not self.data_exchange_bit:
+            return self._read_bytes_only(now)
         deadline = self.slave.next_deadline()
         self.slave.step(now)                        # expire the watchdog here, not a poll later
         connected = self.slave.state is SlaveState.DATA_EXCH
@@ -157,6 +206,40 @@ class SessionProgram:
         self._active_session = session if connected else None
         self._deadline = self.slave.next_deadline() if connected else None
         command = self._decode(raw) if connected and raw is not None else None
+        return self._arm(command)
+
+    def _read_bytes_only(self, now: float) -> Tuple[Any, bool]:
+        """:meth:`read_command` of a program that reads nothing but its input bytes
+        (``data_exchange_bit=False``), as the card holds them at this loop (the master's last
+        telegram, or the card's safe image). The two-telegram rule becomes "read equal in two
+        loops" (what such a program can check). The safe image (all zero), where it is no record of
+        the protocol, is a link loss when it first shows; a record arms / is stale as with the bit."""
+        self.slave.step(now)                        # the card's own watchdog (not the program's doing)
+        read = bytes(self.slave.outputs)
+        if not self.confirm_records or read == self._last_read:
+            self._view = read
+        self._last_read = read
+        raw = self._view
+        if raw is None:
+            self.last_command = None
+            return None, False
+        if not self._safe_is_record and not any(raw):
+            if self._bytes_link_up:
+                self._bytes_link_up = False
+                self.link_losses += 1
+                self._armed = False
+                why = "link to the master lost (the card's safe image in the inputs: watchdog or new Set_Prm)"
+                log.warning("%s: stopping the arm, resetting the program", why)
+                self.on_link_lost(why, max(now, self.arm.last_step_time))
+            self.last_command = None
+            return None, False
+        command = self._decode(raw)
+        if command is not None:
+            self._bytes_link_up = True
+        return self._arm(command)
+
+    def _arm(self, command: Any) -> Tuple[Any, bool]:
+        """Arm on an idle record; a request while disarmed is stale. Returns ``(command, stale)``."""
         self.last_command = command
         stale = False
         if command is not None and not self._armed:
