@@ -608,7 +608,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     conn.send(("opened", scheduling))
     if not scheduling.startswith("SCHED_FIFO"):
         log.warning("%s", scheduling)
-    return BusServer(conn, link, settings, scheduling).run()
+    return BusServer(conn, link, settings, "process %d, %s" % (os.getpid(), scheduling)).run()
 
 
 if __name__ == "__main__":

@@ -101,6 +101,7 @@ class InterfaceNode:
                                 % (self.core.slave_config.address, self.core.bus.phy.device))
         self.diag.add("link", self._diag_link)
         self.diag.add("controller", self._diag_controller)
+        self.diag.add("bus", self._diag_bus)
         self.diag.period = params.diagnostics_period
         self.io_server = IoServer(self.core, params, self.diag)      # set_io, get_io, io_states
         # a plain ActionServer: a preview_only goal runs beside a moving goal and never preempts it
@@ -236,6 +237,31 @@ class InterfaceNode:
             stat.add("link %s" % key.replace("_", " "), str(getattr(c, key)))
         if s.last_diag:
             stat.add("last slave diag", s.last_diag)
+        return stat
+
+    def _diag_bus(self, stat):
+        """The card's view of the master: the gaps between its Data_Exchange replies over the last
+        minute (vr_driver.bus.health), WARN when one passed half its watchdog."""
+        h = self.core.status().bus_health
+        if h is None:
+            stat.summary(DiagnosticStatus.WARN, "no bus yet (the port is not open)")
+            return stat
+        if h.late:
+            stat.summary(DiagnosticStatus.WARN, "a gap of %.0f ms between two Data_Exchange cycles in the "
+                         "last minute: more than half the card's watchdog (%.0f ms)" % (
+                             1e3 * h.max_gap, 1e3 * h.watchdog))
+        else:
+            stat.summary(DiagnosticStatus.OK, h.describe())
+        stat.add("longest gap, last minute [ms]", "%.1f" % (1e3 * h.max_gap))
+        stat.add("jitter p99, last minute [ms]", "%.1f" % (1e3 * h.jitter_p99))
+        stat.add("jitter max, last minute [ms]", "%.1f" % (1e3 * h.jitter_max))
+        stat.add("nominal period [ms]", "%.1f" % (1e3 * h.period))
+        stat.add("watchdog [ms]", "off" if h.watchdog is None else "%.0f" % (1e3 * h.watchdog))
+        stat.add("watchdog margin [ms]", "-" if h.margin is None else "%.1f" % (1e3 * h.margin))
+        stat.add("replies, last minute", str(h.replies))
+        stat.add("longest gap since start [ms]", "%.1f" % (1e3 * h.worst_gap))
+        stat.add("gaps past half the watchdog since start", str(h.late_gaps))
+        stat.add("bus process", h.scheduling)
         return stat
 
     def _diag_controller(self, stat):
