@@ -378,7 +378,10 @@ class RemoteSlave:
         message = ("out", self.address, self.session, data, self.stop_outputs)
         if message != self._sent:
             self._sent = message
-            self._master.send(message)
+            try:
+                self._master.send(message)
+            except PhyError:
+                pass        # the bus process is gone: the bus thread's next cycle() says so
 
     @property
     def inputs(self) -> Optional[bytes]:
@@ -412,6 +415,7 @@ class BusProcessMaster:
         self._slaves: Dict[int, RemoteSlave] = {}
         self._urgent = False
         self._closed = False
+        self._send_lock = threading.Lock()
         ours, theirs = socket.socketpair()
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
@@ -463,12 +467,15 @@ class BusProcessMaster:
             raise DpError("no slave %d configured" % address) from None
 
     def send(self, message: Tuple[Any, ...]) -> None:
-        if self._closed:
-            return
-        try:
-            self._conn.send(message)
-        except (OSError, ValueError):
-            raise PhyError("the bus process is gone (%s)" % self._exit_status()) from None
+        """One message to the bus process (any thread: set_io sets an I/O station's outputs from a
+        service thread while the bus thread sends the controller's; one message at a time)."""
+        with self._send_lock:
+            if self._closed:
+                return
+            try:
+                self._conn.send(message)
+            except (OSError, ValueError):
+                raise PhyError("the bus process is gone (%s)" % self._exit_status()) from None
 
     def poke(self) -> None:
         """Wake a :meth:`cycle` waiting for the next report (a request was posted); the cycle after
@@ -502,14 +509,15 @@ class BusProcessMaster:
         return self._receive() if self._conn in ready else False
 
     def close(self) -> None:
-        if self._closed:
-            return
-        self._closed = True
-        try:
-            self._conn.send(("close",))
-        except (OSError, ValueError):
-            pass
-        self._conn.close()
+        with self._send_lock:
+            if self._closed:
+                return
+            self._closed = True
+            try:
+                self._conn.send(("close",))
+            except (OSError, ValueError):
+                pass
+            self._conn.close()
         for fd in (self._wake_r, self._wake_w):
             try:
                 os.close(fd)
