@@ -28,6 +28,12 @@ Rules (``doc/controller_program.md``):
   divided by ``speed_factor`` like every motion), so it comes to rest ``brake_time / 2`` of path
   time further on; ``moving`` stays true until then. ``brake_time`` 0 halts at once.
 - Clearing a fault does not resume an aborted motion: the master must send a new target.
+- **The configuration of a PTP target** (``configuration``, :class:`~vr_driver.kinematics.solver.
+  ConfigurationRule`; an assumption about the G2, doc/controller_program.md §7): its IK solution
+  nearest the joints of the previous target the arm began (``previous_target``, the default; the
+  arm's joints before the first) or nearest the arm's joints (``current_joints``). They differ only
+  after a motion that stopped short of its target. A LIN / CIRC follows its path from where the arm
+  is, whatever the rule.
 
 Thread safety: every public method takes the arm's lock, so injections from a ROS service thread
 and the program loop may interleave freely.
@@ -45,8 +51,8 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from .. import validate
-from ..errors import MotionError, VrDriverError
-from ..kinematics.solver import Kinematics
+from ..errors import KinematicsError, MotionError, PoseError, VrDriverError
+from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..kinematics.preview import MotionPlanner, MotionSettings, MoveType, Trajectory
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
 from ..protocol.v1 import INT16_MAX, INT16_MIN, round_half_away
@@ -213,10 +219,16 @@ class ArmBase:
     from the SRDF's ``home`` state), the read-outs, and e-stop, drives and error as on a real G2:
     the e-stop cuts the drive power, and releasing it leaves the drives off until they are switched
     on again (refused while the e-stop is pressed); setting any fault stops a motion at once
-    (``self._abort(reason, now)``, the arm's)."""
+    (``self._abort(reason, now)``, the arm's). ``configuration``: the controller's rule for the
+    joint solution of a Cartesian target (:meth:`configuration_seed`)."""
 
     def _init_arm(self, kinematics: Optional[Kinematics], speed_factor: float, brake_time: float,
-                  initial_pose: Any, initial_joints: Optional[Sequence[float]], clock: Clock) -> None:
+                  initial_pose: Any, initial_joints: Optional[Sequence[float]], clock: Clock,
+                  configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
+        try:
+            self.configuration = ConfigurationRule.parse(configuration)
+        except PoseError as exc:
+            raise MotionError("configuration: %s" % exc) from None
         speed_factor = validate.number(speed_factor, lambda _: MotionError(
             "speed_factor must be a finite number > 0, got %r" % (speed_factor,)), 0.0, lo_open=True, text=False)
         self.brake_time = validate.number(brake_time, lambda _: MotionError(
@@ -239,6 +251,25 @@ class ArmBase:
         self._last_step = -math.inf                       # clock time of the last position update
 
     def _abort(self, reason: str, now: Optional[float]) -> bool:
+        raise NotImplementedError
+
+    def configuration_seed(self, previous: Optional[Sequence[float]]) -> Tuple[float, ...]:
+        """The joints the controller takes a Cartesian target's IK solution nearest to, by its
+        ``configuration`` rule: ``previous`` (the joints of the previous target it took; None when
+        there is none) under ``previous_target``, the arm's joints now under ``current_joints``."""
+        with self._lock:
+            return self.configuration.seed(previous, self._joints)
+
+    def snapshot(self) -> Tuple[bool, ControllerPose, Tuple[float, ...]]:
+        """(moving, the exact pose, the joints) read together under the arm's lock. Read one by
+        one from another thread they may straddle a program loop: a motion that begins between
+        them (at speed_factor 100 a joint turns tens of degrees in one 10 ms loop) pairs the rest
+        pose with the joints of the next move."""
+        with self._lock:
+            return self.moving, self._pose, self._joints
+
+    @property
+    def moving(self) -> bool:
         raise NotImplementedError
 
     @property
@@ -338,18 +369,20 @@ class SimArm(ArmBase):
     """A simulated VR-006L: joints, planned motions played back ``speed_factor`` times faster, faults.
 
     ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
-    SRDF's ``home`` state (PoseError / a KinematicsError if it is not reachable).
+    SRDF's ``home`` state (PoseError / a KinematicsError if it is not reachable). ``configuration``:
+    the rule for a PTP target's joint solution (module docstring).
     """
 
     def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MotionPlanner] = None, *,
                  speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
                  initial_joints: Optional[Sequence[float]] = None,
                  settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
-                 brake_time: float = 0.0) -> None:
-        self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock)
+                 brake_time: float = 0.0, configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
+        self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock, configuration)
         self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
         self._motion: Optional[_Motion] = None
         self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
+        self._target: Optional[Tuple[float, ...]] = None  # the joints of the last target begun
 
     # ------------------------------------------------------------------------------- read-outs
     @property
@@ -403,8 +436,19 @@ class SimArm(ArmBase):
         """The trajectory a motion to ``target`` would follow from the current joints (raises the
         planner's VrDriverError when it cannot)."""
         with self._lock:
-            start = self._joints
-        return self.planner.plan(MoveType.parse(move_type), start, target, via)
+            return self._plan(MoveType.parse(move_type), target, via)
+
+    def _plan(self, kind: MoveType, target: Any, via: Any) -> Trajectory:
+        """The motion from the current joints; a PTP to the target's solution by the rule."""
+        seed = self.configuration_seed(self._target)
+        if kind is not MoveType.PTP or seed == self._joints:
+            return self.planner.plan(kind, self._joints, target, via)
+        pose = target if isinstance(target, ControllerPose) else ControllerPose.from_sequence(target)
+        try:
+            goal = self.kin.ik_pose(pose, seed=seed)
+        except KinematicsError as exc:
+            raise type(exc)("PTP target %s: %s" % (pose, exc)) from exc
+        return self.planner.ptp_joints(self._joints, goal)
 
     def begin(self, move_type: Any, target: Any, via: Any = None, now: Optional[float] = None
               ) -> Tuple[bool, str]:
@@ -421,10 +465,11 @@ class SimArm(ArmBase):
                 kind = MoveType.parse(move_type)
                 if kind is MoveType.CIRC and via is None:
                     return False, "circular end point without a stored via point"
-                traj = self.planner.plan(kind, self._joints, target, via)
+                traj = self._plan(kind, target, via)
             except VrDriverError as exc:
                 return False, "%s: %s" % (type(exc).__name__, exc)
             self._result = None
+            self._target = traj.goal
             self._last_step = max(self._last_step, now)
             self._motion = _Motion(traj, now, kind)
             if traj.duration <= 0.0:      # already there

@@ -45,6 +45,10 @@ Motion model (doc/controller_program.md §6 and §9):
   at the position of that moment and drop the queue.
 - States: MOVING (a segment runs), STOPPING (braking), WAITING (at rest at ``done_seq``'s point after
   a target with smooth > 0 and nothing queued), IDLE (at rest otherwise).
+- **The configuration rule** (``configuration``, v3: the program solves each Cartesian target when
+  it takes it, nearest :meth:`~vr_driver.controller.arm.ArmBase.configuration_seed`): nearest the
+  joints of the previous target still in the ring or the arm (``previous_target``, the default; the
+  arm's joints when none is) or nearest the arm's joints at that moment (``current_joints``).
 
 ``speed_factor`` plays the robot time that many times faster (as SimArm); ``ramp_time`` and
 ``brake_time`` are robot time. Every target pushed ends in exactly one :class:`StreamLogEntry`,
@@ -66,7 +70,7 @@ import numpy as np
 from panasonic_vr006l_support.joint_limits import model_ramp_time
 
 from ..errors import MotionError
-from ..kinematics.solver import Kinematics
+from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
 from ..protocol.v1 import round_half_away
 from ..protocol.v2 import BLEND_MAX, BLEND_PER_LEVEL, POSITION_UNIT_MM, StreamState, blend_window, joints_to_wire
@@ -237,14 +241,15 @@ class SimStreamArm(ArmBase):
     def __init__(self, kinematics: Optional[Kinematics] = None, *, speed_factor: float = 1.0,
                  initial_pose: Any = HOME_POSE, initial_joints: Optional[Sequence[float]] = None,
                  clock: Clock = time.monotonic, brake_time: float = 0.0,
-                 ramp_time: Optional[float] = None, look_ahead: int = 1) -> None:
+                 ramp_time: Optional[float] = None, look_ahead: int = 1,
+                 configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
         if ramp_time is not None and not (isinstance(ramp_time, (int, float)) and not isinstance(ramp_time, bool)
                                           and math.isfinite(ramp_time) and ramp_time >= 0.0):
             raise MotionError("ramp_time must be a finite number >= 0, got %r" % (ramp_time,))
         if isinstance(look_ahead, bool) or not isinstance(look_ahead, int) or look_ahead < 0:
             raise MotionError("look_ahead must be an integer >= 0, got %r" % (look_ahead,))
         self.look_ahead = look_ahead
-        self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock)
+        self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock, configuration)
         if ramp_time is None:      # the model's joint limits: max velocity / acceleration (0.1 s)
             ramp_time = self.kin.limits.ramp_time
         self.ramp_time = float(DEFAULT_RAMP_TIME if ramp_time is None else ramp_time)

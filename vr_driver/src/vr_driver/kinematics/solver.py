@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import enum
 import functools
 import json
 import math
@@ -64,6 +65,7 @@ __all__ = [
     "UrdfModel",
     "JointLimits",
     "IkSettings",
+    "ConfigurationRule",
     "Kinematics",
     "build_kdl_chain",
     "read_srdf",
@@ -142,6 +144,46 @@ def build_kdl_chain(joints: Sequence[UrdfJoint]) -> "kdl.Chain":
             kjoint = kdl.Joint(j.name, frame.p, frame.M * kdl.Vector(*j.axis), kind)
         chain.addSegment(kdl.Segment(j.child, kjoint, frame))
     return chain
+
+
+# ========================================================================= the controller's choice
+
+class ConfigurationRule(enum.Enum):
+    """Which of a Cartesian target's joint solutions (J1 front / back, elbow, wrist flip, J4..J6
+    turns; near joint_5 = 0 the split of joint_4 / joint_6) a controller that solves the pose with
+    its own IK takes -- the G2's rule is an assumption to check on a real G2
+    (doc/controller_program.md §7, §10.9):
+
+    - ``PREVIOUS_TARGET`` (the documented assumption): the solution nearest the joints of the
+      previous target it took (the arm's joints when it has none: the first target, or none
+      pending where the program keeps none);
+    - ``CURRENT_JOINTS``: the solution nearest the arm's joints at the moment it takes the target.
+
+    The two differ only where the arm is not at the previous target then: a target taken ahead
+    while the arm is still on its way (v3's ring), or after a stop short of the previous one. The
+    virtual G2 has it as a parameter (``configuration``); the driver applies the same rule to what
+    it sent to know which joints the arm is at (:mod:`vr_driver.driver.tracking`)."""
+
+    PREVIOUS_TARGET = "previous_target"
+    CURRENT_JOINTS = "current_joints"
+
+    @classmethod
+    def parse(cls, value: Any) -> "ConfigurationRule":
+        """A rule from itself or its name (``previous_target`` / ``current_joints``); PoseError
+        naming both otherwise."""
+        if isinstance(value, ConfigurationRule):
+            return value
+        try:
+            return cls(str(value).strip().lower())
+        except ValueError:
+            raise PoseError("unknown configuration rule %r (%s)" % (value, " or ".join(r.value for r in cls))) \
+                from None
+
+    def seed(self, previous: Optional[Sequence[float]], current: Sequence[float]) -> Tuple[float, ...]:
+        """The joints the IK solution is taken nearest to: ``previous`` (the previous target's, None
+        when there is none) under PREVIOUS_TARGET, else ``current`` (the arm's)."""
+        chosen = previous if self is ConfigurationRule.PREVIOUS_TARGET and previous is not None else current
+        return tuple(float(v) for v in chosen)
 
 
 # ===================================================================================== SRDF and YAML
