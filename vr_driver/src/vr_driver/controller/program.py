@@ -94,7 +94,7 @@ from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 
 from .. import validate
 from ..errors import ProtocolError, VrDriverError
-from ..kinematics.solver import Kinematics
+from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose
 from .session import SessionProgram, arm_status_bits
 from .program_v2 import ControllerProgramV2
@@ -146,7 +146,8 @@ PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "b
                "speed_factor": "speed_factor", "initial_pose": "initial_pose", "loop_period": "loop_period",
                "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
                "protocol": "protocol", "interpreter_lookahead": "interpreter_lookahead",
-               "ring_size": "ring_size", "ramp_time": "ramp_time", "true_model": "true_model"}
+               "ring_size": "ring_size", "ramp_time": "ramp_time", "true_model": "true_model",
+               "configuration": "configuration"}
 
 #: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
 #: streamed joint targets, v3 streamed Cartesian targets for the G2 as it is
@@ -210,6 +211,9 @@ class SimOptions:
     #: §7 / §10.9): it sees every reset of the card and takes the master's records of the new session
     #: only. False: it reads nothing but its input bytes (controller.session)
     data_exchange_bit: bool = True
+    #: v1, v3: the joint solution the G2 takes for a Cartesian target (kinematics.solver.ConfigurationRule,
+    #: an assumption, doc/controller_program.md §7): previous_target or current_joints
+    configuration: Any = ConfigurationRule.PREVIOUS_TARGET.value
 
     def __post_init__(self) -> None:
         _protocol(self.protocol)
@@ -243,6 +247,10 @@ class SimOptions:
         if not isinstance(self.data_exchange_bit, bool):
             raise SimError("data_exchange_bit must be true or false, got %r" % (self.data_exchange_bit,))
         try:
+            object.__setattr__(self, "configuration", ConfigurationRule.parse(self.configuration).value)
+        except VrDriverError as exc:
+            raise SimError("configuration: %s" % exc) from None
+        try:
             pose = ControllerPose.from_sequence(self.initial_pose)
         except VrDriverError as exc:
             raise SimError("initial_pose: %s" % exc) from exc
@@ -256,7 +264,7 @@ class SimOptions:
     def from_mapping(cls, params: Mapping[str, Any]) -> "SimOptions":
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
         initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2 |
-        v3), interpreter_lookahead, ring_size (v3), ramp_time (v2, v3), true_model (a file; "" the
+        v3), interpreter_lookahead, ring_size (v3), ramp_time (v2, v3), configuration (v1, v3), true_model (a file; "" the
         model's).
         Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
@@ -697,6 +705,9 @@ class VirtualController(Simulator):
     v3; a given ``arm`` keeps its own): robot time [s] the SimStreamArm takes from rest to full
     speed; None (default) from the kinematics' joint limits, max velocity / acceleration (0.1 s for
     the model); v1's SimArm ignores it.
+    ``configuration`` (v1, v3; a given ``arm`` keeps its own): the joint solution the G2 takes for a
+    Cartesian target, ``previous_target`` (default) or ``current_joints``
+    (:class:`~vr_driver.kinematics.solver.ConfigurationRule`, an assumption: doc/controller_program.md §7).
     ``data_exchange_bit`` (default True): whether the program can read its card's Data_Exchange
     status (an assumption about the G2, :mod:`vr_driver.controller.session`); False: it reads only
     its input bytes, as a G2 whose card offers no such status would.
@@ -724,7 +735,8 @@ class VirtualController(Simulator):
                  brake_time: float = DEFAULT_BRAKE_TIME, protocol: Any = protocols.DEFAULT,
                  interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD, ring_size: int = DEFAULT_RING_SIZE,
                  controller_kinematics: Optional[Kinematics] = None, ramp_time: Optional[float] = None,
-                 true_model: Optional[str] = None, data_exchange_bit: bool = True) -> None:
+                 true_model: Optional[str] = None, data_exchange_bit: bool = True,
+                 configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
@@ -733,7 +745,8 @@ class VirtualController(Simulator):
                                   brake_time=brake_time, protocol=_protocol(protocol).name,
                                   interpreter_lookahead=interpreter_lookahead, ring_size=ring_size,
                                   ramp_time=ramp_time, true_model=true_model,
-                                  data_exchange_bit=data_exchange_bit)
+                                  data_exchange_bit=data_exchange_bit,
+                                  configuration=configuration)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         if self.options.true_model:
@@ -761,7 +774,7 @@ class VirtualController(Simulator):
                 arm = (SimStreamArm if streams else SimArm)(
                     kinematics, speed_factor=self.options.speed_factor,
                     initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
-                    brake_time=self.options.brake_time, **extra)
+                    brake_time=self.options.brake_time, configuration=self.options.configuration, **extra)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
         if isinstance(arm, SimStreamArm) != streams:
@@ -1008,6 +1021,10 @@ def _parser() -> argparse.ArgumentParser:
                         "the layout of kinematics_vr006l.yaml plus zero_offset [rad] per joint (reported angle "
                         "= true angle - zero_offset); default: the model's. The arm and the v3 program's IK "
                         "use it, the driver keeps the model: a robot that differs from the model")
+    p.add_argument("--configuration", choices=[r.value for r in ConfigurationRule],
+                   default=ConfigurationRule.PREVIOUS_TARGET.value,
+                   help="v1, v3: the joint solution the G2 takes for a Cartesian target: nearest the previous "
+                        "target's joints (default) or nearest the arm's joints (doc/controller_program.md §7)")
     p.add_argument("--no-data-exchange-bit", dest="data_exchange_bit", action="store_false",
                    help="the program reads only its input bytes, not its card's Data_Exchange status (a G2 "
                         "whose card offers none): v1 then cannot see a reset of the card, v2 / v3 see it in "
@@ -1079,7 +1096,7 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                              log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
                              interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size,
                              ramp_time=args.ramp_time, true_model=args.true_model,
-                             data_exchange_bit=args.data_exchange_bit)
+                             data_exchange_bit=args.data_exchange_bit, configuration=args.configuration)
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
@@ -1094,7 +1111,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                                        interpreter_lookahead=options.interpreter_lookahead,
                                        ring_size=options.ring_size, ramp_time=options.ramp_time,
                                        true_model=options.true_model,
-                                       data_exchange_bit=options.data_exchange_bit)
+                                       data_exchange_bit=options.data_exchange_bit,
+                                       configuration=options.configuration)
         controller.start()
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)

@@ -16,7 +16,8 @@ and these differences, through the v2 program's hooks:
   :class:`~vr_driver.kinematics.solver.Kinematics` (default: the model's, its own instance; it may
   differ from the arm's, as a real G2's model differs from the robot), choosing the solution nearest
   the joints of the previous target still in the ring or the arm (or the arm's joints when none is):
-  the G2 behaviour §7 assumes. A pose it cannot solve within the joint limits is refused
+  the G2 behaviour §7 assumes (the arm's ``configuration``: ``current_joints`` takes the arm's joints
+  always). A pose it cannot solve within the joint limits is refused
   UNREACHABLE (4); a kind other than MOVEP is refused BAD_SLOT (5): this program runs MOVEP only.
 - **The interpreter look-ahead** (``arm.look_ahead``, set from ``interpreter_lookahead``): the
   arm holds the MOVE it runs and that many more from the ring; the program hands the ring's next
@@ -132,7 +133,7 @@ class ControllerProgramV3(ControllerProgramV2):
     def prepare(self, slot: CartesianSlot, now: float) -> Tuple[Optional[StreamTarget], RejectCode, str]:
         if slot.kind is not CartesianKind.MOVEP:
             return None, RejectCode.BAD_SLOT, "this program runs MOVEP targets only, not %s" % slot.kind.name
-        seed = self._newest if self.occupancy and self._newest is not None else self.arm.joints
+        seed = self.arm.configuration_seed(self._newest if self.occupancy else None)   # the rule (§7)
         try:
             joints = self.kin.ik_pose(pose_from_wire(slot.pose), seed=seed)
         except (KinematicsError, PoseError) as exc:

@@ -11,6 +11,8 @@ existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.
 (streamed Cartesian targets); ``~interpreter_lookahead`` [1], ``~ring_size`` (v3);
 ``~ramp_time`` [unset: from the model's joint limits, max velocity / acceleration, 0.1 s] s of robot
 time the v2 / v3 arm takes from rest to full speed (e.g. 0.5: an older controller; > 0);
+``~configuration`` ["previous_target"] (v1, v3) the joint solution the G2 takes for a Cartesian
+target: nearest the previous target's joints or ``current_joints`` (doc/controller_program.md §7);
 ``~true_model`` [""] a YAML of the simulated robot's own dimensions and joint zero offsets
 (panasonic_vr006l_support.true_model; empty: the model's): the arm and the v3 program compute with
 it while the driver keeps the model, as with a real robot that differs from the model.
@@ -79,6 +81,7 @@ def main() -> int:
                                        brake_time=options.brake_time, protocol=options.protocol,
                                        interpreter_lookahead=options.interpreter_lookahead,
                                        ring_size=options.ring_size, ramp_time=options.ramp_time,
+                                       configuration=options.configuration,
                                        true_model=options.true_model)
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
