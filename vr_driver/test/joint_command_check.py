@@ -101,18 +101,32 @@ class Diagnostics:
 
 
 class Rosout:
+    """The /rosout lines (stamp [s], text), with a wait for a line."""
+
     def __init__(self):
-        self.lock = threading.Lock()
+        self.cond = threading.Condition()
         self.lines = []
         self.sub = rospy.Subscriber("/rosout", Log, self._cb, queue_size=200)
 
     def _cb(self, msg):
-        with self.lock:
-            self.lines.append(msg.msg)
+        with self.cond:
+            self.lines.append((msg.header.stamp.to_sec(), msg.msg))
+            self.cond.notify_all()
 
-    def matching(self, text):
-        with self.lock:
-            return [line for line in self.lines if text in line]
+    def matching(self, text, since=0.0):
+        with self.cond:
+            return [line for t, line in self.lines if text in line and t >= since]
+
+    def wait(self, text, timeout, since=0.0):
+        """The lines containing ``text`` stamped at or after ``since``, once there is one (else [])."""
+        end = time.monotonic() + timeout
+        with self.cond:
+            while not self.matching(text, since):
+                left = end - time.monotonic()
+                if left <= 0:
+                    return []
+                self.cond.wait(left)
+            return self.matching(text, since)
 
 
 def urdf_limits(names):
@@ -142,7 +156,7 @@ class JointCommandTest(unittest.TestCase):
         while cls.pub.get_num_connections() == 0 and time.monotonic() < end:
             time.sleep(0.05)                  # (polling the connection count: no event for it)
         assert cls.pub.get_num_connections() > 0, "nobody subscribes joint_command"
-        assert cls.diag.wait(lambda v: True, 10.0) is not None, "no joint_command diagnostics"
+        assert cls.diag.wait(lambda v: True, 30.0) is not None, "no joint_command diagnostics"
 
     # ------------------------------------------------------------------ helpers
     def command(self, positions, names=None, time_from_start=0.0):
@@ -172,9 +186,9 @@ class JointCommandTest(unittest.TestCase):
         return self.js.latest()
 
     # ------------------------------------------------------------------ streaming protocols
-    def test_01_a_sine_on_joint_1_at_50_hz_is_followed(self):
-        if not self.streams:
-            self.skipTest("protocol v1: see test_10")
+    def sine(self):
+        """Commands the sine on joint_1 from rest at RATE for DURATION: (q0, [(publish time,
+        positions)], first and last publish time, the refusal count before)."""
         q0 = self.at_rest()
         refused_before = self.refused()
         sent = []                                                  # (publish time, positions)
@@ -193,7 +207,26 @@ class JointCommandTest(unittest.TestCase):
             self.command(q, time_from_start=period)
             sent.append((now, q))
             k += 1
-        t_last = sent[-1][0]
+        return q0, sent, t0, sent[-1][0], refused_before
+
+    def test_01_a_sine_on_joint_1_at_50_hz_is_followed(self):
+        if not self.streams:
+            self.skipTest("protocol v1: see test_10")
+        # the driver must see one stream: a command later than joint_command_timeout (0.2 s) ends it
+        # at its last point by design, and a loaded machine can hold this client back that long.
+        # Such a run says nothing about following: it is run again (at most 3 runs; the driver logs
+        # the start and the end of each stream)
+        for attempt in range(1, 4):
+            q0, sent, t0, t_last, refused_before = self.sine()
+            ended = self.rosout.wait("the stream ends", 15.0, since=t_last)
+            self.assertTrue(ended, "the driver never ended the stream after the last command")
+            streams = len(self.rosout.matching("joint_command: stream started", since=t0 - 0.05))
+            if streams == 1:
+                break
+            print("joint_command: run %d reached the driver as %d streams (a command came later than "
+                  "joint_command_timeout: this client was held back)" % (attempt, streams))
+        self.assertEqual(streams, 1, "3 runs of the sine were each cut into streams")
+        period = 1.0 / RATE
 
         def commanded(t):
             return q0[0] + AMPLITUDE * math.sin(2 * math.pi * FREQUENCY * (min(max(t, t0), t_last) - t0))
@@ -211,28 +244,52 @@ class JointCommandTest(unittest.TestCase):
                              % (settle - t_last))
         # followed: the samples during the stream against the commanded sine shifted by the lag
         during = [(s, q) for s, q in self.js.since(t0 + 0.3) if s <= t_last]
-        self.assertGreaterEqual(len(during), int(0.5 * self.bus_rate * (t_last - t0 - 0.3)),
+        # (one sample per record, at most: a loaded machine slows the bus and the publisher skips
+        # records; a quarter of the nominal records is plenty for the fit)
+        self.assertGreaterEqual(len(during), int(0.25 * self.bus_rate * (t_last - t0 - 0.3)),
                                 "too few joint_states samples")
 
         def error(lag):
             return max(abs(q[0] - commanded(s - lag)) for s, q in during)
+
+        def squares(lag):
+            return sum((q[0] - commanded(s - lag)) ** 2 for s, q in during)
+        # the lag: the shift that fits the samples best on the whole (least squares); the shift of
+        # the smallest worst error followed the longest stall of the bus instead (0.082 s under load)
         lags = [0.002 * i for i in range(0, 101)]
-        lag = min(lags, key=error)
+        lag = min(lags, key=squares)
         worst = error(lag)
         others = max(abs(a - b) for _s, q in during for a, b in zip(q[1:], q0[1:]))
+        # the bus as it ran: joint_states has one sample per controller record, one record per
+        # cycle (a record the publisher skipped makes a gap of two). Deadlines count these cycles,
+        # and a stall of the bus (a gap beyond two cycles: the driver or the controller had no CPU)
+        # lets the arm fall behind the sine by its speed times the stall, then catch up
         cycle = 1.0 / self.bus_rate
-        print("joint_command: %d commands at %g Hz over %.2f s on a %g Hz bus; lag %.3f s "
-              "(= two %.3f s steps + %.1f bus cycles), %.3f deg off the shifted sine, other joints "
-              "%.4f deg; at rest at the last target %.3f s after it (%.4f deg off)"
-              % (len(sent), RATE, t_last - t0, self.bus_rate, lag, period, (lag - 2 * period) / cycle,
-                 worst / DEG, others / DEG, settle - t_last, off / DEG))
-        self.assertLessEqual(worst, 1.0 * DEG, "%.3f deg off the sine shifted by %.3f s" % (worst / DEG, lag))
+        stamps = [s for s, _q in during]
+        cycle_seen = (stamps[-1] - stamps[0]) / (len(stamps) - 1)
+        stall = max(0.0, max(b - a for a, b in zip(stamps, stamps[1:])) - 2 * cycle)
+        # the same for this test's own commands: one late by a sleep that overran leaves the arm a
+        # step behind the sine until the next
+        late = max(0.0, max(b[0] - a[0] for a, b in zip(sent, sent[1:])) - period)
+        speed = AMPLITUDE * 2 * math.pi * FREQUENCY
+        print("joint_command: %d commands at %g Hz over %.2f s on a %g Hz bus (ran at a %.2f ms cycle, "
+              "longest stall %.3f s, a command %.3f s late); lag %.3f s (= two %.3f s steps + %.1f bus cycles), %.3f deg off the "
+              "shifted sine, other joints %.4f deg; at rest at the last target %.3f s after it (%.4f deg off)"
+              % (len(sent), RATE, t_last - t0, self.bus_rate, cycle_seen * 1000, stall, late, lag, period,
+                 (lag - 2 * period) / cycle_seen, worst / DEG, others / DEG, settle - t_last, off / DEG))
+        allowed = 1.0 * DEG + speed * (stall + late)
+        self.assertLessEqual(worst, allowed, "%.3f deg off the sine shifted by %.3f s (allowed %.3f deg: 1 deg + "
+                             "%.3f s of the bus standing still + a command %.3f s late)"
+                             % (worst / DEG, lag, allowed / DEG, stall, late))
         self.assertLessEqual(others, 0.1 * DEG)
         # the lag: the controller blends only into a target it already has, so the arm runs one
         # command behind -- two steps (time_from_start) -- plus the way there and back (the bus
         # cycle that carries it, the program loop that reads it, the record that reports it): at
-        # most 4 bus cycles (measured: 3 to 4 at 100 Hz)
-        self.assertLessEqual(lag, 2 * period + 4.0 * cycle, "lag %.3f s" % lag)
+        # most 4 bus cycles as the bus ran (measured: 1 to 2 idle, 2 to 3.2 beside two CPU hogs);
+        # one command more behind would be 2 steps = 4 cycles more
+        self.assertLessEqual(lag, 2 * period + 4.0 * cycle_seen,
+                             "lag %.3f s: two %.3f s steps + %.1f cycles of %.2f ms"
+                             % (lag, period, (lag - 2 * period) / cycle_seen, cycle_seen * 1000))
         self.assertEqual(self.refused(), refused_before, self.diag.values)
 
     def assert_refused(self, positions, kind, names=None, time_from_start=0.0):
@@ -240,7 +297,7 @@ class JointCommandTest(unittest.TestCase):
         key = "refused %s" % kind
         n = int(self.diag.wait(lambda v: True, 5.0)[key])
         self.command(positions, names, time_from_start)
-        values = self.diag.wait(lambda v: int(v[key]) >= n + 1, 5.0)
+        values = self.diag.wait(lambda v: int(v[key]) >= n + 1, 15.0)
         self.assertEqual(int(values[key]), n + 1, values)
         self.assertIn(kind, values["last refusal"])
         t = rospy.Time.now().to_sec()
@@ -281,10 +338,7 @@ class JointCommandTest(unittest.TestCase):
         target[0] += 0.01
         text = self.assert_refused(target, "protocol", time_from_start=0.1)
         self.assertIn("cannot stream", text)
-        end = time.monotonic() + 5.0
-        while not self.rosout.matching("cannot stream") and time.monotonic() < end:
-            time.sleep(0.05)                      # (rosout has no event to wait for a given line)
-        self.assertTrue(self.rosout.matching("cannot stream"), "no log line with the reason")
+        self.assertTrue(self.rosout.wait("cannot stream", 5.0), "no log line with the reason")
 
 
 if __name__ == "__main__":
