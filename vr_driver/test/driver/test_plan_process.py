@@ -22,7 +22,7 @@ import pytest
 
 from _world import World
 from vr_driver.driver import planning as P
-from vr_driver.driver.plan_process import PlanningCore, PlanningProcess, SceneSnapshot
+from vr_driver.driver.plan_process import PlanningCore, PlanningProcess, PlanningProcessError, SceneSnapshot
 from vr_driver.driver.planning import DriverPlanning, PlanGoal
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
@@ -43,6 +43,8 @@ AWAY = PlanGoal(joints=(NAMES, (0.3, 0.5, -0.2, 0.0, 0.5, 0.0)))
 #: a plan that takes its whole budget (RRT* optimises until the clock stops it) on each try: a long
 #: plan without depending on how fast the machine is
 LONG = PlanGoal(pose=BEHIND, planner_id="RRTstar", planning_time=30.0)
+#: a file descriptor that is readable once a process ends; Python >= 3.9 on Linux
+_PIDFD_OPEN = getattr(os, "pidfd_open", None)
 
 
 @pytest.fixture(scope="module")
@@ -61,16 +63,21 @@ def planning(world):
 
 
 class Watched(PlanningProcess):
-    """Sets ``sent`` once a plan request is with the worker (it is planning, or about to)."""
+    """Sets ``sent`` once a plan request is with the worker (it is planning, or about to);
+    ``answer_time`` [s] (None: the real one) is how long a plan may take."""
 
     def __init__(self, core) -> None:
         super().__init__(core)
         self.sent = threading.Event()
+        self.answer_time = None
 
     def _receive(self, deadline, cancel, what):
         if what == "an answer":
             self.sent.set()
         return super()._receive(deadline, cancel, what)
+
+    def _answer_time(self, goal):
+        return self.answer_time if self.answer_time is not None else super()._answer_time(goal)
 
 
 @pytest.fixture
@@ -91,7 +98,9 @@ def in_background(fn):
 
 def test_a_plan_through_the_process_is_the_drivers_plan(world, planning, kin):
     local = DriverPlanning(world.core, kinematics=kin)
-    out = planning.plan(PlanGoal(pose=BEHIND), seed=1)
+    # a budget that a loaded machine (the worker runs niced) does not cut short: RRTConnect ends when it
+    # has a path
+    out = planning.plan(PlanGoal(pose=BEHIND, planning_time=10.0), seed=1)
     assert out.ok and out.code == P.SUCCESS, out.text
     assert out.text.startswith("planned with RRTConnect in ")
     plan = out.trajectory
@@ -150,6 +159,18 @@ def test_a_worker_killed_mid_plan_ends_the_plan_in_words_and_the_next_plan_gets_
     assert watched.pid != first and watched.workers_started == 2
 
 
+def test_a_worker_silent_past_its_budgets_is_stopped_in_words(watched):
+    first = watched.pid
+    watched.answer_time = 2.0                          # LONG plans for 30 s at least
+    out = watched.plan(LONG)
+    assert out.code == P.PLANNING_FAILED and out.trajectory is None
+    assert out.text == "no plan: the planning process (pid %d) did not send an answer in time; it was " \
+                       "stopped" % first, out.text
+    watched.answer_time = None
+    assert watched.plan(AWAY).ok
+    assert watched.pid != first and watched.workers_started == 2
+
+
 def test_a_cancel_while_planning_stops_the_worker_at_once(watched):
     first = watched.pid
     cancel = threading.Event()
@@ -169,6 +190,34 @@ def test_a_cancel_while_planning_stops_the_worker_at_once(watched):
     assert watched.plan(AWAY).ok
 
 
+@pytest.mark.skipif(_PIDFD_OPEN is None, reason="os.pidfd_open needs Python >= 3.9 on Linux")
+def test_a_worker_that_ended_between_two_plans_is_replaced_for_the_next(watched):
+    first = watched.pid
+    fd = _PIDFD_OPEN(first)
+    try:
+        os.kill(first, signal.SIGKILL)
+        assert select.select([fd], [], [], 30.0)[0], "the worker did not end"
+    finally:
+        os.close(fd)
+    out = watched.plan(AWAY)                   # no plan was in progress: this one is not lost
+    assert out.ok, out.text
+    assert watched.pid != first and watched.workers_started == 2
+
+
+def test_a_failure_inside_the_worker_is_raised_in_its_words_and_its_log_reaches_the_node(planning, caplog):
+    """A goal DriverPlanning itself raises on (in-process: the plan server's "internal error"): the
+    worker logs the traceback -- sent to the node, logged there -- and goes on."""
+    pid = planning.pid
+    bad = PlanGoal(joints=(NAMES, ("a",) * 6))
+    with caplog.at_level("WARNING", logger="vr_driver.driver"):
+        with pytest.raises(PlanningProcessError, match="the planning process failed: ValueError: could not "
+                                                       "convert string to float: 'a'"):
+            planning.plan(bad)
+    logged = [r.getMessage() for r in caplog.records if r.name == "vr_driver.driver"]
+    assert any(m.startswith("planning process: plan failed") and "Traceback" in m for m in logged), logged
+    assert planning.plan(AWAY).ok and planning.pid == pid
+
+
 def test_the_planning_does_not_run_in_the_callers_interpreter(planning):
     """The caller's CPU time over a plan that takes its whole budget is a small fraction of the plan's
     time (the worker's own clock); in-process it would be about all of it."""
@@ -179,7 +228,8 @@ def test_the_planning_does_not_run_in_the_callers_interpreter(planning):
     out = planning.plan(goal, cancel=threading.Event())        # with a cancel: the caller polls
     cpu = time.process_time() - cpu
     worker_cpu = _cpu_seconds(pid) - worker_cpu
-    assert out.code in (P.SUCCESS, P.PLANNING_FAILED), out.text     # found (or not) in 1 to 3 tries
+    # found (or not, or refused by the driver's checks) in 1 to 3 tries, each of the whole budget
+    assert out.code in (P.SUCCESS, P.PLANNING_FAILED, P.INVALID_MOTION_PLAN), out.text
     assert out.planning_time >= goal.planning_time
     assert cpu < 0.05 * out.planning_time, (cpu, out.planning_time)
     assert worker_cpu > cpu, (worker_cpu, cpu)
@@ -239,10 +289,6 @@ PARENT = textwrap.dedent("""
                       "loaded": sorted(m for m in ("ompl", "toppra") if m in sys.modules)}), flush=True)
     os._exit(0)            # no close(): the worker must end by itself
 """)
-
-
-#: a file descriptor that is readable once a process (not a child) ends; Python >= 3.9 on Linux
-_PIDFD_OPEN = getattr(os, "pidfd_open", None)
 
 
 @pytest.mark.skipif(_PIDFD_OPEN is None, reason="os.pidfd_open needs Python >= 3.9 on Linux")

@@ -24,7 +24,8 @@ delays no bus cycle: the node only sends a request and waits on a socket.
   ``socket.socketpair()`` (``pass_fds``) wrapped in a :class:`multiprocessing.connection.Connection`
   (pickled messages: ``("start", DriverParams)`` -> ``("ready", None)`` | ``("missing", ...)`` |
   ``("error", words)``; then ``("plan", PlanRequest)`` -> ``("outcome", PlanOutcome)`` |
-  ``("exception", words)``). It ends when the node's end of the socket closes (EOF: the node ended
+  ``("exception", words)``; on the way ``("log", (level, words))``: the worker's warnings, which the
+  node logs as its own). It ends when the node's end of the socket closes (EOF: the node ended
   or closed it), also in the middle of a plan; it ignores SIGINT (a Ctrl-C, roslaunch's stop of the
   process group is the node's to act on).
 - **Started once**: :meth:`PlanningProcess.start` (the plan server calls it when it starts) waits
@@ -43,7 +44,10 @@ delays no bus cycle: the node only sends a request and waits on a socket.
 - **A worker that dies** (a crash, a kill) ends the plan in progress with PLANNING_FAILED, in words
   saying the planning process died and how; a worker that does not answer within its planning
   budgets (:data:`~vr_driver.driver.planning.ATTEMPTS` x the budget) + :data:`ANSWER_MARGIN` is
-  stopped, with words. Either way a new worker is started at once, for the next plan.
+  stopped, with words (OMPL's PRMstar with a budget of 3 s never returned on this machine: in the
+  node's interpreter that hung the goal for good). Either way a new worker is started at once, for
+  the next plan. One that ended between two plans costs no plan: the next one starts a new worker
+  first.
 - **The node's side** costs a snapshot, a pickled request and a pickled trajectory per plan; while
   the worker plans the node waits on the socket (no interpreter lock held), waking every
   :data:`CANCEL_POLL` seconds to see whether the goal was cancelled.
@@ -240,6 +244,10 @@ class PlanningProcess:
                                        % (status.why_no_motion() or "no feedback from the controller"),
                                        planner_id=planner_id)
                 start = status.joints
+            if self._proc is not None and self._proc.poll() is not None:     # it ended between two plans
+                log.warning("planning process %d had ended (%s): starting a new one", self._proc.pid,
+                            _exit_words(self._proc.returncode))
+                self._restart()
             try:
                 if self._proc is None:
                     self._spawn()
@@ -252,12 +260,12 @@ class PlanningProcess:
             request = PlanRequest(goal, tuple(float(v) for v in start), seed, SceneSnapshot.of(self.core),
                                   float(self.core._min_segment()))
             try:
-                self._conn.send(("plan", request))
-                kind, payload = self._receive(t0 + self._answer_time(goal), cancel, "an answer")
+                self._send(("plan", request))
+                kind, payload = self._receive(time.monotonic() + self._answer_time(goal), cancel, "an answer")
             except _Cancelled:
                 self._restart()
                 return cancelled()
-            except (PlanningProcessError, OSError) as exc:
+            except PlanningProcessError as exc:
                 self._restart()
                 return failed("no plan: %s" % exc)
             if kind == "outcome":
@@ -293,8 +301,15 @@ class PlanningProcess:
         try:
             self._conn.send(("start", self.params))
         except OSError:
-            pass                             # it died already: the wait for it says how
+            pass                             # it died already: the wait for its start says how
         log.info("planning process %d started", proc.pid)
+
+    def _send(self, message: Tuple[str, Any]) -> None:
+        try:
+            self._conn.send(message)
+        except OSError:                      # its end is closed: it is ending
+            raise PlanningProcessError("the planning process (pid %d) died (%s)"
+                                       % (self._proc.pid, self._reap())) from None
 
     def _await_ready(self, deadline: float, cancel: Optional[threading.Event]) -> None:
         if self._ready:
@@ -311,8 +326,9 @@ class PlanningProcess:
         raise PlanningProcessError("the planning process cannot plan here: %s" % (payload,))
 
     def _receive(self, deadline: float, cancel: Optional[threading.Event], what: str) -> Tuple[str, Any]:
-        """The worker's next message; _Cancelled when ``cancel`` is set first; PlanningProcessError
-        when the worker dies or is silent until ``deadline`` (time.monotonic)."""
+        """The worker's next message (its log records logged here on the way); _Cancelled when
+        ``cancel`` is set first; PlanningProcessError when the worker dies or is silent until
+        ``deadline`` (time.monotonic)."""
         conn = self._conn
         while True:
             if cancel is not None and cancel.is_set():
@@ -322,11 +338,16 @@ class PlanningProcess:
                 raise PlanningProcessError("the planning process (pid %d) did not send %s in time; it was "
                                            "stopped" % (self._proc.pid, what))
             try:
-                if conn.poll(min(left, CANCEL_POLL) if cancel is not None else left):
-                    return conn.recv()
+                if not conn.poll(min(left, CANCEL_POLL) if cancel is not None else left):
+                    continue
+                kind, payload = conn.recv()
             except (EOFError, OSError):
                 raise PlanningProcessError("the planning process (pid %d) died (%s)"
                                            % (self._proc.pid, self._reap())) from None
+            if kind != "log":
+                return kind, payload
+            level, text = payload
+            log.log(level, "planning process: %s", text)
 
     def _reap(self) -> str:
         """How the worker ended (it closed its socket: it is ending)."""
@@ -415,6 +436,27 @@ def _exit_with_parent(fd: int) -> None:
     threading.Thread(target=watch, name="plan_process-parent", daemon=True).start()
 
 
+class _ToNode(logging.Handler):
+    """The worker's log records (the driver's, e.g. a collision check's refusal of a plan that is
+    then planned again) sent to the node, which logs them as its own (rosout); the main thread's
+    only -- the socket is the main thread's -- others' on stderr."""
+
+    def __init__(self, conn: Connection) -> None:
+        super().__init__(logging.WARNING)
+        self.conn = conn
+        self.thread = threading.get_ident()
+        self.fallback = logging.StreamHandler()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if threading.get_ident() != self.thread:
+            self.fallback.handle(record)
+            return
+        try:
+            self.conn.send(("log", (record.levelno, self.format(record))))
+        except OSError:
+            pass                             # the node is gone: so is this process, soon
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """The worker (module text): ``--fd N`` its end of the socket pair."""
     parser = argparse.ArgumentParser(prog="python3 -m vr_driver.driver.plan_process",
@@ -428,11 +470,17 @@ def main(argv: Optional[List[str]] = None) -> int:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     conn = Connection(args.fd)
     _exit_with_parent(args.fd)
+    for name in ("vr_driver", "pyprofibus_vendor"):
+        logger = logging.getLogger(name)
+        logger.addHandler(_ToNode(conn))
+        logger.propagate = False
     try:
         kind, params = conn.recv()
     except EOFError:
         return 0
     try:
+        if kind != "start":
+            raise PlanningProcessError("the first message must be the parameters, got %r" % (kind,))
         worker = _Worker(params)
     except MissingDependency as exc:
         conn.send(("missing", (exc.package, exc.module, exc.feature, str(exc))))
@@ -451,7 +499,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         except Exception as exc:  # a planner bug: the node's goal ends with it, this process goes on
             log.exception("plan failed")
             answer = ("exception", "%s: %s" % (type(exc).__name__, exc))
-        conn.send(answer)
+        try:
+            conn.send(answer)
+        except OSError:                       # the node is gone
+            return 0
 
 
 if __name__ == "__main__":
