@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
-from vr_driver.driver.core import PlanSeed
+from vr_driver.driver.tracking import CommandedPath
 from vr_driver.kinematics.preview import MotionPlanner
 from vr_driver.errors import EnvelopeError, VrDriverError
 from vr_driver.poses import ControllerPose, MoveType
@@ -229,19 +229,26 @@ def test_the_joints_follow_the_arms_configuration_through_fast_random_moves(kin)
         assert max(off) < math.radians(3.0), (moved, [round(math.degrees(v), 1) for v in off])
 
 
-def test_the_plan_seed_lies_between_the_samples_the_arm_stopped_between(kin):
+def test_the_commanded_path_places_the_arm_between_the_samples_it_stopped_between(kin):
+    """Where on the last validated plan a reported pose lies (tracking.CommandedPath): between the
+    two samples the arm stopped between, not at the nearest one; nowhere for a pose off the plan."""
     planner = MotionPlanner(kin)
     plan = planner.ptp_joints((0.2, 0.4, -0.3, 0.5, 0.8, -0.5), (0.9, 0.1, -0.6, -0.4, 1.2, 0.7))
-    seeds = PlanSeed()
-    assert seeds.at((500.0, 0.0, 500.0, 0.0, 0.0, 0.0)) is None          # no plan yet
-    seeds.follow(plan)
+    path = CommandedPath("plan", plan.positions, plan.tcp[:, :3, 3] * 1000.0, plan.tcp[:, :3, :3])
     q = np.asarray(plan.positions)
+
+    def place(joints):
+        pose = kin.fk_pose(joints)
+        return path.locate(np.array(pose.as_tuple()[:3]), pose.rotation())
     k = len(q) // 2
     stopped = 0.7 * q[k] + 0.3 * q[k + 1]
-    seed = np.asarray(seeds.at(kin.fk_pose(stopped).as_tuple()))
-    assert np.abs(seed - stopped).max() < 0.3 * np.abs(q[k + 1] - q[k]).max()
-    assert seeds.at(kin.fk_pose(q[-1]).as_tuple()) == pytest.approx(tuple(q[-1]), abs=1e-9)
-    assert seeds.at((1300.0, 800.0, 50.0, 0.0, 0.0, 0.0)) is None         # not on the plan
+    at = place(stopped)
+    assert at == pytest.approx(k + 0.3, abs=0.02)
+    assert np.abs(np.asarray(path.joints_at(at)) - stopped).max() < 0.05 * np.abs(q[k + 1] - q[k]).max()
+    path.cursor = at
+    assert path.joints_at(place(q[-1])) == pytest.approx(tuple(q[-1]), abs=1e-9)
+    far = ControllerPose(1300.0, 800.0, 50.0, 0.0, 0.0, 0.0)
+    assert path.locate(np.array(far.as_tuple()[:3]), far.rotation()) is None       # not on the plan
 
 
 # ------------------------------------------------------------------ 8. no stale good news

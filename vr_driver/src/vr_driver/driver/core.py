@@ -37,7 +37,6 @@ import time
 from dataclasses import dataclass, replace
 from typing import Callable, Deque, Dict, List, Optional, Sequence, Tuple
 
-import numpy as np
 from pyprofibus_vendor.phy import Link
 
 from ..bus.health import BusHealthSummary
@@ -56,14 +55,12 @@ from .sequencer import MotionSequencer, why_no_motion
 from .stations import ControllerIo, IoLine
 from .streaming import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGMENT_CYCLES, StreamSequencer,
                         stream_points, stream_speeds)
+from .tracking import JointTracker
 from .trajectories import ValidTrajectory, thin
 
 log = logging.getLogger("vr_driver.driver")
 #: s: the bus period while a stream's end is due (StreamSequencer.end_due)
 END_POLL_PERIOD = 0.01
-#: [mm, deg] a reported pose this near a sample of the last plan lies on it (PlanSeed): the
-#: samples are a planner step apart, a few mm / deg at full speed
-PLAN_SEED_NEAR = 30.0
 #: rad: a Cartesian stream's target, solved as the controller will (the IK solution nearest the
 #: previous target's joints), must land this near the planned point (every joint); farther, the
 #: controller would run another configuration than the one planned and checked
@@ -202,68 +199,8 @@ class TrajectoryRun:
         return n
 
 
-class PlanSeed:
-    """Where on the last validated v1 plan a reported pose lies: the joints of the plan sample
-    nearest the pose (field-wise, mm / deg), when one is within :data:`PLAN_SEED_NEAR`. The arm
-    moves along that plan (and stops on it), whatever the bus lets the driver see of it: sparse
-    samples at speed, rounded poses near a reach or joint limit or a singularity, where the nearest
-    solution to the previous one may be another configuration."""
-
-    def __init__(self) -> None:
-        self._plan = None
-        self._poses = np.zeros((0, 6))
-        self._positions: List[Tuple[float, ...]] = []
-
-    def follow(self, trajectory) -> None:
-        if trajectory is not self._plan:
-            self._plan = trajectory
-            self._poses = np.array([p.as_tuple() for p in trajectory.poses()], dtype=float)
-
-    def follow_stream(self, job: MoveJob, kin: Kinematics) -> None:
-        """Follow a stream job's points (from its start): a Cartesian stream's poses as planned."""
-        if job is self._plan or job.start is None:
-            return
-        positions = [tuple(job.start)] + [p.joints for p in job.points]
-        poses = [kin.fk_pose(job.start)] + [p.pose or kin.fk_pose(p.joints) for p in job.points]
-        self._plan = job
-        self._positions = positions
-        self._poses = np.array([p.as_tuple() for p in poses], dtype=float)
-
-    def at(self, values: Sequence[float]) -> Optional[Tuple[float, ...]]:
-        """The planned joints at ``values`` (a reported pose): the nearest sample, moved towards
-        the neighbour the pose lies towards (the arm stops between samples)."""
-        if self._plan is None or not len(self._poses):
-            return None
-        target = np.asarray(values, dtype=float)
-        dist = np.abs(_pose_delta(self._poses, target)).max(axis=1)
-        k = int(np.argmin(dist))
-        if dist[k] > PLAN_SEED_NEAR:
-            return None
-        q = np.asarray(self._plan.positions if not isinstance(self._plan, MoveJob) else self._positions)
-        best, seed = float(dist[k]), q[k]
-        for j in (k - 1, k + 1):
-            if not 0 <= j < len(q):
-                continue
-            step = _pose_delta(self._poses[j], self._poses[k])
-            span = float(step @ step)
-            if span <= 0.0:
-                continue
-            a = min(1.0, max(0.0, float(_pose_delta(target, self._poses[k]) @ step) / span))
-            off = float(np.abs(_pose_delta(target, self._poses[k] + a * step)).max())
-            if off < best:
-                best, seed = off, q[k] + a * (q[j] - q[k])
-        return tuple(float(v) for v in seed)
-
-
 def _fmt_pose(pose: ControllerPose) -> str:
     return "(%.1f, %.1f, %.1f mm, %.2f, %.2f, %.2f deg)" % pose.as_tuple()
-
-
-def _pose_delta(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a - b`` of controller poses (..., 6), the angles wrapped into [-180, 180)."""
-    d = np.array(a, dtype=float) - b
-    d[..., 3:] = (d[..., 3:] + 180.0) % 360.0 - 180.0
-    return d
 
 
 def driver_kinematics(params: DriverParams) -> Kinematics:
@@ -343,8 +280,8 @@ class DriverCore:
         self._repeated = False            # this cycle was such a repeat
         self._joints: Optional[Tuple[float, ...]] = None
         self._joints_valid = False
-        self._joints_pose: Optional[Tuple[int, ...]] = None
-        self._plan_seed = PlanSeed()
+        # the joints of the reported pose (v1, v3): the commanded branch, the configuration held
+        self.tracker = JointTracker(self.kin, self.protocol.pose_resolution)
         self._model_check: Optional[ModelCheck] = None
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
@@ -901,42 +838,24 @@ class DriverCore:
         return status
 
     def _update_joints(self, sample: LinkSample) -> Optional[Tuple[float, ...]]:
-        """The joints of the reported pose; None while the link is down. v1 reports a pose in whole
-        mm / deg, and one pose has many joint solutions (J4..J6 turn over 360 deg and more): the
-        solution is the one nearest the planned joints where the pose lies on the last validated
-        plan (the controller moves along it), else nearest the last solution -- and the seed itself
-        where rounding pushed the pose just out of the seed's configuration
-        (:meth:`Kinematics.track_pose`). A few milliseconds at most (the solver's time budget)."""
+        """The joints of the controller's latest record; None while the link is down. v2 reports
+        them; v1 and v3 report only a pose, which :class:`~vr_driver.driver.tracking.JointTracker`
+        reads against what was sent (the branch the controller is on, the commanded configuration
+        where the pose leaves it open, no step the arm cannot make). A few milliseconds at most
+        (the solver's time budget)."""
         fb = sample.feedback
         if fb is None:
-            self._joints_valid = False
+            self._joints_valid = False       # (the tracker keeps the last joints as its reference)
             return None
         reported = self.protocol.feedback_joints(fb)
         if reported is not None:            # v2 reports the joints themselves (0.001 deg)
             self._joints, self._joints_valid = reported, True
             return self._joints
-        values = fb.values
-        job = self.sequencer.view.job
-        if job is not None and job.preview is not None:
-            self._plan_seed.follow(job.preview.trajectory)
-        elif job is not None and job.points:
-            self._plan_seed.follow_stream(job, self.kin)
-        if values == self._joints_pose and self._joints_valid:
-            return self._joints
-        try:
-            # the plan's poses are mm / deg: the reported pose, not the record's values (v3 carries
-            # 0.1 mm / 0.01 deg integers there, which never lay near the plan, so the seed fell back
-            # to the last solution and a stretched-out pose rounded past the reach was lost)
-            seed = self._plan_seed.at(fb.pose.as_tuple()) or self._joints
-            self._joints = (self.kin.ik_pose(fb.pose) if seed is None
-                            else self.kin.track_pose(fb.pose, seed))
-            self._joints_valid = True
-            self._joints_pose = values
-        except VrDriverError as exc:
-            if self._joints_valid:
-                log.warning("no joint solution for the reported pose %s: %s", values, exc)
-            self._joints_valid = False
-        return self._joints if self._joints_valid else None
+        self.tracker.follow(self.sequencer.view.job)
+        joints = self.tracker.update(fb.pose, sample.record_time if sample.record_time is not None
+                                     else sample.time)
+        self._joints, self._joints_valid = self.tracker.joints, joints is not None
+        return joints
 
     def _check_model(self, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> None:
         """Once per connection (the first record of a link session) where the protocol reports the
