@@ -146,7 +146,7 @@ def test_leaving_the_path_tolerance_stops_the_run():
     s = sup.step(T0 + 1.4, True, off)
     assert s.violated and s.segment == 2 and s.path_deviation == pytest.approx(1.5)
     assert not sup.running and sup.stops_arm
-    assert sup.stop_reason == "the arm left the path tolerance near segment 2 (1.5 x the tolerance)"
+    assert sup.stop_reason == "the arm left the path tolerance near segment 2 (1.5 x the tolerance, joint_2)"
     sup.cancel()                                         # a cancel after that changes nothing
     out = sup.finish(T0 + 1.8, True, off)
     assert (out.state, out.error_code) == (ABORTED, PATH_TOLERANCE_VIOLATED)

@@ -5,17 +5,26 @@ status (or just the joints), publishes what each step returns, and sets the :cla
 
 - Per sample (:meth:`TrajectorySupervisor.step`): the feedback (desired = the plan at the sample's
   time since the start, actual, error) and the path check: the distance to the planned *path*
-  (:func:`~vr_driver.driver.trajectories.path_deviation`, in units of each joint's path tolerance;
+  (:func:`~vr_driver.driver.trajectories.path_check`, in units of each joint's path tolerance;
   v1 cannot keep the schedule, so the path is checked, not the point of the schedule). Outside it
-  (> 1) the run must stop: PATH_TOLERANCE_VIOLATED.
+  (> 1) the run must stop: PATH_TOLERANCE_VIOLATED, naming the joint.
 - Also per sample, the deviation from the plan *at the same time* (max over joints of
   |actual - plan(stamp - start)|): not a reason to stop, a figure of how well the schedule was
   kept; its largest value is in the note and in :attr:`Outcome.max_time_deviation`.
 - At the end (:meth:`TrajectorySupervisor.finish`): cancelled / preempted / shut down -> canceled;
-  the path left or a job failed -> aborted; the final joints outside the goal tolerance, or later
-  than ``goal_time_tolerance`` after the planned end -> GOAL_TOLERANCE_VIOLATED; otherwise
-  succeeded. The error_string always ends with the note on how the run's time compared with the
-  plan, in the protocol's own terms (its ``name`` and whether it ``streams``).
+  the path left or a job failed -> aborted; the final joints outside the goal tolerance, or (a
+  streaming protocol) later than ``goal_time_tolerance`` after the planned end ->
+  GOAL_TOLERANCE_VIOLATED; otherwise succeeded. The error_string always ends with the note on how
+  the run's time compared with the plan, in the protocol's own terms (its ``name`` and whether it
+  ``streams``). v1 stops at each point and moves at the controller's own speed: its time is
+  reported, never judged (``goal_time_tolerance`` is not applied, and the note says so).
+- On a Cartesian protocol with per-configuration tolerances (the trajectory's ``wire``,
+  :class:`~vr_driver.driver.trajectories.ConfigurationTolerances`): each joint is judged against
+  what the wire's resolution allows where the arm is, and within the wrist band (joint_5 near 0,
+  the plan's or the arm's) joint_4 and joint_6 by their sum -- the path check, the goal check
+  and the deviation at the same time alike. The result says so, with the goal's bound: a goal
+  on the singularity (joint_5 = 0), whose split of joint_4 / joint_6 a Cartesian controller
+  chooses itself, ends SUCCESSFUL within the sum's tolerance, and the words name it.
 
 Units: radians, seconds (the driver's clock), mm for the TCP positions it records.
 """
@@ -28,7 +37,7 @@ import numpy as np
 from typing import Any, List, Optional, Sequence, Tuple
 
 from .trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL, ValidTrajectory,
-                           path_deviation)
+                           path_check)
 
 __all__ = ["SUCCEEDED", "ABORTED", "CANCELED", "SHUTDOWN", "PREEMPTED", "CANCELLED",
            "Sample", "Outcome", "TrajectorySupervisor"]
@@ -64,8 +73,9 @@ class Sample:
     error: Tuple[float, ...]                     # actual - desired
     path_deviation: float                        # distance to the planned path, x the path tolerance
     segment: int                                 # the planned segment nearest the joints
-    time_deviation: float                        # rad, max |error| over the joints
+    time_deviation: float                        # rad, max |error| over the joints (the band's rule)
     violated: bool                               # outside the path tolerance: the run must stop
+    by_sum: bool = False                         # in the wrist band: joint_4 / joint_6 judged by their sum
 
 
 @dataclass(frozen=True)
@@ -111,6 +121,7 @@ class TrajectorySupervisor:
         self.max_path_deviation = 0.0
         self.max_time_deviation = 0.0
         self.worst_time: Optional[Tuple[int, float]] = None      # (joint index, seconds since start)
+        self.samples_by_sum = 0                   # samples judged with joint_4 / joint_6 by their sum
         self._stop_reason = ""
         self._preempted = False
         self._violated = False
@@ -159,8 +170,9 @@ class TrajectorySupervisor:
         actual = tuple(float(v) for v in joints)
         desired = tuple(self.traj.sample(t))
         error = tuple(a - d for a, d in zip(actual, desired))
-        worst = max(range(len(error)), key=lambda i: abs(error[i]))
-        off = abs(error[worst])
+        judged = self._judged(np.array([actual]), np.array([desired]))[0]
+        worst = int(np.argmax(judged))
+        off = float(judged[worst])
         self.samples += 1
         if off > self.max_time_deviation or self.worst_time is None:
             self.max_time_deviation, self.worst_time = off, (worst, t)
@@ -168,14 +180,50 @@ class TrajectorySupervisor:
             self._history.append((t, actual))
         if pose is not None:
             self.executed.append(tuple(pose.as_tuple()[:3]))
-        deviation, segment = path_deviation(self.traj, actual)
+        check = path_check(self.traj, actual)
+        deviation, segment = check.deviation, check.segment
         self.max_path_deviation = max(self.max_path_deviation, deviation)
+        self.samples_by_sum += check.by_sum
         violated = deviation > 1.0
         if violated and not self._stop_reason:
             self._violated = True
             self._stop_reason = ("the arm left the path tolerance near segment %d (%.1f x the "
-                                 "tolerance)" % (segment, deviation))
-        return Sample(t, desired, actual, error, deviation, segment, off, violated)
+                                 "tolerance, %s)" % (segment, deviation, self._joint_words(check.joint, check.by_sum)))
+        return Sample(t, desired, actual, error, deviation, segment, off, violated, check.by_sum)
+
+    def _joint_words(self, joint: int, by_sum: bool) -> str:
+        """A joint's name, or within the wrist band the sum's with the rule."""
+        wire = self.traj.wire
+        if by_sum and wire is not None and joint == wire.wrist[0]:
+            return "%s: %s" % (wire.sum_name(self.names), wire.band_words(self.names))
+        return self.names[joint]
+
+    def _judged(self, actual: np.ndarray, desired: np.ndarray) -> np.ndarray:
+        """|actual - desired| per sample and joint (rows), except where the wrist band's rule
+        applies (a per-configuration trajectory, joint_5 within the band in either): there
+        joint_4's column holds |the error of joint_4 + sign * joint_6| and joint_6's 0."""
+        err = np.abs(actual - desired)
+        wire = self.traj.wire
+        if wire is None or not len(err):
+            return err
+        i4, i5, i6 = wire.wrist
+        band = (np.abs(actual[:, i5]) < wire.band) | (np.abs(desired[:, i5]) < wire.band)
+        if band.any():
+            diff = actual - desired
+            err[band, i4] = np.abs(diff[band, i4] + wire.sign * diff[band, i6])
+            err[band, i6] = 0.0
+        return err
+
+    def _label(self, joint: int, t: float) -> str:
+        """The name of the worst joint of the deviation at the same time, ``t`` s after the start
+        (joint_4's index in the band: the sum)."""
+        wire = self.traj.wire
+        if wire is not None and joint == wire.wrist[0]:
+            q = [v for tt, v in self._history if tt == t]
+            desired = self.traj.sample(t)
+            if (q and wire.in_band(q[0])) or wire.in_band(desired):
+                return wire.sum_name(self.names)
+        return self.names[joint]
 
     def step_status(self, now: float, status: Any) -> Optional[Sample]:
         """:meth:`step` with a :class:`~vr_driver.driver.core.DriverStatus` (stamp: the time the
@@ -209,11 +257,16 @@ class TrajectorySupervisor:
         else:
             text = "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
                 slower, traj.duration, protocol.name, len(run.jobs))
+            if traj.goal_time_tolerance > 0.0:
+                text += ("; its time is reported, not judged: goal_time_tolerance (%.2f s) applies to a "
+                         "streaming protocol" % traj.goal_time_tolerance)
         delay, off, joint, at = fit if fit is not None else self.fit_delay()
         if joint is not None:
             text += ("; at most %.3f deg from the plan at the same time after a start delay of %.3f s "
                      "(%s, %.2f s after the start; %.3f deg without the delay)" % (
-                         math.degrees(off), delay, self.names[joint], at, math.degrees(self.max_time_deviation)))
+                         math.degrees(off), delay, self._label(joint, at), at, math.degrees(self.max_time_deviation)))
+        if traj.wire is not None and self.samples_by_sum:
+            text += "; %s (%d of %d samples)" % (traj.wire.band_words(self.names), self.samples_by_sum, self.samples)
         return text
 
     def fit_delay(self) -> Tuple[float, float, Optional[int], float]:
@@ -233,7 +286,7 @@ class TrajectorySupervisor:
         def judge(delay: float) -> None:
             nonlocal best
             desired = np.column_stack([np.interp(ts - delay, times, plan[:, j]) for j in range(plan.shape[1])])
-            err = np.abs(actual - desired)
+            err = self._judged(actual, desired)
             worst = float(err.max())
             if best is None or worst < best[1] - 1e-12:
                 i, j = np.unravel_index(int(err.argmax()), err.shape)
@@ -270,18 +323,60 @@ class TrajectorySupervisor:
             return outcome(ABORTED, PATH_TOLERANCE_VIOLATED, "%s; %s" % (reason, note))
         if joints is None or not joints_valid:
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "no joint state at the end; " + note)
-        final = traj.positions[-1]
-        off = [abs(a - b) for a, b in zip(joints, final)]
-        bad = [(self.names[i], off[i], t) for i, t in enumerate(traj.goal_tolerance) if off[i] > t]
+        checks, in_band = self.goal_checks(joints)
+        bad = [(name, err, tol) for name, err, tol in checks if err > tol]
         if bad:
             name, err, tol = bad[0]
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "%s ended %.4f rad from the goal (tolerance "
-                           "%.4f); %s" % (name, err, tol, note))
+                           "%.4f%s); %s" % (name, err, tol, self._band_note(joints) if in_band else "", note))
         late = elapsed - traj.duration
-        if traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
+        if self.protocol.streams and traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "reached %.2f s after the planned end "
                            "(goal_time_tolerance %.2f s); %s" % (late, traj.goal_time_tolerance, note))
+        if traj.wire is not None:
+            return outcome(SUCCEEDED, SUCCESSFUL, "%s; %s" % (note, self._goal_words(joints, checks, in_band)))
         return outcome(SUCCEEDED, SUCCESSFUL, note)
+
+    def goal_checks(self, joints: Sequence[float]) -> Tuple[List[Tuple[str, float, float]], bool]:
+        """What the goal check compares: (name, |final - goal| [rad], tolerance [rad]) per joint --
+        within the wrist band (a per-configuration trajectory whose goal or final joint_5 is within
+        it) joint_4 and joint_6 as their sum, against the sum's goal tolerance -- and whether the
+        band's rule applied."""
+        traj = self.traj
+        final = traj.positions[-1]
+        wire = traj.wire
+        off = [abs(a - b) for a, b in zip(joints, final)]
+        checks = [(self.names[i], off[i], t) for i, t in enumerate(traj.goal_tolerance)]
+        if wire is None or not (wire.in_band(final) or wire.in_band(joints)):
+            return checks, False
+        i4, _i5, i6 = wire.wrist
+        checks = [c for i, c in enumerate(checks) if i not in (i4, i6)]
+        checks.insert(i4, (wire.sum_name(self.names), abs(wire.sum_of(joints) - wire.sum_of(final)), wire.goal_sum))
+        return checks, True
+
+    def _band_note(self, joints: Sequence[float]) -> str:
+        wire = self.traj.wire
+        i5 = wire.wrist[1]
+        return "; %s ends %.2f deg from 0 (the goal's %.2f deg): %s" % (
+            self.names[i5], math.degrees(joints[i5]), math.degrees(self.traj.positions[-1][i5]),
+            wire.band_words(self.names))
+
+    def _goal_words(self, joints: Sequence[float], checks: List[Tuple[str, float, float]], in_band: bool) -> str:
+        """The goal's bound in words: the joint nearest its tolerance, and within the wrist band the
+        sum's rule and how far the controller's own split of joint_4 / joint_6 is from the plan's."""
+        finite = [c for c in checks if math.isfinite(c[2]) and c[2] > 0.0]
+        text = "the goal within the tolerances the wire's resolution allows there"
+        if finite:
+            name, err, tol = max(finite, key=lambda c: c[1] / c[2])
+            text += " (closest: %s %.3f deg of %.3f deg)" % (name, math.degrees(err), math.degrees(tol))
+        if in_band:
+            wire = self.traj.wire
+            i4, _i5, i6 = wire.wrist
+            final = self.traj.positions[-1]
+            text += ("%s; their split is the controller's: %s %.2f deg, %s %.2f deg from the plan's"
+                     % (self._band_note(joints), self.names[i4], math.degrees(joints[i4] - final[i4]),
+                        self.names[i6], math.degrees(joints[i6] - final[i6])))
+        return text
 
     def finish_status(self, now: float, status: Any) -> Outcome:
         """:meth:`finish` with a :class:`~vr_driver.driver.core.DriverStatus`."""

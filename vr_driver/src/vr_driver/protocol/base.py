@@ -77,8 +77,10 @@ class Protocol:
     - ``pose_resolution``: (mm, deg) of a reported pose and of a Cartesian target;
     - ``joint_resolution``: deg of a reported joint (None: the protocol reports no joints);
     - ``target_error``: rad, how far the arm's joints may land from a planned joint point the wire
-      carries (rounding of a Cartesian target, solved again by the controller's IK): the default
-      path and goal tolerances are built on it (:attr:`default_goal_tolerance`);
+      carries (rounding of a Cartesian target, solved again by the controller's IK), away from
+      singularities: the scalar default path and goal tolerances are built on it
+      (:attr:`default_goal_tolerance`); with the arm's kinematics a Cartesian protocol's are built
+      on the same rule per configuration (:mod:`vr_driver.driver.resolution`);
     - ``summary``: one line for logs and ``--help``.
     """
 
@@ -108,19 +110,41 @@ class Protocol:
         return self.record_length
 
     # ------------------------------------------------------------------ tolerances
+    #: rad: the least goal tolerance of a joint a goal leaves at 0 (what the stack promises a goal
+    #: reaches, where the wire allows it)
+    goal_tolerance_floor: float = math.radians(0.05)
+    #: rad: what a joint's default path tolerance allows beyond its goal tolerance (the deviation the
+    #: timing and the blending -- v1: the straight joint moves between its stop points -- add)
+    path_allowance: float = math.radians(1.0)
+
+    def goal_tolerance_for(self, wire_error: float) -> float:
+        """rad: the default goal tolerance of a joint whose position the wire can put ``wire_error``
+        [rad] off: twice that (the target's rounding, solved again by the controller, and the
+        reported pose's), at least :attr:`goal_tolerance_floor`. The rule behind
+        :attr:`default_goal_tolerance` (``wire_error`` = ``target_error``) and, per configuration,
+        behind the Cartesian protocols' tolerances (:mod:`vr_driver.driver.resolution`: the error
+        there through the Jacobian)."""
+        return max(self.goal_tolerance_floor, 2.0 * wire_error)
+
+    def path_tolerance_for(self, wire_error: float) -> float:
+        """rad: the default path tolerance for ``wire_error``: :meth:`goal_tolerance_for` plus
+        :attr:`path_allowance`."""
+        return self.goal_tolerance_for(wire_error) + self.path_allowance
+
     @property
     def default_goal_tolerance(self) -> float:
-        """rad: the goal tolerance of a joint a FollowJointTrajectory goal leaves at 0. At least
-        0.05 deg (what the stack promises a goal reaches), and twice what the wire alone may put
-        the joints off (``target_error``): a goal with empty tolerances never fails because of the
-        wire's own resolution."""
-        return max(math.radians(0.05), 2.0 * self.target_error)
+        """rad: the goal tolerance of a joint a FollowJointTrajectory goal leaves at 0, for a caller
+        that has no kinematics (:meth:`goal_tolerance_for` of ``target_error``): a goal with empty
+        tolerances never fails because of the wire's own resolution away from singularities. With
+        the arm's kinematics the Cartesian protocols' defaults are per configuration instead
+        (``validate(..., wire=WireResolution.of(kin, protocol))``)."""
+        return self.goal_tolerance_for(self.target_error)
 
     @property
     def default_path_tolerance(self) -> float:
-        """rad: the path tolerance of a joint a goal leaves at 0: 1 deg beyond the goal tolerance
-        (the deviation the timing and the blending may add on the way)."""
-        return self.default_goal_tolerance + math.radians(1.0)
+        """rad: the path tolerance of a joint a goal leaves at 0 (:meth:`path_tolerance_for` of
+        ``target_error``): 1 deg beyond the goal tolerance."""
+        return self.path_tolerance_for(self.target_error)
 
     # ------------------------------------------------------------------ driver side
     def encode(self, command: Any, byte_order: Any = "little") -> bytes:
