@@ -298,7 +298,7 @@ def test_a_goal_in_the_band_ends_successful_by_the_sum_and_says_so(kin, j5_end):
         out = TrajectorySupervisor(traj, _finished_run(traj), T0, protocol, NAMES).finish(T0 + 3.0, True, turned)
         assert (out.state, out.error_code) == (ABORTED, GOAL_TOLERANCE_VIOLATED)
         assert out.error_string.startswith("joint_4 + joint_6 ended %.4f rad from the goal (tolerance %.4f; "
-                                           "joint_5 ends " % (2.0 * traj.wire.goal_sum, traj.wire.goal_sum)), \
+                                           "joint_5 ends at " % (2.0 * traj.wire.goal_sum, traj.wire.goal_sum)), \
             out.error_string
 
 

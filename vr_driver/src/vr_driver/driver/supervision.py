@@ -357,7 +357,7 @@ class TrajectorySupervisor:
     def _band_note(self, joints: Sequence[float]) -> str:
         wire = self.traj.wire
         i5 = wire.wrist[1]
-        return "; %s ends %.2f deg from 0 (the goal's %.2f deg): %s" % (
+        return "; %s ends at %.2f deg (the goal's %.2f deg): %s" % (
             self.names[i5], math.degrees(joints[i5]), math.degrees(self.traj.positions[-1][i5]),
             wire.band_words(self.names))
 
