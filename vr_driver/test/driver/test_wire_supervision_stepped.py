@@ -148,6 +148,21 @@ def test_a_goal_on_the_singularity_ends_successful_within_a_stated_bound_or_is_r
     arm_within_goal(world, traj)
 
 
+@pytest.mark.parametrize("protocol", ["v1", "v3"])
+def test_the_srdfs_named_states_are_reached_from_home_and_back(kin, protocol):
+    """zero (joint_5 = 0, the singularity) from home, where joint_4 = joint_6 = 0: the controller's
+    split is the previous target's, 0 / 0 -- the state is reached exactly, and judged by the sum."""
+    home, zero = kin.named_states["home"], kin.named_states["zero"]
+    world = world_at(kin, protocol, start=home)
+    for goal in (zero, home):
+        traj = validated(world, *sweep(world.status().joints, goal))
+        _sup, out = supervise(world, traj)
+        succeeded(out)
+        assert max(abs(a - b) for a, b in zip(world.arm.joints, goal)) < 0.01 * DEG, world.arm.joints
+        if goal is zero:
+            assert "their split is the controller's: joint_4 0.00 deg, joint_6 0.00 deg" in out.error_string
+
+
 # ------------------------------------------------------------------------------ real departures
 def block_joint(world, index):
     """The arm's joint ``index`` stays where it is (a brake that did not open, a blocked axis)."""

@@ -24,10 +24,10 @@ The wrist: near joint_5 = 0 the axes of joint_4 and joint_6 line up, and a pose 
 hardly their split: ``J^-1``'s joint_4 and joint_6 rows grow as 1 / sin(joint_5) while their sum's
 stays bounded. Inside :data:`WRIST_BAND` (``|joint_5| <`` 5 deg) joint_4 and joint_6 are judged by
 that sum (:meth:`WireResolution.errors`' second value: the same bound for the sum); the individual
-bounds there are capped at :data:`ERROR_CAP` (they say nothing). 5 deg: on v3 the split's bound is
-0.13 deg at its edge (0.7 deg at 1 deg); on v1 it is some 8 deg there and the controller's IK of a
-whole-degree pose inside it can turn the split by tens of degrees (a pose that the wire cannot
-tell from the plan's).
+bounds there are capped at :data:`ERROR_CAP` (they say nothing). 5 deg: at its edge the split's
+bound is 0.08-0.13 deg on v3 (0.7 deg at 1 deg), 6-8 deg on v1, where the controller's IK of a
+whole-degree pose inside the band turns the split by tens of degrees (a pose the wire cannot tell
+from the plan's); the sum's stays 0.008-0.01 deg (v3), 0.7-0.8 deg (v1).
 """
 from __future__ import annotations
 

@@ -419,7 +419,10 @@ class ProtocolV3(Protocol):
     #: (99.9 % below 0.054 deg, mean 0.010 deg); hence 0.07 deg. Closer to singularities it grows
     #: (smallest singular value >= 0.02: max 0.18 deg), and within 0.01 deg of a joint limit the
     #: rounding can push the pose into another configuration (a flip: doc §10.8). Checked by
-    #: test_protocol_v3.py::test_target_error_bounds_the_rounding (a smaller sample).
+    #: test_protocol_v3.py::test_target_error_bounds_the_rounding (a smaller sample). The scalar
+    #: defaults for a caller without the arm's kinematics are built on it; with them, the
+    #: tolerances use the error at each configuration (driver.resolution), near joint_5 = 0
+    #: judging joint_4 / joint_6 by their sum.
     target_error = math.radians(0.07)
     summary = ("Cartesian targets in 0.1 mm / 0.01 deg streamed one per record into the G2 program's "
                "ring (MOVEP with speed and smooth), a check word (24 bytes out, 28 in)")
