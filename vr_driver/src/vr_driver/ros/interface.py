@@ -161,6 +161,9 @@ class InterfaceNode:
         for timer in getattr(self, "timers", []):
             timer.shutdown()
         self.io_server.shutdown()
+        plan_server = getattr(self, "plan_server", None)
+        if plan_server is not None:
+            plan_server.shutdown()          # its worker ends by EOF anyway; this ends it now
         self.core.stop()
 
     # ------------------------------------------------------------------ publishing
