@@ -571,13 +571,16 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
         against the arm's (v1 and v3 report only a pose, the driver solves the joints: it must keep
         track of the configuration)."""
         arm = sim.program.arm
-        pose = arm.pose
+        # one read under the arm's lock: read one by one, a program loop may start the next move
+        # between them (at x100 a joint turns tens of degrees in 10-20 ms), and a rest pose was
+        # paired with the joints of the next move (seen as 30-53 deg "mismatches" under load)
+        moving, pose, joints = arm.snapshot()
         excess = params.workspace.excess(pose)
         if excess > 1e-6:       # (not float noise on a target that lies on a bound)
             result.outside_samples += 1
             if excess > result.outside_max:
                 result.outside_max, result.outside_pose = excess, pose
-        if arm.moving or rest[0] != pose:
+        if moving or rest[0] != pose:
             rest[:] = [pose, time.monotonic()]
             return
         if status.feedback_time is None or status.feedback_time < rest[1] or \
@@ -587,7 +590,7 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
             reported = sim.feedback         # the pose the controller reports, rounded as on the wire
             if reported is None or tuple(status.pose.as_tuple()) != tuple(reported.pose.as_tuple()):
                 return          # (the driver has not seen this pose yet)
-        off = max(abs(a - b) for a, b in zip(status.joints, arm.joints))
+        off = max(abs(a - b) for a, b in zip(status.joints, joints))
         if off > math.radians(MISMATCH_DEG):
             result.mismatch_samples += 1
             result.mismatch_max = max(result.mismatch_max, math.degrees(off))
