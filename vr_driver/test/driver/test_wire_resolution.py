@@ -324,3 +324,20 @@ def test_v1s_time_is_reported_not_judged(kin):
         assert out.state == state, out.error_string
     assert "its time is reported, not judged: goal_time_tolerance (0.50 s) applies to a streaming protocol" \
         in TrajectorySupervisor(traj, _finished_run(traj), T0, V1, NAMES).note(9.0)
+
+
+def test_the_deviation_at_the_same_time_follows_the_bands_rule(kin):
+    """A sample with the plan's pose but its own split of joint_4 / joint_6 inside the band: on the
+    path, nothing off at the same time; the same split outside the band is a departure."""
+    times, points = sweep(ARM, with_j5(ARM, -24 * DEG))
+    traj = valid(kin, V3, ARM, points, times)
+    sup = TrajectorySupervisor(traj, _finished_run(traj), T0, V3, NAMES)
+    on = traj.sample(1.5)
+    s = sup.step(T0 + 1.5, True, on[:3] + (on[3] + 30 * DEG, on[4], on[5] - 30 * DEG))
+    assert s.by_sum and not s.violated and s.time_deviation < 1e-9 and sup.samples_by_sum == 1
+    assert s.error[3] == pytest.approx(30 * DEG)           # the feedback's error is the joints' own
+    early = traj.sample(0.3)
+    s = sup.step(T0 + 0.3, True, early[:3] + (early[3] + 30 * DEG, early[4], early[5] - 30 * DEG))
+    assert s.violated and s.time_deviation == pytest.approx(30 * DEG)
+    # (the second is nearest the band's part of the plan, 20 deg of joint_5 away: measured there by the sum)
+    assert "joint_4 + joint_6 judged by their sum within 5.0 deg of joint_5 = 0 (2 of 2 samples)" in sup.note(3.0)

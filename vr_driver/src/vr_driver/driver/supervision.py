@@ -214,13 +214,13 @@ class TrajectorySupervisor:
             err[band, i6] = 0.0
         return err
 
-    def _label(self, joint: int, t: float) -> str:
-        """The name of the worst joint of the deviation at the same time, ``t`` s after the start
-        (joint_4's index in the band: the sum)."""
+    def _label(self, joint: int, t: float, delay: float = 0.0) -> str:
+        """The name of the worst joint of the deviation at the same time, the sample ``t`` s after
+        the start against the plan ``delay`` s earlier (joint_4's index in the band: the sum)."""
         wire = self.traj.wire
         if wire is not None and joint == wire.wrist[0]:
             q = [v for tt, v in self._history if tt == t]
-            desired = self.traj.sample(t)
+            desired = self.traj.sample(t - delay)
             if (q and wire.in_band(q[0])) or wire.in_band(desired):
                 return wire.sum_name(self.names)
         return self.names[joint]
@@ -264,7 +264,7 @@ class TrajectorySupervisor:
         if joint is not None:
             text += ("; at most %.3f deg from the plan at the same time after a start delay of %.3f s "
                      "(%s, %.2f s after the start; %.3f deg without the delay)" % (
-                         math.degrees(off), delay, self._label(joint, at), at, math.degrees(self.max_time_deviation)))
+                         math.degrees(off), delay, self._label(joint, at, delay), at, math.degrees(self.max_time_deviation)))
         if traj.wire is not None and self.samples_by_sum:
             text += "; %s (%d of %d samples)" % (traj.wire.band_words(self.names), self.samples_by_sum, self.samples)
         return text
