@@ -346,3 +346,23 @@ def test_a_record_farther_than_the_arm_can_move_is_believed_only_when_the_next_a
     assert steps[0] == 0.0 and steps[1] <= 2 * room + 1e-9, [round(s / DEG, 2) for s in steps]
     assert max(steps[2:]) <= room + 1e-9 and steps[-1] == 0.0, [round(s / DEG, 2) for s in steps]
     assert abs(tracker.joints[0] - there[0]) < 1.5 * DEG
+
+
+@pytest.mark.parametrize("rule", RULES)
+def test_v3_at_rest_at_a_target_the_joints_are_the_controllers_solution_of_its_wire_pose(kin, rule):
+    """v3: a 30-point stream ending at rest. The arm stands exactly at the controller's IK solution
+    of the last target's wire pose (0.1 mm / 0.01 deg) and the report is that same rounded pose:
+    the driver publishes that solution, not a planned point a hundredth of a degree away."""
+    world = make_world(kin, "v3", rule)
+    world.run_for(world.bus_period)
+    q0 = np.array(world.status().joints)
+    n = 30
+    points = [tuple(q0 + np.array([0.3, -0.2, 0.25, 0.4, -0.3, 0.5]) * math.sin(0.5 * math.pi * k / n))
+              for k in range(1, n + 1)]
+    times = [3.0 * k / n for k in range(1, n + 1)]
+    run = world.core.submit_trajectory(trajectory(world, times, points))
+    world.run_until(lambda: run.done, 60.0, "stream done")
+    world.run_for(0.5)
+    assert not world.arm.moving
+    off = max(abs(a - b) for a, b in zip(world.status().joints, world.arm.joints))
+    assert off < 1e-6, off / DEG

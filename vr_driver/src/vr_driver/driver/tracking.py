@@ -22,13 +22,19 @@ client, so they must be the arm's (README "Reliability").
   arm was last seen (SEARCH_BACK samples back, for the rounding); of the places within PATH_NEAR
   the earliest that fits within PATH_TIE as well as the best, so that a path that comes back
   through a pose (a sweep out and back) is not read on its way back.
-- **The joints**: that place's joints where the report's rounding allows them (our FK within the
-  report's cell: half a unit in each of X, Y, Z, CELL_ROTATION units of rotation); otherwise the
-  joints nearest them that the report allows: first with the commanded split of joint_4 / joint_6
-  (their sum and the other joints from the IK of the pose: near the singularity the pose leaves
-  the split open and the commanded one holds), else towards the IK solution nearest the commanded
-  joints. Off the path (no job yet, a report the path does not explain) the same from the last
-  joints.
+- **The joints**: v3 at a commanded target (within a sample of the place) its joints as the
+  controller solved its wire pose, where the report's rounding allows them: at rest there the arm
+  stands at exactly that solution (the report is the target's wire pose, rounded alike), not at a
+  place the rounding leaves a hundredth of a degree away (v1's whole mm / deg would leave a
+  degree: its goal is not taken so). Else that place's joints where the report's rounding allows
+  them (our FK within the report's cell: half a unit in each of X, Y, Z, CELL_ROTATION units of
+  rotation); otherwise the joints nearest them that the report allows: first with the commanded
+  split of joint_4 / joint_6 (their sum and the other joints from the IK of the pose: near the
+  singularity the pose leaves the split open and the commanded one holds), else towards the IK
+  solution nearest the commanded joints. A v3 report the path does not explain is first read
+  against the job's next points (TAKEN_AHEAD past those seen taken: the controller may have taken
+  them before the driver saw it). Off the path (no job yet, a report it still does not explain)
+  the same from the last joints.
 - **Never a step the arm cannot make**: each joint moves at most as far as the commanded path
   moved between the two places, plus its velocity limit x the time since the last record x
   VELOCITY_MARGIN (the controller samples the arm at its own loop, not at the record's stamp). A
@@ -54,7 +60,7 @@ from ..poses import ControllerPose, MoveType
 log = logging.getLogger("vr_driver.driver")
 
 __all__ = ["JointTracker", "CommandedPath", "VELOCITY_MARGIN", "PATH_NEAR", "PATH_TIE", "SAMPLE_STEP",
-           "CELL_ROTATION"]
+           "CELL_ROTATION", "TAKEN_AHEAD"]
 
 #: a joint moves at most its velocity limit x the time between two records x this (the controller
 #: writes its record at its own program loop: two records' samples may lie a loop further apart
@@ -83,6 +89,11 @@ BISECT_STEPS = 8
 BISECT_RESOLUTION = 1e-4
 #: [rad] a PTP goal solved by the rule this near the plan's goal is the plan's
 GOAL_EPS = 1e-6
+#: v3: points past those the driver saw taken that the controller may have taken already: the
+#: acknowledgement of a record comes two records late and v3 sends one target ahead, and the arm
+#: (the virtual G2 at speed_factor 100, a real one after a bus stall) can reach them before the
+#: driver's next record -- a report beyond the path is read against them before it is doubted
+TAKEN_AHEAD = 4
 
 _TWO_PI = 2.0 * math.pi
 
@@ -117,6 +128,7 @@ class CommandedPath:
         self.cursor = 0.0
         self.seen_moving = False          # the arm was seen past its start (it took the target)
         self.targets: List[Tuple[float, ...]] = []   # v3: each point as the controller solves it
+        self.target_samples: List[int] = []          # ... and its sample
         self.extend(joints, position, rotation)
 
     def __len__(self) -> int:
@@ -146,6 +158,18 @@ class CommandedPath:
         a = place - i
         q = self.q[i] if a <= 0.0 or i + 1 >= len(self.q) else self.q[i] + a * (self.q[i + 1] - self.q[i])
         return tuple(float(v) for v in q)
+
+    def target_near(self, place: float) -> Optional[Tuple[float, ...]]:
+        """The joints of the commanded target (as the controller solved its wire pose) within one
+        sample of ``place``, the nearest; None when none is."""
+        best, best_d = None, 1.0 + 1e-9
+        for k in reversed(self.target_samples):
+            d = abs(k - place)
+            if d <= best_d:
+                best, best_d = k, d
+            if k < place - 1.0:
+                break
+        return None if best is None else tuple(float(v) for v in self.q[best])
 
     def locate(self, position: np.ndarray, rotation: np.ndarray) -> Optional[float]:
         """Where on the path (samples from the start) the TCP pose (position [mm], rotation) lies:
@@ -194,6 +218,7 @@ class JointTracker:
         self.kin = kin
         self.rule = ConfigurationRule.parse(rule)
         mm, deg = pose_resolution
+        self.resolution = (float(mm), float(deg))
         self.cell = (CELL_POSITION * mm * (1.0 + CELL_SLACK) + 1e-6, CELL_ROTATION * deg * (1.0 + CELL_SLACK) + 1e-6)
         self.vmax = np.array(kin.limits.velocity if velocity is None else velocity, dtype=float)
         conventions = kin.conventions       # TCP in base = root_in_base * tip * tcp_in_tip
@@ -209,6 +234,7 @@ class JointTracker:
         self._pose: Optional[Tuple[float, ...]] = None     # the last record's pose (mm, deg)
         self._stamp: Optional[float] = None                # ... and its time
         self._previous: Optional[Tuple[float, ...]] = None  # the last target the controller took
+        self._job: Any = None                              # v3: the stream job the path is of
 
     # ------------------------------------------------------------------------ what was sent
     def follow(self, job: Any) -> None:
@@ -260,18 +286,36 @@ class JointTracker:
             position, rotation = self._tcp_many(q)
             self._previous_target()
             path = self.path = CommandedPath(job.id, q, position, rotation)
-        upto = min(len(job.points), job.points_taken + (0 if job.live else 1))
+        self._job = job
+        self._take(path, job, min(len(job.points), job.points_taken + (0 if job.live else 1)))
+
+    def _take(self, path: CommandedPath, job: Any, upto: int) -> None:
+        """Append the job's points up to ``upto`` (exclusive) to ``path``, each solved by the rule."""
         while len(path.targets) < upto:
             point = job.points[len(path.targets)]
             previous = path.targets[-1] if path.targets else None     # (none: the arm's joints)
             seed = self.rule.seed(previous, self.joints if self.joints is not None else path.goal)
-            pose = point.pose if point.pose is not None else self.kin.fk_pose(point.joints)
+            pose = self._wire_pose(point.pose if point.pose is not None else self.kin.fk_pose(point.joints))
             solved = self._solve(pose, seed)
             target = solved if solved is not None else tuple(point.joints)
             q = self._line(path.goal, target)[1:]
             if len(q):
                 path.extend(q, *self._tcp_many(q))
             path.targets.append(target)
+            path.target_samples.append(len(path) - 1)
+
+    def _take_ahead(self) -> bool:
+        """v3: append the job's points the controller may have taken that the driver has not seen
+        taken (TAKEN_AHEAD; a live job's last point may still be replaced); whether any were."""
+        job, path = self._job, self.path
+        if job is None or path is None or path.key != job.id:
+            return False
+        last = len(job.points) - (1 if job.live and not getattr(job, "closed", False) else 0)
+        upto = min(last, job.points_taken + TAKEN_AHEAD)
+        if upto <= len(path.targets):
+            return False
+        self._take(path, job, upto)
+        return True
 
     # ------------------------------------------------------------------------ each record
     def update(self, pose: ControllerPose, stamp: float) -> Optional[Tuple[float, ...]]:
@@ -289,9 +333,14 @@ class JointTracker:
         ref, moved = last, None
         path = self.path
         place = None if path is None else path.locate(np.array(position), np.reshape(rotation, (3, 3)))
+        if place is None and path is not None and self._take_ahead():
+            place = path.locate(np.array(position), np.reshape(rotation, (3, 3)))
         if place is not None:
             ref = path.joints_at(place)
             moved = np.abs(np.subtract(ref, path.joints_at(path.cursor)))
+            target = path.target_near(place)
+            if target is not None and self._fits(target, position, rotation):
+                ref = target          # (at rest there: exactly where the controller's IK put the arm)
         if ref is None:               # the first record: nothing to go by but the pose itself
             q = self._solve(pose, self.kin.named_states.get("home", self.kin.clamp((0.0,) * self.kin.dof)))
         else:
@@ -382,6 +431,17 @@ class JointTracker:
             return self.kin.ik_pose(pose, seed=tuple(seed))
         except KinematicsError:
             return None
+
+    def _wire_pose(self, pose: ControllerPose) -> ControllerPose:
+        """``pose`` as a Cartesian target carries it to the controller, which solves that: each field
+        rounded half away from zero to the pose resolution (Protocol.wire_pose; a point's pose
+        rounded already stays as it is)."""
+        mm, deg = self.resolution
+        out = []
+        for value, unit in zip(pose.as_tuple(), (mm, mm, mm, deg, deg, deg)):
+            steps = math.floor(abs(value) / unit + 0.5)
+            out.append(math.copysign(steps, value) * unit if steps else 0.0)
+        return ControllerPose(*out)
 
     def _tcp(self, q: Sequence[float]) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
         """(TCP position [mm], rotation row-major) in ``base`` at joints ``q`` (KDL, no numpy: it
