@@ -417,6 +417,11 @@ class BusProcessMaster:
         self._closed = False
         self._send_lock = threading.Lock()
         ours, theirs = socket.socketpair()
+        # blocking, whatever socket.setdefaulttimeout() says: rospy sets one (60 s), which makes
+        # new sockets non-blocking underneath -- and the child's end shares that flag, so its recv
+        # raised BlockingIOError on a message not all there yet
+        ours.setblocking(True)
+        theirs.setblocking(True)
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
         try:
@@ -598,7 +603,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="[vr_driver bus %(process)d] %(levelname)s %(message)s")
     logging.getLogger("pyprofibus_vendor").setLevel(logging.WARNING)
-    conn = Connection(int(argv[0]))
+    fd = int(argv[0])
+    os.set_blocking(fd, True)
+    conn = Connection(fd)
     try:
         kind, settings = conn.recv()
     except (EOFError, OSError):

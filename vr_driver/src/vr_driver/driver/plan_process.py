@@ -284,6 +284,11 @@ class PlanningProcess:
         """Start a worker (not waiting for it): a new interpreter that imports this module, with
         the node's module path, and its end of a socket pair; it gets the parameters at once."""
         ours, theirs = socket.socketpair()
+        # blocking, whatever socket.setdefaulttimeout() says: rospy sets one (60 s), which makes new
+        # sockets non-blocking underneath -- the worker's end shares the flag and its recv raised
+        # BlockingIOError (the worker died at the node's first request)
+        ours.setblocking(True)
+        theirs.setblocking(True)
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)   # the node's modules, e.g. a source tree
         try:
@@ -468,6 +473,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     # a Ctrl-C (roslaunch's SIGINT to the process group) is the node's to act on: this process ends
     # when the node's end of the socket closes (a SIGTERM or SIGKILL still ends it at once)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.set_blocking(args.fd, True)
     conn = Connection(args.fd)
     _exit_with_parent(args.fd)
     for name in ("vr_driver", "pyprofibus_vendor"):
