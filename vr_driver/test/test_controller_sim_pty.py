@@ -50,6 +50,10 @@ UNREACHABLE = [(1400, 0, 1400, 0, 0, 0), (1400, 800, 200, 0, 90, 0), (-600, 0, 4
 #: machine needs some 5 000 for the 200 targets)
 PROGRAM_CYCLES = 30_000
 STALL = 0.5                      # an injected stall of the master thread [s], longer than the watchdog
+#: the DP watchdog [s] of the tests whose subject is not a link loss: a busy machine stalls the master
+#: thread for most of a second at times (0.8 s seen with two CPU hogs), which the 0.3 s default turns
+#: into a link loss and a target given up
+QUIET_WATCHDOG = 10.0
 
 SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 REPO = os.path.dirname(os.path.dirname(SRC))
@@ -329,36 +333,59 @@ def test_a_master_stalled_past_the_watchdog_with_a_circ_end_in_flight_never_runs
 
 
 def test_watchdog_stops_the_arm_when_the_master_goes_silent(kin):
+    """The master goes silent mid-motion: the card's watchdog (200 ms) stops the arm the watchdog
+    time after the master's last telegram, no later, and it stays there. On a machine too busy to
+    run the master thread on time a stall of its own may take the link first (the target is then
+    given up before it moved): that attempt proves nothing and another master tries again."""
     watchdog = 0.2
-    vc = VirtualController(kinematics=kin, speed_factor=0.25, loop_period=LOOP)
+    targets = [(900, 300, 500, 0, 90, 30), (1120, 0, 725, 0, 45, 0)]
+    vc = VirtualController(kinematics=kin, speed_factor=0.1, loop_period=LOOP)
     vc.start()
-    driver = MasterDriver(vc.device_path, watchdog=watchdog)
+    attempts = 0
     try:
-        assert driver.wait(lambda: driver.handle.connected, 10.0)
-        target = (900, 300, 500, 0, 90, 30)                      # ~1.1 s of motion at x0.25
-        driver.send(commands_for("ptp", target))
-        assert driver.wait(lambda: any(isinstance(e, Accepted) for e in driver.events), 5.0)
-        assert vc.wait_until(lambda fb: fb.x < 1100, 5.0)        # well under way
-        driver.stop()                                            # the master goes silent mid-motion
-        # its last telegram went out in its last cycle: after the end of the one before
-        last_sent_after, last_sent_before = driver.prev_cycle_end, driver.last_cycle_end
-        assert vc.wait_until(lambda fb: vc.slave_state is SlaveState.WAIT_PRM and not vc.arm.moving, 2.0)
-        stopped = vc.pose
-        loops = vc.program.loops
-        assert vc.wait_until(lambda fb: vc.program.loops >= loops + 10, 2.0)
-        assert vc.pose == stopped                                 # and it stays there
-        assert vc.state is ControllerState.READY
+        while True:
+            attempts += 1
+            assert attempts <= 5, "five masters in a row lost the link by themselves before the test's stop"
+            # the target farther from where the arm is: some 2.8 s of motion at x0.1 from the other one
+            start = ControllerPose(*vc.pose)
+            target = max(targets, key=lambda t: ControllerPose(*t).distance_to(start)[0])
+            driver = MasterDriver(vc.device_path, watchdog=watchdog)
+            try:
+                assert driver.wait(lambda: driver.handle.connected, 10.0)
+                driver.send(commands_for("ptp", target))
+                assert driver.wait_cycles(lambda: any(isinstance(e, (Accepted, Aborted)) for e in driver.events),
+                                          2500)
+                # under way, with more than half of the path (some 250 mm, 1.6 s) still to go
+                moving = not driver.losses and vc.wait_until(
+                    lambda fb: fb.state is ControllerState.BUSY
+                    and ControllerPose(*fb.values).distance_to(start)[0] > 20
+                    and ControllerPose(*fb.values).distance_to(ControllerPose(*target))[0] > 250, 5.0)
+                if not moving or driver.losses:
+                    continue                                     # its own stall took the link first
+                entries = len(vc.log)
+                driver.stop()                                    # the master goes silent mid-motion
+                # its last telegram went out in its last cycle: after the end of the one before
+                last_sent_after, last_sent_before = driver.prev_cycle_end, driver.last_cycle_end
+                assert vc.wait_until(lambda fb: vc.slave_state is SlaveState.WAIT_PRM and not vc.arm.moving, 2.0)
+                stopped = vc.pose
+                loops = vc.program.loops
+                assert vc.wait_until(lambda fb: vc.program.loops >= loops + 10, 2.0)
+                assert vc.pose == stopped                                 # and it stays there
+                assert vc.state is ControllerState.READY
+                break
+            finally:
+                driver.stop()
     finally:
-        driver.stop()
         vc.stop()
+    assert len(vc.log) == entries + 1
     entry = vc.log[-1]
     assert entry.outcome is Outcome.REJECTED and entry.aborted and "watchdog" in entry.reason
-    assert entry.final_pose == stopped and stopped != target
+    assert entry.target == target and entry.final_pose == stopped and stopped != target
     # it moved the watchdog time after the master's last telegram, no longer
     assert last_sent_after + watchdog - 1e-3 <= entry.end_time <= last_sent_before + watchdog + 1e-3
     print("\nwatchdog %.0f ms: the arm stopped %.1f ms after the end of the master's last cycle (which "
-          "took %.1f ms)" % (watchdog * 1e3, (entry.end_time - last_sent_before) * 1e3,
-                             (last_sent_before - last_sent_after) * 1e3))
+          "took %.1f ms); attempt %d" % (watchdog * 1e3, (entry.end_time - last_sent_before) * 1e3,
+                                         (last_sent_before - last_sent_after) * 1e3, attempts))
 
 
 def test_serves_an_existing_device(kin):
@@ -367,7 +394,7 @@ def test_serves_an_existing_device(kin):
     pair = open_pty_pair()
     vc = VirtualController(pair.slave_path, kinematics=kin, speed_factor=SPEED, loop_period=LOOP)
     vc.start()
-    driver = MasterDriver(pair.master_link())
+    driver = MasterDriver(pair.master_link(), watchdog=QUIET_WATCHDOG)
     try:
         assert driver.wait(lambda: driver.handle.connected, 10.0)
         commands = commands_for("lin", (1000, 100, 700, 0, 60, 0)) + commands_for("ptp", (1120, 0, 725, 0, 45, 0))
@@ -411,7 +438,7 @@ def test_cli_serves_a_pty_link_and_exits_cleanly(tmp_path, sig):
     try:
         device = _readline(proc.stdout, 30.0)
         assert device.startswith("/dev/pts/") and os.path.realpath(link) == device
-        driver = MasterDriver(link)
+        driver = MasterDriver(link, watchdog=QUIET_WATCHDOG)
         assert driver.wait(lambda: driver.handle.connected, 10.0)
         commands = (commands_for("ptp", (1120, 0, 725, 0, 45, 0)) + commands_for("lin", (1000, 100, 700, 0, 60, 0))
                     + commands_for("ptp", UNREACHABLE[0])
