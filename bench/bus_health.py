@@ -25,9 +25,10 @@ planner, no garbage of the case before), and in it:
   cell as its scene, the parameter file's 20 Hz bus, the card's 300 ms watchdog) and the load:
 
   ``idle``      nothing for --window s;
-  ``plan``      --goals plan goals back to back in the example cell, from the arm's joints (home):
-                each joint up to GOAL_SPREAD_DEG from there, free, its TCP in the workspace box --
-                in front of the arm, about the pillar, the shelf and the table; every other one as a
+  ``plan``      --goals plan goals back to back in the example cell, each from the arm's joints
+                (home: it does not move; given, so that a link loss does not end the load): each
+                joint up to GOAL_SPREAD_DEG from there, free, its TCP in the workspace box -- in
+                front of the arm, about the pillar, the shelf and the table; every other one as a
                 TCP pose; the same goals for both designs;
   ``validate``  a --points-point joint trajectory goal checked as joint_trajectory_action checks it,
                 in a thread of its own (driver.trajectories.validate, segment_speeds, then
@@ -358,11 +359,14 @@ def cell_goals(core: Any, n: int, seed: int) -> List[Any]:
 
 
 class Plans(Load):
-    """--goals goals planned back to back from the arm's joints: in the driver's interpreter
-    (DriverPlanning) or in the plan action's worker process (PlanningProcess)."""
+    """--goals goals planned back to back from the arm's joints at the start: in the driver's
+    interpreter (DriverPlanning) or in the plan action's worker process (PlanningProcess)."""
 
     def prepare(self) -> None:
         self.goals = cell_goals(self.core, self.cfg["goals"], self.cfg["seed"])
+        # the arm does not move: every goal from its joints now, also after a link loss (when the
+        # plan action would refuse at once: the load would end with the loss)
+        self.start = tuple(self.core.status().joints)
         if self.cfg["design"] == "before":
             from vr_driver.driver.planning import DriverPlanning
             self.planner: Any = DriverPlanning(self.core)
@@ -376,7 +380,7 @@ class Plans(Load):
         failures: Dict[str, int] = {}
         for i, goal in enumerate(self.goals):
             t = time.monotonic()
-            outcome = self.planner.plan(goal, seed=self.cfg["seed"] + i)
+            outcome = self.planner.plan(goal, start=self.start, seed=self.cfg["seed"] + i)
             times.append(time.monotonic() - t)
             ok += outcome.ok
             if not outcome.ok:
