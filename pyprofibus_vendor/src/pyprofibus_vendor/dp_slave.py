@@ -580,6 +580,11 @@ class SlaveServer:
             if self.deframer.pending:
                 timeout = min(timeout, max(0.0, last_rx + self.idle_reset - now))
             data = self.link.recv(4096, timeout)
+            if not data:
+                # bytes that came while this process was not running (recv timed out, then the
+                # scheduler kept us off the CPU): read them before judging the watchdog, which
+                # must expire only when the master was silent, not when we were
+                data = self.link.recv(4096, 0.0)
             now = self.clock()
             if data:
                 last_rx = now
