@@ -36,6 +36,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+import time
 from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from ..errors import CollisionError, MissingDependency, ModelError, SceneError
@@ -50,6 +51,10 @@ __all__ = ["SceneGuard", "describe_contact"]
 # building it takes ~0.3 s, a copy ~1 ms (tests build many cores)
 _MODELS: Dict[Tuple[str, str], Any] = {}
 _MODELS_LOCK = threading.Lock()
+#: a path's check hands the interpreter over every this many configurations (~0.5 ms of checks):
+#: the collision library holds the interpreter lock in each call, and the node's bus thread
+#: waited behind a 400 000-point goal's check for 100-500 ms at a time
+YIELD_EVERY = 64
 
 
 def _robot_checker(prefix: str, model: str = "") -> Any:
@@ -244,8 +249,10 @@ class SceneGuard:
         escaping: Optional[set] = None
         depth = start_depth = 0.0
         last = None
-        for k, f, q in self.configurations(samples):
+        for n, (k, f, q) in enumerate(self.configurations(samples)):
             last = (k, f, q)
+            if n % YIELD_EVERY == YIELD_EVERY - 1:
+                time.sleep(0)     # hand the interpreter over: the bus thread must not wait on a long check
             if not checker.in_collision(q):
                 escaping = None
                 continue
