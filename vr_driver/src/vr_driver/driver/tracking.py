@@ -56,12 +56,18 @@ import PyKDL as kdl
 from ..errors import KinematicsError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import ControllerPose, MoveType
+from .resolution import WRIST_BAND
 
 log = logging.getLogger("vr_driver.driver")
 
 __all__ = ["JointTracker", "CommandedPath", "VELOCITY_MARGIN", "PATH_NEAR", "PATH_TIE", "SAMPLE_STEP",
            "CELL_ROTATION", "TAKEN_AHEAD"]
 
+#: [rad] the exact IK solution of a report may lie this far from the joints the tracker settled on
+#: and still replace them (JointTracker._exact): the report's rounding, never another branch
+EXACT_NEAR = math.radians(1.0)
+#: the chain index of joint_5 (the wrist bend)
+_WRIST5 = 4
 #: a joint moves at most its velocity limit x the time between two records x this (the controller
 #: writes its record at its own program loop: two records' samples may lie a loop further apart
 #: than their stamps)
@@ -331,6 +337,7 @@ class JointTracker:
         rotation = tuple(float(v) for v in pose.rotation().reshape(-1))
         last = self.joints
         ref, moved = last, None
+        at_target = False
         path = self.path
         place = None if path is None else path.locate(np.array(position), np.reshape(rotation, (3, 3)))
         if place is None and path is not None and self._take_ahead():
@@ -341,6 +348,7 @@ class JointTracker:
             target = path.target_near(place)
             if target is not None and self._fits(target, position, rotation):
                 ref = target          # (at rest there: exactly where the controller's IK put the arm)
+                at_target = True
         if ref is None:               # the first record: nothing to go by but the pose itself
             q = self._solve(pose, self.kin.named_states.get("home", self.kin.clamp((0.0,) * self.kin.dof)))
         else:
@@ -364,6 +372,10 @@ class JointTracker:
                 self.limited += 1
                 q = tuple(float(v) for v in np.asarray(last) + np.clip(np.subtract(q, last), -room, room))
         self._far = far
+        if (at_target or place is None) and not far:
+            # at a commanded target, or with no commanded path to go by (the job ended: the arm
+            # rests where it stopped): the exact solution of the report, on the settled branch
+            q = self._exact(pose, q)
         if place is not None:
             path.cursor = place
             path.seen_moving = path.seen_moving or place > 0.0
@@ -425,6 +437,21 @@ class JointTracker:
         return tuple(float(v) for v in a + hi * (b - a))
 
     # ------------------------------------------------------------------------ kinematics
+    def _exact(self, pose: ControllerPose, q: Tuple[float, ...]) -> Tuple[float, ...]:
+        """Outside the wrist band: the IK solution of the reported pose nearest ``q`` (its branch),
+        where it lies within :data:`EXACT_NEAR` of ``q`` on every joint; else ``q``. The joints the
+        tracker settles on explain the report within its rounding; this makes them its exact
+        solution, so that at rest at a target -- where the arm stands exactly at the controller's
+        IK of the pose it reports -- they are the arm's joints, not off by the rounding (0.01 deg at
+        v3's resolution). Inside the band the pose leaves joint_4 - joint_6 open: the commanded
+        split holds (module docstring)."""
+        if abs(q[_WRIST5]) < WRIST_BAND:
+            return q
+        exact = self._solve(pose, q)
+        if exact is None or max(abs(a - b) for a, b in zip(exact, q)) > EXACT_NEAR:
+            return q
+        return exact
+
     def _solve(self, pose: ControllerPose, seed: Sequence[float]) -> Optional[Tuple[float, ...]]:
         """A Cartesian target as the controller solves it: the IK solution nearest ``seed``."""
         try:
