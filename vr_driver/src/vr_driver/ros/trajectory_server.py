@@ -35,6 +35,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from vr_driver.msg import FollowJointTrajectoryAction, FollowJointTrajectoryFeedback, FollowJointTrajectoryResult
 
 from ..driver import DriverCore, DriverError
+from ..driver.resolution import WireResolution
 from ..driver.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
 from ..driver.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
 from ..errors import VrDriverError
@@ -69,6 +70,7 @@ class TrajectoryServer:
         self.on_run: Optional[Callable[[object], None]] = None     # told each run it starts
         self.core = core
         self.names = list(core.joint_names)
+        self._wire: Optional[Tuple[Optional[WireResolution]]] = None     # made at the first goal
         self.period = 1.0 / max(1.0, feedback_rate)
         self._lock = threading.Lock()
         self._cancel: Dict[str, threading.Event] = {}
@@ -114,9 +116,14 @@ class TrajectoryServer:
             raise TrajectoryError(INVALID_GOAL, "motion is not possible: %s" % status.why_no_motion())
         lim = self.core.kin.limits
         protocol = self.core.protocol
+        if self._wire is None:
+            # the Cartesian protocols' per-configuration tolerances (driver/resolution.py): what the
+            # wire's pose resolution allows at each planned point, joint_4 / joint_6 by their sum
+            # near joint_5 = 0; None with joint targets (v2: the protocol's fixed defaults)
+            self._wire = (WireResolution.of(self.core.kin, protocol),)
         traj = validate(goal, self.names, status.joints, lim.lower, lim.upper, rospy.get_time(),
                         default_path_tolerance=protocol.default_path_tolerance,
-                        default_goal_tolerance=protocol.default_goal_tolerance)
+                        default_goal_tolerance=protocol.default_goal_tolerance, wire=self._wire[0])
         segment_speeds(traj, lim.velocity, self.names)
         return traj
 
