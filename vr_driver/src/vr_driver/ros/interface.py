@@ -137,7 +137,6 @@ class InterfaceNode:
         self.core.start()
         self.server.start()
         self.trajectory_server.start()
-        self.plan_server.start()
         self.io_server.start()
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
@@ -145,6 +144,10 @@ class InterfaceNode:
             # ~diagnostic_period), so a timer of the same period skipped every other call (0.67 Hz)
             rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.force_update()),
         ]
+        # last: it waits for its worker process to be ready (1-2 s, longer on a loaded machine), and
+        # robot_status must not wait with it (driver.test saw no robot_status for 2 s after the link
+        # was up: the timers were made after this wait)
+        self.plan_server.start()
         # a shutdown hook (e.g. rosnode kill) only asks; main() does the real stop
         rospy.on_shutdown(self.core.request_stop)
         sc = self.core.slave_config
