@@ -11,8 +11,10 @@ virtual I/O island joined by the line hub, real telegrams over ptys.
   machine), the move succeeds, robot_status keeps motion_possible TRUE; the island back (respawned)
   -> online, outputs at their safe values (the refused write was never queued);
 - the master falls silent (the driver's process stopped with SIGSTOP: killing the `interface` node,
-  required in driver.launch, would end this rostest with it) -> the island's outputs at their safe
-  values within its DP watchdog (300 ms, + slack); SIGCONT -> the driver takes the island back.
+  required in driver.launch, would end this rostest with it; its bus process goes on for
+  bus_node_timeout, sends the stop for bus_stop_hold, then closes the port) -> the island's outputs
+  at their safe values within its DP watchdog (300 ms, + slack) after that; SIGCONT -> the driver
+  takes the island back.
 Run by test/io_line.test."""
 from __future__ import annotations
 
@@ -32,6 +34,7 @@ from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import String
 
+from vr_driver.params import DriverParams
 from vr_driver.msg import CartesianPose, IOStates, MoveToPoseAction, MoveToPoseGoal, RobotStatus, TriState
 from vr_driver.srv import GetIO, SetIO
 
@@ -181,10 +184,15 @@ class IoLineTest(unittest.TestCase):
         self.assertIsNotNone(self.island_outputs(lambda d: d == "01 00 DATA_EXCH", 5.0))
         uri = rosgraph.Master("/io_line_check").lookupNode("/interface")
         pid = ServerProxy(uri).getPid("/io_line_check")[2]
+        # the node's bus process falls silent only after bus_node_timeout + bus_stop_hold (5 s by
+        # default: the 5 s this waited before the bus had a process of its own ran out)
+        silent = (rospy.get_param("/interface/bus_node_timeout", DriverParams.bus_node_timeout)
+                  + rospy.get_param("/interface/bus_stop_hold", DriverParams.bus_stop_hold))
         stopped = time.monotonic()
         os.kill(pid, signal.SIGSTOP)
         try:
-            safe = self.island_outputs(lambda d: d.startswith("00 00") and "DATA_EXCH" not in d, 5.0, after=stopped)
+            safe = self.island_outputs(lambda d: d.startswith("00 00") and "DATA_EXCH" not in d, silent + 5.0,
+                                       after=stopped)
         finally:
             os.kill(pid, signal.SIGCONT)
         self.assertIsNotNone(safe, "the island's outputs did not go safe when the master fell silent")
