@@ -30,10 +30,12 @@ def planner(kin):
 # ---------------------------------------------------------------------------------------- lanes
 # scripts/test runs the modules that compute beside each other, and the ones that run in real time
 # (real ptys, real threads, deadlines on the wall clock) in a phase of their own, beside other
-# real-time tests only (see scripts/test). `pytest --lane computation|realtime|soak` selects one
-# group; without --lane every module runs. A new module that opens a pty or waits on the wall clock
-# belongs in REALTIME.
-REALTIME = {
+# real-time tests only (see scripts/test). `pytest --lane NAME` selects one group of modules; without
+# --lane every module runs. The computing modules are three groups so that two cores finish them
+# together: the top-level modules ("computation"), the stepped driver tests in driver/ ("stepped")
+# and the planning worker's ("planning", processes of OMPL). A new module that opens a pty or waits
+# on the wall clock belongs in "realtime".
+LANE_OF = {
     "test_driver.py": "realtime",                  # DriverCore and the virtual G2 over a real pty
     "test_port_faults.py": "realtime",
     "test_controller_sim_pty.py": "realtime",
@@ -41,8 +43,15 @@ REALTIME = {
     "test_sim_line_pty.py": "realtime",
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
     "test_soak.py": "soak",                        # the longest: a lane of its own
+    "test_plan_process.py": "planning",
 }
-LANES = ("computation", "realtime", "soak")
+LANES = ("computation", "stepped", "planning", "realtime", "soak")
+
+
+def lane_of(path) -> str:
+    """The group of the test module at ``path`` (a pathlib.Path)."""
+    default = "stepped" if path.parent.name == "driver" else "computation"
+    return LANE_OF.get(path.name, default)
 
 
 def pytest_addoption(parser):
@@ -54,4 +63,4 @@ def pytest_ignore_collect(collection_path, config):
     lane = config.getoption("--lane")
     if lane is None or collection_path.suffix != ".py" or not collection_path.name.startswith("test_"):
         return None
-    return True if REALTIME.get(collection_path.name, "computation") != lane else None
+    return True if lane_of(collection_path) != lane else None
