@@ -29,13 +29,14 @@ import enum
 import errno
 import logging
 import math
+import os
 import re
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Deque, Dict, Optional, Tuple
 
 from pyprofibus_vendor.dp import DiagStatus1
 from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState, SlaveSpec
-from pyprofibus_vendor.errors import ProfibusError
+from pyprofibus_vendor.errors import PhyError, ProfibusError
 from pyprofibus_vendor.phy import Link
 
 from ..bus.health import BusHealth, BusHealthSummary
@@ -415,6 +416,11 @@ class LinkSupervisor:
         link: Optional[Link] = None
         try:
             if self.uses_bus_process:
+                # a device that is not there (an unplugged adapter, a virtual controller not started
+                # yet) is said here, as the serial link says it, without starting a process for it
+                # at every reconnect attempt (each start holds the bus loop: the status went stale)
+                if "://" not in device and not os.path.exists(device):
+                    raise PhyError("serial device %s does not exist" % device)
                 master: Any = BusProcessMaster(BusSettings(
                     device=device, baud=baud, master_address=self.bus.master_address,
                     cycle_rate_hz=self.bus.cycle_rate_hz, controller=sc.address,
