@@ -228,9 +228,11 @@ def test_the_planning_does_not_run_in_the_callers_interpreter(planning):
     out = planning.plan(goal, cancel=threading.Event())        # with a cancel: the caller polls
     cpu = time.process_time() - cpu
     worker_cpu = _cpu_seconds(pid) - worker_cpu
-    # found (or not, or refused by the driver's checks) in 1 to 3 tries, each of the whole budget
+    # found (or not, or refused by the driver's checks) in 1 to 3 tries; RRT* may end a try before
+    # its budget once its path is good enough (2.2 s of 3 s seen in CI), so what counts is a plan
+    # long enough that the caller's share of it means something
     assert out.code in (P.SUCCESS, P.PLANNING_FAILED, P.INVALID_MOTION_PLAN), out.text
-    assert out.planning_time >= goal.planning_time
+    assert out.planning_time >= 1.0, out.planning_time
     assert cpu < 0.05 * out.planning_time, (cpu, out.planning_time)
     assert worker_cpu > cpu, (worker_cpu, cpu)
 
