@@ -218,9 +218,7 @@ class BusServer:
             if spec.address == self.settings.controller:
                 handle.outputs = self.settings.idle_record
         elif kind == "cycle_at":
-            # not before now: _wait() adds a period to it, and a time in the past (0: "at once")
-            # made the cycle after the early one go at once too
-            self._next = min(self._next, max(float(msg[1]), self.clock()))
+            self._next = min(self._next, float(msg[1]))
         elif kind == "close":
             raise _Close()
         # "tick": only that the driver is alive
