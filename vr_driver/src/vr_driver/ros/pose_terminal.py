@@ -30,6 +30,9 @@ EXIT_INTERRUPTED = 130
 
 #: how long a preview may take before the driver counts as not answering [s]
 PREVIEW_TIMEOUT = 15.0
+#: s to wait for the driver's action servers / services to be seen: a fresh node finds them over
+#: its own topic connections, which on a loaded machine take more than a second or two
+SERVER_WAIT = 10.0
 
 
 def _pose_from_msg(msg) -> Optional[ControllerPose]:
@@ -377,7 +380,7 @@ class RosBackend(Backend):
     def preview(self, request: PoseRequest) -> PreviewResult:
         import rospy
         from actionlib_msgs.msg import GoalStatus
-        if not self.client.wait_for_server(rospy.Duration(2.0)):
+        if not self.client.wait_for_server(rospy.Duration(SERVER_WAIT)):
             return PreviewResult(False, "no answer: the driver's move_to_pose action is gone (is the driver "
                                  "still running?)", unavailable=True)
         handle = RosMoveHandle(self.client, self._goal(request, preview_only=True))
@@ -401,7 +404,7 @@ class RosBackend(Backend):
         import rospy
         from actionlib_msgs.msg import GoalStatus
         from vr_driver.msg import CartesianPose, PlanGoal
-        if not self.plan_client.wait_for_server(rospy.Duration(2.0)):
+        if not self.plan_client.wait_for_server(rospy.Duration(SERVER_WAIT)):
             return PlanPreview(False, "the driver does not plan: the action %s is not served (it needs OMPL, "
                                "TOPP-RA, pinocchio and coal: the driver's log says which is missing)" % self.plan_name)
         goal = PlanGoal(preview_only=True)
@@ -429,7 +432,7 @@ class RosBackend(Backend):
         execution path)."""
         import rospy
         from vr_driver.msg import FollowJointTrajectoryGoal
-        if not self.trajectory_client.wait_for_server(rospy.Duration(2.0)):
+        if not self.trajectory_client.wait_for_server(rospy.Duration(SERVER_WAIT)):
             return _Failed("the driver's joint_trajectory_action is not served: nothing was sent")
 
         def pose_now() -> Optional[ControllerPose]:
@@ -448,7 +451,7 @@ class RosBackend(Backend):
     def stop(self) -> Tuple[bool, str]:
         import rospy
         try:
-            self.stop_proxy.wait_for_service(2.0)
+            self.stop_proxy.wait_for_service(SERVER_WAIT)
             response = self.stop_proxy()
         except (rospy.ROSException, rospy.ServiceException) as exc:
             return False, "stop_motion is not available: %s" % exc
