@@ -72,12 +72,24 @@ Rules of the program (also in ``doc/controller_program.md``):
   and counted in :attr:`ControllerProgram.bad_records` (a log warning names the bytes); the
   master then sees no answer and times out.
 - PROGRAM_RUNNING is set in every record the program writes.
+
+**Every assumption about the real G2 is a parameter** (:data:`ASSUMPTIONS`, the table in
+doc/controller_program.md §10.9; each a SimOptions field, a ``--option`` of the CLI and a ``~param``
+of the ROS node; the defaults are the model the rest of the stack is tested against): the card's
+``byte_order``, the program's ``loop_period`` and its spread ``loop_jitter`` (seeded by
+``loop_jitter_seed``, :class:`LoopTiming`), ``loop_blocks_during_move`` and ``unreachable``
+(:mod:`vr_driver.controller.session`), ``data_exchange_bit``, ``configuration``, v3's
+``interpreter_lookahead`` and ``send_ahead`` (:mod:`vr_driver.controller.program_v3`), and the
+streaming arm's ``speed_scale`` (MOVEP's speed unit), ``blend_across_input_read``, ``ramp_time``,
+``ramp_shape`` and ``accelerations`` (:mod:`vr_driver.controller.stream_arm`).
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
+import random
 import re
 import signal
 import sys
@@ -96,22 +108,24 @@ from .. import validate
 from ..errors import ProtocolError, VrDriverError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose
-from .session import SessionProgram, arm_status_bits
+from .session import SessionProgram, Unreachable, arm_status_bits
 from .program_v2 import ControllerProgramV2
-from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, ControllerProgramV3
+from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, ControllerProgramV3, SendAhead
 from ..protocol.v1 import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
 from ..protocol.v2 import FeedbackV2, StreamState
 from ..protocol.v3 import FeedbackV3
 from ..protocol import registry as protocols
 from ..protocol.base import Protocol
-from .arm import ExecutionLog, IntPose, LogEntry, Outcome, SimArm
-from .stream_arm import DEFAULT_RAMP_TIME, SimStreamArm, StreamLogEntry
+from .arm import ExecutionLog, IntPose, LogEntry, MotionResult, Outcome, SimArm
+from .stream_arm import DEFAULT_RAMP_TIME, RampShape, SimStreamArm, StreamLogEntry, check_accelerations
 
 __all__ = [
+    "ASSUMPTIONS",
     "DEFAULT_ADDRESS",
     "DEFAULT_BAUD",
     "DEFAULT_LOOP_PERIOD",
     "FAULTS",
+    "LoopTiming",
     "PARAM_NAMES",
     "PROTOCOLS",
     "SimError",
@@ -147,7 +161,17 @@ PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "b
                "byte_order": "byte_order", "log_file": "log_file", "brake_time": "brake_time",
                "protocol": "protocol", "interpreter_lookahead": "interpreter_lookahead",
                "ring_size": "ring_size", "ramp_time": "ramp_time", "true_model": "true_model",
-               "configuration": "configuration"}
+               "configuration": "configuration", "data_exchange_bit": "data_exchange_bit",
+               "speed_scale": "speed_scale", "loop_blocks_during_move": "loop_blocks_during_move",
+               "blend_across_input_read": "blend_across_input_read", "loop_jitter": "loop_jitter",
+               "loop_jitter_seed": "loop_jitter_seed", "send_ahead": "send_ahead", "unreachable": "unreachable",
+               "ramp_shape": "ramp_shape", "accelerations": "accelerations"}
+
+#: the SimOptions fields that are assumptions about the real G2 (doc/controller_program.md §10.9, one
+#: row each): what a commissioning measures and the virtual G2 lets a test set either way
+ASSUMPTIONS = ("byte_order", "loop_period", "loop_jitter", "loop_blocks_during_move", "data_exchange_bit",
+               "configuration", "interpreter_lookahead", "blend_across_input_read", "send_ahead",
+               "unreachable", "speed_scale", "ramp_time", "ramp_shape", "accelerations")
 
 #: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
 #: streamed joint targets, v3 streamed Cartesian targets for the G2 as it is
@@ -214,6 +238,29 @@ class SimOptions:
     #: v1, v3: the joint solution the G2 takes for a Cartesian target (kinematics.solver.ConfigurationRule,
     #: an assumption, doc/controller_program.md §7): previous_target or current_joints
     configuration: Any = ConfigurationRule.PREVIOUS_TARGET.value
+    #: v2 / v3: MOVEP's speed unit -- the commanded speed fraction times this is the arm's real one
+    #: (capped at the joint limits): 1.0 the assumed 0.1 % of the joint limits; e.g. 0.6
+    speed_scale: float = 1.0
+    #: every protocol: a MOVE blocks the program loop until the motion ended (no record read, the
+    #: feedback frozen meanwhile); False: the loop keeps running while the arm moves
+    loop_blocks_during_move: bool = False
+    #: v2 / v3: the program's read of its inputs between two MOVEs keeps the blend (True) or ends it
+    #: in an exact stop at every point (False)
+    blend_across_input_read: bool = True
+    #: every protocol: the spread [s] of the program loop's period, each period drawn uniformly from
+    #: loop_period +- loop_jitter (0: a steady loop), from a generator seeded with loop_jitter_seed
+    loop_jitter: float = 0.0
+    loop_jitter_seed: int = 0
+    #: v3: a target one number ahead waits (accepted) or is refused OUT_OF_ORDER (refused)
+    send_ahead: str = SendAhead.ACCEPTED.value
+    #: every protocol: an unreachable target is refused and the program goes on (skip), or raises an
+    #: alarm that halts the program (alarm_halt)
+    unreachable: str = Unreachable.SKIP.value
+    #: v2 / v3: the arm's speed ramps, linear or s_curve
+    ramp_shape: str = RampShape.LINEAR.value
+    #: v2 / v3: per-axis acceleration limits [rad/s^2] (6 numbers, the mean over a ramp from rest to
+    #: full speed), instead of one ramp_time for every joint; None: ramp_time's model
+    accelerations: Optional[Tuple[float, ...]] = None
 
     def __post_init__(self) -> None:
         _protocol(self.protocol)
@@ -244,8 +291,31 @@ class SimOptions:
                 "got %r" % (self.ramp_time,)), 0.0, lo_open=True))
         if self.true_model:
             _check_true_model(self.true_model)
-        if not isinstance(self.data_exchange_bit, bool):
-            raise SimError("data_exchange_bit must be true or false, got %r" % (self.data_exchange_bit,))
+        for name in ("data_exchange_bit", "loop_blocks_during_move", "blend_across_input_read"):
+            if not isinstance(getattr(self, name), bool):
+                raise SimError("%s must be true or false, got %r" % (name, getattr(self, name)))
+        object.__setattr__(self, "speed_scale", validate.number(self.speed_scale, lambda _: SimError(
+            "speed_scale must be a finite number in (0, 10] (the real speed per commanded speed), got %r"
+            % (self.speed_scale,)), 0.0, 10.0, lo_open=True))
+        object.__setattr__(self, "loop_jitter", validate.number(self.loop_jitter, lambda _: SimError(
+            "loop_jitter must be a finite number >= 0 and below loop_period (%g s), got %r"
+            % (self.loop_period, self.loop_jitter)), 0.0))
+        if self.loop_jitter >= self.loop_period:
+            raise SimError("loop_jitter must be a finite number >= 0 and below loop_period (%g s), got %r"
+                           % (self.loop_period, self.loop_jitter))
+        object.__setattr__(self, "loop_jitter_seed",
+                           _int_option(self.loop_jitter_seed, "loop_jitter_seed", 0, 2 ** 32 - 1))
+        for name, kind in (("send_ahead", SendAhead), ("unreachable", Unreachable), ("ramp_shape", RampShape)):
+            try:
+                object.__setattr__(self, name, kind.parse(getattr(self, name)).value)
+            except VrDriverError as exc:
+                raise SimError(str(exc)) from None
+        try:
+            object.__setattr__(self, "accelerations", check_accelerations(_numbers(self.accelerations)))
+        except VrDriverError as exc:
+            raise SimError(str(exc)) from None
+        if self.accelerations is not None and self.ramp_time is not None:
+            raise SimError("give ramp_time (every joint ramps in that time) or accelerations (per axis), not both")
         try:
             object.__setattr__(self, "configuration", ConfigurationRule.parse(self.configuration).value)
         except VrDriverError as exc:
@@ -265,13 +335,66 @@ class SimOptions:
         """From ROS-style private parameters: pty_link, device, addr, baud, speed_factor,
         initial_pose (6 numbers), loop_period, byte_order, log_file, brake_time, protocol (v1 | v2 |
         v3), interpreter_lookahead, ring_size (v3), ramp_time (v2, v3), configuration (v1, v3), true_model (a file; "" the
-        model's).
+        model's), and the assumptions of :data:`ASSUMPTIONS` (accelerations: a list, or a string of 6
+        numbers).
         Unknown keys are refused."""
         unknown = sorted(set(params) - set(PARAM_NAMES))
         if unknown:
             raise SimError("unknown parameter(s) %s (known: %s)"
                            % (", ".join(unknown), ", ".join(sorted(PARAM_NAMES))))
         return cls(**{PARAM_NAMES[k]: v for k, v in params.items()})
+
+
+    def controller_kwargs(self) -> Dict[str, Any]:
+        """The keyword arguments of :class:`VirtualController` for these options (its ``link``, the
+        device, apart): what the CLI and the ROS node build it from."""
+        return dict(address=self.address, baud=self.baud, speed_factor=self.speed_factor,
+                    initial_pose=self.initial_pose, loop_period=self.loop_period, byte_order=self.byte_order,
+                    pty_link=self.pty_link, log_file=self.log_file, brake_time=self.brake_time,
+                    protocol=self.protocol, interpreter_lookahead=self.interpreter_lookahead,
+                    ring_size=self.ring_size, ramp_time=self.ramp_time, true_model=self.true_model,
+                    data_exchange_bit=self.data_exchange_bit, configuration=self.configuration,
+                    speed_scale=self.speed_scale, loop_blocks_during_move=self.loop_blocks_during_move,
+                    blend_across_input_read=self.blend_across_input_read, loop_jitter=self.loop_jitter,
+                    loop_jitter_seed=self.loop_jitter_seed, send_ahead=self.send_ahead,
+                    unreachable=self.unreachable, ramp_shape=self.ramp_shape, accelerations=self.accelerations)
+
+
+def _numbers(value: Any) -> Any:
+    """A list of numbers given as a string ("5, 20.9 ..." or "[5, 20.9, ...]": a launch argument) as
+    a list of floats (a word that is no number stays a string, for the caller's error); anything
+    else as it is."""
+    if not isinstance(value, str):
+        return value
+    words = [w for w in re.split(r"[\s,]+", value.strip().strip("[]")) if w]
+    out: list = []
+    for w in words:
+        try:
+            out.append(float(w))
+        except ValueError:
+            out.append(w)
+    return out if out else None
+
+
+class LoopTiming:
+    """The periods of the virtual G2's program loop: ``period`` each, or (``jitter`` > 0) each drawn
+    uniformly from ``period - jitter .. period + jitter`` by a generator seeded with ``seed`` -- an
+    irregular loop (an assumption to measure: the driver dates records by the heartbeat, assuming a
+    steady loop, doc/controller_program.md §10.9). The same seed gives the same periods."""
+
+    def __init__(self, period: float, jitter: float = 0.0, seed: int = 0) -> None:
+        if not (math.isfinite(period) and period > 0.0 and math.isfinite(jitter) and 0.0 <= jitter < period):
+            raise SimError("loop timing: period %r must be > 0 and jitter %r in [0, period)" % (period, jitter))
+        self.period = float(period)
+        self.jitter = float(jitter)
+        self.seed = seed
+        self._rng = random.Random(seed)
+
+    def next_period(self) -> float:
+        """The period of the next loop [s]."""
+        if self.jitter == 0.0:
+            return self.period
+        return self._rng.uniform(self.period - self.jitter, self.period + self.jitter)
 
 
 def _check_true_model(path: str) -> None:
@@ -350,9 +473,11 @@ class ControllerProgram(SessionProgram):
 
     def __init__(self, slave: DpSlave, arm: SimArm, *, byte_order: Any = ByteOrder.LITTLE,
                  execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False,
-                 data_exchange_bit: bool = True) -> None:
+                 data_exchange_bit: bool = True, loop_blocks_during_move: bool = False,
+                 unreachable: Any = Unreachable.SKIP) -> None:
         self.byte_order = ByteOrder.parse(byte_order)
-        super().__init__(slave, arm, confirm_records=confirm_records, data_exchange_bit=data_exchange_bit)
+        super().__init__(slave, arm, confirm_records=confirm_records, data_exchange_bit=data_exchange_bit,
+                         loop_blocks_during_move=loop_blocks_during_move, unreachable=unreachable)
         self.arm: SimArm = arm
         self.log = execution_log if execution_log is not None else ExecutionLog()
         self.handshake = ControllerHandshake()
@@ -360,6 +485,8 @@ class ControllerProgram(SessionProgram):
         self.last_command: Optional[Command] = None
         self._seq = 0
         self._pending: Optional[_Pending] = None
+        self._held: Optional[MotionResult] = None      # the arm's result while the loop was blocked
+        self._alarm: Optional[str] = None               # unreachable, alarm_halt: halts after this loop
 
     # ------------------------------------------------------------------- SessionProgram hooks
     def decode_record(self, raw: bytes) -> Command:
@@ -377,10 +504,13 @@ class ControllerProgram(SessionProgram):
         return arm_status_bits(self.arm) | self.handshake.status_bits()
 
     # ------------------------------------------------------------------------------- the loop
-    def step(self, now: float) -> Feedback:
-        """One program loop at clock time ``now``."""
+    def step(self, now: float) -> Optional[Feedback]:
+        """One program loop at clock time ``now`` (none while a MOVE blocks it or an alarm halted
+        it: the last feedback stays, :meth:`~vr_driver.controller.session.SessionProgram.suspended`)."""
+        if self.suspended(now):
+            return self.last_feedback
         command, stale = self.read_command(now)
-        result = self.arm.step(now)
+        result = self._arm_result(now)
         if result is not None and self._pending is not None:
             self.handshake.finish(result.ok, result.reason)
             self._record(Outcome.EXECUTED if result.ok else Outcome.REJECTED, result.reason,
@@ -409,12 +539,41 @@ class ControllerProgram(SessionProgram):
         feedback = self.handshake.feedback(self.arm.reported_pose(), self.status_bits())
         self.slave.inputs = feedback.encode(self.byte_order)
         self.last_feedback = feedback
+        if self._alarm is not None:         # BUSY went out before the MOVE (§5): now the alarm
+            reason, self._alarm = self._alarm, None
+            self.halt(reason, now)
         return feedback
 
+    # ------------------------------------------------------------------- SessionProgram hooks
+    def advance_suspended(self, now: float) -> None:
+        result = self.arm.step(now)
+        if result is not None:
+            self._held = result
+
+    def on_restart(self, now: float) -> None:
+        self.handshake.reset()
+        self._held = None
+
     # ------------------------------------------------------------------------------- helpers
+    def _arm_result(self, now: float) -> Optional[MotionResult]:
+        """The arm's result of a motion that ended since the last loop that ran (also one that
+        ended while a MOVE blocked the loop)."""
+        result = self.arm.step(now)
+        if result is None:
+            result, self._held = self._held, None
+        return result
+
     def _begin(self, command: Command, via: Optional[Command], now: float) -> None:
-        ok, reason = self.arm.begin(command.move_type.to_move_type(), command.pose,
-                                    via=None if via is None else via.pose, now=now)
+        kind = command.move_type.to_move_type()
+        if self.unreachable is Unreachable.ALARM_HALT:
+            try:
+                self.arm.plan(kind, command.pose, via=None if via is None else via.pose)
+            except VrDriverError as exc:
+                why = "%s: %s" % (type(exc).__name__, exc)
+                self._alarm = why
+                self._record(Outcome.REJECTED, "alarm, the program halted: %s" % why, now)
+                return
+        ok, reason = self.arm.begin(kind, command.pose, via=None if via is None else via.pose, now=now)
         if not ok:
             self.handshake.finish(False, reason)
             self._record(Outcome.REJECTED, reason, now)
@@ -434,7 +593,7 @@ class ControllerProgram(SessionProgram):
 
     def on_link_lost(self, why: str, stop_time: float) -> None:
         self.arm.stop(why, now=stop_time)
-        result = self.arm.step(stop_time)
+        result = self._arm_result(stop_time)
         if self._pending is not None and self.handshake.state is ControllerState.BUSY:
             ok = result is not None and result.ok
             reason = "" if ok else why
@@ -711,6 +870,11 @@ class VirtualController(Simulator):
     ``data_exchange_bit`` (default True): whether the program can read its card's Data_Exchange
     status (an assumption about the G2, :mod:`vr_driver.controller.session`); False: it reads only
     its input bytes, as a G2 whose card offers no such status would.
+    The other assumptions about the real G2 (:data:`ASSUMPTIONS`; SimOptions documents each):
+    ``loop_blocks_during_move``, ``unreachable`` (every protocol), ``loop_jitter`` /
+    ``loop_jitter_seed`` (the threaded loop's periods, :attr:`loop_timing`), ``send_ahead`` (v3),
+    ``speed_scale``, ``blend_across_input_read``, ``ramp_shape``, ``accelerations`` (v2, v3; a given
+    ``arm`` keeps its own).
     ``true_model``: a YAML file of the simulated robot's own dimensions, joint limits and joint zero
     offsets (panasonic_vr006l_support.true_model; None, default: the model's). The arm (its FK: the
     pose it reports and where it really is; v1's SimArm also its IK and planner) and the v3
@@ -736,7 +900,11 @@ class VirtualController(Simulator):
                  interpreter_lookahead: int = DEFAULT_INTERPRETER_LOOKAHEAD, ring_size: int = DEFAULT_RING_SIZE,
                  controller_kinematics: Optional[Kinematics] = None, ramp_time: Optional[float] = None,
                  true_model: Optional[str] = None, data_exchange_bit: bool = True,
-                 configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
+                 configuration: Any = ConfigurationRule.PREVIOUS_TARGET, speed_scale: float = 1.0,
+                 loop_blocks_during_move: bool = False, blend_across_input_read: bool = True,
+                 loop_jitter: float = 0.0, loop_jitter_seed: int = 0, send_ahead: Any = SendAhead.ACCEPTED,
+                 unreachable: Any = Unreachable.SKIP, ramp_shape: Any = RampShape.LINEAR,
+                 accelerations: Optional[Sequence[float]] = None) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
@@ -746,7 +914,15 @@ class VirtualController(Simulator):
                                   interpreter_lookahead=interpreter_lookahead, ring_size=ring_size,
                                   ramp_time=ramp_time, true_model=true_model,
                                   data_exchange_bit=data_exchange_bit,
-                                  configuration=configuration)
+                                  configuration=configuration, speed_scale=speed_scale,
+                                  loop_blocks_during_move=loop_blocks_during_move,
+                                  blend_across_input_read=blend_across_input_read, loop_jitter=loop_jitter,
+                                  loop_jitter_seed=loop_jitter_seed,
+                                  send_ahead=send_ahead.value if isinstance(send_ahead, SendAhead) else send_ahead,
+                                  unreachable=unreachable.value if isinstance(unreachable, Unreachable)
+                                  else unreachable,
+                                  ramp_shape=ramp_shape.value if isinstance(ramp_shape, RampShape) else ramp_shape,
+                                  accelerations=None if accelerations is None else tuple(accelerations))
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         if self.options.true_model:
@@ -760,6 +936,9 @@ class VirtualController(Simulator):
         self.zero_offsets = true_zero_offsets(self.options.true_model)
         self.clock = clock
         self.loop_period = self.options.loop_period
+        #: the periods of the program loop (steady, or spread by loop_jitter)
+        self.loop_timing = LoopTiming(self.options.loop_period, self.options.loop_jitter,
+                                      self.options.loop_jitter_seed)
         self.protocol = self.options.protocol
         self.wire = protocols.get(self.protocol)
         streams = self.wire.streams
@@ -769,7 +948,9 @@ class VirtualController(Simulator):
         if arm is None:
             extra: Dict[str, Any] = {"look_ahead": self.options.interpreter_lookahead} if cartesian_stream else {}
             if streams:
-                extra["ramp_time"] = self.options.ramp_time
+                extra.update(ramp_time=self.options.ramp_time, speed_scale=self.options.speed_scale,
+                             blend_across_input_read=self.options.blend_across_input_read,
+                             ramp_shape=self.options.ramp_shape, accelerations=self.options.accelerations)
             try:
                 arm = (SimStreamArm if streams else SimArm)(
                     kinematics, speed_factor=self.options.speed_factor,
@@ -783,20 +964,23 @@ class VirtualController(Simulator):
         self.execution_log = ExecutionLog()
         self.slave = robot_slave(self.options.address, clock, self.protocol)
         self.program: Union[ControllerProgram, ControllerProgramV2, ControllerProgramV3]
-        dx_bit = self.options.data_exchange_bit
+        loop: Dict[str, Any] = dict(data_exchange_bit=self.options.data_exchange_bit,
+                                    loop_blocks_during_move=self.options.loop_blocks_during_move,
+                                    unreachable=self.options.unreachable)
         if cartesian_stream:
             self.program = ControllerProgramV3(self.slave, arm, kinematics=controller_kinematics,
                                                ring_size=self.options.ring_size,
                                                byte_order=self.options.byte_order,
                                                execution_log=self.execution_log,
-                                               confirm_records=confirm_records, data_exchange_bit=dx_bit)
+                                               confirm_records=confirm_records,
+                                               send_ahead=self.options.send_ahead, **loop)
         elif streams:
             self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
-                                               confirm_records=confirm_records, data_exchange_bit=dx_bit)
+                                               confirm_records=confirm_records, **loop)
         else:
             self.program = ControllerProgram(self.slave, arm, byte_order=self.options.byte_order,
                                              execution_log=self.execution_log,
-                                             confirm_records=confirm_records, data_exchange_bit=dx_bit)
+                                             confirm_records=confirm_records, **loop)
         self._cond = threading.Condition()
         super().__init__()
         self.overruns = 0
@@ -855,7 +1039,6 @@ class VirtualController(Simulator):
 
     # ----------------------------------------------------------------------------- the loop
     def _run(self) -> None:
-        period = self.loop_period
         next_time = self.clock()
         while not self._stop.is_set():
             now = self.clock()
@@ -867,15 +1050,16 @@ class VirtualController(Simulator):
                 with self._cond:
                     self._cond.notify_all()
                 return
-            next_time += period
+            next_time += self.loop_timing.next_period()
             now = self.clock()
             if next_time < now:
                 self.overruns += 1
                 next_time = now
             self._stop.wait(next_time - now)
 
-    def step(self, now: Optional[float] = None) -> Union[Feedback, FeedbackV2, FeedbackV3]:
-        """One program loop (at ``now``, default the clock)."""
+    def step(self, now: Optional[float] = None) -> Union[None, Feedback, FeedbackV2, FeedbackV3]:
+        """One program loop (at ``now``, default the clock); the feedback on the bus after it (the
+        last one written, while a MOVE blocks the loop or an alarm halted it)."""
         feedback = self.program.step(self.clock() if now is None else now)
         with self._cond:
             self._cond.notify_all()
@@ -1029,6 +1213,34 @@ def _parser() -> argparse.ArgumentParser:
                    help="the program reads only its input bytes, not its card's Data_Exchange status (a G2 "
                         "whose card offers none): v1 then cannot see a reset of the card, v2 / v3 see it in "
                         "the card's safe image (doc/controller_program.md §4 rule 10)")
+    g2 = p.add_argument_group("assumptions about the real G2 (doc/controller_program.md §10.9; the defaults "
+                              "are the model the driver is tested against)")
+    g2.add_argument("--speed-scale", type=float, default=1.0, metavar="K",
+                    help="v2, v3: MOVEP's speed unit: the commanded speed times K is the real one, capped at the "
+                         "joint limits (default 1: 0.1 %% of the joint speed limits as assumed)")
+    g2.add_argument("--loop-blocks-during-move", action="store_true",
+                    help="a MOVE blocks the program loop until the motion ended: no record is read and the "
+                         "feedback (heartbeat included) is frozen meanwhile (default: the loop keeps running)")
+    g2.add_argument("--no-blend-across-input-read", dest="blend_across_input_read", action="store_false",
+                    help="v2, v3: the program's input read between two MOVEs ends the blend: an exact stop at "
+                         "every point (default: it keeps the blend)")
+    g2.add_argument("--loop-jitter", type=float, default=0.0, metavar="S",
+                    help="spread of the program loop's period: each drawn uniformly from loop period +- S "
+                         "(default 0: a steady loop; below the loop period)")
+    g2.add_argument("--loop-jitter-seed", type=int, default=0, metavar="N",
+                    help="seed of the loop periods' generator (default 0)")
+    g2.add_argument("--send-ahead", choices=[v.value for v in SendAhead], default=SendAhead.ACCEPTED.value,
+                    help="v3: a target one number ahead waits (accepted, default) or is refused OUT_OF_ORDER")
+    g2.add_argument("--unreachable", choices=[v.value for v in Unreachable], default=Unreachable.SKIP.value,
+                    help="an unreachable target is refused and the program goes on (skip, default), or raises "
+                         "an alarm that stops the arm and halts the program until the error is cleared "
+                         "(alarm_halt)")
+    g2.add_argument("--ramp-shape", choices=[v.value for v in RampShape], default=RampShape.LINEAR.value,
+                    help="v2, v3: the arm's speed ramps, linear (default) or s_curve (smoothstep, same duration)")
+    g2.add_argument("--accelerations", type=float, nargs=6, metavar="A", default=None,
+                    help="v2, v3: per-axis acceleration limits in rad/s^2, joint_1 .. joint_6 (the mean over a "
+                         "ramp from rest to full speed), instead of --ramp-time (default: none; every joint "
+                         "ramps in the ramp time)")
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
@@ -1096,23 +1308,19 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
                              log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
                              interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size,
                              ramp_time=args.ramp_time, true_model=args.true_model,
-                             data_exchange_bit=args.data_exchange_bit, configuration=args.configuration)
+                             data_exchange_bit=args.data_exchange_bit, configuration=args.configuration,
+                             speed_scale=args.speed_scale, loop_blocks_during_move=args.loop_blocks_during_move,
+                             blend_across_input_read=args.blend_across_input_read, loop_jitter=args.loop_jitter,
+                             loop_jitter_seed=args.loop_jitter_seed, send_ahead=args.send_ahead,
+                             unreachable=args.unreachable, ramp_shape=args.ramp_shape,
+                             accelerations=None if args.accelerations is None else tuple(args.accelerations))
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)
         return EXIT_USAGE
 
     def make() -> VirtualController:
-        controller = VirtualController(options.device, address=options.address, baud=options.baud,
-                                       speed_factor=options.speed_factor, initial_pose=options.initial_pose,
-                                       loop_period=options.loop_period, byte_order=options.byte_order,
-                                       pty_link=options.pty_link, log_file=options.log_file,
-                                       brake_time=options.brake_time, protocol=options.protocol,
-                                       interpreter_lookahead=options.interpreter_lookahead,
-                                       ring_size=options.ring_size, ramp_time=options.ramp_time,
-                                       true_model=options.true_model,
-                                       data_exchange_bit=options.data_exchange_bit,
-                                       configuration=options.configuration)
+        controller = VirtualController(options.device, **options.controller_kwargs())
         controller.start()
         if controller.symlink:
             log.info("pty %s linked at %s", controller.device_path, controller.symlink)

@@ -48,7 +48,7 @@ from typing import Any, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
-from .session import SessionProgram, arm_status_bits
+from .session import SessionProgram, Unreachable, arm_status_bits
 from ..protocol.v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState,
                           V2, joints_to_wire, next_seq, seq_after, seq_offset)
 from .arm import ExecutionLog, Outcome
@@ -75,8 +75,10 @@ class ControllerProgramV2(SessionProgram):
     waits_ahead = V2.send_ahead - V2.look_ahead_slots
 
     def __init__(self, slave: DpSlave, arm: SimStreamArm, *, execution_log: Optional[ExecutionLog] = None,
-                 confirm_records: bool = False, data_exchange_bit: bool = True) -> None:
-        super().__init__(slave, arm, confirm_records=confirm_records, data_exchange_bit=data_exchange_bit)
+                 confirm_records: bool = False, data_exchange_bit: bool = True,
+                 loop_blocks_during_move: bool = False, unreachable: Any = Unreachable.SKIP) -> None:
+        super().__init__(slave, arm, confirm_records=confirm_records, data_exchange_bit=data_exchange_bit,
+                         loop_blocks_during_move=loop_blocks_during_move, unreachable=unreachable)
         self.arm: SimStreamArm = arm
         self.log = execution_log if execution_log is not None else ExecutionLog()
         self.last_feedback: Optional[FeedbackV2] = None
@@ -106,6 +108,20 @@ class ControllerProgramV2(SessionProgram):
         self.need_start = True
         self._set_outputs(0, stop_time)            # the outputs' safe state until the master sets them
 
+    def advance_suspended(self, now: float) -> None:
+        self._log_entries(self.arm.step(now))
+
+    def on_halt(self, reason: str, now: float) -> None:
+        self._log_entries(self.arm.collect())      # the arm's error stopped it and dropped its queue
+
+    def on_restart(self, now: float) -> None:
+        """A fresh program: nothing taken, a new stream begins with START, no refusal shown."""
+        self.accepted_seq = 0
+        self.rejected_seq = 0
+        self.reject_code = RejectCode.NONE
+        self.need_start = True
+        self._refused = None
+
     # ------------------------------------------------------------------- general-purpose I/O
     def set_input(self, number: int, value: bool) -> None:
         """Set general-purpose input ``number`` (2..16; input 1 is the simulated gripper's)."""
@@ -131,7 +147,10 @@ class ControllerProgramV2(SessionProgram):
 
     # ------------------------------------------------------------------------------ the loop
     def step(self, now: float) -> Any:
-        """One program loop at clock time ``now``."""
+        """One program loop at clock time ``now`` (none while a MOVE blocks it or an alarm halted it:
+        the last feedback stays on the bus, :meth:`~vr_driver.controller.session.SessionProgram.suspended`)."""
+        if self.suspended(now):
+            return self.last_feedback
         command, stale = self.read_command(now)
         self._log_entries(self.arm.step(now))
         self.on_arm_advanced(now)
@@ -144,7 +163,10 @@ class ControllerProgramV2(SessionProgram):
                 if self.brake("STOP from the master", now):
                     log.info("STOP: braking, queue dropped")
             else:
-                self._take(command, now, stale)
+                alarm = self._take(command, now, stale)
+                if alarm is not None:                 # halted before this loop wrote its record
+                    self.halt(alarm, now)
+                    return self.last_feedback
             self._log_entries(self.arm.collect())
         feedback, raw = self.make_feedback(now)
         self.slave.inputs = raw
@@ -205,43 +227,50 @@ class ControllerProgramV2(SessionProgram):
                               None, now, joints_to_wire(self.arm.joints), reject_code=int(code))
 
     # ------------------------------------------------------------------------------- helpers
-    def _take(self, command: Any, now: float, stale: bool) -> None:
+    def _take(self, command: Any, now: float, stale: bool) -> Optional[str]:
+        """Take the command's slots by the rules; returns the alarm that halts the program (an
+        unreachable target with ``unreachable`` = alarm_halt), else None."""
         for index, slot in enumerate(self.command_slots(command)):
             if slot.empty:
-                return
+                return None
             if not seq_after(slot.seq, self.accepted_seq):
                 continue                                    # taken already: a repeat
             if stale:
                 self._refuse(slot, RejectCode.NOT_ARMED, now,
                              "raised before the controller saw a record with both slots empty "
                              "after (re)start / link loss")
-                return
+                return None
             start = index == 0 and Control.START in command.control
             if not start and 2 <= seq_offset(slot.seq, self.accepted_seq) <= 1 + self.waits_ahead:
-                return          # sent ahead of the acknowledgement of the one before it: it waits
+                return None         # sent ahead of the acknowledgement of the one before it: it waits
             idle = self.stream_idle()
             if start and not idle and self.need_start:
-                return                                      # wait until the arm is at rest
+                return None                                     # wait until the arm is at rest
             if not (start and idle) and (self.need_start or slot.seq != next_seq(self.accepted_seq)):
                 why = "a new stream (at start, after a link loss) begins with START" if self.need_start \
                     else "expected %d (after %d)" % (next_seq(self.accepted_seq), self.accepted_seq)
                 self._refuse(slot, RejectCode.OUT_OF_ORDER, now, why)
-                return
+                return None
             if self.room() <= 0:
-                return                                      # the queue is full: it waits
+                return None                                     # the queue is full: it waits
             blocked = self.arm.blocked_reason()
             if blocked is not None:
                 self._refuse(slot, RejectCode.FAULT, now, blocked)
-                return
+                return None
             target, code, why = self.prepare(slot, now)
+            if target is None and code is RejectCode.UNREACHABLE and self.unreachable is Unreachable.ALARM_HALT:
+                why = "target %d unreachable: %s" % (slot.seq, why)
+                self.log.append(self.refusal_entry(slot, code, now, "alarm, the program halted: %s" % why))
+                return why
             if target is None:
                 self._refuse(slot, code, now, why)
-                return
+                return None
             self.queue(target, now)
             self.accepted_seq = slot.seq
             self.need_start = False
             self._refused = None            # a later refusal of a reused number is logged again
             log.debug("taken: %s", slot.describe())
+        return None
 
     def _refuse(self, slot: Any, code: RejectCode, now: float, reason: str) -> None:
         self.rejected_seq, self.reject_code = slot.seq, code

@@ -23,6 +23,11 @@ and these differences, through the v2 program's hooks:
   arm holds the MOVE it runs and that many more from the ring; the program hands the ring's next
   target over whenever the arm has room. 0: the next MOVE is read only once the current one has
   ended, so the arm stops at every point whatever the smooth level; >= 1: it blends as v2's arm.
+- **Sending ahead** (``send_ahead``, :class:`SendAhead`; an assumption, §10.4 rule 7): a slot one
+  number beyond ``accepted_seq + 1`` waits (``accepted``, the default: neither taken nor refused,
+  the master repeats it) or is refused OUT_OF_ORDER (``refused``: a program that takes only the
+  next number; the feedback shows ``rejected_seq`` = that seq, code 1, and a driver that sends
+  ahead ends every stream at its second target).
 - STOP and a link loss drop the ring (each target ``stopped``, "dropped before it started") and
   brake the arm; a fault (e-stop, drives off, error) drops the ring too.
 - The feedback is a :class:`~vr_driver.protocol.v3.FeedbackV3` (no joints, no I/O); the execution
@@ -32,6 +37,7 @@ and these differences, through the v2 program's hooks:
 from __future__ import annotations
 
 import collections
+import enum
 import logging
 from dataclasses import dataclass
 from typing import Any, Deque, Optional, Sequence, Tuple
@@ -46,10 +52,11 @@ from ..protocol.v3 import (SEQ_MAX, CartesianKind, CartesianSlot, CommandV3, Fee
 from ..protocol.v2 import joints_to_wire
 from .arm import ExecutionLog, Outcome
 from .program_v2 import ControllerProgramV2
-from .session import arm_status_bits
+from .session import Unreachable, arm_status_bits
 from .stream_arm import SimStreamArm, StreamLogEntry, StreamTarget
 
-__all__ = ["ControllerProgramV3", "CartesianTarget", "DEFAULT_RING_SIZE", "DEFAULT_INTERPRETER_LOOKAHEAD"]
+__all__ = ["ControllerProgramV3", "CartesianTarget", "SendAhead", "DEFAULT_RING_SIZE",
+           "DEFAULT_INTERPRETER_LOOKAHEAD"]
 
 #: positions the G2 program's ring holds (targets taken and not yet passed, reached or dropped)
 DEFAULT_RING_SIZE = 4
@@ -57,6 +64,26 @@ DEFAULT_RING_SIZE = 4
 DEFAULT_INTERPRETER_LOOKAHEAD = 1
 
 log = logging.getLogger(__name__)
+
+
+class SendAhead(enum.Enum):
+    """What the G2 program does with a target one number ahead of the next it takes (§10.4 rule 7,
+    an assumption): ``accepted`` -- it waits (the default, the rule); ``refused`` -- refused
+    OUT_OF_ORDER."""
+
+    ACCEPTED = "accepted"
+    REFUSED = "refused"
+
+    @classmethod
+    def parse(cls, value: Any) -> "SendAhead":
+        """From itself or its name; MotionError naming both otherwise."""
+        if isinstance(value, SendAhead):
+            return value
+        try:
+            return cls(str(value).strip().lower())
+        except ValueError:
+            raise MotionError("send_ahead must be %s, got %r" % (" or ".join(v.value for v in cls), value)) \
+                from None
 
 
 @dataclass(frozen=True)
@@ -91,12 +118,17 @@ class ControllerProgramV3(ControllerProgramV2):
     def __init__(self, slave: DpSlave, arm: SimStreamArm, *, kinematics: Optional[Kinematics] = None,
                  ring_size: int = DEFAULT_RING_SIZE, byte_order: Any = ByteOrder.LITTLE,
                  execution_log: Optional[ExecutionLog] = None, confirm_records: bool = False,
-                 data_exchange_bit: bool = True) -> None:
+                 data_exchange_bit: bool = True, loop_blocks_during_move: bool = False,
+                 unreachable: Any = Unreachable.SKIP, send_ahead: Any = SendAhead.ACCEPTED) -> None:
         if isinstance(ring_size, bool) or not isinstance(ring_size, int) or ring_size < 1:
             raise MotionError("ring_size must be an integer >= 1, got %r" % (ring_size,))
         self.byte_order = ByteOrder.parse(byte_order)     # before the slave's hooks may decode
         super().__init__(slave, arm, execution_log=execution_log, confirm_records=confirm_records,
-                         data_exchange_bit=data_exchange_bit)
+                         data_exchange_bit=data_exchange_bit, loop_blocks_during_move=loop_blocks_during_move,
+                         unreachable=unreachable)
+        self.send_ahead = SendAhead.parse(send_ahead)
+        if self.send_ahead is SendAhead.REFUSED:
+            self.waits_ahead = 0                   # only accepted_seq + 1 is taken, anything else refused
         self.ring_size = ring_size
         self.kin = kinematics if kinematics is not None else Kinematics.default()
         self.ring: Deque[CartesianTarget] = collections.deque()
@@ -156,6 +188,14 @@ class ControllerProgramV3(ControllerProgramV2):
         self._log_entries(self.arm.collect())      # the arm's targets first: they came first
         self._drop_ring(reason, now)
         return moved
+
+    def on_halt(self, reason: str, now: float) -> None:
+        super().on_halt(reason, now)
+        self._drop_ring("alarm: %s" % reason, now)
+
+    def on_restart(self, now: float) -> None:
+        super().on_restart(now)
+        self._newest = None
 
     def on_arm_advanced(self, now: float) -> None:
         blocked = self.arm.blocked_reason()

@@ -37,9 +37,27 @@ knows that a reset happened is an assumption about the G2 (``data_exchange_bit``
   DONE on it like on the master's flag 0, so exactly once across a reset then rests on the master,
   whose first record of every session is the idle record (driver/link.py). A reset over before any
   loop read the safe image is not seen either; the records go on as if there was none.
+
+Two more assumptions about the G2's program loop live here, shared by every protocol
+(doc/controller_program.md §10.9):
+
+- ``loop_blocks_during_move`` (default False: the loop keeps running while the arm moves): True is
+  a G2 whose MOVE line blocks the program until the motion has ended (§5 "Moves block"). While a
+  motion the program started runs, no loop runs: no record is read (not even a STOP or a link loss:
+  they are seen in the first loop after the arm came to rest), the feedback is not written (the
+  last record stays on the bus, its heartbeat frozen) and nothing new reaches the arm; the card's
+  own watchdog goes on (:meth:`SessionProgram.suspended`).
+- ``unreachable`` (:class:`Unreachable`, default ``skip``): a target the program cannot solve or
+  plan is refused and the program goes on (v1 REJECTED, v2 / v3 code UNREACHABLE), or
+  (``alarm_halt``) the G2 raises an alarm and halts the program: the arm stops at once (the alarm
+  is the arm's error), the targets taken are dropped, and no loop runs any more -- the record last
+  written stays on the bus (v1: BUSY, written before the MOVE; v2 / v3: the record of the loop
+  before). Clearing the error (the operator resets the alarm and starts the program again)
+  restarts the program as at its start: disarmed, the handshake / stream state of a fresh program.
 """
 from __future__ import annotations
 
+import enum
 import logging
 import threading
 from typing import Any, Optional, Tuple
@@ -49,9 +67,29 @@ from pyprofibus_vendor.dp_slave import DpSlave, SlaveState
 from ..errors import ProtocolError, VrDriverError
 from ..protocol.v1 import StatusBits
 
-__all__ = ["SessionProgram", "arm_status_bits"]
+__all__ = ["SessionProgram", "Unreachable", "arm_status_bits"]
 
 log = logging.getLogger(__name__)
+
+
+class Unreachable(enum.Enum):
+    """What the G2 does with a target it cannot reach (an assumption, doc/controller_program.md §5
+    notes, §10.9): ``skip`` -- the program finds out before the MOVE, refuses it and goes on (the
+    default); ``alarm_halt`` -- the G2 raises an alarm and halts the program."""
+
+    SKIP = "skip"
+    ALARM_HALT = "alarm_halt"
+
+    @classmethod
+    def parse(cls, value: Any) -> "Unreachable":
+        """From itself or its name; VrDriverError naming both otherwise."""
+        if isinstance(value, Unreachable):
+            return value
+        try:
+            return cls(str(value).strip().lower())
+        except ValueError:
+            raise VrDriverError("unreachable must be %s, got %r" % (" or ".join(u.value for u in cls), value)) \
+                from None
 
 
 def arm_status_bits(arm: Any) -> StatusBits:
@@ -76,18 +114,31 @@ class SessionProgram:
     Subclasses define :meth:`decode_record` (raw bytes -> command, ProtocolError when it does not
     decode), :meth:`is_idle_command` (the command arms the program) and :meth:`on_link_lost` (stop
     the arm; called from :meth:`read_command`), and call :meth:`read_command` at the start of each
-    program loop.
+    program loop -- after :meth:`suspended`, which says whether the loop runs at all (a MOVE blocking
+    it, or the program halted by an alarm); :meth:`advance_suspended`, :meth:`on_halt` and
+    :meth:`on_restart` are their hooks for that.
     """
 
     def __init__(self, slave: DpSlave, arm: Any, *, confirm_records: bool = False,
-                 data_exchange_bit: bool = True) -> None:
+                 data_exchange_bit: bool = True, loop_blocks_during_move: bool = False,
+                 unreachable: Any = Unreachable.SKIP) -> None:
         if not isinstance(data_exchange_bit, bool):
             raise VrDriverError("data_exchange_bit must be True or False, got %r" % (data_exchange_bit,))
+        if not isinstance(loop_blocks_during_move, bool):
+            raise VrDriverError("loop_blocks_during_move must be True or False, got %r" % (loop_blocks_during_move,))
         self.slave = slave
         self.arm = arm
         self.confirm_records = confirm_records
         #: the program reads its card's Data_Exchange status (True) or only its input bytes (False)
         self.data_exchange_bit = data_exchange_bit
+        #: a MOVE blocks the program loop until the motion ended (module docstring)
+        self.loop_blocks_during_move = loop_blocks_during_move
+        #: an unreachable target is refused (skip) or raises an alarm that halts the program
+        self.unreachable = Unreachable.parse(unreachable)
+        #: the alarm that halted the program (None: it runs)
+        self.halted: Optional[str] = None
+        self.alarms = 0
+        self.blocked_loops = 0          # loops that did not run: a MOVE blocked the program
         self.loops = 0
         self.bad_records = 0
         self.link_losses = 0
@@ -124,6 +175,59 @@ class SessionProgram:
 
     def on_link_lost(self, why: str, stop_time: float) -> None:
         raise NotImplementedError
+
+    def advance_suspended(self, now: float) -> None:
+        """Advance the arm to ``now`` while the loop does not run (the MOVE blocking it goes on; the
+        subclass keeps what the arm reports for the next loop that runs)."""
+        raise NotImplementedError
+
+    def on_halt(self, reason: str, now: float) -> None:
+        """The program halted by an alarm (the arm's error is set and has stopped it): log what
+        ended."""
+
+    def on_restart(self, now: float) -> None:
+        """The alarm was cleared and the program starts again: reset its state as at its start."""
+
+    # ------------------------------------------------------------------------- the loop's life
+    def suspended(self, now: float) -> bool:
+        """Whether the program loop does not run at ``now``: halted by an alarm whose error is still
+        set, or (``loop_blocks_during_move``) a motion it started still runs. The arm advances
+        either way and the card's own watchdog is served; nothing is read or written. A halted
+        program whose error was cleared restarts here (:meth:`on_restart`) and runs this loop."""
+        if self.halted is not None:
+            if self.arm.error is not None:
+                self.slave.step(now)
+                self.advance_suspended(now)
+                return True
+            self._restart(now)
+            return False
+        if self.loop_blocks_during_move and self.arm.moving:
+            self.slave.step(now)
+            self.advance_suspended(now)
+            if self.arm.moving:
+                self.blocked_loops += 1
+                return True
+        return False
+
+    def halt(self, reason: str, now: float) -> None:
+        """``unreachable`` = alarm_halt: the G2 raises an alarm and halts the program. The alarm is
+        the arm's error (it stops the arm at once and shows in the status bits of a record written
+        after the restart); no loop runs until it is cleared."""
+        self.halted = reason
+        self.alarms += 1
+        log.error("alarm: %s -- the program halted (clear the error to restart it)", reason)
+        self.arm.set_error("alarm: %s" % reason, now)
+        self.on_halt(reason, now)
+
+    def _restart(self, now: float) -> None:
+        log.warning("alarm cleared: the program starts again (disarmed) after: %s", self.halted)
+        self.halted = None
+        self._armed = False
+        with self._io_lock:
+            self._zero_seen = False         # armed only by an idle record read after the restart
+        self._view = None
+        self._last_read = None
+        self.on_restart(now)
 
     # ------------------------------------------------------------------------- slave hooks
     def _on_outputs(self, data: bytes) -> None:

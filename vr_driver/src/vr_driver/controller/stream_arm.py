@@ -50,6 +50,28 @@ Motion model (doc/controller_program.md §6 and §9):
   joints of the previous target still in the ring or the arm (``previous_target``, the default; the
   arm's joints when none is) or nearest the arm's joints at that moment (``current_joints``).
 
+**Assumptions about the real G2** (each a parameter; the defaults are the model described above,
+doc/controller_program.md §10.9):
+
+- ``speed_scale`` (default 1.0): MOVEP's speed unit. A target's commanded speed fraction times the
+  scale is the speed the arm really runs at (capped at the joint limits, 1.0): a G2 whose "speed
+  1000" is 60 % of the joint limits is ``speed_scale`` 0.6. Move times, ramps and blend windows
+  follow the real speed.
+- ``blend_across_input_read`` (default True): the program reads its inputs between every two
+  MOVEs; False is a G2 on which that read ends the blend of the MOVE before it -- an exact stop at
+  every point, whatever the smooth level and the look-ahead (the next MOVE then starts from rest
+  at once, without a wait for the program).
+- ``ramp_shape`` (:class:`RampShape`, default ``linear``): the speed ramp from rest (and to rest,
+  and in a blend window) is linear in time (constant acceleration) or S-shaped (``s_curve``: the
+  smoothstep ``3x^2 - 2x^3`` of the ramp's share ``x``: no jump in acceleration, the peak 1.5 times
+  the linear ramp's). Both cover the same distance in the same time, so the timing above holds for
+  either; a controlled stop (:meth:`brake`) keeps its linear ramp.
+- ``accelerations`` (default None): per-axis acceleration limits [rad/s^2], the mean acceleration
+  of a ramp from rest to full speed (full speed / the ramp's time). Given, the stop ramp of a
+  segment lasts ``max_i |dq_i| / (T0 a_i)`` (each joint reaches its cruise speed within its own
+  limit; capped at T0) instead of ``f * ramp_time``; for ``a_i = vmax_i / ramp_time`` the two agree.
+  None: every joint ramps in ``ramp_time`` (today's model). Not with ``ramp_time`` as well.
+
 ``speed_factor`` plays the robot time that many times faster (as SimArm); ``ramp_time`` and
 ``brake_time`` are robot time. Every target pushed ends in exactly one :class:`StreamLogEntry`,
 collected with :meth:`step` / :meth:`collect`.
@@ -59,6 +81,7 @@ Thread safety: every public method takes the arm's lock.
 from __future__ import annotations
 
 import collections
+import enum
 import json
 import math
 import time
@@ -78,6 +101,7 @@ from .arm import ArmBase, Outcome, brake_progress
 
 __all__ = [
     "DEFAULT_RAMP_TIME",
+    "RampShape",
     "BLEND_PER_LEVEL",
     "BLEND_MAX",
     "StreamTarget",
@@ -99,6 +123,50 @@ Clock = Callable[[], float]
 DEFAULT_RAMP_TIME = model_ramp_time()
 
 _EPS = 1e-12
+
+
+class RampShape(enum.Enum):
+    """The shape of the arm's speed ramps (an assumption about the real arm, doc/controller_program.md
+    §10.9): ``linear`` (constant acceleration, the default) or ``s_curve`` (smoothstep: the speed
+    goes as ``3x^2 - 2x^3`` of the ramp's share ``x``, the acceleration rises from 0 and falls back
+    to 0; same duration and distance as the linear ramp)."""
+
+    LINEAR = "linear"
+    S_CURVE = "s_curve"
+
+    @classmethod
+    def parse(cls, value: Any) -> "RampShape":
+        """A shape from itself or its name; MotionError naming both otherwise."""
+        if isinstance(value, RampShape):
+            return value
+        try:
+            return cls(str(value).strip().lower())
+        except ValueError:
+            raise MotionError("ramp_shape must be %s, got %r" % (" or ".join(r.value for r in cls), value)) \
+                from None
+
+
+def _s_area(x: float) -> float:
+    """Distance covered over the share ``x`` (0..1) of an S-shaped ramp from rest to speed 1 lasting
+    1: the integral of the smoothstep 3x^2 - 2x^3 (1/2 at x = 1, as the linear ramp's x^2 / 2)."""
+    return x * x * x - 0.5 * x * x * x * x
+
+
+def check_accelerations(value: Any, joints: int = 6) -> Optional[Tuple[float, ...]]:
+    """Per-axis acceleration limits [rad/s^2] from a sequence of ``joints`` finite numbers > 0 (None:
+    none given); MotionError naming the bad one otherwise."""
+    if value is None:
+        return None
+    if isinstance(value, (str, bytes)) or not hasattr(value, "__len__") or len(value) != joints:
+        raise MotionError("accelerations must be %d numbers > 0 (rad/s^2, joint_1 .. joint_%d), got %r"
+                          % (joints, joints, value))
+    out = []
+    for i, a in enumerate(value):
+        if isinstance(a, bool) or not isinstance(a, (int, float)) or not math.isfinite(a) or a <= 0.0:
+            raise MotionError("accelerations: joint_%d must be a finite number > 0 (rad/s^2), got %r"
+                              % (i + 1, a))
+        out.append(float(a))
+    return tuple(out)
 
 
 def segment_time(move_time: float, ramp_in: float, ramp_out: float) -> float:
@@ -186,18 +254,27 @@ class _Segment:
     """One segment on the path-time axis (see the module docstring for the profile)."""
 
     def __init__(self, target: StreamTarget, start: np.ndarray, t0: float, ramp_in: float,
-                 vmax: np.ndarray, ramp_time: float, wall_start: float) -> None:
+                 vmax: np.ndarray, ramp_time: float, wall_start: float, *, fraction: Optional[float] = None,
+                 accelerations: Optional[np.ndarray] = None, shape: RampShape = RampShape.LINEAR) -> None:
+        f = target.speed_fraction if fraction is None else fraction
         self.target = target
         self.start = start
         self.end = np.array(target.joints)
         self.delta = self.end - start
-        self.move_time = float(np.max(np.abs(self.delta) / (target.speed_fraction * vmax)))
+        self.move_time = float(np.max(np.abs(self.delta) / (f * vmax)))
         self.t0 = t0
         self.ramp_in = min(ramp_in, self.move_time)
-        self.stop_ramp = min(ramp_time * target.speed_fraction, self.move_time)
+        if accelerations is None:
+            ramp = ramp_time * f
+        elif self.move_time > _EPS:            # each joint reaches its cruise speed within its limit
+            ramp = float(np.max(np.abs(self.delta) / (self.move_time * accelerations)))
+        else:
+            ramp = 0.0
+        self.stop_ramp = min(ramp, self.move_time)
         self.ramp_out: Optional[float] = None         # decided at the decision point
         self.blend = 0.0                              # > 0: blends into the next over this window
         self.wall_start = wall_start
+        self.s_curve = shape is RampShape.S_CURVE
 
     @property
     def zero(self) -> bool:
@@ -221,6 +298,8 @@ class _Segment:
         v = 1.0 / self.move_time
         r_in = self.ramp_in
         if u < r_in:
+            if self.s_curve:
+                return v * r_in * _s_area(u / r_in)
             return v * u * u / (2.0 * r_in)
         if self.ramp_out is not None:
             total = self.end_time()
@@ -228,6 +307,8 @@ class _Segment:
                 return 1.0
             left = total - t
             if left < self.ramp_out:
+                if self.s_curve:
+                    return 1.0 - v * self.ramp_out * _s_area(left / self.ramp_out)
                 return 1.0 - v * left * left / (2.0 * self.ramp_out)
         return v * (u - 0.5 * r_in)
 
@@ -242,14 +323,30 @@ class SimStreamArm(ArmBase):
                  initial_pose: Any = HOME_POSE, initial_joints: Optional[Sequence[float]] = None,
                  clock: Clock = time.monotonic, brake_time: float = 0.0,
                  ramp_time: Optional[float] = None, look_ahead: int = 1,
-                 configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
+                 configuration: Any = ConfigurationRule.PREVIOUS_TARGET, speed_scale: float = 1.0,
+                 blend_across_input_read: bool = True, ramp_shape: Any = RampShape.LINEAR,
+                 accelerations: Optional[Sequence[float]] = None) -> None:
         if ramp_time is not None and not (isinstance(ramp_time, (int, float)) and not isinstance(ramp_time, bool)
                                           and math.isfinite(ramp_time) and ramp_time >= 0.0):
             raise MotionError("ramp_time must be a finite number >= 0, got %r" % (ramp_time,))
         if isinstance(look_ahead, bool) or not isinstance(look_ahead, int) or look_ahead < 0:
             raise MotionError("look_ahead must be an integer >= 0, got %r" % (look_ahead,))
+        if isinstance(speed_scale, bool) or not isinstance(speed_scale, (int, float)) \
+                or not math.isfinite(speed_scale) or speed_scale <= 0.0:
+            raise MotionError("speed_scale must be a finite number > 0, got %r" % (speed_scale,))
+        if not isinstance(blend_across_input_read, bool):
+            raise MotionError("blend_across_input_read must be True or False, got %r" % (blend_across_input_read,))
         self.look_ahead = look_ahead
+        #: assumptions about the real G2 (module docstring)
+        self.speed_scale = float(speed_scale)
+        self.blend_across_input_read = blend_across_input_read
+        self.ramp_shape = RampShape.parse(ramp_shape)
         self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock, configuration)
+        self.accelerations = check_accelerations(accelerations, len(self.kin.limits.velocity))
+        if self.accelerations is not None and ramp_time is not None:
+            raise MotionError("give ramp_time (every joint ramps in that time) or accelerations (per axis), "
+                              "not both")
+        self._acc = None if self.accelerations is None else np.array(self.accelerations, dtype=float)
         if ramp_time is None:      # the model's joint limits: max velocity / acceleration (0.1 s)
             ramp_time = self.kin.limits.ramp_time
         self.ramp_time = float(DEFAULT_RAMP_TIME if ramp_time is None else ramp_time)
@@ -458,9 +555,9 @@ class SimStreamArm(ArmBase):
     def _decide(self) -> None:
         seg = self._active
         assert seg is not None and seg.ramp_out is None
-        if self._queue and self._brake is None and seg.target.smooth > 0:
+        if self._queue and self._brake is None and seg.target.smooth > 0 and self.blend_across_input_read:
             nxt = self._queue[0]
-            nxt_time = float(np.max(np.abs(np.array(nxt.joints) - seg.end) / (nxt.speed_fraction * self.vmax)))
+            nxt_time = float(np.max(np.abs(np.array(nxt.joints) - seg.end) / (self._fraction(nxt) * self.vmax)))
             w = blend_window(seg.target.smooth, seg.move_time, nxt_time)
             if w > _EPS:
                 seg.ramp_out = seg.blend = w
@@ -505,7 +602,8 @@ class SimStreamArm(ArmBase):
                     start: Optional[np.ndarray] = None) -> None:
         target = self._queue.popleft()
         begin = self._position(tau) if start is None else start
-        seg = _Segment(target, np.array(begin, dtype=float), tau, 0.0, self.vmax, self.ramp_time, now)
+        seg = _Segment(target, np.array(begin, dtype=float), tau, 0.0, self.vmax, self.ramp_time, now,
+                       fraction=self._fraction(target), accelerations=self._acc, shape=self.ramp_shape)
         seg.ramp_in = seg.stop_ramp if from_rest else min(ramp_in, seg.move_time)
         if target.smooth <= 0:
             seg.ramp_out = seg.stop_ramp
@@ -513,6 +611,13 @@ class SimStreamArm(ArmBase):
         self._active = seg
         if from_rest:
             self._rest = np.array(begin, dtype=float)
+
+    def _fraction(self, target: StreamTarget) -> float:
+        """The share of the joint speed limits the arm really runs a target at: its commanded
+        fraction times ``speed_scale``, at most 1 (exactly the commanded one at scale 1)."""
+        if self.speed_scale == 1.0:
+            return target.speed_fraction
+        return min(1.0, target.speed_fraction * self.speed_scale)
 
     def _halt(self, reason: str, now: float) -> None:
         """Freeze the arm where it is now; the active target ends stopped."""

@@ -16,6 +16,15 @@ target: nearest the previous target's joints or ``current_joints`` (doc/controll
 ``~true_model`` [""] a YAML of the simulated robot's own dimensions and joint zero offsets
 (panasonic_vr006l_support.true_model; empty: the model's): the arm and the v3 program compute with
 it while the driver keeps the model, as with a real robot that differs from the model.
+The assumptions about the real G2 (``controller.program.ASSUMPTIONS``, doc/controller_program.md
+§10.9; the defaults keep the model the stack is tested against): ``~data_exchange_bit`` [true];
+``~speed_scale`` [1.0] (v2, v3: MOVEP's speed unit, real speed = commanded x scale);
+``~loop_blocks_during_move`` [false] (a MOVE blocks the program loop, the feedback frozen);
+``~blend_across_input_read`` [true] (v2, v3: false: an exact stop at every point);
+``~loop_jitter`` [0.0] s, ``~loop_jitter_seed`` [0] (the loop period's spread); ``~send_ahead``
+["accepted"] (v3; or "refused"); ``~unreachable`` ["skip"] (or "alarm_halt"); ``~ramp_shape``
+["linear"] (v2, v3; or "s_curve"); ``~accelerations`` [unset] (v2, v3: 6 numbers, rad/s^2, a list
+or a string; not with ``~ramp_time``). A bad value is refused at start (exit status 2).
 
 Sets ``~device_path`` to the device a master must open. Services (std_srvs/SetBool):
 ``~set_estop`` (True presses the e-stop), ``~set_drives_powered`` (False switches the drives off),
@@ -74,15 +83,7 @@ def main() -> int:
             params["pty_link"] = auto_pty_link()
             os.makedirs(os.path.dirname(params["pty_link"]), exist_ok=True)
         options = SimOptions.from_mapping(params)
-        controller = VirtualController(options.device, address=options.address, baud=options.baud,
-                                       speed_factor=options.speed_factor, initial_pose=options.initial_pose,
-                                       loop_period=options.loop_period, byte_order=options.byte_order,
-                                       pty_link=options.pty_link, log_file=options.log_file,
-                                       brake_time=options.brake_time, protocol=options.protocol,
-                                       interpreter_lookahead=options.interpreter_lookahead,
-                                       ring_size=options.ring_size, ramp_time=options.ramp_time,
-                                       configuration=options.configuration,
-                                       true_model=options.true_model)
+        controller = VirtualController(options.device, **options.controller_kwargs())
     except SimDeviceError as exc:
         rospy.logfatal("virtual_controller: device error: %s", exc)
         return EXIT_DEVICE
