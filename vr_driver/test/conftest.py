@@ -38,14 +38,14 @@ def planner(kin):
 LANE_OF = {
     "test_driver.py": "realtime",                  # DriverCore and the virtual G2 over a real pty
     "test_port_faults.py": "realtime",
-    "test_controller_sim_pty.py": "realtime",
+    "test_controller_sim_pty.py": "pty",           # the v1 program on a real pty: a lane of its own (84 s)
     "test_controller_v2_pty.py": "realtime",
     "test_sim_line_pty.py": "realtime",
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
     "test_soak.py": "soak",                        # the longest: a lane of its own
     "test_plan_process.py": "planning",
 }
-LANES = ("computation", "stepped", "planning", "realtime", "soak")
+LANES = ("computation", "stepped", "planning", "realtime", "pty", "soak")
 
 
 def lane_of(path) -> str:
