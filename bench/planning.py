@@ -1,7 +1,8 @@
 #!/usr/bin/python3
-"""Collision-aware planning in the example cell (issue 27; printed, never asserted).
+"""Collision-aware planning in the example cell (printed, never asserted).
 
     scripts/env python3 bench/planning.py [--n 100] [--seed 1] [--budget 1.0] [--planner RRTConnect]
+                                          [--velocity-scaling 1.0]
                                           [--no-execute] [--protocol v2] [--quick]
 
 The VR-006L (support package's xacro, moveit_config's SRDF) in the example cell
@@ -15,7 +16,8 @@ every other query asks for it as a pose (the controller pose of its TCP, mm / de
 solves every IK branch and takes the nearest collision-free one), the others as joints.
 
 Each query: kinematics.planner.Planner.plan (OMPL RRTConnect, shortcutting and smoothing, TOPP-RA at
-the full speed and acceleration limits, samples every 0.05 s, every sample and chord re-checked),
+the full speed and acceleration limits (``--velocity-scaling``, default 1: the plan action's
+default is 0.1, this bench asks for the full speed explicitly), samples every 0.05 s, every sample and chord re-checked),
 the time of the whole call; then, independently of the planner, every sample and every straight
 chord between two samples (0.25 deg steps) checked with a CollisionChecker of the true shapes
 (padding 0: collisions) and with the padded one (inside the padding).
@@ -151,6 +153,9 @@ def main() -> int:
     parser.add_argument("--seed", type=int, default=1, help="random seed of the queries and the planner (default 1)")
     parser.add_argument("--budget", type=float, default=1.0, help="planner time budget [s] (default 1.0)")
     parser.add_argument("--planner", default="RRTConnect", help="OMPL planner (default RRTConnect)")
+    parser.add_argument("--velocity-scaling", type=float, default=1.0,
+                        help="fraction of the joint speed and acceleration limits, (0, 1] (default 1: the full "
+                             "speed; the plan action's default is 0.1)")
     parser.add_argument("--no-execute", action="store_true", help="plan and check only, no driver rig")
     parser.add_argument("--protocol", default="v2", help="the rig's protocol (default v2: joint targets)")
     parser.add_argument("--driver", action="store_true",
@@ -170,7 +175,8 @@ def main() -> int:
         exact = CollisionChecker.default(scene=load_scene(CELL), padding=0.0)
         from vr_driver.kinematics.solver import Kinematics
         kin = Kinematics.default()
-        planner = Planner(kin, checker, planner=args.planner, time_budget=args.budget, seed=args.seed)
+        planner = Planner(kin, checker, planner=args.planner, time_budget=args.budget, seed=args.seed,
+                          velocity_scaling=args.velocity_scaling, acceleration_scaling=args.velocity_scaling)
     except MissingDependency as exc:
         print("planning benchmark skipped: %s" % exc)
         return 0
@@ -183,9 +189,9 @@ def main() -> int:
         driver_planning = DriverPlanning(executor.world.core)
     rng = random.Random(args.seed)
     print("planning benchmark: %d queries, seed %d, cell %s (%s), padding %.0f mm (the driver's), planner %s, "
-          "budget %.2f s, clearance %.0f mm, max sweep %.0f mm, dt %.2f s%s"
+          "budget %.2f s, velocity scaling %g, clearance %.0f mm, max sweep %.0f mm, dt %.2f s%s"
           % (n, args.seed, os.path.relpath(CELL, REPO), ", ".join(checker.scene.names()), padding * 1e3, args.planner,
-             args.budget, planner.clearance * 1e3, planner.max_sweep * 1e3, planner.dt,
+             args.budget, args.velocity_scaling, planner.clearance * 1e3, planner.max_sweep * 1e3, planner.dt,
              "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol)
           + ("; planned by the plan action's core (driver.planning)" if driver_planning is not None else ""))
     start = executor.joints if executor is not None else tuple(kin.named_states["home"])
@@ -203,7 +209,8 @@ def main() -> int:
         try:
             if driver_planning is not None:
                 outcome = driver_planning.plan(
-                    PlanGoal(pose=goal) if kind == "pose" else PlanGoal(joints=(kin.joint_names, tuple(goal))),
+                    PlanGoal(pose=goal, velocity_scaling=args.velocity_scaling) if kind == "pose"
+                    else PlanGoal(joints=(kin.joint_names, tuple(goal)), velocity_scaling=args.velocity_scaling),
                     start=start, seed=args.seed + i)
                 if not outcome.ok:
                     raise PlanningError("plan", outcome.text)

@@ -82,13 +82,15 @@ class PlanningTest(DriverTestBase):
         self.assertTrue(done.wait(timeout), "no result from the plan action")
         return handle.get_goal_status(), handle.get_result(), phases
 
+    # the goals of these tests ask for the full speed: the driver's default (0.1) would make every run
+    # ten times longer; test_07 checks the default
     def pose_goal(self, pose, preview_only):
         return PlanGoal(goal_type=PlanGoal.POSE, pose=cp(pose), preview_only=preview_only,
-                        allowed_planning_time=5.0)
+                        allowed_planning_time=5.0, velocity_scaling=1.0)
 
     def named_goal(self, name, preview_only):
         return PlanGoal(goal_type=PlanGoal.NAMED, named_state=name, preview_only=preview_only,
-                        allowed_planning_time=5.0)
+                        allowed_planning_time=5.0, velocity_scaling=1.0)
 
     def at_home(self):
         """The arm at home from wherever an earlier test left it: through the plan action (the cell's
@@ -143,6 +145,12 @@ class PlanningTest(DriverTestBase):
         self.assertEqual(result.error_code, PlanResult.SUCCESS, result.error_string)
         self.assertTrue(result.error_string.startswith("preview only (nothing sent): planned with RRTConnect"),
                         result.error_string)
+        # the speed it will run at, said before it runs: the scaling asked for, the peaks within it
+        self.assertEqual(result.velocity_scaling, 1.0)
+        self.assertRegex(result.error_string, r"velocity scaling 1\b.*at its fastest the TCP moves [0-9]+ mm/s, "
+                                              r"joint_[1-6] [0-9.]+ deg/s \([0-9]+ % of its limit\)")
+        self.assertGreater(result.peak_tcp_speed, 0.0)
+        self.assertLessEqual(result.peak_joint_fraction, 1.0 + 1e-6)
         self.assertEqual(phases[:2], [PlanFeedback.PHASE_PLANNING, PlanFeedback.PHASE_PREVIEWING])
         points = self.points(result)
         self.assertGreater(len(points), 10)
@@ -257,16 +265,26 @@ class PlanningTest(DriverTestBase):
         """`pose_terminal --pose ... --type plan --yes` and `--plan home --yes`: the terminal's plan
         through the plan action and joint_trajectory_action, exit 0, the arm where it was sent."""
         self.at_home()
-        for argv, where in ((["--pose"] + [str(v) for v in BEHIND] + ["--type", "plan", "--yes"], BEHIND),
-                            (["--plan", "home", "--yes"], (1120, 0, 725, 0, 45, 0))):
+        for argv, where in ((["--pose"] + [str(v) for v in BEHIND] + ["--type", "plan", "--yes",
+                                                                     "--velocity-scaling", "1"], BEHIND),
+                            (["--plan", "home", "--yes", "--velocity-scaling", "1"], (1120, 0, 725, 0, 45, 0))):
             start = len(self.joints.messages)
             done = subprocess.run(["rosrun", "vr_driver", "pose_terminal"] + argv, stdout=subprocess.PIPE,
                                   stderr=subprocess.STDOUT, universal_newlines=True, timeout=60)
             self.assertEqual(done.returncode, 0, done.stdout)
             self.assertRegex(done.stdout, r"Plan: collision-free; duration [0-9.]+ s \([0-9]+ points\), planned in "
                                           r"[0-9]+ ms by RRTConnect")
+            self.assertRegex(done.stdout, r"  speed: velocity scaling 1; at its fastest the TCP moves [0-9]+ mm/s, "
+                                          r"joint_[1-6] [0-9.]+ deg/s \([0-9]+ % of its limit\)\n(.*\n)*Sent\.")
             self.assertIn("Reached X %g  Y %g  Z %g" % where[:3], done.stdout)
             self.assert_free_run(self.checker, start, 1.0)
+        # without --velocity-scaling: the driver's default, said also with --preview (nothing runs)
+        done = subprocess.run(["rosrun", "vr_driver", "pose_terminal", "--pose"] + [str(v) for v in BEHIND]
+                              + ["--type", "plan", "--preview"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                              universal_newlines=True, timeout=60)
+        self.assertEqual(done.returncode, 0, done.stdout)
+        self.assertRegex(done.stdout, r"  speed: velocity scaling 0.1 \(the driver's default\); at its fastest the TCP "
+                                      r"moves [0-9]+ mm/s, joint_[1-6] [0-9.]+ deg/s \(([0-9]|10) % of its limit\)")
 
     def test_06_cancelling_a_running_plan_stops_the_arm(self):
         """Cancel while the plan runs: joint_trajectory_action stops the arm, the plan goal ends
@@ -318,6 +336,19 @@ class PlanningTest(DriverTestBase):
                             positions=[0.3, 0.5, -0.2, 0.0, 0.5, 0.0], allowed_planning_time=5.0, preview_only=True)
             state, result, _ = self.plan(goal)
             self.assertEqual(result.error_code, PlanResult.SUCCESS, result.error_string)
+            # no velocity_scaling asked for: the driver's default, 0.1 of the joint speed limits, said
+            # with the peak speeds (the TCP's from the trajectory's joints and our FK)
+            self.assertEqual(result.velocity_scaling, 0.1)
+            self.assertIn("velocity scaling 0.1", result.error_string)
+            self.assertRegex(result.peak_joint, r"\Ajoint_[1-6]\Z")
+            self.assertGreater(result.peak_joint_fraction, 0.02)
+            self.assertLessEqual(result.peak_joint_fraction, 0.1 + 1e-6)
+            points = self.points(result)
+            steps = zip(points, points[1:], result.trajectory.points, result.trajectory.points[1:])
+            chord = max(self.kin.fk_pose(b).distance_to(self.kin.fk_pose(a))[0]
+                        / (pb.time_from_start - pa.time_from_start).to_sec() for a, b, pa, pb in steps)
+            self.assertGreater(result.peak_tcp_speed, 0.95 * chord)      # a chord's mean speed: at most the peak
+            self.assertLess(result.peak_tcp_speed, 1.5 * chord)
             goal.preview_only = False
             state, result, phases = self.plan(goal)
             self.assertEqual(state, GoalStatus.ABORTED, result.error_string)

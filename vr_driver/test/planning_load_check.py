@@ -41,13 +41,14 @@ CYCLE = [
 ]
 for _goal in CYCLE:
     _goal.allowed_planning_time = 5.0     # RRTConnect ends when it has a path: a budget, not a duration
+    _goal.velocity_scaling = 1.0          # the full speed, as measured (the driver's default is 0.1)
 GOALS = 20
 #: the background load, in turn: preview-only plans behind the pillar and home (from wherever the arm
 #: is, around the pillar: OMPL plans) with RRT*, which plans until its budget is spent, each try
 LOAD = [PlanGoal(goal_type=PlanGoal.POSE, pose=cp((500, 866, 725, 0, 45, 60)), planner_id="RRTstar",
-                 allowed_planning_time=0.5, preview_only=True),
+                 allowed_planning_time=0.5, preview_only=True, velocity_scaling=1.0),
         PlanGoal(goal_type=PlanGoal.NAMED, named_state="home", planner_id="RRTstar", allowed_planning_time=0.5,
-                 preview_only=True)]
+                 preview_only=True, velocity_scaling=1.0)]
 
 
 def link_values(msg):

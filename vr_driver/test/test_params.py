@@ -228,4 +228,4 @@ def test_plan_action_defaults_are_checked(name, value, words):
     p = DriverParams.from_dict({"planner_id": "PRM", "planning_time": 2.5, "velocity_scaling": 0.5})
     assert (p.planner_id, p.planning_time, p.velocity_scaling) == ("PRM", 2.5, 0.5)
     d = DriverParams()
-    assert (d.planner_id, d.planning_time, d.velocity_scaling) == ("RRTConnect", 1.0, 1.0)
+    assert (d.planner_id, d.planning_time, d.velocity_scaling) == ("RRTConnect", 1.0, 0.1)

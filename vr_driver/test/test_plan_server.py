@@ -68,6 +68,47 @@ def test_the_result_of_a_plan_carries_the_trajectory_under_the_drivers_names():
     assert refused.error_code == msg.PlanResult.GOAL_IN_COLLISION and refused.trajectory.points == []
 
 
+def test_the_result_says_the_speed_the_plan_runs_at():
+    """The scaling it was timed with, the TCP's peak speed (central difference of our FK along the
+    joint velocity) and the joint closest to its limit, in the fields and appended in words."""
+    import math
+    from vr_driver.kinematics.solver import Kinematics
+    kin = Kinematics.default()
+    limit = kin.limits.velocity
+    home = tuple(kin.named_states["home"])
+    # joint_1 alone at 0.2 rad/s, then joint_5 at 0.1 of its limit (the larger fraction of the two)
+    v1 = (0.2, 0.0, 0.0, 0.0, 0.0, 0.0)
+    v5 = (0.0, 0.0, 0.0, 0.0, 0.1 * limit[4], 0.0)
+    zero = (0.0,) * 6
+    positions, velocities = (home, home, home, home), (zero, v1, v5, zero)
+    peaks = plan_server.peak_speeds(kin, positions, velocities)
+    assert (peaks.joint, peaks.joint_speed) == (4, 0.1 * limit[4])
+    assert peaks.joint_fraction == pytest.approx(0.1)
+    # joint_1 turning at 0.2 rad/s moves the TCP at its distance from the joint_1 axis times 0.2
+    x, y = kin.fk_pose(home).x, kin.fk_pose(home).y
+    by_joint_1 = 0.2 * math.hypot(x, y)
+    assert peaks.tcp >= by_joint_1 * (1 - 1e-6)
+    assert plan_server.peak_speeds(kin, positions[:1], velocities[:1]) == (0.0, 0, 0.0, 0.0)
+
+    class Planning:
+        pass
+    server = plan_server.PlanServer(_Core(), DriverParams())
+    server.planning = Planning()
+    server.planning.kin = kin
+    plan = PlannedTrajectory(NAMES, (0.0, 0.5, 1.0, 1.5), positions, velocities, (zero,) * 4, positions, "RRTConnect")
+    text = "planned with RRTConnect in 12 ms: 4 points over 1.50 s (velocity scaling 0.1)"
+    result = server._result(PlanOutcome(P.SUCCESS, text, plan, 0.012, "RRTConnect"), 0.1)
+    assert result.velocity_scaling == 0.1
+    assert (result.peak_joint, result.peak_joint_fraction) == ("joint_5", pytest.approx(0.1))
+    assert result.peak_joint_speed == pytest.approx(math.degrees(0.1 * limit[4]))
+    assert result.peak_tcp_speed == pytest.approx(peaks.tcp)
+    assert result.error_string == text + ("; at its fastest the TCP moves %.0f mm/s, joint_5 %.1f deg/s (10 %% of its "
+                                          "limit)" % (peaks.tcp, math.degrees(0.1 * limit[4])))
+    # words that do not name the scaling get it
+    result = server._result(PlanOutcome(P.SUCCESS, "planned", plan, 0.012, "RRTConnect"), 0.25)
+    assert result.error_string.startswith("planned; velocity scaling 0.25: at its fastest the TCP moves ")
+
+
 def test_the_codes_are_the_actions():
     for name in ("SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
                  "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",

@@ -19,7 +19,8 @@ END = (1.047, 0.42, 0.056, 0.0, 0.307, 0.0)
 
 
 class PlanBackend(FakeBackend):
-    """FakeBackend with the plan action: ``plan_refuse`` a refusal, else a 2.8 s plan of 57 points."""
+    """FakeBackend with the plan action: ``plan_refuse`` a refusal, else a 2.8 s plan of 57 points at
+    the request's velocity scaling (0: the driver's default, 0.1), its peak speeds proportional."""
 
     def __init__(self, plan_refuse="", plan_unavailable=False, **kw):
         super().__init__(**kw)
@@ -35,7 +36,10 @@ class PlanBackend(FakeBackend):
         if self.plan_refuse:
             return PlanPreview(False, self.plan_refuse)
         target = request.target if request.target is not None else ControllerPose(1120, 0, 725, 0, 45, 0)
-        return PlanPreview(True, "", 2.84, 0.213, END, target, 57, "RRTConnect", token=("trajectory", len(self.plans)))
+        scaling = request.velocity_scaling or 0.1
+        return PlanPreview(True, "", 2.84, 0.213, END, target, 57, "RRTConnect", token=("trajectory", len(self.plans)),
+                           velocity_scaling=scaling, peak_tcp_speed=2500.0 * scaling, peak_joint="joint_1",
+                           peak_joint_speed=119.7 * scaling, peak_joint_fraction=scaling)
 
     def start_plan(self, preview):
         self.runs.append(preview.token)
@@ -54,7 +58,8 @@ def test_plan_lines():
 
 
 @pytest.mark.parametrize("line, words, kind", [
-    ("plan", "plan x y z rx ry rz, or plan NAME (a named state of the SRDF, e.g. home); got 0 value(s)", InputError),
+    ("plan", "plan x y z rx ry rz, or plan NAME (a named state of the SRDF, e.g. home), optionally followed by "
+             "scaling S (0 < S <= 1); got 0 value(s)", InputError),
     ("plan 500 866 725", "got 3 value(s) after 'plan'", InputError),
     ("plan 500 866 725 0 45 60 ptp", "got 7 value(s)", InputError),
     ("plan 500 866 nan 0 45 60", "Z: 'nan' is not a position", InputError),
@@ -89,6 +94,28 @@ def test_command_line_plans():
         request_from_args(args("--pose", "1500", "866", "725", "0", "45", "60", "--type", "plan"), WS)
     with pytest.raises(InputError, match="not a state name"):
         request_from_args(args("--plan", "a-b"), WS)
+    with pytest.raises(InputError, match="--velocity-scaling is for plans"):
+        request_from_args(args("--pose", *"500 866 725 0 45 60".split(), "--velocity-scaling", "0.5"), WS)
+
+
+@pytest.mark.parametrize("value", ["0", "1.5", "-0.1", "nan", "fast"])
+def test_a_bad_velocity_scaling_on_the_command_line_is_a_usage_error(value, capsys):
+    with pytest.raises(SystemExit) as err:
+        args("--plan", "home", "--velocity-scaling", value)
+    assert err.value.code == 2
+    assert "--velocity-scaling" in capsys.readouterr().err
+
+
+def test_a_plan_line_may_ask_for_its_velocity_scaling():
+    assert parse_plan_line("plan 500 866 725 0 45 60 scaling 0.5", WS) == PlanRequest(target=BEHIND,
+                                                                                       velocity_scaling=0.5)
+    assert parse_plan_line("plan home SCALING 1", WS) == PlanRequest(state="home", velocity_scaling=1.0)
+    assert PlanRequest(state="home", velocity_scaling=0.5).describe() == \
+        "PLAN to the named state home at velocity scaling 0.5"
+    for line, words in (("plan home scaling 0", "0 < S <= 1"), ("plan home scaling 2", "outside 0 < S <= 1"),
+                        ("plan home scaling x", "'x' is not a number"), ("plan home scaling", "got 2 value")):
+        with pytest.raises(InputError, match=words):
+            parse_plan_line(line, WS)
 
 
 # ----------------------------------------------------------------------------------- the dialogue
@@ -102,6 +129,9 @@ def test_plan_previews_then_runs_exactly_the_previewed_trajectory_on_yes():
     assert "Plan: collision-free; duration 2.8 s (57 points), planned in 213 ms by RRTConnect" in text
     assert "joint target [deg]: J1 60.0  J2 24.1  J3 3.2  J4 0.0  J5 17.6  J6 0.0" in text
     assert "TCP at the end: X 500  Y 866  Z 725  Rx 0  Ry 45  Rz 60" in text
+    # the speed it will run at, before the question: the driver's default scaling and its peaks
+    assert ("  speed: velocity scaling 0.1 (the driver's default); at its fastest the TCP moves 250 mm/s, "
+            "joint_1 12.0 deg/s (10 % of its limit)\nRun this planned motion") in text
     assert prompts[1] == "Run this planned motion on the robot? [y/N]: "
     assert backend.runs == [("trajectory", 1)]                 # the previewed one, not a new plan
     assert backend.sent == [] and backend.previews == []         # no move_to_pose goal at all
@@ -183,8 +213,13 @@ def test_one_shot_plans_preview_only_and_yes():
     assert term.run_once(PlanRequest(state="home"), preview_only=True) == EXIT_OK
     assert backend.runs == [] and "planned (not run)" == term.history[-1].outcome
     term.assume_yes = True
+    said = len(out.getvalue())
     assert term.run_once(PlanRequest(state="home")) == EXIT_OK
     assert backend.runs == [("trajectory", 2)]
+    # --yes asks nothing, but says the speed before the arm moves
+    text = out.getvalue()[said:]
+    assert text.index("  speed: velocity scaling 0.1 (the driver's default); at its fastest the TCP moves 250 mm/s") \
+        < text.index("Sent.")
     assert Terminal(PlanBackend(plan_unavailable=True), WS, out=out, input_fn=lambda p: "y", tty=False
                     ).run_once(PlanRequest(state="home")) == EXIT_NO_DRIVER
     assert Terminal(PlanBackend(plan_refuse="no path found"), WS, out=out, input_fn=lambda p: "y", tty=False
@@ -200,3 +235,24 @@ def test_a_plan_from_where_the_arm_is_runs_nothing():
     assert "Plan: the arm is at the goal already (planned in 3 ms); nothing to run." in text
     assert backend.runs == [] and len(prompts) == 2
     assert term.history[0].outcome == "already there"
+
+
+def test_the_terminals_velocity_scaling_times_every_plan_that_gives_none():
+    """--velocity-scaling S: each plan is asked at S (a line's own 'scaling' wins) and says so."""
+    backend = PlanBackend()
+    code, text, _, _ = session(backend, ["plan home", "n", "plan home scaling 1", "n", "quit"], velocity_scaling=0.5)
+    assert backend.plans == [PlanRequest(state="home", velocity_scaling=0.5), PlanRequest(state="home", velocity_scaling=1.0)]
+    assert "Planning a collision-free motion: PLAN to the named state home at velocity scaling 0.5" in text
+    assert ("  speed: velocity scaling 0.5; at its fastest the TCP moves 1250 mm/s, joint_1 59.9 deg/s "
+            "(50 % of its limit)") in text
+    assert "  speed: velocity scaling 1; at its fastest the TCP moves 2500 mm/s" in text
+    with pytest.raises(InputError, match="velocity_scaling: 2 is outside"):
+        Terminal(backend, WS, velocity_scaling=2)
+
+
+def test_a_driver_that_does_not_say_its_speed_is_named_so():
+    class Mute(PlanBackend):
+        def plan(self, request):
+            return PlanPreview(True, "", 2.84, 0.213, END, BEHIND, 57, "RRTConnect", token="t")
+    code, text, _, _ = session(Mute(), ["plan home", "n", "quit"])
+    assert "  speed: not reported by the driver (velocity scaling the driver's default)" in text

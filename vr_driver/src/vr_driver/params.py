@@ -203,10 +203,11 @@ class DriverParams:
     # the model against the controller (protocols that report joints and pose: v2)
     model_check_position: float = 0.5    # [mm] the reported pose may differ this much from our FK of
     model_check_angle: float = 0.05      # [deg] the reported joints before the model is called off
-    # the plan action (issue 27; vr_driver.kinematics.planner): what a goal that leaves them 0 / empty gets
+    # the plan action (vr_driver.kinematics.planner): what a goal that leaves them 0 / empty gets
     planner_id: str = "RRTConnect"       # the OMPL planner (kinematics.planner.PLANNERS)
     planning_time: float = 1.0           # [s] the planner's time budget
-    velocity_scaling: float = 1.0        # (0, 1] fraction of the joint speed and acceleration limits
+    velocity_scaling: float = 0.1        # (0, 1] fraction of the joint speed and acceleration limits;
+    #                                      0.1 as MoveIt's default: a plan nobody asked to be fast is not
     # safety and model
     prefix: str = ""                     # of every link, joint and frame name of this robot (the
     #                                      URDF's xacro prefix); from_dict puts it in front of

@@ -49,7 +49,7 @@ _PIDFD_OPEN = getattr(os, "pidfd_open", None)
 
 @pytest.fixture(scope="module")
 def world(kin):
-    w = World(kin, {"scene": CELL}, protocol="v3")
+    w = World(kin, {"scene": CELL, "velocity_scaling": 1.0}, protocol="v3")     # full speed: short plans
     w.ready()
     return w
 

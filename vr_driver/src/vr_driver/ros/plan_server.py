@@ -16,6 +16,9 @@ the trajectory server and its result is the driver's.
 - result: the trajectory, planning time, duration, the TCP pose at the end, error_code (the values of
   moveit_msgs/MoveItErrorCodes) and error_string in words (a start or goal in collision names the
   link and the object); on execution the trajectory action's error_code and error_string;
+- the speed, said before anything moves (in the result, its error_string and the log): the velocity
+  scaling the plan was timed with (the goal's, else the parameter ``velocity_scaling``, 0.1 by
+  default), the TCP's peak speed and the joint closest to its speed limit (:func:`peak_speeds`);
 - cancel while planning: the worker is stopped (a new one starts for the next goal) and the goal
   ends cancelled at once; while executing: the trajectory goal is cancelled (the arm stops, the goal
   ends at rest). A worker that dies ends its plan with PLANNING_FAILED, in words.
@@ -26,9 +29,10 @@ starts: the node never imports OMPL or TOPP-RA); nothing else changes.
 """
 from __future__ import annotations
 
+import math
 import threading
 import time
-from typing import Dict, Optional
+from typing import Any, Dict, NamedTuple, Optional, Sequence
 
 import actionlib
 import rospy
@@ -49,6 +53,37 @@ from ..poses import ControllerPose
 
 #: stick figures of the arm drawn along a plan (start and end included)
 SWEEP_POSES = 7
+#: [s] the time step of the central difference that gives the TCP's speed at a sample
+_SPEED_STEP = 1e-3
+
+
+class PeakSpeeds(NamedTuple):
+    """How fast a trajectory runs: the TCP's peak speed [mm/s] and the joint that comes closest to
+    its speed limit (its index in chain order, its peak speed [rad/s], that speed / its limit)."""
+
+    tcp: float
+    joint: int
+    joint_speed: float
+    joint_fraction: float
+
+
+def peak_speeds(kin: Any, positions: Sequence[Sequence[float]],
+                velocities: Sequence[Sequence[float]]) -> PeakSpeeds:
+    """The peaks over a trajectory's samples (joint positions [rad] and velocities [rad/s], chain
+    order): the TCP's speed at each sample is the central difference of the controller pose's
+    position (``kin.fk_pose``: the TCP in ``base``) along the joint velocity, so a TCP offset counts;
+    each joint's speed is compared with ``kin.limits.velocity``. No samples: all 0."""
+    tcp, best = 0.0, (0.0, 0, 0.0)
+    limits = kin.limits.velocity
+    for q, qd in zip(positions, velocities):
+        if any(qd):
+            ahead = kin.fk_pose([a + v * _SPEED_STEP for a, v in zip(q, qd)]).as_tuple()[:3]
+            behind = kin.fk_pose([a - v * _SPEED_STEP for a, v in zip(q, qd)]).as_tuple()[:3]
+            tcp = max(tcp, math.dist(ahead, behind) / (2.0 * _SPEED_STEP))
+        for j, (v, limit) in enumerate(zip(qd, limits)):
+            if limit > 0.0 and abs(v) / limit > best[0]:
+                best = (abs(v) / limit, j, abs(v))
+    return PeakSpeeds(tcp, best[1], best[2], best[0])
 
 
 def goal_from_msg(msg) -> PlanGoal:
@@ -154,7 +189,7 @@ class PlanServer:
             self._end(handle, PlanResult(error_code=core_planning.INVALID_GOAL, error_string="refused: %s" % exc))
             return
         outcome = self.planning.plan(goal, cancel=cancel)
-        result = self._result(outcome)
+        result = self._result(outcome, goal.velocity_scaling or self.params.velocity_scaling)
         if outcome.code == core_planning.PREEMPTED:         # cancelled while planning: nothing planned
             rospy.loginfo("plan to %s: %s", goal.describe(), outcome.text)
             handle.set_canceled(result, result.error_string)
@@ -163,26 +198,43 @@ class PlanServer:
             rospy.logwarn("plan to %s: %s", goal.describe(), outcome.text)
             self._end(handle, result)
             return
-        rospy.loginfo("plan to %s: %s", goal.describe(), outcome.text)
+        text = result.error_string                      # the plan and the speed it runs at, in words
+        rospy.loginfo("plan to %s: %s", goal.describe(), text)
         handle.publish_feedback(PlanFeedback(phase=PlanFeedback.PHASE_PREVIEWING, progress=1.0))
         self.show(outcome)
         if cancel.is_set():
             result.error_code = core_planning.PREEMPTED
-            result.error_string = "cancelled before it ran: %s" % outcome.text
+            result.error_string = "cancelled before it ran: %s" % text
             handle.set_canceled(result, result.error_string)
             return
         if msg.preview_only:
-            result.error_string = "preview only (nothing sent): " + outcome.text
+            result.error_string = "preview only (nothing sent): " + text
             handle.set_succeeded(result, result.error_string)
             return
         self._follow(handle, result, outcome, cancel)
 
-    def _result(self, outcome: PlanOutcome) -> PlanResult:
+    def _result(self, outcome: PlanOutcome, velocity_scaling: float = 0.0) -> PlanResult:
+        """The action's result of ``outcome``; with a trajectory also the speed it runs at
+        (``velocity_scaling``: what it was timed with; the peaks when the planning's kinematics are
+        there), appended to error_string in words."""
         result = PlanResult(error_code=outcome.code, error_string=outcome.text, planning_time=outcome.planning_time,
                             planner_id=outcome.planner_id)
         if outcome.trajectory is not None:
             result.trajectory = self.trajectory_msg(outcome)
             result.duration = outcome.trajectory.duration
+            result.velocity_scaling = velocity_scaling
+            kin = getattr(self.planning, "kin", None)
+            if kin is not None and len(outcome.trajectory.positions) > 1:
+                peaks = peak_speeds(kin, outcome.trajectory.positions, outcome.trajectory.velocities)
+                result.peak_tcp_speed = peaks.tcp
+                result.peak_joint = self.core.joint_names[peaks.joint]
+                result.peak_joint_speed = math.degrees(peaks.joint_speed)
+                result.peak_joint_fraction = peaks.joint_fraction
+                said = "velocity scaling" in outcome.text         # the planning's words name it already
+                result.error_string += ("; %sat its fastest the TCP moves %.0f mm/s, %s %.1f deg/s (%.0f %% of its "
+                                        "limit)" % ("" if said else "velocity scaling %g: " % velocity_scaling,
+                                                    result.peak_tcp_speed, result.peak_joint,
+                                                    result.peak_joint_speed, 100.0 * result.peak_joint_fraction))
         if outcome.target is not None:
             result.target = CartesianPose(*outcome.target.as_tuple())
         return result
@@ -199,9 +251,10 @@ class PlanServer:
 
     def _follow(self, handle, result: PlanResult, outcome: PlanOutcome, cancel: threading.Event) -> None:
         """Run the plan through joint_trajectory_action; the goal ends with its result."""
+        text = result.error_string
         if not self.client.wait_for_server(rospy.Duration(5.0)):
             result.error_code = core_planning.CONTROL_FAILED
-            result.error_string = "%s is not served: nothing was sent (%s)" % (self.trajectory_action, outcome.text)
+            result.error_string = "%s is not served: nothing was sent (%s)" % (self.trajectory_action, text)
             self._end(handle, result)
             return
         done = threading.Event()
@@ -227,17 +280,17 @@ class PlanServer:
         words = fjt.error_string if fjt is not None and fjt.error_string else "goal state %d" % state
         if state == GoalStatus.SUCCEEDED:
             result.error_code = core_planning.SUCCESS
-            result.error_string = "%s; executed: %s" % (outcome.text, words)
+            result.error_string = "%s; executed: %s" % (text, words)
             handle.set_succeeded(result, result.error_string)
             return
         if state in (GoalStatus.PREEMPTED, GoalStatus.RECALLED) or cancelled:
             result.error_code = core_planning.PREEMPTED
-            result.error_string = "%s; stopped: %s" % (outcome.text, words)
+            result.error_string = "%s; stopped: %s" % (text, words)
             handle.set_canceled(result, result.error_string)
             return
         result.error_code = core_planning.CONTROL_FAILED
         result.error_string = "%s; %s by %s: %s" % (
-            outcome.text, "refused" if state == GoalStatus.REJECTED else "failed", self.trajectory_action, words)
+            text, "refused" if state == GoalStatus.REJECTED else "failed", self.trajectory_action, words)
         rospy.logwarn("plan: %s", result.error_string)
         self._end(handle, result)
 

@@ -8,6 +8,7 @@ The workspace is the driver's parameter ``/<driver>/workspace`` (defaults when i
 
     rosrun vr_driver pose_terminal                                    interactive
     rosrun vr_driver pose_terminal --pose 1000 200 800 0 45 0 --type lin --yes
+    rosrun vr_driver pose_terminal --plan home --velocity-scaling 0.5 --yes   a plan, at half speed
     rosrun vr_driver pose_terminal --ns arm1                          the driver in /arm1 (two_arms.launch)
 """
 from __future__ import annotations
@@ -407,7 +408,7 @@ class RosBackend(Backend):
         if not self.plan_client.wait_for_server(rospy.Duration(SERVER_WAIT)):
             return PlanPreview(False, "the driver does not plan: the action %s is not served (it needs OMPL, "
                                "TOPP-RA, pinocchio and coal: the driver's log says which is missing)" % self.plan_name)
-        goal = PlanGoal(preview_only=True)
+        goal = PlanGoal(preview_only=True, velocity_scaling=request.velocity_scaling)
         if request.target is not None:
             goal.goal_type, goal.pose = PlanGoal.POSE, CartesianPose(*request.target.as_tuple())
         else:
@@ -421,7 +422,10 @@ class RosBackend(Backend):
                 and result.trajectory.points:
             return PlanPreview(True, "", result.duration, result.planning_time,
                                tuple(result.trajectory.points[-1].positions), _pose_from_msg(result.target),
-                               len(result.trajectory.points), result.planner_id, token=result.trajectory)
+                               len(result.trajectory.points), result.planner_id, token=result.trajectory,
+                               velocity_scaling=result.velocity_scaling, peak_tcp_speed=result.peak_tcp_speed,
+                               peak_joint=result.peak_joint, peak_joint_speed=result.peak_joint_speed,
+                               peak_joint_fraction=result.peak_joint_fraction)
         reason = result.error_string if result is not None and result.error_string else "the planner refused the goal"
         if reason.startswith("refused: "):
             reason = reason[len("refused: "):]
@@ -506,7 +510,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         backend.shutdown()
         return EXIT_NO_DRIVER
     try:
-        terminal = Terminal(backend, backend.workspace, out=out, input_fn=_readline_input(), assume_yes=args.yes)
+        terminal = Terminal(backend, backend.workspace, out=out, input_fn=_readline_input(), assume_yes=args.yes,
+                            velocity_scaling=args.velocity_scaling)
         if one_shot:
             try:
                 request = request_from_args(args, backend.workspace)

@@ -12,7 +12,9 @@ What is typed, at the first prompt of an entry (the X prompt)::
     x y z rx ry rz [type]     a whole pose on one line (type ptp, lin or circ; default ptp)
     ... circ via x y z [rx ry rz]   a circular move through a via point
     plan x y z rx ry rz       a collision-free motion there, planned around the cell (the driver's
-    plan NAME                 plan action), or to a named state of the SRDF (home, zero)
+    plan NAME                 plan action), or to a named state of the SRDF (home, zero); timed at
+                              the driver's velocity scaling (default 0.1) unless the line ends in
+                              ``scaling S`` (0 < S <= 1) or the terminal runs with --velocity-scaling
     home stop status history help quit
 
 At every later prompt of the entry (Y ... Rz, move type, via point, the confirmation) ``cancel`` or
@@ -24,7 +26,9 @@ Every value is checked before anything goes to the driver: a finite number, insi
 workspace box (also after rounding to the controller's whole mm / deg), then the driver previews the
 move (reachability, joint limits, the path) and only a confirmed, previewed move is sent. A plan is
 previewed by the plan action (preview_only: its duration and planning time shown, the path in RViz)
-and, confirmed, exactly the previewed trajectory runs (through joint_trajectory_action).
+with the speed it will run at (the velocity scaling, the TCP's and the fastest joint's peak speed:
+also with --yes, before anything moves) and, confirmed, exactly the previewed trajectory runs
+(through joint_trajectory_action).
 """
 from __future__ import annotations
 
@@ -33,7 +37,7 @@ import math
 import re
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, List, Optional, Sequence, TextIO, Tuple
 
 from ..kinematics.preview import MoveType
@@ -43,7 +47,7 @@ from ..protocol.v1 import round_half_away
 __all__ = [
     "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
     "FIELDS", "COMMANDS", "InputError", "RangeError", "PoseRequest", "PreviewResult", "MoveProgress", "MoveResult",
-    "PlanRequest", "PlanPreview", "parse_plan_line",
+    "PlanRequest", "PlanPreview", "parse_plan_line", "check_velocity_scaling",
     "StatusInfo", "Backend", "MoveHandle", "Terminal", "ProgressPrinter",
     "fmt_number", "fmt_pose", "fmt_joints_deg", "field_range", "prompt_text", "parse_number",
     "check_value", "parse_move_type", "check_pose", "parse_pose_line", "parse_command",
@@ -266,25 +270,42 @@ def parse_pose_line(text: str, workspace: Workspace) -> PoseRequest:
 
 
 _STATE_NAME = re.compile(r"\A[A-Za-z_][A-Za-z0-9_]*\Z")
-_PLAN_SYNTAX = "plan x y z rx ry rz, or plan NAME (a named state of the SRDF, e.g. home)"
+_PLAN_SYNTAX = ("plan x y z rx ry rz, or plan NAME (a named state of the SRDF, e.g. home), "
+                "optionally followed by scaling S (0 < S <= 1)")
+
+
+def check_velocity_scaling(value: object, what: str = "scaling") -> float:
+    """A plan's velocity scaling: a finite number in (0, 1] (0: the driver's default), or InputError
+    naming ``what``."""
+    text = str(value).strip()
+    if not _NUMBER.match(text):
+        raise InputError("%s: %r is not a number (0 < S <= 1; 0: the driver's default)" % (what, value))
+    scaling = float(text)
+    if not (math.isfinite(scaling) and 0.0 <= scaling <= 1.0):
+        raise InputError("%s: %s is outside 0 < S <= 1 (0: the driver's default)" % (what, text))
+    return scaling
 
 
 @dataclass(frozen=True)
 class PlanRequest:
     """A collision-free motion to plan: to ``target`` (checked: inside the workspace) or to the named
-    state ``state`` of the SRDF."""
+    state ``state`` of the SRDF, timed at ``velocity_scaling`` (0: the driver's parameter
+    ``velocity_scaling``, 0.1 unless configured otherwise)."""
 
     target: Optional[ControllerPose] = None
     state: str = ""
+    velocity_scaling: float = 0.0
 
     def __post_init__(self) -> None:
         if (self.target is None) == (not self.state):
             raise InputError("a plan goes to a pose or to a named state: %s" % _PLAN_SYNTAX)
+        check_velocity_scaling(self.velocity_scaling)
 
     def describe(self) -> str:
+        scaling = " at velocity scaling %g" % self.velocity_scaling if self.velocity_scaling else ""
         if self.target is not None:
-            return "PLAN to %s" % fmt_pose(self.target)
-        return "PLAN to the named state %s" % self.state
+            return "PLAN to %s%s" % (fmt_pose(self.target), scaling)
+        return "PLAN to the named state %s%s" % (self.state, scaling)
 
 
 def is_plan_line(text: str) -> bool:
@@ -293,18 +314,25 @@ def is_plan_line(text: str) -> bool:
 
 
 def parse_plan_line(text: str, workspace: Workspace) -> PlanRequest:
-    """``plan x y z rx ry rz`` or ``plan NAME`` -> PlanRequest; InputError says what is wrong."""
+    """``plan x y z rx ry rz`` or ``plan NAME``, each optionally followed by ``scaling S`` ->
+    PlanRequest; InputError says what is wrong."""
     tokens = _tokens(text)
     if not tokens or tokens[0].lower() != "plan":
         raise InputError("a plan line starts with 'plan': %s" % _PLAN_SYNTAX)
     rest = tokens[1:]
+    scaling = 0.0
+    if len(rest) >= 2 and rest[-2].lower() == "scaling":
+        scaling = check_velocity_scaling(rest[-1])
+        if scaling == 0.0:
+            raise InputError("scaling: 0 < S <= 1 (leave 'scaling S' out for the driver's default)")
+        rest = rest[:-2]
     if len(rest) == 1 and not _NUMBER.match(rest[0]) and not _NOT_FINITE.match(rest[0]):
         if not _STATE_NAME.match(rest[0]):
             raise InputError("plan: %r is not a state name (letters, digits, _): %s" % (rest[0], _PLAN_SYNTAX))
-        return PlanRequest(state=rest[0])
+        return PlanRequest(state=rest[0], velocity_scaling=scaling)
     if len(rest) != 6:
         raise InputError("%s; got %d value(s) after 'plan'" % (_PLAN_SYNTAX, len(rest)))
-    return PlanRequest(target=check_pose(rest, workspace))
+    return PlanRequest(target=check_pose(rest, workspace), velocity_scaling=scaling)
 
 
 def parse_command(text: str) -> Optional[str]:
@@ -372,6 +400,23 @@ class PlanPreview:
     planner: str = ""
     unavailable: bool = False                         # no answer (not a refusal)
     token: object = None
+    # the speed it runs at (the plan action's result; 0 / "" when the driver did not say)
+    velocity_scaling: float = 0.0                     # the fraction of the joint limits it was timed with
+    peak_tcp_speed: float = 0.0                       # mm/s
+    peak_joint: str = ""                              # the joint closest to its speed limit
+    peak_joint_speed: float = 0.0                     # deg/s
+    peak_joint_fraction: float = 0.0                  # of that joint's speed limit
+
+    def describe_speed(self, default: bool = False) -> str:
+        """The speed the plan runs at, in words ("" when the driver did not say); ``default``: the
+        scaling is the driver's default (the request gave none)."""
+        if not self.velocity_scaling:
+            return ""
+        text = "velocity scaling %g%s" % (self.velocity_scaling, " (the driver's default)" if default else "")
+        if self.peak_joint:
+            text += "; at its fastest the TCP moves %.0f mm/s, %s %.1f deg/s (%.0f %% of its limit)" % (
+                self.peak_tcp_speed, self.peak_joint, self.peak_joint_speed, 100.0 * self.peak_joint_fraction)
+        return text
 
 
 class MoveHandle:
@@ -479,9 +524,10 @@ Enter a pose field by field (Enter keeps the value in brackets), or a whole line
   x y z rx ry rz circ via x y z [rx ry rz]   a circular move through a via point
   plan x y z rx ry rz                        a collision-free motion around the cell (the driver's planner)
   plan NAME                                  the same to a named state of the SRDF (home, zero)
+  plan ... scaling S                         a plan at velocity scaling S (0 < S <= 1; default: the driver's, 0.1)
 X Y Z in mm, Rx Ry Rz in degrees (R = Rz*Ry*Rx), the TCP in frame `base`; the controller
 takes whole mm / deg. Every move is previewed by the driver and sent only when you confirm; a plan's preview shows its
-duration and planning time (the path in RViz), and exactly that trajectory runs when you confirm.
+duration, planning time and speed (the path in RViz), and exactly that trajectory runs when you confirm.
 Commands:
   home      move (PTP) to the home pose 1120 0 725 0 45 0
   stop      stop the arm now (the driver's stop_motion)
@@ -521,13 +567,16 @@ def _tri(value: Optional[bool], yes: str = "yes", no: str = "no") -> str:
 
 class Terminal:
     """The dialogue. ``input_fn(prompt)`` reads a line (EOFError at the end, KeyboardInterrupt on
-    Ctrl-C), ``out`` gets everything printed. ``assume_yes`` skips the confirmation."""
+    Ctrl-C), ``out`` gets everything printed. ``assume_yes`` skips the confirmation.
+    ``velocity_scaling`` (0 < S <= 1) times every plan that does not give its own (0: the driver's
+    default)."""
 
     def __init__(self, backend: Backend, workspace: Workspace, out: TextIO = sys.stdout,
                  input_fn: Callable[[str], str] = input, assume_yes: bool = False, tty: Optional[bool] = None,
                  poll_period: float = 0.1, clock: Callable[[], float] = time.monotonic,
-                 stop_wait: float = 10.0):
+                 stop_wait: float = 10.0, velocity_scaling: float = 0.0):
         self.backend = backend
+        self.velocity_scaling = check_velocity_scaling(velocity_scaling, "velocity_scaling")
         self.workspace = workspace
         self.out = out
         self.input_fn = input_fn
@@ -793,7 +842,10 @@ class Terminal:
     def execute_plan(self, request: PlanRequest, confirm: bool = True, preview_only: bool = False,
                      move_timeout: Optional[float] = None) -> int:
         """Plan (the driver's plan action, preview only), show it, confirm, run exactly that
-        trajectory, show progress, report. Returns an EXIT_* code."""
+        trajectory, show progress, report. The speed it will run at is said before the confirmation
+        (also with ``assume_yes``). Returns an EXIT_* code."""
+        if self.velocity_scaling and not request.velocity_scaling:
+            request = replace(request, velocity_scaling=self.velocity_scaling)
         self.say("Planning a collision-free motion: %s" % request.describe())
         preview = self.backend.plan(request)
         if not preview.ok:
@@ -811,6 +863,10 @@ class Terminal:
         self.say("  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target))
         if preview.target is not None:
             self.say("  TCP at the end: %s" % fmt_pose(preview.target))
+        speed = preview.describe_speed(default=not request.velocity_scaling)
+        self.say("  speed: %s" % (speed or "not reported by the driver (velocity scaling %s)"
+                                  % ("%g" % request.velocity_scaling if request.velocity_scaling
+                                     else "the driver's default")))
         if preview_only:
             self._record(request, "planned (not run)")
             return EXIT_OK
@@ -949,6 +1005,17 @@ def in_namespace(ns: str, name: str) -> str:
     return ns.rstrip("/") + "/" + name
 
 
+def _scaling(text: str) -> float:
+    """``--velocity-scaling``: 0 < S <= 1; argparse reports the error."""
+    try:
+        value = check_velocity_scaling(text, "--velocity-scaling")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if value == 0.0:
+        raise argparse.ArgumentTypeError("--velocity-scaling: 0 < S <= 1 (leave it out for the driver's default)")
+    return value
+
+
 def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
     p = _ArgumentParser(prog=prog, description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--pose", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
@@ -958,6 +1025,9 @@ def build_arg_parser(prog: str = "pose_terminal") -> argparse.ArgumentParser:
                         "the cell (the driver's plan action)")
     p.add_argument("--plan", default=None, metavar="NAME",
                    help="plan a collision-free motion to this named state of the SRDF (home, zero) and exit")
+    p.add_argument("--velocity-scaling", type=_scaling, default=0.0, metavar="S",
+                   help="time plans at this fraction of the joint speed and acceleration limits, 0 < S <= 1 "
+                        "(default: the driver's velocity_scaling, 0.1 unless configured otherwise)")
     p.add_argument("--via", nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
                    help="via point of a circular move (--type circ)")
     p.add_argument("-y", "--yes", action="store_true", help="send without asking for confirmation")
@@ -1008,6 +1078,8 @@ def request_from_args(args: argparse.Namespace, workspace: Workspace):
                 parse_number(text, fld, workspace, what=what)
             except RangeError:
                 pass
+    if getattr(args, "velocity_scaling", 0.0):
+        raise InputError("--velocity-scaling is for plans (--plan NAME, --pose ... --type plan)")
     target = check_pose(list(args.pose), workspace)
     via = check_pose(list(args.via), workspace, what="via") if args.via is not None else None
     return PoseRequest(kind, target, via)
