@@ -1,0 +1,91 @@
+"""driver.wire_targets: the wire pose of a v3 stream target chosen among the 3^6 neighbours of its
+rounding so that the controller's IK of it lands on the planned joints -- near joint_5 = 0, where
+the plain rounding swings the wrist by degrees."""
+from __future__ import annotations
+
+import math
+import random
+
+import pytest
+
+from vr_driver.driver.wire_targets import FINE, WireTarget, wire_target
+from vr_driver.errors import VrDriverError
+from vr_driver.protocol import registry
+
+DEG = math.pi / 180.0
+V3 = registry.get("v3")
+
+
+def off(kin, pose, seed, planned):
+    """What the controller does with ``pose``: its IK seeded as it seeds it, against the plan."""
+    q = kin.ik_pose(pose, seed=seed)
+    return max(abs(a - b) for a, b in zip(q, planned))
+
+
+def on_grid(pose, protocol):
+    return protocol.wire_pose(pose).as_tuple() == pytest.approx(pose.as_tuple(), abs=1e-9)
+
+
+def within_one_step(pose, base, protocol):
+    mm, deg = protocol.pose_resolution
+    return all(abs(a - b) <= s * 1.0001 for a, b, s in zip(pose.as_tuple(), base.as_tuple(), (mm,) * 3 + (deg,) * 3))
+
+
+def test_away_from_the_singularity_the_plain_rounding_is_kept(kin):
+    q = (0.2, 0.6, -0.3, 0.4, 0.8, -0.5)
+    t = wire_target(kin, V3, q, q)
+    assert isinstance(t, WireTarget)
+    assert t.steps == (0,) * 6 and t.solved == 1
+    assert t.pose == V3.wire_pose(kin.fk_pose(q))
+    assert t.error <= FINE
+
+
+@pytest.mark.parametrize("j5_deg", [2.0, 0.8, 0.3, 0.1, -0.05])
+def test_near_the_singularity_the_chosen_pose_lands_on_the_plan(kin, j5_deg):
+    q = (0.0, 0.65, -0.28, 20 * DEG, j5_deg * DEG, -30 * DEG)
+    base = V3.wire_pose(kin.fk_pose(q))
+    plain = off(kin, base, q, q)
+    t = wire_target(kin, V3, q, q)
+    assert on_grid(t.pose, V3) and within_one_step(t.pose, base, V3)
+    # the controller's solution of the chosen pose: what wire_target says, and near the plan
+    assert off(kin, t.pose, q, q) == pytest.approx(t.error, abs=1e-12)
+    # (within 0.1 deg of joint_5 = 0 even the best of the 729 grid poses is a few tenths off)
+    assert t.error <= min(plain, (0.05 if abs(j5_deg) >= 0.3 else 0.3) * DEG), (plain / DEG, t.error / DEG, t.steps)
+    if plain > FINE:
+        assert t.steps != (0,) * 6
+
+
+def test_random_wrists_near_the_singularity_land_within_half_a_degree(kin):
+    rng = random.Random(7)
+    worst_plain = worst = 0.0
+    for _ in range(25):
+        q = (rng.uniform(-1, 1), rng.uniform(0.2, 0.9), rng.uniform(-0.6, 0.2), rng.uniform(-1.5, 1.5),
+             rng.uniform(-3, 3) * DEG, rng.uniform(-1.5, 1.5))
+        t = wire_target(kin, V3, q, q)
+        worst_plain = max(worst_plain, off(kin, V3.wire_pose(kin.fk_pose(q)), q, q))
+        worst = max(worst, t.error)
+        assert t.error <= off(kin, V3.wire_pose(kin.fk_pose(q)), q, q)
+    assert worst <= 0.5 * DEG < worst_plain, (worst / DEG, worst_plain / DEG)
+
+
+def test_the_seed_is_the_controllers(kin):
+    """Seeded from another wrist split, the controller solves the same pose onto that split: the
+    search measures against the plan and reports how far that lands."""
+    q = (0.0, 0.65, -0.28, 20 * DEG, 0.0, -30 * DEG)      # on the singularity: the pose fixes the sum
+    other = (0.0, 0.65, -0.28, 30 * DEG, 0.0, -40 * DEG)
+    t = wire_target(kin, V3, q, other)
+    assert off(kin, t.pose, other, q) == pytest.approx(t.error, abs=1e-12)
+
+
+def test_an_unreachable_pose_raises(kin):
+    q = (0.0, 0.0, 0.0, 0.0, 0.5, 0.0)
+    far = (0.0, -2.5, 2.0, 0.0, 0.5, 0.0)
+
+    class Far:
+        """A protocol whose rounding moves the pose 5 m out: nothing can solve it."""
+        pose_resolution = V3.pose_resolution
+
+        def wire_pose(self, pose):
+            return V3.wire_pose(type(pose)(pose.x + 5000.0, pose.y, pose.z, pose.rx, pose.ry, pose.rz))
+    with pytest.raises(VrDriverError):
+        wire_target(kin, Far(), q, far)
