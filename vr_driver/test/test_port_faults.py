@@ -107,7 +107,7 @@ def _thread_cpu(native_id: int) -> float:
 
 def assert_quiet_cpu(rig: Rig, seconds: float = 1.0) -> None:
     """Neither the process nor the driver's bus thread spins while the fault lasts."""
-    thread = rig.core._thread
+    thread = rig.core.bus_loop.thread
     assert thread is not None and thread.is_alive()
     wall0, proc0, bus0 = time.monotonic(), time.process_time(), _thread_cpu(thread.native_id)
     time.sleep(seconds)
@@ -119,7 +119,7 @@ def assert_quiet_cpu(rig: Rig, seconds: float = 1.0) -> None:
 
 
 def assert_alive(rig: Rig, caplog) -> None:
-    assert rig.core._thread is not None and rig.core._thread.is_alive()
+    assert rig.core.bus_loop.thread is not None and rig.core.bus_loop.thread.is_alive()
     assert not [r for r in caplog.records if "unexpected error" in r.getMessage()]
 
 

@@ -257,8 +257,8 @@ def test_the_workers_core_opens_no_port_and_starts_no_thread():
     core = PlanningCore(params)
     assert set(threading.enumerate()) == threads
     assert core.link.state.value == "starting" and core.params.scene == "" and len(core.scene()) == 0
-    core.min_segment = 0.123
-    assert core._min_segment() == 0.123
+    core.node_min_segment = 0.123
+    assert core.min_segment() == 0.123 and core.streams.min_segment() == 0.123
 
 
 def test_a_missing_library_is_the_workers_missing_dependency(world, tmp_path, monkeypatch):

@@ -10,7 +10,7 @@ import math
 import pytest
 
 from vr_driver.driver import JobPhase, LinkState, MoveRequest, SubmitMode
-from vr_driver.driver.core import END_POLL_PERIOD
+from vr_driver.driver.bus_loop import END_POLL_PERIOD
 from vr_driver.driver.streaming import (END_LEAD, END_WATCH, _motion, corner_levels, corner_rounding,
                                       seq_offset, stream_points, stream_speeds, thin_timed)
 from vr_driver.driver.trajectories import TrajectoryGoal, validate

@@ -1,19 +1,27 @@
 """The driver core (ROS-free): a link supervisor and a motion sequencer, stepped by a clock and
 composed by :class:`DriverCore`.
 
-    jobs.py       MoveRequest, Preview, MoveJob, JobPhase, JobResult, SubmitMode
-    link.py       LinkSupervisor: port, DP master, session, freshness, counters -> LinkSample
-    sequencer.py  MotionSequencer: queue, handshake, stops at rest, outcomes -> the record to send
-    core.py       DriverCore: the bus loop steps the two; requests validate and plan off the bus
+    jobs.py         MoveRequest, Preview, MoveJob, JobPhase, JobResult, SubmitMode
+    link.py         LinkSupervisor: port, DP master, session, freshness, counters -> LinkSample
+    sequencer.py    MotionSequencer: queue, handshake, stops at rest, outcomes -> the record to send
+    streaming.py    StreamSequencer (v2, v3): the same for streamed targets; stream_points
+    status.py       DriverStatus (the snapshot the node publishes), ModelCheck, DriverError
+    bus_loop.py     BusLoop: one iteration steps link, joints and sequencer; the bus thread
+    arm_joints.py   ArmJoints: the joints of each record (tracking.py's JointTracker), the model check
+    job_control.py  JobControl: submit, cancel, stop, prepare_trajectory; the planning thread
+    path_checks.py  PathChecks: previews, the workspace box, the cell (scene_guard.py)
+    stream_prep.py  JointStreams (v2), CartesianStreams (v3): a path made a checked stream
+    core.py         DriverCore: owns and wires the parts; the one object the node talks to
 """
 from __future__ import annotations
 
-from .core import DriverCore, DriverError, DriverStatus
+from .core import DriverCore
 from .jobs import JobPhase, JobResult, MoveJob, MoveRequest, Preview, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, ERROR_PROTOCOL, LinkCounters, LinkSample,
                    LinkState, LinkSupervisor, open_serial_link)
 from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer,
                         SequencerView, why_no_motion)
+from .status import DriverError, DriverStatus
 
 __all__ = [
     "DriverCore", "DriverError", "DriverStatus",

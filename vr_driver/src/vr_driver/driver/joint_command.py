@@ -43,14 +43,16 @@ import logging
 import math
 import threading
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 from ..errors import CollisionError, VrDriverError
-from ..kinematics.preview import check_envelope
+from ..kinematics.solver import Kinematics
+from ..params import DriverParams
+from .job_control import JobControl
 from .jobs import MoveJob, StreamPoint
-
-if TYPE_CHECKING:  # pragma: no cover
-    from .core import DriverCore
+from .path_checks import PathChecks
+from .status import DriverStatus
+from .stream_prep import JointStreams
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -84,11 +86,22 @@ class CommandCounters:
 
 
 class JointCommander:
-    """The joint_command state of one :class:`~vr_driver.driver.core.DriverCore` (module docstring).
+    """The joint_command state of one driver (module docstring): ``status(now)`` is the driver's
+    status, ``jobs`` its job control (the queue the live stream joins), ``checks`` and ``streams``
+    its path checks and stream preparation (None: a protocol that does not stream).
     :meth:`command` may be called from any thread; commands are validated one at a time."""
 
-    def __init__(self, core: "DriverCore") -> None:
-        self.core = core
+    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, clock: Callable[[], float],
+                 status: Callable[[float], DriverStatus], jobs: JobControl, checks: PathChecks,
+                 streams: Optional[JointStreams]) -> None:
+        self.params = params
+        self.kin = kinematics
+        self.protocol = protocol
+        self.clock = clock
+        self.status = status
+        self.jobs = jobs
+        self.checks = checks
+        self.streams = streams
         self._lock = threading.Lock()
         self._job: Optional[MoveJob] = None          # the live stream (None: none yet)
         self._last: Tuple[float, ...] = ()           # its last accepted command (controller order)
@@ -142,8 +155,7 @@ class JointCommander:
 
     # ------------------------------------------------------------------ the rules
     def _command(self, names: Sequence[str], positions: Sequence[Any], time_from_start: Any) -> MoveJob:
-        core = self.core
-        protocol = core.protocol
+        protocol = self.protocol
         if not protocol.streams:
             raise JointCommandRefused(
                 "protocol", "protocol %s cannot stream joint targets (one target at a time, the arm "
@@ -158,19 +170,18 @@ class JointCommander:
         if not math.isfinite(dt_given) or dt_given < 0.0:
             raise JointCommandRefused("not_finite", "time_from_start %r must be finite and >= 0"
                                       % (time_from_start,))
-        kin = core.kin
         try:
-            q = kin.check_limits(q)
+            q = self.kin.check_limits(q)
         except VrDriverError as exc:
             raise JointCommandRefused("limits", str(exc)) from None
-        now = core.clock()
-        status = core.status(now)
+        now = self.clock()
+        status = self.status(now)
         if not status.motion_possible:
             raise JointCommandRefused("state", "motion is not possible: %s" % status.why_no_motion())
-        timeout = core.params.joint_command_timeout
-        view = core.sequencer.view
+        timeout = self.params.joint_command_timeout
+        view = self.jobs.view
         job = self._job
-        other = core.last_posted                     # a move or trajectory posted meanwhile
+        other = self.jobs.last_posted                    # a move or trajectory posted meanwhile
         if other is not None and other is not job and not other.done:
             raise JointCommandRefused("busy", "a trajectory or move (job %d) is %s; joint_command "
                                       "starts only when nothing else runs (stop it with stop_motion "
@@ -205,29 +216,29 @@ class JointCommander:
         pose = self._check_path(prev, q, origin)
         if anchor != prev:
             self._check_path(anchor, q, "the last target on the wire")
-        smooth = core.params.stream_smooth
+        smooth = self.params.stream_smooth
         if alive:
             assert job is not None
             t = now - self._created + step_time          # its planned arrival from the stream's start
             point = StreamPoint(q, speed, smooth, t, len(job.points), pose=pose)
             anchored = StreamPoint(q, anchored_speed, smooth, t, len(job.points), pose=pose)
-            core.sequencer.extend(job, point, anchored, now)
+            self.jobs.extend_live(job, point, anchored, now)
         else:
             point = StreamPoint(q, speed, smooth, step_time, 1, pose=pose)
             job = MoveJob(None, None, points=(point,), start=prev, live=True, stamp=now)
-            core.post_job(job)
+            self.jobs.post_job(job)
             self._job, self._created = job, now
             self._streams += 1
             log.info("joint_command: stream started (job %d) from [%s] deg", job.id,
                      " ".join("%.2f" % math.degrees(v) for v in prev))
         self._last, self._stamp = q, now
-        core.wake()
+        self.jobs.wake()
         return job
 
     def _reordered(self, names: Sequence[str], positions: Sequence[Any]) -> Tuple[float, ...]:
         """The positions in the controller's joint order; refused for wrong names or counts and
         for values that are not finite numbers."""
-        expected = list(self.core.params.controller_joint_names)
+        expected = list(self.params.controller_joint_names)
         try:
             names = [str(n) for n in names]
             values = list(positions)
@@ -267,11 +278,11 @@ class JointCommander:
         than a joint's limit is refused, naming the joint; without, it gets full speed (the arm just
         takes longer)."""
         refuse = bool(origin)
-        vmax = self.core.kin.limits.velocity
+        vmax = self.kin.limits.velocity
         ratios = [abs(b - a) / (step_time * v) for a, b, v in zip(prev, q, vmax)]
         worst = max(range(len(ratios)), key=ratios.__getitem__)
         if refuse and ratios[worst] > 1.0 + 1e-9:
-            names = self.core.params.controller_joint_names
+            names = self.params.controller_joint_names
             raise JointCommandRefused(
                 "speed", "%s would move %.4f rad in %.4g s: %.3f rad/s, %.0f %% of its %.3g rad/s "
                 "limit (%.3g rad/s too fast; the step from %s)"
@@ -284,19 +295,17 @@ class JointCommander:
         """The straight joint move ``prev`` -> ``q`` inside the workspace box; for a Cartesian
         protocol the pose the wire carries, solved as the controller will from ``prev``, must be
         ``q``. Returns that pose (None for a joint protocol)."""
-        core = self.core
         try:
-            with core.planning_gate:
-                check_envelope(core.planner.ptp_joints(prev, q), core.params.workspace)
+            self.checks.check_joint_move(prev, q)
         except VrDriverError as exc:
             raise JointCommandRefused("workspace", "the step from %s: %s" % (origin, exc)) from None
         try:         # one chord: a few checks of ~10 us each (scene_guard)
-            core.check_collision_path((prev, q), "the step from %s" % origin)
+            self.checks.check_collision_path((prev, q), "the step from %s" % origin)
         except CollisionError as exc:
             raise JointCommandRefused("collision", str(exc)) from None
-        if core.protocol.joint_targets:
+        if self.protocol.joint_targets:
             return None
-        error = core.configuration_error(prev, q)
+        error = self.streams.configuration_error(prev, q)      # type: ignore[union-attr]  (it streams)
         if error:
             raise JointCommandRefused("configuration", "from %s: %s" % (origin, error))
-        return core.protocol.wire_pose(core.kin.fk_pose(q))
+        return self.protocol.wire_pose(self.kin.fk_pose(q))

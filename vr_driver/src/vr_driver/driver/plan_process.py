@@ -134,7 +134,7 @@ class SceneSnapshot:
 class PlanRequest:
     """One plan for the worker: the goal, the arm's joints to plan from, the planner's seed (None:
     random), the scene, and the node's shortest stream segment [s] (its measured bus cycle:
-    :meth:`DriverCore._min_segment`), so that the worker's stream check is the node's."""
+    :meth:`DriverCore.min_segment`), so that the worker's stream check is the node's."""
 
     goal: PlanGoal
     start: Tuple[float, ...]
@@ -258,7 +258,7 @@ class PlanningProcess:
                 self._restart()                                    # the next plan tries a new one
                 return failed("no plan: the planning process could not start: %s" % exc)
             request = PlanRequest(goal, tuple(float(v) for v in start), seed, SceneSnapshot.of(self.core),
-                                  float(self.core._min_segment()))
+                                  float(self.core.min_segment()))
             try:
                 self._send(("plan", request))
                 kind, payload = self._receive(time.monotonic() + self._answer_time(goal), cancel, "an answer")
@@ -398,16 +398,16 @@ def _no_port(device: str, baud: int) -> Any:
 class PlanningCore(DriverCore):
     """The worker's DriverCore, never started: no port (its link factory refuses; the link is never
     stepped), no thread (``start()`` is never called), no I/O line, no cell file (each request brings
-    the scene). Its shortest stream segment is the node's (:attr:`min_segment`, set per request):
-    the node measures its bus cycle, this core never runs one."""
+    the scene). Its shortest stream segment is the node's (:attr:`node_min_segment`, set per
+    request): the node measures its bus cycle, this core never runs one."""
 
-    min_segment: Optional[float] = None
+    node_min_segment: Optional[float] = None
 
     def __init__(self, params: Any) -> None:
         super().__init__(replace(params, scene="", io_signals=""), open_link=_no_port)
 
-    def _min_segment(self) -> float:
-        return self.min_segment if self.min_segment is not None else super()._min_segment()
+    def min_segment(self) -> float:
+        return self.node_min_segment if self.node_min_segment is not None else super().min_segment()
 
 
 class _Worker:
@@ -424,7 +424,7 @@ class _Worker:
             self.core.scene_guard = SceneGuard(self.core.kin, self.core.planning_gate, snap.scene(), snap.padding,
                                                snap.checked, params.prefix, model=params.model)
             self.scene = snap
-        self.core.min_segment = request.min_segment
+        self.core.node_min_segment = request.min_segment
         return self.planning.plan(request.goal, request.start, request.seed)
 
 

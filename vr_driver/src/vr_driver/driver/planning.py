@@ -377,45 +377,21 @@ class DriverPlanning:
         return lambda q: abs(q[_WRIST]) >= WRIST_MARGIN and not strict.in_collision(q)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:
-        """Why the driver would refuse ``plan``, "" when it would not: a streaming protocol's stream
-        (its points: their configurations with a Cartesian protocol, and their segments); v1's PTP
-        moves between the plan's thinned stop points (``submit_trajectory``: each previewed as the
-        controller runs it, a straight joint move, against the box and the cell -- the plan's
-        samples between two stop points are not what v1 runs). Call it without the planning gate:
-        the checks take it."""
+        """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked
+        as ``submit_trajectory`` checks it (``DriverCore.prepare_trajectory``) -- a streaming
+        protocol's stream (its points: their configurations with a Cartesian protocol, and their
+        segments); v1's PTP moves between the plan's thinned stop points, each previewed as the
+        controller runs it, a straight joint move, against the box and the cell (the plan's samples
+        between two stop points are not what v1 runs). Call it without the planning gate: the
+        checks take it."""
         if len(plan.positions) < 2:
             return ""
-        if not getattr(self.core, "streaming", False):
-            return self._ptp_refusal(plan)
-        from .streaming import MAX_STREAM_TOLERANCE
-        tol = math.radians(self.params.stream_path_tolerance)
-        try:
-            points = self.core._stream(plan.times, plan.positions, tol, max(tol, MAX_STREAM_TOLERANCE))
-            if points:
-                self.core.check_segments(plan.positions[0], points)
-        except VrDriverError as exc:
-            return str(exc)
-        return ""
-
-
-    def _ptp_refusal(self, plan: PlannedTrajectory) -> str:
-        """v1: the PTP moves ``submit_trajectory`` would send for ``plan`` (validated with the
-        protocol's default tolerances, as joint_trajectory_action gets the plan), each previewed from
-        the previous one's end."""
-        from ..poses import MoveType
-        from .jobs import MoveRequest
-        from .trajectories import TrajectoryGoal, thin, validate
+        from .trajectories import TrajectoryGoal, validate
         lim = self.kin.limits
         try:
             traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), plan.positions[0], lim.lower,
                             lim.upper, 0.0)
-            start = tuple(plan.positions[0])
-            for n, k in enumerate(thin(traj)[1:], 1):
-                target = self.kin.fk_pose(traj.positions[k])
-                try:
-                    start = self.core.preview(MoveRequest(MoveType.PTP, target), start).joint_target
-                except VrDriverError as exc:
-                    return "PTP %d to stop point %d of the plan: %s" % (n, k, exc)
+            self.core.prepare_trajectory(traj, traj.positions[0])
         except VrDriverError as exc:
             return str(exc)
         return ""

@@ -1,0 +1,214 @@
+"""A stream made ready to send, per protocol family (ROS-free, no I/O; callers' threads and the
+planning thread, never the bus thread). A planned path (times and joint positions) becomes the
+points of one stream job (:func:`vr_driver.driver.streaming.stream_points`: thinned with its
+timing, each segment's speed from its planned duration, blended through with ``stream_smooth``),
+and every straight joint move between them is checked -- the joint limits, the workspace box and
+the cell -- before anything is queued.
+
+- :class:`JointStreams` (v2: joint targets): the controller runs the joints as sent.
+- :class:`CartesianStreams` (v3: pose targets): the controller solves each target's pose itself,
+  as the IK solution nearest the previous target's joints. Each point also gets the pose the wire
+  carries, solved as the controller will: it must land on the planned joints within
+  CONFIGURATION_TOLERANCE, or the controller would run another configuration than the one
+  planned and checked (doc/controller_program.md section 7); no joint turns by more than
+  CARTESIAN_MAX_STEP between two points.
+
+:func:`stream_preparation` picks the family of a protocol (None for one that does not stream: v1).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import replace
+from typing import Any, Callable, Optional, Sequence, Tuple
+
+from ..errors import VrDriverError
+from ..kinematics.solver import Kinematics
+from ..params import DriverParams
+from ..poses import ControllerPose
+from .jobs import MoveJob, Preview, StreamPoint
+from .path_checks import PathChecks
+from .status import DriverError
+from .streaming import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
+
+__all__ = ["CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
+           "stream_preparation"]
+
+#: rad: a Cartesian stream's target, solved as the controller will (the IK solution nearest the
+#: previous target's joints), must land this near the planned point (every joint); farther, the
+#: controller would run another configuration than the one planned and checked
+CONFIGURATION_TOLERANCE = math.radians(1.0)
+#: [rad] the widest joint step between two points of a Cartesian stream (streaming.split_long): the
+#: controller takes the solution nearest the previous target, the planned one only while a joint
+#: turns by well under half a turn between them
+CARTESIAN_MAX_STEP = math.radians(90.0)
+
+
+def fmt_pose(pose: ControllerPose) -> str:
+    return "(%.1f, %.1f, %.1f mm, %.2f, %.2f, %.2f deg)" % pose.as_tuple()
+
+
+class JointStreams:
+    """Streams of joint targets (v2). ``min_segment()``: the shortest segment the bus feeds without
+    a gap now [s] (the driver's bus cycle)."""
+
+    #: the widest joint step between two points (None: any)
+    max_step: Optional[float] = None
+
+    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
+                 min_segment: Callable[[], float]) -> None:
+        self.params = params
+        self.kin = kinematics
+        self.protocol = protocol
+        self.checks = checks
+        self.min_segment = min_segment
+
+    def points(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
+               max_tolerance: float) -> Tuple[StreamPoint, ...]:
+        """The stream of the path ``times`` / ``positions`` (from ``positions[0]``, where the arm
+        is), thinned to ``tolerance`` (at most ``max_tolerance`` where the bus could not feed the
+        segments); () when the path does not move."""
+        points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
+                               tolerance, self.min_segment(), max_tolerance,
+                               corner_tolerance=math.radians(self.params.stream_path_tolerance),
+                               max_step=self.max_step)
+        if not points:
+            return points
+        return self.with_poses(positions[0], points)
+
+    def trajectory(self, times: Sequence[float], positions: Sequence[Sequence[float]]) -> Tuple[StreamPoint, ...]:
+        """A planner trajectory's stream (thinned to ``stream_path_tolerance``) with every segment
+        checked (:meth:`check_segments`); () when it does not move. Raises DriverError naming the
+        point or the segment (and that nothing was sent)."""
+        tol = math.radians(self.params.stream_path_tolerance)
+        points = self.points(times, positions, tol, max(tol, MAX_STREAM_TOLERANCE))
+        if points:
+            try:
+                self.check_segments(positions[0], points)
+            except VrDriverError as exc:
+                raise DriverError("%s; nothing was sent" % exc) from None
+        return points
+
+    def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
+               ) -> Tuple[StreamPoint, ...]:
+        """``points`` as they go out after a target at ``start``, checked as the controller will take
+        them; joint targets go out as they are."""
+        return tuple(points)
+
+    def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
+        """Why the controller would not reach ``joints`` after a target at ``prev`` ("": it would;
+        joint targets are run as sent)."""
+        return ""
+
+    def preview_stream(self, preview: Preview) -> Tuple[StreamPoint, ...]:
+        """A validated move as a stream: its planned samples (a PTP's joint line with its speed
+        ramps, a LIN / CIRC's Cartesian path) thinned to 0.01 deg at their planned times; the last
+        point is exactly the previewed target."""
+        traj = preview.trajectory
+        positions = [tuple(float(v) for v in q) for q in traj.positions]
+        positions[-1] = tuple(preview.joint_target)
+        points = self.points([float(t) for t in traj.times], positions, math.radians(0.01),
+                             MAX_CARTESIAN_TOLERANCE)
+        if not points:      # already there: one target at the goal
+            points = (StreamPoint(tuple(preview.joint_target), 1000, 0, 0.0, len(positions) - 1),)
+            points = self.with_poses(positions[0], points)
+        return points
+
+    def check_segments(self, start: Sequence[float], points: Sequence[StreamPoint]) -> None:
+        """Every straight joint move of the stream (from ``start``) inside the joint limits and the
+        workspace box, sampled as a PTP preview; raises (EnvelopeError, KinematicsError...) naming
+        the segment; CollisionError naming the point where a chord collides."""
+        self.checks.check_collision_path([tuple(start)] + [p.joints for p in points],
+                                         "the stream's straight joint moves", [0.0] + [p.time for p in points])
+        prev = tuple(start)
+        for i, point in enumerate(points):
+            try:
+                self.checks.check_joint_move(prev, point.joints)
+            except VrDriverError as exc:
+                raise type(exc)("segment %d of %d (to planned point %d): %s"
+                                % (i + 1, len(points), point.index, exc)) from None
+            prev = point.joints
+            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
+
+    def restream(self, job: MoveJob, joints: Tuple[float, ...]) -> Tuple[Tuple[StreamPoint, ...], Tuple[float, ...]]:
+        """A stream job's points from ``joints`` (the arm is not where the stream was planned to
+        start): the first segment is checked again and its speed set for its planned arrival (no
+        faster than the limits)."""
+        points = job.points
+        self.check_segments(joints, points[:1])
+        self.with_poses(joints, points[:1])
+        first = points[0]
+        # (a pause at the start, first.release > 0: the move begins when it ends)
+        speed = stream_speeds(joints, [tuple(joints), first.joints], [first.release, first.time],
+                              self.kin.limits.velocity)[1]
+        return (replace(first, speed=speed),) + tuple(points[1:]), tuple(joints)
+
+
+class CartesianStreams(JointStreams):
+    """Streams of pose targets (v3): each point with the pose the wire carries, solved as the
+    controller will (module docstring)."""
+
+    max_step = CARTESIAN_MAX_STEP
+
+    def _solve(self, pose: ControllerPose, prev: Sequence[float], joints: Sequence[float]
+               ) -> Tuple[Tuple[float, ...], int]:
+        """The controller's solution of the wire's ``pose`` of ``joints`` after a target at
+        ``prev``, and the joint farthest from ``joints`` in it; VrDriverError when it has none."""
+        with self.checks.gate:
+            solved = self.kin.ik_pose(pose, seed=tuple(prev))
+        off = [abs(a - b) for a, b in zip(solved, joints)]
+        return solved, max(range(len(off)), key=off.__getitem__)
+
+    def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
+               ) -> Tuple[StreamPoint, ...]:
+        """Each point gets its pose (FK of the planned joints, as the wire carries it) and is
+        solved as the controller will solve it -- the IK solution nearest the previous target's
+        joints (the arm's, ``start``, for the first): it must be the planned point within
+        CONFIGURATION_TOLERANCE. Raises DriverError naming the point (nothing is sent)."""
+        out = []
+        prev = tuple(start)
+        for i, point in enumerate(points):
+            where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
+            pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
+            try:
+                solved, worst = self._solve(pose, prev, point.joints)
+            except VrDriverError as exc:
+                raise DriverError("%s: the controller cannot solve its pose %s: %s; nothing was sent"
+                                  % (where, fmt_pose(pose), exc)) from None
+            if abs(solved[worst] - point.joints[worst]) > CONFIGURATION_TOLERANCE:
+                raise DriverError(
+                    "%s: the controller would reach its pose %s in another configuration than planned "
+                    "(joint_%d %.1f deg instead of %.1f deg: the solution nearest the previous target's "
+                    "joints); plan a path that stays in one configuration, or use a protocol with joint "
+                    "targets; nothing was sent" % (where, fmt_pose(pose), worst + 1,
+                                                   math.degrees(solved[worst]), math.degrees(point.joints[worst])))
+            out.append(replace(point, pose=pose))
+            prev = point.joints
+            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
+        return tuple(out)
+
+    def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
+        """Why the controller would not reach ``joints`` when sent their pose (FK, rounded as the
+        wire carries it) after a target at ``prev`` -- it solves the pose as the IK solution
+        nearest the previous target's joints -- or "" when it reaches them within
+        CONFIGURATION_TOLERANCE."""
+        pose = self.protocol.wire_pose(self.kin.fk_pose(joints))
+        try:
+            solved, worst = self._solve(pose, prev, joints)
+        except VrDriverError as exc:
+            return "the controller cannot solve its pose %s: %s" % (fmt_pose(pose), exc)
+        if abs(solved[worst] - joints[worst]) <= CONFIGURATION_TOLERANCE:
+            return ""
+        return ("the controller would reach its pose %s in another configuration (joint_%d %.1f deg "
+                "instead of %.1f deg: the solution nearest the previous target's joints); use a "
+                "protocol with joint targets" % (fmt_pose(pose), worst + 1, math.degrees(solved[worst]),
+                                                 math.degrees(joints[worst])))
+
+
+def stream_preparation(params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
+                       min_segment: Callable[[], float]) -> Optional[JointStreams]:
+    """The stream preparation of ``protocol``'s family; None when it does not stream (v1)."""
+    if not protocol.streams:
+        return None
+    family = JointStreams if protocol.joint_targets else CartesianStreams
+    return family(params, kinematics, protocol, checks, min_segment)
