@@ -106,3 +106,29 @@ class DocsTest(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+#: a code comment's pointer to a README section: README "X", README, "X", README.md, "X",
+#: README.md, section X (the section name up to the closing quote or parenthesis)
+README_POINTER = re.compile(r'README(?:\.md)?,? (?:section )?"([^"]+)"|README(?:\.md)?, section ([^)"]+)\)')
+CODE_SUFFIXES = (".py", ".msg", ".srv", ".action", ".launch", ".test", ".yaml", ".srdf", ".xacro", ".rst", ".cfg")
+
+
+class CodePointersTest(unittest.TestCase):
+    def test_a_comment_that_names_a_readme_section_names_one_that_exists(self):
+        """Sections move between the READMEs and vr_driver/doc/: a pointer in the code to a heading no
+        Markdown file has any more leads nowhere."""
+        headings = set()
+        for f in repo_files():
+            if f.endswith(".md") and os.path.isfile(os.path.join(REPO, f)):
+                headings |= {h.replace("-", " ") for h in anchors(read(f))}
+        stale = []
+        for f in repo_files():
+            if not f.endswith(CODE_SUFFIXES) or not os.path.isfile(os.path.join(REPO, f)) or f == "test/test_docs.py":
+                continue
+            for n, line in enumerate(read(f).splitlines(), 1):
+                for m in README_POINTER.finditer(line):
+                    name = (m.group(1) or m.group(2)).strip()
+                    if slug(name).replace("-", " ") not in headings:
+                        stale.append("%s:%d: %s" % (f, n, name))
+        self.assertEqual(stale, [], "pointers to README sections that no Markdown file has")

@@ -140,7 +140,7 @@ def test_follow_joint_trajectory_goal_round_trips():
 
 def test_io_messages_and_services_carry_what_the_io_line_shows():
     """issue 18: io_states (IOStates of IOState), set_io (SetIO) and get_io (GetIO) as documented in
-    doc/README.md: every field name and type, and a round trip of a state."""
+    doc/ros_api.md: every field name and type, and a round trip of a state."""
     srv = pytest.importorskip("vr_driver.srv", reason="vr_driver services not built (run scripts/test)")
     from io import BytesIO
     assert msg.IOState.__slots__ == ["name", "station", "type", "direction", "value", "online"]

@@ -118,7 +118,7 @@ def test_the_virtual_controller_link_is_one_per_namespace():
 
 
 def test_a_socket_url_is_a_port_the_driver_opens(monkeypatch):
-    """README: a serial line reached over the network (an RS-485 / TCP converter, or ser2net):
+    """doc/multi_robot.md: a serial line reached over the network (an RS-485 / TCP converter, or ser2net):
     the port is pyserial's socket:// URL; the driver's link opens it (a real TCP connection)."""
     from vr_driver.driver.link import open_serial_link
     server = socket.socket()

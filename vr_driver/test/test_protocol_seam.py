@@ -1,4 +1,4 @@
-"""The protocol seam (vr_driver.protocol, doc/README.md "Protocols"): no module outside
+"""The protocol seam (vr_driver.protocol, doc/protocols.md): no module outside
 ``vr_driver/protocol/`` compares protocol names. Code that depends on the protocol asks the
 protocol object (``params.wire``, ``protocol.get(name)``) for a fact, a codec or a capability.
 

@@ -3,7 +3,7 @@
 The URDF carries position, velocity and effort limits; the joint *accelerations* have no place in a
 URDF ``<limit>``, so they are read here, from the same YAML entries (``joints.<name>.acceleration``).
 They are an ASSUMPTION (velocity / 0.1 s, the ramp the virtual arm has always used) until measured on
-the real arm: see the YAML's comment and README.md, "The robot model". MoveIt's ``joint_limits.yaml``
+the real arm: see the YAML's comment and the package's README.md, "The robot model". MoveIt's ``joint_limits.yaml``
 carries the same accelerations (its test compares them), and the virtual arm's default ramp time is
 :func:`ramp_time` of this set.
 

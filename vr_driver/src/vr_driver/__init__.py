@@ -3,7 +3,7 @@
 The core modules import no rospy (test/test_no_ros_imports.py): errors, poses, params, validate,
 io_signals (the vocabulary), protocol, kinematics, driver, controller, terminal and csr.
 The ROS edge: ros (the nodes and their helpers). The layout and what each subpackage may import:
-doc/README.md, "Layout" (test/test_layout.py checks it).
+doc/layout.md (test/test_layout.py checks it).
 """
 
 # The generated messages (vr_driver.msg) live in the catkin devel/install space, the code here:

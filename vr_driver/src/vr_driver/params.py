@@ -178,7 +178,7 @@ class DriverParams:
     # the bus in a process of its own (vr_driver.bus.process): nothing the node computes delays a cycle
     bus_process: bool = True             # False: the DP master in the node's bus thread (as before 0.3)
     bus_rt_priority: int = 20            # SCHED_FIFO priority of the bus process where the system
-    #                                      allows it (README "Real-time priority"); 0: normal
+    #                                      allows it (doc/reliability.md, "Real-time priority"); 0: normal
     bus_node_timeout: float = 3.0        # [s] the node silent this long is dead to the bus process
     #                                      (a dead node is seen at once: its socket closes)
     bus_stop_hold: float = 2.0           # [s] after the node died: the stop record this long, then the

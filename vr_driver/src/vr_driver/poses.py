@@ -334,7 +334,7 @@ class ControllerPose:
         return dp, math.degrees(angle)
 
 
-#: the controller's home pose (README.md; SRDF group_state ``home``)
+#: the controller's home pose (vr_driver/doc/ros_api.md; SRDF group_state ``home``)
 HOME_POSE = ControllerPose(1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
 
 

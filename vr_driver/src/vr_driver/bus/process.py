@@ -11,7 +11,7 @@ opens the port, runs the :class:`~pyprofibus_vendor.dp_master.DpMaster` at the d
 and reports every cycle (the slaves' states, state changes, inputs with their arrival times, the
 counters, :mod:`~vr_driver.bus.health`) over a socket. It imports only the standard library and
 pyprofibus_vendor. Where the system allows it runs with real-time priority (``rt_priority``:
-SCHED_FIFO; see the README's "Real-time priority"), else at normal priority, and says which.
+SCHED_FIFO; see doc/reliability.md, "Real-time priority"), else at normal priority, and says which.
 
 **The driver's side** is :class:`BusProcessMaster`, a stand-in for the DpMaster that the link
 supervisor (vr_driver.driver.link) and the I/O line (vr_driver.driver.stations) use unchanged: its
