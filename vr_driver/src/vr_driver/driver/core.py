@@ -236,7 +236,8 @@ class DriverCore:
         self.sequencer.outputs = value      # type: ignore[attr-defined]  (StreamSequencer)
         self.wake()
 
-    # ------------------------------------------------------------------------ requests (JobControl)
+    # ------------------------------------------------------------------------ requests
+    # (JobControl has their rules; each validates and plans in the caller's thread, then queues)
     def preview(self, request: MoveRequest, start_joints: Optional[Sequence[float]] = None) -> Preview:
         return self.jobs.preview(request, start_joints)
 

@@ -151,12 +151,18 @@ class JobControl:
 
     # ------------------------------------------------------------------------ moves
     def preview(self, request: MoveRequest, start_joints: Optional[Sequence[float]] = None) -> Preview:
-        """:meth:`PathChecks.preview` from ``start_joints`` (default: the arm's joints now)."""
+        """Validate and plan ``request`` from the current joints (or ``start_joints``); sends
+        nothing (:meth:`PathChecks.preview`). Raises VrDriverError (PoseError, KinematicsError,
+        MotionError, EnvelopeError, ProtocolError, CollisionError, DriverError) with the reason."""
         return self.checks.preview(request, self._current_joints() if start_joints is None else start_joints)
 
     def submit(self, request: MoveRequest, on_update: Optional[Callable[[MoveJob], None]] = None,
                mode: SubmitMode = SubmitMode.APPEND, ticket: Optional[int] = None) -> MoveJob:
-        """Validate, preview and queue a move (``DriverCore.submit``)."""
+        """Validate, preview and queue a move. Raises (and queues nothing) when it is invalid,
+        unreachable, leaves the envelope, or the controller cannot move now. ``mode``: APPEND
+        (behind the queue) or PREEMPT (stop the running move, drop the queue; ``ticket`` from
+        :meth:`claim_ticket` keeps arrival order). A streaming protocol runs it as a stream of its
+        previewed samples (:meth:`JointStreams.preview_stream`)."""
         self._require_motion_possible()
         preview = self.preview(request, self._planning_start(mode))
         if self.streams is not None:
@@ -172,7 +178,11 @@ class JobControl:
 
     def submit_joint_path(self, names: Sequence[str], points: Sequence[Sequence[float]],
                           on_update: Optional[Callable[[MoveJob], None]] = None) -> List[MoveJob]:
-        """Each joint point a PTP target, streamed in order (``DriverCore.submit_joint_path``)."""
+        """Each joint point -> FK -> a PTP target, streamed in order. All points are validated
+        and previewed first (in the caller's thread; the bus keeps cycling); if any is bad,
+        nothing is queued and DriverError names the point. The new path replaces every queued
+        target of an earlier one; the target in flight completes and the new path runs from its
+        end. An empty ``points`` stops the motion."""
         if not points:
             self.stop_motion("empty joint path: stop requested")
             return []
@@ -241,8 +251,20 @@ class JobControl:
     def submit_trajectory(self, traj: ValidTrajectory,
                           on_update: Optional[Callable[[MoveJob], None]] = None,
                           mode: SubmitMode = SubmitMode.REPLACE) -> TrajectoryRun:
-        """Run a validated planner trajectory (``DriverCore.submit_trajectory``): the collision
-        check of its samples and chords, then :meth:`prepare_trajectory` and the queue."""
+        """Run a validated planner trajectory: its samples and the chords between them checked
+        against the cell (CollisionError, nothing queued), then what :meth:`prepare_trajectory`
+        makes of it, queued.
+
+        A streaming protocol: one streamed job (:func:`streaming.stream_points`: thinned with its
+        timing to ``stream_path_tolerance``, each segment's speed from its planned duration,
+        blended through with ``stream_smooth``). ``mode`` as :meth:`submit` (REPLACE, the default:
+        the points the controller already took complete, then this one).
+
+        Protocol v1: thinned to the fewest stop points that keep the path within its path
+        tolerance (:func:`trajectories.thin`), each kept point a PTP target of a joint path (it
+        replaces the queued targets of an earlier path). The v1 program stops at every point and
+        moves at its own speed: the result says how much slower than planned it ran. Raises
+        DriverError (nothing queued) naming the point or segment refused."""
         try:
             self.checks.check_collision_path(traj.positions, "trajectory", traj.times)
         except CollisionError as exc:
@@ -269,7 +291,9 @@ class JobControl:
 
     # ------------------------------------------------------------------------ the queue
     def claim_ticket(self) -> int:
-        """A ticket in arrival order for a goal that preempts (``DriverCore.claim_ticket``)."""
+        """A ticket in arrival order for a goal that preempts (take it as the goal arrives, pass it
+        to :meth:`submit`): of two goals, the one that arrived later wins, whichever is planned
+        first; an older one submitted after a newer ticket was claimed is superseded."""
         return self.sequencer.claim_ticket()
 
     def post_job(self, job: MoveJob) -> None:
