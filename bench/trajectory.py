@@ -2,6 +2,7 @@
 """Planner-like trajectories through joint_trajectory_action on the virtual controller (printed, never asserted).
 
     scripts/bench trajectory [-- --n 3 --seed 1 --configs v1-paced,v2-paced,v3-paced,v3-paced-la0 --plot DIR]
+    scripts/bench trajectory -- --set wrist [--n 6]      (v3-paced, v3-paced-ramp05, v1-paced, v2-paced)
 
 Trajectories (:func:`generate`, deterministic for a seed; the same set for every configuration):
 random joint paths as a sampling planner returns them -- 1 to 3 legs between random waypoints, each
@@ -16,6 +17,23 @@ joint_limits.yaml, full), by the classic forward-backward pass on the path param
 the end (:func:`resample`). Each leg's curve, every resampled point and every chord between two lie
 in the limits and the box below. Goals carry empty tolerances (the driver's per-protocol defaults),
 as MoveIt sends them.
+
+The "wrist" set (``--set wrist``, :func:`wrist_plan`): goals across and onto the wrist singularity
+(joint_5 = 0), where a pose fixes joint_4 + joint_6 but hardly their split. Goal i does
+``WRIST_KINDS[i]`` (cycled): "cross" from one side (|joint_5| 15-35 deg) to the other, "near" ends
+within 0.2-2 deg of 0, "on" ends on it exactly; from home: + -> -, - -> +, + -> near, near -> a side
+-> across, -> 0, 0 -> a side -> across. 1-2 legs, straight or bent (never in joint_5), joint_4 and
+joint_6 away from 0 and apart at every waypoint (10-40 / 10-60 deg, at least 15 deg apart), joint_1..3
+moving up to 10 deg per leg; timed as the "topp" set (velocity scaling 0.2-1: a slow crossing spends
+a few bus cycles in the band) with the planner's accelerations MATCHED to the configuration's arm
+(``ramp_time``: velocity / ramp_time, :meth:`Checker.accelerations`; the same paths, only the timing
+differs); every point and chord inside the limits and the box (the other singularities checked with
+joint_5 at 30 deg). Judged as the driver judges (:class:`WristRule`, vr_driver.driver.resolution's
+band): where joint_5 is within 5 deg of 0 in the sample or the plan, joint_4 / joint_6 by their sum,
+elsewhere each joint; the deviation, the distance to the path and the final error so. The targets
+(``WRIST_TARGETS``, per goal and per configuration): every goal SUCCESSFUL with empty tolerances, time
+<= 1.10 x plan + 0.3 s, deviation <= 0.5 deg, final error <= 0.05 deg; v1: SUCCESSFUL only (its time
+and deviation reported). Default configurations ``WRIST_CONFIGS``.
 
 The "dense" set (``--set dense``, the first bench's): 10 to 100 points in all
 (point 0 = the start, at time 0), the points spread over the legs by length. Every point lies inside
@@ -142,6 +160,12 @@ DEFAULT_CONFIGS = ("v1-paced", "v2-paced", "v3-paced", "v3-paced-la0", "v3-fast"
 TARGETS = (("time - 1.10 x plan - 0.3 s", "margin_s", 0.0), ("still [%]", "still_pct", 5.0),
            ("dev per joint [deg]", "dev_deg", 0.5), ("final error [deg]", "final_deg", 0.05))
 TIME_FACTOR, TIME_SLACK = 1.10, 0.3   # s: the time target, time <= 1.10 x plan + 0.3 s
+#: the "wrist" set's targets (every configuration, every goal; shown with the band rule of
+#: :class:`WristRule`): (label, key, limit); on v1 only "every goal SUCCESSFUL" is judged, its time
+#: and deviation (stops at kept points, whole-mm / whole-degree targets) are reported
+WRIST_TARGETS = (("time - 1.10 x plan - 0.3 s", "margin_s", 0.0),
+                 ("deviation at the same time, band rule [deg]", "dev_deg", 0.5),
+                 ("final error, band rule [deg]", "final_deg", 0.05))
 
 # --------------------------------------------------------------------------------- the generator
 #: where waypoints are drawn [deg]: inside the limits with room to spare, one arm configuration as a
@@ -168,8 +192,9 @@ WORKSPACE_MARGIN = 5.0                # mm: the box shrunk by this (the v1 progr
 #: driver's default 1 deg every goal would end early, with no figures of a whole run
 V1_TOLERANCE = 5.0
 #: the trajectory sets: "topp" time-optimal (velocity and acceleration limited) and resampled, as
-#: MoveIt's time parameterisation gives; "dense" 10-100 points at cruise fractions (the first bench)
-TIMINGS = ("topp", "dense")
+#: MoveIt's time parameterisation gives; "dense" 10-100 points at cruise fractions (the first bench);
+#: "wrist" the topp timing on goals across and onto the wrist singularity (joint_5 = 0)
+TIMINGS = ("topp", "dense", "wrist")
 
 
 @dataclass(frozen=True)
@@ -242,10 +267,26 @@ class Checker:
     def home(self) -> Tuple[float, ...]:
         return self.kin.ik_pose(HOME_POSE)
 
-    def point_ok(self, q: Sequence[float]) -> bool:
+    def point_ok(self, q: Sequence[float], wrist: bool = False) -> bool:
+        """``q`` inside the joint limits, its TCP inside the box, off singularities (``wrist``: the
+        "wrist" set's points sit on joint_5 = 0 by design: the rest of the arm off its own, the
+        measure taken with joint_5 at ``WRIST_PROBE``)."""
         if any(not lo <= v <= hi for v, lo, hi in zip(q, self.lower, self.upper)):
             return False
-        return self.workspace.contains(self.kin.fk_pose(q)) and self.kin.manipulability(q) >= MIN_MANIPULABILITY
+        if not self.workspace.contains(self.kin.fk_pose(q)):
+            return False
+        if wrist:
+            q = tuple(q[:4]) + (WRIST_PROBE,) + tuple(q[5:])
+        return self.kin.manipulability(q) >= MIN_MANIPULABILITY
+
+    def accelerations(self, ramp_time: Optional[float] = None) -> Tuple[float, ...]:
+        """The planner's acceleration limits matched to an arm that reaches full speed in
+        ``ramp_time`` s (MoveIt's velocity / ramp_time; None: joint_limits.yaml's, the model's 0.1 s)."""
+        if ramp_time is None:
+            return tuple(self.amax)
+        if not ramp_time > 0.0:
+            raise ValueError("ramp_time %r: a positive time in seconds" % (ramp_time,))
+        return tuple(v / ramp_time for v in self.vmax_planner)
 
     def chord_ok(self, a: Sequence[float], b: Sequence[float]) -> bool:
         """Every sample (0.02 rad apart) of the straight joint-space move a -> b in the box."""
@@ -283,14 +324,19 @@ def _waypoint(rng: random.Random, prev: Sequence[float], chk: Checker) -> Option
 
 
 def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_points: Optional[int] = None,
-                 speed: Tuple[float, float] = SPEED, timing: str = "topp") -> Planned:
+                 speed: Tuple[float, float] = SPEED, timing: str = "topp", index: int = 0,
+                 amax: Optional[Sequence[float]] = None) -> Planned:
     """One planner-like trajectory from ``start`` (see the module doc): ``timing`` "topp" (time-optimal
-    under the velocity and acceleration limits, resampled every RESAMPLE_DT) or "dense" (10-100
-    points, each leg at its cruise fraction, :func:`time_law`). Raises RuntimeError when no valid
-    one is found in many attempts (cannot happen from a valid start in practice)."""
+    under the velocity and acceleration limits, resampled every RESAMPLE_DT), "dense" (10-100
+    points, each leg at its cruise fraction, :func:`time_law`) or "wrist" (:func:`wrist_plan`: the
+    goal ``WRIST_KINDS[index]`` of the set, timed as "topp" under the accelerations ``amax``, default
+    joint_limits.yaml's). Raises RuntimeError when no valid one is found in many attempts (cannot
+    happen from a valid start in practice)."""
     if timing not in TIMINGS:
         raise ValueError("timing %r: one of %s" % (timing, ", ".join(TIMINGS)))
     start = tuple(float(v) for v in start)
+    if timing == "wrist":
+        return wrist_plan(rng, start, chk, WRIST_KINDS[index % len(WRIST_KINDS)], amax)
     for _attempt in range(200):
         n_legs = rng.randint(1, 3)
         ways, prev = [], start
@@ -363,28 +409,30 @@ def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_poi
 
 def _topp_plan(rng: random.Random, starts: Sequence[Tuple[float, ...]], ways: Sequence[Tuple[float, ...]],
                bumps: Sequence[Sequence[float]], kinds: Sequence[str], chk: Checker,
-               speed: Tuple[float, float]) -> Optional[Planned]:
+               speed: Tuple[float, float], accel: Optional[Sequence[float]] = None,
+               wrist: bool = False) -> Optional[Planned]:
     """The "topp" set: the legs' curves checked against the limits and the box, timed at one velocity
-    scaling in ``speed`` (as MoveIt's) with the full acceleration limits, resampled; None if a
-    curve or a resampled point or chord leaves the box."""
+    scaling in ``speed`` (as MoveIt's) with the full acceleration limits (``accel``, default
+    joint_limits.yaml's), resampled; None if a curve or a resampled point or chord leaves the box.
+    ``wrist``: the points may sit on joint_5 = 0 (:meth:`Checker.point_ok`)."""
     legs = [Leg(tuple(a), tuple(b), tuple(bump)) for a, b, bump in zip(starts, ways, bumps)]
     for leg in legs:
         prev = leg.a
         for k in range(1, LEG_CHECKS + 1):
             q = leg.q(k / LEG_CHECKS)
-            if not (chk.point_ok(q) and chk.chord_ok(prev, q)):
+            if not (chk.point_ok(q, wrist) and chk.chord_ok(prev, q)):
                 return None
             prev = q
     f = rng.uniform(*speed)
     vmax = [f * v * TOPP_MARGIN for v in chk.vmax_planner]
-    amax = [a * TOPP_MARGIN for a in chk.amax]
+    amax = [a * TOPP_MARGIN for a in (chk.amax if accel is None else accel)]
     try:
         timed = [time_leg(leg, vmax, amax) for leg in legs]
     except ValueError:
         return None
     points, times_ns = resample(timed)
     for p0, p1 in zip(points, points[1:]):
-        if not (chk.point_ok(p1) and chk.chord_ok(p0, p1)):
+        if not (chk.point_ok(p1, wrist) and chk.chord_ok(p0, p1)):
             return None
     fractions = [max(abs(y - x) / v for x, y, v in zip(p0, p1, chk.vmax)) / ((t1 - t0) * 1e-9)
                  for p0, p1, t0, t1 in zip(points, points[1:], times_ns, times_ns[1:])]
@@ -411,15 +459,17 @@ def rng_for(seed: int, index: int) -> random.Random:
 
 
 def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[Sequence[float]] = None,
-             timing: str = "dense") -> List[Planned]:
+             timing: str = "dense", ramp_time: Optional[float] = None) -> List[Planned]:
     """``n`` chained trajectories (each from the previous one's end), from ``start`` (default home).
     The bench makes trajectory ``i`` the same way from where the arm really is (:func:`rng_for`):
-    from the planned end, it is this one."""
+    from the planned end, it is this one. ``ramp_time`` (the "wrist" set only): the planner's
+    accelerations matched to an arm reaching full speed in that time (:meth:`Checker.accelerations`)."""
     chk = chk or Checker()
     q = tuple(start) if start is not None else chk.home()
+    amax = chk.accelerations(ramp_time) if timing == "wrist" else None
     out = []
     for i in range(n):
-        traj = generate_one(rng_for(seed, i), q, chk, timing=timing)
+        traj = generate_one(rng_for(seed, i), q, chk, timing=timing, index=i, amax=amax)
         out.append(traj)
         q = traj.points[-1]
     return out
@@ -590,6 +640,144 @@ def resample(timed: Sequence[TimedLeg], dt: float = RESAMPLE_DT) -> Tuple[List[T
     return points, times_ns
 
 
+# ------------------------------------------------------------------------ the "wrist" set
+#: what goal ``i`` of the "wrist" set does (cycled): "cross" ends on the other side of joint_5 = 0
+#: than it starts, "near" ends within ``WRIST_NEAR`` of it, "on" ends on it; each starting inside
+#: the band first leaves it to a side. From home (joint_5 +24 deg): + -> -, - -> +, + -> near,
+#: near -> side -> the other side, side -> 0, 0 -> side -> the other side, then again
+WRIST_KINDS = ("cross", "cross", "near", "cross", "on", "cross")
+WRIST_SIDE = (15.0, 35.0)             # deg: |joint_5| of a goal's end or via point off the singularity
+WRIST_NEAR = (0.2, 2.0)               # deg: |joint_5| of a "near" goal's end
+WRIST_J4 = (10.0, 40.0)               # deg: |joint_4| at every waypoint (away from 0) ...
+WRIST_J6 = (10.0, 60.0)               # deg: ... |joint_6| ...
+WRIST_SPLIT = 15.0                    # deg: ... and |joint_4 - joint_6| (the split a pose leaves open near 0)
+WRIST_ARM = 10.0                      # deg: joint_1..3 move up to this per leg ("a little")
+WRIST_BUMP = (3.0, 10.0)              # deg: bent legs, in one of joint_1..4, joint_6 (never joint_5)
+#: velocity scaling per trajectory (MoveIt's): fast crossings and slow ones, which spend a few bus cycles in the band
+WRIST_SPEED = (0.2, 1.0)
+#: joint_5 [rad] at which the "wrist" set's points are checked for the arm's other singularities
+WRIST_PROBE = math.radians(30.0)
+#: the configurations the "wrist" set runs by default: v3 at 19.2 kbit/s paced with the island,
+#: look-ahead 1, at the model's ramp and at 0.5 s (the planner's accelerations matched), v1, v2
+WRIST_CONFIGS = ("v3-paced", "v3-paced-ramp05", "v1-paced", "v2-paced")
+
+
+def _wrist_waypoint(rng: random.Random, prev: Sequence[float], j5: float, chk: Checker
+                    ) -> Optional[Tuple[float, ...]]:
+    """A waypoint with joint_5 = ``j5``: joint_1..3 up to ``WRIST_ARM`` from ``prev`` (inside
+    ``SAMPLE_BOX``), joint_4 / joint_6 drawn anew away from 0 and apart (``WRIST_J4``, ``WRIST_J6``,
+    ``WRIST_SPLIT``); None if none passes the checks."""
+    for _ in range(200):
+        q = list(prev)
+        for i in range(3):
+            lo, hi = (math.radians(v) for v in SAMPLE_BOX[i])
+            q[i] = min(max(prev[i] + math.radians(rng.uniform(-WRIST_ARM, WRIST_ARM)), lo), hi)
+        q[3] = rng.choice((-1.0, 1.0)) * math.radians(rng.uniform(*WRIST_J4))
+        q[5] = rng.choice((-1.0, 1.0)) * math.radians(rng.uniform(*WRIST_J6))
+        q[4] = j5
+        if abs(q[3] - q[5]) >= math.radians(WRIST_SPLIT) and chk.point_ok(q, wrist=True):
+            return tuple(q)
+    return None
+
+
+def wrist_joint5(rng: random.Random, start_j5: float, kind: str) -> List[Tuple[str, float]]:
+    """joint_5 [rad] of each waypoint of a "wrist" goal of ``kind`` from ``start_j5``, with what its
+    leg does ("side": to one side, "cross": across joint_5 = 0, "near", "on"). A start on a side
+    (``|joint_5| >= WRIST_SIDE[0]``) may go via another point on that side (one trajectory in two);
+    a start nearer the singularity first leaves it to a side drawn at random."""
+    def side() -> float:
+        return math.radians(rng.uniform(*WRIST_SIDE))
+    if kind not in ("cross", "near", "on"):
+        raise ValueError("wrist goal kind %r: cross, near or on" % (kind,))
+    on_side = abs(start_j5) >= math.radians(WRIST_SIDE[0]) - 1e-9
+    if on_side:
+        s = math.copysign(1.0, start_j5)
+        out = [("side", s * side())] if rng.random() < 0.5 else []
+    else:
+        s = rng.choice((-1.0, 1.0))
+        out = [("side", s * side())]
+    if kind == "cross":
+        out.append(("cross", -s * side()))
+    elif kind == "near":
+        out.append(("near", rng.choice((-1.0, 1.0)) * math.radians(rng.uniform(*WRIST_NEAR))))
+    else:
+        out.append(("on", 0.0))
+    return out
+
+
+def wrist_plan(rng: random.Random, start: Sequence[float], chk: Checker, kind: str,
+               amax: Optional[Sequence[float]] = None) -> Planned:
+    """One goal of the "wrist" set from ``start``: its joint_5 waypoints (:func:`wrist_joint5`), the
+    other joints by :func:`_wrist_waypoint`, each leg straight or bent (never in joint_5: a "cross"
+    leg crosses 0 once), timed as the "topp" set (:func:`_topp_plan`, velocity scaling in
+    ``WRIST_SPEED``, accelerations ``amax``: the planner's, matched to the arm's ramp). The random
+    draws do not depend on ``amax``: the same paths at every ramp, only their timing differs.
+    ``legs``: "<what the leg does to joint_5> <straight|bent>". Raises RuntimeError when no valid
+    one is found."""
+    start = tuple(float(v) for v in start)
+    for _attempt in range(200):
+        plan = wrist_joint5(rng, start[4], kind)
+        ways, prev = [], start
+        for _what, j5 in plan:
+            w = _wrist_waypoint(rng, prev, j5, chk)
+            if w is None:
+                break
+            ways.append(w)
+            prev = w
+        if len(ways) != len(plan):
+            continue
+        bumps, kinds = [], []
+        for what, _j5 in plan:
+            bump = [0.0] * 6
+            if rng.random() < 0.5:
+                bump[rng.choice((0, 1, 2, 3, 5))] = math.radians(rng.uniform(*WRIST_BUMP)) * rng.choice((-1.0, 1.0))
+                kinds.append(what + " bent")
+            else:
+                kinds.append(what + " straight")
+            bumps.append(bump)
+        planned = _topp_plan(rng, [start] + ways[:-1], ways, bumps, kinds, chk, WRIST_SPEED, accel=amax, wrist=True)
+        if planned is not None:
+            return planned
+    raise RuntimeError("no valid wrist goal (%s) found from %s" % (kind, start))
+
+
+@dataclass(frozen=True)
+class WristRule:
+    """How the "wrist" set is judged: the driver's wrist band (vr_driver.driver.resolution:
+    ``WRIST_BAND``, ``WireResolution.in_band`` / ``sum_of``). Where joint_5 is within ``band`` of 0
+    in the sample or in the plan it is compared with (the driver's rule, supervision's
+    ``_judged``), joint_4 and joint_6 count by ``joint_4 + sign * joint_6`` -- the pose fixes only
+    that there, on every protocol that carries poses -- elsewhere every joint by itself."""
+
+    band: float
+    sign: float
+
+    @classmethod
+    def of(cls, kin: Any) -> "WristRule":
+        """The driver's band and sign for the arm ``kin`` (the sign: its joint_4 / joint_6 axes)."""
+        from types import SimpleNamespace
+
+        from vr_driver.driver.resolution import WRIST_BAND, WireResolution
+        wire = WireResolution(kin, SimpleNamespace(pose_resolution=(1.0, 1.0)), band=WRIST_BAND)
+        return cls(wire.band, wire.sign)
+
+    def in_band(self, actual: Sequence[float], desired: Sequence[float]) -> bool:
+        return abs(actual[4]) < self.band or abs(desired[4]) < self.band
+
+    def errors(self, actual: Sequence[float], desired: Sequence[float]) -> List[float]:
+        """7 errors [rad]: the six joints' (joint_4's and joint_6's 0 inside the band) and the
+        sum's (0 outside it)."""
+        errs = [abs(a - b) for a, b in zip(actual, desired)] + [0.0]
+        if self.in_band(actual, desired):
+            errs[6] = abs((actual[3] - desired[3]) + self.sign * (actual[5] - desired[5]))
+            errs[3] = errs[5] = 0.0
+        return errs
+
+    def words(self) -> str:
+        return "joint_4 %s joint_6 by their sum where |joint_5| < %.1f deg (the sample's or the plan's)" % (
+            "+" if self.sign > 0 else "-", math.degrees(self.band))
+
+
 # ------------------------------------------------------------------------------------ the figures
 STILL_EPS = math.radians(0.01)        # a joint that moved less than this did not move
 MAX_LAG, LAG_STEP = 0.5, 0.005        # s: start delays tried when comparing with the plan
@@ -622,12 +810,17 @@ def min_still(cycle_rate: float, joint_states_rate: float) -> float:
 
 def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_result: float,
             final: Optional[Sequence[float]], shortest_still: float, age: float = 0.0,
-            judged: Optional[Sequence[Tuple[float, Sequence[float]]]] = None) -> Dict[str, Any]:
+            judged: Optional[Sequence[Tuple[float, Sequence[float]]]] = None,
+            wrist: Optional[WristRule] = None) -> Dict[str, Any]:
     """The figures of one goal from joint_states ``samples`` (time since send_goal, joints in the
     controller's order), the result's time, the first joints after it and :func:`min_still`.
     ``judged`` (--true-model: the true joints, same form): the deviation, the distance to the path
     and (``final`` being then the first true joints after the result) the final error are of these;
-    the timing figures (still, stops, start) stay those of ``samples``."""
+    the timing figures (still, stops, start) stay those of ``samples``. ``wrist`` (the "wrist" set):
+    the deviation, the distance to the path and the final error by its band rule (joint_4 / joint_6
+    by their sum where joint_5 is near 0): ``dev_joints_deg`` then has joint_4's and joint_6's
+    outside the band only, ``dev_sum_deg`` the sum's inside it (None: no sample there), ``dev_joint``
+    7 when the sum is the worst; ``band_samples`` how many samples were judged so."""
     from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
     inside = [(t, q) for t, q in samples if 0.0 <= t <= t_result]
     out: Dict[str, Any] = {"planned": plan.duration, "elapsed": t_result, "ratio": t_result / plan.duration,
@@ -651,14 +844,19 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     if judged is not None:
         inside = [(t, q) for t, q in judged if 0.0 <= t <= t_result]
 
+    def errors(q: Sequence[float], want: Sequence[float]) -> List[float]:
+        if wrist is None:
+            return [abs(a - b) for a, b in zip(q, want)]
+        return wrist.errors(q, want)
+
     def deviation(lag: float) -> Tuple[float, int, List[float]]:
         worst, joint = 0.0, 0
-        per_joint = [0.0] * len(plan.points[0])
+        per_joint = [0.0] * (len(plan.points[0]) + (1 if wrist is not None else 0))
         for t, q in inside:
             best, best_errs = math.inf, per_joint
             for back in steps:
                 want = plan.sample(t - lag - back)
-                errs = [abs(a - b) for a, b in zip(q, want)]
+                errs = errors(q, want)
                 if max(errs) < best:
                     best, best_errs = max(errs), errs
             per_joint = [max(a, b) for a, b in zip(per_joint, best_errs)]
@@ -682,14 +880,33 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
             if d[0] < worst:
                 lag, (worst, joint, joints) = t, d
     out["dev_deg"], out["dev_joint"] = math.degrees(worst), joint + 1
-    out["dev_joints_deg"] = [math.degrees(v) for v in joints]
+    out["dev_joints_deg"] = [math.degrees(v) for v in joints[:6]]
     out["dev_send_deg"], out["lag_s"] = math.degrees(raw), lag
     path = ValidTrajectory(positions=plan.points, times=plan.times, path_tolerance=(1.0,) * 6,
-                           goal_tolerance=(1.0,) * 6, goal_time_tolerance=0.0, delay=0.0)
+                           goal_tolerance=(1.0,) * 6, goal_time_tolerance=0.0, delay=0.0,
+                           wire=unit_band(plan, wrist) if wrist is not None else None)
     out["path_deg"] = math.degrees(max((path_deviation(path, q)[0] for _t, q in inside), default=0.0))
-    out["final_deg"] = (math.degrees(max(abs(a - b) for a, b in zip(final, plan.points[-1])))
-                        if final is not None else None)
+    out["final_deg"] = (math.degrees(max(errors(final, plan.points[-1]))) if final is not None else None)
+    if wrist is not None:
+        band = [wrist.in_band(q, plan.sample(t - lag)) for t, q in inside]
+        out["band_samples"] = sum(band)
+        out["sum_name"] = "J4+J6" if wrist.sign > 0 else "J4-J6"
+        out["dev_sum_deg"] = math.degrees(joints[6]) if any(band) else None
+        out["final_by_sum"] = final is not None and wrist.in_band(final, plan.points[-1])
+        out["j5_deg"] = [math.degrees(plan.points[0][4]), min((math.degrees(q[4]) for q in plan.points), key=abs),
+                         math.degrees(plan.points[-1][4])]
     return out
+
+
+def unit_band(plan: Planned, wrist: WristRule) -> Any:
+    """The driver's per-configuration tolerances (``ConfigurationTolerances``) with every tolerance
+    1 rad and ``wrist``'s band: the driver's distance to the path (``path_deviation``) in rad, with
+    joint_4 / joint_6 by their sum within the band."""
+    from vr_driver.driver.trajectories import ConfigurationTolerances
+    n = len(plan.points)
+    return ConfigurationTolerances(path=((1.0,) * 6,) * n, path_sum=(1.0,) * n, goal_sum=1.0,
+                                   errors=((0.0,) * 6,) * n, sum_errors=(0.0,) * n, band=wrist.band,
+                                   sign=wrist.sign)
 
 
 #: the driver's own figure in the result's error_string (driver.supervision's note)
@@ -804,6 +1021,10 @@ class Run:
                      if cfg.get("true_model") else None)
         self.zero = tuple(cfg.get("model_zero") or (0.0,) * 6)
         self.client = actionlib.ActionClient("/joint_trajectory_action", FollowJointTrajectoryAction)
+        # the "wrist" set: judged by the driver's band rule, planned with accelerations matched to the arm's ramp
+        wrist = cfg.get("set") == "wrist"
+        self.wrist = WristRule.of(self.chk.kin) if wrist else None
+        self.amax = self.chk.accelerations(cfg.get("ramp_time")) if wrist else None
 
     def q_of(self, msg: Any) -> Optional[Tuple[float, ...]]:
         try:
@@ -925,11 +1146,13 @@ class Run:
         q = self.current()
         note = ""
         try:
-            plan = generate_one(rng_for(cfg["seed"], index - 1), q, self.chk, timing=cfg["set"])
+            plan = generate_one(rng_for(cfg["seed"], index - 1), q, self.chk, timing=cfg["set"], index=index - 1,
+                                amax=self.amax)
         except RuntimeError:                  # the arm stopped somewhere odd: from home
             note = self.reposition(self.chk.home())
             self.wait_idle(time.monotonic() + 30.0, "the arm not idle after going home")
-            plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk, timing=cfg["set"])
+            plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk, timing=cfg["set"],
+                                index=index - 1, amax=self.amax)
         mark = self.joints.mark()
         true_mark = self.true.mark() if self.true is not None else 0
         timeout = 30.0 + 4.0 * plan.duration + 1.5 * len(plan.points)
@@ -940,7 +1163,8 @@ class Run:
             final, judged = self.stamped(self.true, true_mark, self.true_q, t_send, t_done)
         # joint_states are stamped with the time the controller took their record: no age window
         rec = analyse(plan, samples, t_done - t_send, final,
-                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate), age=0.0, judged=judged)
+                      min_still(cfg["cycle_rate"], self.chk.params.joint_states_rate), age=0.0, judged=judged,
+                      wrist=self.wrist)
         if cfg.get("plot"):
             rec["plot"] = plot_goal(cfg["plot"], cfg["name"], index, plan, samples, rec["lag_s"],
                                     t_done - t_send, "%s goal %d: %s" % (cfg["name"], index, cfg["title"]))
@@ -968,6 +1192,11 @@ class Run:
         ready = self.wait_ready(cfg["ready_timeout"])
         print("ready %.1f s after roslaunch (joint_trajectory_action up, motion_possible TRUE)" % ready, flush=True)
         recs = []
+        if self.wrist is not None:
+            print("wrist goals: %s; planner's accelerations %s rad/s^2 (matched to %s)"
+                  % (self.wrist.words(), "/".join("%.3g" % a for a in self.amax),
+                     "the arm's %g s ramp" % cfg["ramp_time"] if cfg.get("ramp_time") else "the model's 0.1 s ramp, "
+                     "joint_limits.yaml"), flush=True)
         print("%3s %4s %7s %-10s %6s %7s %7s %7s %5s %10s %7s %8s %9s  %s" % (
             "#", "pts", "plan s", "state", "ratio", "margin", "still%", "start s", "stops", "dev deg(J)", "delay",
             "path deg", "final deg", "result"), flush=True)
@@ -975,12 +1204,14 @@ class Run:
         for i in range(cfg["n"]):
             rec = self.one(i + 1)
             recs.append(rec)
-            print("%3d %4d %7.2f %-10s %6.2f %+7.2f %7.1f %7s %5d %7.2f(%d) %7.3f %8.2f %9s  %s%s"
+            print("%3d %4d %7.2f %-10s %6.2f %+7.2f %7.1f %7s %5d %7.2f(%s) %7.3f %8.2f %9s  %s%s"
                   % (rec["index"], rec["points"], rec["planned"], rec["state_name"], rec["ratio"], rec["margin_s"],
                      rec["still_pct"], "n/a" if rec["start_s"] is None else "%.2f" % rec["start_s"],
-                     rec["stops"], rec["dev_deg"], rec["dev_joint"], rec["lag_s"], rec["path_deg"],
-                     "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
+                     rec["stops"], rec["dev_deg"], rec.get("sum_name", "") if rec["dev_joint"] == 7 else rec["dev_joint"],
+                     rec["lag_s"], rec["path_deg"], "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
                      rec["error_string"][:110], " [%s]" % rec["note"] if rec["note"] else ""), flush=True)
+            if self.wrist is not None:
+                print("    %s [%s]" % (wrist_words(rec, cfg["protocol"]), " / ".join(rec["legs"])), flush=True)
             refused_in_a_row = 0 if rec["ran"] else refused_in_a_row + 1
             if refused_in_a_row >= 2 and not any(r["ran"] for r in recs):
                 raise Failure("unsupported: the first goals were refused (%s)" % rec["error_string"])
@@ -988,7 +1219,8 @@ class Run:
                 raise Failure("unsupported: no result for trajectory %d within the timeout" % rec["index"])
         return {"name": cfg["name"], "protocol": cfg["protocol"], "baud": cfg["baud"], "cycle_rate": cfg["cycle_rate"],
                 "goals": recs, "tolerances": cfg["tolerances"], "title": cfg["title"], "set": cfg["set"],
-                "true_model": cfg.get("true_model", ""), "model": cfg.get("model", "")}
+                "true_model": cfg.get("true_model", ""), "model": cfg.get("model", ""),
+                "wrist_rule": self.wrist.words() if self.wrist is not None else ""}
 
 
 def worker(cfg: Dict[str, Any]) -> int:
@@ -1052,16 +1284,50 @@ def _mm(values: Sequence[float], fmt: str = "%.3g") -> str:
     return (fmt + " / " + fmt) % (_median(values), max(values)) if values else "n/a"
 
 
-def verdicts(result: Dict[str, Any]) -> List[Tuple[str, bool]]:
+def verdicts(result: Dict[str, Any]) -> List[Tuple[str, Optional[bool]]]:
     """(target, met) of one configuration: every goal SUCCESSFUL, then each of TARGETS on every goal
-    run to the end (a deviation per joint: the largest joint of the goal)."""
+    run to the end (a deviation per joint: the largest joint of the goal); the "wrist" set: each of
+    WRIST_TARGETS, met None (reported, not judged) on v1."""
     goals = result["goals"]
     ran = [g for g in goals if g["completed"]]
-    out = [("all goals SUCCESSFUL", bool(goals) and all(g["ok"] for g in goals))]
-    for label, key, limit in TARGETS:
+    out: List[Tuple[str, Optional[bool]]] = [("all goals SUCCESSFUL", bool(goals) and all(g["ok"] for g in goals))]
+    wrist = result.get("set") == "wrist"
+    for label, key, limit in (WRIST_TARGETS if wrist else TARGETS):
+        if wrist and result.get("protocol") == "v1":
+            out.append((label, None))
+            continue
         vals = [g[key] for g in ran if g.get(key) is not None]
         out.append((label, bool(vals) and len(vals) == len(goals) and max(vals) <= limit))
     return out
+
+
+def goal_verdicts(rec: Dict[str, Any], protocol: str) -> List[Tuple[str, Optional[bool]]]:
+    """The "wrist" set's judging of one goal: SUCCESSFUL, then each of WRIST_TARGETS (False when the
+    goal did not run to the end; None on v1: reported, not judged)."""
+    out: List[Tuple[str, Optional[bool]]] = [("SUCCESSFUL", bool(rec["ok"]))]
+    for label, key, limit in WRIST_TARGETS:
+        value = rec.get(key)
+        out.append((label, None if protocol == "v1" else
+                    bool(rec["completed"]) and value is not None and value <= limit))
+    return out
+
+
+def _met(met: Optional[bool]) -> str:
+    return "reported (not judged)" if met is None else "met" if met else "NOT met"
+
+
+def wrist_words(rec: Dict[str, Any], protocol: str) -> str:
+    """One goal of the "wrist" set in a line: joint_5 from / nearest 0 / to, the samples judged by
+    the sum, the deviation outside the band and the sum's inside it, the final error, the verdicts."""
+    j5 = rec.get("j5_deg") or [math.nan] * 3
+    return ("wrist: joint_5 %+.1f -> %+.1f deg (nearest 0: %+.2f), %d of %d samples in the band; deviation outside "
+            "it %s deg, %s in it %s deg; final %s deg%s; %s" % (
+                j5[0], j5[2], j5[1], rec.get("band_samples", 0), rec["samples"],
+                "%.2f" % max(rec["dev_joints_deg"], default=0.0), rec.get("sum_name", "J4+J6"),
+                "n/a" if rec.get("dev_sum_deg") is None else "%.3f" % rec["dev_sum_deg"],
+                "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
+                " (J4 / J6 by their sum)" if rec.get("final_by_sum") else "",
+                ", ".join("%s %s" % (label.split(" [")[0], _met(met)) for label, met in goal_verdicts(rec, protocol))))
 
 
 def summary(results: List[Dict[str, Any]]) -> None:
@@ -1094,21 +1360,55 @@ def summary(results: List[Dict[str, Any]]) -> None:
             _mm(vals("dev_send_deg"), "%.2f"), _mm(vals("path_deg"), "%.2f"), _mm(vals("final_deg"), "%.3f")))
         per_joint = [[g["dev_joints_deg"][j] for g in ran if g.get("dev_joints_deg")] for j in range(6)]
         rows_j.append("| %s | %s |" % (r["title"], " | ".join(_mm(v, "%.2f") for v in per_joint)))
-    print("| **target** (v3, 19.2 kbit/s paced, I/O island, look-ahead >= 1) | all | | <= 0 | <= 5 | | <= 0.5 "
-          "per joint | | | | | <= 0.05 |")
+    wrist = any(r.get("set") == "wrist" for r in results)
+    if not wrist:
+        print("| **target** (v3, 19.2 kbit/s paced, I/O island, look-ahead >= 1) | all | | <= 0 | <= 5 | | <= 0.5 "
+              "per joint | | | | | <= 0.05 |")
     if rows_j:
-        print("\ndeviation from the plan at the same time per joint [deg], median / max over the goals (target <= 0.5):")
+        print("\ndeviation from the plan at the same time per joint [deg], median / max over the goals (target <= 0.5%s):"
+              % ("; J4 and J6 outside the wrist band" if wrist else ""))
         print("| configuration | J1 | J2 | J3 | J4 | J5 | J6 |")
         print("|" + " --- |" * 7)
         for row in rows_j:
             print(row)
+    if wrist:
+        wrist_summary(results)
     print()
     for r in results:
         if "failed" in r:
             print("%s: FAILED / unsupported: %s" % (r["name"], r["failed"]))
             continue
         print("%s against the targets (every goal): %s" % (
-            r["name"], ", ".join("%s %s" % (label, "met" if met else "NOT met") for label, met in verdicts(r))))
+            r["name"], ", ".join("%s %s" % (label, _met(met)) for label, met in verdicts(r))))
+
+
+def wrist_summary(results: List[Dict[str, Any]]) -> None:
+    """The "wrist" set's table (Markdown): per configuration, median / max over the goals run to the
+    end, the figures the targets judge by the band rule, and the targets' row."""
+    rule = next((r.get("wrist_rule") for r in results if r.get("wrist_rule")), "")
+    print("\nwrist goals (across and onto joint_5 = 0), judged with %s; v1: every goal SUCCESSFUL judged, the rest "
+          "reported:" % (rule or "the driver's wrist band"))
+    head = ("configuration", "goals SUCCESSFUL", "time margin [s]", "deviation, band rule [deg]",
+            "outside the band, largest joint [deg]", "sum in the band [deg]", "samples in the band",
+            "final error, band rule [deg]", "driver's own [deg]")
+    print("| " + " | ".join(head) + " |")
+    print("|" + " --- |" * len(head))
+    for r in results:
+        if "failed" in r:
+            print("| %s | FAILED: %s |" % (r["name"], r["failed"][:160]) + " |" * (len(head) - 2))
+            continue
+        goals = r["goals"]
+        ran = [g for g in goals if g["completed"]]
+
+        def vals(key: str) -> List[float]:
+            return [g[key] for g in ran if g.get(key) is not None]
+        print("| %s | %d / %d | %s | %s | %s | %s | %d of %d | %s | %s |" % (
+            r["title"], sum(1 for g in goals if g["ok"]), len(goals), _mm(vals("margin_s"), "%+.2f"),
+            _mm(vals("dev_deg"), "%.2f"), _mm([max(g["dev_joints_deg"]) for g in ran if g.get("dev_joints_deg")], "%.2f"),
+            _mm(vals("dev_sum_deg"), "%.3f"), sum(g.get("band_samples", 0) for g in ran), sum(g["samples"] for g in ran),
+            _mm(vals("final_deg"), "%.3f"), _mm(vals("driver_dev_deg"), "%.2f")))
+    print("| **target** (v3 19.2 kbit/s paced + island, look-ahead 1, ramp 0.1 and 0.5 s; v2; v1 SUCCESSFUL only) "
+          "| all | <= 0 | <= 0.5 | | | | <= 0.05 | |")
 
 
 def run_worker(cfg: Dict[str, Any]) -> Tuple[int, Optional[Dict[str, Any]]]:
@@ -1128,12 +1428,15 @@ def main(argv: Optional[List[str]] = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--n", type=int, default=3, help="trajectories per configuration (default 3)")
     p.add_argument("--seed", type=int, default=1, help="the trajectories' seed (default 1)")
-    p.add_argument("--configs", default=",".join(DEFAULT_CONFIGS),
-                   help="comma-separated subset of %s (default: %s)" % (", ".join(CONFIGS), ",".join(DEFAULT_CONFIGS)))
+    p.add_argument("--configs", default="",
+                   help="comma-separated subset of %s (default: %s; --set wrist: %s)"
+                        % (", ".join(CONFIGS), ",".join(DEFAULT_CONFIGS), ",".join(WRIST_CONFIGS)))
     p.add_argument("--set", choices=TIMINGS, default="topp",
                    help="trajectories: topp = time-optimal under MoveIt's velocity and acceleration limits, "
                         "resampled every %g s, goals with empty tolerances (default); dense = 10-100 points at "
-                        "cruise fractions, v1 goals with %g deg tolerances" % (RESAMPLE_DT, V1_TOLERANCE))
+                        "cruise fractions, v1 goals with %g deg tolerances; wrist = goals across and onto "
+                        "joint_5 = 0, timed as topp with the accelerations matched to the arm's ramp, judged "
+                        "with joint_4 / joint_6 by their sum near joint_5 = 0" % (RESAMPLE_DT, V1_TOLERANCE))
     p.add_argument("--plot", default="", metavar="DIR",
                    help="draw each goal's planned and executed joints over time into DIR/<config>_<goal>.png")
     p.add_argument("--speed-factor", type=float, default=1.0,
@@ -1171,7 +1474,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         args.true_model = os.path.abspath(args.true_model)
     if args.quick:
         args.n = 1
-    names = [c.strip() for c in args.configs.split(",") if c.strip()]
+    names = [c.strip() for c in (args.configs or ",".join(WRIST_CONFIGS if args.set == "wrist" else DEFAULT_CONFIGS)
+                                 ).split(",") if c.strip()]
     bad = [c for c in names if c not in CONFIGS]
     if bad or not names:
         p.error("unknown configuration(s) %s (known: %s)" % (", ".join(bad), ", ".join(CONFIGS)))
@@ -1179,10 +1483,13 @@ def main(argv: Optional[List[str]] = None) -> int:
         p.error("--n must be >= 1")
     started = time.perf_counter()
     plans = generate(args.seed, args.n, timing=args.set)
-    print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned), "
+    print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned%s), "
           "configurations %s; each with its own roscore + driver.launch sim:=true"
           % (args.n, args.set, args.seed, "/".join(str(len(t.points)) for t in plans),
-             "/".join("%.2f" % t.duration for t in plans), ", ".join(names)), flush=True)
+             "/".join("%.2f" % t.duration for t in plans),
+             "; goals %s at the model's ramp (a ramp_time configuration: the same paths, timed with the planner's "
+             "accelerations matched to it)" % "/".join(WRIST_KINDS[i % len(WRIST_KINDS)] for i in range(args.n))
+             if args.set == "wrist" else "", ", ".join(names)), flush=True)
     status, results = run_all(args, names, title_note="", model="")
     if status == 130:
         return 130
