@@ -4,7 +4,10 @@ Checked with the driver's own code, not the generator's: the driver's validate()
 segment_speeds() accept each one (joint limits, increasing times, within the speed limits); every
 point's TCP and every sample of the joint-space chords between points lie in the workspace box of
 vr_driver.yaml (check_envelope); 10-100 points; each segment's limiting joint at 50-100 % of its
-speed limit; chained (each starts where the previous ended); the same for the same seed.
+speed limit; chained (each starts where the previous ended); the same for the same seed. The
+"wrist" set's goals cross joint_5 = 0 and end near or on it, inside the limits and the box, with the
+accelerations matched to the arm's ramp; its judging follows the driver's wrist band (joint_4 /
+joint_6 by their sum where joint_5 is near 0).
 """
 import importlib.util
 import math
@@ -204,6 +207,261 @@ class TimeOptimalSetTest(unittest.TestCase):
             for j in range(6):
                 self.assertLessEqual(abs(v[i][j]), vmax[j])
                 self.assertLessEqual(abs(2.0 * (v[i + 1][j] - v[i][j]) / h), amax[j])
+
+
+class WristSetTest(unittest.TestCase):
+    """The "wrist" set (``--set wrist``): deterministic, its goals cross joint_5 = 0, end within 2 deg
+    of it or on it, with joint_4 / joint_6 away from 0 and apart and the arm's other joints moving a
+    little; every point and chord inside the limits and the box, within MoveIt's velocity limits and
+    the accelerations matched to the arm's ramp (0.5 s: velocity / 0.5 s), the same paths at both."""
+
+    @classmethod
+    def setUpClass(cls):
+        set_up_stack(cls)
+        cls.vmax, cls.amax = joint_limits_yaml()
+        cls.n = 2 * len(cls.bench.WRIST_KINDS)
+        cls.chk = cls.bench.Checker()
+        cls.trajs = cls.bench.generate(3, cls.n, cls.chk, timing="wrist")
+        cls.slow = cls.bench.generate(3, cls.n, cls.chk, timing="wrist", ramp_time=0.5)
+
+    def test_same_seed_same_goals(self):
+        again = self.bench.generate(3, 3, self.chk, timing="wrist")
+        self.assertEqual([t.to_json() for t in again], [t.to_json() for t in self.trajs[:3]])
+        other = self.bench.generate(4, 1, self.chk, timing="wrist")
+        self.assertNotEqual(other[0].to_json(), self.trajs[0].to_json())
+
+    def test_goals_cross_and_end_near_or_on_the_singularity(self):
+        b = self.bench
+        deg = math.radians
+        crossed = near = on = 0
+        for k, t in enumerate(self.trajs):
+            kind = b.WRIST_KINDS[k % len(b.WRIST_KINDS)]
+            j5 = [q[4] for q in t.points]
+            end = t.points[-1]
+            with self.subTest(goal=k, kind=kind, j5=[round(math.degrees(v), 2) for v in j5]):
+                self.assertEqual(t.legs[-1].split()[0], kind)
+                if kind == "cross":
+                    # from one side to the other: a sign change between two points of the last leg
+                    self.assertTrue(deg(15.0) - 1e-9 <= abs(end[4]) <= deg(35.0) + 1e-9)
+                    self.assertTrue(any(a * b_ < 0.0 for a, b_ in zip(j5, j5[1:])))
+                    if abs(j5[0]) >= deg(15.0):
+                        self.assertLess(j5[0] * end[4], 0.0)
+                    crossed += 1
+                elif kind == "near":
+                    self.assertTrue(0.0 < abs(end[4]) <= deg(2.0))
+                    near += 1
+                else:
+                    self.assertEqual(end[4], 0.0)                 # exactly on it
+                    on += 1
+                # the wrist's other joints away from 0 and apart at the end (and at every waypoint)
+                self.assertGreaterEqual(abs(end[3]), deg(10.0) - 1e-9)
+                self.assertGreaterEqual(abs(end[5]), deg(10.0) - 1e-9)
+                self.assertGreaterEqual(abs(end[3] - end[5]), deg(15.0) - 1e-9)
+                # the arm's other joints move a little: at most 10 deg per leg (and a bend of 10 deg)
+                moved = [max(abs(q[i] - t.points[0][i]) for q in t.points) for i in range(3)]
+                self.assertLessEqual(max(moved), deg(10.0) * len(t.legs) + deg(10.0) + 1e-9)
+                self.assertGreater(max(moved), deg(0.5))
+        self.assertEqual((crossed, near, on), (8, 2, 2))
+        # a goal that starts inside the band leaves it first (near -> a side -> across)
+        after_near = self.trajs[3]
+        self.assertLess(abs(after_near.points[0][4]), math.radians(2.0))
+        self.assertEqual([leg.split()[0] for leg in after_near.legs], ["side", "cross"])
+
+    def test_points_and_chords_inside_the_limits_and_the_box_and_the_driver_accepts_them(self):
+        from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+        from vr_driver.kinematics.preview import check_envelope
+        names = self.params.controller_joint_names
+        lim = self.kin.limits
+        ws = self.params.workspace
+        for k, t in enumerate(self.trajs + self.slow):
+            with self.subTest(goal=k):
+                steps = [b - a for a, b in zip(t.times_ns, t.times_ns[1:])]
+                self.assertTrue(all(s == 100_000_000 for s in steps[:-1]), steps)
+                traj = validate(TrajectoryGoal(names, t.points, t.times), names, t.points[0], lim.lower, lim.upper, 0.0)
+                self.assertTrue(all(s <= 1.0 for s in segment_speeds(traj, lim.velocity, names)))
+                for i, q in enumerate(t.points):
+                    self.assertEqual(self.kin.limit_violations(q), [])
+                    self.assertTrue(ws.contains(self.kin.fk_pose(q)), self.kin.fk_pose(q))
+                    if i:
+                        check_envelope(self.planner.ptp_joints(t.points[i - 1], q), ws)   # raises if not
+        self.assertEqual(self.trajs[0].points[0], tuple(self.kin.ik_pose(self.bench.HOME_POSE)))
+        for a, b in zip(self.trajs, self.trajs[1:]):
+            self.assertEqual(a.points[-1], b.points[0])                  # chained
+
+    def accelerations(self, t):
+        """Per joint the largest |acceleration| the samples show (divided differences; at the ends from
+        rest and to rest), and the largest speed as a share of MoveIt's limit."""
+        times, pts = t.times, t.points
+        h = [b - a for a, b in zip(times, times[1:])]
+        v = [[(q1[j] - q0[j]) / hh for j in range(6)] for q0, q1, hh in zip(pts, pts[1:], h)]
+        acc = [0.0] * 6
+        for i in range(len(v) - 1):
+            for j in range(6):
+                acc[j] = max(acc[j], abs(2.0 * (v[i + 1][j] - v[i][j]) / (h[i] + h[i + 1])))
+        for j in range(6):                      # from rest and to rest
+            acc[j] = max(acc[j], 2.0 * abs(v[0][j]) / h[0], 2.0 * abs(v[-1][j]) / h[-1])
+        return acc, max(abs(x) / vm for vv in v for x, vm in zip(vv, self.vmax))
+
+    def test_accelerations_matched_to_the_ramp_and_the_same_paths(self):
+        b = self.bench
+        self.assertEqual(self.chk.accelerations(), tuple(self.amax))
+        matched = self.chk.accelerations(0.5)
+        for m, v in zip(matched, self.vmax):
+            self.assertAlmostEqual(m, v / 0.5, places=12)
+        with self.assertRaises(ValueError):
+            self.chk.accelerations(0.0)
+        over = 0
+        for k, (fast, slow) in enumerate(zip(self.trajs, self.slow)):
+            with self.subTest(goal=k):
+                # the same path (the same waypoints), only timed for the slower arm
+                self.assertEqual(fast.legs, slow.legs)
+                self.assertEqual(fast.points[0], slow.points[0])
+                self.assertEqual(fast.points[-1], slow.points[-1])
+                self.assertGreater(slow.duration, fast.duration)
+                acc, speed = self.accelerations(slow)
+                self.assertLessEqual(speed, 1.0 + 1e-9)
+                for j in range(6):
+                    self.assertLessEqual(acc[j], matched[j] + 1e-9)
+                acc_fast, _speed = self.accelerations(fast)
+                for j in range(6):
+                    self.assertLessEqual(acc_fast[j], self.amax[j] + 1e-9)
+                over += any(a > m for a, m in zip(acc_fast, matched))
+        # the model-ramp plans ask for more than a 0.5 s arm has: matching matters
+        self.assertGreater(over, 0)
+        self.assertEqual(b.WRIST_CONFIGS, ("v3-paced", "v3-paced-ramp05", "v1-paced", "v2-paced"))
+        for name in b.WRIST_CONFIGS:
+            self.assertIn(name, b.CONFIGS)
+        self.assertEqual(b.CONFIGS["v3-paced-ramp05"][3], {"paced": True, "lookahead": 1, "ramp_time": 0.5})
+
+
+class WristJudgingTest(unittest.TestCase):
+    """The "wrist" set's judging on made-up runs: inside the band (|joint_5| < 5 deg, the sample's or
+    the plan's) joint_4 / joint_6 by their sum, outside it each joint; the targets per goal and per
+    configuration, v1 on SUCCESSFUL only."""
+
+    @classmethod
+    def setUpClass(cls):
+        cls.bench = load_bench()
+        cls.rule = cls.bench.WristRule(band=math.radians(5.0), sign=1.0)
+        d = math.radians
+        # joint_5 from +20 to -20 deg in 1 s, joint_4 +20, joint_6 -30 (the issue's sweep)
+        cls.plan = cls.bench.Planned(((0.1, 0.5, -0.2, d(20.0), d(20.0), d(-30.0)),
+                                      (0.1, 0.5, -0.2, d(20.0), d(-20.0), d(-30.0))),
+                                     (0, 1_000_000_000), (0.1,), ("cross straight",))
+        cls.times = [0.05 * k for k in range(21)]
+
+    def run_of(self, change):
+        """Samples of the plan at 20 Hz, ``change(t, q)`` applied."""
+        return [(t, change(t, list(self.plan.sample(t)))) for t in self.times]
+
+    def test_the_driver_s_band_and_sign(self):
+        from vr_driver.driver.resolution import WRIST_BAND, WireResolution
+        from vr_driver.kinematics.solver import Kinematics
+        from types import SimpleNamespace
+        kin = Kinematics.default()
+        rule = self.bench.WristRule.of(kin)
+        self.assertEqual(rule.band, WRIST_BAND)
+        self.assertEqual(rule.sign, WireResolution(kin, SimpleNamespace(pose_resolution=(0.1, 0.01))).sign)
+        self.assertIn("by their sum where |joint_5| < 5.0 deg", rule.words())
+
+    def test_inside_the_band_a_split_that_keeps_the_sum_is_on_the_plan(self):
+        b = self.bench
+        d = math.radians
+
+        def split(t, q):
+            if abs(q[4]) < d(5.0):                   # the controller's own split: +10 / -10 deg
+                q[3] += d(10.0)
+                q[5] -= d(10.0)
+            return tuple(q)
+        samples = self.run_of(split)
+        judged = b.analyse(self.plan, samples, 1.0, self.plan.points[-1], 0.1, wrist=self.rule)
+        plain = b.analyse(self.plan, samples, 1.0, self.plan.points[-1], 0.1)
+        self.assertLess(judged["dev_deg"], 1e-6)
+        self.assertLess(judged["path_deg"], 1e-6)          # the driver's path check with the same band
+        self.assertAlmostEqual(judged["dev_sum_deg"], 0.0, places=6)
+        self.assertEqual(judged["band_samples"], 5)        # joint_5 at +4, +2, 0, -2, -4 deg
+        self.assertEqual(judged["sum_name"], "J4+J6")
+        self.assertAlmostEqual(plain["dev_deg"], 10.0, places=6)
+        self.assertGreater(plain["path_deg"], 5.0)
+        self.assertNotIn("dev_sum_deg", plain)
+
+    def test_inside_the_band_the_sum_counts(self):
+        b = self.bench
+        d = math.radians
+
+        def turned(t, q):
+            if abs(q[4]) < d(5.0):                    # both the same way: the sum off by 0.6 deg
+                q[3] += d(0.3)
+                q[5] += d(0.3)
+            return tuple(q)
+        r = b.analyse(self.plan, self.run_of(turned), 1.0, self.plan.points[-1], 0.1, wrist=self.rule)
+        self.assertAlmostEqual(r["dev_deg"], 0.6, places=6)
+        self.assertEqual(r["dev_joint"], 7)                # the sum is the worst
+        self.assertAlmostEqual(r["dev_sum_deg"], 0.6, places=6)
+        self.assertEqual(r["dev_joints_deg"][3], 0.0)      # joint_4 and joint_6 outside the band: on the plan
+        self.assertEqual(r["dev_joints_deg"][5], 0.0)
+        verdict = dict(b.goal_verdicts(dict(r, ok=True, completed=True), "v3"))
+        self.assertFalse(verdict["deviation at the same time, band rule [deg]"])
+
+    def test_outside_the_band_each_joint_counts(self):
+        b = self.bench
+        d = math.radians
+
+        def off(t, q):
+            if q[4] > d(10.0):                          # a split off the plan where the wrist is well-conditioned
+                q[3] += d(0.4)
+                q[5] -= d(0.4)
+            return tuple(q)
+        r = b.analyse(self.plan, self.run_of(off), 1.0, self.plan.points[-1], 0.1, wrist=self.rule)
+        self.assertAlmostEqual(r["dev_deg"], 0.4, places=6)
+        self.assertIn(r["dev_joint"], (4, 6))
+        self.assertAlmostEqual(r["dev_joints_deg"][3], 0.4, places=6)
+        self.assertAlmostEqual(r["dev_sum_deg"], 0.0, places=6)
+        verdict = dict(b.goal_verdicts(dict(r, ok=True, completed=True, margin_s=-0.1), "v3"))
+        self.assertEqual(set(verdict.values()), {True})     # 0.4 deg: within 0.5
+
+    def test_the_final_error_by_the_same_rule(self):
+        b = self.bench
+        d = math.radians
+        plan = b.Planned((self.plan.points[0], (0.1, 0.5, -0.2, d(20.0), 0.0, d(-30.0))), (0, 1_000_000_000),
+                         (0.1,), ("on straight",))
+        samples = [(t, plan.sample(t)) for t in self.times]
+        end = list(plan.points[-1])
+        split = tuple(end[:3] + [end[3] + d(5.0), end[4], end[5] - d(5.0)])
+        turned = tuple(end[:3] + [end[3] + d(0.03), end[4], end[5] + d(0.03)])
+        r = b.analyse(plan, samples, 1.0, split, 0.1, wrist=self.rule)
+        self.assertAlmostEqual(r["final_deg"], 0.0, places=9)
+        self.assertTrue(r["final_by_sum"])
+        self.assertAlmostEqual(b.analyse(plan, samples, 1.0, turned, 0.1, wrist=self.rule)["final_deg"], 0.06, places=6)
+        self.assertAlmostEqual(b.analyse(plan, samples, 1.0, split, 0.1)["final_deg"], 5.0, places=6)
+        # an end off the band: each joint
+        far = b.analyse(self.plan, self.run_of(lambda t, q: tuple(q)), 1.0,
+                        tuple(v + (d(0.04) if j == 3 else 0.0) for j, v in enumerate(self.plan.points[-1])),
+                        0.1, wrist=self.rule)
+        self.assertAlmostEqual(far["final_deg"], 0.04, places=6)
+        self.assertFalse(far["final_by_sum"])
+
+    def test_the_targets_per_configuration_v1_on_successful_only(self):
+        b = self.bench
+        good = {"ok": True, "completed": True, "margin_s": -0.2, "dev_deg": 0.3, "final_deg": 0.01}
+        late = dict(good, margin_s=0.4)
+        for protocol in ("v3", "v2"):
+            met = dict(b.verdicts({"set": "wrist", "protocol": protocol, "goals": [good, good]}))
+            self.assertEqual(set(met.values()), {True}, protocol)
+            met = dict(b.verdicts({"set": "wrist", "protocol": protocol, "goals": [good, late]}))
+            self.assertFalse(met["time - 1.10 x plan - 0.3 s"])
+            self.assertTrue(met["all goals SUCCESSFUL"])
+        met = dict(b.verdicts({"set": "wrist", "protocol": "v1", "goals": [good, late]}))
+        self.assertEqual(met, {"all goals SUCCESSFUL": True, "time - 1.10 x plan - 0.3 s": None,
+                               "deviation at the same time, band rule [deg]": None,
+                               "final error, band rule [deg]": None})
+        failed = dict(good, ok=False, completed=False)
+        self.assertFalse(dict(b.verdicts({"set": "wrist", "protocol": "v1", "goals": [good, failed]}))[
+            "all goals SUCCESSFUL"])
+        self.assertEqual([m for _l, m in b.goal_verdicts(failed, "v3")], [False] * 4)
+        # the topp set's verdicts are unchanged: TARGETS, still included
+        self.assertEqual([label for label, _m in b.verdicts({"set": "topp", "protocol": "v1", "goals": [good]})],
+                         ["all goals SUCCESSFUL"] + [label for label, _k, _l in b.TARGETS])
 
 
 class FiguresTest(unittest.TestCase):
