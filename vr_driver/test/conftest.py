@@ -42,6 +42,7 @@ LANE_OF = {
     "test_controller_v2_pty.py": "realtime",
     "test_sim_line_pty.py": "realtime",
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
+    "test_commission.py": "realtime",              # `commission` against the virtual G2 over a real pty
     "test_soak.py": "soak",                        # the longest: a lane of its own
     "test_plan_process.py": "planning",
 }

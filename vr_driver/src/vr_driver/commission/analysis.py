@@ -1,0 +1,311 @@
+"""The numbers of a commissioning, from the records logged every bus cycle. ROS-free, no I/O: plain
+functions over (time, value) samples, tested on synthetic profiles.
+
+- :func:`loop_timing`: the program loop's period (the heartbeat's rate), its spread and the longest
+  time the heartbeat stood still, from the intervals :func:`~vr_driver.commission.bus.heartbeat_brackets`
+  gives (each loop dated between two requests of the master).
+- :func:`date_loops`: a time for every loop of a window -- on the line ``a + P k`` through the
+  brackets (a steady loop: no master scheduling in it), per run between two stalls.
+- :func:`cruise`: the constant-speed part of a move from rest to rest and its speed.
+- :func:`fit_ramp`: the speed ramp from rest (and to rest): its duration, linear or S-shaped,
+  with the cruise line fixing where it is centred (a ramp of duration r ends r / 2 after the cruise
+  line leaves the rest position, for either shape).
+- :func:`min_speed_near`: the lowest speed of a stream near each of its points (a stop or a blend).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import List, Optional, Sequence, Tuple
+
+__all__ = ["LoopTiming", "loop_timing", "date_loops", "Cruise", "top_speed", "cruise", "RampFit", "fit_ramp",
+           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "min_speed_near", "moved_interval"]
+
+Samples = Sequence[Tuple[float, float]]
+
+
+# ----------------------------------------------------------------------------------- the loop
+
+@dataclass(frozen=True)
+class LoopTiming:
+    """The program loop seen through the heartbeat."""
+
+    period: float                 # [s] the mean loop period (slope of loop time over loop count)
+    spread: Optional[float]       # [s] standard deviation of single periods (None: the bus cycle is
+    #                               too long to see single loops)
+    max_gap: float                # [s] the longest time between two new heartbeats as seen
+    loops: int                    # loops counted
+    span: float                   # [s] over this time
+
+
+def _line(xs: Sequence[float], ys: Sequence[float]) -> Tuple[float, float]:
+    """Least squares y = a + b x: (a, b)."""
+    n = len(xs)
+    mx, my = sum(xs) / n, sum(ys) / n
+    sxx = sum((x - mx) ** 2 for x in xs)
+    if sxx <= 0.0:
+        return my, 0.0
+    b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
+    return my - b * mx, b
+
+
+def loop_timing(brackets: Sequence[Tuple[int, float, float]]) -> Optional[LoopTiming]:
+    """The loop's timing from (loop count, earliest, latest) brackets; None with fewer than 3."""
+    if len(brackets) < 3:
+        return None
+    ks = [float(k) for k, _, _ in brackets]
+    mids = [(e + l) / 2.0 for _, e, l in brackets]
+    _, period = _line(ks, mids)
+    singles = [(m2 - m1, ((l1 - e1) ** 2 + (l2 - e2) ** 2) / 12.0)
+               for (k1, e1, l1), (k2, e2, l2), m1, m2 in zip(brackets, brackets[1:], mids, mids[1:])
+               if k2 - k1 == 1]
+    spread: Optional[float] = None
+    if len(singles) >= 10:
+        mean = sum(i for i, _ in singles) / len(singles)
+        var = sum((i - mean) ** 2 for i, _ in singles) / (len(singles) - 1)
+        quant = sum(q for _, q in singles) / len(singles)    # the brackets' own share
+        spread = math.sqrt(max(0.0, var - quant))
+    max_gap = max(l2 - l1 for (_, _, l1), (_, _, l2) in zip(brackets, brackets[1:]))
+    return LoopTiming(period, spread, max_gap, brackets[-1][0] - brackets[0][0],
+                      brackets[-1][2] - brackets[0][2])
+
+
+def date_loops(brackets: Sequence[Tuple[int, float, float]], stall: float) -> dict:
+    """{loop count: time} for every bracket: on the line a + P k fitted per run of brackets without a
+    stall (a gap between two new heartbeats longer than ``stall`` seconds starts a new run), ``a``
+    placed in the middle of what every bracket of the run allows (the tightest dating a steady loop
+    has), each time then clipped into its own bracket (a loop that ran late is seen there); a run
+    too short for a line keeps the brackets' middles."""
+    out = {}
+    runs: List[List[Tuple[int, float, float]]] = []
+    for b in brackets:
+        if runs and b[2] - runs[-1][-1][2] <= stall:
+            runs[-1].append(b)
+        else:
+            runs.append([b])
+    for run in runs:
+        if len(run) < 5:
+            for k, e, l in run:
+                out[k] = (e + l) / 2.0
+            continue
+        a, p = _line([float(k) for k, _, _ in run], [(e + l) / 2.0 for _, e, l in run])
+        lo = max(e - p * k for k, e, _ in run)
+        hi = min(l - p * k for k, _, l in run)
+        if lo <= hi:
+            a = (lo + hi) / 2.0
+        for k, e, l in run:
+            out[k] = min(max(a + p * k, e), l)      # a late loop shows in its bracket
+    return out
+
+
+# ----------------------------------------------------------------------------------- moves
+
+@dataclass(frozen=True)
+class Cruise:
+    """The constant-speed part of a move."""
+
+    speed: float                  # signed [unit/s]
+    start: float                  # [s] its first and last sample
+    end: float
+    samples: int
+    line_at: float                # [s] when the cruise line passes ``line_value``
+    line_value: float
+
+
+def moved_interval(samples: Samples, eps: float) -> Optional[Tuple[int, int]]:
+    """(last index at the start value, first index at the end value) of a move from rest to rest:
+    the samples between them are the motion; None if the value never left its start."""
+    if len(samples) < 3:
+        return None
+    q0, q1 = samples[0][1], samples[-1][1]
+    first = next((i for i, (_, q) in enumerate(samples) if abs(q - q0) > eps), None)
+    if first is None:
+        return None
+    last = next(i for i in range(len(samples) - 1, -1, -1) if abs(samples[i][1] - q1) > eps)
+    return max(0, first - 1), min(len(samples) - 1, last + 1)
+
+
+def top_speed(speeds: Sequence[float]) -> float:
+    """The speed a move cruises at: the median of the speeds within 20 % of the fastest (a single
+    fast outlier, a sample's timing error, does not set it; the ramps and the rest do not count)."""
+    mags = sorted(abs(v) for v in speeds)
+    if not mags or mags[-1] <= 0.0:
+        return 0.0
+    top = [m for m in mags if m >= 0.8 * mags[-1]]
+    return top[len(top) // 2]
+
+
+def cruise(samples: Samples, tolerance: float = 0.03, span: int = 4) -> Optional[Cruise]:
+    """The cruise of a move from rest to rest: the longest run of samples whose speed over ``span``
+    samples (a single sample-to-sample speed carries each sample's timing error) stays within
+    ``tolerance`` of the move's top speed (:func:`top_speed`), the line fitted through
+    its positions. None if it spans fewer than 4 samples (no cruise reached)."""
+    n = len(samples)
+    if n < span + 6:
+        return None
+    speeds = []
+    for (t1, q1), (t2, q2) in zip(samples, samples[span:]):
+        speeds.append((q2 - q1) / (t2 - t1) if t2 > t1 else 0.0)
+    vtop = top_speed(speeds)
+    if vtop <= 0.0:
+        return None
+    ok = [abs(abs(v) - vtop) <= tolerance * vtop for v in speeds]
+    best, run_start = (0, 0), None
+    for i, good in enumerate(ok + [False]):
+        if good and run_start is None:
+            run_start = i
+        elif not good and run_start is not None:
+            if i - run_start > best[1] - best[0]:
+                best = (run_start, i)
+            run_start = None
+    lo, hi = best[0], best[1] - 1 + span      # speed i spans samples i .. i + span
+    if best[1] - best[0] < 2 or hi - lo < 3:
+        return None
+    pts = samples[lo:hi + 1]
+    a, b = _line([t for t, _ in pts], [q for _, q in pts])
+    mid = (pts[0][0] + pts[-1][0]) / 2.0
+    return Cruise(b, pts[0][0], pts[-1][0], len(pts), mid, a + b * mid)
+
+
+def ramp_linear(tau: float, r: float) -> float:
+    """Distance covered ``tau`` after leaving rest with a linear speed ramp of ``r`` to speed 1."""
+    if tau <= 0.0:
+        return 0.0
+    if tau >= r:
+        return tau - r / 2.0
+    return tau * tau / (2.0 * r)
+
+
+def ramp_s_curve(tau: float, r: float) -> float:
+    """The same for an S-shaped ramp (speed 3u^2 - 2u^3 of the ramp's share u): the same distance
+    in the same time as the linear ramp, the peak acceleration 1.5 times its."""
+    if tau <= 0.0:
+        return 0.0
+    if tau >= r:
+        return tau - r / 2.0
+    u = tau / r
+    return r * (u ** 3 - 0.5 * u ** 4)
+
+
+@dataclass(frozen=True)
+class RampFit:
+    """A speed ramp from rest (or to rest) fitted to the samples."""
+
+    duration: float               # [s] from rest to cruise speed
+    shape: str                    # "linear" or "s_curve" (the better fit)
+    rms: float                    # [unit] of the better fit
+    rms_other: float              # [unit] of the other shape
+    samples: int                  # samples in the ramp
+
+    @property
+    def confident(self) -> bool:
+        """The shapes told apart: the other fits at least 1.5 times worse."""
+        return self.rms_other >= 1.5 * self.rms
+
+
+def fit_ramp(samples: Samples, speed: float, rest: float, leave: float, to_rest: bool = False,
+             r_max: float = 5.0) -> Optional[RampFit]:
+    """Fit the ramp of a move from rest (``to_rest``: into rest) of cruise speed ``speed`` (signed)
+    whose cruise line is at ``rest`` at time ``leave`` (the ramp of duration r then begins at
+    ``leave - r / 2``; into rest: ends at ``leave + r / 2``). Both shapes, r by golden-section
+    search over (0, r_max]; the samples within r_max of ``leave`` count. None without samples
+    inside a ramp."""
+    sign = -1.0 if to_rest else 1.0
+    pts = [(t, q) for t, q in samples if abs(t - leave) <= r_max]
+    if len(pts) < 4 or speed == 0.0:
+        return None
+
+    def sse(r: float, shape) -> float:
+        total = 0.0
+        for t, q in pts:
+            tau = sign * (t - leave) + r / 2.0
+            model = rest + sign * speed * shape(tau, r)
+            total += (q - model) ** 2
+        return total
+
+    fits = {}
+    for name, shape in (("linear", ramp_linear), ("s_curve", ramp_s_curve)):
+        # a coarse scan first (the SSE of a few samples has local minima), then golden section
+        grid = [r_max * (i + 1) / 400.0 for i in range(400)]
+        best = min(grid, key=lambda r: sse(r, shape))
+        lo, hi = max(1e-6, best - r_max / 400.0), best + r_max / 400.0
+        g = (math.sqrt(5.0) - 1.0) / 2.0
+        for _ in range(40):
+            a, b = hi - g * (hi - lo), lo + g * (hi - lo)
+            if sse(a, shape) < sse(b, shape):
+                hi = b
+            else:
+                lo = a
+        r = (lo + hi) / 2.0
+        fits[name] = (r, math.sqrt(sse(r, shape) / len(pts)))
+    name = min(fits, key=lambda n: fits[n][1])
+    other = "s_curve" if name == "linear" else "linear"
+    r = fits[name][0]
+    inside = sum(1 for t, _ in pts if 0.0 < sign * (t - leave) + r / 2.0 < r)
+    if inside < 2:
+        return None
+    return RampFit(r, name, fits[name][1], fits[other][1], inside)
+
+
+@dataclass(frozen=True)
+class MoveFit:
+    """A move from rest to rest: its cruise speed and both ramps."""
+
+    speed: float                  # signed [unit/s]
+    ramp_in: RampFit
+    ramp_out: RampFit
+    cruise_samples: int
+
+
+def fit_move(samples: Samples, loop: float = 0.01) -> Optional[MoveFit]:
+    """Cruise speed and both ramps of a move from rest to rest, refined together: the cruise line
+    from the samples between the two ramps, the ramps centred on where that line leaves and reaches
+    rest, three times over (a first line from :func:`cruise` holds samples of the ramps' ends). None
+    when the move has no cruise (it never reached a constant speed) or a ramp cannot be fitted.
+    ``loop``: the sampling period (a floor for the ramps' search range)."""
+    cr = cruise(samples)
+    if cr is None:
+        return None
+    start, end = samples[0][1], samples[-1][1]
+    v, at, value = cr.speed, cr.line_at, cr.line_value
+    lo, hi = cr.start, cr.end
+    fit_in = fit_out = None
+    count = cr.samples
+    for _ in range(3):
+        leave = at + (start - value) / v
+        arrive = at + (end - value) / v
+        fit_in = fit_ramp([p for p in samples if p[0] <= hi], v, start, leave, r_max=3.0 * max(lo - leave, loop))
+        fit_out = fit_ramp([p for p in samples if p[0] >= lo], v, end, arrive, to_rest=True,
+                           r_max=3.0 * max(arrive - hi, loop))
+        if fit_in is None or fit_out is None:
+            return None
+        lo, hi = leave + fit_in.duration / 2.0, arrive - fit_out.duration / 2.0
+        pts = [p for p in samples if lo < p[0] < hi]
+        if len(pts) < 3:
+            return None
+        a, v = _line([t for t, _ in pts], [q for _, q in pts])
+        at = (pts[0][0] + pts[-1][0]) / 2.0
+        value = a + v * at
+        count = len(pts)
+    assert fit_in is not None and fit_out is not None
+    return MoveFit(v, fit_in, fit_out, count)
+
+
+def min_speed_near(samples: Samples, points: Sequence[float], window: float) -> List[Optional[float]]:
+    """For each value in ``points`` (a monotonic path's passing values): the lowest sample-to-sample
+    speed within ``window`` seconds of when the samples pass it (None if they never do)."""
+    speeds = [((t1 + t2) / 2.0, abs(q2 - q1) / (t2 - t1)) for (t1, q1), (t2, q2) in zip(samples, samples[1:])
+              if t2 > t1]
+    out: List[Optional[float]] = []
+    for p in points:
+        at = None
+        for (t1, q1), (t2, q2) in zip(samples, samples[1:]):
+            if (q1 - p) * (q2 - p) <= 0.0 and q1 != q2:
+                at = t1 + (t2 - t1) * (p - q1) / (q2 - q1)
+                break
+        if at is None:
+            out.append(None)
+            continue
+        near = [v for t, v in speeds if abs(t - at) <= window]
+        out.append(min(near) if near else None)
+    return out

@@ -1,0 +1,254 @@
+"""The commissioning tool's own bus: the driver's link supervisor on the serial port, one DP cycle per
+call, every cycle logged. ROS-free.
+
+:class:`CommissionBus` runs :class:`~vr_driver.driver.link.LinkSupervisor` in this process (no bus
+process: the tool does nothing else while the bus runs, and it must see *every* record, where a bus
+process hands over only the newest) at the configured cycle rate. Each :meth:`CommissionBus.cycle`
+sends the record it is given, runs one Data_Exchange and appends a :class:`Cycle` -- the request's
+time, the reply's arrival, the decoded feedback (or why there was none) and the command -- to the
+log that the analysis (:mod:`vr_driver.commission.analysis`) reads and that :meth:`CommissionBus.dump`
+writes out as JSON lines.
+
+Timing: a record's heartbeat ``h`` was written by the program loop *between* the request of the last
+cycle that brought an older heartbeat and the request of the cycle that brought ``h`` (the card
+answers a request with the image the program wrote before it). :func:`heartbeat_brackets` gives
+those intervals; they date the loops without the master's own scheduling in them.
+
+The port is the tool's alone: :func:`port_users` names the other processes that hold a serial
+device open (the driver node, a terminal program), and the port is opened exclusively.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import os
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
+
+from ..driver.link import LinkSample, LinkState, LinkSupervisor
+from ..errors import VrDriverError
+from ..params import DriverParams
+from ..protocol.v3 import FeedbackV3
+
+__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_users", "heartbeat_brackets"]
+
+log = logging.getLogger("vr_driver.commission")
+
+
+class CommissionError(VrDriverError):
+    """A commissioning step cannot go on (the message says why and what to do)."""
+
+
+class LinkDown(CommissionError):
+    """The controller's link was lost (or never came up) while a step needed it."""
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """One bus cycle as the tool saw it."""
+
+    index: int
+    request: float                        # clock time the cycle began (the request went out)
+    time: float                           # clock time the cycle ended
+    state: LinkState
+    feedback: Optional[FeedbackV3]        # the record that arrived in this cycle (None: none / bad)
+    arrival: Optional[float]              # when it arrived (the reply's end)
+    command: bytes                        # the record sent in this cycle
+    reason: str = ""                      # the link's reason when it is not connected
+
+    def to_json(self) -> str:
+        fb = self.feedback
+        row: Dict[str, Any] = {"i": self.index, "t_req": round(self.request, 6), "t": round(self.time, 6),
+                               "link": self.state.value, "out": self.command.hex()}
+        if fb is not None:
+            row.update(arrival=round(self.arrival or 0.0, 6), hb=fb.heartbeat, state=fb.state.name,
+                       armed=fb.armed, status=int(fb.status), accepted=fb.accepted_seq, done=fb.done_seq,
+                       active=fb.active_seq, rejected=fb.rejected_seq, code=int(fb.reject_code), tcp=list(fb.tcp))
+        elif self.reason:
+            row["reason"] = self.reason
+        return json.dumps(row, separators=(",", ":"))
+
+
+def port_users(device: str, proc: str = "/proc") -> List[Tuple[int, str]]:
+    """Other processes that hold ``device`` open: (pid, command line) each, read from /proc (empty
+    where /proc cannot be read). A pseudo terminal (/dev/pts/N) is not checked: its other end (a
+    virtual controller) holds it open on purpose."""
+    try:
+        target = os.path.realpath(device)
+        if target.startswith("/dev/pts/") or not os.path.exists(target):
+            return []
+        pids = [int(p) for p in os.listdir(proc) if p.isdigit()]
+    except OSError:
+        return []
+    me = os.getpid()
+    out = []
+    for pid in pids:
+        if pid == me:
+            continue
+        fd_dir = os.path.join(proc, str(pid), "fd")
+        try:
+            fds = os.listdir(fd_dir)
+        except OSError:
+            continue
+        for fd in fds:
+            try:
+                if os.path.realpath(os.path.join(fd_dir, fd)) == target:
+                    break
+            except OSError:
+                continue
+        else:
+            continue
+        try:
+            with open(os.path.join(proc, str(pid), "cmdline"), "rb") as fh:
+                cmd = fh.read().replace(b"\0", b" ").decode("utf-8", "replace").strip()
+        except OSError:
+            cmd = "?"
+        out.append((pid, cmd))
+    return out
+
+
+def _open_exclusive(device: str, baud: int) -> Any:
+    """The serial link, opened exclusively (nobody else opens the port while the tool runs)."""
+    from pyprofibus_vendor.phy_serial import SerialLink
+    if "://" in device:
+        return SerialLink(device, baud)
+    return SerialLink(device, baud, exclusive=True)
+
+
+class CommissionBus:
+    """The link supervisor of ``params`` (its protocol, byte order, port, cycle rate), stepped by
+    :meth:`cycle`. ``clock`` and ``sleep`` are injectable; ``open_link`` too (tests)."""
+
+    def __init__(self, params: DriverParams, clock: Callable[[], float] = time.monotonic,
+                 sleep: Callable[[float], None] = time.sleep,
+                 open_link: Optional[Callable[[str, int], Any]] = None) -> None:
+        self.params = params
+        self.bus_config = params.bus()
+        self.clock = clock
+        self.sleep = sleep
+        self.period = 1.0 / params.cycle_rate
+        self.supervisor = LinkSupervisor(params, self.bus_config, clock,
+                                         open_link=open_link or _open_exclusive)
+        self.log: List[Cycle] = []
+        self.order = params.byte_order
+        self.record = params.wire.idle_record(params.byte_order)
+        self.feedback: Optional[FeedbackV3] = None      # the newest good record
+        self.last_sample: Optional[LinkSample] = None
+        self._next = clock()
+        self._dumped = 0
+
+    @property
+    def device(self) -> str:
+        return self.bus_config.phy.device
+
+    @property
+    def connected(self) -> bool:
+        return self.supervisor.state is LinkState.CONNECTED
+
+    def send(self, record: bytes) -> None:
+        """The record sent from the next cycle on (held until another is given)."""
+        self.record = record
+        self.supervisor.set_outputs(record)
+
+    def cycle(self) -> Cycle:
+        """Wait for the cycle's time, run one DP cycle with the current record, log it."""
+        now = self.clock()
+        if now < self._next:
+            self.sleep(self._next - now)
+            now = self.clock()
+        self._next = max(self._next + self.period, now)
+        self.supervisor.set_outputs(self.record)
+        sample = self.supervisor.step(now)
+        self.last_sample = sample
+        fb = sample.fresh if isinstance(sample.fresh, FeedbackV3) else None
+        if fb is not None:
+            self.feedback = fb
+        entry = Cycle(len(self.log), now, sample.time, sample.state, fb,
+                      sample.feedback_time if fb is not None else None, self.record,
+                      "" if sample.connected else sample.reason)
+        self.log.append(entry)
+        return entry
+
+    def run(self, until: Callable[[Cycle], bool], timeout: float,
+            record: Optional[Callable[[Cycle], Optional[bytes]]] = None, need_link: bool = True) -> Cycle:
+        """Cycle until ``until(cycle)`` (that cycle is returned) or ``timeout`` seconds passed
+        (CommissionError). ``record(cycle)``, if given, may return the record to send next.
+        ``need_link``: a link that is not connected raises LinkDown (with the link's reason)."""
+        end = self.clock() + timeout
+        while True:
+            c = self.cycle()
+            if need_link and c.state is not LinkState.CONNECTED:
+                raise LinkDown("the link to the controller is down: %s" % (c.reason or c.state.value))
+            if until(c):
+                return c
+            if record is not None:
+                nxt = record(c)
+                if nxt is not None:
+                    self.send(nxt)
+            if self.clock() >= end:
+                raise CommissionError("no answer within %.1f s (last record: %s)"
+                                      % (timeout, self.feedback.describe() if self.feedback else "none"))
+
+    def run_for(self, seconds: float, record: Optional[Callable[[Cycle], Optional[bytes]]] = None,
+                need_link: bool = True) -> List[Cycle]:
+        """Cycle for ``seconds``; the cycles of that time."""
+        first = len(self.log)
+        end = self.clock() + seconds
+        self.run(lambda c: c.time >= end, seconds + 5.0, record, need_link)
+        return self.log[first:]
+
+    def connect(self, timeout: float, bad_records: int = 20) -> LinkSample:
+        """Cycle until the link is up (a good record of this session), ``bad_records`` records in a
+        row could not be decoded (another byte order? the caller reads the reason), or ``timeout``;
+        the last sample either way (the caller reads its state and reason)."""
+        end = self.clock() + timeout
+        counters = self.supervisor.counters
+        while True:
+            c = self.cycle()
+            sample = self.last_sample
+            assert sample is not None
+            if c.state is LinkState.CONNECTED or self.clock() >= end or counters.protocol_errors >= bad_records:
+                return sample
+
+    def dump(self, fh: Any) -> None:
+        """Write the cycles not yet written as JSON lines."""
+        for c in self.log[self._dumped:]:
+            fh.write(c.to_json() + "\n")
+        self._dumped = len(self.log)
+
+    def close(self) -> None:
+        """Send the idle record for a few cycles, then close the port."""
+        try:
+            if self.connected:
+                self.send(self.params.wire.idle_record(self.order))
+                for _ in range(3):
+                    self.cycle()
+        finally:
+            self.supervisor.close()
+
+
+def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]]:
+    """(unwrapped heartbeat, earliest, latest) for every heartbeat seen first in ``cycles``: the
+    program loop that wrote it ran after the request of the last cycle with an older heartbeat
+    (earliest) and before the request of the cycle that brought it (latest). Heartbeats are
+    unwrapped (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
+    out: List[Tuple[int, float, float]] = []
+    last_raw: Optional[int] = None
+    k = 0
+    prev_request: Optional[float] = None
+    for c in cycles:
+        fb = c.feedback
+        if fb is None:
+            continue
+        if last_raw is None:
+            last_raw = fb.heartbeat
+            prev_request = c.request
+            continue
+        step = (fb.heartbeat - last_raw) % 65536
+        if step:
+            k += step
+            out.append((k, prev_request if prev_request is not None else c.request, c.request))
+            last_raw = fb.heartbeat
+        prev_request = c.request
+    return out

@@ -1,0 +1,188 @@
+"""`rosrun vr_driver commission --yes` against the virtual G2 over a REAL pty pair (real telegrams, the
+tool in a process of its own, the controller's threads in this one), in settings that each change one
+assumption about the G2 (doc/controller_program.md §10.9): the tool must find each -- the look-ahead
+and the rules exactly, the speed unit within 2 %, the accelerations within 10 %, the loop period
+within 1 ms -- and print the robot time of the run. The YAML it writes is read back and checked;
+so is the joint_limits.yaml beside it.
+
+The moves are short and fast (the virtual arm runs in real time) and each setting runs only the steps
+its assumption needs besides the quick ones (the full run is the default setting's); settings run
+one after the other (the timing of both ends must not depend on a neighbour's load)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from typing import Any, Dict, List, Tuple
+
+import pytest
+import yaml
+
+from vr_driver.controller.program import VirtualController
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+NODE = os.path.join(os.path.dirname(HERE), "nodes", "commission")
+BAUD = 187500
+CYCLE_RATE = 250.0
+LOOP = 0.01
+
+# quick sizes: degrees, percent, seconds (doc/commissioning.md has the real arm's)
+QUICK = ["--heartbeat-time", "1.0", "--loop-move", "20", "--loop-percent", "30", "--speed-move", "25",
+         "--speed-percent", "50", "--stream-step", "5", "--stream-percent", "50", "--config-percent", "100",
+         "--ramp-move", "25", "--ramp-percent", "100", "--hold-time", "0.2"]
+MOTION = ["speed", "lookahead", "configuration", "ramps"]
+
+
+def skip(*names: str) -> List[str]:
+    return ["--skip", ",".join(names)] if names else []
+
+
+def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeout: float = 120.0
+                   ) -> Tuple[Dict[str, Any], str, VirtualController]:
+    """Start the virtual G2 with ``vc_options``, run the tool against it, return (its YAML, its
+    output, the controller)."""
+    vc = VirtualController(protocol="v3", baud=BAUD, loop_period=vc_options.pop("loop_period", LOOP),
+                           **vc_options)
+    out = tmp_path / "commissioning.yaml"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    vc.start()
+    try:
+        proc = subprocess.run([sys.executable, NODE, "--port", vc.device_path, "--baud", str(BAUD),
+                               "--cycle-rate", str(CYCLE_RATE), "--yes", "--out", str(out)] + QUICK + args,
+                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                              timeout=timeout)
+    finally:
+        vc.stop()
+    assert vc.error is None and vc.server_error is None, (vc.error, vc.server_error)
+    assert proc.returncode == 0, proc.stdout[-3000:]
+    assert "robot time: " in proc.stdout
+    with open(out, encoding="utf-8") as fh:
+        doc = yaml.safe_load(fh)
+    return doc, proc.stdout, vc
+
+
+def finding(doc: Dict[str, Any], assumption: str) -> Dict[str, Any]:
+    rows = [f for f in doc["commissioning"]["findings"] if f["assumption"].startswith(assumption)]
+    assert len(rows) == 1, (assumption, [f["assumption"] for f in doc["commissioning"]["findings"]])
+    return rows[0]
+
+
+def model_accelerations(kin) -> Tuple[float, ...]:
+    return tuple(kin.limits.acceleration)
+
+
+# ------------------------------------------------------------------------------------ the default
+
+def test_default_g2_every_step_as_assumed(tmp_path, kin):
+    doc, text, vc = run_commission(tmp_path, {}, [])
+    assert doc["protocol"] == "v3" and doc["byte_order"] == "little"
+    assert doc["interpreter_lookahead"] == 1
+    assert abs(doc["loop_period"] - LOOP) < 0.001
+    assert doc["loop_blocks_during_move"] is False
+    assert abs(doc["speed_scale"] - 1.0) < 0.02
+    assert doc["configuration"] == "previous_target"
+    assert doc["send_ahead"] == "accepted" and doc["unreachable"] == "skip"
+    assert doc["check_word"] is True and doc["ring_size"] == 4
+    for i, a in enumerate(model_accelerations(kin)):
+        assert abs(doc["accelerations"]["joint_%d" % (i + 1)] - a) <= 0.1 * a, doc["accelerations"]
+    assert doc["ramp_shape"] == "linear"
+    assert "stream_smooth" not in doc                      # the arm blends: the user's setting stays
+    ident = doc["commissioning"]["controller"]
+    assert ident["ident"] == "0x06C6" and ident["chk_cfg"] == "17 17 17 13 27 27 27"
+    assert doc["commissioning"]["date"] and doc["commissioning"]["robot_time"] > 0
+    steps = doc["commissioning"]["steps"]
+    assert all(s["status"] == "done" for s in steps.values()), steps
+    # every row as assumed, except the loop's steadiness, which is this machine's load
+    bad = [f for f in doc["commissioning"]["findings"] if f["ok"] is not True
+           and not f["assumption"].startswith("program loop at rest")]
+    assert not bad, bad
+    with open(tmp_path / "joint_limits.yaml", encoding="utf-8") as fh:
+        limits = yaml.safe_load(fh)["joint_limits"]
+    assert limits == doc["joint_limits"]
+    for i, name in enumerate(kin.limits.names):
+        assert limits[name]["max_velocity"] == pytest.approx(kin.limits.velocity[i], abs=1e-3)
+        assert limits[name]["max_acceleration"] == doc["accelerations"]["joint_%d" % (i + 1)]
+    # every bus cycle logged
+    lines = (tmp_path / "commissioning.cycles.jsonl").read_text().splitlines()
+    assert len(lines) > 1000
+    assert vc.program.bad_records >= 2                     # the corrupted and the torn record, ignored
+
+
+# ------------------------------------------------------------------------------------ the changes
+
+def test_no_lookahead(tmp_path):
+    doc, text, _ = run_commission(tmp_path, {"interpreter_lookahead": 0}, skip("loop", "speed", "configuration", "ramps"))
+    assert doc["interpreter_lookahead"] == 0
+    assert doc["stream_smooth"] == 0                       # the driver times every point as a stop
+    row = finding(doc, "interpreter look-ahead")
+    assert row["ok"] is False and "string of stops" in row["consequence"]
+
+
+def test_lookahead_2_and_a_slower_speed_unit(tmp_path):
+    doc, text, _ = run_commission(tmp_path, {"interpreter_lookahead": 2, "speed_scale": 0.6},
+                                  skip("loop", "configuration", "ramps"))
+    # 1 and 2 look alike on the bus (the program's ring feeds the interpreter): ">= 1", written as 1
+    assert doc["interpreter_lookahead"] == 1
+    assert ">= 1" in finding(doc, "interpreter look-ahead")["measured"]
+    assert "stream_smooth" not in doc
+    assert abs(doc["speed_scale"] - 0.6) <= 0.02 * 0.6
+    assert finding(doc, "MOVEP speed unit")["ok"] is False
+    assert doc["joint_limits"]["joint_1"]["max_velocity"] == pytest.approx(0.6 * 2.09, rel=0.02)
+
+
+@pytest.mark.parametrize("ramp_time, shape, axes", [(0.5, "linear", "1,5"), (0.5, "s_curve", "2,6"),
+                                                     (0.1, "s_curve", "3")])
+def test_ramps(tmp_path, kin, ramp_time, shape, axes):
+    percent = "50" if ramp_time > 0.2 else "100"
+    doc, text, _ = run_commission(
+        tmp_path, {"ramp_time": ramp_time, "ramp_shape": shape},
+        skip("loop", "lookahead", "configuration", "speed", "send_ahead") + ["--axes", axes, "--ramp-percent", percent])
+    want = {i + 1: v / ramp_time for i, v in enumerate(kin.limits.velocity)}
+    got = doc["accelerations"]
+    assert set(got) == {"joint_%s" % a for a in axes.split(",")}
+    for name, a in got.items():
+        axis = int(name.split("_")[1])
+        assert abs(a - want[axis]) <= 0.1 * want[axis], (name, a, want[axis])
+    assert doc["ramp_shape"] == shape
+    assert doc["ramp_time"] == pytest.approx(ramp_time, rel=0.1)
+
+
+def test_per_axis_accelerations(tmp_path, kin):
+    acc = (8.0, 12.0, 15.0, 20.0, 30.0, 45.0)
+    doc, text, _ = run_commission(tmp_path, {"accelerations": acc},
+                                  skip("loop", "lookahead", "configuration", "speed", "send_ahead")
+                                  + ["--ramp-percent", "60", "--ramp-move", "30"])
+    for i, a in enumerate(acc):
+        got = doc["accelerations"]["joint_%d" % (i + 1)]
+        assert abs(got - a) <= 0.1 * a, (i + 1, got, a)
+        assert doc["joint_limits"]["joint_%d" % (i + 1)]["max_acceleration"] == got
+
+
+def test_loop_blocking_during_a_move(tmp_path):
+    doc, text, _ = run_commission(tmp_path, {"loop_blocks_during_move": True}, skip("configuration", "ramps"))
+    assert doc["loop_blocks_during_move"] is True
+    row = finding(doc, "program loop during a MOVE")
+    assert row["ok"] is False and "protocol v1" in row["consequence"]
+    assert doc["interpreter_lookahead"] == 0 and doc["stream_smooth"] == 0
+    assert abs(doc["speed_scale"] - 1.0) <= 0.05           # from the move times: the ramps cancel
+
+
+def test_byte_order_send_ahead_and_loop_period(tmp_path):
+    doc, text, vc = run_commission(tmp_path, {"byte_order": "big", "send_ahead": "refused", "loop_period": 0.004},
+                                   skip(*MOTION))
+    assert doc["byte_order"] == "big"
+    assert "trying big" in text
+    assert finding(doc, "byte order")["ok"] is False
+    assert doc["check_word"] is True
+    assert doc["send_ahead"] == "refused"
+    assert "send_ahead: 1" in finding(doc, "a target sent ahead")["consequence"]
+    assert abs(doc["loop_period"] - 0.004) < 0.001
+    assert doc["loop_blocks_during_move"] is False
+
+
+def test_configuration_current_joints_and_an_alarm(tmp_path):
+    doc, text, _ = run_commission(tmp_path, {"configuration": "current_joints", "unreachable": "alarm_halt"},
+                                  skip("loop", "speed", "lookahead", "ramps"))
+    assert doc["configuration"] == "current_joints"
+    assert doc["unreachable"] == "alarm_halt"
+    assert "reset the alarm at the pendant" in text
