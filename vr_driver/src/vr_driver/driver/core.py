@@ -286,10 +286,6 @@ class DriverCore:
         """Every straight joint move of a stream checked (:meth:`JointStreams.check_segments`)."""
         self._streams().check_segments(start, points)
 
-    def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
-        """Why the controller would not reach ``joints`` after ``prev`` ("": it would)."""
-        return self._streams().configuration_error(prev, joints)
-
     def _streams(self):
         if self.streams is None:
             raise DriverError("protocol %s does not stream" % self.protocol.name)

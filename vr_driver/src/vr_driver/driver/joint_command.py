@@ -305,7 +305,13 @@ class JointCommander:
             raise JointCommandRefused("collision", str(exc)) from None
         if self.protocol.joint_targets:
             return None
-        error = self.streams.configuration_error(prev, q)      # type: ignore[union-attr]  (it streams)
+        try:        # (the coordinate search only: near joint_5 = 0 a few dozen IK solutions)
+            found = self.streams.target(prev, q, search=False)      # type: ignore[union-attr]  (it streams)
+        except VrDriverError as exc:
+            raise JointCommandRefused("configuration", "from %s: the controller cannot solve its pose: %s"
+                                      % (origin, exc)) from None
+        error = self.streams.refusal(found, q)      # type: ignore[union-attr]
         if error:
-            raise JointCommandRefused("configuration", "from %s: %s" % (origin, error))
-        return self.protocol.wire_pose(self.kin.fk_pose(q))
+            raise JointCommandRefused("configuration", "from %s: %s; use a protocol with joint targets"
+                                      % (origin, error))
+        return found.pose

@@ -8,7 +8,9 @@ the cell -- before anything is queued.
 - :class:`JointStreams` (v2: joint targets): the controller runs the joints as sent.
 - :class:`CartesianStreams` (v3: pose targets): the controller solves each target's pose itself,
   as the IK solution nearest the previous target's joints. Each point also gets the pose the wire
-  carries, solved as the controller will: it must land on the planned joints within
+  carries -- the planned pose rounded, or near joint_5 = 0 the one-step neighbour of that rounding
+  the controller solves nearest the plan (:mod:`.wire_targets`) -- solved as the controller will:
+  it must land on the planned joints within
   CONFIGURATION_TOLERANCE, or the controller would run another configuration than the one
   planned and checked (doc/controller_program.md section 7); no joint turns by more than
   CARTESIAN_MAX_STEP between two points.
@@ -30,6 +32,7 @@ from .jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from .status import DriverError
 from .streaming import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
+from .wire_targets import WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
            "stream_preparation"]
@@ -95,11 +98,6 @@ class JointStreams:
         them; joint targets go out as they are."""
         return tuple(points)
 
-    def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
-        """Why the controller would not reach ``joints`` after a target at ``prev`` ("": it would;
-        joint targets are run as sent)."""
-        return ""
-
     def preview_stream(self, preview: Preview) -> Tuple[StreamPoint, ...]:
         """A validated move as a stream: its planned samples (a PTP's joint line with its speed
         ramps, a LIN / CIRC's Cartesian path) thinned to 0.01 deg at their planned times; the last
@@ -136,8 +134,7 @@ class JointStreams:
         faster than the limits)."""
         points = job.points
         self.check_segments(joints, points[:1])
-        self.with_poses(joints, points[:1])
-        first = points[0]
+        first = self.with_poses(joints, points[:1])[0]     # (v3: its wire pose solved from here)
         # (a pause at the start, first.release > 0: the move begins when it ends)
         speed = stream_speeds(joints, [tuple(joints), first.joints], [first.release, first.time],
                               self.kin.limits.velocity)[1]
@@ -150,59 +147,55 @@ class CartesianStreams(JointStreams):
 
     max_step = CARTESIAN_MAX_STEP
 
-    def _solve(self, pose: ControllerPose, prev: Sequence[float], joints: Sequence[float]
-               ) -> Tuple[Tuple[float, ...], int]:
-        """The controller's solution of the wire's ``pose`` of ``joints`` after a target at
-        ``prev``, and the joint farthest from ``joints`` in it; VrDriverError when it has none."""
+    def target(self, prev: Sequence[float], joints: Sequence[float], search: bool = True) -> WireTarget:
+        """The wire pose for ``joints`` after a target at ``prev`` and the controller's solution of
+        it (:func:`.wire_targets.wire_target`: the plain rounding, or where that lands off the plan
+        -- near joint_5 = 0 -- the one-step neighbour that lands nearest; ``search`` False: within
+        FULL_SEARCH_BAND the coordinate search only, for a caller at a command's rate).
+        VrDriverError when the controller cannot solve it."""
         with self.checks.gate:
-            solved = self.kin.ik_pose(pose, seed=tuple(prev))
-        off = [abs(a - b) for a, b in zip(solved, joints)]
-        return solved, max(range(len(off)), key=off.__getitem__)
+            if search:
+                return wire_target(self.kin, self.protocol, joints, prev)
+            return wire_target(self.kin, self.protocol, joints, prev, full_band=0.0)
 
     def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
-               ) -> Tuple[StreamPoint, ...]:
-        """Each point gets its pose (FK of the planned joints, as the wire carries it) and is
-        solved as the controller will solve it -- the IK solution nearest the previous target's
-        joints (the arm's, ``start``, for the first): it must be the planned point within
-        CONFIGURATION_TOLERANCE. Raises DriverError naming the point (nothing is sent)."""
+                   ) -> Tuple[StreamPoint, ...]:
+        """Each point gets the pose the wire carries -- its planned pose rounded, or the one-step
+        neighbour of that rounding whose solution lands nearest the plan (:meth:`target`) -- and
+        is solved as the controller will solve it: the IK solution nearest the previous target's
+        joints (the controller's own solution of the previous target; the arm's, ``start``, for
+        the first). It must be the planned point within CONFIGURATION_TOLERANCE. Raises
+        DriverError naming the point (nothing is sent)."""
         out = []
         prev = tuple(start)
         for i, point in enumerate(points):
             where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
-            pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
             try:
-                solved, worst = self._solve(pose, prev, point.joints)
+                found = self.target(prev, point.joints)
             except VrDriverError as exc:
+                pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
                 raise DriverError("%s: the controller cannot solve its pose %s: %s; nothing was sent"
                                   % (where, fmt_pose(pose), exc)) from None
-            if abs(solved[worst] - point.joints[worst]) > CONFIGURATION_TOLERANCE:
-                raise DriverError(
-                    "%s: the controller would reach its pose %s in another configuration than planned "
-                    "(joint_%d %.1f deg instead of %.1f deg: the solution nearest the previous target's "
-                    "joints); plan a path that stays in one configuration, or use a protocol with joint "
-                    "targets; nothing was sent" % (where, fmt_pose(pose), worst + 1,
-                                                   math.degrees(solved[worst]), math.degrees(point.joints[worst])))
-            out.append(replace(point, pose=pose))
-            prev = point.joints
+            refusal = self.refusal(found, point.joints)
+            if refusal:
+                raise DriverError("%s: %s; plan a path that stays in one configuration, or use a protocol "
+                                  "with joint targets; nothing was sent" % (where, refusal))
+            out.append(replace(point, pose=found.pose))
+            prev = found.joints
             time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
         return tuple(out)
 
-    def configuration_error(self, prev: Sequence[float], joints: Sequence[float]) -> str:
-        """Why the controller would not reach ``joints`` when sent their pose (FK, rounded as the
-        wire carries it) after a target at ``prev`` -- it solves the pose as the IK solution
-        nearest the previous target's joints -- or "" when it reaches them within
-        CONFIGURATION_TOLERANCE."""
-        pose = self.protocol.wire_pose(self.kin.fk_pose(joints))
-        try:
-            solved, worst = self._solve(pose, prev, joints)
-        except VrDriverError as exc:
-            return "the controller cannot solve its pose %s: %s" % (fmt_pose(pose), exc)
-        if abs(solved[worst] - joints[worst]) <= CONFIGURATION_TOLERANCE:
+    @staticmethod
+    def refusal(found: WireTarget, joints: Sequence[float]) -> str:
+        """"" when the controller's solution ``found`` is the planned ``joints`` within
+        CONFIGURATION_TOLERANCE, else why not, in words."""
+        if found.error <= CONFIGURATION_TOLERANCE:
             return ""
-        return ("the controller would reach its pose %s in another configuration (joint_%d %.1f deg "
-                "instead of %.1f deg: the solution nearest the previous target's joints); use a "
-                "protocol with joint targets" % (fmt_pose(pose), worst + 1, math.degrees(solved[worst]),
-                                                 math.degrees(joints[worst])))
+        off = [abs(a - b) for a, b in zip(found.joints, joints)]
+        worst = max(range(len(off)), key=off.__getitem__)
+        return ("the controller would reach its pose %s in another configuration than planned (joint_%d "
+                "%.1f deg instead of %.1f deg: the solution nearest the previous target's joints)"
+                % (fmt_pose(found.pose), worst + 1, math.degrees(found.joints[worst]), math.degrees(joints[worst])))
 
 
 def stream_preparation(params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
