@@ -27,8 +27,8 @@ CYCLE_RATE = 250.0
 LOOP = 0.01
 
 # quick sizes: degrees, percent, seconds (doc/commissioning.md has the real arm's)
-QUICK = ["--heartbeat-time", "1.0", "--loop-move", "20", "--loop-percent", "30", "--speed-move", "25",
-         "--speed-percent", "50", "--stream-step", "5", "--stream-percent", "50", "--config-percent", "100",
+QUICK = ["--watchdog-ms", "1000", "--heartbeat-time", "1.0", "--loop-move", "20", "--loop-percent", "30", "--speed-move", "25",
+         "--speed-percent", "50", "--stream-step", "8", "--stream-percent", "50", "--config-percent", "100",
          "--ramp-move", "25", "--ramp-percent", "100", "--hold-time", "0.2"]
 MOTION = ["speed", "lookahead", "configuration", "ramps"]
 
@@ -37,8 +37,8 @@ def skip(*names: str) -> List[str]:
     return ["--skip", ",".join(names)] if names else []
 
 
-def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeout: float = 120.0
-                   ) -> Tuple[Dict[str, Any], str, VirtualController]:
+def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeout: float = 120.0,
+                   cycle_rate: float = CYCLE_RATE) -> Tuple[Dict[str, Any], str, VirtualController]:
     """Start the virtual G2 with ``vc_options``, run the tool against it, return (its YAML, its
     output, the controller)."""
     vc = VirtualController(protocol="v3", baud=BAUD, loop_period=vc_options.pop("loop_period", LOOP),
@@ -48,7 +48,7 @@ def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeou
     vc.start()
     try:
         proc = subprocess.run([sys.executable, NODE, "--port", vc.device_path, "--baud", str(BAUD),
-                               "--cycle-rate", str(CYCLE_RATE), "--yes", "--out", str(out)] + QUICK + args,
+                               "--cycle-rate", str(cycle_rate), "--yes", "--out", str(out)] + QUICK + args,
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
                               timeout=timeout)
     finally:
@@ -131,12 +131,15 @@ def test_lookahead_2_and_a_slower_speed_unit(tmp_path):
 
 
 @pytest.mark.parametrize("ramp_time, shape, axes", [(0.5, "linear", "1,5"), (0.5, "s_curve", "2,6"),
-                                                     (0.1, "s_curve", "3")])
+                                                     (0.1, "s_curve", "3,4")])
 def test_ramps(tmp_path, kin, ramp_time, shape, axes):
-    percent = "50" if ramp_time > 0.2 else "100"
+    # a ramp of 0.1 s is 10 loops of 10 ms: the S-shape is told from the linear one by a faster loop
+    # (4 ms) and bus (500 Hz); a 0.5 s ramp at half speed (0.25 s) at the default ones
+    fast = ramp_time < 0.2
     doc, text, _ = run_commission(
-        tmp_path, {"ramp_time": ramp_time, "ramp_shape": shape},
-        skip("loop", "lookahead", "configuration", "speed", "send_ahead") + ["--axes", axes, "--ramp-percent", percent])
+        tmp_path, {"ramp_time": ramp_time, "ramp_shape": shape, "loop_period": 0.004 if fast else LOOP},
+        skip("loop", "lookahead", "configuration", "speed", "send_ahead")
+        + ["--axes", axes, "--ramp-percent", "100" if fast else "50"], cycle_rate=500.0 if fast else CYCLE_RATE)
     want = {i + 1: v / ramp_time for i, v in enumerate(kin.limits.velocity)}
     got = doc["accelerations"]
     assert set(got) == {"joint_%s" % a for a in axes.split(",")}

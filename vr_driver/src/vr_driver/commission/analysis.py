@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 __all__ = ["LoopTiming", "loop_timing", "date_loops", "Cruise", "top_speed", "cruise", "RampFit", "fit_ramp",
-           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "min_speed_near", "moved_interval"]
+           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "passing_times", "min_speed_near", "moved_interval"]
 
 Samples = Sequence[Tuple[float, float]]
 
@@ -47,6 +47,19 @@ def _line(xs: Sequence[float], ys: Sequence[float]) -> Tuple[float, float]:
         return my, 0.0
     b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
     return my - b * mx, b
+
+
+def _robust_line(xs: Sequence[float], ys: Sequence[float]) -> Tuple[float, float]:
+    """y = a + b x through points of which a few may be far off (a record dated late on a loaded
+    machine): the slope is the median of the pairwise slopes (Theil-Sen), the intercept the median
+    of y - b x."""
+    n = len(xs)
+    slopes = sorted((ys[j] - ys[i]) / (xs[j] - xs[i]) for i in range(n) for j in range(i + 1, n) if xs[j] != xs[i])
+    if not slopes:
+        return _line(xs, ys)
+    b = slopes[len(slopes) // 2]
+    rest = sorted(y - b * x for x, y in zip(xs, ys))
+    return rest[len(rest) // 2], b
 
 
 def loop_timing(brackets: Sequence[Tuple[int, float, float]]) -> Optional[LoopTiming]:
@@ -162,7 +175,7 @@ def cruise(samples: Samples, tolerance: float = 0.03, span: int = 4) -> Optional
     if best[1] - best[0] < 2 or hi - lo < 3:
         return None
     pts = samples[lo:hi + 1]
-    a, b = _line([t for t, _ in pts], [q for _, q in pts])
+    a, b = _robust_line([t for t, _ in pts], [q for _, q in pts])
     mid = (pts[0][0] + pts[-1][0]) / 2.0
     return Cruise(b, pts[0][0], pts[-1][0], len(pts), mid, a + b * mid)
 
@@ -193,14 +206,27 @@ class RampFit:
 
     duration: float               # [s] from rest to cruise speed
     shape: str                    # "linear" or "s_curve" (the better fit)
-    rms: float                    # [unit] of the better fit
-    rms_other: float              # [unit] of the other shape
+    residual: float               # [unit] mean absolute residual of the better fit
+    residual_other: float         # [unit] of the other shape
     samples: int                  # samples in the ramp
+    duration_other: float = 0.0   # [s] the duration the other shape's fit found
+
+    def duration_as(self, shape: str) -> float:
+        """The ramp's duration if it has ``shape`` (the two fits differ by the shape's curve)."""
+        return self.duration if shape == self.shape else self.duration_other
+
+    @property
+    def s_curve_evidence(self) -> float:
+        """log(linear's residual / S-curve's): > 0 where the S-curve fits better. Summed over many
+        ramps it decides the shape where single ramps are too noisy to."""
+        lin, s = ((self.residual, self.residual_other) if self.shape == "linear"
+                  else (self.residual_other, self.residual))
+        return math.log(max(lin, 1e-12) / max(s, 1e-12))
 
     @property
     def confident(self) -> bool:
         """The shapes told apart: the other fits at least 1.5 times worse."""
-        return self.rms_other >= 1.5 * self.rms
+        return self.residual_other >= 1.5 * self.residual
 
 
 def fit_ramp(samples: Samples, speed: float, rest: float, leave: float, to_rest: bool = False,
@@ -208,8 +234,9 @@ def fit_ramp(samples: Samples, speed: float, rest: float, leave: float, to_rest:
     """Fit the ramp of a move from rest (``to_rest``: into rest) of cruise speed ``speed`` (signed)
     whose cruise line is at ``rest`` at time ``leave`` (the ramp of duration r then begins at
     ``leave - r / 2``; into rest: ends at ``leave + r / 2``). Both shapes, r by golden-section
-    search over (0, r_max]; the samples within r_max of ``leave`` count. None without samples
-    inside a ramp."""
+    search over (0, r_max] for the least sum of absolute residuals (a few records dated late on a
+    loaded machine do not pull it); the samples within r_max of ``leave`` count. None without
+    samples inside a ramp."""
     sign = -1.0 if to_rest else 1.0
     pts = [(t, q) for t, q in samples if abs(t - leave) <= r_max]
     if len(pts) < 4 or speed == 0.0:
@@ -220,7 +247,7 @@ def fit_ramp(samples: Samples, speed: float, rest: float, leave: float, to_rest:
         for t, q in pts:
             tau = sign * (t - leave) + r / 2.0
             model = rest + sign * speed * shape(tau, r)
-            total += (q - model) ** 2
+            total += abs(q - model)
         return total
 
     fits = {}
@@ -237,14 +264,14 @@ def fit_ramp(samples: Samples, speed: float, rest: float, leave: float, to_rest:
             else:
                 lo = a
         r = (lo + hi) / 2.0
-        fits[name] = (r, math.sqrt(sse(r, shape) / len(pts)))
+        fits[name] = (r, sse(r, shape) / len(pts))
     name = min(fits, key=lambda n: fits[n][1])
     other = "s_curve" if name == "linear" else "linear"
     r = fits[name][0]
     inside = sum(1 for t, _ in pts if 0.0 < sign * (t - leave) + r / 2.0 < r)
     if inside < 2:
         return None
-    return RampFit(r, name, fits[name][1], fits[other][1], inside)
+    return RampFit(r, name, fits[name][1], fits[other][1], inside, fits[other][0])
 
 
 @dataclass(frozen=True)
@@ -283,12 +310,26 @@ def fit_move(samples: Samples, loop: float = 0.01) -> Optional[MoveFit]:
         pts = [p for p in samples if lo < p[0] < hi]
         if len(pts) < 3:
             return None
-        a, v = _line([t for t, _ in pts], [q for _, q in pts])
+        a, v = _robust_line([t for t, _ in pts], [q for _, q in pts])
         at = (pts[0][0] + pts[-1][0]) / 2.0
         value = a + v * at
         count = len(pts)
     assert fit_in is not None and fit_out is not None
     return MoveFit(v, fit_in, fit_out, count)
+
+
+def passing_times(samples: Samples, points: Sequence[float]) -> List[Optional[float]]:
+    """For each value in ``points``: when the samples (a monotonic path) first pass it, interpolated
+    (None if they never do)."""
+    out: List[Optional[float]] = []
+    for p in points:
+        at = None
+        for (t1, q1), (t2, q2) in zip(samples, samples[1:]):
+            if (q1 - p) * (q2 - p) <= 0.0 and q1 != q2:
+                at = t1 + (t2 - t1) * (p - q1) / (q2 - q1)
+                break
+        out.append(at)
+    return out
 
 
 def min_speed_near(samples: Samples, points: Sequence[float], window: float) -> List[Optional[float]]:
@@ -297,15 +338,7 @@ def min_speed_near(samples: Samples, points: Sequence[float], window: float) -> 
     speeds = [((t1 + t2) / 2.0, abs(q2 - q1) / (t2 - t1)) for (t1, q1), (t2, q2) in zip(samples, samples[1:])
               if t2 > t1]
     out: List[Optional[float]] = []
-    for p in points:
-        at = None
-        for (t1, q1), (t2, q2) in zip(samples, samples[1:]):
-            if (q1 - p) * (q2 - p) <= 0.0 and q1 != q2:
-                at = t1 + (t2 - t1) * (p - q1) / (q2 - q1)
-                break
-        if at is None:
-            out.append(None)
-            continue
-        near = [v for t, v in speeds if abs(t - at) <= window]
+    for at in passing_times(samples, points):
+        near = [v for t, v in speeds if at is not None and abs(t - at) <= window]
         out.append(min(near) if near else None)
     return out

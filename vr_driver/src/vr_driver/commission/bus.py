@@ -10,9 +10,9 @@ log that the analysis (:mod:`vr_driver.commission.analysis`) reads and that :met
 writes out as JSON lines.
 
 Timing: a record's heartbeat ``h`` was written by the program loop *between* the request of the last
-cycle that brought an older heartbeat and the request of the cycle that brought ``h`` (the card
-answers a request with the image the program wrote before it). :func:`heartbeat_brackets` gives
-those intervals; they date the loops without the master's own scheduling in them.
+cycle that brought an older heartbeat and the arrival of the reply that brought ``h`` (the card
+answers a request with the image the program wrote before it answered). :func:`heartbeat_brackets`
+gives those intervals: they hold whatever the scheduling of either end did.
 
 The port is the tool's alone: :func:`port_users` names the other processes that hold a serial
 device open (the driver node, a terminal program), and the port is opened exclusively.
@@ -231,8 +231,8 @@ class CommissionBus:
 def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]]:
     """(unwrapped heartbeat, earliest, latest) for every heartbeat seen first in ``cycles``: the
     program loop that wrote it ran after the request of the last cycle with an older heartbeat
-    (earliest) and before the request of the cycle that brought it (latest). Heartbeats are
-    unwrapped (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
+    (earliest) and before the reply that brought it arrived (latest). Heartbeats are unwrapped
+    (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
     out: List[Tuple[int, float, float]] = []
     last_raw: Optional[int] = None
     k = 0
@@ -248,7 +248,8 @@ def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]
         step = (fb.heartbeat - last_raw) % 65536
         if step:
             k += step
-            out.append((k, prev_request if prev_request is not None else c.request, c.request))
+            latest = c.arrival if c.arrival is not None else c.time
+            out.append((k, prev_request if prev_request is not None else c.request, latest))
             last_raw = fb.heartbeat
         prev_request = c.request
     return out

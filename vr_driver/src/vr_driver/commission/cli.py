@@ -50,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--cycle-rate", type=float, default=20.0, help="bus cycles per second (default 20)")
     p.add_argument("--bus-config", default="", help="pyprofibus bus config YAML (default: the built-in one)")
     p.add_argument("--slave-address", type=int, default=4, help="the controller's DP address (default 4)")
+    p.add_argument("--watchdog-ms", type=int, default=None,
+                   help="the card's DP watchdog [ms] (default: the bus config's, 300)")
     p.add_argument("--byte-order", choices=("little", "big"), default="little",
                    help="the byte order tried first (the other is tried if the records fail)")
     p.add_argument("--model", default="", help="kinematics YAML of the arm (default: the package's model)")
@@ -107,10 +109,12 @@ def _sizes(args: argparse.Namespace) -> Sizes:
 
 def _params(args: argparse.Namespace, byte_order: str) -> DriverParams:
     cycle = float(args.cycle_rate)
+    watchdog = args.watchdog_ms
     return DriverParams.from_dict({
         "protocol": "v3", "port": args.port, "baud": args.baud, "cycle_rate": cycle,
         "bus_config": args.bus_config, "slave_address": args.slave_address, "byte_order": byte_order,
-        "model": args.model, "bus_process": False, "link_timeout": max(0.5, 4.0 / cycle),
+        "watchdog_ms": watchdog, "model": args.model, "bus_process": False,
+        "link_timeout": max(0.5, 4.0 / cycle, (watchdog or 0) / 1000.0),
         "stop_settle_time": max(0.25, 2.0 / cycle), "joint_command_timeout": max(0.2, 2.0 / cycle),
         "bus_node_timeout": max(3.0, 2.0 / cycle), "reconnect_period": 0.5})
 

@@ -24,6 +24,8 @@ from .steps import Finding, StepResult
 __all__ = ["DRIVER_KEYS", "NEW_KEYS", "table", "driver_values", "joint_limits", "write_yaml",
            "write_joint_limits"]
 
+#: a speed scale this close to 1 is the assumed unit (the measurement's own precision)
+SPEED_TOLERANCE = 0.02
 #: DriverParams names the commissioning sets
 DRIVER_KEYS = ("protocol", "byte_order", "stream_smooth")
 #: keys of measured G2 behaviours the driver does not read yet (the virtual G2's parameter names)
@@ -75,7 +77,9 @@ def joint_limits(names: Sequence[str], velocity: Sequence[float], acceleration: 
     (speed 1000 then never reaches the joint limit), the measured accelerations where measured,
     the model's elsewhere."""
     scale = measured.get("speed_scale")
-    factor = min(1.0, scale) if isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0 else 1.0
+    factor = 1.0
+    if isinstance(scale, (int, float)) and math.isfinite(scale) and 0.0 < scale < 1.0 - SPEED_TOLERANCE:
+        factor = scale               # within the measurement's 2 %: the unit as assumed
     acc = measured.get("accelerations") or {}
     out = {}
     for i, name in enumerate(names):

@@ -621,7 +621,9 @@ class LookAheadStep(Step):
         sign = ctx.direction(q0, 1, s.stream_points * s.stream_step)
         results = {}
         ring = 0
-        for smooth in (s.stream_smooth, 0):
+        for smooth in (s.stream_smooth, s.stream_smooth, 0):
+            if smooth in results and _verdict(results[smooth])[0] is not None:
+                continue                           # a second smooth stream only if the first was unclear
             pts = []
             for i in range(1, s.stream_points + 1):
                 q = list(ctx.offset(q0, 1, sign * s.stream_step * i))
@@ -638,22 +640,21 @@ class LookAheadStep(Step):
             for c in cycles:
                 if c.feedback is not None:
                     ring = max(ring, (c.feedback.accepted_seq - c.feedback.done_seq) % 65535)
-            results[smooth] = self._stops(ctx, cycles, q0, pts, sign)
+            results[smooth] = self._stops(ctx, cycles, q0, pts, seqs)
             ctx.move_to(q0, s.stream_percent)
         ctx.measured["ring_size"] = ring
-        blended = results[s.stream_smooth]
-        exact = results[0]
+        blended, blended_words = _verdict(results[s.stream_smooth])
+        exact, exact_words = _verdict(results[0])
         findings = []
         if ctx.loop_blocks:
             lookahead = 0
             measured = "each point a stop (the loop blocks during a MOVE: each MOVE ends before the next is read)"
         elif blended is None:
             lookahead = None
-            measured = "not measured (too few records during the stream: a faster bus or a longer --stream-step)"
+            measured = "unclear at smooth %d: %s" % (s.stream_smooth, blended_words)
         else:
-            n_stop, n = sum(1 for x in blended if x), len(blended)
-            lookahead = 0 if n_stop == n else (1 if n_stop == 0 else None)
-            measured = ("stops at %d of %d inner points at smooth %d" % (n_stop, n, s.stream_smooth))
+            lookahead = 0 if blended else 1
+            measured = "%s at smooth %d" % (blended_words, s.stream_smooth)
         if lookahead is not None:
             ctx.measured["interpreter_lookahead"] = lookahead
         consequence = {0: "no blending: v3 runs a path as a string of stops (the smooth level is lost: no "
@@ -665,20 +666,20 @@ class LookAheadStep(Step):
                                             ("0" if lookahead == 0 else ">= 1")),
                                 consequence.get(lookahead, "unclear: run the step again, watch the arm"),
                                 None if lookahead is None else lookahead >= 1))
-        if exact is not None and not ctx.loop_blocks:
-            n_stop = sum(1 for x in exact if x)
-            findings.append(Finding("smooth 0 (an exact stop)", "stops at every point",
-                                    "stops at %d of %d" % (n_stop, len(exact)),
-                                    "none" if n_stop == len(exact) else "the program does not pass the smooth level to "
-                                    "MOVEP: check §10.7", n_stop == len(exact)))
+        if not ctx.loop_blocks:
+            findings.append(Finding("smooth 0 (an exact stop)", "stops at every point", exact_words,
+                                    "none" if exact else "unclear: run the step again, watch the arm" if exact is None
+                                    else "the program does not pass the smooth level to MOVEP: check §10.7", exact))
         findings.append(Finding("the program's ring (§10.4 rule 2)", "4 positions", "%d targets taken ahead of the "
                                 "arm at most" % ring, "none" if ring >= 2 else "fewer than two: the stream starves "
                                 "between points", ring >= 2))
         return findings
 
     def _stops(self, ctx: Context, cycles: Sequence[Cycle], q0: Sequence[float], pts: Sequence[Sequence[float]],
-               sign: float) -> Optional[List[bool]]:
-        """For each inner point: did joint_1 (nearly) stop there? None when the records are too sparse."""
+               seqs: Sequence[int]) -> Optional[List[Optional[bool]]]:
+        """For each inner point: did joint_1 (nearly) stop there (True), blend through it (False), or
+        was the next target not yet taken half a segment before it (None: the master was late, the
+        arm had nothing to blend into)? None when the records are too sparse."""
         if ctx.loop_blocks:
             return None
         track = ctx.track(cycles, q0)
@@ -691,7 +692,30 @@ class LookAheadStep(Step):
         window = max(0.35 * seg, 1.5 * ctx.loop_period)
         inner = [p[0] for p in pts[:-1]]
         lows = analysis.min_speed_near(samples, inner, window)
-        return [low is not None and low < 0.35 * cruise for low in lows]
+        passing = analysis.passing_times(samples, inner)
+        out: List[Optional[bool]] = []
+        for k, (low, at) in enumerate(zip(lows, passing)):
+            taken = next((c.arrival or c.time for c in cycles if c.feedback is not None
+                          and (c.feedback.accepted_seq == seqs[k + 1] or seq_after(c.feedback.accepted_seq, seqs[k + 1]))),
+                         None)
+            if low is None or at is None or taken is None or taken > at - 0.5 * seg:
+                out.append(None)
+            else:
+                out.append(low < 0.35 * cruise)
+        return out
+
+
+def _verdict(stops: Optional[List[Optional[bool]]]) -> Tuple[Optional[bool], str]:
+    """(True: a stop at every point, False: at none, None: unclear), in words."""
+    if stops is None:
+        return None, "too few records during the stream"
+    known = [x for x in stops if x is not None]
+    late = len(stops) - len(known)
+    words = "stops at %d of %d inner points%s" % (sum(known), len(known),
+                                                  " (%d left out: the next target came late)" % late if late else "")
+    if len(known) < 2 or 0 < sum(known) < len(known):
+        return None, words
+    return bool(known[0]), words
 
 
 class ConfigurationStep(Step):
@@ -771,56 +795,60 @@ class RampStep(Step):
             return [Finding("per-axis acceleration", "model: full speed in 0.1 s", "not measured: the loop blocks "
                             "during a MOVE (no record while the arm moves)", "keep the model's accelerations", None)]
         q0 = ctx.current_joints(ctx.start_joints)
-        accelerations: Dict[int, float] = {}
-        shapes: List[str] = []
-        findings = []
         model = tuple(ctx.kin.limits.acceleration)
+        measured: Dict[int, Tuple[float, List[analysis.RampFit]]] = {}     # axis: cruise speed, its ramps
+        findings = []
         for axis in s.ramp_axes:
             move = s.ramp_move * (2.0 if axis >= 5 else 1.0)
             sign = ctx.direction(q0, axis, move)
-            fits: List[analysis.RampFit] = []
-            speeds: List[float] = []
+            fits: List[Tuple[float, analysis.RampFit]] = []        # (cruise speed, ramp)
             q = q0
-            for leg in (sign * move, -sign * move):
-                target = ctx.offset(q, axis, leg)
-                cycles = ctx.move_to(target, s.ramp_percent)
-                track = ctx.track(cycles, q)
-                samples = [(t, qq[axis - 1]) for t, qq in track]
-                fit = analysis.fit_move(samples, ctx.loop_period)
-                log.debug("joint_%d %+.0f deg: %s", axis, leg, fit)
-                if fit is not None:
-                    speeds.append(abs(fit.speed))
-                    fits.extend((fit.ramp_in, fit.ramp_out))
-                q = ctx.current_joints(target)
-            name = "joint_%d" % axis
-            if not fits or not speeds:
-                findings.append(Finding("%s acceleration" % name, "%.1f rad/s^2 (model)" % model[axis - 1],
+            for attempt in range(2):
+                for leg in (sign * move, -sign * move):
+                    target = ctx.offset(q, axis, leg)
+                    cycles = ctx.move_to(target, s.ramp_percent)
+                    track = ctx.track(cycles, q)
+                    fit = analysis.fit_move([(t, qq[axis - 1]) for t, qq in track], ctx.loop_period)
+                    log.debug("joint_%d %+.0f deg: %s", axis, leg, fit)
+                    if fit is not None:
+                        fits.extend((abs(fit.speed), f) for f in (fit.ramp_in, fit.ramp_out))
+                    q = ctx.current_joints(target)
+                # the four ramps agree (within 10 %): done; else once more (a record dated late on a
+                # busy line or machine bends a ramp), and the median of all
+                each = [v / f.duration for v, f in fits]
+                if len(each) >= 4 and max(each) - min(each) <= 0.1 * sorted(each)[len(each) // 2]:
+                    break
+            if not fits:
+                findings.append(Finding("joint_%d acceleration" % axis, "%.1f rad/s^2 (model)" % model[axis - 1],
                                         "not measured: no cruise reached", "give a longer --ramp-move", None))
                 continue
-            r = sorted(f.duration for f in fits)[len(fits) // 2]
-            v = sum(speeds) / len(speeds)
-            a = v / r
-            accelerations[axis] = a
-            votes = [f.shape for f in fits]
-            shape = max(sorted(set(votes)), key=votes.count)
-            shapes.extend(votes)
+            v = sorted(v for v, _ in fits)[len(fits) // 2]
+            measured[axis] = (v, [f for _, f in fits])
+        if not measured:
+            return findings
+        # the shape from every ramp of the run together (one ramp's evidence is weak at a few records
+        # per ramp), then each axis's acceleration from its ramps' durations in that shape
+        evidence = sum(f.s_curve_evidence for _, ramps in measured.values() for f in ramps)
+        shape = "s_curve" if evidence > 0 else "linear"
+        n = sum(len(ramps) for _, ramps in measured.values())
+        accelerations = {}
+        for axis, (v, ramps) in sorted(measured.items()):
+            r = sorted(f.duration_as(shape) for f in ramps)[len(ramps) // 2]
+            a = accelerations[axis] = v / r
             ok = abs(a - model[axis - 1]) <= 0.1 * model[axis - 1]
             findings.append(Finding(
-                "%s acceleration" % name, "%.1f rad/s^2 (model: full speed in %.2f s)" % (
+                "joint_%d acceleration" % axis, "%.1f rad/s^2 (model: full speed in %.2f s)" % (
                     model[axis - 1], ctx.vmax[axis - 1] / model[axis - 1]),
-                "%.1f rad/s^2 (%.2f rad/s reached in %.3f s; %s ramp)" % (a, v, r, shape.replace("_", "-")),
+                "%.1f rad/s^2 (%.2f rad/s reached in %.3f s, the median of %d ramps)" % (a, v, r, len(ramps)),
                 "none" if ok else "the planner's max_acceleration (joint_limits.yaml) and the driver's stream timing "
                 "take the measured value", ok))
-        if accelerations:
-            ctx.measured["accelerations"] = {axis: round(a, 3) for axis, a in accelerations.items()}
-            ctx.measured["ramp_time"] = round(max(ctx.vmax[ax - 1] / a for ax, a in accelerations.items()), 4)
-        if shapes:
-            shape = max(set(shapes), key=shapes.count)
-            ctx.measured["ramp_shape"] = shape
-            findings.append(Finding("ramp shape", "linear (constant acceleration)", "%s (%d of %d fits)" % (
-                shape.replace("_", "-"), shapes.count(shape), len(shapes)),
-                "none" if shape == "linear" else "S-shaped: the peak acceleration is 1.5 times the mean the planner "
-                "is given (the ramp's time and distance are the linear one's)", shape == "linear"))
+        ctx.measured["accelerations"] = {axis: round(a, 3) for axis, a in accelerations.items()}
+        ctx.measured["ramp_time"] = round(max(ctx.vmax[ax - 1] / a for ax, a in accelerations.items()), 4)
+        ctx.measured["ramp_shape"] = shape
+        findings.append(Finding("ramp shape", "linear (constant acceleration)", "%s (%d ramps, evidence %+.1f)" % (
+            shape.replace("_", "-"), n, evidence),
+            "none" if shape == "linear" else "S-shaped: the peak acceleration is 1.5 times the mean the planner "
+            "is given (the ramp's time and distance are the linear one's)", shape == "linear"))
         return findings
 
 
