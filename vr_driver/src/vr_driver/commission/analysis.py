@@ -31,8 +31,8 @@ class LoopTiming:
     """The program loop seen through the heartbeat."""
 
     period: float                 # [s] the mean loop period (slope of loop time over loop count)
-    spread: Optional[float]       # [s] standard deviation of single periods (None: the bus cycle is
-    #                               too long to see single loops)
+    spread: Optional[float]       # [s] standard deviation of single periods, the part that adds up
+    #                               from loop to loop (None: the bus cycle is too long to see loops)
     max_gap: float                # [s] the longest time between two new heartbeats as seen
     loops: int                    # loops counted
     span: float                   # [s] over this time
@@ -69,15 +69,21 @@ def loop_timing(brackets: Sequence[Tuple[int, float, float]]) -> Optional[LoopTi
     ks = [float(k) for k, _, _ in brackets]
     mids = [(e + l) / 2.0 for _, e, l in brackets]
     _, period = _line(ks, mids)
-    singles = [(m2 - m1, ((l1 - e1) ** 2 + (l2 - e2) ** 2) / 12.0)
-               for (k1, e1, l1), (k2, e2, l2), m1, m2 in zip(brackets, brackets[1:], mids, mids[1:])
-               if k2 - k1 == 1]
+    # the spread of single periods that adds up (a loop that runs late stays late: what moves the
+    # driver's heartbeat dating, record_clock): the variance of m-loop spans grows as m x that
+    # variance; the brackets' own error (up to a bus cycle) does not grow with m, so the slope of
+    # the variance over m is free of it
+    at = {k: m for (k, _, _), m in zip(brackets, mids)}
+    points = []
+    for m in range(1, 9):
+        spans = [at[k + m] - at[k] for k in at if k + m in at]
+        if len(spans) >= 20:
+            mean = sum(spans) / len(spans)
+            points.append((float(m), sum((x - mean) ** 2 for x in spans) / (len(spans) - 1)))
     spread: Optional[float] = None
-    if len(singles) >= 10:
-        mean = sum(i for i, _ in singles) / len(singles)
-        var = sum((i - mean) ** 2 for i, _ in singles) / (len(singles) - 1)
-        quant = sum(q for _, q in singles) / len(singles)    # the brackets' own share
-        spread = math.sqrt(max(0.0, var - quant))
+    if len(points) >= 4:
+        _, slope = _line([m for m, _ in points], [v for _, v in points])
+        spread = math.sqrt(max(0.0, slope))
     max_gap = max(l2 - l1 for (_, _, l1), (_, _, l2) in zip(brackets, brackets[1:]))
     return LoopTiming(period, spread, max_gap, brackets[-1][0] - brackets[0][0],
                       brackets[-1][2] - brackets[0][2])

@@ -1,0 +1,142 @@
+"""The commissioning's numbers and files without a bus (vr_driver.commission.analysis, .report, .cli):
+synthetic records of known loops and moves, the verdicts they must give. Pure computation; the tool
+against the virtual G2 over a pty is test_commission.py."""
+from __future__ import annotations
+
+import io
+import math
+import random
+
+import pytest
+
+from vr_driver.commission import analysis
+from vr_driver.commission.bus import port_users
+from vr_driver.commission.cli import main
+from vr_driver.commission.report import driver_values, joint_limits
+from vr_driver.commission.steps import _verdict
+
+
+def brackets_of(times, cycle):
+    """The brackets a master cycling every ``cycle`` s sees for loops at ``times``."""
+    out = []
+    for k, t in enumerate(times[1:], start=1):
+        latest = math.ceil(t / cycle) * cycle
+        out.append((k, latest - cycle, latest))
+    return out
+
+
+@pytest.mark.parametrize("jitter", [0.0, 0.002])
+def test_loop_period_and_spread(jitter):
+    rng = random.Random(3)
+    t, times = 0.0013, []
+    for _ in range(400):
+        times.append(t)
+        t += 0.01 + rng.uniform(-jitter, jitter)
+    lt = analysis.loop_timing(brackets_of(times, 0.00413))      # a bus cycle not a fraction of the loop's
+    assert abs(lt.period - 0.01) < 2e-4
+    want = jitter / math.sqrt(3.0)                   # a uniform spread's standard deviation
+    assert abs(lt.spread - want) < 0.5e-3, (lt.spread, want)
+    assert lt.max_gap < 0.02
+
+
+def test_a_stalled_heartbeat_shows_as_a_gap_and_splits_the_dating():
+    times = [0.01 * k for k in range(50)] + [0.8 + 0.01 * k for k in range(50)]   # 0.3 s without a loop
+    br = brackets_of(times, 0.004)
+    assert analysis.loop_timing(br).max_gap > 0.29
+    dates = analysis.date_loops(br, stall=0.05)
+    assert all(e <= dates[k] <= l for k, e, l in br)
+    assert abs(dates[60] - times[60]) < 0.004
+
+
+def profile(shape, r, v=2.0, dist=1.0, dt=0.01, t0=0.105, quantum=1.7e-4):
+    """Samples of a move from rest to rest (ramps of ``r`` with ``shape``) every ``dt``, rounded as the
+    wire's resolution rounds a joint (~0.01 deg)."""
+    ramp = analysis.ramp_s_curve if shape == "s_curve" else analysis.ramp_linear
+    t_move = dist / v + r                            # from rest to rest: T0 + r
+    out = []
+    for i in range(int((t0 + t_move + 0.2) / dt)):
+        t = i * dt
+        tau = t - t0
+        q = v * ramp(tau, r) - v * ramp(tau - dist / v, r)
+        out.append((t, round(q / quantum) * quantum))
+    return out
+
+
+@pytest.mark.parametrize("shape, r", [("linear", 0.1), ("s_curve", 0.1), ("linear", 0.25), ("s_curve", 0.25)])
+def test_move_fit_finds_speed_ramp_and_shape(shape, r):
+    fit = analysis.fit_move(profile(shape, r))
+    assert fit is not None
+    assert abs(fit.speed - 2.0) < 0.01
+    for ramp in (fit.ramp_in, fit.ramp_out):
+        assert abs(ramp.duration_as(shape) - r) < 0.05 * r
+        assert ramp.shape == shape
+        assert (ramp.s_curve_evidence > 0) == (shape == "s_curve")
+
+
+def test_a_move_without_cruise_is_not_fitted():
+    a, half = 20.0, 0.15                             # up at 20 rad/s^2 for 0.15 s, then down at once
+    tri = []
+    for i in range(60):
+        t = 0.01 * i - 0.1
+        u = min(max(t, 0.0), 2 * half)
+        q = a * u * u / 2 if u <= half else a * half * half - a * (2 * half - u) ** 2 / 2 + a * half * half
+        tri.append((t, q))
+    assert analysis.fit_move(tri) is None
+
+
+def test_min_speed_near_points():
+    stop = [(0.01 * i, min(i, 20) * 0.01 + max(0, i - 25) * 0.01) for i in range(50)]   # rests at 0.2 for 5 samples
+    assert analysis.min_speed_near(stop, [0.2], 0.03)[0] == 0.0
+    assert analysis.passing_times(stop, [0.1])[0] == pytest.approx(0.1)
+    assert analysis.passing_times(stop, [5.0]) == [None]
+
+
+def test_lookahead_verdicts():
+    assert _verdict([True, True, None, True]) == (True, "stops at 3 of 3 inner points (1 left out: the next "
+                                                        "target came late)")
+    assert _verdict([False, False, False])[0] is False
+    assert _verdict([True, False, False])[0] is None
+    assert _verdict([None, None, True])[0] is None          # one point does not decide
+    assert _verdict(None)[0] is None
+
+
+def test_driver_values_and_joint_limits():
+    assert driver_values({"interpreter_lookahead": 0, "byte_order": "big"})["stream_smooth"] == 0
+    assert "stream_smooth" not in driver_values({"interpreter_lookahead": 1})
+    values = driver_values({"accelerations": {2: 10.0}, "speed_scale": 0.6})
+    assert values["accelerations"] == {"joint_2": 10.0} and values["protocol"] == "v3"
+    names, vel, acc = ("j1", "j2"), (2.0, 4.0), (20.0, 40.0)
+    lim = joint_limits(names, vel, acc, {"speed_scale": 0.6, "accelerations": {2: 10.0}})
+    assert lim["j1"] == {"has_velocity_limits": True, "max_velocity": 1.2, "has_acceleration_limits": True,
+                         "max_acceleration": 20.0}
+    assert lim["j2"]["max_acceleration"] == 10.0
+    # within the measurement's 2 % the unit is as assumed; above 1 speed 1000 still stops at the limit
+    assert joint_limits(names, vel, acc, {"speed_scale": 0.99})["j1"]["max_velocity"] == 2.0
+    assert joint_limits(names, vel, acc, {"speed_scale": 1.3})["j1"]["max_velocity"] == 2.0
+
+
+def test_port_users_reads_proc(tmp_path):
+    dev = tmp_path / "ttyUSB9"
+    dev.write_text("")
+    proc = tmp_path / "proc"
+    (proc / "4242" / "fd").mkdir(parents=True)
+    (proc / "4242" / "fd" / "3").symlink_to(dev)
+    (proc / "4242" / "cmdline").write_bytes(b"python3\0interface\0")
+    (proc / "77" / "fd").mkdir(parents=True)
+    assert port_users(str(dev), proc=str(proc)) == [(4242, "python3 interface")]
+    assert port_users("/dev/pts/0", proc=str(proc)) == []       # a pty's other end holds it on purpose
+
+
+def test_cli_refuses_bad_arguments_and_asks_before_anything_is_sent(tmp_path):
+    out = io.StringIO()
+    assert main(["--skip", "nope"], out=out, ask=lambda q: "y") == 2
+    assert "unknown step nope" in out.getvalue()
+    assert main(["--speed-percent", "150"], out=io.StringIO(), ask=lambda q: "y") == 2
+    asked = []
+    out = io.StringIO()
+    port = str(tmp_path / "no_such_port")
+    assert main(["--port", port, "--out", str(tmp_path / "c.yaml")], out=out,
+                ask=lambda q: asked.append(q) or "n") == 1
+    assert asked and "clear space" in asked[0]
+    assert "nothing was sent" in out.getvalue()
+    assert not (tmp_path / "c.yaml").exists()
