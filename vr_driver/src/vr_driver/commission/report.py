@@ -110,14 +110,13 @@ def write_yaml(path: str, measured: Mapping[str, Any], identity: Mapping[str, An
                            **({"error": r.error} if r.error else {})} for r in results},
         "findings": [f.as_dict() for f in findings],
     }
-    header = textwrap.dedent("""\
-        # Written by `rosrun vr_driver commission` on %s (vr_driver/doc/commissioning.md).
-        # Controller: %s.
-        # driver.launch commissioning:=THIS_FILE sets the driver's parameters below (DriverParams names:
-        # %s); %s are the G2's measured behaviours (the virtual G2's parameter names);
-        # joint_limits are the planner's (also in joint_limits.yaml beside this file).
-        """) % (date.strftime("%Y-%m-%d %H:%M:%S %Z"), _identity_lines(identity), ", ".join(DRIVER_KEYS),
-                ", ".join(NEW_KEYS))
+    text = ("Written by `rosrun vr_driver commission` on %s (vr_driver/doc/commissioning.md). Controller: %s. "
+            "driver.launch commissioning:=THIS_FILE sets the driver's parameters below (DriverParams names: %s); "
+            "%s are the G2's measured behaviours (the virtual G2's parameter names); joint_limits are the "
+            "planner's (also in joint_limits.yaml beside this file)."
+            % (date.strftime("%Y-%m-%d %H:%M:%S %Z"), _identity_lines(identity), ", ".join(DRIVER_KEYS),
+               ", ".join(NEW_KEYS)))
+    header = "".join("# %s\n" % line for line in textwrap.wrap(text, 98))
     _write(path, header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=False, width=110))
 
 
