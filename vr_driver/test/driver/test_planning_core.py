@@ -226,6 +226,29 @@ def test_a_cartesian_protocol_plans_away_from_the_wrist_singularity(kin):
         assert valid(bent[:4] + (2 * P.WRIST_MARGIN, 0.0))
 
 
+def test_a_cartesian_protocol_plans_away_from_the_stretched_elbow(kin):
+    """v3: near the stretched-out arm a pose's two elbow branches lie within a few degrees (at
+    joint_3 = stretch +- 7 deg the controller's IK of the rounded pose was seen on the other one):
+    the planner keeps joint_3 ELBOW_MARGIN from the stretch (but on the last try, as for the wrist);
+    v2 does not need it."""
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    # the two elbow branches of a pose meet there: the stretch is where they are nearest
+    near = (0.3, 0.2, stretch + P.ELBOW_MARGIN / 2, 0.0, 0.5, 0.0)
+    clear = near[:2] + (stretch + 2 * P.ELBOW_MARGIN,) + near[3:]
+    sols = kin.ik_solutions(kin.fk(near))
+    assert min(abs(q[2] - near[2]) for q in sols if abs(q[2] - near[2]) > 1e-6) <= 1.1 * P.ELBOW_MARGIN
+    # (the box widened to the arm's reach: the stretched arm is outside the driver's default box)
+    reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
+    for protocol, expected in (("v3", False), ("v2", True)):
+        w = world(kin, protocol=protocol, workspace=reach)
+        planning = DriverPlanning(w.core, kinematics=kin)
+        valid = planning._planning_validity(planning.snapshot())
+        assert valid(near) is expected, protocol
+        assert valid(clear), protocol
+        assert planning._planning_validity(planning.snapshot(), wrist_margin=False)(near)
+
+
 def test_a_plan_the_driver_would_refuse_is_planned_again(kin, monkeypatch):
     w = world(kin)
     planning = DriverPlanning(w.core, kinematics=kin)

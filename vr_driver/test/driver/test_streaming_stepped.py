@@ -78,6 +78,25 @@ def test_split_long_puts_planned_points_back_where_a_joint_would_turn_too_far():
     assert split_long(wide, [0, 2], 0.5) == [0, 1, 2]
 
 
+def test_split_long_puts_planned_points_back_where_the_controller_would_not_reach_the_next():
+    """``reaches`` (a Cartesian controller: would it solve the next pose onto the planned joints
+    after a target here?) splits a step within ``max_step`` too; a planned step it does not reach
+    is sent as planned (the stream check then refuses it in words)."""
+    from vr_driver.driver.streaming import split_long
+    line = [(0.0, 0.1 * k) for k in range(11)]
+    calls = []
+
+    def reaches(a, b):
+        calls.append((a, b))
+        return abs(a[1] - b[1]) <= 0.45
+    assert split_long(line, [0, 10], 2.0, reaches) == [0, 4, 8, 10]
+    assert calls                                                # it was asked
+    assert split_long(line, [0, 10], 2.0, lambda a, b: True) == [0, 10]
+    # not even the next planned point: every planned point goes back (the densest stream; the
+    # stream check decides on it)
+    assert split_long(line, [0, 10], 2.0, lambda a, b: False) == list(range(11))
+
+
 def test_thin_timed_keeps_ends_and_timing():
     times = [0.0, 1.0, 2.0, 3.0, 4.0]
     line = [(0.1 * k,) * 6 for k in range(5)]                  # constant speed: nothing in between

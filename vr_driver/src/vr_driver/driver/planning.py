@@ -26,8 +26,9 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
 - **What the driver will accept**: with a Cartesian protocol (v1, v3) the controller solves each
   target's pose itself, taking the solution nearest the previous target: near the wrist singularity
   (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another
-  configuration than planned"). So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` away from the
-  start and the goal (as it keeps its clearance), and a plan is checked by the driver's own stream
+  configuration than planned"); near the stretched-out arm the two elbow branches of a pose meet,
+  with the same effect. So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` and joint_3
+  :data:`ELBOW_MARGIN` from the stretch away from the start and the goal (as it keeps its clearance), and a plan is checked by the driver's own stream
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
   all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
@@ -46,6 +47,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 from ..errors import MissingDependency, VrDriverError
 from ..kinematics import deps
 from ..kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError
+from ..kinematics.solver import stretched_elbow
 from ..poses import ControllerPose, Workspace
 
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
@@ -69,13 +71,19 @@ _FEATURE = "the plan action (vr_driver.driver.planning)"
 #: [rad] a Cartesian protocol's plan keeps |joint_5| at least this far from the wrist singularity
 #: (except near its start and goal: the planner's escape zone)
 WRIST_MARGIN = 0.0524          # 3 deg
+#: [rad] ... and joint_3 at least this far from the stretched-out arm (kinematics.solver.stretched_elbow),
+#: where the pose's two elbow branches lie within twice this of each other: the controller's IK of a
+#: rounded pose may take the other one, or find the pose beyond its reach (0.1 mm past a stretched
+#: arm); 8 deg costs the arm about 3 mm of its reach
+ELBOW_MARGIN = math.radians(8.0)
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
 #: [rad] a goal this close to the arm's joints on every joint is where the arm is: nothing to move
 AT_GOAL = 1e-4
-#: the chain index of the wrist bend (joint_5)
+#: the chain indices of the wrist bend (joint_5) and the elbow (joint_3)
 _WRIST = 4
+_ELBOW = 2
 
 
 @dataclass(frozen=True)
@@ -366,15 +374,24 @@ class DriverPlanning:
 
     def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the
-        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN -- except on the
-        last try: the margin walls joint_5 = 0 off, and a goal on the other side of it (joint_5 of the
-        other sign, farther than the start's and goal's own zones) then has no path at all; without
-        it the driver's stream check still decides whether the controller would run the plan."""
+        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN and joint_3
+        ELBOW_MARGIN from the stretched arm -- except on the last try: the margins wall joint_5 = 0
+        and the stretch off, and a goal on the other side of one (joint_5 of the other sign, the
+        other elbow branch, farther than the start's and goal's own zones) then has no path at all;
+        without them the driver's stream check still decides whether the controller would run the
+        plan."""
         strict = validity.copy()
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
-        if getattr(self.core.protocol, "joint_targets", True) or not wrist_margin:
+        if getattr(self.core.protocol, "joint_targets", True):
             return lambda q: not strict.in_collision(q)
-        return lambda q: abs(q[_WRIST]) >= WRIST_MARGIN and not strict.in_collision(q)
+        if not wrist_margin:
+            return lambda q: not strict.in_collision(q)
+        stretched = stretched_elbow(self.kin)
+
+        def clear(q) -> bool:
+            return abs(q[_WRIST]) >= WRIST_MARGIN and (
+                stretched is None or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
+        return lambda q: clear(q) and not strict.in_collision(q)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:
         """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked

@@ -74,7 +74,7 @@ class JointStreams:
         points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
                                tolerance, self.min_segment(), max_tolerance,
                                corner_tolerance=math.radians(self.params.stream_path_tolerance),
-                               max_step=self.max_step)
+                               max_step=self.max_step, reaches=self.reaches())
         if not points:
             return points
         return self.with_poses(positions[0], points)
@@ -91,6 +91,11 @@ class JointStreams:
             except VrDriverError as exc:
                 raise DriverError("%s; nothing was sent" % exc) from None
         return points
+
+    def reaches(self) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
+        """Would the controller, after a target at the first joints, run the second as planned?
+        (None: joint targets are run as sent.)"""
+        return None
 
     def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
                ) -> Tuple[StreamPoint, ...]:
@@ -146,6 +151,18 @@ class CartesianStreams(JointStreams):
     controller will (module docstring)."""
 
     max_step = CARTESIAN_MAX_STEP
+
+    def reaches(self) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
+        """The controller, after a target at ``a``, solves the wire pose of ``b`` onto ``b`` within
+        CONFIGURATION_TOLERANCE (:meth:`target`, the coordinate search only): where it would not --
+        another elbow or wrist branch lies nearer ``a`` than ``b`` does -- the stream keeps planned
+        points in between (:func:`.streaming.split_long`)."""
+        def reaches(a: Sequence[float], b: Sequence[float]) -> bool:
+            try:
+                return self.target(a, b, search=False).error <= CONFIGURATION_TOLERANCE
+            except VrDriverError:
+                return False
+        return reaches
 
     def target(self, prev: Sequence[float], joints: Sequence[float], search: bool = True) -> WireTarget:
         """The wire pose for ``joints`` after a target at ``prev`` and the controller's solution of

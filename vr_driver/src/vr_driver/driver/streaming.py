@@ -199,16 +199,23 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
     return stream, tight
 
 
-def split_long(positions: Sequence[Sequence[float]], kept: Sequence[int], max_step: float) -> List[int]:
+def split_long(positions: Sequence[Sequence[float]], kept: Sequence[int], max_step: float,
+               reaches: Optional[Callable[[Sequence[float], Sequence[float]], bool]] = None) -> List[int]:
     """``kept`` with planned points added between two kept ones whose joints differ by more than
-    ``max_step`` [rad] (any joint): from each kept point the farthest planned point still within
-    ``max_step`` of it, until the next kept one is (a planned step wider than ``max_step`` stays)."""
+    ``max_step`` [rad] (any joint), or -- with ``reaches`` (a Cartesian protocol: would the
+    controller, after a target at the first joints, solve the pose of the second onto them?) --
+    where the controller would not reach the next kept point from the one before: from each kept
+    point the farthest planned point still within ``max_step`` of it and reached from it, until the
+    next kept one is (a planned step that is not stays: the stream check then says why)."""
+    def near(a: int, b: int) -> bool:
+        return max(abs(x - y) for x, y in zip(positions[a], positions[b])) <= max_step and (
+            reaches is None or reaches(positions[a], positions[b]))
     out = [kept[0]]
     for b in kept[1:]:
         a = out[-1]
-        while max(abs(x - y) for x, y in zip(positions[a], positions[b])) > max_step:
+        while not near(a, b):
             j = a + 1
-            while j + 1 < b and max(abs(x - y) for x, y in zip(positions[a], positions[j + 1])) <= max_step:
+            while j + 1 < b and near(a, j + 1):
                 j += 1
             if j >= b:
                 break
@@ -220,7 +227,8 @@ def split_long(positions: Sequence[Sequence[float]], kept: Sequence[int], max_st
 
 def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
                   smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None,
-                  corner_tolerance: Optional[float] = None, max_step: Optional[float] = None
+                  corner_tolerance: Optional[float] = None, max_step: Optional[float] = None,
+                  reaches: Optional[Callable[[Sequence[float], Sequence[float]], bool]] = None
                   ) -> Tuple[StreamPoint, ...]:
     """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
     thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point but the last blended
@@ -230,7 +238,9 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     ``max_step`` [rad] (a Cartesian protocol): no joint moves farther than that between two stream
     points (:func:`split_long` puts planned points back): the controller solves each pose nearest the
     previous target, which is the planned joints only while a wrist joint turns by well under half a
-    turn -- a thinned straight segment turning joint_6 by 270 deg would be run as -90 deg.
+    turn -- a thinned straight segment turning joint_6 by 270 deg would be run as -90 deg. ``reaches``
+    (with ``max_step``): where the controller would solve the next point onto another branch (near
+    the elbow's stretch, where two branches lie a few degrees apart), planned points are put back too.
 
     A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
     point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
@@ -251,7 +261,7 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     if len(kept) < 2:
         return ()
     corner_tol = tolerance if corner_tolerance is None else corner_tolerance
-    chosen = set(kept if max_step is None else split_long(positions, kept, max_step))
+    chosen = set(kept if max_step is None else split_long(positions, kept, max_step, reaches))
     while True:
         order = sorted(chosen)
         stream, tight = _timed(times, positions, order[1:], vmax, smooth, corner_tol)

@@ -325,6 +325,17 @@ def _angle_about(axis, frm, to):
     return math.atan2(_dot(axis, _cross(fp, to)), _dot(fp, to))
 
 
+def stretched_elbow(kin: "Kinematics") -> Optional[float]:
+    """[rad] joint_3 where the arm is stretched out (the shoulder, the elbow and the wrist centre in
+    a line, the two elbow branches of a pose meet: near it a pose hardly fixes joint_2 / joint_3 and
+    the nearest-solution IK of a controller may take the other branch); None without the analytic
+    solver (an arm of another shape)."""
+    solver = getattr(kin, "_analytic", None)
+    if solver is None:
+        return None
+    return math.remainder(solver.phi2 - solver.phiw + math.pi, 2.0 * math.pi)
+
+
 class _AnalyticSolver:
     """Closed-form IK of a 6R arm with J2 || J3 _|_ J1 and a spherical wrist, from the zero-pose screw
     axes of the chain (product of exponentials: T(q) = e^[a1]q1 ... e^[a6]q6 M)."""
