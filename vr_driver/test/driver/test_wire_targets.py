@@ -89,3 +89,17 @@ def test_an_unreachable_pose_raises(kin):
             return V3.wire_pose(type(pose)(pose.x + 5000.0, pose.y, pose.z, pose.rx, pose.ry, pose.rz))
     with pytest.raises(VrDriverError):
         wire_target(kin, Far(), q, far)
+
+
+def test_a_rounding_past_the_stretched_arms_reach_is_replaced_by_a_neighbour_inside_it(kin):
+    """The arm stretched out (joint_3 at the stretch): the plain rounding may push the pose 0.05 mm
+    past its reach, where the G2 has no solution; a neighbour rounded the other way has one, near
+    the plan."""
+    from vr_driver.kinematics.solver import stretched_elbow
+    q = (0.0, 0.5, stretched_elbow(kin), 0.2, 0.6, 0.1)
+    with pytest.raises(VrDriverError):
+        kin.ik_pose(V3.wire_pose(kin.fk_pose(q)), seed=q)
+    t = wire_target(kin, V3, q, q)
+    assert any(t.steps) and V3.wire_pose(t.pose) == t.pose
+    assert off(kin, t.pose, q, q) == pytest.approx(t.error, abs=1e-12)
+    assert t.error <= 0.5 * DEG

@@ -57,8 +57,9 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
                 full_band: float = FULL_SEARCH_BAND) -> WireTarget:
     """The wire pose for the planned ``joints`` whose solution by the controller's IK seeded with
     ``seed`` (its configuration rule: the previous target's solution, or its joints now) lands
-    nearest ``joints``. Raises the kinematics' VrDriverError when not even the plain rounding can be
-    solved (the caller names the point); a neighbour that cannot be solved is passed over."""
+    nearest ``joints``. A neighbour that cannot be solved is passed over; when the plain rounding
+    cannot (a pose 0.1 mm past the stretched arm's reach), every neighbour is tried. Raises the
+    kinematics' VrDriverError when none can be solved (the caller names the point)."""
     planned = tuple(float(v) for v in joints)
     seed = tuple(float(v) for v in seed)
     base = protocol.wire_pose(kin.fk_pose(planned))
@@ -80,7 +81,19 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
             return None
         return WireTarget(pose, q, max(abs(a - b) for a, b in zip(q, planned)), steps, 0)
 
-    best = attempt((0,) * 6)
+    try:
+        best = attempt((0,) * 6)
+    except VrDriverError as exc:
+        # the rounding pushed the pose past the stretched arm's reach (0.1 mm is enough there): a
+        # neighbour rounded the other way may be inside it
+        best = None
+        for steps in itertools.product(STEPS, repeat=6):
+            found = attempt(steps) if any(steps) else None
+            if found is not None and (best is None or _better(found, best)):
+                best = found
+        if best is None:
+            raise exc
+        return WireTarget(best.pose, best.joints, best.error, best.steps, count[0])
     if best.error > fine:
         best = _coordinate_search(best, attempt, fine)
     if best.error > fine and abs(planned[WRIST_BEND]) < full_band:
