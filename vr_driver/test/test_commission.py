@@ -19,6 +19,7 @@ import pytest
 import yaml
 
 from vr_driver.controller.program import VirtualController
+from vr_driver.params import DriverParams, ParamError
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 NODE = os.path.join(os.path.dirname(HERE), "nodes", "commission")
@@ -58,7 +59,17 @@ def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeou
     assert "robot time: " in proc.stdout
     with open(out, encoding="utf-8") as fh:
         doc = yaml.safe_load(fh)
+    # the file is the driver's parameters as they are: DriverParams takes it (driver.launch loads it)
+    assert doc["planning_limits"] == str(tmp_path / "joint_limits.yaml")
+    params = DriverParams.from_dict(dict(doc, port="/dev/null"))
+    assert params.protocol == doc["protocol"] and params.commissioning["date"] == doc["commissioning"]["date"]
     return doc, proc.stdout, vc
+
+
+def limits_of(doc: Dict[str, Any]) -> Dict[str, Any]:
+    """The planner's limits the YAML names (planning_limits: the joint_limits.yaml beside it)."""
+    with open(doc["planning_limits"], encoding="utf-8") as fh:
+        return yaml.safe_load(fh)["joint_limits"]
 
 
 def finding(doc: Dict[str, Any], assumption: str) -> Dict[str, Any]:
@@ -76,16 +87,16 @@ def model_accelerations(kin) -> Tuple[float, ...]:
 def test_default_g2_every_step_as_assumed(tmp_path, kin):
     doc, text, vc = run_commission(tmp_path, {}, [])
     assert doc["protocol"] == "v3" and doc["byte_order"] == "little"
-    assert doc["interpreter_lookahead"] == 1
-    assert abs(doc["loop_period"] - LOOP) < 0.001
-    assert doc["loop_blocks_during_move"] is False
-    assert abs(doc["speed_scale"] - 1.0) < 0.02
-    assert doc["configuration"] == "previous_target"
-    assert doc["send_ahead"] == "accepted" and doc["unreachable"] == "skip"
-    assert doc["check_word"] is True and doc["ring_size"] == 4
+    assert doc["controller"]["interpreter_lookahead"] == 1
+    assert abs(doc["controller"]["loop_period"] - LOOP) < 0.001
+    assert doc["controller"]["loop_blocks_during_move"] is False
+    assert abs(doc["controller"]["speed_scale"] - 1.0) < 0.02
+    assert doc["controller"]["configuration"] == "previous_target"
+    assert doc["controller"]["send_ahead"] == "accepted" and doc["controller"]["unreachable"] == "skip"
+    assert doc["controller"]["check_word"] is True and doc["controller"]["ring_size"] == 4
     for i, a in enumerate(model_accelerations(kin)):
-        assert abs(doc["accelerations"]["joint_%d" % (i + 1)] - a) <= 0.1 * a, doc["accelerations"]
-    assert doc["ramp_shape"] == "linear"
+        assert abs(doc["controller"]["accelerations"]["joint_%d" % (i + 1)] - a) <= 0.1 * a, doc["controller"]["accelerations"]
+    assert doc["controller"]["ramp_shape"] == "linear"
     assert "stream_smooth" not in doc                      # the arm blends: the user's setting stays
     ident = doc["commissioning"]["controller"]
     assert ident["ident"] == "0x06C6" and ident["chk_cfg"] == "17 17 17 13 27 27 27"
@@ -93,15 +104,15 @@ def test_default_g2_every_step_as_assumed(tmp_path, kin):
     steps = doc["commissioning"]["steps"]
     assert all(s["status"] == "done" for s in steps.values()), steps
     # every row as assumed, except the loop's steadiness, which is this machine's load
-    bad = [f for f in doc["commissioning"]["findings"] if f["ok"] is not True
+    bad = [f for f in doc["commissioning"]["findings"] if f.get("ok") is not True
            and not f["assumption"].startswith("program loop at rest")]
     assert not bad, bad
     with open(tmp_path / "joint_limits.yaml", encoding="utf-8") as fh:
         limits = yaml.safe_load(fh)["joint_limits"]
-    assert limits == doc["joint_limits"]
+    assert limits == limits_of(doc)
     for i, name in enumerate(kin.limits.names):
         assert limits[name]["max_velocity"] == pytest.approx(kin.limits.velocity[i], abs=1e-3)
-        assert limits[name]["max_acceleration"] == doc["accelerations"]["joint_%d" % (i + 1)]
+        assert limits[name]["max_acceleration"] == doc["controller"]["accelerations"]["joint_%d" % (i + 1)]
     # every bus cycle logged
     lines = (tmp_path / "commissioning.cycles.jsonl").read_text().splitlines()
     assert len(lines) > 1000
@@ -112,22 +123,22 @@ def test_default_g2_every_step_as_assumed(tmp_path, kin):
 
 def test_no_lookahead(tmp_path):
     doc, text, _ = run_commission(tmp_path, {"interpreter_lookahead": 0}, skip("loop", "speed", "configuration", "ramps"))
-    assert doc["interpreter_lookahead"] == 0
+    assert doc["controller"]["interpreter_lookahead"] == 0
     assert doc["stream_smooth"] == 0                       # the driver times every point as a stop
     row = finding(doc, "interpreter look-ahead")
-    assert row["ok"] is False and "string of stops" in row["consequence"]
+    assert row.get("ok") is False and "string of stops" in row["consequence"]
 
 
 def test_lookahead_2_and_a_slower_speed_unit(tmp_path):
     doc, text, _ = run_commission(tmp_path, {"interpreter_lookahead": 2, "speed_scale": 0.6},
                                   skip("loop", "configuration", "ramps"))
     # 1 and 2 look alike on the bus (the program's ring feeds the interpreter): ">= 1", written as 1
-    assert doc["interpreter_lookahead"] == 1
+    assert doc["controller"]["interpreter_lookahead"] == 1
     assert ">= 1" in finding(doc, "interpreter look-ahead")["measured"]
     assert "stream_smooth" not in doc
-    assert abs(doc["speed_scale"] - 0.6) <= 0.02 * 0.6
+    assert abs(doc["controller"]["speed_scale"] - 0.6) <= 0.02 * 0.6
     assert finding(doc, "MOVEP speed unit")["ok"] is False
-    assert doc["joint_limits"]["joint_1"]["max_velocity"] == pytest.approx(0.6 * 2.09, rel=0.02)
+    assert limits_of(doc)["joint_1"]["max_velocity"] == pytest.approx(0.6 * 2.09, rel=0.02)
 
 
 @pytest.mark.parametrize("ramp_time, shape, axes", [(0.5, "linear", "1,5"), (0.5, "s_curve", "2,6"),
@@ -141,13 +152,13 @@ def test_ramps(tmp_path, kin, ramp_time, shape, axes):
         skip("loop", "lookahead", "configuration", "speed", "send_ahead")
         + ["--axes", axes, "--ramp-percent", "100" if fast else "50"], cycle_rate=500.0 if fast else CYCLE_RATE)
     want = {i + 1: v / ramp_time for i, v in enumerate(kin.limits.velocity)}
-    got = doc["accelerations"]
+    got = doc["controller"]["accelerations"]
     assert set(got) == {"joint_%s" % a for a in axes.split(",")}
     for name, a in got.items():
         axis = int(name.split("_")[1])
         assert abs(a - want[axis]) <= 0.1 * want[axis], (name, a, want[axis])
-    assert doc["ramp_shape"] == shape
-    assert doc["ramp_time"] == pytest.approx(ramp_time, rel=0.1)
+    assert doc["controller"]["ramp_shape"] == shape
+    assert doc["controller"]["ramp_time"] == pytest.approx(ramp_time, rel=0.1)
 
 
 def test_per_axis_accelerations(tmp_path, kin):
@@ -156,18 +167,23 @@ def test_per_axis_accelerations(tmp_path, kin):
                                   skip("loop", "lookahead", "configuration", "speed", "send_ahead")
                                   + ["--ramp-percent", "60", "--ramp-move", "30"])
     for i, a in enumerate(acc):
-        got = doc["accelerations"]["joint_%d" % (i + 1)]
+        got = doc["controller"]["accelerations"]["joint_%d" % (i + 1)]
         assert abs(got - a) <= 0.1 * a, (i + 1, got, a)
-        assert doc["joint_limits"]["joint_%d" % (i + 1)]["max_acceleration"] == got
+        assert limits_of(doc)["joint_%d" % (i + 1)]["max_acceleration"] == got
 
 
 def test_loop_blocking_during_a_move(tmp_path):
     doc, text, _ = run_commission(tmp_path, {"loop_blocks_during_move": True}, skip("configuration", "ramps"))
-    assert doc["loop_blocks_during_move"] is True
+    assert doc["controller"]["loop_blocks_during_move"] is True
     row = finding(doc, "program loop during a MOVE")
-    assert row["ok"] is False and "protocol v1" in row["consequence"]
-    assert doc["interpreter_lookahead"] == 0 and doc["stream_smooth"] == 0
-    assert abs(doc["speed_scale"] - 1.0) <= 0.05           # from the move times: the ramps cancel
+    assert row.get("ok") is False and "protocol v1" in row["consequence"]
+    assert doc["controller"]["interpreter_lookahead"] == 0 and doc["stream_smooth"] == 0
+    assert abs(doc["controller"]["speed_scale"] - 1.0) <= 0.05           # from the move times: the ramps cancel
+    # the protocol that works with it; v3 with this G2 is refused at start, in words
+    assert doc["protocol"] == "v1"
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict(dict(doc, protocol="v3"))
+    assert err.value.name == "controller/loop_blocks_during_move" and "use protocol v1" in str(err.value)
 
 
 def test_byte_order_send_ahead_and_loop_period(tmp_path):
@@ -176,16 +192,18 @@ def test_byte_order_send_ahead_and_loop_period(tmp_path):
     assert doc["byte_order"] == "big"
     assert "trying big" in text
     assert finding(doc, "byte order")["ok"] is False
-    assert doc["check_word"] is True
-    assert doc["send_ahead"] == "refused"
-    assert "send_ahead: 1" in finding(doc, "a target sent ahead")["consequence"]
-    assert abs(doc["loop_period"] - 0.004) < 0.001
-    assert doc["loop_blocks_during_move"] is False
+    assert doc["controller"]["check_word"] is True
+    assert doc["controller"]["send_ahead"] == "refused"
+    assert "controller/send_ahead: refused" in finding(doc, "a target sent ahead")["consequence"]
+    # the driver told so sends one target per acknowledgement
+    assert DriverParams.from_dict(dict(doc, port="/dev/null")).wire.send_ahead == 1
+    assert abs(doc["controller"]["loop_period"] - 0.004) < 0.001
+    assert doc["controller"]["loop_blocks_during_move"] is False
 
 
 def test_configuration_current_joints_and_an_alarm(tmp_path):
     doc, text, _ = run_commission(tmp_path, {"configuration": "current_joints", "unreachable": "alarm_halt"},
                                   skip("loop", "speed", "lookahead", "ramps"))
-    assert doc["configuration"] == "current_joints"
-    assert doc["unreachable"] == "alarm_halt"
+    assert doc["controller"]["configuration"] == "current_joints"
+    assert doc["controller"]["unreachable"] == "alarm_halt"
     assert "reset the alarm at the pendant" in text

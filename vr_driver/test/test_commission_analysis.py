@@ -103,8 +103,11 @@ def test_lookahead_verdicts():
 def test_driver_values_and_joint_limits():
     assert driver_values({"interpreter_lookahead": 0, "byte_order": "big"})["stream_smooth"] == 0
     assert "stream_smooth" not in driver_values({"interpreter_lookahead": 1})
-    values = driver_values({"accelerations": {2: 10.0}, "speed_scale": 0.6})
-    assert values["accelerations"] == {"joint_2": 10.0} and values["protocol"] == "v3"
+    values = driver_values({"accelerations": {2: 10.0}, "speed_scale": 0.6, "interpreter_lookahead": None})
+    assert values["controller"] == {"accelerations": {"joint_2": 10.0}, "speed_scale": 0.6}   # only the measured
+    assert values["protocol"] == "v3"
+    blocking = driver_values({"loop_blocks_during_move": True, "interpreter_lookahead": 0})
+    assert blocking["protocol"] == "v1" and blocking["stream_smooth"] == 0
     names, vel, acc = ("j1", "j2"), (2.0, 4.0), (20.0, 40.0)
     lim = joint_limits(names, vel, acc, {"speed_scale": 0.6, "accelerations": {2: 10.0}})
     assert lim["j1"] == {"has_velocity_limits": True, "max_velocity": 1.2, "has_acceleration_limits": True,

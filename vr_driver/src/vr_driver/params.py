@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from . import validate
@@ -30,6 +30,23 @@ def _protocols() -> Tuple[str, ...]:
     """The controller protocols' names (vr_driver.protocol; doc/controller_program.md)."""
     from .protocol import registry
     return registry.names()
+
+
+def _stream_smooth(protocol: str, facts: "ControllerFacts", stream_smooth: int) -> int:
+    """``stream_smooth`` for the commissioned G2: 0 where it reads no MOVE ahead on a streaming
+    protocol (it stops at every point anyway: each is timed as a stop). A program loop that stops
+    while a MOVE runs cannot serve a streaming protocol: ParamError naming
+    ``controller/loop_blocks_during_move`` and the protocol that works."""
+    from .protocol import registry
+    if not registry.get(protocol).streams:
+        return stream_smooth
+    if facts.loop_blocks_during_move:
+        raise ParamError("controller/loop_blocks_during_move", True,
+                         "the G2's program loop stops while a MOVE runs: protocol %s cannot stream with it "
+                         "(the feedback freezes while the arm moves, a target is taken only between MOVEs, "
+                         "STOP is not seen until the move ends) -- use protocol %s (doc/commissioning.md)"
+                         % (protocol, registry.DEFAULT))
+    return 0 if facts.interpreter_lookahead == 0 else stream_smooth
 
 
 def _io_protocols() -> Tuple[str, ...]:
@@ -153,6 +170,138 @@ def _scene(params: Mapping[str, Any], default: str) -> str:
     return value
 
 
+#: the joint solution the G2 takes for a Cartesian target (doc/controller_program.md §10.9)
+CONFIGURATION_RULES = ("previous_target", "current_joints")
+#: what the G2's program does with a target one number ahead of the next it takes: waits (accepted),
+#: refuses it OUT_OF_ORDER (refused), or runs it (taken: exactly once broken by the program)
+SEND_AHEAD_RULES = ("accepted", "refused", "taken")
+#: what an unreachable pose does: refused UNREACHABLE (skip) or an alarm that halts the program
+UNREACHABLE_RULES = ("skip", "alarm_halt")
+RAMP_SHAPES = ("linear", "s_curve")
+
+
+@dataclass(frozen=True)
+class ControllerFacts:
+    """What the G2 does where the design only assumes (doc/controller_program.md §10.9): the
+    ``controller:`` mapping of the parameters, as ``rosrun vr_driver commission`` measured it
+    (doc/commissioning.md). The defaults are the assumptions (the virtual G2's defaults): a driver
+    without a commissioning file runs as before. Every value is range-checked at start; a bad one is a
+    ParamError naming ``controller/<key>``. What the driver does with them:
+    :mod:`vr_driver.driver.commissioned` (the words it says at connect, the stream timing, the
+    planner's limits) and :class:`DriverParams` (a program loop that blocks during a MOVE refuses a
+    streaming protocol; no look-ahead makes every stream point a stop, ``stream_smooth`` 0; a target
+    sent ahead refused: one target per acknowledgement, :attr:`DriverParams.wire`)."""
+
+    interpreter_lookahead: int = 1       # MOVEs the G2's interpreter reads ahead of the one running
+    #                                      (0: each point a stop; 2: shorter stream segments feed it)
+    loop_period: float = 0.01            # [s] the program loop's period at rest (information)
+    loop_period_spread: float = 0.0      # [s] its spread (information: joint_states stamps may be
+    #                                      early by up to it)
+    loop_blocks_during_move: bool = False   # the program loop stops while a MOVE runs (no streaming)
+    speed_scale: float = 1.0             # MOVEP's speed unit: the real speed per commanded speed
+    #                                      (0.6: "speed 1000" is 60 % of the joint limits)
+    configuration: str = "previous_target"   # the joint solution of a Cartesian target (information)
+    send_ahead: str = "accepted"         # a target one number ahead (SEND_AHEAD_RULES)
+    unreachable: str = "skip"            # an unreachable pose (UNREACHABLE_RULES; information)
+    ring_size: int = 4                   # targets the program's ring holds (information)
+    ramp_shape: str = "linear"           # the arm's speed ramps (RAMP_SHAPES; information)
+    ramp_time: Optional[float] = None    # [s] rest to full speed of the slowest-ramping joint
+    #                                      measured; None: not measured (the model's)
+    accelerations: Tuple[Tuple[str, float], ...] = ()   # (plain joint name, rad/s^2) measured
+    check_word: bool = True              # the program checks the master's check word and seq copy
+
+    @classmethod
+    def from_dict(cls, value: Any, joint_names: Tuple[str, ...]) -> "ControllerFacts":
+        """Validate the ``controller`` mapping (missing keys: the assumptions; unknown keys are
+        errors). ``joint_names``: the plain joint names ``accelerations`` may name."""
+        if value is None:
+            value = {}
+        if not isinstance(value, Mapping):
+            raise ParamError("controller", value, "expected a mapping of the G2's measured behaviours "
+                             "(doc/commissioning.md)")
+        known = [f.name for f in fields(cls)]
+        unknown = sorted(set(value) - set(known))
+        if unknown:
+            raise ParamError("controller/%s" % unknown[0], value[unknown[0]],
+                             "unknown key (known: %s)" % ", ".join(known))
+        d = cls()
+        try:
+            ramp = value.get("ramp_time")
+            return cls(
+                interpreter_lookahead=_integer(value, "interpreter_lookahead", d.interpreter_lookahead, 0, 16),
+                loop_period=_number(value, "loop_period", d.loop_period, 0.0, 1.0, lo_open=True),
+                loop_period_spread=_number(value, "loop_period_spread", d.loop_period_spread, 0.0, 1.0),
+                loop_blocks_during_move=_boolean(value, "loop_blocks_during_move", d.loop_blocks_during_move),
+                speed_scale=_number(value, "speed_scale", d.speed_scale, 0.0, 10.0, lo_open=True),
+                configuration=_string(value, "configuration", d.configuration, CONFIGURATION_RULES),
+                send_ahead=_string(value, "send_ahead", d.send_ahead, SEND_AHEAD_RULES),
+                unreachable=_string(value, "unreachable", d.unreachable, UNREACHABLE_RULES),
+                ring_size=_integer(value, "ring_size", d.ring_size, 1, 1000),
+                ramp_shape=_string(value, "ramp_shape", d.ramp_shape, RAMP_SHAPES),
+                ramp_time=None if ramp is None else _number(value, "ramp_time", 0.0, 0.0, 10.0),
+                accelerations=_accelerations(value.get("accelerations"), joint_names),
+                check_word=_boolean(value, "check_word", d.check_word),
+            )
+        except ParamError as exc:
+            if exc.name.startswith("controller/"):
+                raise
+            raise ParamError("controller/" + exc.name, exc.value, exc.reason) from None
+
+    def acceleration(self, name: str) -> Optional[float]:
+        """The measured acceleration [rad/s^2] of the joint called ``name`` (plain), or None."""
+        return dict(self.accelerations).get(name)
+
+
+def _accelerations(value: Any, joint_names: Tuple[str, ...]) -> Tuple[Tuple[str, float], ...]:
+    """``controller/accelerations``: {plain joint name: rad/s^2 in (0, 1000]}, or empty."""
+    if value is None:
+        return ()
+    if not isinstance(value, Mapping):
+        raise ParamError("controller/accelerations", value, "expected a mapping {joint name: rad/s^2}")
+    out = []
+    for name in sorted(value):
+        if name not in joint_names:
+            raise ParamError("controller/accelerations/%s" % name, value[name],
+                             "not a joint of the arm (%s)" % ", ".join(joint_names))
+        out.append((name, _number(value, name, 0.0, 0.0, 1000.0, lo_open=True)))
+    return tuple(out)
+
+
+def read_planning_limits(path: str, joint_names: Tuple[str, ...]
+                         ) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
+    """(velocities [rad/s], accelerations [rad/s^2]) of ``joint_names`` (plain) from a MoveIt
+    ``joint_limits.yaml`` (the layout of panasonic_vr006l_moveit_config/config/joint_limits.yaml, e.g.
+    the one ``commission`` writes beside its file). ParamError naming ``planning_limits`` and the
+    joint and key for a missing file, a missing joint, or a limit that is not a number > 0."""
+    import yaml
+    if not os.path.isfile(path):
+        raise ParamError("planning_limits", path, "no such file")
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = yaml.safe_load(fh)
+    except (OSError, yaml.YAMLError) as exc:
+        raise ParamError("planning_limits", path, "cannot read it: %s" % exc) from None
+    limits = doc.get("joint_limits") if isinstance(doc, Mapping) else None
+    if not isinstance(limits, Mapping):
+        raise ParamError("planning_limits", path, "expected a mapping joint_limits: {joint: {max_velocity, "
+                         "max_acceleration, ...}} (MoveIt's joint_limits.yaml)")
+    velocity, acceleration = [], []
+    for name in joint_names:
+        entry = limits.get(name)
+        if not isinstance(entry, Mapping):
+            raise ParamError("planning_limits", path, "joint_limits/%s: missing (every joint of the arm: %s)"
+                             % (name, ", ".join(joint_names)))
+        for key, out in (("max_velocity", velocity), ("max_acceleration", acceleration)):
+            flag = "has_" + key[4:] + "_limits"
+            if entry.get(flag) is not True:
+                raise ParamError("planning_limits", path, "joint_limits/%s/%s: must be true (the planner "
+                                 "needs both limits of every joint)" % (name, flag))
+            out.append(validate.number(entry.get(key), lambda _: ParamError(
+                "planning_limits", path, "joint_limits/%s/%s: expected a number > 0, got %r"
+                % (name, key, entry.get(key))), 0.0, 1e6, lo_open=True, text=False))
+    return tuple(velocity), tuple(acceleration)
+
+
 @dataclass(frozen=True)
 class DriverParams:
     """Everything the driver reads at start (see config/vr_driver.yaml for the documentation)."""
@@ -208,6 +357,12 @@ class DriverParams:
     planning_time: float = 1.0           # [s] the planner's time budget
     velocity_scaling: float = 0.1        # (0, 1] fraction of the joint speed and acceleration limits;
     #                                      0.1 as MoveIt's default: a plan nobody asked to be fast is not
+    planning_limits: str = ""            # MoveIt joint_limits.yaml the plan action times its plans to
+    #                                      (commission's, beside its file); "" = the model's limits
+    # the G2 as commissioned (doc/commissioning.md): its measured behaviours, and where they came from
+    controller: ControllerFacts = field(default_factory=ControllerFacts)
+    commissioning: Mapping[str, Any] = field(default_factory=dict, hash=False)   # date, identity,
+    #                                      table: information
     # safety and model
     prefix: str = ""                     # of every link, joint and frame name of this robot (the
     #                                      URDF's xacro prefix); from_dict puts it in front of
@@ -271,8 +426,18 @@ class DriverParams:
         prefix = _prefix(params, d.prefix)
         model = _model(params, d.model)
         scene = _scene(params, d.scene)
+        protocol = _string(params, "protocol", d.protocol, _protocols())
+        facts = ControllerFacts.from_dict(params.get("controller"), tuple(names))
+        planning_limits = _string(params, "planning_limits", d.planning_limits)
+        if planning_limits:
+            read_planning_limits(planning_limits, tuple(names))
+        commissioning = params.get("commissioning", {})
+        if not isinstance(commissioning, Mapping):
+            raise ParamError("commissioning", commissioning, "expected a mapping (the commissioning's date, "
+                             "controller identity and table: information)")
+        stream_smooth = _stream_smooth(protocol, facts, _integer(params, "stream_smooth", d.stream_smooth, 0, 10))
         out = cls(
-            protocol=_string(params, "protocol", d.protocol, _protocols()),
+            protocol=protocol,
             bus_config=bus_config,
             io_signals=io_signals,
             port=_port(params, d.port),
@@ -295,7 +460,7 @@ class DriverParams:
             motion_timeout_margin=_number(params, "motion_timeout_margin", d.motion_timeout_margin, 0.0, 600.0),
             stop_settle_time=_number(params, "stop_settle_time", d.stop_settle_time, 0.0, 5.0, lo_open=True),
             stop_timeout=_number(params, "stop_timeout", d.stop_timeout, 0.0, 600.0, lo_open=True),
-            stream_smooth=_integer(params, "stream_smooth", d.stream_smooth, 0, 10),
+            stream_smooth=stream_smooth,
             stream_path_tolerance=_number(params, "stream_path_tolerance", d.stream_path_tolerance,
                                           0.0, 5.0),
             joint_command_timeout=_number(params, "joint_command_timeout", d.joint_command_timeout,
@@ -307,6 +472,9 @@ class DriverParams:
             planner_id=_planner_id(params, d.planner_id),
             planning_time=_number(params, "planning_time", d.planning_time, 0.0, 60.0, lo_open=True),
             velocity_scaling=_number(params, "velocity_scaling", d.velocity_scaling, 0.0, 1.0, lo_open=True),
+            planning_limits=planning_limits,
+            controller=facts,
+            commissioning=dict(commissioning),
             prefix=prefix,
             workspace=workspace,
             controller_joint_names=prefixed(prefix, tuple(names)),
@@ -381,9 +549,15 @@ class DriverParams:
 
     @property
     def wire(self) -> "Any":
-        """The controller protocol as one object (:class:`vr_driver.protocol.base.Protocol`)."""
+        """The controller protocol as one object (:class:`vr_driver.protocol.base.Protocol`); where
+        the G2 does not take a target sent ahead (``controller/send_ahead`` other than accepted), a
+        copy of it that sends one target per acknowledgement (``with_send_ahead``, offered by the
+        protocols that send ahead of their slots)."""
         from .protocol import registry
-        return registry.get(self.protocol)
+        proto = registry.get(self.protocol)
+        if self.controller.send_ahead != "accepted" and proto.send_ahead > proto.look_ahead_slots:
+            proto = proto.with_send_ahead(proto.look_ahead_slots)
+        return proto
 
     def bus(self) -> "Any":
         """The PROFIBUS bus configuration: the bus config file (or the package default) with

@@ -1,12 +1,14 @@
 """The end of a commissioning: the table (assumption, expected, measured, consequence) and the files
 (ROS-free).
 
-:func:`write_yaml` writes ONE file for ``driver.launch commissioning:=FILE``: the driver's parameters
-that follow from the measurements, by their DriverParams names (``protocol``, ``byte_order``,
-``stream_smooth``), the measured behaviours of the G2 under keys of their own (the virtual G2's
-names: ``interpreter_lookahead``, ``speed_scale``, ``loop_blocks_during_move``, ...; the driver does
-not read them yet), the planner's joint limits (``joint_limits``, MoveIt's shape) and, under
-``commissioning``, the date, the controller's identity, the robot time and the table.
+:func:`write_yaml` writes ONE file for ``driver.launch commissioning:=FILE``, in the shape
+:class:`vr_driver.params.DriverParams` validates: the driver's parameters that follow from the
+measurements by their names (``protocol``, ``byte_order``, ``stream_smooth`` where the arm cannot
+blend), ``planning_limits`` (the ``joint_limits.yaml`` written beside it: the plan action's limits),
+the measured behaviours of the G2 under ``controller`` (:class:`~vr_driver.params.ControllerFacts`:
+``interpreter_lookahead``, ``speed_scale``, ``loop_blocks_during_move``, ...; only what was measured)
+and, under ``commissioning`` (information), the date, the controller's identity, the robot time and
+the table.
 :func:`write_joint_limits` writes the same limits as a MoveIt ``joint_limits.yaml`` beside it.
 """
 from __future__ import annotations
@@ -21,15 +23,15 @@ import yaml
 
 from .steps import Finding, StepResult
 
-__all__ = ["DRIVER_KEYS", "NEW_KEYS", "table", "driver_values", "joint_limits", "write_yaml",
+__all__ = ["DRIVER_KEYS", "CONTROLLER_KEYS", "table", "driver_values", "joint_limits", "write_yaml",
            "write_joint_limits"]
 
 #: a speed scale this close to 1 is the assumed unit (the measurement's own precision)
 SPEED_TOLERANCE = 0.02
 #: DriverParams names the commissioning sets
-DRIVER_KEYS = ("protocol", "byte_order", "stream_smooth")
-#: keys of measured G2 behaviours the driver does not read yet (the virtual G2's parameter names)
-NEW_KEYS = ("interpreter_lookahead", "loop_period", "loop_period_spread", "loop_blocks_during_move",
+DRIVER_KEYS = ("protocol", "byte_order", "stream_smooth", "planning_limits", "controller", "commissioning")
+#: the measured G2 behaviours, the keys of ``controller`` (ControllerFacts; the virtual G2's parameter names)
+CONTROLLER_KEYS = ("interpreter_lookahead", "loop_period", "loop_period_spread", "loop_blocks_during_move",
             "speed_scale", "configuration", "send_ahead", "unreachable", "ring_size", "ramp_shape",
             "ramp_time", "accelerations", "check_word")
 
@@ -53,13 +55,17 @@ def table(findings: Sequence[Finding], width: int = 100) -> str:
 
 
 def driver_values(measured: Mapping[str, Any]) -> Dict[str, Any]:
-    """The driver's parameters (DriverParams names) and the new keys, from what was measured."""
-    out: Dict[str, Any] = {"protocol": "v3"}
+    """The driver's parameters (DriverParams names; the measured behaviours under ``controller``) from
+    what was measured. ``protocol`` v3, or v1 where the program loop blocks during a MOVE (v3 cannot
+    stream with it: the driver refuses it at start); ``stream_smooth`` 0 where the arm cannot blend."""
+    blocks = bool(measured.get("loop_blocks_during_move"))
+    out: Dict[str, Any] = {"protocol": "v1" if blocks else "v3"}
     if "byte_order" in measured:
         out["byte_order"] = measured["byte_order"]
-    if measured.get("interpreter_lookahead") == 0 or measured.get("loop_blocks_during_move"):
+    if measured.get("interpreter_lookahead") == 0 or blocks:
         out["stream_smooth"] = 0
-    for key in NEW_KEYS:
+    controller: Dict[str, Any] = {}
+    for key in CONTROLLER_KEYS:
         value = measured.get(key)
         if value is None:
             continue
@@ -67,7 +73,8 @@ def driver_values(measured: Mapping[str, Any]) -> Dict[str, Any]:
             value = {"joint_%d" % axis: float(a) for axis, a in sorted(value.items())}
         elif isinstance(value, float):
             value = round(value, 6)
-        out[key] = value
+        controller[key] = value
+    out["controller"] = controller
     return out
 
 
@@ -95,13 +102,16 @@ def _identity_lines(identity: Mapping[str, Any]) -> str:
 
 
 def write_yaml(path: str, measured: Mapping[str, Any], identity: Mapping[str, Any],
-               results: Sequence[StepResult], limits: Mapping[str, Any], robot_time: float,
+               results: Sequence[StepResult], limits_path: str, robot_time: float,
                date: Optional[datetime.datetime] = None) -> None:
-    """The commissioning file (module docstring)."""
+    """The commissioning file (module docstring); ``limits_path``: the joint_limits.yaml written
+    beside it (stored absolute as ``planning_limits``; driver.launch sets it from the file's place)."""
     date = date or datetime.datetime.now(datetime.timezone.utc).astimezone()
     findings = [f for r in results for f in r.findings]
-    doc: Dict[str, Any] = dict(driver_values(measured))
-    doc["joint_limits"] = dict(limits)
+    values = driver_values(measured)
+    doc: Dict[str, Any] = {k: v for k, v in values.items() if k != "controller"}
+    doc["planning_limits"] = os.path.abspath(limits_path)
+    doc["controller"] = values["controller"]
     doc["commissioning"] = {
         "date": date.isoformat(timespec="seconds"),
         "controller": dict(identity),
@@ -110,14 +120,25 @@ def write_yaml(path: str, measured: Mapping[str, Any], identity: Mapping[str, An
                            **({"error": r.error} if r.error else {})} for r in results},
         "findings": [f.as_dict() for f in findings],
     }
+    doc = _no_none(doc)
     text = ("Written by `rosrun vr_driver commission` on %s (vr_driver/doc/commissioning.md). Controller: %s. "
-            "driver.launch commissioning:=THIS_FILE sets the driver's parameters below (DriverParams names: %s); "
-            "%s are the G2's measured behaviours (the virtual G2's parameter names); joint_limits are the "
-            "planner's (also in joint_limits.yaml beside this file)."
-            % (date.strftime("%Y-%m-%d %H:%M:%S %Z"), _identity_lines(identity), ", ".join(DRIVER_KEYS),
-               ", ".join(NEW_KEYS)))
+            "driver.launch commissioning:=THIS_FILE loads it into the driver's parameters (DriverParams: %s); "
+            "controller holds the G2's measured behaviours (what the driver does with each is logged at connect); "
+            "planning_limits names the planner's limits (joint_limits.yaml beside this file)."
+            % (date.strftime("%Y-%m-%d %H:%M:%S %Z"), _identity_lines(identity), ", ".join(DRIVER_KEYS)))
     header = "".join("# %s\n" % line for line in textwrap.wrap(text, 98))
     _write(path, header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=False, width=110))
+
+
+def _no_none(value: Any) -> Any:
+    """``value`` without None anywhere (the ROS parameter server cannot hold it: roslaunch would fail
+    loading the file): a mapping's key whose value is None is left out (a finding not measured has
+    no ``ok``), a None in a list becomes "none"."""
+    if isinstance(value, Mapping):
+        return {k: _no_none(v) for k, v in value.items() if v is not None}
+    if isinstance(value, (list, tuple)):
+        return ["none" if v is None else _no_none(v) for v in value]
+    return value
 
 
 def write_joint_limits(path: str, limits: Mapping[str, Mapping[str, Any]], source: str,

@@ -485,8 +485,9 @@ class LoopStep(Step):
             if blocks else
             "runs: period %s, longest gap %s" % (_ms(during.period if during else None), _ms(gap)),
             "v3 cannot stream with it: the feedback freezes while the arm moves, a target is taken only between "
-            "two MOVEs and STOP is not seen. Use protocol v1 (ROSLINK, §5; protocol: v1, the card's v1 modules) or "
-            "run the fieldbus part of the program in a parallel task" if blocks else "none", not blocks))
+            "two MOVEs and STOP is not seen; the driver refuses v3 at start. Use protocol v1 (ROSLINK, §5; "
+            "protocol: v1, the card's v1 modules) or run the fieldbus part of the program in a parallel task"
+            if blocks else "none", not blocks))
         return findings
 
 
@@ -516,12 +517,14 @@ class SendAheadStep(Step):
         if taken:
             verdict, ok = "taken out of order", False
             consequence = ("exactly once is broken: a target after a missed one runs -- edit the program "
-                           "(§10.7: only accepted_seq + 1 is taken)")
+                           "(§10.7: only accepted_seq + 1 is taken); until then controller/send_ahead: taken makes "
+                           "the driver send one target per acknowledgement")
         elif refused:
             verdict, ok = "refused OUT_OF_ORDER", False
-            consequence = ("the driver sends one target ahead of the acknowledgement: with this program every "
-                           "stream ends at its second target. Edit the program (§10.7: IF W(1) = LI001 + 2 THEN "
-                           "GOTO *RUN) or set send_ahead: 1 (the driver does not read it yet)")
+            consequence = ("a driver sending one target ahead of the acknowledgement would end every stream at "
+                           "its second target: controller/send_ahead: refused makes it send one target per "
+                           "acknowledgement (a new target every other bus cycle). Or edit the program (§10.7: "
+                           "IF W(1) = LI001 + 2 THEN GOTO *RUN)")
         else:
             verdict, ok, consequence = "waits (neither taken nor refused)", True, "none"
         ctx.measured["send_ahead"] = {True: "accepted"}.get(ok, "taken" if taken else "refused")
@@ -579,9 +582,10 @@ class SpeedStep(Step):
         ctx.measured["speed_scale"] = round(scale, 4)
         return [Finding("MOVEP speed unit", "speed 1000 = the joint speed limit (0.1 % units)",
                         "x %.3f of the assumed speed (%s)" % (scale, how),
-                        "none" if ok else "the arm runs %.0f %% of the commanded speed: speed_scale: %.3f (the driver "
-                        "does not read it yet: until it does, a stream runs %.2f times the planned time; the planner's "
-                        "max_velocity is scaled in joint_limits.yaml)" % (100 * scale, scale, 1.0 / scale), ok)]
+                        "none" if ok else "the arm runs %.0f %% of the commanded speed: controller/speed_scale: %.3f "
+                        "(the driver sends each stream speed / %.3f; not told, a stream runs up to %.2f times the planned "
+                        "time; the planner's max_velocity is scaled in joint_limits.yaml where below 1)"
+                        % (100 * scale, scale, scale, 1.0 / scale), ok)]
 
 
 def _motion_window(cycles: Sequence[Cycle]) -> Optional[Tuple[int, int]]:
@@ -766,7 +770,8 @@ class ConfigurationStep(Step):
                     rule, j6(end6), j6(qb[5]), j6(qb_other[5])),
                 "none" if rule == "previous_target" else "the driver checks every stream point and tracks the "
                 "joints assuming previous_target: a point taken while the arm is on its way may run another "
-                "configuration than the one checked -- configuration: %s (the driver does not read it yet)" % rule,
+                "configuration than the one checked -- controller/configuration: %s (information: the driver "
+                "says so at connect; keep stream points clear of configuration changes)" % rule,
                 rule == "previous_target"))
             rest6 = end6
         # back in steps of at most 90 deg, where both rules agree
@@ -840,8 +845,8 @@ class RampStep(Step):
                 "joint_%d acceleration" % axis, "%.1f rad/s^2 (model: full speed in %.2f s)" % (
                     model[axis - 1], ctx.vmax[axis - 1] / model[axis - 1]),
                 "%.1f rad/s^2 (%.2f rad/s reached in %.3f s, the median of %d ramps)" % (a, v, r, len(ramps)),
-                "none" if ok else "the planner's max_acceleration (joint_limits.yaml) and the driver's stream timing "
-                "take the measured value", ok))
+                "none" if ok else "the plan action's max_acceleration (joint_limits.yaml, planning_limits) takes "
+                "the measured value", ok))
         ctx.measured["accelerations"] = {axis: round(a, 3) for axis, a in accelerations.items()}
         ctx.measured["ramp_time"] = round(max(ctx.vmax[ax - 1] / a for ax, a in accelerations.items()), 4)
         ctx.measured["ramp_shape"] = shape

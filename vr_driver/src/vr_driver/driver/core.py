@@ -32,6 +32,7 @@ Safety rules enforced here and in the parts (README "Reliability"):
 """
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from typing import Callable, List, Optional, Sequence, Tuple
@@ -46,17 +47,19 @@ from .bus_loop import BusLoop
 from .job_control import JobControl, PlanningThread, TrajectoryRun
 from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .joint_command import JointCommander
-from .link import LinkSupervisor, open_serial_link
+from .commissioned import controller_notes, min_segment_cycles
+from .link import LinkState, LinkSupervisor, open_serial_link
 from .path_checks import PathChecks, load_cell
 from .scene_guard import SceneGuard
 from .sequencer import MotionSequencer
 from .stations import ControllerIo, IoLine
 from .status import DriverError, DriverStatus
 from .stream_prep import stream_preparation
-from .streaming import MIN_SEGMENT_CYCLES, StreamSequencer
+from .streaming import StreamSequencer
 from .trajectories import ValidTrajectory
 
 Clock = Callable[[], float]
+log = logging.getLogger("vr_driver.driver")
 
 __all__ = ["DriverCore", "DriverError", "DriverStatus", "TrajectoryRun", "driver_kinematics"]
 
@@ -126,6 +129,10 @@ class DriverCore:
                                self.bus_loop.wake)
         self.joint_commander = JointCommander(params, self.kin, self.protocol, clock, self.status, self.jobs,
                                               self.checks, self.streams)
+        #: what the commissioned G2 changes, in words (logged at every connect; the node's diagnostics)
+        self.controller_notes = controller_notes(params, self.kin)
+        self._notes_said = False
+        self.add_listener(self._say_controller_notes)
 
     # ------------------------------------------------------------------------ the parts' state
     @property
@@ -173,12 +180,22 @@ class DriverCore:
     def min_segment(self) -> float:
         """The shortest stream segment the bus feeds without a gap: MIN_SEGMENT_CYCLES of the
         configured cycle, or of the measured one when the wire is slower (a 72-byte record at
-        19.2 kbit/s)."""
+        19.2 kbit/s); for the commissioned G2 (its look-ahead, one target per acknowledgement)
+        :func:`~vr_driver.driver.commissioned.min_segment_cycles` of them."""
         rate = self.bus.cycle_rate_hz
         measured = self.link.cycle_rate
         if measured > 0.0:
             rate = min(rate, measured)
-        return MIN_SEGMENT_CYCLES / rate
+        return min_segment_cycles(self.params) / rate
+
+    def _say_controller_notes(self, status: DriverStatus) -> None:
+        """At every connect (bus thread): what the commissioned G2 changes, in words
+        (:attr:`controller_notes`), one warning each."""
+        up = status.link is LinkState.CONNECTED
+        if up and not self._notes_said:
+            for note in self.controller_notes:
+                log.warning("controller: %s", note)
+        self._notes_said = up
 
     # ------------------------------------------------------------------------ lifecycle
     def start(self) -> None:

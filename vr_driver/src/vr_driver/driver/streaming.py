@@ -60,8 +60,8 @@ from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "corner_levels", "corner_rounding",
-           "seq_offset"]
+__all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "wire_speed", "corner_levels",
+           "corner_rounding", "seq_offset"]
 
 #: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
 #: longer than MIN_SEGMENT_CYCLES (a quarter of the default path tolerance: the thinning, the blended
@@ -117,6 +117,17 @@ def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], tim
         speeds.append(permille)
         prev = q
     return speeds
+
+
+def wire_speed(speed: int, speed_scale: float) -> int:
+    """The speed number to send for a target planned at ``speed`` (0.1 % of the joint speed limits)
+    to a G2 whose MOVEP runs ``speed_scale`` times the commanded speed (its speed unit, measured by
+    the commissioning: ``controller/speed_scale``): ``speed / speed_scale`` rounded up (never slower
+    than planned), 1..1000 -- where the arm cannot go that fast, 1000 (slower than planned: the
+    planner must have had the scaled velocity limits). ``speed_scale`` 1: ``speed`` itself."""
+    if speed_scale == 1.0:
+        return speed
+    return min(1000, max(1, int(math.ceil(speed / speed_scale - 1e-9))))
 
 
 def _motion(start: Sequence[float], points: Sequence[Sequence[float]], speeds: Sequence[int],
@@ -521,7 +532,8 @@ class StreamSequencer(SequencerBase):
 
     def _target(self, job: MoveJob, k: int) -> WireTarget:
         point = job.points[k]
-        return WireTarget(self._seq(k), point.joints, point.pose, point.speed, point.smooth)
+        return WireTarget(self._seq(k), point.joints, point.pose,
+                          wire_speed(point.speed, self.params.controller.speed_scale), point.smooth)
 
     def record(self, now: float) -> Any:
         outputs = self.outputs

@@ -44,6 +44,7 @@ word, which the check word catches.
 """
 from __future__ import annotations
 
+import copy
 import enum
 import math
 import struct
@@ -458,6 +459,20 @@ class ProtocolV3(Protocol):
 
     look_ahead_slots = 1
     send_ahead = 2                  # one slot, the next target sent before the acknowledgement
+
+    def with_send_ahead(self, send_ahead: int) -> "ProtocolV3":
+        """This protocol for one driver whose G2 takes targets differently ahead: a copy whose
+        ``send_ahead`` is ``send_ahead`` (``look_ahead_slots`` .. the class's 2; 1: one target per
+        acknowledgement, for a program that refuses a target sent ahead -- the commissioning's
+        ``controller/send_ahead``, :attr:`vr_driver.params.DriverParams.wire`). The registry's object
+        is left as it is (the virtual G2 and every other driver keep the protocol's rule)."""
+        if isinstance(send_ahead, bool) or not isinstance(send_ahead, int) \
+                or not self.look_ahead_slots <= send_ahead <= type(self).send_ahead:
+            raise ProtocolError("send_ahead must be an integer in [%d, %d], got %r"
+                                % (self.look_ahead_slots, type(self).send_ahead, send_ahead))
+        proto = copy.copy(self)
+        proto.send_ahead = send_ahead
+        return proto
 
     def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
                        outputs: int = 0) -> CommandV3:

@@ -87,6 +87,15 @@ def pose_from_msg(msg: CartesianPose, what: str) -> ControllerPose:
         raise type(exc)("%s: %s" % (what, exc)) from None
 
 
+def _add_controller_notes(stat, notes):
+    """The commissioned G2's differences and what the driver does about each
+    (:func:`vr_driver.driver.commissioned.controller_notes`), one entry each, on the controller's
+    diagnostics (also logged at every connect)."""
+    for k, note in enumerate(notes, 1):
+        stat.add("commissioning %d" % k, note)
+    return stat
+
+
 class InterfaceNode:
     def __init__(self, params: DriverParams):
         self.params = params
@@ -288,11 +297,10 @@ class InterfaceNode:
             if not check.ok and fb is not None:
                 stat.mergeSummary(DiagnosticStatus.WARN, "the model differs from the controller's by "
                                   "%.2f mm / %.3f deg" % (check.position_mm, check.angle_deg))
-        c = s.counters
         for key in ("targets_sent", "targets_done", "targets_rejected", "targets_aborted"):
-            stat.add(key.replace("_", " "), str(getattr(c, key)))
+            stat.add(key.replace("_", " "), str(getattr(s.counters, key)))
         stat.add("queue", str(s.queue_length))
-        return stat
+        return _add_controller_notes(stat, self.core.controller_notes)
 
     def _publish_markers(self, job: MoveJob) -> None:
         """Goal arrow and previewed TCP path on ~markers (a failure here never blocks a move)."""
