@@ -24,9 +24,9 @@ from std_srvs.srv import SetBool, SetBoolResponse
 from ..controller.program import (AUTO_LINK, EXIT_DEVICE, EXIT_USAGE, SimDeviceError,
                              SimError, resolve_link)
 from ..controller.io_island import ISLAND_ADDRESS, VirtualIoIsland
-from .support import route_to_rosout, stop_on_signals, watch_simulator
+from .support import route_to_rosout, stop_on_signals, virtual_hardware_priority, watch_simulator
 
-PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path")
+PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path", "rt_priority")
 
 
 def main() -> int:
@@ -37,6 +37,7 @@ def main() -> int:
     unknown = sorted(k for k in params if k not in PARAMS)
     if unknown:
         rospy.logwarn("virtual_io_island: ignoring unknown parameter(s) %s", ", ".join(unknown))
+    virtual_hardware_priority("virtual_io_island")
     device = params.get("device") or None
     pty_link = None if device else params.get("pty_link", AUTO_LINK) or None
     try:

@@ -33,6 +33,27 @@ class RosoutHandler(logging.Handler):
             rospy.logdebug("%s", text)
 
 
+#: SCHED_FIFO priority of the virtual hardware's nodes (the virtual G2, the line, the I/O island):
+#: they stand for hardware, which is never late -- above the driver's bus process (bus_rt_priority
+#: 20), so that a loaded machine delays the driver, never the devices it is judged against
+VIRTUAL_RT_PRIORITY = 30
+
+
+def virtual_hardware_priority(name: str) -> str:
+    """Ask for SCHED_FIFO ``~rt_priority`` (default VIRTUAL_RT_PRIORITY, 0: normal) for this node's
+    calling thread -- call it before the device's threads start: they inherit it -- and log how it
+    is scheduled, once. Returns that, in words."""
+    from ..bus.process import set_priority
+    try:
+        priority = int(rospy.get_param("~rt_priority", VIRTUAL_RT_PRIORITY))
+    except (TypeError, ValueError):
+        rospy.logwarn("%s: ~rt_priority must be an integer 0..99: normal scheduling", name)
+        priority = 0
+    words = set_priority(max(0, min(99, priority)))
+    rospy.loginfo("%s: %s (virtual hardware: ~rt_priority)", name, words)
+    return words
+
+
 def route_to_rosout(*names: str, level: int = logging.INFO) -> None:
     """Send the named loggers to rosout only (no propagation, so nothing is logged twice)."""
     for name in names:

@@ -51,11 +51,11 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from ..controller.program import (AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
                              SimDeviceError, SimError, SimOptions, VirtualController, auto_pty_link)
-from .support import route_to_rosout, stop_on_signals, watch_simulator
+from .support import route_to_rosout, stop_on_signals, virtual_hardware_priority, watch_simulator
 from ..controller.arm import LogEntry
 
 #: parameters the node writes itself (not options)
-_OWN_PARAMS = ("device_path",)
+_OWN_PARAMS = ("device_path", "rt_priority")
 
 #: Hz of ~true_joints
 TRUE_JOINTS_RATE = 50.0
@@ -78,6 +78,7 @@ def main() -> int:
     params, unknown = split_params(rospy.get_param("~", {}) or {})
     if unknown:
         rospy.logwarn("virtual_controller: ignoring unknown parameter(s) %s", ", ".join(unknown))
+    virtual_hardware_priority("virtual_controller")
     try:
         if params.get("pty_link") == AUTO_LINK:
             params["pty_link"] = auto_pty_link()

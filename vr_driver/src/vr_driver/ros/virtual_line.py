@@ -20,7 +20,7 @@ import rospy
 from pyprofibus_vendor.errors import PhyError
 
 from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, resolve_link
-from .support import route_to_rosout, stop_on_signals
+from .support import route_to_rosout, stop_on_signals, virtual_hardware_priority
 from ..controller.line import LineHub
 
 
@@ -28,6 +28,7 @@ def main() -> int:
     stop = stop_on_signals()
     rospy.init_node("virtual_line", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
+    virtual_hardware_priority("virtual_line")
     try:
         raw = rospy.get_param("~stations", [AUTO_LINK, AUTO_LINK + ":io_island"])
         if not isinstance(raw, list):
