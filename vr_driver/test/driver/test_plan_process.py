@@ -4,7 +4,7 @@ a refusal the same as in-process, a plan the driver's own checks accept); a scen
 a plan reaches the next; a worker killed mid-plan ends that plan PLANNING_FAILED in words and the
 next plan gets a new worker; a cancel stops the worker at once; the caller's interpreter does
 (next to) nothing while a long plan runs (its CPU time, not the wall clock); a missing library is
-the worker's MissingDependency; the worker runs niced and ends with its parent; the node's side never
+the worker's MissingDependency; the worker runs at the node's priority (niced with the bus in the node's thread) and ends with its parent; the node's side never
 imports OMPL or TOPP-RA. Skipped, with the reason, where OMPL, TOPP-RA, pinocchio or coal are missing."""
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ import pytest
 
 from _world import World
 from vr_driver.driver import planning as P
-from vr_driver.driver.plan_process import PlanningCore, PlanningProcess, PlanningProcessError, SceneSnapshot
+from vr_driver.driver.plan_process import (WORKER_NICE, PlanningCore, PlanningProcess, PlanningProcessError, SceneSnapshot,
+                                           worker_nice)
 from vr_driver.driver.planning import DriverPlanning, PlanGoal
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
@@ -98,7 +99,7 @@ def in_background(fn):
 
 def test_a_plan_through_the_process_is_the_drivers_plan(world, planning, kin):
     local = DriverPlanning(world.core, kinematics=kin)
-    # a budget that a loaded machine (the worker runs niced) does not cut short: RRTConnect ends when it
+    # a budget that a loaded machine (the worker competes for the CPU) does not cut short: RRTConnect ends when it
     # has a path
     out = planning.plan(PlanGoal(pose=BEHIND, planning_time=10.0), seed=1)
     assert out.ok and out.code == P.SUCCESS, out.text
@@ -243,12 +244,29 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")      # utime + stime
 
 
-def test_the_worker_runs_at_a_lower_priority_and_leaves_a_ctrl_c_to_the_node(planning):
+def test_the_worker_runs_at_the_nodes_priority_with_a_bus_process_and_leaves_a_ctrl_c_to_the_node(planning):
+    """With the bus in a process of its own (bus_process, the default) the worker runs at the node's
+    priority; a Ctrl-C to the process group is the node's to act on."""
+    assert planning.params.bus_process and worker_nice(planning.params) == 0
     pid = planning.pid
-    assert os.getpriority(os.PRIO_PROCESS, pid) == min(19, os.getpriority(os.PRIO_PROCESS, 0) + 10)
+    assert os.getpriority(os.PRIO_PROCESS, pid) == os.getpriority(os.PRIO_PROCESS, 0)
     os.kill(pid, signal.SIGINT)           # roslaunch's stop reaches the whole process group
     assert planning.plan(AWAY).ok
     assert planning.pid == pid
+
+
+def test_the_worker_is_niced_when_the_bus_cycles_in_the_nodes_thread(kin):
+    """bus_process false: the bus thread shares the node's interpreter and its core; the worker
+    runs WORKER_NICE lower so that it never competes with it."""
+    w = World(kin, {"scene": CELL, "bus_process": False}, protocol="v3")
+    w.ready()
+    assert worker_nice(w.core.params) == WORKER_NICE == 10
+    p = PlanningProcess(w.core)
+    p.start()
+    try:
+        assert os.getpriority(os.PRIO_PROCESS, p.pid) == min(19, os.getpriority(os.PRIO_PROCESS, 0) + WORKER_NICE)
+    finally:
+        p.close()
 
 
 def test_the_workers_core_opens_no_port_and_starts_no_thread():

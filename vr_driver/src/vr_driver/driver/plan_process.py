@@ -20,7 +20,8 @@ delays no bus cycle: the node only sends a request and waits on a socket.
   the node's parameters (it opens no port and starts no thread: its link factory refuses, and
   ``start()`` is never called) and a :class:`~vr_driver.driver.planning.DriverPlanning` on it --
   the same code that planned in the node before, the driver's own stream checks included. It runs
-  at a lower CPU priority (``nice`` +:data:`WORKER_NICE`), one plan at a time. It talks over a
+  at the node's CPU priority, or lower (``nice`` +:data:`WORKER_NICE`) when the bus cycles in the
+  node's own thread (:func:`worker_nice`), one plan at a time. It talks over a
   ``socket.socketpair()`` (``pass_fds``) wrapped in a :class:`multiprocessing.connection.Connection`
   (pickled messages: ``("start", DriverParams)`` -> ``("ready", None)`` | ``("missing", ...)`` |
   ``("error", words)``; then ``("plan", PlanRequest)`` -> ``("outcome", PlanOutcome)`` |
@@ -78,11 +79,19 @@ from .scene_guard import SceneGuard
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["PlanningProcess", "PlanningProcessError", "PlanRequest", "SceneSnapshot", "PlanningCore", "WORKER_NICE",
+__all__ = ["PlanningProcess", "PlanningProcessError", "PlanRequest", "SceneSnapshot", "PlanningCore", "WORKER_NICE", "worker_nice",
            "READY_TIMEOUT", "ANSWER_MARGIN", "CANCEL_POLL"]
 
-#: the worker's niceness above the node's: it never competes with the bus thread for a core
+#: the worker's niceness above the node's when the bus cycles in the node's own thread
+#: (``bus_process: false``): then it must never compete with the bus thread for a core. With the bus
+#: in a process of its own (the default; real-time where allowed) the worker runs at the node's
+#: priority: niced, a loaded machine left it so little CPU that a 1 s budget found no path
 WORKER_NICE = 10
+
+
+def worker_nice(params: Any) -> int:
+    """The worker's niceness above the node's for the driver's parameters (WORKER_NICE)."""
+    return 0 if getattr(params, "bus_process", True) else WORKER_NICE
 #: [s] the longest wait for a new worker to be ready (its imports and models take about a second;
 #: a loaded machine, at the worker's low priority, longer)
 READY_TIMEOUT = 60.0
@@ -293,7 +302,7 @@ class PlanningProcess:
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)   # the node's modules, e.g. a source tree
         try:
             proc = subprocess.Popen([sys.executable, "-m", "vr_driver.driver.plan_process",
-                                     "--fd", str(theirs.fileno())],
+                                     "--fd", str(theirs.fileno()), "--nice", str(worker_nice(self.params))],
                                     pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
         except OSError as exc:
             ours.close()
@@ -467,9 +476,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog="python3 -m vr_driver.driver.plan_process",
                                      description="the plan action's planning process (started by the driver)")
     parser.add_argument("--fd", type=int, required=True, help="its end of the socket pair to the driver")
+    parser.add_argument("--nice", type=int, default=WORKER_NICE, help="niceness above the node's (default %d)"
+                        % WORKER_NICE)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="plan_process[%(process)d] %(levelname)s: %(message)s")
-    os.nice(WORKER_NICE)
+    if args.nice > 0:
+        os.nice(args.nice)
     # a Ctrl-C (roslaunch's SIGINT to the process group) is the node's to act on: this process ends
     # when the node's end of the socket closes (a SIGTERM or SIGKILL still ends it at once)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
