@@ -2,9 +2,9 @@
 """rostest of planning under load (test/planning_load.test): the driver with the example cell,
 protocol v3 at 19.2 kbit/s on the paced virtual line (the bytes take their wire time, the I/O island
 on the line), the plan action. 20 goals (short moves in front of the arm: joints, poses, home) are
-planned and executed one after another through the plan action while a second client keeps the
-planner busy with preview-only plans around the pillar (behind it, home) of a planner that uses its
-whole budget (RRT*) -- so OMPL plans while trajectories stream. Each of the 20 ends SUCCEEDED (executed by
+planned and executed one after another through the plan action while a second client starts a
+preview-only plan around the pillar (behind it, home) each time a trajectory runs, with a planner
+that uses its whole budget (RRT*) -- so OMPL plans while trajectories stream. Each of the 20 ends SUCCEEDED (executed by
 joint_trajectory_action); the link is never lost (the driver's /diagnostics: link losses 0), and the
 controller's card (and the island's) never sees its DP watchdog expire (their warnings on /rosout:
 none). Before the planning ran in a worker process of its own, OMPL held the node's interpreter
@@ -96,19 +96,24 @@ class PlanningLoadTest(unittest.TestCase):
                              "motion never became possible")
         executing = threading.Event()          # an executed goal's trajectory is running
         stop = threading.Event()
-        previews = []                          # (result code, whether a trajectory was running at its end)
+        previews = []                          # (state, result code) of each preview plan
         load_errors = []
 
         def load():
+            # a preview starts each time a trajectory is running (the plan action's executing
+            # phase), so that OMPL plans in the worker while the trajectory streams -- whatever the
+            # machine's speed: waiting on the phase, not on a guess of how long things take
             k = 0
             while not stop.is_set():
+                if not executing.wait(0.2):
+                    continue
                 k += 1
                 try:
                     state, result = self.plan(self.load_client, LOAD[k % len(LOAD)])
                 except AssertionError as exc:
                     load_errors.append(str(exc))
                     return
-                previews.append((state, result.error_code if result else None, executing.is_set()))
+                previews.append((state, result.error_code if result else None))
 
         t0 = time.monotonic()
         loader = threading.Thread(target=load, daemon=True)
@@ -138,12 +143,11 @@ class PlanningLoadTest(unittest.TestCase):
             loader.join(30.0)
         took = time.monotonic() - t0
         self.assertEqual(load_errors, [])
-        during = sum(1 for _, _, running in previews if running)
-        rospy.loginfo("planning_load: %d goals executed in %.1f s; %d preview plans (%d ended while a "
-                      "trajectory ran)", len(results), took, len(previews), during)
-        self.assertGreaterEqual(during, 3, "too few plans were made while a trajectory ran: %s" % previews)
+        rospy.loginfo("planning_load: %d goals executed in %.1f s; %d preview plans started while a "
+                      "trajectory ran", len(results), took, len(previews))
+        self.assertGreaterEqual(len(previews), 3, "too few plans were started while a trajectory ran: %s" % previews)
         self.assertTrue(all(code in (PlanResult.SUCCESS, PlanResult.PLANNING_FAILED, PlanResult.INVALID_MOTION_PLAN)
-                            for _, code, _ in previews), previews)
+                            for _, code in previews), previews)
         # the link: never lost, over the whole run (the counters count from the driver's start)
         msg = self.diag.wait_for(lambda m: link_values(m) is not None, 10.0, after=time.monotonic())
         self.assertIsNotNone(msg, "no link diagnostics")
