@@ -144,4 +144,4 @@ def _speed_words(params: DriverParams, kin: Any) -> str:
         if over:
             return text + " -- planning_limits (%s) allows more for %s: plans may run slower there" % (
                 params.planning_limits, ", ".join(over))
-    return text + "; planning_limits (%s) holds the scaled limits for the planner" % params.planning_limits
+    return text + "; the plan action plans with planning_limits (%s)" % params.planning_limits

@@ -49,6 +49,7 @@ from ..kinematics import deps
 from ..kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError
 from ..kinematics.solver import stretched_elbow
 from ..poses import ControllerPose, Workspace
+from .commissioned import planning_kinematics
 
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
@@ -250,7 +251,8 @@ class DriverPlanning:
         if kinematics is None:
             from .core import driver_kinematics
             kinematics = driver_kinematics(self.params)   # its own: no solver shared with the bus thread
-        self.kin = kinematics
+        # the commissioned joint speed and acceleration limits (planning_limits), where measured
+        self.kin = planning_kinematics(self.params, kinematics)
         self.clock = clock
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
