@@ -11,6 +11,8 @@ composed by :class:`DriverCore`.
     job_control.py  JobControl: submit, cancel, stop, prepare_trajectory; the planning thread
     path_checks.py  PathChecks: previews, the workspace box, the cell (scene_guard.py)
     stream_prep.py  JointStreams (v2), CartesianStreams (v3): a path made a checked stream
+    wire_targets.py the wire pose of a v3 target the G2 solves on the plan (near joint_5 = 0)
+    commissioned.py what the driver does with the commissioning file's G2 facts (speeds, look-ahead)
     core.py         DriverCore: owns and wires the parts; the one object the node talks to
 """
 from __future__ import annotations
