@@ -497,3 +497,21 @@ def test_the_driver_parameter_model_makes_the_true_robot_the_drivers_model():
     default.ready()
     check = default.status().model_check
     assert check is not None and not check.ok, check
+
+
+def test_status_after_waits_for_a_snapshot_of_a_later_iteration(world):
+    """A thread woken by a job's end (set inside the sequencer's step, before that step's snapshot)
+    asks for the status of a later iteration: status_after returns only once the bus loop has taken
+    one (here the test's one thread steps the loop while another waits)."""
+    import threading
+    t = world.now + 1e-6                     # after the last snapshot
+    got = []
+    waiter = threading.Thread(target=lambda: got.append(world.core.bus_loop.status_after(t, 10.0)))
+    waiter.start()
+    waiter.join(0.2)
+    assert waiter.is_alive() and got == []   # no later snapshot yet: still waiting
+    world.run_for(2.0 / world.params.cycle_rate)
+    waiter.join(5.0)
+    assert got == [True]
+    assert world.core.status().time >= t
+    assert world.core.bus_loop.status_after(world.now + 1.0, 0.05) is False    # none: it gives up

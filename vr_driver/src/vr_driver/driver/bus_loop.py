@@ -55,6 +55,7 @@ class BusLoop:
         self._repeated = False            # this cycle was such a repeat
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
+        self._fresh = threading.Condition()      # notified with each new snapshot (status_after)
 
     # ------------------------------------------------------------------------ the thread
     @property
@@ -159,6 +160,15 @@ class BusLoop:
         self._notify(status)
         return status
 
+    def status_after(self, t: float, timeout: float) -> bool:
+        """Wait (at most ``timeout`` s) for a snapshot taken at ``t`` or later; True when there is one.
+        A job's end is set inside the sequencer's step, before that step's snapshot: a thread woken
+        by it that reads the status at once reads the one before -- the arm's joints a record before
+        its end (a goal check failed at 0.45 deg off a pose the arm had reached). Not for a stepped
+        core (one thread: nothing else would take the snapshot)."""
+        with self._fresh:
+            return self._fresh.wait_for(lambda: self._status.time >= t, timeout)
+
     # ------------------------------------------------------------------------ snapshots
     def _snapshot(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
         view = self.sequencer.view
@@ -196,6 +206,8 @@ class BusLoop:
         return status
 
     def _notify(self, status: DriverStatus) -> None:
+        with self._fresh:
+            self._fresh.notify_all()
         for callback in self._listeners:
             try:
                 callback(status)

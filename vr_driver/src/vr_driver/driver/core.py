@@ -227,6 +227,13 @@ class DriverCore:
         ``link_timeout``, or with feedback older than that, reads as a lost link."""
         return self.bus_loop.status(self.clock() if now is None else now)
 
+    def status_after(self, t: float, timeout: Optional[float] = None) -> DriverStatus:
+        """The snapshot of a bus iteration that began at ``t`` (the clock) or later -- e.g. the status
+        beside a job that ended -- waiting for it at most ``timeout`` (default ``link_timeout``),
+        then :meth:`status` (after a timeout: what it is then, a lost link when it is old)."""
+        self.bus_loop.status_after(t, self.params.link_timeout if timeout is None else timeout)
+        return self.status()
+
     # ------------------------------------------------------------------------ stepping (tests)
     def spin_once(self) -> DriverStatus:
         """One bus iteration (:meth:`BusLoop.spin_once`)."""

@@ -216,7 +216,8 @@ class TrajectoryServer:
             for job in run.jobs:
                 job.wait(self.core.params.stop_timeout + 5.0)
         self._draw("trajectory_executed", self._executed(sup), (0.2, 1.0, 0.2))
-        outcome = sup.finish_status(self.core.clock(), self.core.status())
+        # the status of a bus iteration after the run ended (the one that ended it may not be out yet)
+        outcome = sup.finish_status(self.core.clock(), self.core.status_after(self.core.clock()))
         rospy.loginfo("joint_trajectory_action: %s", outcome.note)
         result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string=outcome.error_string)
         if outcome.state == SUCCEEDED:
