@@ -38,6 +38,27 @@ def skip(*names: str) -> List[str]:
     return ["--skip", ",".join(names)] if names else []
 
 
+#: SCHED_FIFO priority of the virtual G2's threads where allowed (as the virtual hardware's ROS nodes)
+HARDWARE_PRIORITY = 30
+
+
+def start_as_hardware(vc: VirtualController) -> None:
+    """``vc.start()`` with its threads at real-time priority where the system allows it: the virtual
+    G2 stands for hardware, which is never late -- the tool measures its loop period to 1 ms, and a
+    starved controller thread once measured 15.5 ms for 10 ms in a loaded test run. Its threads
+    inherit the policy of the thread that starts them; this one goes back to normal scheduling."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(HARDWARE_PRIORITY))
+        realtime = True
+    except (PermissionError, OSError, AttributeError):
+        realtime = False
+    try:
+        vc.start()
+    finally:
+        if realtime:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
 def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeout: float = 120.0,
                    cycle_rate: float = CYCLE_RATE) -> Tuple[Dict[str, Any], str, VirtualController]:
     """Start the virtual G2 with ``vc_options``, run the tool against it, return (its YAML, its
@@ -46,7 +67,7 @@ def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeou
                            **vc_options)
     out = tmp_path / "commissioning.yaml"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    vc.start()
+    start_as_hardware(vc)
     try:
         proc = subprocess.run([sys.executable, NODE, "--port", vc.device_path, "--baud", str(BAUD),
                                "--cycle-rate", str(cycle_rate), "--yes", "--out", str(out)] + QUICK + args,
