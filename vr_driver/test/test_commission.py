@@ -38,8 +38,9 @@ def skip(*names: str) -> List[str]:
     return ["--skip", ",".join(names)] if names else []
 
 
-#: SCHED_FIFO priority of the virtual G2's threads where allowed (as the virtual hardware's ROS nodes)
-HARDWARE_PRIORITY = 30
+#: SCHED_FIFO priority of the virtual G2's threads where allowed (as the virtual hardware's ROS nodes:
+#: below the tool's own bus, 20)
+HARDWARE_PRIORITY = 10
 
 
 def start_as_hardware(vc: VirtualController) -> None:
