@@ -24,14 +24,14 @@ import logging
 import os
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, Iterable, List, Optional, Tuple
+from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Tuple
 
 from ..driver.link import LinkSample, LinkState, LinkSupervisor
 from ..errors import VrDriverError
 from ..params import DriverParams
 from ..protocol.v3 import FeedbackV3
 
-__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_users", "heartbeat_brackets"]
+__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_users", "heartbeat_brackets", "new_loops"]
 
 log = logging.getLogger("vr_driver.commission")
 
@@ -228,12 +228,10 @@ class CommissionBus:
             self.supervisor.close()
 
 
-def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]]:
-    """(unwrapped heartbeat, earliest, latest) for every heartbeat seen first in ``cycles``: the
-    program loop that wrote it ran after the request of the last cycle with an older heartbeat
-    (earliest) and before the reply that brought it arrived (latest). Heartbeats are unwrapped
-    (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
-    out: List[Tuple[int, float, float]] = []
+def new_loops(cycles: Iterable[Cycle]) -> Iterator[Tuple[Cycle, int, Optional[float]]]:
+    """(cycle, unwrapped heartbeat, the request time of the cycle before it) for the first record
+    of ``cycles`` (heartbeat 0) and for every later one that brought a newer heartbeat: the program
+    loop count, unwrapped (mod 65536) from the first record; records without a new loop skipped."""
     last_raw: Optional[int] = None
     k = 0
     prev_request: Optional[float] = None
@@ -243,13 +241,20 @@ def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]
             continue
         if last_raw is None:
             last_raw = fb.heartbeat
-            prev_request = c.request
-            continue
-        step = (fb.heartbeat - last_raw) % 65536
-        if step:
-            k += step
-            latest = c.arrival if c.arrival is not None else c.time
-            out.append((k, prev_request if prev_request is not None else c.request, latest))
-            last_raw = fb.heartbeat
+            yield c, 0, None
+        else:
+            step = (fb.heartbeat - last_raw) % 65536
+            if step:
+                k += step
+                last_raw = fb.heartbeat
+                yield c, k, prev_request
         prev_request = c.request
-    return out
+
+
+def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]]:
+    """(unwrapped heartbeat, earliest, latest) for every heartbeat seen first in ``cycles``: the
+    program loop that wrote it ran after the request of the last cycle with an older heartbeat
+    (earliest) and before the reply that brought it arrived (latest). Heartbeats are unwrapped
+    (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
+    return [(k, prev if prev is not None else c.request, c.arrival if c.arrival is not None else c.time)
+            for c, k, prev in new_loops(cycles) if k > 0]

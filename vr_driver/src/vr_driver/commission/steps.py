@@ -44,7 +44,7 @@ from ..protocol.v1 import ByteOrder, StatusBits
 from ..protocol.v3 import (CartesianSlot, CommandV3, Control, FeedbackV3, RejectCode, StreamState, check_word,
                            next_seq, seq_after)
 from . import analysis
-from .bus import CommissionBus, CommissionError, Cycle, heartbeat_brackets
+from .bus import CommissionBus, CommissionError, Cycle, heartbeat_brackets, new_loops
 
 log = logging.getLogger("vr_driver.commission")
 
@@ -220,22 +220,7 @@ class Context:
         dates = analysis.date_loops(brackets, stall=max(3.0 * self.loop_period, 3.0 * self.bus.period))
         out: List[Tuple[float, Tuple[float, ...]]] = []
         q = tuple(seed)
-        k_of: Dict[int, int] = {}
-        last_raw: Optional[int] = None
-        k = 0
-        for c in cycles:
-            fb = c.feedback
-            if fb is None:
-                continue
-            if last_raw is None:
-                last_raw = fb.heartbeat
-                k_of[id(c)] = 0
-                continue
-            step = (fb.heartbeat - last_raw) % 65536
-            if step:
-                k += step
-                last_raw = fb.heartbeat
-                k_of[id(c)] = k
+        k_of: Dict[int, int] = {id(c): k for c, k, _prev in new_loops(cycles)}
         for c in cycles:
             k = k_of.get(id(c), -1)
             if k < 0 or c.feedback is None:

@@ -74,7 +74,7 @@ from ..errors import MissingDependency, VrDriverError
 from ..kinematics.scene import Scene, SceneObject
 from .core import DriverCore, driver_kinematics
 from .planning import (ATTEMPTS, INVALID_ROBOT_STATE, PLANNING_FAILED, PREEMPTED, DriverPlanning, PlanGoal,
-                       PlanOutcome)
+                       PlanOutcome, joints_to_plan_from)
 from .scene_guard import SceneGuard
 
 log = logging.getLogger("vr_driver.driver")
@@ -247,12 +247,9 @@ class PlanningProcess:
             if self._closed:
                 return failed("no plan: the planning process was closed (the driver is shutting down)")
             if start is None:
-                status = self.core.status()
-                if status.joints is None or not getattr(status, "joints_valid", True):
-                    return PlanOutcome(INVALID_ROBOT_STATE, "refused: the arm's joints are not known (%s)"
-                                       % (status.why_no_motion() or "no feedback from the controller"),
-                                       planner_id=planner_id)
-                start = status.joints
+                start = joints_to_plan_from(self.core.status())
+                if isinstance(start, str):
+                    return PlanOutcome(INVALID_ROBOT_STATE, start, planner_id=planner_id)
             if self._proc is not None and self._proc.poll() is not None:     # it ended between two plans
                 log.warning("planning process %d had ended (%s): starting a new one", self._proc.pid,
                             _exit_words(self._proc.returncode))

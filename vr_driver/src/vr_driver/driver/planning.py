@@ -143,6 +143,15 @@ class WorkspaceContact:
         return self._text
 
 
+def joints_to_plan_from(status: Any) -> Any:
+    """The arm's joints in the driver's ``status`` (a DriverStatus), or -- when they are not known --
+    the refusal in words (a str)."""
+    if status.joints is None or not getattr(status, "joints_valid", True):
+        return "refused: the arm's joints are not known (%s)" % (
+            status.why_no_motion() or "no feedback from the controller")
+    return tuple(status.joints)
+
+
 class CellValidity:
     """A collision checker (or None: nothing to collide with) and the workspace box as one validity
     the planner takes like a checker: ``in_collision(q)`` (the arm hits something, or its TCP is
@@ -318,12 +327,9 @@ class DriverPlanning:
         except PlanningError as exc:
             return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planner_id=goal.planner_id)
         if start is None:
-            status = self.core.status()
-            if status.joints is None or not getattr(status, "joints_valid", True):
-                return PlanOutcome(INVALID_ROBOT_STATE, "refused: the arm's joints are not known (%s)"
-                                   % (status.why_no_motion() or "no feedback from the controller"),
-                                   planner_id=planner_id)
-            start = status.joints
+            start = joints_to_plan_from(self.core.status())
+            if isinstance(start, str):
+                return PlanOutcome(INVALID_ROBOT_STATE, start, planner_id=planner_id)
         refusal = ""
         for attempt in range(ATTEMPTS):
             try:
