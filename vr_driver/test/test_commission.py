@@ -18,6 +18,7 @@ from typing import Any, Dict, List, Tuple
 import pytest
 import yaml
 
+from vr_driver.commission.steps import STEP_NAMES
 from vr_driver.controller.program import VirtualController
 from vr_driver.params import DriverParams, ParamError
 
@@ -128,6 +129,14 @@ def test_default_g2_every_step_as_assumed(tmp_path, kin):
     # every row as assumed, except the loop's steadiness, which is this machine's load
     bad = [f for f in doc["commissioning"]["findings"] if f.get("ok") is not True
            and not f["assumption"].startswith("program loop at rest")]
+    # an unclear verdict ("run the step again, watch the arm": too few records near a point on a
+    # loaded machine) is re-measured as the tool advises -- the look-ahead step alone, once -- and
+    # must then be clear and as assumed; a verdict that is wrong (False) is never re-measured
+    unclear = {f["assumption"] for f in bad if "ok" not in f or f.get("ok") is None}
+    if unclear and unclear == {f["assumption"] for f in bad} and unclear <= {"smooth 0 (an exact stop)"}:
+        (tmp_path / "again").mkdir()
+        again, _text, _vc = run_commission(tmp_path / "again", {}, skip(*(n for n in STEP_NAMES if n != "lookahead")))
+        bad = [f for f in again["commissioning"]["findings"] if f["assumption"] in unclear and f.get("ok") is not True]
     assert not bad, bad
     with open(tmp_path / "joint_limits.yaml", encoding="utf-8") as fh:
         limits = yaml.safe_load(fh)["joint_limits"]
