@@ -19,7 +19,6 @@ import sys
 import time
 from typing import Callable, List, Optional, Sequence, TextIO
 
-from ..bus.process import set_priority
 from ..errors import VrDriverError
 from ..params import DriverParams, ParamError
 from .bus import CommissionBus, CommissionError, LinkDown, port_users
@@ -181,9 +180,6 @@ class _Runner:
         if unknown:
             self.say("commission: unknown step %s (steps: %s)" % (", ".join(unknown), ", ".join(STEP_NAMES)))
             return 2
-        # the tool is the bus here, as the driver's bus process is: real-time where the system allows
-        # it, so that a busy machine does not thin out the records every step measures from
-        self.say("commission: the bus runs at %s" % set_priority(params.bus_rt_priority))
         device = bus_config.phy.device
         users = port_users(device)
         if users:
