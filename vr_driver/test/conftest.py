@@ -42,11 +42,11 @@ LANE_OF = {
     "test_controller_v2_pty.py": "realtime",
     "test_sim_line_pty.py": "realtime",
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
-    "test_commission.py": "realtime",              # `commission` against the virtual G2 over a real pty
+    "test_commission.py": "solo",                  # `commission` measures the virtual G2 to the ms: alone
     "test_soak.py": "soak",                        # the longest: a lane of its own
     "test_plan_process.py": "planning",
 }
-LANES = ("computation", "stepped", "planning", "realtime", "pty", "soak")
+LANES = ("computation", "stepped", "planning", "realtime", "pty", "soak", "solo")
 
 
 def lane_of(path) -> str:
