@@ -14,17 +14,16 @@ Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
 from __future__ import annotations
 
-import os
 from typing import Any
 
 import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from ..controller.program import (AUTO_LINK, EXIT_DEVICE, EXIT_USAGE, SimDeviceError,
-                             SimError, resolve_link)
+from ..controller.program import AUTO_LINK
 from ..controller.io_island import ISLAND_ADDRESS, VirtualIoIsland
-from .support import route_to_rosout, stop_on_signals, virtual_hardware_priority, watch_simulator
+from .support import (open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
+                      watch_simulator)
 
 PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path", "rt_priority")
 
@@ -39,19 +38,14 @@ def main() -> int:
         rospy.logwarn("virtual_io_island: ignoring unknown parameter(s) %s", ", ".join(unknown))
     virtual_hardware_priority("virtual_io_island")
     device = params.get("device") or None
-    pty_link = None if device else params.get("pty_link", AUTO_LINK) or None
-    try:
-        if pty_link is not None and pty_link.startswith(AUTO_LINK):
-            pty_link = resolve_link(pty_link, "io_island")
-            os.makedirs(os.path.dirname(pty_link), exist_ok=True)
-        island = VirtualIoIsland(device, address=params.get("addr", ISLAND_ADDRESS),
-                                 baud=params.get("baud", 19200), pty_link=pty_link)
-    except SimDeviceError as exc:
-        rospy.logfatal("virtual_io_island: device error: %s", exc)
-        return EXIT_DEVICE
-    except SimError as exc:
-        rospy.logfatal("virtual_io_island: %s", exc)
-        return EXIT_USAGE
+
+    def make() -> VirtualIoIsland:
+        pty_link = None if device else own_link(params.get("pty_link", AUTO_LINK), "io_island")
+        return VirtualIoIsland(device, address=params.get("addr", ISLAND_ADDRESS),
+                               baud=params.get("baud", 19200), pty_link=pty_link)
+    island, status = open_device("virtual_io_island", make)
+    if island is None:
+        return status
     island.set_part_present(bool(params.get("part_present", False)))
 
     def set_part_present(request: Any) -> Any:

@@ -9,9 +9,10 @@ deadlocks on Ctrl-C. Our nodes therefore init with ``disable_signals=True``, let
 from __future__ import annotations
 
 import logging
+import os
 import signal
 import threading
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Tuple
 
 import rospy
 
@@ -54,6 +55,36 @@ def virtual_hardware_priority(name: str) -> str:
     words = set_priority(max(0, min(99, priority)))
     rospy.loginfo("%s: %s (virtual hardware: ~rt_priority)", name, words)
     return words
+
+
+def own_link(value: Any, station: str) -> Optional[str]:
+    """A virtual device's ``~pty_link``: "" or None for no symlink; ``auto`` / ``auto:NAME`` this
+    launch's own link of ``station`` / NAME (``controller.program.resolve_link``), its folder made;
+    any other value, the path as given."""
+    from ..controller.program import AUTO_LINK, resolve_link
+    if not value:
+        return None
+    if not isinstance(value, str):
+        from ..controller.program import SimError
+        raise SimError("~pty_link must be a path, %r or \"\", got %r" % (AUTO_LINK, value))
+    if value.startswith(AUTO_LINK):
+        value = resolve_link(value, station)
+        os.makedirs(os.path.dirname(value), exist_ok=True)
+    return value
+
+
+def open_device(name: str, make: Callable[[], Any]) -> Tuple[Any, int]:
+    """``make()``, which opens a virtual device on its serial port, and EXIT_OK; or, after a fatal
+    log in words, (None, EXIT_DEVICE) when the port failed, (None, EXIT_USAGE) for a wrong setting."""
+    from ..controller.program import EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError
+    try:
+        return make(), EXIT_OK
+    except SimDeviceError as exc:
+        rospy.logfatal("%s: device error: %s", name, exc)
+        return None, EXIT_DEVICE
+    except (SimError, ValueError) as exc:
+        rospy.logfatal("%s: %s", name, exc)
+        return None, EXIT_USAGE
 
 
 def route_to_rosout(*names: str, level: int = logging.INFO) -> None:

@@ -41,7 +41,6 @@ Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
 from __future__ import annotations
 
-import os
 from typing import Any, Dict, Mapping, Tuple
 
 import rospy
@@ -49,9 +48,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from ..controller.program import (AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, PARAM_NAMES,
-                             SimDeviceError, SimError, SimOptions, VirtualController, auto_pty_link)
-from .support import route_to_rosout, stop_on_signals, virtual_hardware_priority, watch_simulator
+from ..controller.program import AUTO_LINK, EXIT_OK, PARAM_NAMES, SimOptions, VirtualController
+from .support import (open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
+                      watch_simulator)
 from ..controller.arm import LogEntry
 
 #: parameters the node writes itself (not options)
@@ -79,18 +78,18 @@ def main() -> int:
     if unknown:
         rospy.logwarn("virtual_controller: ignoring unknown parameter(s) %s", ", ".join(unknown))
     virtual_hardware_priority("virtual_controller")
-    try:
+
+    def read_options() -> SimOptions:
         if params.get("pty_link") == AUTO_LINK:
-            params["pty_link"] = auto_pty_link()
-            os.makedirs(os.path.dirname(params["pty_link"]), exist_ok=True)
-        options = SimOptions.from_mapping(params)
-        controller = VirtualController(options.device, **options.controller_kwargs())
-    except SimDeviceError as exc:
-        rospy.logfatal("virtual_controller: device error: %s", exc)
-        return EXIT_DEVICE
-    except SimError as exc:
-        rospy.logfatal("virtual_controller: %s", exc)
-        return EXIT_USAGE
+            params["pty_link"] = own_link(AUTO_LINK, "g2")
+        return SimOptions.from_mapping(params)
+    options, status = open_device("virtual_controller", read_options)
+    if options is None:
+        return status
+    controller, status = open_device(
+        "virtual_controller", lambda: VirtualController(options.device, **options.controller_kwargs()))
+    if controller is None:
+        return status
 
     executed = rospy.Publisher("~executed", String, queue_size=100, latch=True)
 

@@ -11,7 +11,6 @@ Sets ``~device_path`` (the master's pty). Exit status: 0 on shutdown, 2 bad para
 """
 from __future__ import annotations
 
-import os
 import threading
 from typing import List
 
@@ -19,8 +18,8 @@ import rospy
 
 from pyprofibus_vendor.errors import PhyError
 
-from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError, resolve_link
-from .support import route_to_rosout, stop_on_signals, virtual_hardware_priority
+from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, SimError, resolve_link
+from .support import open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority
 from ..controller.line import LineHub
 
 
@@ -29,28 +28,20 @@ def main() -> int:
     rospy.init_node("virtual_line", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     virtual_hardware_priority("virtual_line")
-    try:
+
+    def make() -> LineHub:
         raw = rospy.get_param("~stations", [AUTO_LINK, AUTO_LINK + ":io_island"])
-        if not isinstance(raw, list):
-            raise SimError("~stations must be a list of pty paths, got %r" % (raw,))
-        if not all(isinstance(p, str) and p for p in raw):
+        if not isinstance(raw, list) or not all(isinstance(p, str) and p for p in raw):
             raise SimError("~stations must be a list of pty paths, got %r" % (raw,))
         stations: List[str] = [resolve_link(p) for p in raw]
-        link = rospy.get_param("~pty_link", AUTO_LINK) or None
-        if link is not None and link.startswith(AUTO_LINK):
-            link = resolve_link(link, "line")
-            os.makedirs(os.path.dirname(link), exist_ok=True)
         baud = int(rospy.get_param("~baud", 0)) or None
-        hub = LineHub(stations, pty_link=link, baud=baud)
-    except SimDeviceError as exc:
-        rospy.logfatal("virtual_line: device error: %s", exc)
-        return EXIT_DEVICE
-    except (SimError, ValueError) as exc:
-        rospy.logfatal("virtual_line: %s", exc)
-        return EXIT_USAGE
+        return LineHub(stations, pty_link=own_link(rospy.get_param("~pty_link", AUTO_LINK), "line"), baud=baud)
+    hub, status = open_device("virtual_line", make)
+    if hub is None:
+        return status
     rospy.set_param("~device_path", hub.device_path)
     rospy.loginfo("virtual_line: master end %s%s; stations %s", hub.device_path,
-                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(stations))
+                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(s.path for s in hub.stations))
     halt = threading.Event()
     rospy.on_shutdown(halt.set)
     status = EXIT_OK
