@@ -38,7 +38,7 @@ import re
 import sys
 import time
 from dataclasses import dataclass, field, replace
-from typing import Callable, List, Optional, Sequence, TextIO, Tuple
+from typing import Any, Callable, List, Optional, Sequence, TextIO, Tuple
 
 from ..kinematics.preview import MoveType
 from ..poses import HOME_POSE, ControllerPose, Workspace
@@ -802,15 +802,25 @@ class Terminal:
             return EXIT_NO_DRIVER if preview.unavailable else EXIT_REFUSED
         self.say("Preview: reachable; estimated duration %.1f s" % preview.duration)
         self.say("  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target))
+        stop = self._go_ahead(request, preview_only, confirm, "previewed (not sent)",
+                              "Send this %s move to the robot? [y/N]: " % request.move_type.name)
+        if stop is not None:
+            return stop
+        return self._run_move(request, preview, move_timeout)
+
+    def _go_ahead(self, request: Any, preview_only: bool, confirm: bool, shown: str, question: str
+                  ) -> Optional[int]:
+        """None when the previewed or planned ``request`` may go to the robot now; else the exit
+        status: EXIT_OK after recording ``shown`` when only a preview was asked for, EXIT_REFUSED
+        when motion is not possible or the user does not answer ``question`` with yes."""
         if preview_only:
-            self._record(request, "previewed (not sent)")
+            self._record(request, shown)
             return EXIT_OK
         if not self._motion_possible(request):
             return EXIT_REFUSED
-        if confirm and not self.assume_yes and not self._confirm(
-                request, "Send this %s move to the robot? [y/N]: " % request.move_type.name):
+        if confirm and not self.assume_yes and not self._confirm(request, question):
             return EXIT_REFUSED
-        return self._run_move(request, preview, move_timeout)
+        return None
 
     def _motion_possible(self, request) -> bool:
         status = self.backend.status()
@@ -867,14 +877,10 @@ class Terminal:
         self.say("  speed: %s" % (speed or "not reported by the driver (velocity scaling %s)"
                                   % ("%g" % request.velocity_scaling if request.velocity_scaling
                                      else "the driver's default")))
-        if preview_only:
-            self._record(request, "planned (not run)")
-            return EXIT_OK
-        if not self._motion_possible(request):
-            return EXIT_REFUSED
-        if confirm and not self.assume_yes and not self._confirm(
-                request, "Run this planned motion on the robot? [y/N]: "):
-            return EXIT_REFUSED
+        stop = self._go_ahead(request, preview_only, confirm, "planned (not run)",
+                              "Run this planned motion on the robot? [y/N]: ")
+        if stop is not None:
+            return stop
         return self._run_move(request, preview, move_timeout, start=lambda: self.backend.start_plan(preview))
 
     def _run_move(self, request, preview, move_timeout: Optional[float],
