@@ -12,8 +12,7 @@ from __future__ import annotations
 import faulthandler
 import signal
 import sys
-import threading
-from typing import Dict, List, Optional, Tuple
+from typing import List, Optional, Tuple
 
 import actionlib
 import diagnostic_updater
@@ -30,6 +29,7 @@ from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, 
 from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
                      SubmitMode)
 from ..errors import MissingDependency, VrDriverError
+from .goal_runner import Goal, GoalRunner
 from .industrial import IndustrialInterface
 from .io_server import IoServer
 from .joint_command import JointCommandSubscriber
@@ -115,13 +115,14 @@ class InterfaceNode:
         self.io_server = IoServer(self.core, params, self.diag)      # set_io, get_io, io_states
         # a plain ActionServer: a preview_only goal runs beside a moving goal and never preempts it
         # (SimpleActionServer would cancel the running move for any new goal, previews included);
-        # a new motion goal preempts the running one (the arm is stopped first)
-        self.server = actionlib.ActionServer("move_to_pose", MoveToPoseAction, goal_cb=self._on_goal,
-                                             cancel_cb=self._on_cancel, auto_start=False)
-        self._goals_lock = threading.Lock()
-        self._cancel: Dict[str, threading.Event] = {}        # goal id -> cancel requested
-        self._tickets: Dict[str, int] = {}                   # motion goal id -> arrival ticket
-        self._motion_goal: Optional[str] = None
+        # a new motion goal preempts the running one at its arrival (the arm is stopped first) and
+        # takes the core's ticket then, so that the newest goal wins however long each takes to plan
+        self.goals = GoalRunner("move_to_pose", self._execute,
+                                lambda text: MoveToPoseResult(success=False, reason=text),
+                                exclusive=lambda goal: not goal.preview_only,
+                                ticket=lambda _goal: self.core.claim_ticket())
+        self.server = actionlib.ActionServer("move_to_pose", MoveToPoseAction, goal_cb=self.goals.on_goal,
+                                             cancel_cb=self.goals.on_cancel, auto_start=False)
         # feedback_states, stop_motion, start_motion, joint_path_command (service), get_robot_info
         self.industrial = IndustrialInterface(self.core, params, self.joint_path)
         # FollowJointTrajectory under the ROS-Industrial name (MoveIt's controller manager)
@@ -359,75 +360,39 @@ class InterfaceNode:
             raise DriverError("has_via is only allowed with CIRC goals")
         return MoveRequest(kind, target, via, preview_only=goal.preview_only)
 
-    def _on_goal(self, handle) -> None:
-        """ActionServer thread (goals arrive here in the order the server received them): take a
-        ticket for a motion goal and preempt the previous one now -- the newest goal wins however
-        long each takes to plan --, accept, then run the goal in its own thread."""
-        goal_id = handle.get_goal_id().id
-        with self._goals_lock:
-            self._cancel[goal_id] = threading.Event()
-            if not handle.get_goal().preview_only:
-                self._tickets[goal_id] = self.core.claim_ticket()
-                previous, self._motion_goal = self._motion_goal, goal_id
-                if previous is not None and previous in self._cancel:
-                    self._cancel[previous].set()
-        handle.set_accepted()
-        threading.Thread(target=self._run_goal, args=(handle, goal_id), name="goal-" + goal_id[-8:],
-                         daemon=True).start()
-
-    def _on_cancel(self, handle) -> None:
-        with self._goals_lock:
-            event = self._cancel.get(handle.get_goal_id().id)
-        if event is not None:
-            event.set()
-
-    def _run_goal(self, handle, goal_id: str) -> None:
-        try:
-            self._execute(handle, handle.get_goal(), self._cancel[goal_id])
-        except Exception as exc:  # never leave a goal hanging
-            rospy.logerr("move_to_pose: internal error: %s", exc)
-            handle.set_aborted(MoveToPoseResult(success=False, reason="internal error: %s" % exc))
-        finally:
-            with self._goals_lock:
-                self._cancel.pop(goal_id, None)
-                self._tickets.pop(goal_id, None)
-                if self._motion_goal == goal_id:
-                    self._motion_goal = None
-
-    def _execute(self, handle, goal: MoveToPoseGoal, cancel: threading.Event) -> None:
+    def _execute(self, goal: Goal) -> None:
+        """One move_to_pose goal (its thread; :class:`GoalRunner` ends it if this raises)."""
+        cancel = goal.cancel
         result = MoveToPoseResult()
         feedback = MoveToPoseFeedback(phase=MoveToPoseFeedback.PHASE_VALIDATING)
         status = self.core.status()
         feedback.current = cartesian(status.pose)
-        handle.publish_feedback(feedback)
-        goal_id = handle.get_goal_id().id
+        goal.publish_feedback(feedback)
         try:
-            request = self._request_from_goal(goal)
+            request = self._request_from_goal(goal.get_goal())
             if request.preview_only:
                 preview = self.core.preview(request)
                 job = None
             else:
-                with self._goals_lock:
-                    ticket = self._tickets.get(goal_id)
                 # PREEMPT: stops the running move and drops the queue; a goal older than the
                 # newest ticket is superseded by the core, never run
-                job = self.core.submit(request, mode=SubmitMode.PREEMPT, ticket=ticket)
+                job = self.core.submit(request, mode=SubmitMode.PREEMPT, ticket=goal.ticket)
                 preview = job.preview
         except (VrDriverError, ValueError, TypeError) as exc:
             result.success = False
             result.reason = "refused: %s" % exc
             result.reached = cartesian(status.pose)
             rospy.logwarn("move_to_pose %s", result.reason)
-            handle.set_aborted(result, result.reason)
+            goal.set_aborted(result, result.reason)
             return
         result.joint_target = list(preview.joint_target)
         result.estimated_duration = preview.duration
         feedback.phase = MoveToPoseFeedback.PHASE_PREVIEW
-        handle.publish_feedback(feedback)
+        goal.publish_feedback(feedback)
         if job is None:
             result.success = True
             result.reached = cartesian(status.pose)
-            handle.set_succeeded(result, "preview only: reachable, %.2f s" % preview.duration)
+            goal.set_succeeded(result, "preview only: reachable, %.2f s" % preview.duration)
             return
         self._publish_markers(job)
         period = 1.0 / max(5.0, min(50.0, self.params.joint_states_rate))
@@ -439,9 +404,7 @@ class InterfaceNode:
                 break
             if cancel.is_set() and not cancelled:
                 cancelled = True
-                with self._goals_lock:
-                    preempted = self._motion_goal != goal_id
-                self.core.cancel(job, "preempted by a new goal" if preempted
+                self.core.cancel(job, "preempted by a new goal" if goal.preempted
                                  else "goal cancelled by the client")
                 feedback.phase = MoveToPoseFeedback.PHASE_STOPPING
             elif job.phase is JobPhase.STOPPING:
@@ -453,7 +416,7 @@ class InterfaceNode:
             if s.pose is not None:
                 feedback.current = cartesian(s.pose)
                 feedback.distance_to_go, feedback.angle_to_go = s.pose.distance_to(preview.target)
-            handle.publish_feedback(feedback)
+            goal.publish_feedback(feedback)
             job.wait_change(phase, period)          # wakes at once on a phase change
         res = job.wait(5.0)
         s = self.core.status()
@@ -463,12 +426,12 @@ class InterfaceNode:
         result.success = bool(res is not None and res.success)
         result.reason = res.reason if res is not None else "no result"
         if result.success:
-            handle.set_succeeded(result)
+            goal.set_succeeded(result)
         elif cancelled or (res is not None and res.phase is JobPhase.CANCELLED):
-            handle.set_canceled(result, result.reason)
+            goal.set_canceled(result, result.reason)
         else:
             rospy.logwarn("move_to_pose failed: %s", result.reason)
-            handle.set_aborted(result, result.reason)
+            goal.set_aborted(result, result.reason)
 
     def _joint_path(self, msg: JointTrajectory) -> None:
         """The joint_path_command topic: :meth:`joint_path`, a refusal logged."""

@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import threading
 import time
-from typing import Any, Dict, NamedTuple, Optional, Sequence
+from typing import Any, NamedTuple, Optional, Sequence
 
 import actionlib
 import rospy
@@ -50,6 +50,7 @@ from ..driver.plan_process import PlanningProcess
 from ..driver.planning import PlanGoal, PlanOutcome, arm_points
 from ..errors import MissingDependency, VrDriverError
 from ..poses import ControllerPose
+from .goal_runner import Goal, GoalRunner
 
 #: stick figures of the arm drawn along a plan (start and end included)
 SWEEP_POSES = 7
@@ -117,8 +118,9 @@ class PlanServer:
         self.server = None
         self.client = None
         self.marker_pub = None
-        self._lock = threading.Lock()
-        self._cancel: Dict[str, threading.Event] = {}
+        # goals run side by side, none preempts another (the worker plans one at a time)
+        self.goals = GoalRunner(name, self._run, lambda text: PlanResult(
+            error_code=core_planning.INVALID_MOTION_PLAN, error_string=text), thread_name="plan")
 
     def start(self) -> bool:
         """Start the planning process and advertise the action; False (and one warning saying why) when
@@ -138,8 +140,8 @@ class PlanServer:
             return False
         self.marker_pub = rospy.Publisher("~plan_markers", MarkerArray, queue_size=2, latch=True)
         self.client = actionlib.ActionClient(self.trajectory_action, FollowJointTrajectoryAction)
-        self.server = actionlib.ActionServer(self.name, PlanAction, goal_cb=self._on_goal,
-                                             cancel_cb=self._on_cancel, auto_start=False)
+        self.server = actionlib.ActionServer(self.name, PlanAction, goal_cb=self.goals.on_goal,
+                                             cancel_cb=self.goals.on_cancel, auto_start=False)
         self.server.start()
         if not self.planning.collision_checked:
             rospy.logwarn("interface: the plan action plans WITHOUT collision checks (collision_check: false): "
@@ -154,34 +156,14 @@ class PlanServer:
         if self.planning is not None:
             self.planning.close()
 
-    # ------------------------------------------------------------------ callbacks
-    def _on_goal(self, handle) -> None:
-        goal_id = handle.get_goal_id().id
-        with self._lock:
-            self._cancel[goal_id] = threading.Event()
-        handle.set_accepted()
-        threading.Thread(target=self._run, args=(handle, goal_id), name="plan-" + goal_id[-8:],
-                         daemon=True).start()
-
-    def _on_cancel(self, handle) -> None:
-        with self._lock:
-            event = self._cancel.get(handle.get_goal_id().id)
-        if event is not None:
-            event.set()
-
-    def _run(self, handle, goal_id: str) -> None:
-        try:
-            self._execute(handle, handle.get_goal(), self._cancel[goal_id])
-        except Exception as exc:  # never leave a goal hanging
-            rospy.logerr("plan: internal error: %s", exc)
-            handle.set_aborted(PlanResult(error_code=core_planning.INVALID_MOTION_PLAN,
-                                          error_string="internal error: %s" % exc))
-        finally:
-            with self._lock:
-                self._cancel.pop(goal_id, None)
-
     # ------------------------------------------------------------------ one goal
+    def _run(self, goal: Goal) -> None:
+        """One accepted goal (its thread; :class:`GoalRunner` ends it if this raises)."""
+        self._execute(goal, goal.get_goal(), goal.cancel)
+
     def _execute(self, handle, msg, cancel: threading.Event) -> None:
+        """Plan ``msg``, show it and, unless ``preview_only``, run it; ``handle`` (a :class:`Goal`) ends
+        once with the result, ``cancel`` stops the planning or the run."""
         handle.publish_feedback(PlanFeedback(phase=PlanFeedback.PHASE_PLANNING, progress=0.0))
         try:
             goal = goal_from_msg(msg)

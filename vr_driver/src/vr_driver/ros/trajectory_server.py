@@ -25,8 +25,7 @@ feedback, pass on cancel / preempt / shutdown -> set the result it gives (and dr
 """
 from __future__ import annotations
 
-import threading
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, List, Optional, Sequence, Tuple
 
 import actionlib
 import rospy
@@ -39,6 +38,7 @@ from ..driver.resolution import WireResolution
 from ..driver.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
 from ..driver.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
 from ..errors import VrDriverError
+from .goal_runner import Goal, GoalRefused, GoalRunner
 
 
 def trajectory_from_msg(traj, path_tolerance=(), goal_tolerance=(), goal_time_tolerance: float = 0.0
@@ -72,42 +72,26 @@ class TrajectoryServer:
         self.names = list(core.joint_names)
         self._wire: Optional[Tuple[Optional[WireResolution]]] = None     # made at the first goal
         self.period = 1.0 / max(1.0, feedback_rate)
-        self._lock = threading.Lock()
-        self._cancel: Dict[str, threading.Event] = {}
-        self._current: Optional[str] = None
-        self.server = actionlib.ActionServer(name, FollowJointTrajectoryAction, goal_cb=self._on_goal,
-                                             cancel_cb=self._on_cancel, auto_start=False)
+        # each goal checked at arrival (a refusal preempts nothing); a new goal preempts the running one
+        self.goals = GoalRunner(name, self._execute,
+                                lambda text: FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=text),
+                                check=self._check, exclusive=True, thread_name="trajectory")
+        self.server = actionlib.ActionServer(name, FollowJointTrajectoryAction, goal_cb=self.goals.on_goal,
+                                             cancel_cb=self.goals.on_cancel, auto_start=False)
 
     def start(self) -> None:
         self.server.start()
 
-    # ------------------------------------------------------------------ callbacks
-    def _on_goal(self, handle) -> None:
-        """Goals arrive here in order: check, preempt the previous one, run in a thread."""
-        goal_id = handle.get_goal_id().id
-        try:
-            traj = self._check(handle.get_goal())
-        except TrajectoryError as exc:
-            self._refuse(handle, exc.code, str(exc))
-            return
-        with self._lock:
-            previous, self._current = self._current, goal_id
-            self._cancel[goal_id] = threading.Event()
-            if previous is not None and previous in self._cancel:
-                self._cancel[previous].set()
-        handle.set_accepted()
-        threading.Thread(target=self._run, args=(handle, goal_id, traj),
-                         name="trajectory-" + goal_id[-8:], daemon=True).start()
-
-    def _on_cancel(self, handle) -> None:
-        with self._lock:
-            event = self._cancel.get(handle.get_goal_id().id)
-        if event is not None:
-            event.set()
-
     # ------------------------------------------------------------------ helpers
     def _check(self, goal):
-        return self.check(goal_from_msg(goal))
+        """The goal message validated at its arrival (the runner's check): the trajectory to run, or
+        GoalRefused with the control_msgs error code and the reason."""
+        try:
+            return self.check(goal_from_msg(goal))
+        except TrajectoryError as exc:
+            rospy.logwarn("joint_trajectory_action refused (%d): %s", exc.code, exc)
+            raise GoalRefused(FollowJointTrajectoryResult(error_code=exc.code, error_string=str(exc)),
+                              str(exc)) from None
 
     def check(self, goal: TrajectoryGoal):
         """Validate a goal against the arm's joints now (TrajectoryError with its code)."""
@@ -146,32 +130,17 @@ class TrajectoryServer:
             except Exception as exc:  # a display aid only
                 rospy.logwarn("could not draw %s: %s", ns, exc)
 
-    def _refuse(self, handle, code: int, reason: str) -> None:
-        rospy.logwarn("joint_trajectory_action refused (%d): %s", code, reason)
-        handle.set_rejected(FollowJointTrajectoryResult(error_code=code, error_string=reason), reason)
-
-    def _run(self, handle, goal_id: str, traj) -> None:
-        try:
-            self._execute(handle, goal_id, traj)
-        except Exception as exc:  # never leave a goal hanging
-            rospy.logerr("joint_trajectory_action: internal error: %s", exc)
-            handle.set_aborted(FollowJointTrajectoryResult(error_code=INVALID_GOAL,
-                                                           error_string="internal error: %s" % exc))
-        finally:
-            with self._lock:
-                self._cancel.pop(goal_id, None)
-                if self._current == goal_id:
-                    self._current = None
-
-    def _execute(self, handle, goal_id: str, traj) -> None:
-        cancel = self._cancel[goal_id]
+    def _execute(self, goal: Goal) -> None:
+        """One accepted goal (its thread; :class:`GoalRunner` ends it if this raises): ``goal.work`` is
+        the trajectory :meth:`_check` validated."""
+        traj, cancel = goal.work, goal.cancel
         if traj.delay > 0.0:
             cancel.wait(traj.delay)
         try:
             run = self.core.submit_trajectory(traj)
         except (VrDriverError, DriverError) as exc:
             result = FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=str(exc))
-            handle.set_aborted(result, str(exc))
+            goal.set_aborted(result, str(exc))
             return
         if self.on_run is not None:
             self.on_run(run)                 # feedback_states: desired = this plan from now on
@@ -185,9 +154,7 @@ class TrajectoryServer:
                 sup.shutdown()
                 break
             if cancel.is_set():
-                with self._lock:
-                    preempted = self._current != goal_id
-                sup.cancel(preempted)
+                sup.cancel(goal.preempted)
                 break
             status = self.core.status()
             new = status.record_time is not None and status.record_time != last_record
@@ -200,7 +167,7 @@ class TrajectoryServer:
                 fb.desired = JointTrajectoryPoint(positions=list(sample.desired))
                 fb.actual = JointTrajectoryPoint(positions=list(sample.actual))
                 fb.error = JointTrajectoryPoint(positions=list(sample.error))
-                handle.publish_feedback(fb)
+                goal.publish_feedback(fb)
                 if rospy.get_time() - last_draw > 0.5:
                     last_draw = rospy.get_time()
                     self._draw("trajectory_executed", self._executed(sup), (0.2, 1.0, 0.2))
@@ -221,11 +188,11 @@ class TrajectoryServer:
         rospy.loginfo("joint_trajectory_action: %s", outcome.note)
         result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string=outcome.error_string)
         if outcome.state == SUCCEEDED:
-            handle.set_succeeded(result)
+            goal.set_succeeded(result)
         elif outcome.state == CANCELED:
-            handle.set_canceled(result)
+            goal.set_canceled(result)
         else:
-            handle.set_aborted(result)
+            goal.set_aborted(result)
 
     @staticmethod
     def _executed(sup: TrajectorySupervisor) -> List[Tuple[float, float, float]]:
