@@ -17,7 +17,7 @@ Layers (the first name below ``vr_driver``):
 
 Known exceptions (KNOWN, each a lazy import inside one function; one that is no longer needed
 fails the test, so the list only shrinks): ``params`` resolves ``port: auto`` with
-``controller.program.resolve_link``, takes the protocol object from ``protocol.registry`` and the
+``controller.pty_link.resolve_link``, takes the protocol object from ``protocol.registry`` and the
 controller's own I/O length from ``driver.stations``; ``csr.cli`` imports rospy, rosgraph and
 trajectory_msgs for ``--from-topic``.
 
@@ -74,7 +74,7 @@ ROS_PACKAGES = {"rospy", "rosgraph", "rospkg", "roslib", "rosparam", "rosservice
                 "tf2_ros", "message_filters", "genpy"}
 #: (importing module, imported module): allowed only inside a function
 KNOWN = {
-    ("vr_driver.params", "vr_driver.controller.program"): "port: auto resolves like the virtual controller's link",
+    ("vr_driver.params", "vr_driver.controller.pty_link"): "port: auto resolves like the virtual controller's link",
     ("vr_driver.params", "vr_driver.protocol"): "the protocol object (names, GSD modules, record length, I/O)",
     ("vr_driver.params", "vr_driver.driver.stations"): "the controller's own I/O length in the v2 records",
     ("vr_driver.params", "vr_driver.kinematics.planner"): "planner_id: the OMPL planners the planner knows",
@@ -396,7 +396,7 @@ BREAKS = [
     ("terminal/pose_input.py", "import actionlib", "only vr_driver.ros imports ROS"),
     ("kinematics/solver.py", "from vr_driver.msg import RobotStatus", "only vr_driver.ros imports ROS"),
     ("csr/cli.py", "import rospy", "known exception, but at module level"),
-    ("params.py", "from .controller.program import resolve_link", "known exception, but at module level"),
+    ("params.py", "from .controller.pty_link import resolve_link", "known exception, but at module level"),
     ("stray.py", '"""A module beside the vocabulary that is not part of it."""', "not in any layer"),
 ]
 

@@ -15,7 +15,7 @@ replaces its outputs by the safe image when it leaves Data_Exchange -- the DP wa
 master fell silent) or the master re-parameterised it -- and :class:`IslandProgram` takes no output
 image as a command unless the slave is in Data_Exchange.
 
-:class:`VirtualIoIsland` serves the slave on its own pty (:class:`~vr_driver.controller.program.SimPort`)
+:class:`VirtualIoIsland` serves the slave on its own pty (:class:`~vr_driver.controller.pty_link.SimPort`)
 with the program loop in a thread; on the virtual line the hub (:mod:`pyprofibus_vendor.line`)
 joins its pty with the controller's. ``python3 -m vr_driver.controller.io_island`` runs it from the shell
 (:func:`main`); the ROS node is ``virtual_io_island`` (:mod:`vr_driver.ros.io_island`).
@@ -32,7 +32,8 @@ from typing import IO, Callable, Optional, Sequence, Union
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
 
-from .program import Simulator, SimPort, _int_option, _positive, run_simulator
+from .pty_link import SimPort
+from .simulator import Simulator, int_option, positive_option, run_simulator
 
 __all__ = ["ISLAND_ADDRESS", "ISLAND_IDENT", "ISLAND_CFG", "ISLAND_GSD", "GRIPPER_DELAY", "island_slave",
            "IslandProgram", "VirtualIoIsland", "main"]
@@ -102,19 +103,19 @@ class IslandProgram:
 
 class VirtualIoIsland(Simulator):
     """The virtual I/O island: DP slave + program loop, on its own port (see
-    :class:`~vr_driver.controller.program.SimPort`: ``link`` None creates a pty, symlinked at
+    :class:`~vr_driver.controller.pty_link.SimPort`: ``link`` None creates a pty, symlinked at
     ``pty_link``; a string serves that device; a Link is used as it is). :meth:`step` runs one
     program loop by hand (stepped tests; do not mix with :meth:`start`)."""
 
     def __init__(self, link: Union[None, str, Link] = None, *, address: int = ISLAND_ADDRESS,
                  baud: int = 19200, pty_link: Optional[str] = None,
                  loop_period: float = DEFAULT_LOOP_PERIOD, clock: Clock = time.monotonic) -> None:
-        self.address = _int_option(address, "addr", 0, 125)
-        self.loop_period = _positive(loop_period, "loop_period")
+        self.address = int_option(address, "addr", 0, 125)
+        self.loop_period = positive_option(loop_period, "loop_period")
         self.clock = clock
         self.slave = island_slave(self.address, clock)
         self.program = IslandProgram(self.slave)
-        self.port = SimPort(link, _int_option(baud, "baud", 9600, 12_000_000), pty_link or None)
+        self.port = SimPort(link, int_option(baud, "baud", 9600, 12_000_000), pty_link or None)
         self.server = SlaveServer(self.port.link, self.slave, clock=clock)
         super().__init__()
 

@@ -40,7 +40,8 @@ from typing import IO, Callable, List, Optional, Sequence, Tuple
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
-from .program import EXIT_OK, SimError, Simulator, SimPort, _pid_alive, run_simulator
+from .pty_link import SimPort, pid_alive
+from .simulator import EXIT_OK, SimError, Simulator, run_simulator
 
 __all__ = ["LineCounters", "LineHub", "main"]
 
@@ -72,7 +73,7 @@ def _lock_owner_gone(path: str) -> bool:
             text = f.read().strip()
     except OSError:
         return False
-    return text.isdigit() and not _pid_alive(int(text))
+    return text.isdigit() and not pid_alive(int(text))
 
 
 class LineHub(Simulator):

@@ -1,5 +1,7 @@
-"""The link side of a virtual G2 program, shared by protocol v1 (:class:`~vr_driver.controller.program.
-ControllerProgram`) and v2 (:class:`~vr_driver.controller.program_v2.ControllerProgramV2`). ROS-free.
+"""The link side of a virtual G2 program, shared by every protocol's program (v1
+:class:`~vr_driver.controller.program_v1.ControllerProgramV1`, v2
+:class:`~vr_driver.controller.program_v2.ControllerProgramV2`, v3
+:class:`~vr_driver.controller.program_v3.ControllerProgramV3`). ROS-free.
 
 :class:`SessionProgram` hooks a :class:`~pyprofibus_vendor.DpSlave` and gives each program loop the
 master's command of the current Data_Exchange session (``None``: no command), with the rules both
