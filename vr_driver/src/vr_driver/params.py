@@ -102,7 +102,7 @@ def _port(params: Mapping[str, Any], default: str) -> str:
     value = _string(params, "port", default)
     if value != "auto" and not value.startswith("auto:"):
         return value
-    from .controller.program import SimError, resolve_link
+    from .controller.pty_link import SimError, resolve_link
     try:
         return resolve_link(value)
     except SimError as exc:
