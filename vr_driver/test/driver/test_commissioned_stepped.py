@@ -303,10 +303,17 @@ def test_notes_are_empty_for_the_assumed_g2_and_name_each_difference(kin):
     text = "\n".join(notes)
     assert "commissioned on 2025-01-02T10:00:00+01:00" in notes[0] and "0x06C6" in notes[0]
     for words in ("reads 2 MOVEs ahead", "RUNS a target sent ahead", "check word", "halts the G2's program",
-                  "nearest its joints"):
+                  "nearest its joints", "up to 5 points before it", "at most 18 deg apart"):
         assert words in text, words
+    # the driver applies the rule: no longer "checks points assuming the previous target's solution"
+    assert "previous target" not in text
     # v1 streams nothing: only what concerns every protocol
     v1 = controller_notes(DriverParams.from_dict({"controller": {"speed_scale": 0.6, "interpreter_lookahead": 0,
                                                                  "unreachable": "alarm_halt"}}), kin)
     assert len(v1) == 1 and "alarm" in v1[0]
+    # the configuration rule: v1 tracks its joints by it, v2 sends joints (no rule to apply)
+    rule = {"configuration": "current_joints"}
+    v1 = controller_notes(DriverParams.from_dict({"controller": rule}), kin)
+    assert len(v1) == 1 and "joint_states apply that rule" in v1[0] and "stream" not in v1[0], v1
+    assert controller_notes(DriverParams.from_dict({"protocol": "v2", "controller": rule}), kin) == ()
     assert math.isfinite(kin.limits.ramp_time)

@@ -94,12 +94,16 @@ class Corrupt:
 PACE = {"v1": {"fast": 1.0, "slow": 0.1}, "v3": {"fast": 0.5, "slow": 6.0}}
 
 
-def make_world(kin, protocol, rule, pace="fast"):
+def make_world(kin, protocol, rule, pace="fast", told=None):
+    """The world with the virtual G2 at configuration ``rule`` and the driver told ``told`` (its
+    ``controller/configuration``; default: the G2's own rule, as a commissioning file says)."""
     start = ControllerPose(*[float(round(v)) for v in kin.fk_pose(Q_A).as_tuple()])
     planner = MotionPlanner(kin, MotionSettings(velocity_scale=PACE["v1"][pace])) if protocol == "v1" else None
-    world = World(kin, protocol=protocol, initial_pose=start, planner=planner)
+    told = rule if told is None else told
+    world = World(kin, {"controller": {"configuration": told}}, protocol=protocol, initial_pose=start,
+                  planner=planner)
     world.arm.configuration = ConfigurationRule.parse(rule)
-    world.core.tracker.rule = ConfigurationRule.parse(rule)
+    assert world.core.tracker.rule is ConfigurationRule.parse(told)
     world.ready()
     assert max(abs(a - b) for a, b in zip(world.arm.joints, Q_A)) < 2.0 * DEG
     return world
@@ -278,14 +282,29 @@ def test_after_a_stop_the_rule_decides_the_branch_and_the_joints_follow_it(kin, 
     assert max(abs(a - b) for a, b in zip(world.status().joints, world.arm.joints)) <= ACCURACY
 
 
-@pytest.mark.parametrize("rule", RULES)
-def test_v3_targets_taken_ahead_are_solved_by_the_rule_and_the_joints_follow_it(kin, rule):
-    """v3: a stream turning joint_6 by 240 deg in three targets 80 deg apart; the ring takes all
-    three while the arm is still near the start. The third one's pose is solved at +240 deg nearest
-    the previous target (previous_target) but at -120 deg nearest the arm (current_joints): the arm
-    turns back on its last segment. The driver applies the same rule to what it sent and publishes
-    the arm's joints all the way."""
-    world = make_world(kin, "v3", rule)
+#: (the virtual G2's rule, the driver's controller/configuration, the stream's points [deg of joint_6
+#: from the start], where the arm ends [deg])
+TAKEN_AHEAD_CASES = [
+    ("previous_target", "previous_target", [80, 160, 240], 240.0),
+    ("current_joints", "current_joints", list(range(20, 241, 20)), 240.0),
+    ("current_joints", "previous_target", [80, 160, 240], -120.0),
+]
+
+
+@pytest.mark.parametrize("rule, told, stream, ends", TAKEN_AHEAD_CASES,
+                         ids=["previous_target", "current_joints", "current_joints-told-previous_target"])
+def test_v3_targets_taken_ahead_are_solved_by_the_rule_and_the_joints_follow_it(kin, rule, told, stream, ends, caplog):
+    """v3: a stream turning joint_6 by 240 deg (12 planned points 20 deg apart); the ring takes
+    four targets while the arm is still near the start. Told previous_target, the driver keeps
+    three targets 80 deg apart: the third one's pose is solved at +240 deg nearest the previous
+    target, but at -120 deg nearest the arm. Told current_joints, it keeps points at most
+    90 / (ring_size + 1) = 18 deg apart -- every planned point -- so that the arm, up to five points
+    behind when the G2 takes a target, is nearest the planned solution: the arm turns +240 deg as
+    planned. The G2 at current_joints with the driver told previous_target (a commissioning not
+    applied): the arm turns back on its last segment, and the driver's joints follow it -- off the
+    commanded path, which has the same pose a turn away -- with a warning that names the rule.
+    Every published sample is the arm's joints."""
+    world = make_world(kin, "v3", rule, told=told)
     truth = Truth(world)
     world.run_for(world.bus_period)
     q0 = np.array(world.status().joints)
@@ -294,13 +313,19 @@ def test_v3_targets_taken_ahead_are_solved_by_the_rule_and_the_joints_follow_it(
     times = [3.0 * k / n for k in range(1, n + 1)]
     since = world.now
     run = world.core.submit_trajectory(trajectory(world, times, points))
-    assert [round((p.joints[5] - q0[5]) / DEG) for p in run.jobs[0].points] == [80, 160, 240]
+    assert [round((p.joints[5] - q0[5]) / DEG) for p in run.jobs[0].points] == stream
     world.run_until(lambda: run.done, 60.0, "stream done")
     world.run_for(0.5)
     turned = (world.arm.joints[5] - q0[5]) / DEG
-    assert turned == pytest.approx(240.0 if rule == "previous_target" else -120.0, abs=0.1)
+    assert turned == pytest.approx(ends, abs=0.1)
     Verdict(world, truth, published(world, since)).check()
     assert max(abs(a - b) for a, b in zip(world.status().joints, world.arm.joints)) <= ACCURACY
+    warned = [r.getMessage() for r in caplog.records if "only on another branch" in r.getMessage()]
+    if rule == told:
+        assert world.core.tracker.off_branch == 0 and not warned
+    else:
+        assert world.core.tracker.off_branch >= 1
+        assert len(warned) == 1 and "controller/configuration previous_target" in warned[0], warned
 
 
 def test_the_configuration_rule_is_a_parameter_of_the_virtual_g2():

@@ -103,3 +103,25 @@ def test_a_rounding_past_the_stretched_arms_reach_is_replaced_by_a_neighbour_ins
     assert any(t.steps) and V3.wire_pose(t.pose) == t.pose
     assert off(kin, t.pose, q, q) == pytest.approx(t.error, abs=1e-12)
     assert t.error <= 0.5 * DEG
+
+
+def test_further_seeds_count_by_the_worst_and_change_nothing_where_they_agree(kin):
+    """``also`` (a controller at current_joints: the arm anywhere on a stretch of the plan when it
+    takes the target): the pose's error is the worst over every seed, and its joints are that
+    seed's solution. Away from any other branch the seeds agree: the same pose as from one seed.
+    With joint_6 a turn on, the seed at the start solves the target's pose half a turn back: the
+    error says so."""
+    q = (0.2, 0.6, -0.3, 0.4, 0.8, -0.5)
+    near = [tuple(v - d for v, d in zip(q, (0.05, 0.02, 0.0, 0.1, 0.05, 0.2)))]
+    one = wire_target(kin, V3, q, q)
+    many = wire_target(kin, V3, q, q, also=near + [q])
+    assert (many.pose, many.error, many.steps) == (one.pose, one.error, one.steps)
+    assert many.solved == 2 * one.solved                  # (the duplicate seed is not solved again)
+    turned = q[:5] + (q[5] + 240 * DEG,)
+    before = q[:5] + (q[5] + 160 * DEG,)
+    t = wire_target(kin, V3, turned, before)
+    assert t.error <= FINE
+    t = wire_target(kin, V3, turned, before, also=[q])
+    assert t.error == pytest.approx(2 * math.pi, abs=0.01)          # the start's solution: a turn off
+    assert t.joints[5] == pytest.approx(turned[5] - 2 * math.pi, abs=0.01)
+    assert off(kin, t.pose, q, turned) == pytest.approx(t.error, abs=1e-12)

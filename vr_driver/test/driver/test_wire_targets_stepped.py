@@ -47,10 +47,17 @@ def test_a_target_at_the_singularity_goes_out_where_the_controller_lands_on_the_
     assert max(abs(a - b) for a, b in zip(solved, NEAR)) <= 0.3 * DEG
 
 
-def test_a_goal_at_the_singularity_ends_on_the_planned_wrist(world, kin):
+@pytest.mark.parametrize("rule", ["previous_target", "current_joints"])
+def test_a_goal_at_the_singularity_ends_on_the_planned_wrist(kin, rule):
     """A planned move from joint_5 = 24 deg to 0.01 deg (joint_4 / joint_6 turning on the way): it
     runs, each target once, and the arm ends on the plan's split of joint_4 / joint_6 -- not only on
-    their sum, which is all the pose fixes there."""
+    their sum, which is all the pose fixes there. With the G2 and the driver at either configuration
+    rule (current_joints: each wire pose chosen to land on the plan from every point the arm may be
+    at when the G2 takes it)."""
+    from vr_driver.kinematics.solver import ConfigurationRule
+    world = World(kin, {"controller": {"configuration": rule}}, protocol="v3", initial_pose=kin.fk_pose(START))
+    world.arm.configuration = ConfigurationRule.parse(rule)
+    world.ready()
     n = 20
     times, points = [], []
     for k in range(1, n + 1):

@@ -30,8 +30,10 @@ class ArmJoints:
         self.params = params
         self.kin = kinematics
         self.protocol = protocol
-        # the joints of the reported pose (v1, v3): the commanded branch, the configuration held
-        self.tracker = JointTracker(kinematics, self.protocol.pose_resolution)
+        # the joints of the reported pose (v1, v3): the commanded branch, the configuration held,
+        # each target solved by the controller's configuration rule (controller/configuration)
+        self.tracker = JointTracker(kinematics, self.protocol.pose_resolution,
+                                    rule=params.controller.configuration)
         self.joints: Optional[Tuple[float, ...]] = None
         self.valid = False
         self.model_check: Optional[ModelCheck] = None

@@ -14,6 +14,11 @@ Where each fact acts:
   (:attr:`vr_driver.params.DriverParams.wire`), and stream segments twice as long
   (:func:`min_segment_cycles`);
 - ``loop_blocks_during_move``: a streaming protocol is refused at start (DriverParams);
+- ``configuration`` (the G2's rule for a Cartesian target's joint solution): the driver predicts
+  the G2's solution by it -- ``joint_states`` on v1 and v3 (:class:`~.tracking.JointTracker`), the
+  v3 stream check and the wire poses (:class:`~.stream_prep.CartesianStreams`: under
+  ``current_joints`` each point checked from where the arm may be when the G2 takes it, up to
+  ``ring_size`` + 1 points back, and points kept closer together);
 - ``planning_limits`` (not a controller fact, the file beside the commissioning's): the plan
   action's joint speed and acceleration limits (:func:`planning_kinematics`).
 
@@ -24,9 +29,11 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import math
 from typing import Any, List, Optional, Tuple
 
 from ..params import DriverParams, read_planning_limits
+from .stream_prep import CARTESIAN_MAX_STEP
 from .streaming import MIN_SEGMENT_CYCLES
 
 __all__ = ["controller_notes", "min_segment_cycles", "planning_kinematics", "plain_names"]
@@ -119,10 +126,16 @@ def controller_notes(params: DriverParams, kin: Any = None) -> Tuple[str, ...]:
         notes.append("an unreachable target raises an alarm that halts the G2's program (controller/"
                      "unreachable alarm_halt): the driver checks every pose against its model before sending "
                      "it; if it happens, reset the alarm at the pendant and restart the program")
-    if facts.configuration == "current_joints":
-        notes.append("the G2 solves a Cartesian target nearest its joints at that moment (controller/"
-                     "configuration current_joints): the driver checks points assuming the previous "
-                     "target's solution -- keep stream points clear of configuration changes")
+    if facts.configuration == "current_joints" and not wire.joint_targets:
+        text = ("the G2 solves a Cartesian target nearest its joints at that moment (controller/configuration "
+                "current_joints): the driver's joint_states apply that rule to what it sent")
+        if wire.streams:
+            window = facts.ring_size + 1
+            text += ("; each stream point is checked from wherever the arm may be when the G2 takes it, up to %d "
+                     "points before it (controller/ring_size %d + 1), and stream points are kept at most %.0f deg "
+                     "apart (more points where a joint turns fast)"
+                     % (window, facts.ring_size, math.degrees(CARTESIAN_MAX_STEP / window)))
+        notes.append(text)
     return tuple(notes)
 
 

@@ -7,13 +7,33 @@ the cell -- before anything is queued.
 
 - :class:`JointStreams` (v2: joint targets): the controller runs the joints as sent.
 - :class:`CartesianStreams` (v3: pose targets): the controller solves each target's pose itself,
-  as the IK solution nearest the previous target's joints. Each point also gets the pose the wire
+  as the IK solution nearest the joints its configuration rule names (``controller/configuration``,
+  :class:`~vr_driver.kinematics.solver.ConfigurationRule`; doc/controller_program.md section 7 and
+  section 10.9): the previous target's (``previous_target``, the documented assumption) or the
+  arm's when it takes the target (``current_joints``). Each point also gets the pose the wire
   carries -- the planned pose rounded, or near joint_5 = 0 the one-step neighbour of that rounding
-  the controller solves nearest the plan (:mod:`.wire_targets`) -- solved as the controller will:
-  it must land on the planned joints within
-  CONFIGURATION_TOLERANCE, or the controller would run another configuration than the one
-  planned and checked (doc/controller_program.md section 7); no joint turns by more than
-  CARTESIAN_MAX_STEP between two points.
+  the controller solves nearest the plan (:mod:`.wire_targets`) -- solved as the controller will
+  by that rule: it must land on the planned joints within CONFIGURATION_TOLERANCE, or the
+  controller would run another configuration than the one planned and checked; no joint turns by
+  more than :attr:`CartesianStreams.max_step` between two points.
+
+  **current_joints: where the arm is when the G2 takes a target** (the driver's assumption, stated
+  here and in doc/controller_program.md section 10.9): the master offers each target as soon as the
+  one before was taken, and the G2 takes it once its ring (``controller/ring_size`` targets, the one
+  the arm runs to and those read ahead) has room -- once the arm passed the target ``ring_size``
+  before it, i.e. began blending out of it. So when the G2 takes point i the arm lies on the planned
+  path between point i - ring_size - 1 and point i - 1 (the start for the first points; a blend
+  around point i - ring_size stays inside the triangle of it and its two neighbours); later still
+  when the bus or a pause held the target back, but never past point i - 1, where it stops and
+  waits. Which of a pose's IK solutions lies nearest a seed changes only across planes (the seeds
+  nearer one solution than another form a half-space), so the same solution is nearest every
+  joints of that stretch exactly when it is nearest each of its points: every point is solved from
+  each of the ring_size + 1 points before it (:func:`~.wire_targets.wire_target`'s ``also``), and
+  all must land on the plan. Points are kept at most CARTESIAN_MAX_STEP / (ring_size + 1) apart in
+  each joint and CARTESIAN_MAX_REACH / (ring_size + 1) in all joints together, so that over the
+  stretch a joint turns by no more than CARTESIAN_MAX_STEP and the wrist moves no more than a
+  quarter of the way to its flip (measured: a straight move to the flipped wrist in 18 deg steps
+  of joint_4 and joint_6 was solved back onto the start's wrist halfway, at joint_5 = 0).
 
 :func:`stream_preparation` picks the family of a protocol (None for one that does not stream: v1).
 """
@@ -25,7 +45,7 @@ from dataclasses import replace
 from typing import Any, Callable, Optional, Sequence, Tuple
 
 from ..errors import VrDriverError
-from ..kinematics.solver import Kinematics
+from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..params import DriverParams
 from ..poses import ControllerPose
 from .jobs import MoveJob, Preview, StreamPoint
@@ -34,17 +54,23 @@ from .status import DriverError
 from .streaming import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
 from .wire_targets import WireTarget, wire_target
 
-__all__ = ["CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
+__all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
            "stream_preparation"]
 
 #: rad: a Cartesian stream's target, solved as the controller will (the IK solution nearest the
-#: previous target's joints), must land this near the planned point (every joint); farther, the
-#: controller would run another configuration than the one planned and checked
+#: joints its configuration rule names), must land this near the planned point (every joint);
+#: farther, the controller would run another configuration than the one planned and checked
 CONFIGURATION_TOLERANCE = math.radians(1.0)
-#: [rad] the widest joint step between two points of a Cartesian stream (streaming.split_long): the
-#: controller takes the solution nearest the previous target, the planned one only while a joint
-#: turns by well under half a turn between them
+#: [rad] the widest joint turn between the joints a Cartesian stream's target is solved nearest and
+#: the target (streaming.split_long): the controller takes the solution nearest them, the planned
+#: one only while a joint turns by well under half a turn in between -- previous_target: between
+#: two points; current_joints: over the ring_size + 1 points before (module docstring)
 CARTESIAN_MAX_STEP = math.radians(90.0)
+#: [rad] current_joints: the widest straight joint distance (all joints together) over the stretch
+#: of the plan the arm may be on when the controller takes a target -- a quarter of the distance
+#: to the pose's flipped-wrist solution (joint_4 and joint_6 half a turn each: pi sqrt 2), as
+#: CARTESIAN_MAX_STEP is a quarter of a joint's turn; per step, this over the window
+CARTESIAN_MAX_REACH = math.pi * math.sqrt(2.0) / 4.0
 
 
 def fmt_pose(pose: ControllerPose) -> str:
@@ -148,47 +174,70 @@ class JointStreams:
 
 class CartesianStreams(JointStreams):
     """Streams of pose targets (v3): each point with the pose the wire carries, solved as the
-    controller will (module docstring)."""
+    controller will by its configuration rule, ``params.controller.configuration`` (module
+    docstring)."""
 
-    max_step = CARTESIAN_MAX_STEP
+    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
+                 min_segment: Callable[[], float]) -> None:
+        super().__init__(params, kinematics, protocol, checks, min_segment)
+        #: the controller's rule for a target's joint solution
+        self.rule = ConfigurationRule.parse(params.controller.configuration)
+        #: the points before a target whose joints the controller may solve it nearest: the
+        #: previous one (previous_target), or the ring's worth and one more (current_joints)
+        self.window = 1 if self.rule is ConfigurationRule.PREVIOUS_TARGET else params.controller.ring_size + 1
+        #: the widest joint step between two points: CARTESIAN_MAX_STEP over the window
+        self.max_step = CARTESIAN_MAX_STEP / self.window
 
     def reaches(self) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
         """The controller, after a target at ``a``, solves the wire pose of ``b`` onto ``b`` within
         CONFIGURATION_TOLERANCE (:meth:`target`, the coordinate search only): where it would not --
         another elbow or wrist branch lies nearer ``a`` than ``b`` does -- the stream keeps planned
-        points in between (:func:`.streaming.split_long`)."""
+        points in between (:func:`.streaming.split_long`). current_joints: ``a`` the seed (one of
+        those :meth:`with_poses` then checks), and ``b`` within CARTESIAN_MAX_REACH over the window
+        of ``a`` (all joints together; module docstring)."""
+        reach = CARTESIAN_MAX_REACH / self.window if self.rule is ConfigurationRule.CURRENT_JOINTS else math.inf
+
         def reaches(a: Sequence[float], b: Sequence[float]) -> bool:
+            if math.sqrt(sum((x - y) ** 2 for x, y in zip(a, b))) > reach:
+                return False
             try:
                 return self.target(a, b, search=False).error <= CONFIGURATION_TOLERANCE
             except VrDriverError:
                 return False
         return reaches
 
-    def target(self, prev: Sequence[float], joints: Sequence[float], search: bool = True) -> WireTarget:
+    def target(self, prev: Sequence[float], joints: Sequence[float], search: bool = True,
+               earlier: Sequence[Sequence[float]] = ()) -> WireTarget:
         """The wire pose for ``joints`` after a target at ``prev`` and the controller's solution of
         it (:func:`.wire_targets.wire_target`: the plain rounding, or where that lands off the plan
         -- near joint_5 = 0 -- the one-step neighbour that lands nearest; ``search`` False: within
         FULL_SEARCH_BAND the coordinate search only, for a caller at a command's rate).
+        ``earlier``: current_joints, the points before ``prev`` the arm may still be at (or
+        between) when the controller takes the target: solved from each as well, the worst counts.
         VrDriverError when the controller cannot solve it."""
+        also = tuple(earlier) if self.rule is ConfigurationRule.CURRENT_JOINTS else ()
         with self.checks.gate:
             if search:
-                return wire_target(self.kin, self.protocol, joints, prev)
-            return wire_target(self.kin, self.protocol, joints, prev, full_band=0.0)
+                return wire_target(self.kin, self.protocol, joints, prev, also=also)
+            return wire_target(self.kin, self.protocol, joints, prev, full_band=0.0, also=also)
 
     def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
                    ) -> Tuple[StreamPoint, ...]:
         """Each point gets the pose the wire carries -- its planned pose rounded, or the one-step
         neighbour of that rounding whose solution lands nearest the plan (:meth:`target`) -- and
-        is solved as the controller will solve it: the IK solution nearest the previous target's
-        joints (the controller's own solution of the previous target; the arm's, ``start``, for
-        the first). It must be the planned point within CONFIGURATION_TOLERANCE. Raises
-        DriverError naming the point (nothing is sent)."""
+        is solved as the controller will solve it by its rule: the IK solution nearest the previous
+        target's joints (the controller's own solution of the previous target; the arm's,
+        ``start``, for the first), or -- current_joints -- nearest each of the :attr:`window`
+        points before it (the controller's solutions; ``start`` the first of them: the module
+        docstring says why these). It must be the planned point within CONFIGURATION_TOLERANCE.
+        Raises DriverError naming the point (nothing is sent)."""
         out = []
         prev = tuple(start)
+        history = [prev]            # the arm's path so far: start, then each point as solved
         for i, point in enumerate(points):
             where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
             try:
-                found = self.target(prev, point.joints)
+                found = self.target(prev, point.joints, earlier=history[-self.window:-1])
             except VrDriverError as exc:
                 pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
                 raise DriverError("%s: the controller cannot solve its pose %s: %s; nothing was sent"
@@ -199,20 +248,29 @@ class CartesianStreams(JointStreams):
                                   "with joint targets; nothing was sent" % (where, refusal))
             out.append(replace(point, pose=found.pose))
             prev = found.joints
+            history.append(prev)
+            if len(history) > self.window:
+                del history[0]
             time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
         return tuple(out)
 
-    @staticmethod
-    def refusal(found: WireTarget, joints: Sequence[float]) -> str:
+    def refusal(self, found: WireTarget, joints: Sequence[float]) -> str:
         """"" when the controller's solution ``found`` is the planned ``joints`` within
-        CONFIGURATION_TOLERANCE, else why not, in words."""
+        CONFIGURATION_TOLERANCE, else why not, in words (naming the rule)."""
         if found.error <= CONFIGURATION_TOLERANCE:
             return ""
         off = [abs(a - b) for a, b in zip(found.joints, joints)]
         worst = max(range(len(off)), key=off.__getitem__)
+        if self.rule is ConfigurationRule.PREVIOUS_TARGET:
+            nearest = "the solution nearest the previous target's joints"
+        else:
+            nearest = ("the solution nearest the arm's joints when the controller takes it, up to %d points "
+                       "before it (controller/configuration current_joints, ring_size %d)"
+                       % (self.window, self.window - 1))
         return ("the controller would reach its pose %s in another configuration than planned (joint_%d "
-                "%.1f deg instead of %.1f deg: the solution nearest the previous target's joints)"
-                % (fmt_pose(found.pose), worst + 1, math.degrees(found.joints[worst]), math.degrees(joints[worst])))
+                "%.1f deg instead of %.1f deg: %s)"
+                % (fmt_pose(found.pose), worst + 1, math.degrees(found.joints[worst]), math.degrees(joints[worst]),
+                   nearest))
 
 
 def stream_preparation(params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,

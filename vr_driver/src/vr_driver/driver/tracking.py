@@ -12,9 +12,10 @@ client, so they must be the arm's (README "Reliability").
 
 - **The commanded path** (:meth:`JointTracker.follow`, from the job in flight once it went out):
   v1 the job's validated plan -- a PTP's goal as the controller solves the wire pose by the
-  configuration rule (:class:`~vr_driver.kinematics.solver.ConfigurationRule`: nearest the previous
-  target's joints, or the arm's when it takes it), a LIN / CIRC along its path from where it
-  starts; v3 the stream's points, each solved as the controller solves its wire pose by the same
+  configuration rule (:class:`~vr_driver.kinematics.solver.ConfigurationRule`, the driver's
+  ``controller/configuration``: nearest the previous target's joints, or the arm's when it takes
+  it -- the tracker's joints when the driver saw the target taken), a LIN / CIRC along its path
+  from where it starts; v3 the stream's points, each solved as the controller solves its wire pose by the same
   rule, joined by the straight joint moves the controller runs between them. Sampled at most
   SAMPLE_STEP apart in every joint, with the TCP pose of every sample.
 - **Where on it the arm is** (each new record): the reported pose projected onto the path
@@ -40,6 +41,12 @@ client, so they must be the arm's (README "Reliability").
   VELOCITY_MARGIN (the controller samples the arm at its own loop, not at the record's stamp). A
   corrupt record (a pose the path does not explain) moves the joints that much at most -- never
   onto another branch -- and the next good one back; a lost record only lengthens the time.
+- **The arm's branch, not the commanded one**: a place on the path whose joints lie farther from
+  the last joints than that (the same pose a turn of a joint away, or with the wrist flipped) is
+  not where the arm is: the controller solved a target otherwise than the rule the driver
+  applies (a G2 whose rule differs from ``controller/configuration``). The report is read off the
+  path, from the last joints, so that the joints stay on the arm's branch, and the first such
+  report of a path is a warning naming the rule (:attr:`JointTracker.off_branch` counts them).
 
 The cost per record: one projection (numpy over the path's samples near the last place), a few
 FK, at most one IK (the solver's time budget); per target taken one IK and the FK of its samples.
@@ -235,6 +242,8 @@ class JointTracker:
         self.valid = False
         self.path: Optional[CommandedPath] = None
         self.doubted = 0                  # records not believed: beyond what the arm can move
+        self.off_branch = 0               # records whose place on the path the arm cannot be at
+        self._warned: Any = None          # the key of the path the last off-branch warning was of
         self.limited = 0                  # records whose step the velocity limits held back
         self._far = False                 # the last record lay farther than the arm can move
         self._pose: Optional[Tuple[float, ...]] = None     # the last record's pose (mm, deg)
@@ -349,6 +358,12 @@ class JointTracker:
             if target is not None and self._fits(target, position, rotation):
                 ref = target          # (at rest there: exactly where the controller's IK put the arm)
                 at_target = True
+            if last is not None and dt is not None and self._beyond(ref, last, moved, dt):
+                # the place has the report's pose, but on another branch than the arm's (a joint a
+                # turn away, the wrist flipped): the arm left the commanded path -- a controller
+                # that solved a target otherwise than the driver's rule -- read it off the path
+                self._off_branch(path, ref, last)
+                place, ref, moved, at_target = None, last, None, False
         if ref is None:               # the first record: nothing to go by but the pose itself
             q = self._solve(pose, self.kin.named_states.get("home", self.kin.clamp((0.0,) * self.kin.dof)))
         else:
@@ -383,6 +398,30 @@ class JointTracker:
         self._pose, self._stamp = (None if far else values), stamp
         self.joints, self.valid = q, True
         return q
+
+    def _off_branch(self, path: CommandedPath, ref: Sequence[float], last: Sequence[float]) -> None:
+        """Count a report :meth:`_beyond` the arm's reach on ``path``; the first of a path is a
+        warning naming the rule the driver applies (a controller whose rule differs runs targets
+        on branches the driver did not check)."""
+        self.off_branch += 1
+        if self._warned == path.key:
+            return
+        self._warned = path.key
+        off = np.abs(np.subtract(ref, last))
+        worst = int(np.argmax(off))
+        log.warning("the arm's reported pose lies on the commanded path only on another branch (joint %d "
+                    "%.0f deg from the arm's): the controller solved a target otherwise than its configuration "
+                    "rule as the driver applies it (controller/configuration %s; doc/commissioning.md) -- the "
+                    "joints follow the arm, off the commanded path", worst + 1, math.degrees(off[worst]),
+                    self.rule.value)
+
+    def _beyond(self, ref: Sequence[float], last: Sequence[float], moved: np.ndarray, dt: float) -> bool:
+        """Whether the joints ``ref`` of a place on the commanded path lie farther from the last
+        joints than the arm can have moved since (the path's own motion between the two places
+        ``moved``, plus the velocity limits x ``dt`` x the margin, plus EXACT_NEAR for the
+        rounding): the same pose on another branch."""
+        room = moved + self.vmax * dt * self.margin + EXACT_NEAR
+        return bool(np.any(np.abs(np.subtract(ref, last)) > room))
 
     def _fit(self, pose: ControllerPose, position: Sequence[float], rotation: Sequence[float],
              ref: Sequence[float]) -> Optional[Tuple[float, ...]]:

@@ -11,7 +11,9 @@ the plan there although every target is "the planned pose".
 Each of the six numbers may be rounded up or down by one step without leaving the resolution's
 bound, so there are 3^6 = 729 wire poses for one planned pose. :func:`wire_target` picks among them
 the one whose solution by the controller's rule (seeded as the controller seeds it) lands nearest
-the planned joints: first the plain rounding; when that is off by more than ``fine``, a coordinate
+the planned joints -- for a controller that solves a target nearest the arm's joints when it takes
+it (``current_joints``), which the driver knows only to lie on a stretch of the planned path, from
+every seed of that stretch it is given (the worst of them counts): first the plain rounding; when that is off by more than ``fine``, a coordinate
 search over single steps (a few dozen IK solutions, ~0.4 ms each); within FULL_SEARCH_BAND of
 joint_5 = 0, where the coordinate search can stall, all 729. Measured on random wrists within 3 deg
 of the singularity (v3): the worst plain rounding 14.5 deg off, the chosen pose 0.44 deg off, most
@@ -54,32 +56,51 @@ class WireTarget:
 
 
 def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], fine: float = FINE,
-                full_band: float = FULL_SEARCH_BAND) -> WireTarget:
+                full_band: float = FULL_SEARCH_BAND, also: Sequence[Sequence[float]] = ()) -> WireTarget:
     """The wire pose for the planned ``joints`` whose solution by the controller's IK seeded with
     ``seed`` (its configuration rule: the previous target's solution, or its joints now) lands
-    nearest ``joints``. A neighbour that cannot be solved is passed over; when the plain rounding
-    cannot (a pose 0.1 mm past the stretched arm's reach), every neighbour is tried. Raises the
-    kinematics' VrDriverError when none can be solved (the caller names the point)."""
+    nearest ``joints``. ``also``: further seeds the controller may take instead (``current_joints``:
+    the arm's joints anywhere on the stretch of the plan it may be on when the controller takes the
+    target); a pose's error is then the worst over all seeds, and ``joints`` of the result the
+    solution from the worst seed (the first one when they agree). A neighbour that cannot be solved
+    is passed over; when the plain rounding cannot (a pose 0.1 mm past the stretched arm's reach),
+    every neighbour is tried. Raises the kinematics' VrDriverError when none can be solved (the
+    caller names the point)."""
     planned = tuple(float(v) for v in joints)
     seed = tuple(float(v) for v in seed)
+    seeds = [seed]
+    for other in also:
+        other = tuple(float(v) for v in other)
+        if other not in seeds:
+            seeds.append(other)
     base = protocol.wire_pose(kin.fk_pose(planned))
     mm, deg = protocol.pose_resolution
     sizes = (mm, mm, mm, deg, deg, deg)
     count = [0]
 
-    def attempt(steps: Tuple[int, ...]) -> Optional[WireTarget]:
+    def attempt(steps: Tuple[int, ...], bound: float = math.inf) -> Optional[WireTarget]:
+        """The pose ``steps`` off the plain rounding, solved from every seed -- from the first only
+        when that is already farther than ``bound`` off the plan (it cannot be the better one)."""
         if any(steps):
             pose = protocol.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
         else:
             pose = base
-        count[0] += 1
-        try:
-            q = tuple(kin.ik_pose(pose, seed=seed))
-        except VrDriverError:
-            if not any(steps):
-                raise
-            return None
-        return WireTarget(pose, q, max(abs(a - b) for a, b in zip(q, planned)), steps, 0)
+        worst: Optional[Tuple[float, Tuple[float, ...]]] = None
+        for s in seeds:
+            count[0] += 1
+            try:
+                q = tuple(kin.ik_pose(pose, seed=s))
+            except VrDriverError:
+                if not any(steps):
+                    raise
+                return None
+            error = max(abs(a - b) for a, b in zip(q, planned))
+            if worst is None or error > worst[0]:
+                worst = (error, q)
+            if worst[0] > bound:
+                break
+        assert worst is not None
+        return WireTarget(pose, worst[1], worst[0], steps, 0)
 
     try:
         best = attempt((0,) * 6)
@@ -100,7 +121,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
         for steps in itertools.product(STEPS, repeat=6):
             if steps == best.steps:
                 continue
-            found = attempt(steps)
+            found = attempt(steps, best.error)
             if found is not None and _better(found, best):
                 best = found
     return WireTarget(best.pose, best.joints, best.error, best.steps, count[0])
@@ -123,7 +144,7 @@ def _coordinate_search(best: WireTarget, attempt, fine: float) -> WireTarget:
                 s = best.steps[i] + d
                 if abs(s) > 1:
                     continue
-                found = attempt(best.steps[:i] + (s,) + best.steps[i + 1:])
+                found = attempt(best.steps[:i] + (s,) + best.steps[i + 1:], improved.error)
                 if found is not None and _better(found, improved):
                     improved = found
         if improved is best:
