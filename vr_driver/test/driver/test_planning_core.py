@@ -6,6 +6,7 @@ the link and the object; a scene change reaches the next plan; missing libraries
 MissingDependency. Skipped, with the reason, where OMPL, TOPP-RA, pinocchio or coal are missing."""
 from __future__ import annotations
 
+import math
 import os
 
 import pytest
@@ -380,3 +381,42 @@ def test_a_goal_across_the_wrist_singularity_is_planned_on_the_last_try_without_
     assert out.ok, out.text
     assert planning.driver_refusal(out.trajectory) == ""
     assert min(p[4] for p in out.trajectory.positions) < 0.0 < max(p[4] for p in out.trajectory.positions)
+
+
+def test_a_pose_goal_on_a_cartesian_protocol_prefers_the_starts_elbow_branch(kin):
+    """v3: a pose goal's IK solutions on the start's side of the stretched elbow come before those
+    across it, nearer or not (the controller, solving each target nearest the previous one, keeps
+    the start's branch there); v2 plans to the nearest, whichever branch."""
+    from vr_driver.kinematics.planner import Planner
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    below, above = (0.3, 0.2, stretch - 0.2, 0.3, 0.6, 0.1), (0.3, 0.2, stretch + 0.3, 0.3, 0.6, 0.1)
+    reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
+    v3 = DriverPlanning(world(kin, workspace=reach).core, kinematics=kin)._goal_preference()
+    assert DriverPlanning(world(kin, protocol="v2", workspace=reach).core, kinematics=kin)._goal_preference() is None
+    assert (v3(below, below), v3(below, above), v3(above, below), v3(above, above)) == (0, 1, 1, 0)
+    # the planner orders by the rank first: here the nearest solution (the start's side) comes last
+    start = (0.3, 0.2, stretch - 0.05, 0.3, 0.6, 0.1)
+    nearest = Planner(kin, None).goal_candidates(start, kin.fk(above))
+    ranked = Planner(kin, None, goal_preference=lambda s, q: 0 if q[2] > stretch else 1).goal_candidates(
+        start, kin.fk(above))
+    assert nearest[0][2] < stretch and ranked[0][2] > stretch
+    assert sorted(nearest) == sorted(ranked)
+    with pytest.raises(TypeError, match="goal_preference must be a callable"):
+        Planner(kin, None, goal_preference=3)
+
+
+def test_a_goal_across_the_stretched_elbow_refused_every_time_says_so(kin, monkeypatch):
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
+    planning = DriverPlanning(world(kin, workspace=reach).core, kinematics=kin)
+    monkeypatch.setattr(planning, "driver_refusal", lambda plan: "point 3 of 7: another configuration")
+    start, across = (0.3, 0.2, stretch + 0.3, 0.3, 0.6, 0.1), (0.3, 0.2, stretch - 0.3, 0.3, 0.6, 0.1)
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, across)), start=start, seed=1)
+    assert out.code == P.INVALID_MOTION_PLAN, out.text
+    assert "is across the stretched elbow (joint_3 %.1f deg)" % math.degrees(stretch) in out.text
+    # a goal on the start's side: the refusal alone
+    same = start[:2] + (start[2] + 0.02,) + start[3:]
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, same)), start=start, seed=1)
+    assert out.code == P.INVALID_MOTION_PLAN and "stretched elbow" not in out.text, out.text

@@ -339,7 +339,8 @@ class DriverPlanning:
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(
-                                          validity, wrist_margin=attempt < ATTEMPTS - 1))
+                                          validity, wrist_margin=attempt < ATTEMPTS - 1),
+                                      goal_preference=self._goal_preference())
                     plan = self._at_goal(planner, tuple(start), target) or planner.plan(tuple(start), target)
             except PlanningError as exc:
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
@@ -353,8 +354,9 @@ class DriverPlanning:
             if not refusal:
                 break
         else:
-            return PlanOutcome(INVALID_MOTION_PLAN, "the driver would refuse each of %d plans, the last: %s"
-                               % (ATTEMPTS, refusal), planning_time=self.clock() - t0, planner_id=planner_id)
+            return PlanOutcome(INVALID_MOTION_PLAN, "the driver would refuse each of %d plans, the last: %s%s"
+                               % (ATTEMPTS, refusal, self._across_the_elbow(start, plan.goal)),
+                               planning_time=self.clock() - t0, planner_id=planner_id)
         elapsed = self.clock() - t0
         end = self.kin.fk_pose(plan.goal)
         if len(plan.times) == 1:
@@ -379,6 +381,37 @@ class DriverPlanning:
         zero = (0.0,) * len(start)
         return PlannedTrajectory(tuple(planner.names), (0.0,), (start,), (zero,), (zero,), (start,),
                                  planner.planner_name, {"total": 0.0})
+
+    def _across_the_elbow(self, start: Sequence[float], goal: Sequence[float]) -> str:
+        """"" -- or, with a Cartesian protocol and ``goal`` on the other side of the stretched elbow
+        from ``start``, why that matters, in words."""
+        rank = self._goal_preference()
+        if rank is None or not rank(start, goal):
+            return ""
+        return ("; the goal (joint_3 %.1f deg) is across the stretched elbow (joint_3 %.1f deg) from the start "
+                "(%.1f deg): the controller solves each pose nearest its previous target, which there is often "
+                "the start's elbow branch -- a goal on the start's side, a path through a pose goal's other "
+                "solutions, or a protocol with joint targets (v2) avoids it"
+                % (math.degrees(goal[_ELBOW]), math.degrees(stretched_elbow(self.kin)), math.degrees(start[_ELBOW])))
+
+    def _goal_preference(self):
+        """With a Cartesian protocol, the rank of a pose goal's IK solution: 0 on the start's side of
+        the stretched elbow, 1 across it. The controller solves each target nearest the previous
+        one: across the stretch the two elbow branches of a pose lie either side of it, the nearer
+        is the start's, so a stream that must change the branch is refused by the driver's check far
+        more often than not (bench/planning.py: 4 of the last 10 failures). A joint goal is what it
+        is; None (nearest first) with joint targets."""
+        if getattr(self.core.protocol, "joint_targets", True):
+            return None
+        stretched = stretched_elbow(self.kin)
+        if stretched is None:
+            return None
+
+        def rank(start: Sequence[float], q: Sequence[float]) -> int:
+            side = math.remainder(start[_ELBOW] - stretched, 2.0 * math.pi)
+            other = math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)
+            return 0 if side * other >= 0.0 else 1
+        return rank
 
     def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the

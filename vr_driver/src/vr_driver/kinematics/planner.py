@@ -240,13 +240,17 @@ class Planner:
     kinematics'; ``velocity`` and ``acceleration`` are the speed and acceleration limits);
     ``planner``: one of :data:`PLANNERS`; ``time_budget`` [s] of the planner; ``seed``: an int
     for reproducible plans; ``velocity_scaling`` / ``acceleration_scaling`` in (0, 1];
-    ``dt`` [s] the largest sample spacing; ``max_sweep`` [m] the motion-check resolution."""
+    ``dt`` [s] the largest sample spacing; ``max_sweep`` [m] the motion-check resolution;
+    ``goal_preference(start, q)``: a rank (lower first) that orders a pose goal's IK solutions
+    before their nearness -- e.g. the driver's: a controller that solves poses itself cannot be
+    relied on to change the elbow branch, so the solutions on the start's branch come first."""
 
     def __init__(self, kinematics: Any, validity: Any = None, limits: Any = None,
                  planner: str = DEFAULT_PLANNER, time_budget: float = 1.0, seed: Optional[int] = None,
                  velocity_scaling: float = 1.0, acceleration_scaling: float = 1.0, dt: float = DEFAULT_DT,
                  max_sweep: float = DEFAULT_MAX_SWEEP, clearance: float = DEFAULT_CLEARANCE,
-                 planning_validity: Optional[Callable[[Sequence[float]], bool]] = None) -> None:
+                 planning_validity: Optional[Callable[[Sequence[float]], bool]] = None,
+                 goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None) -> None:
         if planner not in PLANNERS:
             raise PlanningError("plan", "unknown planner %r: the planners are %s" % (planner, ", ".join(PLANNERS)))
         self.kin = kinematics
@@ -263,6 +267,9 @@ class Planner:
         self.is_valid, self._contacts = _validity(validity)
         self.clearance = _number(clearance, "clearance [m]", 0.0, lo_open=False)
         self._strict = self._strict_validity(validity, planning_validity)
+        if goal_preference is not None and not callable(goal_preference):
+            raise TypeError("goal_preference must be a callable rank(start, q) -> int, got %r" % (goal_preference,))
+        self._prefer = goal_preference
         self._ends: Tuple[Tuple[float, ...], ...] = ()
         for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
             if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
@@ -345,8 +352,9 @@ class Planner:
 
     # ------------------------------------------------------------------------------------ goals
     def goal_candidates(self, start: Sequence[float], goal: Any) -> List[Tuple[float, ...]]:
-        """The goal's joint configurations inside the limits, nearest to ``start`` first (one for a
-        joint or named goal; every IK branch of a pose). PlanningError when there is none."""
+        """The goal's joint configurations inside the limits, nearest to ``start`` first -- the
+        ``goal_preference`` rank before the nearness, when given -- (one for a joint or named goal;
+        every IK branch of a pose). PlanningError when there is none."""
         if isinstance(goal, str):
             states = getattr(self.kin, "named_states", {}) or {}
             if goal not in states:
@@ -364,7 +372,10 @@ class Planner:
                                               for v, lo, hi in zip(q, self.lower, self.upper))]
         if not sols:
             raise PlanningError("goal", "goal pose unreachable within the planner's joint limits")
-        sols.sort(key=lambda q: self._nearness(start, q))
+        if self._prefer is None:
+            sols.sort(key=lambda q: self._nearness(start, q))
+        else:
+            sols.sort(key=lambda q: (self._prefer(start, q), self._nearness(start, q)))
         return sols
 
     def _pose_target(self, goal: Any) -> Optional[np.ndarray]:
