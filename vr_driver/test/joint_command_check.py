@@ -17,6 +17,7 @@ stays put.
 from __future__ import annotations
 
 import math
+import re
 import threading
 import time
 import unittest
@@ -78,6 +79,7 @@ class Diagnostics:
     def __init__(self):
         self.cond = threading.Condition()
         self.values = None
+        self.stamp = 0.0                     # when the node published them (ROS time [s])
         self.sub = rospy.Subscriber("/diagnostics", DiagnosticArray, self._cb, queue_size=50)
 
     def _cb(self, msg):
@@ -87,6 +89,7 @@ class Diagnostics:
             if status.name.endswith("joint_command") and "refused" in values:
                 with self.cond:
                     self.values = values
+                    self.stamp = msg.header.stamp.to_sec()
                     self.cond.notify_all()
 
     def wait(self, predicate, timeout):
@@ -256,7 +259,7 @@ class JointCommandTest(unittest.TestCase):
             return sum((q[0] - commanded(s - lag)) ** 2 for s, q in during)
         # the lag: the shift that fits the samples best on the whole (least squares); the shift of
         # the smallest worst error followed the longest stall of the bus instead (0.082 s under load)
-        lags = [0.002 * i for i in range(0, 101)]
+        lags = [0.002 * i for i in range(0, 251)]
         lag = min(lags, key=squares)
         worst = error(lag)
         others = max(abs(a - b) for _s, q in during for a, b in zip(q[1:], q0[1:]))
@@ -271,25 +274,41 @@ class JointCommandTest(unittest.TestCase):
         # the same for this test's own commands: one late by a sleep that overran leaves the arm a
         # step behind the sine until the next
         late = max(0.0, max(b[0] - a[0] for a, b in zip(sent, sent[1:])) - period)
+        # and how late the commands reached the driver's callback (their age on arrival, which the
+        # driver measures from the stamps and shows in /diagnostics): the transport and the node's
+        # own threads, beyond what the driver can make up. Its spread shifts single commands in time
+        values = self.diag.wait(lambda v: self.diag.stamp >= settle, 10.0)
+        self.assertGreaterEqual(self.diag.stamp, settle, "no /diagnostics after the stream")
+        ages = re.match(r"(-?[\d.]+) \.\. (-?[\d.]+) \((\d+) stamped\)",
+                        values["command age on arrival, last stream [ms]"])
+        self.assertIsNotNone(ages, values)
+        age_min, age_max = float(ages.group(1)) / 1e3, float(ages.group(2)) / 1e3
+        self.assertGreaterEqual(int(ages.group(3)), 0.25 * len(sent), "too few commands reached the driver")
         speed = AMPLITUDE * 2 * math.pi * FREQUENCY
         print("joint_command: %d commands at %g Hz over %.2f s on a %g Hz bus (ran at a %.2f ms cycle, "
-              "longest stall %.3f s, a command %.3f s late); lag %.3f s (= two %.3f s steps + %.1f bus cycles), %.3f deg off the "
-              "shifted sine, other joints %.4f deg; at rest at the last target %.3f s after it (%.4f deg off)"
-              % (len(sent), RATE, t_last - t0, self.bus_rate, cycle_seen * 1000, stall, late, lag, period,
-                 (lag - 2 * period) / cycle_seen, worst / DEG, others / DEG, settle - t_last, off / DEG))
-        allowed = 1.0 * DEG + speed * (stall + late)
+              "longest stall %.3f s, a command %.3f s late, %.1f .. %.1f ms old on arrival); lag %.3f s (= two "
+              "%.3f s steps + %.1f bus cycles), %.3f deg off the shifted sine, other joints %.4f deg; at rest at "
+              "the last target %.3f s after it (%.4f deg off)"
+              % (len(sent), RATE, t_last - t0, self.bus_rate, cycle_seen * 1000, stall, late, age_min * 1e3,
+                 age_max * 1e3, lag, period, (lag - 2 * period) / cycle_seen, worst / DEG, others / DEG,
+                 settle - t_last, off / DEG))
+        age_spread = max(0.0, age_max - age_min)
+        allowed = 1.0 * DEG + speed * (stall + late + age_spread)
         self.assertLessEqual(worst, allowed, "%.3f deg off the sine shifted by %.3f s (allowed %.3f deg: 1 deg + "
-                             "%.3f s of the bus standing still + a command %.3f s late)"
-                             % (worst / DEG, lag, allowed / DEG, stall, late))
+                             "%.3f s of the bus standing still + a command %.3f s late + %.3f s spread of the "
+                             "commands' age on arrival)" % (worst / DEG, lag, allowed / DEG, stall, late, age_spread))
         self.assertLessEqual(others, 0.1 * DEG)
         # the lag: the controller blends only into a target it already has, so the arm runs one
         # command behind -- two steps (time_from_start) -- plus the way there and back (the bus
         # cycle that carries it, the program loop that reads it, the record that reports it): at
         # most 4 bus cycles as the bus ran (measured: 1 to 2 idle, 2 to 3.2 beside two CPU hogs);
         # one command more behind would be 2 steps = 4 cycles more
-        self.assertLessEqual(lag, 2 * period + 4.0 * cycle_seen,
-                             "lag %.3f s: two %.3f s steps + %.1f cycles of %.2f ms"
-                             % (lag, period, (lag - 2 * period) / cycle_seen, cycle_seen * 1000))
+        # -- after the command reached the driver (its oldest age on arrival: a loaded machine's
+        # transport and callbacks, measured, not the driver's doing)
+        self.assertLessEqual(lag, 2 * period + 4.0 * cycle_seen + max(0.0, age_max),
+                             "lag %.3f s: two %.3f s steps + %.1f cycles of %.2f ms + %.3f s on the way"
+                             % (lag, period, (lag - 2 * period - max(0.0, age_max)) / cycle_seen,
+                                cycle_seen * 1000, max(0.0, age_max)))
         self.assertEqual(self.refused(), refused_before, self.diag.values)
 
     def assert_refused(self, positions, kind, names=None, time_from_start=0.0):
