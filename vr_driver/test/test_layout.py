@@ -94,11 +94,7 @@ LONG_CLASSES = {     # class: (its length when listed, at most: it may shrink, n
     "vr_driver.driver.sequencer.SequencerBase": (372, "the queue, stops and outcomes common to v1 and the streams"),
 }
 #: import edges (importer, imported) left out of the circle check, and why; each closes a circle today
-CIRCLE_EDGES = {
-    ("vr_driver.protocol.base", "vr_driver.protocol.registry"):
-        "framed_record names the protocol whose version byte came (a lazy import of the registry, "
-        "which imports every protocol); the protocol seam's rework (issue 34, item 2) removes it",
-}
+CIRCLE_EDGES: dict = {}
 
 
 def module_name(root, path):

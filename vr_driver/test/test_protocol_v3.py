@@ -99,7 +99,7 @@ def test_idle_record_and_check_word_helper():
 
 slots = st.one_of(st.just(EMPTY), st.builds(
     CartesianSlot, seq=st.integers(1, SEQ_MAX), kind=st.sampled_from([CartesianKind.MOVEP, CartesianKind.MOVEL]),
-    smooth=st.integers(0, 10), speed=st.integers(1, 1000), pose=st.tuples(*[INT16] * 6)))
+    smooth=st.integers(0, 10), speed=st.integers(1, 1000), values=st.tuples(*[INT16] * 6)))
 
 
 @st.composite
@@ -190,11 +190,11 @@ def test_pose_length():
 
 @pytest.mark.parametrize("field, value", [
     ("seq", -1), ("seq", 65536), ("seq", True), ("kind", 3), ("kind", 0), ("smooth", -1), ("smooth", 11),
-    ("speed", 0), ("speed", 1001), ("speed", 1.5), ("pose", (0, 0, 0, 0, 0, 32768)),
-    ("pose", (-32769, 0, 0, 0, 0, 0)), ("pose", (0, 0, 0, 0, 0)), ("pose", (0.5, 0, 0, 0, 0, 0)),
+    ("speed", 0), ("speed", 1001), ("speed", 1.5), ("values", (0, 0, 0, 0, 0, 32768)),
+    ("values", (-32769, 0, 0, 0, 0, 0)), ("values", (0, 0, 0, 0, 0)), ("values", (0.5, 0, 0, 0, 0, 0)),
 ])
 def test_slot_field_ranges(field, value):
-    good = dict(seq=5, kind=CartesianKind.MOVEP, smooth=2, speed=100, pose=(1, 2, 3, 4, 5, 6))
+    good = dict(seq=5, kind=CartesianKind.MOVEP, smooth=2, speed=100, values=(1, 2, 3, 4, 5, 6))
     CartesianSlot(**good)
     good[field] = value
     with pytest.raises(ProtocolError):

@@ -12,22 +12,43 @@ carry the controller's own I/O words).
 A protocol is both ends: the driver uses ``encode`` / ``decode_feedback`` / ``idle_record``, the
 virtual controller ``decode_command`` / ``encode_feedback`` and the Chk_Cfg; both see the same
 record length, so a card configured for another protocol refuses the master at Chk_Cfg.
+
+The protocol object also names the code that runs it at each end: :meth:`Protocol.controller_program`
+(the virtual G2's program) and :meth:`Protocol.sequencer` (the driver's sequencer), each what that
+end's package registered for it with :meth:`Protocol.implement` (the built-in protocols':
+``vr_driver.controller.programs``, ``vr_driver.driver.sequencers``). A protocol nobody registered a
+program or a sequencer for is refused in words -- it never runs on another protocol's code, however
+alike their capabilities. Adding a protocol is one module (its Protocol subclass and records), one
+registration (:func:`vr_driver.protocol.registry.register`), its controller program and its
+sequencer (``vr_driver/test/test_toy_protocol.py`` does it).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple
 
+from ..errors import ProtocolError
 from ..poses import ControllerPose
 
 __all__ = ["Protocol", "WireTarget", "framed_record"]
+
+#: each registered protocol's version byte by its name (vr_driver.protocol.registry keeps it), so
+#: that a record of another protocol is named in the error
+_VERSIONS: Dict[str, int] = {}
+#: what the packages at the two ends registered for each protocol, by its name and the role
+#: (:meth:`Protocol.implement`)
+_IMPLEMENTATIONS: Dict[Tuple[str, str], Any] = {}
+#: the roles, what implements them and where the built-in protocols' are registered
+_ROLES = {
+    "controller_program": ("controller program", "the virtual G2", "vr_driver.controller.programs"),
+    "sequencer": ("sequencer", "the driver", "vr_driver.driver.sequencers"),
+}
 
 
 def framed_record(data: Any, size: int, version: int, what: str) -> bytes:
     """``data`` as the bytes of a record of ``size`` bytes whose first byte is ``version``;
     ProtocolError naming ``what`` otherwise (the record's own integrity check comes after)."""
-    from ..errors import ProtocolError
     try:
         raw = bytes(data)
     except (TypeError, ValueError) as exc:
@@ -35,8 +56,7 @@ def framed_record(data: Any, size: int, version: int, what: str) -> bytes:
     if len(raw) != size:
         raise ProtocolError("%s record must be %d bytes, got %d" % (what, size, len(raw)))
     if raw[0] != version:
-        from .registry import get, names
-        other = [name for name in names() if get(name).version == raw[0]]
+        other = [name for name, known in _VERSIONS.items() if known == raw[0]]
         raise ProtocolError("%s record: version byte %d, expected %d (is the other end running %s?)"
                             % (what, raw[0], version, "protocol " + other[0] if other else "another protocol"))
     return raw
@@ -53,6 +73,10 @@ class WireTarget:
     pose: Optional[ControllerPose]            # mm / deg: FK of ``joints`` (Cartesian protocols need it)
     speed: int                                # 0.1 % of the joint speed limits, 1..1000
     smooth: int                               # 0 (an exact stop) .. the protocol's largest level
+
+
+def _qualname(value: Any) -> str:
+    return "%s.%s" % (getattr(value, "__module__", "?"), getattr(value, "__qualname__", repr(value)))
 
 
 class Protocol:
@@ -227,6 +251,44 @@ class Protocol:
             steps = math.floor(abs(value) / unit + 0.5)
             out.append(math.copysign(steps, value) * unit if steps else 0.0)
         return ControllerPose(*out)
+
+    # ------------------------------------------------------------------ the code at each end
+    def implement(self, *, controller_program: Any = None, sequencer: Any = None) -> None:
+        """Register the code that runs this protocol: ``controller_program``, the virtual G2's program
+        class (a :class:`~vr_driver.controller.session.SessionProgram` with ``make_arm`` /
+        ``from_options``), and / or ``sequencer``, the driver's sequencer class. Called by the package
+        of that end (never by this package, which imports neither). Registering the same class again
+        is harmless; another class for a role already taken is a ProtocolError (a protocol runs on
+        one program, never silently on the last one registered)."""
+        for role, value in (("controller_program", controller_program), ("sequencer", sequencer)):
+            if value is None:
+                continue
+            key = (self.name, role)
+            known = _IMPLEMENTATIONS.get(key)
+            if known is not None and known is not value:
+                raise ProtocolError("protocol %s already has a %s (%s), not registering %s"
+                                    % (self.name, _ROLES[role][0], _qualname(known), _qualname(value)))
+            _IMPLEMENTATIONS[key] = value
+
+    def controller_program(self) -> Any:
+        """The class of the virtual G2's program for this protocol (registered with
+        :meth:`implement`); ProtocolError in words when there is none -- never another
+        protocol's."""
+        return self._implementation("controller_program")
+
+    def sequencer(self) -> Any:
+        """The class of the driver's sequencer for this protocol (registered with :meth:`implement`:
+        v1's handshake sequencer, the stream sequencer); ProtocolError in words when there is none."""
+        return self._implementation("sequencer")
+
+    def _implementation(self, role: str) -> Any:
+        try:
+            return _IMPLEMENTATIONS[(self.name, role)]
+        except KeyError:
+            what, end, where = _ROLES[role]
+            raise ProtocolError("protocol %s has no %s registered: %s cannot run it (its %s registers with "
+                                "protocol.implement(%s=...); the built-in protocols' are in %s)"
+                                % (self.name, what, end, what, role, where)) from None
 
     def describe(self) -> str:
         return "%s (%d bytes each way): %s" % (self.name, self.record_length, self.summary)

@@ -6,14 +6,14 @@ from __future__ import annotations
 from typing import Any, Dict, Tuple
 
 from ..errors import ProtocolError
-from .base import Protocol
+from .base import _IMPLEMENTATIONS, _VERSIONS, Protocol
 from .v1 import V1
 from .v2 import V2
 from .v3 import V3
 
-__all__ = ["get", "names", "DEFAULT"]
+__all__ = ["get", "names", "register", "unregister", "DEFAULT"]
 
-_ALL: Dict[str, Protocol] = {p.name: p for p in (V1, V2, V3)}
+_ALL: Dict[str, Protocol] = {}
 #: the protocol of an unchanged G2 program (the thesis')
 DEFAULT = V1.name
 
@@ -32,3 +32,38 @@ def get(name: Any) -> Protocol:
         return _ALL[name]
     except (KeyError, TypeError):
         raise ProtocolError("unknown protocol %r (known: %s)" % (name, ", ".join(_ALL))) from None
+
+
+def register(protocol: Protocol) -> Protocol:
+    """Make ``protocol`` one of the protocols the ``protocol`` parameter may name (returned as it
+    is). ProtocolError for an object that is no Protocol, without a name, or whose name or version
+    byte another protocol has (a record must name the protocol that sent it). The code that runs it
+    at each end registers with the protocol object (:meth:`~vr_driver.protocol.base.Protocol.implement`)."""
+    if not isinstance(protocol, Protocol) or not protocol.name:
+        raise ProtocolError("register() takes a Protocol with a name, got %r" % (protocol,))
+    for other in _ALL.values():
+        if other is protocol:
+            return protocol
+        if other.name == protocol.name or other.version == protocol.version:
+            raise ProtocolError("protocol %s (version byte %d): %s already has that %s"
+                                % (protocol.name, protocol.version, other.name,
+                                   "name" if other.name == protocol.name else "version byte"))
+    _ALL[protocol.name] = protocol
+    _VERSIONS[protocol.name] = protocol.version
+    return protocol
+
+
+def unregister(name: str) -> None:
+    """Forget the protocol called ``name`` and what was registered to run it (a test's own protocol,
+    when the test ends); the built-in ones stay. ProtocolError for one of them."""
+    if name in _BUILT_IN:
+        raise ProtocolError("protocol %s is built in: it stays registered" % name)
+    _ALL.pop(name, None)
+    _VERSIONS.pop(name, None)
+    for key in [key for key in _IMPLEMENTATIONS if key[0] == name]:
+        del _IMPLEMENTATIONS[key]
+
+
+for _protocol in (V1, V2, V3):
+    register(_protocol)
+_BUILT_IN = frozenset(_ALL)

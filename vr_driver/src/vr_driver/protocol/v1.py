@@ -13,10 +13,11 @@ Resolution: the G2 exchanges integers only, so a target is rounded to 1 mm / 1 d
 round half away from zero (0.5 -> 1, -0.5 -> -1, 2.5 -> 3), the same on both sides of zero, unlike
 Python's ``round`` (half to even). The rounded value is what is range- and workspace-checked.
 
-Feedback status byte: bits 0-5 are defined (:class:`StatusBits`); bits 6-7 are reserved and a
-feedback record with either set is refused with ProtocolError. Our controller program never sets
-them, so a set bit means the output mapping on the controller is wrong (shifted bytes, swapped
-words) and nothing else in that record can be trusted either.
+Feedback status byte: bits 0-5 are defined (:class:`~vr_driver.protocol.common.StatusBits`, every
+protocol's); bits 6-7 are reserved and a feedback record with either set is refused with
+ProtocolError. Our controller program never sets them, so a set bit means the output mapping on
+the controller is wrong (shifted bytes, swapped words) and nothing else in that record can be
+trusted either.
 
 Handshake (doc/controller_program.md): the controller starts a motion only when its state is READY and the flag
 is 1, reports BUSY, then DONE or REJECTED, holds that until the flag is 0, then returns to READY.
@@ -37,23 +38,18 @@ from .. import validate
 from ..errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
 from ..poses import CONTROLLER_FIELDS, ControllerPose, MoveType, Workspace, finite_number
 from .base import Protocol
+from .common import (INT16_MAX, INT16_MIN, STATUS_RESERVED_MASK, ByteOrder, FeedbackRecord, StatusBits,
+                     parse_byte_order, round_half_away)
 
 __all__ = [
     "V1",
     "ProtocolV1",
     "RECORD_SIZE",
-    "INT16_MIN",
-    "INT16_MAX",
-    "STATUS_RESERVED_MASK",
     "FLAG_NONE",
     "FLAG_REQUEST",
     "FLAG_STOP",
     "WireMoveType",
     "ControllerState",
-    "StatusBits",
-    "ByteOrder",
-    "parse_byte_order",
-    "round_half_away",
     "to_wire_int",
     "Command",
     "Feedback",
@@ -70,6 +66,9 @@ __all__ = [
     "DEFAULT_ACCEPT_TIMEOUT",
     "DEFAULT_RELEASE_TIMEOUT",
     "DEFAULT_SETTLE_TIME",
+    # the shared vocabulary (vr_driver.protocol.common), importable from here as before it moved
+    "INT16_MIN", "INT16_MAX", "STATUS_RESERVED_MASK", "StatusBits", "ByteOrder", "parse_byte_order",
+    "round_half_away",
 ]
 
 #: byte 13 of a command: no request / execute this target / stop the motion in progress
@@ -79,10 +78,6 @@ FLAG_STOP = 2
 
 #: bytes per record, each direction
 RECORD_SIZE = 14
-INT16_MIN = -32768
-INT16_MAX = 32767
-#: status bits 6 and 7: reserved, must be 0
-STATUS_RESERVED_MASK = 0xC0
 
 #: default time for the controller to answer a raised flag (BUSY, DONE or REJECTED) [s]
 DEFAULT_ACCEPT_TIMEOUT = 1.0
@@ -164,79 +159,10 @@ class ControllerState(enum.IntEnum):
     REJECTED = 3   # target refused or motion failed; held until the flag is 0
 
 
-class StatusBits(enum.IntFlag):
-    """Byte 14 of the feedback. Bits 6-7 are reserved (0)."""
-
-    DRIVES_POWERED = 1
-    ESTOP = 2
-    ERROR = 4
-    IN_MOTION = 8
-    PROGRAM_RUNNING = 16
-    VIA_STORED = 32
-
-    def describe(self) -> str:
-        """The set bits in words, in bit order ("drives powered, in motion"); "none" when 0."""
-        words = [_STATUS_WORDS[bit] for bit in _STATUS_ORDER if self & bit]
-        extra = int(self) & ~0x3F
-        if extra:
-            words.append("reserved bits 0x%02X" % extra)
-        return ", ".join(words) if words else "none"
-
-
-_STATUS_ORDER = (StatusBits.DRIVES_POWERED, StatusBits.ESTOP, StatusBits.ERROR, StatusBits.IN_MOTION,
-                 StatusBits.PROGRAM_RUNNING, StatusBits.VIA_STORED)
-_STATUS_WORDS = {
-    StatusBits.DRIVES_POWERED: "drives powered",
-    StatusBits.ESTOP: "e-stop",
-    StatusBits.ERROR: "error",
-    StatusBits.IN_MOTION: "in motion",
-    StatusBits.PROGRAM_RUNNING: "program running",
-    StatusBits.VIA_STORED: "via point stored",
-}
-
-
-class ByteOrder(str, enum.Enum):
-    """Order of the two bytes of each int16 word: ``little`` (the default of doc/controller_program.md) or ``big``."""
-
-    LITTLE = "little"
-    BIG = "big"
-
-    @classmethod
-    def parse(cls, value: Any, name: str = "byte_order") -> "ByteOrder":
-        """``value`` as a ByteOrder; ProtocolError naming the parameter ``name`` otherwise."""
-        if isinstance(value, ByteOrder):
-            return value
-        if isinstance(value, str):
-            text = value.strip().lower()
-            for member in cls:
-                if member.value == text:
-                    return member
-        raise ProtocolError("parameter %s must be 'little' or 'big', got %r" % (name, value))
-
-    @property
-    def struct_prefix(self) -> str:
-        return "<" if self is ByteOrder.LITTLE else ">"
-
-
-def parse_byte_order(value: Any, name: str = "byte_order") -> ByteOrder:
-    """Validate a byte order parameter ("little" / "big"); the error names ``name``."""
-    return ByteOrder.parse(value, name)
-
-
 _STRUCTS = {order: struct.Struct(order.struct_prefix + "6hBB") for order in ByteOrder}
 
 
 # ------------------------------------------------------------------------------------ conversions
-
-def round_half_away(value: float) -> int:
-    """Round to the nearest integer, halves away from zero (2.5 -> 3, -2.5 -> -3). Exact for every
-    float (no ``floor(x + 0.5)`` error at 0.49999999999999994)."""
-    magnitude = abs(value)
-    whole = math.floor(magnitude)
-    if magnitude - whole >= 0.5:   # exact: whole <= magnitude, same binade or zero
-        whole += 1
-    return int(-whole if value < 0 else whole)
-
 
 def to_wire_int(value: Any, name: str) -> int:
     """A pose value rounded to the controller's integer resolution (:func:`round_half_away`),
@@ -401,7 +327,7 @@ class Command:
 
 
 @dataclass(frozen=True)
-class Feedback:
+class Feedback(FeedbackRecord):
     """Controller -> master record: the current pose (whole mm / deg), the state, the status bits."""
 
     x: int

@@ -32,70 +32,29 @@ import struct
 from dataclasses import dataclass
 from typing import Any, Sequence, Tuple
 
-from ..errors import PoseError, ProtocolError
+from ..errors import ProtocolError
 from ..poses import ControllerPose
 from .base import Protocol, WireTarget, framed_record
-from .v1 import StatusBits, round_half_away
+from .common import (BLEND_MAX, BLEND_PER_LEVEL, INT32_MAX, INT32_MIN, JOINT_UNIT_DEG, SEQ_MAX, SMOOTH_MAX, Control,
+                     FeedbackRecord, RejectCode, Slot, SlotFormat, StatusBits, StreamState, blend_window,
+                     describe_stream_feedback, joints_from_wire, joints_to_wire, next_seq, seq_after, seq_offset)
 
 __all__ = [
-    "V2",
-    "ProtocolV2",
-    "VERSION",
-    "RECORD_SIZE_V2",
-    "SEQ_MAX",
-    "JOINT_UNIT_DEG",
-    "POSITION_UNIT_MM",
-    "SPEED_UNIT",
-    "SMOOTH_MAX",
-    "BLEND_PER_LEVEL",
-    "BLEND_MAX",
-    "blend_window",
-    "Control",
-    "TargetKind",
-    "StreamState",
-    "RejectCode",
-    "crc16",
-    "next_seq",
-    "seq_offset",
-    "describe_stream_feedback",
-    "seq_after",
-    "joints_to_wire",
-    "joints_from_wire",
-    "TargetSlot",
-    "EMPTY",
-    "CommandV2",
-    "FeedbackV2",
-    "GSD_MODULES_V2",
-    "CHK_CFG_V2",
+    "V2", "ProtocolV2", "VERSION", "RECORD_SIZE_V2", "POSITION_UNIT_MM", "SPEED_UNIT", "TargetKind", "crc16",
+    "JOINT_SLOT", "TargetSlot", "EMPTY", "CommandV2", "FeedbackV2", "GSD_MODULES_V2", "CHK_CFG_V2",
+    # the shared vocabulary (vr_driver.protocol.common), importable from here as before it moved
+    "SEQ_MAX", "JOINT_UNIT_DEG", "SMOOTH_MAX", "BLEND_PER_LEVEL", "BLEND_MAX", "blend_window", "Control",
+    "StreamState", "RejectCode", "next_seq", "seq_offset", "describe_stream_feedback", "seq_after",
+    "joints_to_wire", "joints_from_wire",
 ]
 
 VERSION = 2
 #: bytes per record, each direction
 RECORD_SIZE_V2 = 72
-#: sequence numbers run 1..SEQ_MAX and wrap to 1 (0 marks an empty slot / "none yet")
-SEQ_MAX = 0xFFFF
-#: joint angles on the wire: int32 in this many degrees (0.001 deg)
-JOINT_UNIT_DEG = 0.001
 #: Cartesian feedback: X, Y, Z in 0.01 mm; Rx, Ry, Rz in 0.001 deg
 POSITION_UNIT_MM = 0.01
 #: speed on the wire: 0.1 % of the joint speed limits (1..1000)
 SPEED_UNIT = 0.001
-SMOOTH_MAX = 10
-#: the blend through a point of smooth level k (doc/controller_program.md §6, the G2 behaviour this
-#: design assumes): a window of BLEND_PER_LEVEL * k of the shorter of the two move times, at most
-#: BLEND_MAX of it (the windows at a segment's two ends never overlap); the driver sizes the level
-#: at a corner from it, the virtual controller moves by it
-BLEND_PER_LEVEL = 0.05
-BLEND_MAX = 0.5
-
-
-def blend_window(smooth: int, move_time: float, next_move_time: float) -> float:
-    """The blend window [s] through a point of smooth level ``smooth`` between two segments of those
-    move times; the arm passes the point at about ``|v1 - v2| * window / 8`` from it."""
-    if smooth <= 0:
-        return 0.0
-    return min(BLEND_PER_LEVEL * smooth, BLEND_MAX) * min(move_time, next_move_time)
-
 #: Chk_Cfg modules of a v2 card configuration, inputs first like v1: 32 + 32 + 8 bytes each way
 #: (general identifier format: 0x5F = 16 words in, 0x17 = 8 bytes in, 0x6F / 0x27 the outputs)
 GSD_MODULES_V2 = ("32 Bytes In", "32 Bytes In", "8 Bytes In", "32 Bytes Out", "32 Bytes Out",
@@ -103,7 +62,7 @@ GSD_MODULES_V2 = ("32 Bytes In", "32 Bytes In", "8 Bytes In", "32 Bytes Out", "3
 #: the Chk_Cfg bytes of those modules
 CHK_CFG_V2 = bytes([0x5F, 0x5F, 0x17, 0x6F, 0x6F, 0x27])
 
-_INT32 = (-(2 ** 31), 2 ** 31 - 1)
+_INT32 = (INT32_MIN, INT32_MAX)
 _HEADER = struct.Struct("<BBH")                  # version, control, reserved
 _SLOT = struct.Struct("<HBBHH6i")                # seq, kind, smooth, speed, reserved, joints
 _COMMAND = struct.Struct("<BBH32s32sHH")         # header, slot 0, slot 1, outputs, CRC
@@ -111,36 +70,9 @@ _FEEDBACK = struct.Struct("<BBBBHHHH6i6iHHHB3sH")  # see FeedbackV2
 assert _SLOT.size == 32 and _COMMAND.size == RECORD_SIZE_V2 and _FEEDBACK.size == RECORD_SIZE_V2
 
 
-class Control(enum.IntFlag):
-    """Byte 2 (index 1) of a command."""
-
-    STOP = 1       # decelerate to rest now and drop every target taken but not yet moved to
-    START = 2      # slot 0 starts a new stream (taken only when the controller is idle, queue empty)
-
-
 class TargetKind(enum.IntEnum):
     NONE = 0
     JOINT = 1      # MOVEP to the six joint angles (joint-interpolated)
-
-
-class StreamState(enum.IntEnum):
-    """Byte 2 (index 1) of the feedback."""
-
-    IDLE = 0       # at rest, nothing queued
-    MOVING = 1     # moving to active_seq (a look-ahead target may be queued)
-    STOPPING = 2   # decelerating after STOP, a fault or a link loss
-    WAITING = 3    # at rest at done_seq's point: the next target did not come in time (a gap)
-
-
-class RejectCode(enum.IntEnum):
-    """Byte 4 (index 3) of the feedback: why ``rejected_seq`` was refused."""
-
-    NONE = 0
-    OUT_OF_ORDER = 1    # not the sequence number after accepted_seq (a gap or a stale repeat)
-    NOT_ARMED = 2       # raised before the controller saw an empty record after (re)start / loss
-    FAULT = 3           # e-stop, drives off or an error
-    UNREACHABLE = 4     # outside the joint limits or the reach; the controller's own check
-    BAD_SLOT = 5        # unknown kind, speed 0 or above 100 %, smooth above SMOOTH_MAX
 
 
 # ---------------------------------------------------------------------------------------- helpers
@@ -154,49 +86,6 @@ def crc16(data: bytes) -> int:
         for _ in range(8):
             crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
     return crc
-
-
-def next_seq(seq: int) -> int:
-    """The sequence number after ``seq`` (1..SEQ_MAX, wrapping to 1; after 0 comes 1)."""
-    return 1 if seq >= SEQ_MAX else seq + 1
-
-
-def seq_offset(seq: int, base: int) -> int:
-    """How many numbers ``seq`` lies after ``base`` in the wrapping sequence 1..SEQ_MAX (0 for
-    ``base`` itself; SEQ_MAX - 1 for the number just before it)."""
-    return ((seq - 1) - (base - 1)) % SEQ_MAX
-
-
-def seq_after(a: int, b: int) -> bool:
-    """True if ``a`` comes after ``b`` in the wrapping sequence (within half the range)."""
-    if a == 0:
-        return False
-    if b == 0:
-        return True
-    return 0 < (a - b) % SEQ_MAX < SEQ_MAX // 2
-
-
-def joints_to_wire(joints: Sequence[float]) -> Tuple[int, ...]:
-    """Six joint angles [rad] as int32 in 0.001 deg (rounded half away from zero); PoseError
-    naming the joint for a value that is not a finite number or does not fit int32."""
-    values = tuple(joints)
-    if len(values) != 6:
-        raise PoseError("a joint target has 6 angles, got %d" % len(values))
-    out = []
-    for i, value in enumerate(values):
-        name = "joint_%d" % (i + 1)
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise PoseError("%s must be a finite number of radians, got %r" % (name, value))
-        wire = round_half_away(math.degrees(value) / JOINT_UNIT_DEG)
-        if not _INT32[0] <= wire <= _INT32[1]:
-            raise PoseError("%s = %g rad does not fit the wire's int32 of 0.001 deg" % (name, value))
-        out.append(wire)
-    return tuple(out)
-
-
-def joints_from_wire(values: Sequence[int]) -> Tuple[float, ...]:
-    """int32 0.001 deg -> radians."""
-    return tuple(math.radians(v * JOINT_UNIT_DEG) for v in values)
 
 
 def _check_crc(raw: bytes, what: str) -> None:
@@ -221,39 +110,22 @@ def _seq(value: Any, name: str) -> int:
 
 # ------------------------------------------------------------------------------------------ records
 
-@dataclass(frozen=True)
-class TargetSlot:
-    """One joint target of a command (or an empty slot: seq 0)."""
+def _describe_joints(values: Tuple[int, ...]) -> str:
+    return "joints %s deg" % " ".join("%.3f" % (v * JOINT_UNIT_DEG) for v in values)
 
-    seq: int = 0
-    kind: TargetKind = TargetKind.NONE
-    smooth: int = 0
-    speed: int = 0                               # 0.1 % of the joint speed limits, 1..1000
-    joints: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)  # 0.001 deg
 
-    def __post_init__(self) -> None:
-        _seq(self.seq, "slot seq")
-        try:
-            object.__setattr__(self, "kind", TargetKind(self.kind))
-        except ValueError:
-            raise ProtocolError("slot kind %r is unknown (0 none, 1 joint)" % (self.kind,)) from None
-        joints = tuple(self.joints)
-        if len(joints) != 6 or not all(isinstance(v, int) and not isinstance(v, bool)
-                                       and _INT32[0] <= v <= _INT32[1] for v in joints):
-            raise ProtocolError("slot joints must be 6 int32 values (0.001 deg), got %r" % (joints,))
-        object.__setattr__(self, "joints", joints)
-        if self.seq == 0:
-            if self.kind is not TargetKind.NONE or any(joints) or self.speed or self.smooth:
-                raise ProtocolError("an empty slot (seq 0) carries nothing")
-            return
-        if self.kind is TargetKind.NONE:
-            raise ProtocolError("slot %d has no kind" % self.seq)
-        if isinstance(self.speed, bool) or not isinstance(self.speed, int) or not 1 <= self.speed <= 1000:
-            raise ProtocolError("slot %d: speed must be 1..1000 (0.1 %% of the joint speed limits), "
-                                "got %r" % (self.seq, self.speed))
-        if isinstance(self.smooth, bool) or not isinstance(self.smooth, int) \
-                or not 0 <= self.smooth <= SMOOTH_MAX:
-            raise ProtocolError("slot %d: smooth must be 0..%d, got %r" % (self.seq, SMOOTH_MAX, self.smooth))
+#: v2's part of a target slot (:class:`~vr_driver.protocol.common.Slot`): joint targets, six int32
+#: in 0.001 deg
+JOINT_SLOT = SlotFormat(kinds=TargetKind, labels=tuple("joint_%d [0.001 deg]" % (i + 1) for i in range(6)),
+                        value_range=_INT32, describe_values=_describe_joints)
+
+
+class TargetSlot(Slot):
+    """One joint target of a v2 command (or an empty slot: seq 0): the shared slot
+    (:class:`~vr_driver.protocol.common.Slot`, validated there) whose six values are the joints in
+    0.001 deg (``joints``)."""
+
+    FORMAT = JOINT_SLOT
 
     @classmethod
     def joint_target(cls, seq: int, joints_rad: Sequence[float], speed_fraction: float,
@@ -267,22 +139,16 @@ class TargetSlot:
         return cls(seq, TargetKind.JOINT, smooth, speed, joints_to_wire(joints_rad))
 
     @property
-    def empty(self) -> bool:
-        return self.seq == 0
+    def joints(self) -> Tuple[int, ...]:
+        """The joint target in 0.001 deg (the slot's values)."""
+        return self.values
 
     @property
     def joints_rad(self) -> Tuple[float, ...]:
-        return joints_from_wire(self.joints)
-
-    def describe(self) -> str:
-        if self.empty:
-            return "(empty)"
-        return "#%d %s speed %.1f %% smooth %d joints %s deg" % (
-            self.seq, self.kind.name, self.speed / 10.0, self.smooth,
-            " ".join("%.3f" % (v * JOINT_UNIT_DEG) for v in self.joints))
+        return joints_from_wire(self.values)
 
     def pack(self) -> bytes:
-        return _SLOT.pack(self.seq, int(self.kind), self.smooth, self.speed, 0, *self.joints)
+        return _SLOT.pack(self.seq, int(self.kind), self.smooth, self.speed, 0, *self.values)
 
     @classmethod
     def unpack(cls, raw: bytes) -> "TargetSlot":
@@ -344,7 +210,7 @@ class CommandV2:
 
 
 @dataclass(frozen=True)
-class FeedbackV2:
+class FeedbackV2(FeedbackRecord):
     """Controller -> master: the stream's progress, the joints and the pose."""
 
     state: StreamState = StreamState.IDLE
@@ -425,20 +291,6 @@ class FeedbackV2:
 
     def describe(self) -> str:
         return describe_stream_feedback(self)
-
-
-def describe_stream_feedback(fb: Any, where: str = "") -> str:
-    """A streaming protocol's feedback in words (its state, sequence numbers, status bits, a
-    refusal, arming); ``where``: the arm's position as text, if the record has one to show."""
-    text = "%s, taken %d, at %d, done %d%s; status: %s" % (
-        fb.state.name, fb.accepted_seq, fb.active_seq, fb.done_seq, ", " + where if where else "",
-        fb.status.describe())
-    if fb.rejected_seq:
-        text += "; refused %d (%s)" % (fb.rejected_seq, fb.reject_code.name)
-    if not fb.armed:
-        text += "; not armed"
-    return text
-
 
 
 # ---------------------------------------------------------------------------------- the seam

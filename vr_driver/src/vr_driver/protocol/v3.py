@@ -54,36 +54,16 @@ from typing import Any, Optional, Sequence, Tuple
 from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose, finite_number, wrap_degrees
 from .base import Protocol, WireTarget, framed_record
-from .v1 import ByteOrder, StatusBits, round_half_away
-from .v2 import (SEQ_MAX, SMOOTH_MAX, Control, RejectCode, StreamState, describe_stream_feedback, next_seq,
-                 seq_after)
+from .common import (INT16_MAX, INT16_MIN, SEQ_MAX, SMOOTH_MAX, SPEED_MAX, ByteOrder, Control, FeedbackRecord,
+                     RejectCode, Slot, SlotFormat, StatusBits, StreamState, describe_stream_feedback, next_seq,
+                     round_half_away, seq_after)
 
 __all__ = [
-    "V3",
-    "ProtocolV3",
-    "VERSION",
-    "COMMAND_SIZE_V3",
-    "FEEDBACK_SIZE_V3",
-    "POSITION_UNIT_MM",
-    "ANGLE_UNIT_DEG",
-    "SPEED_MAX",
-    "SMOOTH_MAX",
-    "ARMED_BIT",
-    "Control",
-    "CartesianKind",
-    "StreamState",
-    "RejectCode",
-    "next_seq",
-    "seq_after",
-    "check_word",
-    "pose_to_wire",
-    "pose_from_wire",
-    "CartesianSlot",
-    "EMPTY",
-    "CommandV3",
-    "FeedbackV3",
-    "GSD_MODULES_V3",
-    "CHK_CFG_V3",
+    "V3", "ProtocolV3", "VERSION", "COMMAND_SIZE_V3", "FEEDBACK_SIZE_V3", "POSITION_UNIT_MM", "ANGLE_UNIT_DEG",
+    "ARMED_BIT", "CartesianKind", "check_word", "pose_to_wire", "pose_from_wire", "CARTESIAN_SLOT", "CartesianSlot",
+    "EMPTY", "CommandV3", "FeedbackV3", "GSD_MODULES_V3", "CHK_CFG_V3",
+    # the shared vocabulary (vr_driver.protocol.common), importable from here as before it moved
+    "SPEED_MAX", "SMOOTH_MAX", "Control", "StreamState", "RejectCode", "next_seq", "seq_after",
 ]
 
 VERSION = 3
@@ -95,8 +75,6 @@ FEEDBACK_SIZE_V3 = 28
 POSITION_UNIT_MM = 0.1
 #: Rx, Ry, Rz on the wire: int16 in 0.01 degree (+-327.67 deg; sent wrapped into (-180, 180])
 ANGLE_UNIT_DEG = 0.01
-#: speed word: 0.1 % of the joint speed limits, 1..SPEED_MAX (MOVEP; an assumption to check, doc §10)
-SPEED_MAX = 1000
 #: bit 7 of the feedback's state byte: the program takes targets (an empty record of this session came)
 ARMED_BIT = 0x80
 _PER_MM, _PER_DEG = 10.0, 100.0    # wire units per mm / deg (a product rounds as the decimal reads)
@@ -112,7 +90,7 @@ GSD_MODULES_V3 = ("8 Bytes In", "8 Bytes In", "8 Bytes In", "4 Bytes In",
 #: in, 0x27 = 8 bytes out)
 CHK_CFG_V3 = bytes([0x17, 0x17, 0x17, 0x13, 0x27, 0x27, 0x27])
 
-_INT16 = (-0x8000, 0x7FFF)
+_INT16 = (INT16_MIN, INT16_MAX)
 _COMMAND = {o: struct.Struct(o.struct_prefix + "BBHBBH6hHH") for o in ByteOrder}
 _FEEDBACK = {o: struct.Struct(o.struct_prefix + "BBBBHHHH6hHH") for o in ByteOrder}
 _WORDS = {(o, n): struct.Struct(o.struct_prefix + "%dH" % n) for o in ByteOrder
@@ -210,31 +188,19 @@ def _fmt_pose(values: Sequence[int]) -> str:
 
 # ------------------------------------------------------------------------------------------ records
 
-@dataclass(frozen=True)
-class CartesianSlot:
-    """The one target of a command (or an empty slot: seq 0): a Cartesian pose in wire units."""
+#: v3's part of a target slot (:class:`~vr_driver.protocol.common.Slot`): a Cartesian pose, six int16
+#: (X Y Z in 0.1 mm, Rx Ry Rz in 0.01 deg); its speed word is MOVEP's (0.1 % of the joint speed
+#: limits, 1..SPEED_MAX: an assumption to check, doc §10)
+CARTESIAN_SLOT = SlotFormat(kinds=CartesianKind, labels=_LABELS, value_range=_INT16,
+                            describe_values=lambda values: "to " + _fmt_pose(values))
 
-    seq: int = 0
-    kind: CartesianKind = CartesianKind.NONE
-    smooth: int = 0
-    speed: int = 0                               # 0.1 % of the joint speed limits, 1..1000
-    pose: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)   # X Y Z 0.1 mm, Rx Ry Rz 0.01 deg
 
-    def __post_init__(self) -> None:
-        _int(self.seq, "slot seq", 0, SEQ_MAX)
-        try:
-            object.__setattr__(self, "kind", CartesianKind(self.kind))
-        except ValueError:
-            raise ProtocolError("slot kind %r is unknown (0 none, 1 MOVEP, 2 MOVEL)" % (self.kind,)) from None
-        object.__setattr__(self, "pose", _pose_ints(self.pose, "slot"))
-        if self.seq == 0:
-            if self.kind is not CartesianKind.NONE or any(self.pose) or self.speed or self.smooth:
-                raise ProtocolError("an empty slot (seq 0) carries nothing")
-            return
-        if self.kind is CartesianKind.NONE:
-            raise ProtocolError("slot %d has no kind" % self.seq)
-        _int(self.speed, "slot %d: speed (0.1 %% of the joint speed limits)" % self.seq, 1, SPEED_MAX)
-        _int(self.smooth, "slot %d: smooth" % self.seq, 0, SMOOTH_MAX)
+class CartesianSlot(Slot):
+    """The one target of a v3 command (or an empty slot: seq 0): the shared slot
+    (:class:`~vr_driver.protocol.common.Slot`, validated there) whose six values are a Cartesian pose
+    in wire units (``pose``)."""
+
+    FORMAT = CARTESIAN_SLOT
 
     @classmethod
     def from_pose(cls, seq: int, pose: Any, speed: int, smooth: int = 0,
@@ -243,23 +209,14 @@ class CartesianSlot:
         return cls(seq, kind, smooth, speed, pose_to_wire(pose))
 
     @property
-    def empty(self) -> bool:
-        return self.seq == 0
-
-    @property
-    def values(self) -> Tuple[int, ...]:
-        return self.pose
+    def pose(self) -> Tuple[int, ...]:
+        """The target as on the wire: X Y Z 0.1 mm, Rx Ry Rz 0.01 deg (the slot's values)."""
+        return self.values
 
     @property
     def controller_pose(self) -> ControllerPose:
         """The target in mm / deg."""
-        return pose_from_wire(self.pose)
-
-    def describe(self) -> str:
-        if self.empty:
-            return "(empty)"
-        return "#%d %s speed %.1f %% smooth %d to %s" % (
-            self.seq, self.kind.name, self.speed / 10.0, self.smooth, _fmt_pose(self.pose))
+        return pose_from_wire(self.values)
 
 
 EMPTY = CartesianSlot()
@@ -288,7 +245,7 @@ class CommandV3:
         order = ByteOrder.parse(byte_order)
         s = self.slot
         body = _COMMAND[order].pack(VERSION, int(self.control), s.seq, int(s.kind), s.smooth, s.speed,
-                                    *s.pose, s.seq, 0)
+                                    *s.values, s.seq, 0)
         return _seal(body, order)
 
     @classmethod
@@ -307,7 +264,7 @@ class CommandV3:
 
 
 @dataclass(frozen=True)
-class FeedbackV3:
+class FeedbackV3(FeedbackRecord):
     """Controller -> master: the stream's progress and the TCP pose (no joints, no controller I/O).
     The attribute names are FeedbackV2's where the field exists."""
 
