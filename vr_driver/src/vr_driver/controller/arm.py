@@ -55,7 +55,7 @@ from ..errors import KinematicsError, MotionError, PoseError, VrDriverError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..kinematics.preview import MotionPlanner, MotionSettings, MoveType, Trajectory
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
-from ..protocol.v1 import INT16_MAX, INT16_MIN, round_half_away
+from ..protocol.common import INT16_MAX, INT16_MIN, round_half_away
 
 __all__ = [
     "IntPose",
@@ -79,7 +79,7 @@ _INT16 = (INT16_MIN, INT16_MAX)
 
 def round_pose(pose: Any) -> IntPose:
     """A pose in whole mm / degrees as the G2 reports it: rounded half away from zero (the wire's
-    rounding, :func:`vr_driver.protocol.v1.round_half_away`), angles wrapped into (-180, 180], every
+    rounding, :func:`vr_driver.protocol.common.round_half_away`), angles wrapped into (-180, 180], every
     value clamped into int16."""
     if not isinstance(pose, ControllerPose):
         pose = ControllerPose.from_sequence(pose)

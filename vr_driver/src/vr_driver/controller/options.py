@@ -19,7 +19,7 @@ from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose
 from ..protocol import registry as protocols
 from ..protocol.base import Protocol
-from ..protocol.v1 import ByteOrder
+from ..protocol.common import ByteOrder
 from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, SendAhead
 from .session import Unreachable
 from .simulator import SimError, int_option, positive_option

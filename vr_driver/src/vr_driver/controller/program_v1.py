@@ -57,12 +57,14 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
 from ..errors import VrDriverError
-from ..protocol.v1 import ByteOrder, Command, ControllerHandshake, ControllerState, Feedback, StatusBits
+from ..poses import ControllerPose
+from ..protocol.common import ByteOrder, StatusBits
+from ..protocol.v1 import Command, ControllerHandshake, ControllerState, Feedback
 from .arm import ExecutionLog, LogEntry, MotionResult, Outcome, SimArm
 from .session import SessionProgram, Unreachable, arm_status_bits
 
@@ -111,6 +113,20 @@ class ControllerProgramV1(SessionProgram):
         self._pending: Optional[_Pending] = None
         self._held: Optional[MotionResult] = None      # the arm's result while the loop was blocked
         self._alarm: Optional[str] = None               # unreachable, alarm_halt: halts after this loop
+
+    # ------------------------------------------------------------------- built by the virtual G2
+    ARM_TYPE = SimArm
+
+    @classmethod
+    def make_arm(cls, kinematics: Any, options: Any, clock: Callable[[], float]) -> SimArm:
+        return SimArm(kinematics, speed_factor=options.speed_factor, initial_pose=ControllerPose(*options.initial_pose),
+                      clock=clock, brake_time=options.brake_time, configuration=options.configuration)
+
+    @classmethod
+    def from_options(cls, slave: DpSlave, arm: SimArm, options: Any, *, execution_log: Any,
+                     confirm_records: bool, kinematics: Any = None) -> "ControllerProgramV1":
+        return cls(slave, arm, byte_order=options.byte_order, execution_log=execution_log,
+                   confirm_records=confirm_records, **cls.loop_options(options))
 
     # ------------------------------------------------------------------- SessionProgram hooks
     def decode_record(self, raw: bytes) -> Command:

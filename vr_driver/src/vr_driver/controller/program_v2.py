@@ -44,13 +44,15 @@ small hooks of the loop: :meth:`~ControllerProgramV2.command_slots`,
 from __future__ import annotations
 
 import logging
-from typing import Any, Optional, Sequence, Tuple
+from typing import Any, Callable, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
+from ..poses import ControllerPose
+from ..protocol.common import (SEQ_MAX, Control, RejectCode, StreamState, joints_to_wire, next_seq, seq_after,
+                               seq_offset)
+from ..protocol.v2 import V2, CommandV2, FeedbackV2
 from .session import SessionProgram, Unreachable, arm_status_bits
-from ..protocol.v2 import (SEQ_MAX, CommandV2, Control, FeedbackV2, RejectCode, StreamState,
-                          V2, joints_to_wire, next_seq, seq_after, seq_offset)
 from .arm import ExecutionLog, Outcome
 from .stream_arm import SimStreamArm, StreamLogEntry, StreamTarget, wire_pose
 
@@ -94,6 +96,25 @@ class ControllerProgramV2(SessionProgram):
         self.io_outputs = 0
         self._gripper_cmd = (0, 0.0)        # (output 1, when it last changed)
         self._forced_inputs = 0
+
+    # ------------------------------------------------------------------- built by the virtual G2
+    ARM_TYPE = SimStreamArm
+
+    @classmethod
+    def make_arm(cls, kinematics: Any, options: Any, clock: Callable[[], float], **extra: Any) -> SimStreamArm:
+        """The streaming arm of the options (``extra``: a subclass's further arguments)."""
+        return SimStreamArm(kinematics, speed_factor=options.speed_factor,
+                            initial_pose=ControllerPose(*options.initial_pose), clock=clock,
+                            brake_time=options.brake_time, configuration=options.configuration,
+                            ramp_time=options.ramp_time, speed_scale=options.speed_scale,
+                            blend_across_input_read=options.blend_across_input_read,
+                            ramp_shape=options.ramp_shape, accelerations=options.accelerations, **extra)
+
+    @classmethod
+    def from_options(cls, slave: DpSlave, arm: SimStreamArm, options: Any, *, execution_log: Any,
+                     confirm_records: bool, kinematics: Any = None) -> "ControllerProgramV2":
+        return cls(slave, arm, execution_log=execution_log, confirm_records=confirm_records,
+                   **cls.loop_options(options))
 
     # ------------------------------------------------------------------- SessionProgram hooks
     def decode_record(self, raw: bytes) -> CommandV2:

@@ -40,16 +40,14 @@ import collections
 import enum
 import logging
 from dataclasses import dataclass
-from typing import Any, Deque, Optional, Sequence, Tuple
+from typing import Any, Callable, Deque, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
 from ..errors import KinematicsError, MotionError, PoseError
 from ..kinematics.solver import Kinematics
-from ..protocol.v1 import ByteOrder
-from ..protocol.v3 import (SEQ_MAX, CartesianKind, CartesianSlot, CommandV3, FeedbackV3, RejectCode,
-                           V3, pose_from_wire, pose_to_wire)
-from ..protocol.v2 import joints_to_wire
+from ..protocol.common import SEQ_MAX, ByteOrder, RejectCode, joints_to_wire
+from ..protocol.v3 import V3, CartesianKind, CartesianSlot, CommandV3, FeedbackV3, pose_from_wire, pose_to_wire
 from .arm import ExecutionLog, Outcome
 from .program_v2 import ControllerProgramV2
 from .session import Unreachable, arm_status_bits
@@ -133,6 +131,19 @@ class ControllerProgramV3(ControllerProgramV2):
         self.kin = kinematics if kinematics is not None else Kinematics.default()
         self.ring: Deque[CartesianTarget] = collections.deque()
         self._newest: Optional[Tuple[float, ...]] = None     # joints of the newest target taken
+
+    # ------------------------------------------------------------------- built by the virtual G2
+    @classmethod
+    def make_arm(cls, kinematics: Any, options: Any, clock: Callable[[], float], **extra: Any) -> SimStreamArm:
+        """The streaming arm, reading ``interpreter_lookahead`` MOVEs ahead as the G2's interpreter."""
+        return super().make_arm(kinematics, options, clock, look_ahead=options.interpreter_lookahead, **extra)
+
+    @classmethod
+    def from_options(cls, slave: DpSlave, arm: SimStreamArm, options: Any, *, execution_log: Any,
+                     confirm_records: bool, kinematics: Any = None) -> "ControllerProgramV3":
+        return cls(slave, arm, kinematics=kinematics, ring_size=options.ring_size, byte_order=options.byte_order,
+                   execution_log=execution_log, confirm_records=confirm_records, send_ahead=options.send_ahead,
+                   **cls.loop_options(options))
 
     # ------------------------------------------------------------------- SessionProgram hooks
     def decode_record(self, raw: bytes) -> CommandV3:

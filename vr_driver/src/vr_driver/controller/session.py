@@ -62,12 +62,12 @@ from __future__ import annotations
 import enum
 import logging
 import threading
-from typing import Any, Optional, Tuple
+from typing import Any, Callable, Dict, Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveState
 
 from ..errors import ProtocolError, VrDriverError
-from ..protocol.v1 import StatusBits
+from ..protocol.common import StatusBits
 
 __all__ = ["SessionProgram", "Unreachable", "arm_status_bits"]
 
@@ -167,6 +167,31 @@ class SessionProgram:
         self._chained_state = slave.on_state_change
         slave.on_outputs = self._on_outputs
         slave.on_state_change = self._on_state_change
+
+    # ------------------------------------------------------------------- built by the virtual G2
+    #: the simulated arm class this program moves (the virtual G2 refuses another)
+    ARM_TYPE: type = object
+
+    @classmethod
+    def make_arm(cls, kinematics: Any, options: Any, clock: Callable[[], float]) -> Any:
+        """The simulated arm this program moves, from the virtual G2's validated options (a
+        :class:`~vr_driver.controller.options.SimOptions`) and the arm's ``kinematics`` (None: the
+        model's). VrDriverError for an initial pose it cannot take."""
+        raise NotImplementedError
+
+    @classmethod
+    def from_options(cls, slave: DpSlave, arm: Any, options: Any, *, execution_log: Any,
+                     confirm_records: bool, kinematics: Any = None) -> "SessionProgram":
+        """This program on ``slave`` and ``arm`` with the virtual G2's options (``kinematics``: the
+        controller's own, for a program that solves Cartesian targets)."""
+        raise NotImplementedError
+
+    @staticmethod
+    def loop_options(options: Any) -> Dict[str, Any]:
+        """The options of the link side and the loop every program takes (this class's keyword
+        arguments) from the virtual G2's options."""
+        return dict(data_exchange_bit=options.data_exchange_bit,
+                    loop_blocks_during_move=options.loop_blocks_during_move, unreachable=options.unreachable)
 
     # ------------------------------------------------------------------- subclass interface
     def decode_record(self, raw: bytes) -> Any:

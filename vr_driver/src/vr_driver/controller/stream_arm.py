@@ -95,8 +95,8 @@ from panasonic_vr006l_support.joint_limits import model_ramp_time
 from ..errors import MotionError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
-from ..protocol.v1 import round_half_away
-from ..protocol.v2 import BLEND_MAX, BLEND_PER_LEVEL, POSITION_UNIT_MM, StreamState, blend_window, joints_to_wire
+from ..protocol.common import BLEND_MAX, BLEND_PER_LEVEL, StreamState, blend_window, joints_to_wire, round_half_away
+from ..protocol.v2 import POSITION_UNIT_MM
 from .arm import ArmBase, Outcome, brake_progress
 
 __all__ = [

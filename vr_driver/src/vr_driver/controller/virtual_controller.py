@@ -33,26 +33,24 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import IO, Any, Callable, Dict, Optional, Sequence, Tuple, Union
+from typing import IO, Any, Callable, Optional, Sequence, Tuple, Union
 
 from pyprofibus_vendor.config import default_robot_config
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
 from pyprofibus_vendor.phy_serial import PtyPair
 
-from ..errors import VrDriverError
+from ..errors import ProtocolError, VrDriverError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose
 from ..protocol import registry as protocols
-from ..protocol.v1 import ByteOrder, ControllerState, Feedback
-from ..protocol.v2 import FeedbackV2, StreamState
-from ..protocol.v3 import FeedbackV3
+from ..protocol.common import ByteOrder, FeedbackRecord, StreamState
+from ..protocol.v1 import ControllerState
 from .arm import ExecutionLog, IntPose, LogEntry, SimArm
 from .options import (DEFAULT_ADDRESS, DEFAULT_BAUD, DEFAULT_BRAKE_TIME, DEFAULT_LOOP_PERIOD, LoopTiming, SimOptions,
                       protocol_option, true_kinematics, true_zero_offsets)
-from .program_v1 import ControllerProgramV1
-from .program_v2 import ControllerProgramV2
-from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, ControllerProgramV3, SendAhead
+from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, SendAhead
+from . import programs  # noqa: F401  (registers the built-in protocols' programs)
 from .pty_link import SimPort
 from .session import Unreachable
 from .simulator import SimError, Simulator
@@ -86,10 +84,15 @@ class VirtualController(Simulator):
     ``pty_link`` a symlink to it is made there (replacing a stale symlink, never another file) and
     removed by :meth:`stop`. A string serves that existing device (``SerialLink(link, baud)``). A
     :class:`~pyprofibus_vendor.phy.Link` is used as it is (the caller closes it).
-    ``confirm_records`` (default: True for v1, False for v2): the program acts on a master record
-    only once it arrived in two consecutive Data_Exchange telegrams (see the module docstring; v2's
-    CRC-16 closes the gap the rule closes for v1, without costing a bus cycle per target).
-    ``protocol``: ``"v1"`` (default) runs :class:`~vr_driver.controller.program_v1.ControllerProgramV1` on a 14-byte slave and a
+    ``confirm_records`` (default: the protocol's ``confirm_records``, True for v1): the program acts
+    on a master record only once it arrived in two consecutive Data_Exchange telegrams
+    (:mod:`vr_driver.controller.program_v1`; v2's CRC-16 and v3's check word close the gap the rule
+    closes for v1, without costing a bus cycle per target).
+    ``protocol`` (a name or a protocol object) runs the program the protocol object names
+    (:meth:`~vr_driver.protocol.base.Protocol.controller_program`; SimError for a protocol without
+    one) on a slave with its Chk_Cfg and the arm that program moves (its ``make_arm``; a given
+    ``arm`` must be of its ``ARM_TYPE``): ``"v1"`` (default)
+    :class:`~vr_driver.controller.program_v1.ControllerProgramV1` on a 14-byte slave and a
     :class:`~vr_driver.controller.arm.SimArm`; ``"v2"`` runs :class:`~vr_driver.controller.program_v2.
     ControllerProgramV2` on a 72-byte slave (``CHK_CFG_V2``) and a :class:`~vr_driver.controller.stream_arm.
     SimStreamArm` (streamed joint targets, look-ahead blending); its feedback is a FeedbackV2.
@@ -178,46 +181,28 @@ class VirtualController(Simulator):
                                       self.options.loop_jitter_seed)
         self.protocol = self.options.protocol
         self.wire = protocols.get(self.protocol)
-        streams = self.wire.streams
-        cartesian_stream = streams and not self.wire.joint_targets   # the controller solves the IK
+        try:
+            program_type = self.wire.controller_program()      # its own, never another protocol's
+        except ProtocolError as exc:
+            raise SimError(str(exc)) from None
         if confirm_records is None:
             confirm_records = self.wire.confirm_records
         if arm is None:
-            extra: Dict[str, Any] = {"look_ahead": self.options.interpreter_lookahead} if cartesian_stream else {}
-            if streams:
-                extra.update(ramp_time=self.options.ramp_time, speed_scale=self.options.speed_scale,
-                             blend_across_input_read=self.options.blend_across_input_read,
-                             ramp_shape=self.options.ramp_shape, accelerations=self.options.accelerations)
             try:
-                arm = (SimStreamArm if streams else SimArm)(
-                    kinematics, speed_factor=self.options.speed_factor,
-                    initial_pose=ControllerPose(*self.options.initial_pose), clock=clock,
-                    brake_time=self.options.brake_time, configuration=self.options.configuration, **extra)
+                arm = program_type.make_arm(kinematics, self.options, clock)
             except VrDriverError as exc:
                 raise SimError("initial pose %s: %s" % (self.options.initial_pose, exc)) from exc
-        if isinstance(arm, SimStreamArm) != streams:
-            raise SimError("protocol %s needs a %s" % (self.protocol, "SimStreamArm" if streams else "SimArm"))
+        if not isinstance(arm, program_type.ARM_TYPE):
+            raise SimError("protocol %s needs a %s, got a %s" % (self.protocol, program_type.ARM_TYPE.__name__,
+                                                                 type(arm).__name__))
         self.arm: Any = arm
         self.execution_log = ExecutionLog()
-        self.slave = robot_slave(self.options.address, clock, self.protocol)
-        self.program: Union[ControllerProgramV1, ControllerProgramV2, ControllerProgramV3]
-        loop: Dict[str, Any] = dict(data_exchange_bit=self.options.data_exchange_bit,
-                                    loop_blocks_during_move=self.options.loop_blocks_during_move,
-                                    unreachable=self.options.unreachable)
-        if cartesian_stream:
-            self.program = ControllerProgramV3(self.slave, arm, kinematics=controller_kinematics,
-                                               ring_size=self.options.ring_size,
-                                               byte_order=self.options.byte_order,
-                                               execution_log=self.execution_log,
-                                               confirm_records=confirm_records,
-                                               send_ahead=self.options.send_ahead, **loop)
-        elif streams:
-            self.program = ControllerProgramV2(self.slave, arm, execution_log=self.execution_log,
-                                               confirm_records=confirm_records, **loop)
-        else:
-            self.program = ControllerProgramV1(self.slave, arm, byte_order=self.options.byte_order,
-                                             execution_log=self.execution_log,
-                                             confirm_records=confirm_records, **loop)
+        self.slave = robot_slave(self.options.address, clock, self.wire)
+        #: the protocol's program (:meth:`vr_driver.protocol.base.Protocol.controller_program`)
+        self.program: Any = program_type.from_options(self.slave, arm, self.options,
+                                                      execution_log=self.execution_log,
+                                                      confirm_records=confirm_records,
+                                                      kinematics=controller_kinematics)
         self._cond = threading.Condition()
         super().__init__()
         self.overruns = 0
@@ -294,7 +279,7 @@ class VirtualController(Simulator):
                 next_time = now
             self._stop.wait(next_time - now)
 
-    def step(self, now: Optional[float] = None) -> Union[None, Feedback, FeedbackV2, FeedbackV3]:
+    def step(self, now: Optional[float] = None) -> Optional[FeedbackRecord]:
         """One program loop (at ``now``, default the clock); the feedback on the bus after it (the
         last one written, while a MOVE blocks the loop or an alarm halted it)."""
         feedback = self.program.step(self.clock() if now is None else now)
@@ -327,7 +312,7 @@ class VirtualController(Simulator):
         return self.program.state
 
     @property
-    def feedback(self) -> Union[None, Feedback, FeedbackV2, FeedbackV3]:
+    def feedback(self) -> Optional[FeedbackRecord]:
         return self.program.last_feedback
 
     @property
