@@ -6,7 +6,8 @@ public hook interface (``follow``, ``advance``, ``record``, ``idle_command``, ``
 ``stop_untracked``, ``replaced``, ``apply_replan``, ``on_lost``, ``resting``, ``end_due``):
 :class:`MotionSequencer` (v1: one target at a time through the handshake) here, and
 :class:`~vr_driver.driver.streaming.StreamSequencer` (the streaming protocols). The driver core
-picks one by the protocol object's ``streams``.
+runs the one the protocol object names (:meth:`vr_driver.protocol.base.Protocol.sequencer`, registered
+by :mod:`vr_driver.driver.sequencers`).
 
 :meth:`SequencerBase.step` is called once per bus iteration with the link's
 :class:`~vr_driver.driver.link.LinkSample` and the arm's current joints; it returns the command to
@@ -42,8 +43,8 @@ from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple, Union
 from ..errors import HandshakeError
 from ..params import DriverParams
 from ..poses import ControllerPose
-from ..protocol.v1 import (Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected,
-                        StatusBits, TimedOut)
+from ..protocol.common import FeedbackRecord, StatusBits
+from ..protocol.v1 import Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected, TimedOut
 from .jobs import JobPhase, MoveJob, SubmitMode
 from .link import LinkSample
 
@@ -63,7 +64,7 @@ START_TOLERANCE = 0.02
 SESSION_RECORDS_BEFORE_REQUEST = 2
 
 
-def why_no_motion(fb: Feedback) -> str:
+def why_no_motion(fb: FeedbackRecord) -> str:
     """What in the controller's status bits forbids motion ("" when nothing does)."""
     bits = fb.status
     reasons = []
@@ -311,7 +312,7 @@ class SequencerBase:
         self._publish()
 
     # ------------------------------------------------------------------ requests
-    def _take(self, request: _Request, now: float, fb: Optional[Feedback]) -> None:
+    def _take(self, request: _Request, now: float, fb: Optional[FeedbackRecord]) -> None:
         if isinstance(request, _Add):
             self._take_add(request, now)
         elif isinstance(request, _Extend):
@@ -402,7 +403,7 @@ class SequencerBase:
 
 
         # ------------------------------------------------------------------ at rest
-    def _track_rest(self, now: float, fb: Feedback) -> None:
+    def _track_rest(self, now: float, fb: FeedbackRecord) -> None:
         values = fb.values
         if values != self._rest_values or fb.status & StatusBits.IN_MOTION:
             self._rest_values = values
@@ -418,7 +419,7 @@ class SequencerBase:
         job.set_phase(JobPhase.STOPPING)
         self._settle = _Settle(job, phase, reason, now)
 
-    def _check_settle(self, now: float, fb: Feedback) -> None:
+    def _check_settle(self, now: float, fb: FeedbackRecord) -> None:
         settle = self._settle
         if settle is None:
             return
