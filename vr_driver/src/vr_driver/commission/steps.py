@@ -40,7 +40,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from ..errors import KinematicsError, PoseError
 from ..poses import ControllerPose
-from ..protocol.v1 import ByteOrder, StatusBits
+from ..protocol.common import ByteOrder, StatusBits
 from ..protocol.v3 import (CartesianSlot, CommandV3, Control, FeedbackV3, RejectCode, StreamState, check_word,
                            next_seq, seq_after)
 from . import analysis

@@ -16,7 +16,7 @@ from dataclasses import replace
 from typing import Any, Callable, List, Optional
 
 from ..params import DriverParams
-from ..protocol.v1 import StatusBits
+from ..protocol.common import StatusBits
 from .arm_joints import ArmJoints
 from .link import ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkSample, LinkSupervisor
 from .sequencer import SequencerBase

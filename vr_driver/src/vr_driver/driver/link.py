@@ -43,7 +43,7 @@ from ..bus.health import BusHealth, BusHealthSummary
 from ..bus.process import BusProcessMaster, BusSettings, RemoteSlave
 from ..errors import ProtocolError
 from ..params import DriverParams
-from ..protocol.v1 import Feedback
+from ..protocol.common import FeedbackRecord as Feedback  # every protocol's feedback record
 from .record_clock import RecordClock
 
 log = logging.getLogger("vr_driver.driver")

@@ -10,7 +10,7 @@ from typing import Dict, Optional, Tuple
 from ..bus.health import BusHealthSummary
 from ..errors import VrDriverError
 from ..poses import ControllerPose
-from ..protocol.v1 import Feedback
+from ..protocol.common import FeedbackRecord as Feedback  # every protocol's feedback record
 from .jobs import MoveJob
 from .link import ERROR_LINK, LinkCounters, LinkState
 from .sequencer import why_no_motion

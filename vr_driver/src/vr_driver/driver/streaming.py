@@ -51,8 +51,7 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 from ..params import DriverParams
 from ..protocol.base import WireTarget
-from ..protocol.v1 import StatusBits
-from ..protocol.v2 import SEQ_MAX, StreamState, blend_window, next_seq, seq_offset
+from ..protocol.common import SEQ_MAX, StatusBits, StreamState, blend_window, next_seq, seq_offset
 from .jobs import JobPhase, MoveJob, StreamPoint
 from .link import LinkSample
 from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, SequencerBase, _Settle

@@ -42,7 +42,7 @@ from typing import Any, Callable, List, Optional, Sequence, TextIO, Tuple
 
 from ..kinematics.preview import MoveType
 from ..poses import HOME_POSE, ControllerPose, Workspace
-from ..protocol.v1 import round_half_away
+from ..protocol.common import round_half_away
 
 __all__ = [
     "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
