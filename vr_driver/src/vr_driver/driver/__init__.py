@@ -23,6 +23,7 @@ from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, ERROR_PROTOCOL, Lin
                    LinkState, LinkSupervisor, open_serial_link)
 from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer,
                         SequencerView, why_no_motion)
+from . import sequencers  # noqa: F401  (registers each built-in protocol's sequencer with it)
 from .status import DriverError, DriverStatus
 
 __all__ = [
