@@ -3,6 +3,7 @@
 
     scripts/bench trajectory [-- --n 3 --seed 1 --configs v1-paced,v2-paced,v3-paced,v3-paced-la0 --plot DIR]
     scripts/bench trajectory -- --set wrist [--n 6]      (v3-paced, v3-paced-ramp05, v1-paced, v2-paced)
+    scripts/bench trajectory -- --set wrist --configs v3-paced-ramp05 --commissioning FILE   (before / after)
 
 Trajectories (:func:`generate`, deterministic for a seed; the same set for every configuration):
 random joint paths as a sampling planner returns them -- 1 to 3 legs between random waypoints, each
@@ -100,6 +101,14 @@ offsets (0 for the package's model): both then count from the same zero pose. ``
 proposed poses, the joints the pendant shows and the TCP pose the controller reports on the true
 robot, rounded to 0.01; the fit from the package's model, written to a temporary YAML) and every
 configuration runs again with the driver's ``model:=`` that file; the before / after table follows.
+``--commissioning FILE`` (what ``rosrun vr_driver commission`` wrote, with the ``joint_limits.yaml``
+beside it): every configuration runs twice, as before the commissioning -- the driver without it,
+the planner at the model's limits (joint_limits.yaml of the MoveIt config; the "wrist" set's
+accelerations too, NOT matched to the configuration's arm: what a user plans with before measuring
+it) -- and after it: ``driver.launch commissioning:=FILE`` (the driver's parameters from the file;
+the configuration's ``protocol:=`` and bus still win) and the planner at the file's limits (its
+``planning_limits``, :func:`planner_limits`, velocity and acceleration); the before / after table
+follows (:func:`compare_commissioning`).
 ``--plot DIR``: per goal DIR/<config>_<goal>.png, the planned and the executed joints over time
 (:func:`plot_goal`, matplotlib Agg). A configuration the stack does not support
 (no ready driver, every goal refused) is reported with the reason; the bench then goes on with the
@@ -1021,10 +1030,11 @@ class Run:
                      if cfg.get("true_model") else None)
         self.zero = tuple(cfg.get("model_zero") or (0.0,) * 6)
         self.client = actionlib.ActionClient("/joint_trajectory_action", FollowJointTrajectoryAction)
-        # the "wrist" set: judged by the driver's band rule, planned with accelerations matched to the arm's ramp
+        # the "wrist" set: judged by the driver's band rule, planned with accelerations matched to the
+        # arm's ramp -- or, with --commissioning, the model's (before) or the commissioning's (after)
         wrist = cfg.get("set") == "wrist"
         self.wrist = WristRule.of(self.chk.kin) if wrist else None
-        self.amax = self.chk.accelerations(cfg.get("ramp_time")) if wrist else None
+        self.amax = planner_setup(self.chk, cfg)
 
     def q_of(self, msg: Any) -> Optional[Tuple[float, ...]]:
         try:
@@ -1193,10 +1203,10 @@ class Run:
         print("ready %.1f s after roslaunch (joint_trajectory_action up, motion_possible TRUE)" % ready, flush=True)
         recs = []
         if self.wrist is not None:
-            print("wrist goals: %s; planner's accelerations %s rad/s^2 (matched to %s)"
-                  % (self.wrist.words(), "/".join("%.3g" % a for a in self.amax),
-                     "the arm's %g s ramp" % cfg["ramp_time"] if cfg.get("ramp_time") else "the model's 0.1 s ramp, "
-                     "joint_limits.yaml"), flush=True)
+            print("wrist goals: %s; planner's accelerations %s rad/s^2 (%s)"
+                  % (self.wrist.words(), "/".join("%.3g" % a for a in self.amax), planner_words(cfg)), flush=True)
+        elif cfg.get("planner_limits"):
+            print("planner's limits: %s" % planner_words(cfg), flush=True)
         print("%3s %4s %7s %-10s %6s %7s %7s %7s %5s %10s %7s %8s %9s  %s" % (
             "#", "pts", "plan s", "state", "ratio", "margin", "still%", "start s", "stops", "dev deg(J)", "delay",
             "path deg", "final deg", "result"), flush=True)
@@ -1256,7 +1266,63 @@ def launch_args(cfg: Dict[str, Any]) -> List[str]:
         args.append("true_model:=%s" % cfg["true_model"])
     if cfg.get("model"):
         args.append("model:=%s" % cfg["model"])
+    if cfg.get("commissioning"):
+        args.append("commissioning:=%s" % cfg["commissioning"])
     return args
+
+
+def planner_limits(commissioning: str, config: str = CONFIG_FILE) -> Tuple[str, Tuple[float, ...], Tuple[float, ...]]:
+    """(the file, max velocity, max acceleration per joint, the controller's order) the planner
+    plans with after the commissioning ``commissioning`` (its ``planning_limits``: the
+    joint_limits.yaml ``commission`` wrote beside it -- driver.launch's rule -- read as the driver
+    reads it, vr_driver.params.read_planning_limits, for the joints of the driver's ``config``).
+    ValueError naming the file when it is not a commissioning's."""
+    import yaml
+
+    from vr_driver.driver.commissioned import plain_names
+    from vr_driver.errors import VrDriverError
+    from vr_driver.params import DriverParams, read_planning_limits
+    with open(config) as fh:
+        params = DriverParams.from_dict(yaml.safe_load(fh) or {})
+    with open(commissioning) as fh:
+        doc = yaml.safe_load(fh) or {}
+    if not isinstance(doc, dict) or "commissioning" not in doc:
+        raise ValueError("%s: not a commissioning file (no commissioning: mapping; rosrun vr_driver commission "
+                         "--out FILE writes one)" % commissioning)
+    beside = os.path.join(os.path.dirname(os.path.abspath(commissioning)), "joint_limits.yaml")
+    try:
+        velocity, acceleration = read_planning_limits(beside, plain_names(params))
+    except VrDriverError as exc:
+        raise ValueError("%s: its planner's limits: %s" % (commissioning, exc)) from None
+    return beside, tuple(velocity), tuple(acceleration)
+
+
+def planner_setup(chk: Checker, cfg: Dict[str, Any]) -> Optional[Tuple[float, ...]]:
+    """The planner's limits of a configuration, set on ``chk`` (its ``vmax_planner`` and ``amax``:
+    every set's timing reads them): the commissioning's (``cfg["planner_limits"]``, --commissioning
+    after) or the model's; returns the "wrist" set's accelerations -- the commissioning's, the
+    model's (``cfg["unmatched"]``: --commissioning before) or matched to the arm's ``ramp_time`` --
+    and None for the other sets (they plan at ``chk.amax``)."""
+    if cfg.get("planner_limits"):
+        _file, velocity, acceleration = planner_limits(cfg["commissioning"])
+        chk.vmax_planner, chk.amax = velocity, acceleration
+    if cfg.get("set") != "wrist":
+        return None
+    if cfg.get("planner_limits") or cfg.get("unmatched"):
+        return tuple(chk.amax)
+    return chk.accelerations(cfg.get("ramp_time"))
+
+
+def planner_words(cfg: Dict[str, Any]) -> str:
+    """Where a configuration's planner limits come from, in words."""
+    if cfg.get("planner_limits"):
+        return "the commissioning's, %s" % cfg["planner_limits"]
+    if cfg.get("unmatched") or cfg.get("set") != "wrist":
+        return "the model's 0.1 s ramp, joint_limits.yaml%s" % (
+            " (before the commissioning: not matched to the arm)" if cfg.get("unmatched") else "")
+    if cfg.get("ramp_time"):
+        return "matched to the arm's %g s ramp" % cfg["ramp_time"]
+    return "matched to the model's 0.1 s ramp, joint_limits.yaml"
 
 
 def title(protocol: str, baud: int, rate: float, paced: bool, lookahead: Optional[int],
@@ -1465,9 +1531,24 @@ def main(argv: Optional[List[str]] = None) -> int:
     p.add_argument("--calibrate", action="store_true",
                    help="with --true-model: then simulate the pendant calibration session, fit, and run every "
                         "configuration again with the driver's model:= the fitted YAML; print before / after")
+    p.add_argument("--commissioning", default="", metavar="FILE",
+                   help="the file `rosrun vr_driver commission --out FILE` wrote (the joint_limits.yaml beside it): "
+                        "every configuration before the commissioning (the driver without it, the planner at the "
+                        "model's limits, the wrist set's accelerations not matched to the arm) and after "
+                        "(driver.launch commissioning:=FILE, the planner at its limits); print before / after")
     args = p.parse_args(argv)
     if args.calibrate and not args.true_model:
         p.error("--calibrate needs --true-model")
+    if args.commissioning:
+        if args.calibrate:
+            p.error("--commissioning and --calibrate: one before / after at a time")
+        if not os.path.isfile(args.commissioning):
+            p.error("--commissioning: no such file %s" % args.commissioning)
+        args.commissioning = os.path.abspath(args.commissioning)
+        try:
+            planner_limits(args.commissioning)
+        except (ValueError, OSError) as exc:
+            p.error("--commissioning: %s" % exc)
     if args.true_model:
         if not os.path.isfile(args.true_model):
             p.error("--true-model: no such file %s" % args.true_model)
@@ -1490,10 +1571,21 @@ def main(argv: Optional[List[str]] = None) -> int:
              "; goals %s at the model's ramp (a ramp_time configuration: the same paths, timed with the planner's "
              "accelerations matched to it)" % "/".join(WRIST_KINDS[i % len(WRIST_KINDS)] for i in range(args.n))
              if args.set == "wrist" else "", ", ".join(names)), flush=True)
-    status, results = run_all(args, names, title_note="", model="")
+    status, results = run_all(args, names, title_note="", model="",
+                              stage="before" if args.commissioning else "")
     if status == 130:
         return 130
     summary(results)
+    if args.commissioning:
+        print("=== after the commissioning: driver.launch commissioning:=%s, the planner at %s"
+              % (args.commissioning, planner_limits(args.commissioning)[0]),
+              flush=True)
+        code, after = run_all(args, names, title_note="", model="", stage="after")
+        if code == 130:
+            return 130
+        status = status or code
+        summary(after)
+        compare_commissioning(results, after)
     if args.calibrate:
         import tempfile
         out = os.path.join(tempfile.mkdtemp(prefix="vr_traj_calib_"), "kinematics_fitted.yaml")
@@ -1516,9 +1608,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     return status
 
 
-def run_all(args: Any, names: Sequence[str], title_note: str, model: str) -> Tuple[int, List[Dict[str, Any]]]:
+def run_all(args: Any, names: Sequence[str], title_note: str, model: str, stage: str = ""
+            ) -> Tuple[int, List[Dict[str, Any]]]:
     """Every configuration of ``names`` in its worker, the driver's ``model`` "" (the package's) or a
-    YAML; (exit status: 0, 1 a configuration failed, 130 interrupted; the results)."""
+    YAML; ``stage`` (--commissioning) "before" or "after" the commissioning of
+    ``args.commissioning`` (:func:`planner_setup`); (exit status: 0, 1 a configuration failed, 130
+    interrupted; the results)."""
     def tol(deg: Optional[float], protocol: str) -> float:
         if deg is None:
             deg = V1_TOLERANCE if protocol == "v1" and args.set == "dense" else 0.0
@@ -1542,6 +1637,13 @@ def run_all(args: Any, names: Sequence[str], title_note: str, model: str) -> Tup
                "true_model": args.true_model, "model": model, "model_zero": zero}
         if args.true_model:
             cfg["title"] += ", true robot %s%s" % (os.path.basename(args.true_model), title_note)
+        if stage == "before":
+            cfg["unmatched"] = True
+            cfg["title"] += ", before commissioning (planner at the model's limits)"
+        elif stage == "after":
+            cfg["commissioning"] = args.commissioning
+            cfg["planner_limits"] = planner_limits(args.commissioning)[0]
+            cfg["title"] += ", commissioned (driver and planner from %s)" % os.path.basename(args.commissioning)
         cfg["tolerances"] = "path %s, goal %s" % (shown(cfg["path_tol"]), shown(cfg["goal_tol"]))
         code, result = run_worker(cfg)
         if code == 130:
@@ -1553,6 +1655,37 @@ def run_all(args: Any, names: Sequence[str], title_note: str, model: str) -> Tup
             status = 1
         results.append(result)
     return status, results
+
+
+def compare_commissioning(before: List[Dict[str, Any]], after: List[Dict[str, Any]]) -> None:
+    """The before / after commissioning table (Markdown), per configuration: goals SUCCESSFUL, the
+    time margin, the deviation from the plan at the same time, the driver's own figure and the
+    final error (median / max over the goals run to the end; the "wrist" set by its band rule)."""
+    print("=== before / after the commissioning (median / max over the goals run to the end; time margin = time - "
+          "(%.2f x plan + %.1f s))" % (TIME_FACTOR, TIME_SLACK))
+    head = ("configuration", "goals SUCCESSFUL before → after", "plan [s] before", "plan [s] after",
+            "time margin before [s]", "time margin after [s]", "deviation before [deg]", "deviation after [deg]",
+            "driver's own before [deg]", "driver's own after [deg]", "final error before [deg]",
+            "final error after [deg]")
+    print("| " + " | ".join(head) + " |")
+    print("|" + " --- |" * len(head))
+    by_name = {r["name"]: r for r in after}
+    for b in before:
+        a = by_name.get(b["name"], {"failed": "not run"})
+
+        def vals(r: Dict[str, Any], key: str) -> List[float]:
+            return [g[key] for g in r.get("goals", []) if g["completed"] and g.get(key) is not None]
+
+        def ok(r: Dict[str, Any]) -> str:
+            if "failed" in r:
+                return "FAILED"
+            return "%d / %d" % (sum(1 for g in r["goals"] if g["ok"]), len(r["goals"]))
+        print("| %s | %s → %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
+            b["name"], ok(b), ok(a), _mm(vals(b, "planned"), "%.2f"), _mm(vals(a, "planned"), "%.2f"),
+            _mm(vals(b, "margin_s"), "%+.2f"), _mm(vals(a, "margin_s"), "%+.2f"),
+            _mm(vals(b, "dev_deg"), "%.2f"), _mm(vals(a, "dev_deg"), "%.2f"),
+            _mm(vals(b, "driver_dev_deg"), "%.2f"), _mm(vals(a, "driver_dev_deg"), "%.2f"),
+            _mm(vals(b, "final_deg"), "%.3f"), _mm(vals(a, "final_deg"), "%.3f")))
 
 
 def compare(before: List[Dict[str, Any]], after: List[Dict[str, Any]], calib: Dict[str, Any]) -> None:

@@ -598,3 +598,98 @@ class FiguresTest(unittest.TestCase):
 
 if __name__ == "__main__":
     unittest.main()
+
+
+class CommissioningTest(unittest.TestCase):
+    """--commissioning FILE: before the commissioning the planner plans at the model's limits (the
+    "wrist" set's accelerations too, not matched to the arm), after it at the file's
+    ``planning_limits`` (the joint_limits.yaml beside it), and the driver gets
+    ``commissioning:=FILE``; a file that is not a commissioning's is refused in words."""
+
+    @classmethod
+    def setUpClass(cls):
+        import tempfile
+        cls.bench = load_bench()
+        cls.tmp = tempfile.TemporaryDirectory()
+        cls.file = os.path.join(cls.tmp.name, "g2_commissioning.yaml")
+        # a G2 that ramps in 0.5 s: the accelerations velocity / 0.5, the velocities the model's
+        cls.vmax, cls.model_amax = cls.bench.joint_limits(["joint_%d" % i for i in range(1, 7)])
+        cls.measured = [round(v / 0.5, 3) for v in cls.vmax]
+        with open(cls.file, "w") as fh:
+            yaml.safe_dump({"protocol": "v3", "planning_limits": os.path.join(cls.tmp.name, "joint_limits.yaml"),
+                            "controller": {"ramp_time": 0.5},
+                            "commissioning": {"date": "2026-01-01T00:00:00+00:00"}}, fh)
+        with open(os.path.join(cls.tmp.name, "joint_limits.yaml"), "w") as fh:
+            yaml.safe_dump({"joint_limits": {"joint_%d" % (i + 1): {
+                "has_velocity_limits": True, "max_velocity": v, "has_acceleration_limits": True,
+                "max_acceleration": a} for i, (v, a) in enumerate(zip(cls.vmax, cls.measured))}}, fh)
+        cls.chk = cls.bench.Checker()
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.tmp.cleanup()
+
+    def setup(self, **cfg):
+        chk = self.bench.Checker.__new__(self.bench.Checker)
+        chk.__dict__.update(self.chk.__dict__)              # (the shared model; its own limits)
+        return chk, self.bench.planner_setup(chk, cfg)
+
+    def test_the_planner_s_limits_before_and_after(self):
+        b = self.bench
+        path, velocity, acceleration = b.planner_limits(self.file)
+        self.assertEqual(path, os.path.join(self.tmp.name, "joint_limits.yaml"))
+        self.assertEqual(velocity, tuple(self.vmax))
+        self.assertEqual(acceleration, tuple(self.measured))
+        # the wrist set: matched to the arm's ramp without the option, the model's before, the file's after
+        _chk, matched = self.setup(set="wrist", ramp_time=0.5)
+        self.assertEqual(matched, self.chk.accelerations(0.5))
+        chk, before = self.setup(set="wrist", ramp_time=0.5, unmatched=True)
+        self.assertEqual(before, tuple(self.model_amax))
+        self.assertEqual(chk.amax, self.chk.amax)
+        chk, after = self.setup(set="wrist", ramp_time=0.5, commissioning=self.file, planner_limits=path)
+        self.assertEqual(after, tuple(self.measured))
+        self.assertEqual((tuple(chk.vmax_planner), tuple(chk.amax)), (tuple(self.vmax), tuple(self.measured)))
+        # the topp set plans at chk.amax: the file's after, the model's before
+        chk, none = self.setup(set="topp", commissioning=self.file, planner_limits=path)
+        self.assertIsNone(none)
+        self.assertEqual(tuple(chk.amax), tuple(self.measured))
+        self.assertNotEqual(tuple(self.model_amax), tuple(self.measured))
+        # a goal timed after the commissioning is slower than one timed at the model's limits
+        import random
+        start = self.chk.home()
+        fast = b.generate_one(random.Random(3), start, self.chk, timing="wrist", index=0, amax=before)
+        slow = b.generate_one(random.Random(3), start, chk, timing="wrist", index=0, amax=after)
+        self.assertEqual(fast.points[-1], slow.points[-1])
+        self.assertGreater(slow.duration, fast.duration)
+        for words, cfg in (("the commissioning's", {"planner_limits": path}),
+                           ("not matched", {"set": "wrist", "unmatched": True}),
+                           ("0.5 s ramp", {"set": "wrist", "ramp_time": 0.5})):
+            self.assertIn(words, b.planner_words(cfg))
+
+    def test_the_driver_is_launched_with_the_file_and_others_are_refused(self):
+        b = self.bench
+        args = b.launch_args({"baud": 19200, "cycle_rate": 20.0, "speed_factor": 1.0, "protocol": "v3",
+                              "commissioning": self.file})
+        self.assertIn("commissioning:=%s" % self.file, args)
+        self.assertIn("protocol:=v3", args)
+        self.assertFalse(any(a.startswith("commissioning:=") for a in b.launch_args(
+            {"baud": 19200, "cycle_rate": 20.0, "speed_factor": 1.0, "protocol": "v3"})))
+        other = os.path.join(self.tmp.name, "not_one.yaml")
+        with open(other, "w") as fh:
+            yaml.safe_dump({"protocol": "v3"}, fh)
+        with self.assertRaisesRegex(ValueError, "not a commissioning file"):
+            b.planner_limits(other)
+        # the option refuses it before anything starts, and --calibrate with it (main sets the
+        # bench's signal handlers: this process's are put back)
+        import signal
+        saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)}
+        try:
+            for argv in (["--commissioning", other],
+                         ["--commissioning", self.file, "--true-model", self.file, "--calibrate"],
+                         ["--commissioning", os.path.join(self.tmp.name, "missing.yaml")]):
+                with self.subTest(argv=argv), self.assertRaises(SystemExit) as err:
+                    b.main(argv)
+                self.assertEqual(err.exception.code, 2)
+        finally:
+            for sig, handler in saved.items():
+                signal.signal(sig, handler)
