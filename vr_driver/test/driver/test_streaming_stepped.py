@@ -544,3 +544,17 @@ def test_controller_outputs_fall_to_safe_on_a_link_loss_and_stay_there(world):
     world.run_until(lambda: world.status().link is LinkState.CONNECTED, 10.0, "link back")
     world.run_for(1.0)
     assert world.core.sequencer.outputs == 0 and world.program.io_outputs == 0   # until set again
+
+
+@pytest.mark.parametrize("protocol", ["v2", "v3"])
+def test_a_joint_path_without_timing_is_refused_naming_the_protocol(kin, protocol):
+    """A streaming protocol runs a joint path with its timing: an untimed one is refused in words
+    that name the protocol actually in use (v3 takes this path too), and nothing is sent."""
+    from vr_driver.driver import DriverError
+    w = World(kin, protocol=protocol)
+    w.ready()
+    q = list(w.core.status().joints)
+    q[0] += 0.1
+    with pytest.raises(DriverError, match="protocol %s runs a joint path with its timing" % protocol):
+        w.core.submit_joint_path(w.core.joint_names, [q])
+    assert w.core.status().job is None

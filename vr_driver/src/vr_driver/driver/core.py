@@ -51,11 +51,9 @@ from .commissioned import controller_notes, min_segment_cycles
 from .link import LinkState, LinkSupervisor, open_serial_link
 from .path_checks import PathChecks, load_cell
 from .scene_guard import SceneGuard
-from .sequencer import MotionSequencer
 from .stations import ControllerIo, IoLine
 from .status import DriverError, DriverStatus
 from .stream_prep import stream_preparation
-from .streaming import StreamSequencer
 from .trajectories import ValidTrajectory
 
 Clock = Callable[[], float]
@@ -101,8 +99,8 @@ class DriverCore:
         self.link = LinkSupervisor(params, self.bus, clock, open_link, stations=self.io)
         self.protocol = params.wire
         self.streaming = self.protocol.streams
-        self.sequencer = (StreamSequencer if self.streaming else MotionSequencer)(
-            params, clock, self._schedule_replan)
+        # the protocol object names its sequencer (driver/sequencers.py registers v1 / v2 / v3's)
+        self.sequencer = self.protocol.sequencer()(params, clock, self._schedule_replan)
         # the controller's own I/O (v2) as a station of the signal map at the controller's address
         self.controller_io: Optional[ControllerIo] = None
         if self.io is not None and self.protocol.controller_io and \

@@ -187,8 +187,8 @@ class JobControl:
             self.stop_motion("empty joint path: stop requested")
             return []
         if self.streams is not None:
-            raise DriverError("protocol v2 runs a joint path with its timing: give each point a "
-                              "time_from_start (see submit_trajectory); nothing was sent")
+            raise DriverError("protocol %s runs a joint path with its timing: give each point a "
+                              "time_from_start (see submit_trajectory); nothing was sent" % self.streams.protocol.name)
         order = self._joint_order(names)
         self._require_motion_possible()
         previews = self._ptp_path(points, order, self._planning_start(SubmitMode.REPLACE),
