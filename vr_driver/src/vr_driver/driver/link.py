@@ -43,7 +43,7 @@ from ..bus.health import BusHealth, BusHealthSummary
 from ..bus.process import BusProcessMaster, BusSettings, RemoteSlave
 from ..errors import ProtocolError
 from ..params import DriverParams
-from ..protocol.common import FeedbackRecord as Feedback  # every protocol's feedback record
+from ..protocol.common import FeedbackRecord
 from .record_clock import RecordClock
 
 log = logging.getLogger("vr_driver.driver")
@@ -96,8 +96,8 @@ class LinkSample:
     time: float
     state: LinkState
     reason: str
-    fresh: Optional[Feedback]              # a record that arrived in this iteration (decoded)
-    feedback: Optional[Feedback]           # the latest good record while CONNECTED, else None
+    fresh: Optional[FeedbackRecord]              # a record that arrived in this iteration (decoded)
+    feedback: Optional[FeedbackRecord]           # the latest good record while CONNECTED, else None
     feedback_time: Optional[float]         # when ``feedback`` arrived
     session: int                           # +1 every time the link becomes CONNECTED
     session_records: int                   # good records received in this session
@@ -180,7 +180,7 @@ class LinkSupervisor:
         self._session_records = 0            # good records received in this DP session
         self._record_time: Optional[float] = None    # when the last record (good or bad) arrived
         self._good_time: Optional[float] = None      # when the last good record arrived
-        self._feedback: Optional[Feedback] = None
+        self._feedback: Optional[FeedbackRecord] = None
         self._bad_record = ""                # why the last record could not be decoded
         self._slave_reason = ""
         self._logged_slave_reason = ""
@@ -316,12 +316,12 @@ class LinkSupervisor:
         fresh = self._judge(now, stalled)
         return self._sample(now, fresh, cycled=True)
 
-    def _judge(self, now: float, stalled: bool = False) -> Optional[Feedback]:
+    def _judge(self, now: float, stalled: bool = False) -> Optional[FeedbackRecord]:
         """Take the cycle's record if a new one arrived; update the link state. ``stalled``: the
         cycle took longer than ``link_timeout`` -- its reply may have waited in the port's buffer
         all that time (a process stopped and resumed), so it is not fresh news and is dropped."""
         slave = self._slave
-        fresh: Optional[Feedback] = None
+        fresh: Optional[FeedbackRecord] = None
         reason = ""
         if slave is None or not slave.connected:
             state = slave.state.value if slave is not None else "none"
@@ -378,7 +378,7 @@ class LinkSupervisor:
             self._error_code, self._error_reason = 0, ""
         return fresh
 
-    def _sample(self, now: float, fresh: Optional[Feedback], cycled: bool) -> LinkSample:
+    def _sample(self, now: float, fresh: Optional[FeedbackRecord], cycled: bool) -> LinkSample:
         connected = self._state is LinkState.CONNECTED and self._feedback is not None
         return LinkSample(
             time=now, state=self._state, reason=self._reason, fresh=fresh,

@@ -10,7 +10,7 @@ from typing import Dict, Optional, Tuple
 from ..bus.health import BusHealthSummary
 from ..errors import VrDriverError
 from ..poses import ControllerPose
-from ..protocol.common import FeedbackRecord as Feedback  # every protocol's feedback record
+from ..protocol.common import FeedbackRecord
 from .jobs import MoveJob
 from .link import ERROR_LINK, LinkCounters, LinkState
 from .sequencer import why_no_motion
@@ -50,7 +50,7 @@ class DriverStatus:
     time: float
     link: LinkState
     link_reason: str
-    feedback: Optional[Feedback]              # None unless the link is CONNECTED
+    feedback: Optional[FeedbackRecord]              # None unless the link is CONNECTED
     pose: Optional[ControllerPose]
     joints: Optional[Tuple[float, ...]]
     joints_valid: bool

@@ -37,7 +37,7 @@ from .scene_server import SceneServer
 from .plan_server import PlanServer
 from ..params import DriverParams, ParamError
 from ..poses import ControllerPose, MoveType
-from ..protocol.v1 import StatusBits
+from ..protocol.common import StatusBits
 from .trajectory_server import TrajectoryServer, trajectory_from_msg
 from .support import route_to_rosout, stop_on_signals, wait_for_shutdown
 
