@@ -231,6 +231,26 @@ def _number(value: Any, name: str, lo: float, hi: float = math.inf, lo_open: boo
     return float(value)
 
 
+def pose_target(kin: Any, goal: Any) -> Optional[np.ndarray]:
+    """The tip pose (4x4 in the chain root of ``kin``) of a pose goal -- a ControllerPose, a 4x4
+    matrix or ((x, y, z) [m], (qx, qy, qz, qw)) -- or None for a joint goal. PlanningError for a
+    malformed pose."""
+    if isinstance(goal, ControllerPose):
+        return kin.conventions.controller_to_tip(goal)
+    if isinstance(goal, np.ndarray) and goal.shape == (4, 4):
+        return goal.astype(float)
+    if isinstance(goal, (tuple, list)) and len(goal) == 2 and all(isinstance(g, (tuple, list, np.ndarray))
+                                                                   for g in goal):
+        position, quaternion = goal
+        if len(position) != 3 or len(quaternion) != 4:
+            raise PlanningError("goal", "a pose goal is ((x, y, z) [m], (qx, qy, qz, qw)), got %r" % (goal,))
+        try:
+            return ros_to_matrix(position, quaternion)
+        except (PoseError, ValueError) as exc:
+            raise PlanningError("goal", "goal pose: %s" % exc) from exc
+    return None
+
+
 class Planner:
     """Plans collision-free, timed joint trajectories for one chain (see the module text).
 
@@ -361,7 +381,7 @@ class Planner:
                 raise PlanningError("goal", "unknown named state %r: the SRDF's states are %s"
                                     % (goal, ", ".join(sorted(states)) or "(none)"))
             return [self._joints(states[goal], "goal state %r" % goal)]
-        target = self._pose_target(goal)
+        target = pose_target(self.kin, goal)
         if target is None:
             return [self._joints(goal, "goal")]
         try:
@@ -377,23 +397,6 @@ class Planner:
         else:
             sols.sort(key=lambda q: (self._prefer(start, q), self._nearness(start, q)))
         return sols
-
-    def _pose_target(self, goal: Any) -> Optional[np.ndarray]:
-        """The tip pose (4x4 in the chain root) of a pose goal; None for a joint goal."""
-        if isinstance(goal, ControllerPose):
-            return self.kin.conventions.controller_to_tip(goal)
-        if isinstance(goal, np.ndarray) and goal.shape == (4, 4):
-            return goal.astype(float)
-        if isinstance(goal, (tuple, list)) and len(goal) == 2 and all(isinstance(g, (tuple, list, np.ndarray))
-                                                                       for g in goal):
-            position, quaternion = goal
-            if len(position) != 3 or len(quaternion) != 4:
-                raise PlanningError("goal", "a pose goal is ((x, y, z) [m], (qx, qy, qz, qw)), got %r" % (goal,))
-            try:
-                return ros_to_matrix(position, quaternion)
-            except (PoseError, ValueError) as exc:
-                raise PlanningError("goal", "goal pose: %s" % exc) from exc
-        return None
 
     # ------------------------------------------------------------------------------------ plan
     def plan(self, start: Any, goal: Any, velocity_scaling: Optional[float] = None,

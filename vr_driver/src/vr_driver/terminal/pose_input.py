@@ -565,6 +565,39 @@ def _tri(value: Optional[bool], yes: str = "yes", no: str = "no") -> str:
     return "unknown" if value is None else (yes if value else no)
 
 
+def history_lines(history: Sequence["HistoryEntry"]) -> List[str]:
+    """The ``history`` command's lines: each entry's time, request and outcome."""
+    if not history:
+        return ["No moves yet."]
+    lines = []
+    for n, entry in enumerate(history, 1):
+        stamp = time.strftime("%H:%M:%S", time.localtime(entry.when))
+        lines += ["%3d  %s  %s" % (n, stamp, entry.request.describe()), "               -> %s" % entry.outcome]
+    return lines
+
+
+def status_lines(s: Any) -> List[str]:
+    """The ``status`` command's lines from the backend's status (None: none received yet)."""
+    if s is None:
+        return ["No robot_status from the driver yet."]
+    lines = []
+    if s.age is not None and s.age > 2.0:
+        lines.append("Warning: the last robot_status is %.1f s old (is the driver running?)" % s.age)
+    lines.append("link:            %s" % (s.link or "unknown"))
+    possible = _tri(s.motion_possible)
+    if s.motion_possible is False and s.why_no_motion:
+        possible += " (%s)" % s.why_no_motion
+    lines.append("motion possible: %s" % possible)
+    lines.append("mode: %s, e-stop: %s, drives: %s, in motion: %s, error: %s%s"
+                 % (s.mode or "unknown", _tri(s.e_stopped, "PRESSED", "released"),
+                    _tri(s.drives_powered, "on", "off"), _tri(s.in_motion), _tri(s.in_error),
+                    " (code %d)" % s.error_code if s.error_code else ""))
+    lines.append("pose:            %s" % (fmt_pose(s.pose) if s.pose is not None else "unknown (no feedback)"))
+    if s.joints is not None:
+        lines.append("joints [deg]:    %s" % fmt_joints_deg(s.joints))
+    return lines
+
+
 class Terminal:
     """The dialogue. ``input_fn(prompt)`` reads a line (EOFError at the end, KeyboardInterrupt on
     Ctrl-C), ``out`` gets everything printed. ``assume_yes`` skips the confirmation.
@@ -753,33 +786,12 @@ class Terminal:
         return EXIT_OK
 
     def show_history(self) -> None:
-        if not self.history:
-            self.say("No moves yet.")
-            return
-        for n, entry in enumerate(self.history, 1):
-            stamp = time.strftime("%H:%M:%S", time.localtime(entry.when))
-            self.say("%3d  %s  %s" % (n, stamp, entry.request.describe()))
-            self.say("               -> %s" % entry.outcome)
+        for line in history_lines(self.history):
+            self.say(line)
 
     def show_status(self) -> None:
-        s = self.backend.status()
-        if s is None:
-            self.say("No robot_status from the driver yet.")
-            return
-        if s.age is not None and s.age > 2.0:
-            self.say("Warning: the last robot_status is %.1f s old (is the driver running?)" % s.age)
-        self.say("link:            %s" % (s.link or "unknown"))
-        possible = _tri(s.motion_possible)
-        if s.motion_possible is False and s.why_no_motion:
-            possible += " (%s)" % s.why_no_motion
-        self.say("motion possible: %s" % possible)
-        self.say("mode: %s, e-stop: %s, drives: %s, in motion: %s, error: %s%s"
-                 % (s.mode or "unknown", _tri(s.e_stopped, "PRESSED", "released"),
-                    _tri(s.drives_powered, "on", "off"), _tri(s.in_motion), _tri(s.in_error),
-                    " (code %d)" % s.error_code if s.error_code else ""))
-        self.say("pose:            %s" % (fmt_pose(s.pose) if s.pose is not None else "unknown (no feedback)"))
-        if s.joints is not None:
-            self.say("joints [deg]:    %s" % fmt_joints_deg(s.joints))
+        for line in status_lines(self.backend.status()):
+            self.say(line)
 
     # -------------------------------------------------------------- one move
     def _record(self, request: PoseRequest, outcome: str) -> None:
