@@ -40,7 +40,7 @@ planner, no garbage of the case before), and in it:
   ``hog``       two CPU hog processes (busy loops at normal priority) for --window s.
 
   Designs: ``before`` -- ``bus_process`` false (the DP master in the driver's bus thread) and the
-  planning in the driver's interpreter (driver.planning.DriverPlanning, the plan action's old way);
+  planning in the driver's interpreter (driver.planning.PlanActionCore, the plan action's old way);
   ``after`` -- ``bus_process`` true (vr_driver.bus.process, SCHED_FIFO 20 where allowed) and the
   planning in a worker process (driver.plan_process.PlanningProcess, started before the window as the
   plan action starts it).
@@ -362,7 +362,7 @@ def cell_goals(core: Any, n: int, seed: int) -> List[Any]:
 
 class Plans(Load):
     """--goals goals planned back to back from the arm's joints at the start: in the driver's
-    interpreter (DriverPlanning) or in the plan action's worker process (PlanningProcess)."""
+    interpreter (PlanActionCore) or in the plan action's worker process (PlanningProcess)."""
 
     def prepare(self) -> None:
         self.goals = cell_goals(self.core, self.cfg["goals"], self.cfg["seed"])
@@ -370,8 +370,8 @@ class Plans(Load):
         # plan action would refuse at once: the load would end with the loss)
         self.start = tuple(self.core.status().joints)
         if self.cfg["design"] == "before":
-            from vr_driver.driver.planning import DriverPlanning
-            self.planner: Any = DriverPlanning(self.core)
+            from vr_driver.driver.planning import PlanActionCore
+            self.planner: Any = PlanActionCore(self.core)
         else:
             from vr_driver.driver.plan_process import PlanningProcess
             self.planner = PlanningProcess(self.core)

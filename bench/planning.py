@@ -159,7 +159,7 @@ def main() -> int:
     parser.add_argument("--no-execute", action="store_true", help="plan and check only, no driver rig")
     parser.add_argument("--protocol", default="v2", help="the rig's protocol (default v2: joint targets)")
     parser.add_argument("--driver", action="store_true",
-                        help="plan as the plan action does (driver.planning.DriverPlanning on the rig's driver: "
+                        help="plan as the plan action does (driver.planning.PlanActionCore on the rig's driver: "
                              "its checker, the workspace box, with v1 / v3 the wrist margin, the driver's own "
                              "stream check and re-plans) instead of the bare planner")
     parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
@@ -185,8 +185,8 @@ def main() -> int:
     executor = None if args.no_execute else Executor(kin, exact, args.protocol)
     driver_planning = None
     if args.driver:
-        from vr_driver.driver.planning import DriverPlanning, PlanGoal
-        driver_planning = DriverPlanning(executor.world.core)
+        from vr_driver.driver.planning import PlanActionCore, PlanGoal
+        driver_planning = PlanActionCore(executor.world.core)
     rng = random.Random(args.seed)
     print("planning benchmark: %d queries, seed %d, cell %s (%s), padding %.0f mm (the driver's), planner %s, "
           "budget %.2f s, velocity scaling %g, clearance %.0f mm, max sweep %.0f mm, dt %.2f s%s"

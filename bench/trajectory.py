@@ -256,7 +256,7 @@ class Checker:
         import yaml
 
         from vr_driver.kinematics.solver import Kinematics
-        from vr_driver.kinematics.preview import MotionPlanner
+        from vr_driver.kinematics.preview import MovePreviewer
         from vr_driver.params import DriverParams
         from vr_driver.poses import Workspace
         with open(config) as fh:
@@ -264,7 +264,7 @@ class Checker:
         self.kin = Kinematics.default()
         if any(self.params.tcp_offset):
             self.kin.conventions = self.kin.conventions.with_tcp(self.params.tcp_offset)
-        self.planner = MotionPlanner(self.kin)
+        self.planner = MovePreviewer(self.kin)
         ws = self.params.workspace
         self.workspace = Workspace(x=(ws.x[0] + margin, ws.x[1] - margin), y=(ws.y[0] + margin, ws.y[1] - margin),
                                    z=(ws.z[0] + margin, ws.z[1] - margin), angle=ws.angle)

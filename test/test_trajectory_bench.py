@@ -33,12 +33,12 @@ def set_up_stack(cls):
     class attributes of a test class."""
     cls.bench = load_bench()
     from vr_driver.kinematics.solver import Kinematics
-    from vr_driver.kinematics.preview import MotionPlanner
+    from vr_driver.kinematics.preview import MovePreviewer
     from vr_driver.params import DriverParams
     with open(os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")) as fh:
         cls.params = DriverParams.from_dict(yaml.safe_load(fh))
     cls.kin = Kinematics.default()
-    cls.planner = MotionPlanner(cls.kin)
+    cls.planner = MovePreviewer(cls.kin)
 
 
 class TrajectoryGeneratorTest(unittest.TestCase):

@@ -23,8 +23,8 @@ def kin():
 
 @pytest.fixture(scope="session")
 def planner(kin):
-    from vr_driver.kinematics.preview import MotionPlanner
-    return MotionPlanner(kin)
+    from vr_driver.kinematics.preview import MovePreviewer
+    return MovePreviewer(kin)
 
 
 # ---------------------------------------------------------------------------------------- lanes

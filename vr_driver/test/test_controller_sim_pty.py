@@ -30,7 +30,7 @@ from pyprofibus_vendor.phy_serial import open_pty_pair
 
 from vr_driver.controller.program import SimDeviceError, SimError, VirtualController, auto_pty_link
 from vr_driver.errors import VrDriverError
-from vr_driver.kinematics.preview import MotionPlanner, MoveType
+from vr_driver.kinematics.preview import MovePreviewer, MoveType
 from vr_driver.poses import ControllerPose, Workspace
 from vr_driver.protocol.v1 import (Aborted, Accepted, Command, ControllerState, Done, Feedback, HandshakeEvent,
                                 MasterHandshake, MasterPhase, Rejected, TimedOut, WireMoveType, commands_for)
@@ -162,7 +162,7 @@ def make_program(kin, start_joints, n: int, seed: int = 20240601):
     targets made from the FK of random joints and rounded to whole mm / deg. Every 20th move is
     followed by an unreachable target. Returns [(move type, target, via, reachable)]."""
     rng = random.Random(seed)
-    planner = MotionPlanner(kin)
+    planner = MovePreviewer(kin)
     box = Workspace()
     lo, hi = kin.limits.lower, kin.limits.upper
     q = tuple(start_joints)

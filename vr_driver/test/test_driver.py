@@ -318,18 +318,18 @@ def test_missing_port_is_reported_and_retried(tmp_path, kin):
 def test_planning_never_runs_on_the_bus_thread(tmp_path, kin):
     """Every plan -- submit, joint path, the replan of a job queued behind a stopped one -- runs in
     the caller's thread or the planning thread, never in the bus thread."""
-    from vr_driver.kinematics.preview import MotionPlanner
+    from vr_driver.kinematics.preview import MovePreviewer
 
     threads = []
 
-    class Recording(MotionPlanner):
+    class Recording(MovePreviewer):
         def plan(self, *args, **kwargs):
             threads.append(threading.current_thread().name)
             return super().plan(*args, **kwargs)
 
     r = Rig(tmp_path, kin, speed_factor=1.0)
     try:
-        r.core.planner = Recording(kin)
+        r.core.previewer = Recording(kin)
         r.wait_ready()
         first = r.core.submit(MoveRequest(MoveType.LIN, (1000, -600, 800, 0, 45, 0)))
         second = r.core.submit(MoveRequest(MoveType.LIN, (1000, -300, 700, 0, 45, 0)))

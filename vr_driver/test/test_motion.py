@@ -9,7 +9,7 @@ import pytest
 
 from vr_driver.errors import (JointLimitError, MotionError, NearSingularError, PoseError, UnreachableError,
                               VrDriverError)
-from vr_driver.kinematics.preview import MotionPlanner, MotionSettings, MoveType, Trajectory, trapezoid_tau
+from vr_driver.kinematics.preview import MovePreviewer, MotionSettings, MoveType, Trajectory, trapezoid_tau
 from vr_driver.poses import HOME_POSE, ControllerPose
 
 TOL = 1e-3  # 1 mm
@@ -197,6 +197,6 @@ def test_bad_input_is_rejected(kin, planner, home):
 
 
 def test_velocity_scale_slows_the_move(kin, home):
-    fast = MotionPlanner(kin).ptp_joints(home, (0.5, 0.2, -0.5, 1.0, 0.5, 1.0))
-    slow = MotionPlanner(kin, MotionSettings(velocity_scale=0.5)).ptp_joints(home, (0.5, 0.2, -0.5, 1.0, 0.5, 1.0))
+    fast = MovePreviewer(kin).ptp_joints(home, (0.5, 0.2, -0.5, 1.0, 0.5, 1.0))
+    slow = MovePreviewer(kin, MotionSettings(velocity_scale=0.5)).ptp_joints(home, (0.5, 0.2, -0.5, 1.0, 0.5, 1.0))
     assert slow.duration == pytest.approx(2 * fast.duration, rel=1e-9)

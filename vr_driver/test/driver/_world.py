@@ -107,7 +107,7 @@ class World:
         self.params = DriverParams.from_dict(dict(WORLD_PARAMS, protocol=protocol, **(params or {})))
         self.opened = 0
         self.open_error: Optional[Exception] = None
-        self.core = DriverCore(self.params, kinematics=kin, planner=planner, clock=self.clock,
+        self.core = DriverCore(self.params, kinematics=kin, previewer=planner, clock=self.clock,
                                open_link=self._open)
         self.kin = self.core.kin
         self.bus_period = 1.0 / self.params.cycle_rate

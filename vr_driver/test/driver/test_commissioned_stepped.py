@@ -270,7 +270,7 @@ def test_planning_limits_are_the_plan_actions(kin, tmp_path):
     if missing:
         pytest.skip("; ".join(r for _, r in missing))
     from vr_driver.commission.report import joint_limits, write_joint_limits
-    from vr_driver.driver.planning import DriverPlanning, PlanGoal
+    from vr_driver.driver.planning import PlanActionCore, PlanGoal
     lim = kin.limits
     slow = {axis: v / 0.5 for axis, v in enumerate(lim.velocity, 1)}     # a 0.5 s ramp on every joint
     limits = joint_limits(lim.names, lim.velocity, lim.acceleration, {"accelerations": slow})
@@ -283,7 +283,7 @@ def test_planning_limits_are_the_plan_actions(kin, tmp_path):
         w.ready()
         pk = planning_kinematics(w.params, kin)
         assert (pk is kin) == (not params)
-        planning = DriverPlanning(w.core, kinematics=pk)
+        planning = PlanActionCore(w.core, kinematics=pk)
         out = planning.plan(goal, seed=1)
         assert out.ok, out.text
         acc = [max(abs(a[i]) for a in out.trajectory.accelerations) for i in range(6)]

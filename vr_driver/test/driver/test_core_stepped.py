@@ -12,7 +12,7 @@ import pytest
 
 from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
 from vr_driver.driver.tracking import CommandedPath
-from vr_driver.kinematics.preview import MotionPlanner
+from vr_driver.kinematics.preview import MovePreviewer
 from vr_driver.errors import EnvelopeError, VrDriverError
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol.v1 import ControllerState, StatusBits
@@ -232,7 +232,7 @@ def test_the_joints_follow_the_arms_configuration_through_fast_random_moves(kin)
 def test_the_commanded_path_places_the_arm_between_the_samples_it_stopped_between(kin):
     """Where on the last validated plan a reported pose lies (tracking.CommandedPath): between the
     two samples the arm stopped between, not at the nearest one; nowhere for a pose off the plan."""
-    planner = MotionPlanner(kin)
+    planner = MovePreviewer(kin)
     plan = planner.ptp_joints((0.2, 0.4, -0.3, 0.5, 0.8, -0.5), (0.9, 0.1, -0.6, -0.4, 1.2, 0.7))
     path = CommandedPath("plan", plan.positions, plan.tcp[:, :3, 3] * 1000.0, plan.tcp[:, :3, :3])
     q = np.asarray(plan.positions)
@@ -391,7 +391,7 @@ def test_requests_plan_one_at_a_time(world):
     import threading
     import time as _time
     world.ready()
-    planner = world.core.planner
+    planner = world.core.previewer
     plan = planner.plan
     running, peak, lock = [0], [0], threading.Lock()
 

@@ -1,5 +1,5 @@
 """The plan action's planning in a worker process (driver/plan_process.py) on a stepped world of the
-example cell (protocol v3): a plan through the process is DriverPlanning's (the codes and the words of
+example cell (protocol v3): a plan through the process is PlanActionCore's (the codes and the words of
 a refusal the same as in-process, a plan the driver's own checks accept); a scene object added after
 a plan reaches the next; a worker killed mid-plan ends that plan PLANNING_FAILED in words and the
 next plan gets a new worker; a cancel stops the worker at once; the caller's interpreter does
@@ -24,7 +24,7 @@ from _world import World
 from vr_driver.driver import planning as P
 from vr_driver.driver.plan_process import (WORKER_NICE, PlanningCore, PlanningProcess, PlanningProcessError, SceneSnapshot,
                                            worker_nice)
-from vr_driver.driver.planning import DriverPlanning, PlanGoal
+from vr_driver.driver.planning import PlanActionCore, PlanGoal
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
 from vr_driver.kinematics.scene import SceneObject
@@ -98,7 +98,7 @@ def in_background(fn):
 
 
 def test_a_plan_through_the_process_is_the_drivers_plan(world, planning, kin):
-    local = DriverPlanning(world.core, kinematics=kin)
+    local = PlanActionCore(world.core, kinematics=kin)
     # a budget that a loaded machine (the worker competes for the CPU) does not cut short: RRTConnect ends when it
     # has a path
     out = planning.plan(PlanGoal(pose=BEHIND, planning_time=10.0), seed=1)
@@ -206,7 +206,7 @@ def test_a_worker_that_ended_between_two_plans_is_replaced_for_the_next(watched)
 
 
 def test_a_failure_inside_the_worker_is_raised_in_its_words_and_its_log_reaches_the_node(planning, caplog):
-    """A goal DriverPlanning itself raises on (in-process: the plan server's "internal error"): the
+    """A goal PlanActionCore itself raises on (in-process: the plan server's "internal error"): the
     worker logs the traceback -- sent to the node, logged there -- and goes on."""
     pid = planning.pid
     bad = PlanGoal(joints=(NAMES, ("a",) * 6))

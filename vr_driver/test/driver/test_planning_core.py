@@ -13,7 +13,7 @@ import pytest
 
 from _world import World
 from vr_driver.driver import planning as P
-from vr_driver.driver.planning import CellValidity, DriverPlanning, PlanGoal, arm_points, code_of
+from vr_driver.driver.planning import CellValidity, PlanActionCore, PlanGoal, arm_points, code_of
 from vr_driver.driver.trajectories import TrajectoryGoal, validate
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
@@ -51,7 +51,7 @@ def free_with(checker, positions):
 
 def test_a_pose_behind_the_pillar_is_planned_accepted_and_run_by_the_driver(kin):
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     start = w.status().joints
     out = planning.plan(PlanGoal(pose=BEHIND), seed=1)
     assert out.ok and out.code == P.SUCCESS, out.text
@@ -82,7 +82,7 @@ def test_the_workspace_box_bounds_every_sample(kin):
     """With the top of the box at 1000 mm the plan stays under it (less the clearance), where the
     plan with the default box rises higher: the box is part of the planner's validity."""
     w = world(kin, workspace={"z": [0.0, 1000.0]})
-    out = DriverPlanning(w.core, kinematics=kin).plan(PlanGoal(pose=BEHIND), seed=1)
+    out = PlanActionCore(w.core, kinematics=kin).plan(PlanGoal(pose=BEHIND), seed=1)
     assert out.ok, out.text
     top = max(kin.fk_pose(q).z for q in out.trajectory.positions)
     assert top <= 1000.0 - 9.0, top
@@ -90,7 +90,7 @@ def test_the_workspace_box_bounds_every_sample(kin):
 
 def test_a_goal_in_collision_names_the_link_and_the_object(kin):
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     out = planning.plan(PlanGoal(pose=ControllerPose(1100, 0, 200, 0, 90, 0)))     # into the table
     assert out.code == P.GOAL_IN_COLLISION and out.trajectory is None
     assert out.text.startswith("goal refused: ") and "with object table" in out.text, out.text
@@ -100,7 +100,7 @@ def test_a_goal_in_collision_names_the_link_and_the_object(kin):
 def test_a_scene_change_reaches_the_next_plan(kin):
     """A box where the goal is: the next plan is refused naming it; removed: planned again."""
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     goal = AWAY
     assert planning.plan(goal).ok
     x, y, z = kin.fk_pose(AWAY.joints[1]).position_m
@@ -113,7 +113,7 @@ def test_a_scene_change_reaches_the_next_plan(kin):
 
 def test_a_start_in_collision_is_refused_naming_it(kin):
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     inside = (0.0, 1.0, 0.0, 0.0, 1.0, 0.0)            # leaning forward, the wrist in the table
     out = planning.plan(PlanGoal(named="home"), start=inside)
     assert out.code == P.START_STATE_IN_COLLISION, out.text
@@ -137,7 +137,7 @@ def test_a_start_in_collision_is_refused_naming_it(kin):
 ])
 def test_bad_goals_are_refused_in_words(kin, goal, words):
     w = world(kin)
-    out = DriverPlanning(w.core, kinematics=kin).plan(goal)
+    out = PlanActionCore(w.core, kinematics=kin).plan(goal)
     assert out.code == P.INVALID_GOAL and out.trajectory is None
     assert words in out.text, out.text
     w.run_for(0.5)
@@ -148,7 +148,7 @@ def test_a_joint_goal_in_any_name_order(kin):
     w = world(kin)
     names = tuple("joint_%d" % i for i in range(6, 0, -1))
     zero = (0.0,) * 6
-    out = DriverPlanning(w.core, kinematics=kin).plan(PlanGoal(joints=(names, zero)))
+    out = PlanActionCore(w.core, kinematics=kin).plan(PlanGoal(joints=(names, zero)))
     assert out.ok, out.text
     assert out.trajectory.goal == pytest.approx(zero, abs=1e-9)
 
@@ -197,7 +197,7 @@ def test_missing_libraries_are_named(kin, monkeypatch):
         return real(module, feature)
     monkeypatch.setattr(deps, "require", without_ompl)
     with pytest.raises(MissingDependency) as err:
-        DriverPlanning(w.core, kinematics=kin)
+        PlanActionCore(w.core, kinematics=kin)
     assert "ompl" in str(err.value)
 
 
@@ -205,12 +205,12 @@ def test_no_checker_while_collisions_are_to_be_checked_is_a_missing_dependency(k
     w = world(kin, scene="")
     monkeypatch.setattr(type(w.core), "collision", property(lambda self: None))
     with pytest.raises(MissingDependency, match="no collision checker"):
-        DriverPlanning(w.core, kinematics=kin)
+        PlanActionCore(w.core, kinematics=kin)
 
 
 def test_collision_check_off_plans_with_the_box_only_and_says_so(kin):
     w = world(kin, scene="", collision_check=False)
-    out = DriverPlanning(w.core, kinematics=kin).plan(AWAY)
+    out = PlanActionCore(w.core, kinematics=kin).plan(AWAY)
     assert out.ok and out.text.endswith("collisions NOT checked (collision_check: false)"), out.text
 
 
@@ -221,7 +221,7 @@ def test_a_cartesian_protocol_plans_away_from_the_wrist_singularity(kin):
     bent = (0.3, 0.3, -0.3, 0.0, P.WRIST_MARGIN / 2, 0.0)
     for protocol, expected in (("v3", False), ("v2", True)):
         w = world(kin, protocol=protocol)
-        planning = DriverPlanning(w.core, kinematics=kin)
+        planning = PlanActionCore(w.core, kinematics=kin)
         valid = planning._planning_validity(planning.snapshot())
         assert valid(bent) is expected, protocol
         assert valid(bent[:4] + (2 * P.WRIST_MARGIN, 0.0))
@@ -243,7 +243,7 @@ def test_a_cartesian_protocol_plans_away_from_the_stretched_elbow(kin):
     reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
     for protocol, expected in (("v3", False), ("v2", True)):
         w = world(kin, protocol=protocol, workspace=reach)
-        planning = DriverPlanning(w.core, kinematics=kin)
+        planning = PlanActionCore(w.core, kinematics=kin)
         valid = planning._planning_validity(planning.snapshot())
         assert valid(near) is expected, protocol
         assert valid(clear), protocol
@@ -252,7 +252,7 @@ def test_a_cartesian_protocol_plans_away_from_the_stretched_elbow(kin):
 
 def test_a_plan_the_driver_would_refuse_is_planned_again(kin, monkeypatch):
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     answers = ["point 3 of 9: the controller would reach its pose in another configuration", ""]
     seen = []
 
@@ -274,7 +274,7 @@ def test_the_driver_refusal_is_the_stream_check(kin):
     """A plan the v3 stream check accepts is "" (the plans above run); a jump of the wrist between
     two points of a short plan is refused in the driver's words."""
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     out = planning.plan(AWAY)
     assert out.ok and planning.driver_refusal(out.trajectory) == ""
     start = w.status().joints
@@ -290,7 +290,7 @@ def test_planning_leaves_the_drivers_planning_gate_free(kin, monkeypatch):
     own lock."""
     from vr_driver.kinematics import planner as planner_module
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     seen = []
     real = planner_module.Planner.plan
 
@@ -309,7 +309,7 @@ def test_a_prefixed_arm_plans_under_its_own_names():
     kin = driver_kinematics(DriverParams.from_dict({"prefix": "left_"}))
     w = World(kin, {"prefix": "left_", "scene": CELL}, protocol="v3")
     w.ready()
-    planning = DriverPlanning(w.core)
+    planning = PlanActionCore(w.core)
     assert planning.kin.base == "left_base_link"
     names = tuple("left_joint_%d" % i for i in range(1, 7))
     assert w.core.joint_names == names
@@ -323,7 +323,7 @@ def test_a_goal_where_the_arm_is_is_one_point_at_rest(kin):
     'plan home' there is one point where the arm is -- the planner's timing finds none for such a
     move -- and the driver takes it as nothing to do."""
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     here = w.status().joints
     home = kin.named_states["home"]
     assert 0.0 < max(abs(a - b) for a, b in zip(here, home)) < P.AT_GOAL
@@ -343,7 +343,7 @@ def test_on_v1_the_driver_refusal_is_the_ptp_moves_between_the_stop_points(kin):
     plan's samples: a plan whose samples go round the pillar but whose stop points leave a straight
     move through it is refused in the driver's words (and planned again), one that runs is ""."""
     w = world(kin, protocol="v1", workspace={"y": [-1200.0, 1200.0]})     # the goal is 1104 mm out
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     out = planning.plan(AWAY)
     assert out.ok and planning.driver_refusal(out.trajectory) == ""
     # a plan (made up: straight from home to joint_1 at 1.4 rad, beyond the pillar) that thins to one
@@ -367,7 +367,7 @@ def test_a_goal_across_the_wrist_singularity_is_planned_on_the_last_try_without_
     check still decides, and accepts it."""
     import math
     w = world(kin)
-    planning = DriverPlanning(w.core, kinematics=kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
     validity = planning.snapshot()
     q = (0.3, 0.5, -0.2, 0.0, 0.0, 0.0)                           # joint_5 = 0, free of the cell
     assert not validity.in_collision(q)
@@ -392,8 +392,8 @@ def test_a_pose_goal_on_a_cartesian_protocol_prefers_the_starts_elbow_branch(kin
     stretch = stretched_elbow(kin)
     below, above = (0.3, 0.2, stretch - 0.2, 0.3, 0.6, 0.1), (0.3, 0.2, stretch + 0.3, 0.3, 0.6, 0.1)
     reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
-    v3 = DriverPlanning(world(kin, workspace=reach).core, kinematics=kin)._goal_preference()
-    assert DriverPlanning(world(kin, protocol="v2", workspace=reach).core, kinematics=kin)._goal_preference() is None
+    v3 = PlanActionCore(world(kin, workspace=reach).core, kinematics=kin)._goal_preference()
+    assert PlanActionCore(world(kin, protocol="v2", workspace=reach).core, kinematics=kin)._goal_preference() is None
     assert (v3(below, below), v3(below, above), v3(above, below), v3(above, above)) == (0, 1, 1, 0)
     # the planner orders by the rank first: here the nearest solution (the start's side) comes last
     start = (0.3, 0.2, stretch - 0.05, 0.3, 0.6, 0.1)
@@ -410,7 +410,7 @@ def test_a_goal_across_the_stretched_elbow_refused_every_time_says_so(kin, monke
     from vr_driver.kinematics.solver import stretched_elbow
     stretch = stretched_elbow(kin)
     reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
-    planning = DriverPlanning(world(kin, workspace=reach).core, kinematics=kin)
+    planning = PlanActionCore(world(kin, workspace=reach).core, kinematics=kin)
     monkeypatch.setattr(planning, "driver_refusal", lambda plan: "point 3 of 7: another configuration")
     start, across = (0.3, 0.2, stretch + 0.3, 0.3, 0.6, 0.1), (0.3, 0.2, stretch - 0.3, 0.3, 0.6, 0.1)
     out = planning.plan(PlanGoal(joints=(kin.joint_names, across)), start=start, seed=1)

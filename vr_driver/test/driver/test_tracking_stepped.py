@@ -20,7 +20,7 @@ import pytest
 
 from vr_driver.driver import MoveRequest
 from vr_driver.driver.tracking import VELOCITY_MARGIN
-from vr_driver.kinematics.preview import MotionPlanner, MotionSettings
+from vr_driver.kinematics.preview import MovePreviewer, MotionSettings
 from vr_driver.kinematics.solver import ConfigurationRule
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol.registry import get
@@ -98,7 +98,7 @@ def make_world(kin, protocol, rule, pace="fast", told=None):
     """The world with the virtual G2 at configuration ``rule`` and the driver told ``told`` (its
     ``controller/configuration``; default: the G2's own rule, as a commissioning file says)."""
     start = ControllerPose(*[float(round(v)) for v in kin.fk_pose(Q_A).as_tuple()])
-    planner = MotionPlanner(kin, MotionSettings(velocity_scale=PACE["v1"][pace])) if protocol == "v1" else None
+    planner = MovePreviewer(kin, MotionSettings(velocity_scale=PACE["v1"][pace])) if protocol == "v1" else None
     told = rule if told is None else told
     world = World(kin, {"controller": {"configuration": told}}, protocol=protocol, initial_pose=start,
                   planner=planner)

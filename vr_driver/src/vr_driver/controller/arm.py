@@ -1,7 +1,7 @@
 """The simulated arm of the virtual G2 controller, and its execution log. ROS-free, no I/O.
 
 :class:`SimArm` holds the joints of the arm and plays back trajectories of
-:class:`~vr_driver.kinematics.preview.MotionPlanner` (PTP joint-interpolated, LIN straight, CIRC through a via
+:class:`~vr_driver.kinematics.preview.MovePreviewer` (PTP joint-interpolated, LIN straight, CIRC through a via
 point) in time divided by ``speed_factor``. Time is injected: :meth:`SimArm.begin` and
 :meth:`SimArm.step` take ``now``; the run-time injections (e-stop, drives, error) read the arm's
 clock (default ``time.monotonic``, the same clock the program loop uses) so that a stop lands at
@@ -53,7 +53,7 @@ import numpy as np
 from .. import validate
 from ..errors import KinematicsError, MotionError, PoseError, VrDriverError
 from ..kinematics.solver import ConfigurationRule, Kinematics
-from ..kinematics.preview import MotionPlanner, MotionSettings, MoveType, Trajectory
+from ..kinematics.preview import MovePreviewer, MotionSettings, MoveType, Trajectory
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
 from ..protocol.common import INT16_MAX, INT16_MIN, round_half_away
 
@@ -373,13 +373,13 @@ class SimArm(ArmBase):
     the rule for a PTP target's joint solution (module docstring).
     """
 
-    def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MotionPlanner] = None, *,
+    def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MovePreviewer] = None, *,
                  speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
                  initial_joints: Optional[Sequence[float]] = None,
                  settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
                  brake_time: float = 0.0, configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
         self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock, configuration)
-        self.planner = planner if planner is not None else MotionPlanner(self.kin, settings)
+        self.planner = planner if planner is not None else MovePreviewer(self.kin, settings)
         self._motion: Optional[_Motion] = None
         self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
         self._target: Optional[Tuple[float, ...]] = None  # the joints of the last target begun

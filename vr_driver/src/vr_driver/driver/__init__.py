@@ -3,7 +3,7 @@ composed by :class:`DriverCore`.
 
     jobs.py         MoveRequest, Preview, MoveJob, JobPhase, JobResult, SubmitMode
     link.py         LinkSupervisor: port, DP master, session, freshness, counters -> LinkSample
-    sequencer.py    MotionSequencer: queue, handshake, stops at rest, outcomes -> the record to send
+    sequencer.py    HandshakeSequencer: queue, handshake, stops at rest, outcomes -> the record to send
     streaming.py    StreamSequencer (v2, v3): the same for streamed targets; stream_points
     status.py       DriverStatus (the snapshot the node publishes), ModelCheck, DriverError
     bus_loop.py     BusLoop: one iteration steps link, joints and sequencer; the bus thread
@@ -21,7 +21,7 @@ from .core import DriverCore
 from .jobs import JobPhase, JobResult, MoveJob, MoveRequest, Preview, SubmitMode
 from .link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, ERROR_PROTOCOL, LinkCounters, LinkSample,
                    LinkState, LinkSupervisor, open_serial_link)
-from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, MotionSequencer,
+from .sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, HandshakeSequencer,
                         SequencerView, why_no_motion)
 from . import sequencers  # noqa: F401  (registers each built-in protocol's sequencer with it)
 from .status import DriverError, DriverStatus
@@ -31,6 +31,6 @@ __all__ = [
     "JobPhase", "JobResult", "MoveJob", "MoveRequest", "Preview", "SubmitMode",
     "ERROR_CONTROLLER", "ERROR_LINK", "ERROR_NONE", "ERROR_PROTOCOL", "LinkCounters", "LinkSample",
     "LinkState", "LinkSupervisor", "open_serial_link",
-    "SESSION_RECORDS_BEFORE_REQUEST", "START_TOLERANCE", "MotionSequencer", "SequencerView",
+    "SESSION_RECORDS_BEFORE_REQUEST", "START_TOLERANCE", "HandshakeSequencer", "SequencerView",
     "why_no_motion",
 ]

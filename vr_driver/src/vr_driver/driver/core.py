@@ -4,7 +4,7 @@
 and the tests talk to:
 
 - :class:`~vr_driver.driver.link.LinkSupervisor` (port, DP master, session, freshness, counters),
-- the sequencer (:class:`~vr_driver.driver.sequencer.MotionSequencer`, v1's handshake, or
+- the sequencer (:class:`~vr_driver.driver.sequencer.HandshakeSequencer`, v1's handshake, or
   :class:`~vr_driver.driver.streaming.StreamSequencer`: queue, stops, outcomes),
 - :class:`~vr_driver.driver.bus_loop.BusLoop` (the bus thread: one iteration steps the link, the
   joints and the sequencer and publishes a :class:`~vr_driver.driver.status.DriverStatus`),
@@ -39,7 +39,7 @@ from typing import Callable, List, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.phy import Link
 
-from ..kinematics.preview import MotionPlanner
+from ..kinematics.preview import MovePreviewer
 from ..kinematics.solver import Kinematics
 from ..params import DriverParams
 from .arm_joints import ArmJoints
@@ -84,7 +84,7 @@ class DriverCore:
     factory for an in-memory or fault-injecting link)."""
 
     def __init__(self, params: DriverParams, kinematics: Optional[Kinematics] = None,
-                 planner: Optional[MotionPlanner] = None, clock: Clock = time.monotonic,
+                 previewer: Optional[MovePreviewer] = None, clock: Clock = time.monotonic,
                  open_link: Callable[[str, int], Link] = open_serial_link) -> None:
         self.params = params
         self.bus = params.bus()
@@ -118,7 +118,7 @@ class DriverCore:
         # the card's watchdog expired. Waiting here costs no CPU and no interpreter lock.
         self._planning_gate = threading.Lock()
         # the cell and the collision checks (scene_guard; MissingDependency: a scene but no libraries)
-        self.checks = PathChecks(self.kin, planner or MotionPlanner(self.kin), params.workspace, self._planning_gate,
+        self.checks = PathChecks(self.kin, previewer or MovePreviewer(self.kin), params.workspace, self._planning_gate,
                                  SceneGuard(self.kin, self._planning_gate, load_cell(params.scene),
                                             params.collision_padding, params.collision_check, params.prefix,
                                             model=params.model))
@@ -144,13 +144,13 @@ class DriverCore:
         return self.arm.tracker
 
     @property
-    def planner(self) -> MotionPlanner:
-        """The planner of previews (replaceable as a whole, e.g. by a test's recording planner)."""
-        return self.checks.planner
+    def previewer(self) -> MovePreviewer:
+        """The previews of moves (replaceable as a whole, e.g. by a test's recording previewer)."""
+        return self.checks.previewer
 
-    @planner.setter
-    def planner(self, planner: MotionPlanner) -> None:
-        self.checks.planner = planner
+    @previewer.setter
+    def previewer(self, previewer: MovePreviewer) -> None:
+        self.checks.previewer = previewer
 
     @property
     def scene_guard(self) -> SceneGuard:

@@ -4,8 +4,8 @@ straight joint move inside the workspace box, and asks the cell (:mod:`vr_driver
 whether samples of a path or the chords between them collide.
 
 All planning and checking is done under the driver's *planning gate* (one at a time: twenty goals
-planning at once starved the bus thread of the interpreter lock, README "Reliability"). The planner
-and the scene guard may be replaced as a whole (a test's recording planner, the plan process's scene
+planning at once starved the bus thread of the interpreter lock, README "Reliability"). The previewer
+and the scene guard may be replaced as a whole (a test's recording previewer, the plan process's scene
 per request); the checks always use the current ones.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ from __future__ import annotations
 import threading
 from typing import Any, Optional, Sequence
 
-from ..kinematics.preview import MotionPlanner, check_envelope
+from ..kinematics.preview import MovePreviewer, check_envelope
 from ..kinematics.solver import Kinematics
 from ..poses import Workspace
 from ..protocol.v1 import commands_for
@@ -38,13 +38,13 @@ def load_cell(path: str):
 
 
 class PathChecks:
-    """The previews and path checks of one driver (module docstring): ``planner`` previews,
+    """The previews and path checks of one driver (module docstring): ``previewer`` previews,
     ``scene_guard`` checks collisions, ``gate`` is the planning gate both run under."""
 
-    def __init__(self, kinematics: Kinematics, planner: MotionPlanner, workspace: Workspace,
+    def __init__(self, kinematics: Kinematics, previewer: MovePreviewer, workspace: Workspace,
                  gate: threading.Lock, scene_guard: SceneGuard) -> None:
         self.kin = kinematics
-        self.planner = planner
+        self.previewer = previewer
         self.workspace = workspace
         self.gate = gate
         self.scene_guard = scene_guard
@@ -59,7 +59,7 @@ class PathChecks:
         target = commands[-1].pose
         via = commands[0].pose if len(commands) == 2 else None
         with self.gate:
-            trajectory = self.planner.plan(request.move_type, start_joints, target, via)
+            trajectory = self.previewer.plan(request.move_type, start_joints, target, via)
         check_envelope(trajectory, self.workspace)
         self.check_collision_path(trajectory.positions, "%s path" % request.move_type.name, trajectory.times)
         return Preview(request, commands, trajectory, tuple(trajectory.goal))
@@ -68,7 +68,7 @@ class PathChecks:
         """The straight joint move ``start`` -> ``end`` inside the joint limits and the workspace
         box, sampled as a PTP preview; raises (EnvelopeError, KinematicsError...) with the reason."""
         with self.gate:
-            check_envelope(self.planner.ptp_joints(start, end), self.workspace)
+            check_envelope(self.previewer.ptp_joints(start, end), self.workspace)
 
     def check_collision_path(self, samples: Sequence[Sequence[float]], what: str,
                              times: Optional[Sequence[float]] = None) -> None:

@@ -10,7 +10,7 @@ delays no bus cycle: the node only sends a request and waits on a socket.
     planning = PlanningProcess(core)       # the DriverCore of the node (not started here)
     planning.start()                       # the worker, ready to plan; MissingDependency (naming the
                                            # package and scripts/setup) when it cannot plan here
-    outcome = planning.plan(PlanGoal(named="home"), cancel=event)   # a PlanOutcome, as DriverPlanning's
+    outcome = planning.plan(PlanGoal(named="home"), cancel=event)   # a PlanOutcome, as PlanActionCore's
     planning.kin, planning.collision_checked                          # for the plan's markers
     planning.close()
 
@@ -18,7 +18,7 @@ delays no bus cycle: the node only sends a request and waits on a socket.
   :class:`subprocess.Popen`, never forked from the node: a fork would copy the rospy threads'
   locks in whatever state they were): an unstarted :class:`~vr_driver.driver.core.DriverCore` of
   the node's parameters (it opens no port and starts no thread: its link factory refuses, and
-  ``start()`` is never called) and a :class:`~vr_driver.driver.planning.DriverPlanning` on it --
+  ``start()`` is never called) and a :class:`~vr_driver.driver.planning.PlanActionCore` on it --
   the same code that planned in the node before, the driver's own stream checks included. It runs
   at the node's CPU priority, or lower (``nice`` +:data:`WORKER_NICE`) when the bus cycles in the
   node's own thread (:func:`worker_nice`), one plan at a time. It talks over a
@@ -73,7 +73,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 from ..errors import MissingDependency, VrDriverError
 from ..kinematics.scene import Scene, SceneObject
 from .core import DriverCore, driver_kinematics
-from .planning import (ATTEMPTS, INVALID_ROBOT_STATE, PLANNING_FAILED, PREEMPTED, DriverPlanning, PlanGoal,
+from .planning import (ATTEMPTS, INVALID_ROBOT_STATE, PLANNING_FAILED, PREEMPTED, PlanActionCore, PlanGoal,
                        PlanOutcome, joints_to_plan_from)
 from .scene_guard import SceneGuard
 
@@ -220,14 +220,14 @@ class PlanningProcess:
 
     @property
     def collision_checked(self) -> bool:
-        """Whether plans are checked against the arm itself and the scene (as DriverPlanning's)."""
+        """Whether plans are checked against the arm itself and the scene (as PlanActionCore's)."""
         return getattr(self.core, "collision", None) is not None and getattr(self.params, "collision_check", True)
 
     # ------------------------------------------------------------------ planning
     def plan(self, goal: PlanGoal, start: Optional[Sequence[float]] = None, seed: Optional[int] = None,
              cancel: Optional[threading.Event] = None) -> PlanOutcome:
         """Plan ``goal`` in the worker from ``start`` (default: the arm's joints now) against the
-        driver's scene now, as :meth:`DriverPlanning.plan <vr_driver.driver.planning.DriverPlanning.plan>`
+        driver's scene now, as :meth:`PlanActionCore.plan <vr_driver.driver.planning.PlanActionCore.plan>`
         would. ``cancel`` set while it plans: the worker is stopped and the outcome is PREEMPTED.
         Never raises for a bad goal or a worker that dies (the outcome says);
         PlanningProcessError when the worker failed inside (a planner bug: its words)."""
@@ -417,11 +417,11 @@ class PlanningCore(DriverCore):
 
 
 class _Worker:
-    """The worker's planning: a DriverPlanning on an unstarted core, its scene set per request."""
+    """The worker's planning: a PlanActionCore on an unstarted core, its scene set per request."""
 
     def __init__(self, params: Any) -> None:
         self.core = PlanningCore(params)
-        self.planning = DriverPlanning(self.core, kinematics=self.core.kin)   # one thread: one model
+        self.planning = PlanActionCore(self.core, kinematics=self.core.kin)   # one thread: one model
         self.scene: Optional[SceneSnapshot] = None
 
     def plan(self, request: PlanRequest) -> PlanOutcome:

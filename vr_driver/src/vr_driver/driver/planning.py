@@ -3,7 +3,7 @@ controller's units) planned from the arm's joints with :class:`vr_driver.kinemat
 against a snapshot of the driver's collision checker and scene, inside the driver's workspace box,
 and the outcome as a code and words (the node vr_driver.ros.plan_server only translates messages).
 
-    planning = DriverPlanning(core)          # MissingDependency when OMPL / TOPP-RA / the checker's
+    planning = PlanActionCore(core)          # MissingDependency when OMPL / TOPP-RA / the checker's
                                              # libraries cannot be imported (the action is then not served)
     outcome = planning.plan(PlanGoal(pose=ControllerPose(500, 866, 725, 0, 45, 60)))
     outcome.ok, outcome.code, outcome.text, outcome.trajectory (a PlannedTrajectory), outcome.target
@@ -53,7 +53,7 @@ from .commissioned import planning_kinematics
 
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
-           "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "DriverPlanning",
+           "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
            "arm_points", "code_of"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
@@ -241,8 +241,11 @@ def arm_points(kinematics: Any, q: Sequence[float]) -> List[Tuple[float, float, 
     return out
 
 
-class DriverPlanning:
-    """Plans for a :class:`~vr_driver.driver.core.DriverCore` (see the module text). Raises
+class PlanActionCore:
+    """The plan action's ROS-free part (``ros/plan_server.py`` is its ROS edge): plans for a
+    :class:`~vr_driver.driver.core.DriverCore` with the OMPL planner
+    (:class:`~vr_driver.kinematics.planner.Planner`) against the driver's own checks (see the module
+    text). Not the previews of single moves: :class:`~vr_driver.kinematics.preview.MovePreviewer`. Raises
     MissingDependency when the planner's libraries (OMPL, TOPP-RA) cannot be imported, or when the
     driver checks collisions (``collision_check``) but has no checker (its libraries are missing)."""
 

@@ -4,7 +4,7 @@ bus loop. ROS-free, no I/O, no planning.
 :class:`SequencerBase` is what every protocol shares; a protocol's sequencer implements its small
 public hook interface (``follow``, ``advance``, ``record``, ``idle_command``, ``stop_job``,
 ``stop_untracked``, ``replaced``, ``apply_replan``, ``on_lost``, ``resting``, ``end_due``):
-:class:`MotionSequencer` (v1: one target at a time through the handshake) here, and
+:class:`HandshakeSequencer` (v1: one target at a time through the handshake) here, and
 :class:`~vr_driver.driver.streaming.StreamSequencer` (the streaming protocols). The driver core
 runs the one the protocol object names (:meth:`vr_driver.protocol.base.Protocol.sequencer`, registered
 by :mod:`vr_driver.driver.sequencers`).
@@ -50,7 +50,7 @@ from .link import LinkSample
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["SequencerBase", "MotionSequencer", "SequencerView", "START_TOLERANCE", "SESSION_RECORDS_BEFORE_REQUEST",
+__all__ = ["SequencerBase", "HandshakeSequencer", "SequencerView", "START_TOLERANCE", "SESSION_RECORDS_BEFORE_REQUEST",
            "why_no_motion"]
 
 # a queued job whose planned start differs from the current joints by more than this [rad] is
@@ -516,8 +516,8 @@ class SequencerBase:
         return None
 
 
-class MotionSequencer(SequencerBase):
-    """Protocol v1: one target at a time through :class:`~vr_driver.protocol.v1.MasterHandshake`
+class HandshakeSequencer(SequencerBase):
+    """v1's handshake sequencer: one target at a time through :class:`~vr_driver.protocol.v1.MasterHandshake`
     (request, accepted, done / rejected; the arm stops at each target). :meth:`step` returns a
     :class:`~vr_driver.protocol.v1.Command`."""
 

@@ -35,7 +35,7 @@ from ..errors import EnvelopeError, KinematicsError, MotionError, NearSingularEr
 from .solver import Kinematics
 from ..poses import ControllerPose, MoveType, Workspace, matrix_to_quaternion, quaternion_slerp, quaternion_to_matrix
 
-__all__ = ["MoveType", "MotionSettings", "Trajectory", "MotionPlanner", "trapezoid_tau", "check_envelope"]
+__all__ = ["MoveType", "MotionSettings", "Trajectory", "MovePreviewer", "trapezoid_tau", "check_envelope"]
 
 
 @dataclass(frozen=True)
@@ -122,9 +122,12 @@ class Trajectory:
         return len(self.times)
 
 
-class MotionPlanner:
-    """Builds PTP / LIN / CIRC trajectories on a :class:`Kinematics` (its frame conventions, TCP and
-    limits). Poses are controller poses (ControllerPose or (X, Y, Z mm, Rx, Ry, Rz deg))."""
+class MovePreviewer:
+    """Previews one move: builds the PTP / LIN / CIRC trajectory the controller will run, on a
+    :class:`Kinematics` (its frame conventions, TCP and limits). Poses are controller poses
+    (ControllerPose or (X, Y, Z mm, Rx, Ry, Rz deg)). No obstacles, no search: collision-free paths
+    are planned by :class:`~vr_driver.kinematics.planner.Planner` (OMPL), the plan action runs it
+    (:class:`~vr_driver.driver.planning.PlanActionCore`)."""
 
     def __init__(self, kinematics: Kinematics, settings: Optional[MotionSettings] = None):
         self.kin = kinematics

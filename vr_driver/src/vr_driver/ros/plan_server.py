@@ -1,5 +1,5 @@
 """`plan`: the collision-aware planning action of the node `interface` (vr_driver/Plan.action). ROS
-adapter only: the planning is :class:`vr_driver.driver.planning.DriverPlanning` (OMPL, TOPP-RA, a
+adapter only: the planning is :class:`vr_driver.driver.planning.PlanActionCore` (OMPL, TOPP-RA, a
 snapshot of the driver's collision checker and scene, the workspace box), run in a worker process of
 its own by :class:`vr_driver.driver.plan_process.PlanningProcess` -- never in the node's interpreter,
 whose bus thread a plan would starve (OMPL holds the interpreter lock for seconds); execution is the node's own
