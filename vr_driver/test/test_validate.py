@@ -17,7 +17,11 @@ from vr_driver import validate
 from vr_driver.controller.program import SimError, SimOptions
 from vr_driver.csr.fields import _integer as csr_integer
 from vr_driver.csr.fields import _number as csr_number
-from vr_driver.errors import CsrError, HandshakeError, MotionError, PoseError
+from vr_driver.controller.program_v3 import SendAhead
+from vr_driver.controller.session import Unreachable
+from vr_driver.controller.stream_arm import RampShape
+from vr_driver.errors import CsrError, HandshakeError, MotionError, PoseError, VrDriverError
+from vr_driver.kinematics.solver import ConfigurationRule
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.poses import ControllerPose, MoveType, finite_number
 from vr_driver.terminal.pose_input import PoseRequest
@@ -72,6 +76,32 @@ def test_integer_range():
         validate.integer(6, _fail, 0, 5)
     with pytest.raises(ValueError, match="^bad$"):
         validate.integer("5", _fail, 0, 5)
+
+
+def test_choice_takes_a_member_or_its_word_and_names_the_words_otherwise():
+    shape = validate.choice(RampShape, " S_Curve ", _fail)
+    assert shape is RampShape.S_CURVE and validate.choice(RampShape, shape, _fail) is shape
+    with pytest.raises(ValueError, match="^words: linear or s_curve$") as caught:
+        validate.choice(RampShape, "cubic", lambda words: ValueError("words: " + words))
+    assert caught.value.__cause__ is None and caught.value.__suppress_context__
+
+
+@pytest.mark.parametrize("kind, value, error, message", [
+    (RampShape, "cubic", MotionError, "ramp_shape must be linear or s_curve, got 'cubic'"),
+    (SendAhead, 3, MotionError, "send_ahead must be accepted or refused, got 3"),
+    (Unreachable, None, VrDriverError, "unreachable must be skip or alarm_halt, got None"),
+    (MoveType, "spline", MotionError, "unknown move type 'spline' (ptp, lin, circ)"),
+    (ConfigurationRule, "nearest", PoseError,
+     "unknown configuration rule 'nearest' (previous_target or current_joints)"),
+])
+def test_enum_parse_keeps_each_enums_error_and_words(kind, value, error, message):
+    """The enums whose ``parse`` is :func:`validate.choice_parser`: each its own error type and
+    message, word for word; a member or its word (any case) is taken."""
+    with pytest.raises(error) as caught:
+        kind.parse(value)
+    assert str(caught.value) == message
+    first = list(kind)[0]
+    assert kind.parse(first) is first and kind.parse(" %s " % first.value.upper()) is first
 
 
 def test_validate_imports_without_kdl_and_ros():

@@ -65,14 +65,7 @@ class MoveType(enum.Enum):
     LIN = "lin"
     CIRC = "circ"
 
-    @classmethod
-    def parse(cls, value: Any) -> "MoveType":
-        if isinstance(value, MoveType):
-            return value
-        try:
-            return cls(str(value).strip().lower())
-        except ValueError as exc:
-            raise MotionError("unknown move type %r (ptp, lin, circ)" % (value,)) from exc
+    parse = validate.choice_parser(MotionError, "unknown move type {value!r} (ptp, lin, circ)")
 
 
 CONTROLLER_FIELDS = ("x", "y", "z", "rx", "ry", "rz")

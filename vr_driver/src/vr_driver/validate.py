@@ -1,5 +1,6 @@
 """The value checks every vr_driver module shares: what counts as a finite number, an integer, and
-whether it lies in a range. ROS-free, no PyKDL; part of the vocabulary layer (beside poses.py).
+whether it lies in a range; which member of a small enum a word names (:func:`choice`, an enum's ``parse`` from
+:func:`choice_parser`). ROS-free, no PyKDL; part of the vocabulary layer (beside poses.py).
 
 Each caller keeps its own error type and wording: it passes ``fail``, a function that builds the
 exception to raise. ``fail(None)`` is asked for when the value is not of the wanted kind (not a
@@ -14,14 +15,15 @@ float is not a finite number (no OverflowError escapes).
 """
 from __future__ import annotations
 
+import enum
 import math
 import operator
 import re
-from typing import Any, Callable, Optional, TypeVar
+from typing import Any, Callable, Optional, Type, TypeVar
 
 import numpy as np
 
-__all__ = ["Fail", "is_bool", "as_finite", "as_integer", "number", "integer"]
+__all__ = ["Fail", "is_bool", "as_finite", "as_integer", "number", "integer", "choice", "choice_parser"]
 
 #: builds the exception for a value that is not of the wanted kind (None) or out of range (got)
 Fail = Callable[[Optional[float]], Exception]
@@ -30,6 +32,7 @@ Fail = Callable[[Optional[float]], Exception]
 _INTEGER_TEXT = re.compile(r"^\s*[-+]?\d+\s*$")
 
 _N = TypeVar("_N", int, float)
+_E = TypeVar("_E", bound=enum.Enum)
 
 
 def is_bool(value: Any) -> bool:
@@ -98,3 +101,28 @@ def integer(value: Any, fail: Fail, lo: Optional[int] = None, hi: Optional[int] 
     if got is None:
         raise fail(None)
     return _in_range(got, fail, lo, hi, False)
+
+
+def choice(kind: Type[_E], value: Any, fail: Callable[[str], Exception]) -> _E:
+    """``value`` as a member of the enum ``kind`` whose values are lower-case words: the member
+    itself, or its value as text (case and surrounding white space ignored: " S_Curve "). Otherwise
+    raises ``fail(choices)``, ``choices`` the values in words ("linear or s_curve"); the caller's
+    message names the setting and the value (``from None``: the enum's own ValueError is no news)."""
+    if isinstance(value, kind):
+        return value
+    try:
+        return kind(str(value).strip().lower())
+    except ValueError:
+        raise fail(" or ".join(member.value for member in kind)) from None
+
+
+def choice_parser(error: Callable[[str], Exception], message: str) -> Any:
+    """An enum's ``parse`` classmethod (assigned in the class body: ``parse = choice_parser(...)``):
+    the member :func:`choice` finds for a value, else ``error(message)`` raised, ``message``
+    formatted with ``words`` (the enum's values in words) and ``value`` (what was given), e.g.
+    ``"ramp_shape must be {words}, got {value!r}"``. Each enum keeps its own error type and words."""
+    def parse(cls: Type[_E], value: Any) -> _E:
+        return choice(cls, value, lambda words: error(message.format(words=words, value=value)))
+    parse.__doc__ = "The member ``value`` names (itself, or its value as text); %s otherwise: %r." % (
+        error.__name__, message)
+    return classmethod(parse)

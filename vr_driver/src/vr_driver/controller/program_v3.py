@@ -44,6 +44,7 @@ from typing import Any, Callable, Deque, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave
 
+from .. import validate
 from ..errors import KinematicsError, MotionError, PoseError
 from ..kinematics.solver import Kinematics
 from ..protocol.common import SEQ_MAX, ByteOrder, RejectCode, joints_to_wire
@@ -72,16 +73,7 @@ class SendAhead(enum.Enum):
     ACCEPTED = "accepted"
     REFUSED = "refused"
 
-    @classmethod
-    def parse(cls, value: Any) -> "SendAhead":
-        """From itself or its name; MotionError naming both otherwise."""
-        if isinstance(value, SendAhead):
-            return value
-        try:
-            return cls(str(value).strip().lower())
-        except ValueError:
-            raise MotionError("send_ahead must be %s, got %r" % (" or ".join(v.value for v in cls), value)) \
-                from None
+    parse = validate.choice_parser(MotionError, "send_ahead must be {words}, got {value!r}")
 
 
 @dataclass(frozen=True)

@@ -66,6 +66,7 @@ from typing import Any, Callable, Dict, Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveState
 
+from .. import validate
 from ..errors import ProtocolError, VrDriverError
 from ..protocol.common import StatusBits
 
@@ -82,16 +83,7 @@ class Unreachable(enum.Enum):
     SKIP = "skip"
     ALARM_HALT = "alarm_halt"
 
-    @classmethod
-    def parse(cls, value: Any) -> "Unreachable":
-        """From itself or its name; VrDriverError naming both otherwise."""
-        if isinstance(value, Unreachable):
-            return value
-        try:
-            return cls(str(value).strip().lower())
-        except ValueError:
-            raise VrDriverError("unreachable must be %s, got %r" % (" or ".join(u.value for u in cls), value)) \
-                from None
+    parse = validate.choice_parser(VrDriverError, "unreachable must be {words}, got {value!r}")
 
 
 def arm_status_bits(arm: Any) -> StatusBits:

@@ -92,6 +92,7 @@ import numpy as np
 
 from panasonic_vr006l_support.joint_limits import model_ramp_time
 
+from .. import validate
 from ..errors import MotionError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
@@ -134,16 +135,7 @@ class RampShape(enum.Enum):
     LINEAR = "linear"
     S_CURVE = "s_curve"
 
-    @classmethod
-    def parse(cls, value: Any) -> "RampShape":
-        """A shape from itself or its name; MotionError naming both otherwise."""
-        if isinstance(value, RampShape):
-            return value
-        try:
-            return cls(str(value).strip().lower())
-        except ValueError:
-            raise MotionError("ramp_shape must be %s, got %r" % (" or ".join(r.value for r in cls), value)) \
-                from None
+    parse = validate.choice_parser(MotionError, "ramp_shape must be {words}, got {value!r}")
 
 
 def _s_area(x: float) -> float:

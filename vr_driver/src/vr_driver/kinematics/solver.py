@@ -167,17 +167,9 @@ class ConfigurationRule(enum.Enum):
     PREVIOUS_TARGET = "previous_target"
     CURRENT_JOINTS = "current_joints"
 
-    @classmethod
-    def parse(cls, value: Any) -> "ConfigurationRule":
-        """A rule from itself or its name (``previous_target`` / ``current_joints``); PoseError
-        naming both otherwise."""
-        if isinstance(value, ConfigurationRule):
-            return value
-        try:
-            return cls(str(value).strip().lower())
-        except ValueError:
-            raise PoseError("unknown configuration rule %r (%s)" % (value, " or ".join(r.value for r in cls))) \
-                from None
+    #: a rule from itself or its name (``previous_target`` / ``current_joints``); PoseError naming
+    #: both otherwise
+    parse = validate.choice_parser(PoseError, "unknown configuration rule {value!r} ({words})")
 
     def seed(self, previous: Optional[Sequence[float]], current: Sequence[float]) -> Tuple[float, ...]:
         """The joints the IK solution is taken nearest to: ``previous`` (the previous target's, None
