@@ -529,6 +529,21 @@ def test_the_options_are_checked_with_a_clear_error(kin):
     assert RampShape.parse(" S_Curve ") is RampShape.S_CURVE and Unreachable.parse("skip") is Unreachable.SKIP
 
 
+def test_the_cli_options_are_the_node_parameters():
+    """The CLI hands its options to SimOptions.from_mapping by the node's parameter names: each
+    parameter is an option's destination, the CLI's defaults are SimOptions' own, and
+    controller_kwargs names only VirtualController's keywords."""
+    import inspect
+
+    from vr_driver.controller.cli import _parser
+    args = _parser().parse_args([])
+    assert set(PARAM_NAMES) <= set(vars(args))
+    assert SimOptions.from_mapping({name: getattr(args, name) for name in PARAM_NAMES}) == SimOptions()
+    kwargs = SimOptions().controller_kwargs()
+    assert "device" not in kwargs and set(kwargs) == set(PARAM_NAMES.values()) - {"device"}
+    assert set(kwargs) <= set(inspect.signature(VirtualController).parameters)
+
+
 @pytest.mark.parametrize("protocol", ["v1", "v2", "v3"])
 def test_the_virtual_controller_hands_each_setting_to_its_program_and_arm(kin, protocol):
     kw = dict(loop_blocks_during_move=True, unreachable="alarm_halt", speed_scale=0.6,

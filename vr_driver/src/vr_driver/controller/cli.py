@@ -12,7 +12,8 @@ from typing import IO, Optional, Sequence
 from ..kinematics.solver import ConfigurationRule
 from ..poses import HOME_POSE
 from ..protocol import registry as protocols
-from .options import DEFAULT_ADDRESS, DEFAULT_BAUD, DEFAULT_BRAKE_TIME, DEFAULT_LOOP_PERIOD, PROTOCOLS, SimOptions
+from .options import (DEFAULT_ADDRESS, DEFAULT_BAUD, DEFAULT_BRAKE_TIME, DEFAULT_LOOP_PERIOD, PARAM_NAMES, PROTOCOLS,
+                      SimOptions)
 from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, SendAhead
 from .session import Unreachable
 from .simulator import EXIT_USAGE, SimError, run_simulator
@@ -120,18 +121,8 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
     logging.basicConfig(level=level, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
-        options = SimOptions(device=args.device, pty_link=args.pty_link, address=args.addr, baud=args.baud,
-                             speed_factor=args.speed_factor, initial_pose=tuple(args.initial_pose),
-                             loop_period=args.loop_period, byte_order=args.byte_order,
-                             log_file=args.log_file, brake_time=args.brake_time, protocol=args.protocol,
-                             interpreter_lookahead=args.interpreter_lookahead, ring_size=args.ring_size,
-                             ramp_time=args.ramp_time, true_model=args.true_model,
-                             data_exchange_bit=args.data_exchange_bit, configuration=args.configuration,
-                             speed_scale=args.speed_scale, loop_blocks_during_move=args.loop_blocks_during_move,
-                             blend_across_input_read=args.blend_across_input_read, loop_jitter=args.loop_jitter,
-                             loop_jitter_seed=args.loop_jitter_seed, send_ahead=args.send_ahead,
-                             unreachable=args.unreachable, ramp_shape=args.ramp_shape,
-                             accelerations=None if args.accelerations is None else tuple(args.accelerations))
+        # the options' destinations are the ROS node's parameter names (PARAM_NAMES): one validation
+        options = SimOptions.from_mapping({name: getattr(args, name) for name in PARAM_NAMES})
     except SimError as exc:
         parser.print_usage(sys.stderr)
         print("%s: error: %s" % (parser.prog, exc), file=sys.stderr)

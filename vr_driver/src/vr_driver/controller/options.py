@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import random
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from pyprofibus_vendor.config import default_robot_config
@@ -206,17 +206,9 @@ class SimOptions:
 
     def controller_kwargs(self) -> Dict[str, Any]:
         """The keyword arguments of :class:`VirtualController` for these options (its ``link``, the
-        device, apart): what the CLI and the ROS node build it from."""
-        return dict(address=self.address, baud=self.baud, speed_factor=self.speed_factor,
-                    initial_pose=self.initial_pose, loop_period=self.loop_period, byte_order=self.byte_order,
-                    pty_link=self.pty_link, log_file=self.log_file, brake_time=self.brake_time,
-                    protocol=self.protocol, interpreter_lookahead=self.interpreter_lookahead,
-                    ring_size=self.ring_size, ramp_time=self.ramp_time, true_model=self.true_model,
-                    data_exchange_bit=self.data_exchange_bit, configuration=self.configuration,
-                    speed_scale=self.speed_scale, loop_blocks_during_move=self.loop_blocks_during_move,
-                    blend_across_input_read=self.blend_across_input_read, loop_jitter=self.loop_jitter,
-                    loop_jitter_seed=self.loop_jitter_seed, send_ahead=self.send_ahead,
-                    unreachable=self.unreachable, ramp_shape=self.ramp_shape, accelerations=self.accelerations)
+        device, apart): every option but the device, by its own name. What the CLI and the ROS node
+        build it from."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != "device"}
 
 
 def _numbers(value: Any) -> Any:
