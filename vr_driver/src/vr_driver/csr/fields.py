@@ -95,12 +95,18 @@ def _text(value: Any, what: str, max_len: Optional[int] = None, allow_empty: boo
     return value
 
 
+def _matching(value: Any, what: str, pattern: "re.Pattern[str]", otherwise: str) -> str:
+    """A non-empty text field (:func:`_text`) that ``pattern`` matches; CsrError "<value> <otherwise>"
+    if it does not."""
+    value = _text(value, what, allow_empty=False)
+    if not pattern.match(value):
+        raise CsrError("%s %s" % (show(value), otherwise), field=what)
+    return value
+
+
 def _token(value: Any, what: str) -> str:
     """A non-empty text field without spaces (point names, variable types)."""
-    value = _text(value, what, allow_empty=False)
-    if not _NAME_RE.match(value):
-        raise CsrError("%s may hold only letters, digits and _" % show(value), field=what)
-    return value
+    return _matching(value, what, _NAME_RE, "may hold only letters, digits and _")
 
 
 def _number(value: Any, what: str) -> float:
@@ -152,10 +158,8 @@ def _speed(value: Any, unit: str, what: str) -> float:
 
 
 def _tool_text(value: Any, what: str) -> str:
-    value = _text(value, what, allow_empty=False)
-    if not _TOOL_RE.match(value):
-        raise CsrError("%s is not 'n:NAME' (e.g. 1:TOOL01)" % show(value), field=what)
-    return value
+    """A tool as the file writes it: ``n:NAME`` (the Tool header, a TOOL line)."""
+    return _matching(value, what, _TOOL_RE, "is not 'n:NAME' (e.g. 1:TOOL01)")
 
 
 def _date(value: Any, what: str) -> _dt.datetime:
