@@ -200,7 +200,7 @@ class ControllerFacts:
     loop_blocks_during_move: bool = False   # the program loop stops while a MOVE runs (no streaming)
     speed_scale: float = 1.0             # MOVEP's speed unit: the real speed per commanded speed
     #                                      (0.6: "speed 1000" is 60 % of the joint limits)
-    configuration: str = "previous_target"   # the joint solution of a Cartesian target (information)
+    configuration: str = "previous_target"   # the joint solution of a Cartesian target: the tracker and v3's stream check apply it
     send_ahead: str = "accepted"         # a target one number ahead (SEND_AHEAD_RULES)
     unreachable: str = "skip"            # an unreachable pose (UNREACHABLE_RULES; information)
     ring_size: int = 4                   # targets the program's ring holds (information)
