@@ -205,9 +205,16 @@ def _fmt_values(values: Tuple[int, ...]) -> str:
 
 # --------------------------------------------------------------------------------------- records
 
+def _unpack(data: Any, byte_order: Any, what: str) -> Tuple[int, ...]:
+    """A record's eight fields: the six pose words, bytes 13 and 14 (``what``: "command" /
+    "feedback", for the length error)."""
+    return _STRUCTS[ByteOrder.parse(byte_order)].unpack(_as_bytes(data, what))
+
+
 @dataclass(frozen=True)
-class Command:
-    """Master -> controller record: the target (whole mm / deg), the request flag, the move type."""
+class _PoseWords:
+    """The first six int16 words of either record: a pose in whole mm / deg (a Command's target, a
+    Feedback's position), ``values`` as a tuple and ``pose`` as a ControllerPose."""
 
     x: int
     y: int
@@ -215,13 +222,31 @@ class Command:
     rx: int
     ry: int
     rz: int
+
+    def _check_words(self, record: str) -> None:
+        """Each word an int16 (ProtocolError naming ``record`` and the field otherwise)."""
+        for name, label in zip(CONTROLLER_FIELDS, _LABELS):
+            object.__setattr__(self, name, _check_word(getattr(self, name), "%s %s" % (record, label)))
+
+    @property
+    def values(self) -> Tuple[int, int, int, int, int, int]:
+        return (self.x, self.y, self.z, self.rx, self.ry, self.rz)
+
+    @property
+    def pose(self) -> ControllerPose:
+        return ControllerPose(*self.values)
+
+
+@dataclass(frozen=True)
+class Command(_PoseWords):
+    """Master -> controller record: the target (whole mm / deg), the request flag, the move type."""
+
     request: bool
     move_type: WireMoveType
     stop: bool = False
 
     def __post_init__(self) -> None:
-        for name, label in zip(CONTROLLER_FIELDS, _LABELS):
-            object.__setattr__(self, name, _check_word(getattr(self, name), "command %s" % label))
+        self._check_words("command")
         if not isinstance(self.stop, bool):
             raise ProtocolError("command stop must be True/False, got %r" % (self.stop,))
         request = self.request
@@ -290,9 +315,7 @@ class Command:
     def decode(cls, data: Any, byte_order: Any = ByteOrder.LITTLE) -> "Command":
         """From 14 bytes; ProtocolError on a wrong length, a flag byte not 0/1/2, an unknown move
         type, or move type NONE with the flag 1."""
-        order = ByteOrder.parse(byte_order)
-        raw = _as_bytes(data, "command")
-        x, y, z, rx, ry, rz, flag, kind = _STRUCTS[order].unpack(raw)
+        x, y, z, rx, ry, rz, flag, kind = _unpack(data, byte_order, "command")
         if flag not in (FLAG_NONE, FLAG_REQUEST, FLAG_STOP):
             raise ProtocolError("command byte 13 (request flag) must be 0, 1 or 2 (stop), got 0x%02X"
                                 % flag)
@@ -306,14 +329,6 @@ class Command:
         return cls(x, y, z, rx, ry, rz, flag == FLAG_REQUEST, move_type, stop=flag == FLAG_STOP)
 
     # ------------------------------------------------------------------ views
-    @property
-    def values(self) -> Tuple[int, int, int, int, int, int]:
-        return (self.x, self.y, self.z, self.rx, self.ry, self.rz)
-
-    @property
-    def pose(self) -> ControllerPose:
-        return ControllerPose(*self.values)
-
     def with_request(self, request: bool) -> "Command":
         return replace(self, request=request, stop=False)
 
@@ -327,21 +342,14 @@ class Command:
 
 
 @dataclass(frozen=True)
-class Feedback(FeedbackRecord):
+class Feedback(_PoseWords, FeedbackRecord):
     """Controller -> master record: the current pose (whole mm / deg), the state, the status bits."""
 
-    x: int
-    y: int
-    z: int
-    rx: int
-    ry: int
-    rz: int
     state: ControllerState
     status: StatusBits = StatusBits(0)
 
     def __post_init__(self) -> None:
-        for name, label in zip(CONTROLLER_FIELDS, _LABELS):
-            object.__setattr__(self, name, _check_word(getattr(self, name), "feedback %s" % label))
+        self._check_words("feedback")
         state = self.state
         if validate.as_integer(state) is None:
             raise ProtocolError("feedback state must be a ControllerState (0-3), got %r" % (state,))
@@ -380,9 +388,7 @@ class Feedback(FeedbackRecord):
     def decode(cls, data: Any, byte_order: Any = ByteOrder.LITTLE) -> "Feedback":
         """From 14 bytes; ProtocolError on a wrong length, an unknown state (byte 13 > 3) or a
         reserved status bit (byte 14, bits 6-7)."""
-        order = ByteOrder.parse(byte_order)
-        raw = _as_bytes(data, "feedback")
-        x, y, z, rx, ry, rz, state, status = _STRUCTS[order].unpack(raw)
+        x, y, z, rx, ry, rz, state, status = _unpack(data, byte_order, "feedback")
         if state > max(ControllerState):
             raise ProtocolError("feedback byte 13 (state) = %d is unknown (0 ready, 1 busy, 2 done, "
                                 "3 rejected)" % state)
@@ -390,14 +396,6 @@ class Feedback(FeedbackRecord):
             raise ProtocolError("feedback byte 14 (status) = 0x%02X has reserved bit(s) 6-7 set: the "
                                 "controller's output mapping is wrong" % status)
         return cls(x, y, z, rx, ry, rz, ControllerState(state), StatusBits(status))
-
-    @property
-    def values(self) -> Tuple[int, int, int, int, int, int]:
-        return (self.x, self.y, self.z, self.rx, self.ry, self.rz)
-
-    @property
-    def pose(self) -> ControllerPose:
-        return ControllerPose(*self.values)
 
     def describe(self) -> str:
         return "%s at %s, status: %s" % (self.state.name, _fmt_values(self.values), self.status.describe())
@@ -577,6 +575,17 @@ class MasterPhase(enum.Enum):
     EXECUTING = "executing"        # BUSY seen, waiting for DONE / REJECTED
     WAIT_RELEASE = "wait_release"  # DONE / REJECTED seen, flag 0, waiting for READY
     RECOVER = "recover"            # target given up (timeout, abort): flag 0, waiting for READY
+
+
+#: the handshake's phases with a time limit: the phase -> (the MasterHandshake attribute holding
+#: the limit [s], the TimedOut's stage, its message: ``target`` in words and ``limit`` filled in)
+_TIME_LIMITS = {
+    MasterPhase.WAIT_ACCEPT: ("accept_timeout", "accept",
+                              "the controller did not accept {target} within {limit:.3g} s (is its program running?)"),
+    MasterPhase.EXECUTING: ("_motion_timeout", "motion", "the controller did not finish {target} within {limit:.3g} s"),
+    MasterPhase.WAIT_RELEASE: ("release_timeout", "release",
+                               "the controller did not return to READY within {limit:.3g} s after the flag was cleared"),
+}
 
 
 @dataclass(frozen=True)
@@ -864,26 +873,19 @@ class MasterHandshake:
         return None                                  # EXECUTING, BUSY
 
     def _check_timers(self, t: float) -> Optional[HandshakeEvent]:
-        phase, waited = self._phase, t - (t if self._since is None else self._since)
-        if phase is MasterPhase.WAIT_ACCEPT and waited > self.accept_timeout:
-            assert self._target is not None
-            self._recover(t)
-            return TimedOut(self._seq, self._target, t,
-                            "the controller did not accept %s within %.3g s (is its program running?)"
-                            % (self._target.describe(), self.accept_timeout), self.last_feedback, "accept")
-        if phase is MasterPhase.EXECUTING and waited > self._motion_timeout:
-            assert self._target is not None
-            self._recover(t)
-            return TimedOut(self._seq, self._target, t,
-                            "the controller did not finish %s within %.3g s"
-                            % (self._target.describe(), self._motion_timeout), self.last_feedback, "motion")
-        if phase is MasterPhase.WAIT_RELEASE and waited > self.release_timeout:
-            assert self._target is not None
-            self._recover(t)
-            return TimedOut(self._seq, self._target, t,
-                            "the controller did not return to READY within %.3g s after the flag "
-                            "was cleared" % self.release_timeout, self.last_feedback, "release")
-        return None
+        """TimedOut once the phase has lasted longer than its time limit (:data:`_TIME_LIMITS`):
+        the target is given up (:meth:`_recover`)."""
+        timer = _TIME_LIMITS.get(self._phase)
+        if timer is None:
+            return None
+        limit_name, stage, message = timer
+        limit = getattr(self, limit_name)
+        if t - (t if self._since is None else self._since) <= limit:
+            return None
+        assert self._target is not None
+        self._recover(t)
+        return TimedOut(self._seq, self._target, t, message.format(target=self._target.describe(), limit=limit),
+                        self.last_feedback, stage)
 
 
 # ---------------------------------------------------------------------------------- the seam
