@@ -143,3 +143,31 @@ def test_cli_refuses_bad_arguments_and_asks_before_anything_is_sent(tmp_path):
     assert asked and "clear space" in asked[0]
     assert "nothing was sent" in out.getvalue()
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_loops_are_counted_by_the_heartbeats_advance_not_by_the_records():
+    """At the user's default bus (20 cycles/s) against a 10 ms program loop each record brings about
+    five new loops: a 0.4 s move with the loop running is ~40 loops, not the ~8 records that brought
+    them (the tool once took that for a loop blocked by the MOVE and wrote protocol v1)."""
+    from vr_driver.commission.bus import heartbeat_brackets, Cycle
+    from vr_driver.driver.link import LinkState
+    loop, cycle = 0.010, 0.050
+    cycles = []
+    for i in range(9):                                   # 0.4 s of records, one every 50 ms
+        t = i * cycle
+        cycles.append(Cycle(i, t, t + 0.02, LinkState.CONNECTED, _Fb(int(t / loop) % 65536), t + 0.02, b""))
+    brackets = heartbeat_brackets(cycles)
+    assert len(brackets) == 8                            # the records that brought a new heartbeat
+    assert analysis.loops_seen(brackets) == 40           # the loops they counted
+    # a loop blocked during the move: the heartbeat stands still until the record that shows it done
+    blocked = [Cycle(i, i * cycle, i * cycle + 0.02, LinkState.CONNECTED, _Fb(7 if i < 8 else 8), i * cycle + 0.02, b"")
+               for i in range(9)]
+    assert analysis.loops_seen(heartbeat_brackets(blocked)) == 1
+    assert analysis.loops_seen([]) == 0
+
+
+class _Fb:
+    """A record as heartbeat_brackets reads it: only its heartbeat."""
+
+    def __init__(self, heartbeat):
+        self.heartbeat = heartbeat

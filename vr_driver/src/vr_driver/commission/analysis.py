@@ -62,6 +62,14 @@ def _robust_line(xs: Sequence[float], ys: Sequence[float]) -> Tuple[float, float
     return rest[len(rest) // 2], b
 
 
+def loops_seen(brackets: Sequence[Tuple[int, float, float]]) -> int:
+    """How many program loops ran over the records of ``brackets`` (:func:`~vr_driver.commission.
+    bus.heartbeat_brackets`): the heartbeat's advance, not the number of records that brought a new
+    one -- at a bus slower than the loop (20 cycles/s against a 10 ms loop) each record brings about
+    five loops."""
+    return brackets[-1][0] if brackets else 0
+
+
 def loop_timing(brackets: Sequence[Tuple[int, float, float]]) -> Optional[LoopTiming]:
     """The loop's timing from (loop count, earliest, latest) brackets; None with fewer than 3."""
     if len(brackets) < 3:

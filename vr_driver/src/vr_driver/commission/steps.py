@@ -456,7 +456,9 @@ class LoopStep(Step):
                                   "program's active_seq / done_seq (§10.7)")
         inside = moved[window[0]:window[1] + 1]
         duration = inside[-1].request - inside[0].request
-        beats = len(heartbeat_brackets(inside)) - 1         # new heartbeats before the one that shows it done
+        # loops the program ran while the arm moved, less the one that reports it done (records, at a
+        # bus slower than the loop, each bring several: counting them took a running loop for blocked)
+        beats = analysis.loops_seen(heartbeat_brackets(inside)) - 1
         expected = duration / rest.period
         blocks = beats < 0.2 * expected
         during = analysis.loop_timing(heartbeat_brackets(inside))
