@@ -16,7 +16,7 @@ one protocol's module takes from another's. ROS-free, no I/O.
   integers, validated once; what the six integers are and the kinds a protocol knows are the
   protocol's data (:class:`SlotFormat`): v2's joint slot, v3's Cartesian slot.
 - The record types a driver holds whatever the protocol: :class:`FeedbackRecord` (every protocol's
-  feedback record is one).
+  feedback record is one; :class:`StreamFeedback` the fields the streaming protocols' share).
 """
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ __all__ = [
     "ByteOrder", "parse_byte_order", "round_half_away", "INT16_MIN", "INT16_MAX", "INT32_MIN", "INT32_MAX",
     "StatusBits", "STATUS_RESERVED_MASK", "FeedbackRecord",
     "SEQ_MAX", "next_seq", "seq_offset", "seq_after", "SPEED_MAX", "SMOOTH_MAX", "BLEND_PER_LEVEL", "BLEND_MAX",
-    "blend_window", "Control", "StreamState", "RejectCode", "describe_stream_feedback",
+    "blend_window", "Control", "StreamState", "RejectCode", "StreamFeedback", "describe_stream_feedback",
     "JOINT_UNIT_DEG", "joints_to_wire", "joints_from_wire", "SlotFormat", "Slot",
 ]
 
@@ -214,6 +214,30 @@ class RejectCode(enum.IntEnum):
     FAULT = 3           # e-stop, drives off or an error
     UNREACHABLE = 4     # outside the joint limits or the reach; the controller's own check
     BAD_SLOT = 5        # unknown kind, speed 0 or above 100 %, smooth above SMOOTH_MAX
+
+
+@dataclass(frozen=True)
+class StreamFeedback(FeedbackRecord):
+    """What every streaming protocol's feedback record starts with (v2 ``FeedbackV2``, v3
+    ``FeedbackV3`` add their own fields after these): the stream's state, the status bits, why
+    ``rejected_seq`` was refused, and the sequence numbers taken, passed, moved to and refused."""
+
+    state: StreamState = StreamState.IDLE
+    status: StatusBits = StatusBits(0)
+    reject_code: RejectCode = RejectCode.NONE
+    accepted_seq: int = 0
+    done_seq: int = 0
+    active_seq: int = 0
+    rejected_seq: int = 0
+
+    def _check_codes(self, record: str) -> None:
+        """``state`` and ``reject_code`` as their enums; ProtocolError "<record>: ..." for a number
+        neither knows."""
+        try:
+            object.__setattr__(self, "state", StreamState(self.state))
+            object.__setattr__(self, "reject_code", RejectCode(self.reject_code))
+        except ValueError as exc:
+            raise ProtocolError("%s: %s" % (record, exc)) from None
 
 
 def describe_stream_feedback(fb: Any, where: str = "") -> str:

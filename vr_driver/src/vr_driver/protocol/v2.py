@@ -36,7 +36,7 @@ from ..errors import ProtocolError
 from ..poses import ControllerPose
 from .base import Protocol, WireTarget, framed_record
 from .common import (BLEND_MAX, BLEND_PER_LEVEL, INT32_MAX, INT32_MIN, JOINT_UNIT_DEG, SEQ_MAX, SMOOTH_MAX, Control,
-                     FeedbackRecord, RejectCode, Slot, SlotFormat, StatusBits, StreamState, blend_window,
+                     RejectCode, Slot, SlotFormat, StatusBits, StreamFeedback, StreamState, blend_window,
                      describe_stream_feedback, joints_from_wire, joints_to_wire, next_seq, seq_after, seq_offset)
 
 __all__ = [
@@ -210,16 +210,9 @@ class CommandV2:
 
 
 @dataclass(frozen=True)
-class FeedbackV2(FeedbackRecord):
+class FeedbackV2(StreamFeedback):
     """Controller -> master: the stream's progress, the joints and the pose."""
 
-    state: StreamState = StreamState.IDLE
-    status: StatusBits = StatusBits(0)
-    reject_code: RejectCode = RejectCode.NONE
-    accepted_seq: int = 0
-    done_seq: int = 0
-    active_seq: int = 0
-    rejected_seq: int = 0
     joints: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)   # 0.001 deg
     tcp: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)      # X Y Z 0.01 mm, Rx Ry Rz 0.001 deg
     heartbeat: int = 0                              # +1 every program loop (mod 65536)
@@ -229,11 +222,7 @@ class FeedbackV2(FeedbackRecord):
     #                                                 set once an empty record of this session came
 
     def __post_init__(self) -> None:
-        try:
-            object.__setattr__(self, "state", StreamState(self.state))
-            object.__setattr__(self, "reject_code", RejectCode(self.reject_code))
-        except ValueError as exc:
-            raise ProtocolError("v2 feedback: %s" % exc) from None
+        self._check_codes("v2 feedback")
         status = int(self.status)
         if status & ~0x3F or status < 0:
             raise ProtocolError("v2 feedback: reserved status bits set (0x%02X)" % status)

@@ -54,8 +54,8 @@ from typing import Any, Optional, Sequence, Tuple
 from ..errors import PoseError, ProtocolError
 from ..poses import ControllerPose, finite_number, wrap_degrees
 from .base import Protocol, WireTarget, framed_record
-from .common import (INT16_MAX, INT16_MIN, SEQ_MAX, SMOOTH_MAX, SPEED_MAX, ByteOrder, Control, FeedbackRecord,
-                     RejectCode, Slot, SlotFormat, StatusBits, StreamState, describe_stream_feedback, next_seq,
+from .common import (INT16_MAX, INT16_MIN, SEQ_MAX, SMOOTH_MAX, SPEED_MAX, ByteOrder, Control, RejectCode, Slot,
+                     SlotFormat, StatusBits, StreamFeedback, StreamState, describe_stream_feedback, next_seq,
                      round_half_away, seq_after)
 
 __all__ = [
@@ -264,27 +264,16 @@ class CommandV3:
 
 
 @dataclass(frozen=True)
-class FeedbackV3(FeedbackRecord):
+class FeedbackV3(StreamFeedback):
     """Controller -> master: the stream's progress and the TCP pose (no joints, no controller I/O).
     The attribute names are FeedbackV2's where the field exists."""
 
-    state: StreamState = StreamState.IDLE
-    status: StatusBits = StatusBits(0)
-    reject_code: RejectCode = RejectCode.NONE
-    accepted_seq: int = 0
-    done_seq: int = 0
-    active_seq: int = 0
-    rejected_seq: int = 0
     tcp: Tuple[int, ...] = (0, 0, 0, 0, 0, 0)      # X Y Z 0.1 mm, Rx Ry Rz 0.01 deg
     heartbeat: int = 0                              # +1 every program loop (mod 65536)
     armed: bool = False                             # state byte bit 7: the program takes targets
 
     def __post_init__(self) -> None:
-        try:
-            object.__setattr__(self, "state", StreamState(self.state))
-            object.__setattr__(self, "reject_code", RejectCode(self.reject_code))
-        except ValueError as exc:
-            raise ProtocolError("v3 feedback: %s" % exc) from None
+        self._check_codes("v3 feedback")
         status = self.status
         if isinstance(status, bool) or not isinstance(status, int) or int(status) & ~0x3F or int(status) < 0:
             raise ProtocolError("v3 feedback: status must be StatusBits 0..0x3F (bits 6-7 reserved), "
