@@ -105,6 +105,35 @@ def test_arm_starts_at_home_and_reports_whole_units(kin):
     assert round_pose((0.5, -0.5, 2.5, 179.6, -180.0, -0.4)) == (1, -1, 3, 180, 180, 0)
 
 
+def test_arm_read_outs_are_read_only_and_taken_under_the_lock(kin):
+    """joints, pose, estop, error, last_step_time (controller.arm.LockedRead): the value as of the
+    last step, read under the arm's lock, and not assignable."""
+    arm = SimArm(kin, clock=lambda: 0.0)
+    arm.set_estop(True)
+    assert arm.estop and arm.joints == arm._joints and SimArm.joints.__doc__.startswith("The exact joints")
+    for name in ("joints", "pose", "estop", "error", "last_step_time"):
+        with pytest.raises(AttributeError, match="%s is read-only" % name):
+            setattr(arm, name, None)
+    taken = threading.Event()
+    release = threading.Event()
+
+    def hold_the_lock() -> None:
+        with arm._lock:
+            taken.set()
+            release.wait(5.0)
+    holder = threading.Thread(target=hold_the_lock)
+    holder.start()
+    assert taken.wait(5.0)
+    reader = threading.Thread(target=lambda: arm.joints)
+    reader.start()
+    reader.join(0.2)
+    assert reader.is_alive()                   # waits for the lock
+    release.set()
+    reader.join(5.0)
+    holder.join(5.0)
+    assert not reader.is_alive()
+
+
 def test_arm_initial_pose_and_joints(kin):
     arm = SimArm(kin, initial_pose=(900, 300, 500, 0, 90, 30), clock=lambda: 0.0)
     assert arm.reported_pose() == (900, 300, 500, 0, 90, 30)

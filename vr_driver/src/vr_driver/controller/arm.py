@@ -213,6 +213,30 @@ def brake_progress(elapsed: float, brake_time: float) -> float:
     return tau - tau * tau / (2.0 * brake_time) if brake_time > 0.0 else 0.0
 
 
+class LockedRead:
+    """A read-only attribute of an arm that the program thread steps while others read it: the value
+    of ``attribute``, read under the arm's ``_lock``. In the class body: ``joints =
+    LockedRead("_joints", "The exact joints [rad] at the last step.")``. Setting it raises
+    AttributeError, as a property without a setter does."""
+
+    def __init__(self, attribute: str, doc: Optional[str] = None) -> None:
+        self.attribute = attribute
+        self.name = attribute
+        self.__doc__ = doc
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, arm: Any, owner: Optional[type] = None) -> Any:
+        if arm is None:
+            return self
+        with arm._lock:
+            return getattr(arm, self.attribute)
+
+    def __set__(self, arm: Any, value: Any) -> None:
+        raise AttributeError("%s is read-only" % self.name)
+
+
 class ArmBase:
     """What both simulated arms (SimArm, the v2 SimStreamArm) share: the start (validated options,
     the initial joints: ``initial_joints`` wins over ``initial_pose``, which is solved by IK seeded
@@ -272,33 +296,16 @@ class ArmBase:
     def moving(self) -> bool:
         raise NotImplementedError
 
-    @property
-    def joints(self) -> Tuple[float, ...]:
-        """The exact joints [rad] at the last step."""
-        with self._lock:
-            return self._joints
-
-    @property
-    def pose(self) -> ControllerPose:
-        """The exact TCP pose (float mm / deg) at the last step."""
-        with self._lock:
-            return self._pose
+    joints = LockedRead("_joints", "The exact joints [rad] at the last step.")
+    pose = LockedRead("_pose", "The exact TCP pose (float mm / deg) at the last step.")
 
     def reported_pose(self) -> IntPose:
         """The pose as the v1 controller reports it (whole mm / degrees)."""
         with self._lock:
             return round_pose(self._pose)
 
-    @property
-    def last_step_time(self) -> float:
-        """Clock time the position was last brought up to date (-inf before any)."""
-        with self._lock:
-            return self._last_step
-
-    @property
-    def estop(self) -> bool:
-        with self._lock:
-            return self._estop
+    last_step_time = LockedRead("_last_step", "Clock time the position was last brought up to date (-inf before any).")
+    estop = LockedRead("_estop", "True while the e-stop is pressed.")
 
     @property
     def drives_powered(self) -> bool:
@@ -306,11 +313,7 @@ class ArmBase:
         with self._lock:
             return self._drives and not self._estop
 
-    @property
-    def error(self) -> Optional[str]:
-        """The injected error text, or None."""
-        with self._lock:
-            return self._error
+    error = LockedRead("_error", "The injected error text, or None.")
 
     def blocked_reason(self) -> Optional[str]:
         """Why no motion may start now (e-stop, drives off, error), or None."""

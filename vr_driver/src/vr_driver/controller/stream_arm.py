@@ -98,7 +98,7 @@ from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
 from ..protocol.common import BLEND_MAX, BLEND_PER_LEVEL, StreamState, blend_window, joints_to_wire, round_half_away
 from ..protocol.v2 import POSITION_UNIT_MM
-from .arm import ArmBase, Outcome, brake_progress
+from .arm import ArmBase, LockedRead, Outcome, brake_progress
 
 __all__ = [
     "DEFAULT_RAMP_TIME",
@@ -374,10 +374,7 @@ class SimStreamArm(ArmBase):
                 return StreamState.MOVING
             return StreamState.WAITING if self._waiting else StreamState.IDLE
 
-    @property
-    def done_seq(self) -> int:
-        with self._lock:
-            return self._done_seq
+    done_seq = LockedRead("_done_seq", "The sequence number of the target last reached or blended through (0: none yet).")
 
     @property
     def active_seq(self) -> int:
