@@ -171,3 +171,38 @@ class _Fb:
 
     def __init__(self, heartbeat):
         self.heartbeat = heartbeat
+
+
+def test_an_analysis_runs_while_the_bus_keeps_cycling():
+    """Context.while_cycling: the work runs in a thread of its own while the step's thread cycles
+    the bus (the card's watchdog must not see it stand still); its value or its error comes back."""
+    import threading
+    from vr_driver.commission.steps import Context
+
+    class Bus:
+        def __init__(self):
+            self.cycles = 0
+            self.fifth = threading.Event()
+
+        def run(self, until, timeout):
+            while True:
+                self.cycles += 1
+                if self.cycles == 5:
+                    self.fifth.set()
+                if until(None):
+                    return None
+
+    class Ctx:
+        bus = Bus()
+
+    def work(x):
+        assert Ctx.bus.fifth.wait(10.0), "the bus did not cycle while the analysis ran"
+        return x * 2
+    assert Context.while_cycling(Ctx, work, 21) == 42
+    assert Ctx.bus.cycles >= 5
+
+    def broken():
+        raise ValueError("bad record")
+    Ctx.bus = Bus()
+    with pytest.raises(ValueError, match="bad record"):
+        Context.while_cycling(Ctx, broken)

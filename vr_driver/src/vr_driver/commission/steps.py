@@ -34,6 +34,7 @@ from __future__ import annotations
 import logging
 import math
 import struct
+import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -213,9 +214,33 @@ class Context:
                                   "(calibrate the model, README \"Calibrating the model\")"
                                   % (self.feedback.pose, exc)) from None
 
+    def while_cycling(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)``, computed in a thread of its own while this thread keeps the bus cycling
+        with the record it holds: the card's watchdog must never see the bus stand still for an
+        analysis (the IK of every record of a move, in this thread, stalled the bus 160-280 ms at
+        100 and 250 cycles/s and the card's 300 ms watchdog ended the link)."""
+        out: Dict[str, Any] = {}
+
+        def work() -> None:
+            try:
+                out["value"] = fn(*args)
+            except BaseException as exc:  # raised again below, in the step's thread
+                out["error"] = exc
+        worker = threading.Thread(target=work, name="commission-analysis", daemon=True)
+        worker.start()
+        self.bus.run(lambda c: not worker.is_alive(), timeout=300.0)
+        worker.join()
+        if "error" in out:
+            raise out["error"]
+        return out["value"]
+
     def track(self, cycles: Sequence[Cycle], seed: Sequence[float]) -> List[Tuple[float, Tuple[float, ...]]]:
         """(time, joints) for every new record of ``cycles``: dated by its heartbeat, the joints
-        solved from its pose nearest the previous record's (continuous through the move)."""
+        solved from its pose nearest the previous record's (continuous through the move). Computed
+        while the bus keeps cycling (:meth:`while_cycling`)."""
+        return self.while_cycling(self._track, list(cycles), tuple(seed))
+
+    def _track(self, cycles: Sequence[Cycle], seed: Sequence[float]) -> List[Tuple[float, Tuple[float, ...]]]:
         brackets = heartbeat_brackets(cycles)
         dates = analysis.date_loops(brackets, stall=max(3.0 * self.loop_period, 3.0 * self.bus.period))
         out: List[Tuple[float, Tuple[float, ...]]] = []
@@ -800,7 +825,8 @@ class RampStep(Step):
                     target = ctx.offset(q, axis, leg)
                     cycles = ctx.move_to(target, s.ramp_percent)
                     track = ctx.track(cycles, q)
-                    fit = analysis.fit_move([(t, qq[axis - 1]) for t, qq in track], ctx.loop_period)
+                    fit = ctx.while_cycling(analysis.fit_move, [(t, qq[axis - 1]) for t, qq in track],
+                                            ctx.loop_period)
                     log.debug("joint_%d %+.0f deg: %s", axis, leg, fit)
                     if fit is not None:
                         fits.extend((abs(fit.speed), f) for f in (fit.ramp_in, fit.ramp_out))
