@@ -16,7 +16,7 @@ from .options import (DEFAULT_ADDRESS, DEFAULT_BAUD, DEFAULT_BRAKE_TIME, DEFAULT
                       SimOptions)
 from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, SendAhead
 from .session import Unreachable
-from .simulator import EXIT_USAGE, SimError, run_simulator
+from .simulator import EXIT_USAGE, SimError, parse_simulator_args, run_simulator, simulator_parser
 from .stream_arm import DEFAULT_RAMP_TIME, RampShape
 from .virtual_controller import VirtualController
 
@@ -26,15 +26,14 @@ log = logging.getLogger(__name__)
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.controller.program",
-        description="Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
-                    "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
-                    "joint-target streaming protocol; with --protocol v3, Cartesian-target streaming "
-                    "for the G2 as it is) against a simulated VR-006L. Without "
-                    "--device it creates a pty pair; the first line on stdout is the device path "
-                    "for the master. Stops cleanly on SIGINT / SIGTERM.",
-        epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")
+    p = simulator_parser(
+        "program",
+        "Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
+        "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
+        "joint-target streaming protocol; with --protocol v3, Cartesian-target streaming "
+        "for the G2 as it is) against a simulated VR-006L. Without "
+        "--device it creates a pty pair; the first line on stdout is the device path "
+        "for the master. Stops cleanly on SIGINT / SIGTERM.")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--pty-link", metavar="PATH",
                        help="create a pty pair and symlink its device end at PATH (removed on exit)")
@@ -109,17 +108,13 @@ def _parser() -> argparse.ArgumentParser:
                          "ramps in the ramp time)")
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
-    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
     return p
 
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
     parser = _parser()
-    args = parser.parse_args(argv)          # exits 2 on a bad option
+    args = parse_simulator_args(parser, argv)
     out = stdout if stdout is not None else sys.stdout
-    level = logging.WARNING - 10 * min(2, args.verbose)
-    logging.basicConfig(level=level, stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     try:
         # the options' destinations are the ROS node's parameter names (PARAM_NAMES): one validation
         options = SimOptions.from_mapping({name: getattr(args, name) for name in PARAM_NAMES})

@@ -22,7 +22,6 @@ joins its pty with the controller's. ``python3 -m vr_driver.controller.io_island
 """
 from __future__ import annotations
 
-import argparse
 import logging
 import sys
 import threading
@@ -33,7 +32,7 @@ from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
 
 from .pty_link import SimPort
-from .simulator import Simulator, int_option, positive_option, run_simulator
+from .simulator import Simulator, int_option, parse_simulator_args, positive_option, run_simulator, simulator_parser
 
 __all__ = ["ISLAND_ADDRESS", "ISLAND_IDENT", "ISLAND_CFG", "ISLAND_GSD", "GRIPPER_DELAY", "island_slave",
            "IslandProgram", "VirtualIoIsland", "main"]
@@ -156,23 +155,17 @@ class VirtualIoIsland(Simulator):
 
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.controller.io_island",
-        description="Virtual I/O island: a PROFIBUS-DP slave (ident 0x0F1A, 2 bytes in / 2 out, GSD "
-                    "VRIO0F1A.gsd) with a simulated gripper. Without --device it creates a pty pair; the "
-                    "first line on stdout is the device path. Stops cleanly on SIGINT / SIGTERM.",
-        epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem, 1 internal error")
+    p = simulator_parser("io_island", "Virtual I/O island: a PROFIBUS-DP slave (ident 0x0F1A, 2 bytes in / "
+                         "2 out, GSD VRIO0F1A.gsd) with a simulated gripper. Without --device it creates a pty "
+                         "pair; the first line on stdout is the device path. Stops cleanly on SIGINT / SIGTERM.")
     where = p.add_mutually_exclusive_group()
     where.add_argument("--pty-link", metavar="PATH", help="symlink the pty's device end at PATH (removed on exit)")
     where.add_argument("--device", metavar="DEV", help="serve an existing serial device")
     p.add_argument("--addr", type=int, default=ISLAND_ADDRESS, help="DP slave address (default 8)")
     p.add_argument("--baud", type=int, default=19200, help="DP bit rate (default 19200)")
     p.add_argument("--part-present", action="store_true", help="start with a part present")
-    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
-    args = p.parse_args(argv)
+    args = parse_simulator_args(p, argv)
     out = stdout if stdout is not None else sys.stdout
-    logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     def make() -> VirtualIoIsland:
         island = VirtualIoIsland(args.device, address=args.addr, baud=args.baud, pty_link=args.pty_link)
         island.set_part_present(args.part_present)

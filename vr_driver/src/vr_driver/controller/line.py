@@ -25,7 +25,6 @@ shell (:func:`main`; the first line on stdout is the master's device path).
 """
 from __future__ import annotations
 
-import argparse
 import heapq
 import logging
 import os
@@ -41,7 +40,7 @@ from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
 from .pty_link import SimPort, pid_alive
-from .simulator import EXIT_OK, SimError, Simulator, run_simulator
+from .simulator import EXIT_OK, SimError, Simulator, parse_simulator_args, run_simulator, simulator_parser
 
 __all__ = ["LineCounters", "LineHub", "main"]
 
@@ -209,20 +208,14 @@ class LineHub(Simulator):
 
 
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.controller.line",
-        description="The virtual RS-485 line: joins the ptys of simulated DP stations (virtual controller, "
-                    "virtual I/O island) into one multi-drop line. The first line on stdout is the device "
-                    "path the master opens. Stops cleanly on SIGINT / SIGTERM.",
-        epilog="exit status: 0 stopped by a signal, 2 bad option, 3 device problem")
+    p = simulator_parser("line", "The virtual RS-485 line: joins the ptys of simulated DP stations (virtual "
+                         "controller, virtual I/O island) into one multi-drop line. The first line on stdout is "
+                         "the device path the master opens. Stops cleanly on SIGINT / SIGTERM.", internal_error=False)
     p.add_argument("stations", nargs="+", metavar="STATION_PATH", help="a station's pty (or its symlink)")
     p.add_argument("--pty-link", metavar="PATH", help="symlink the master's pty at PATH (removed on exit)")
     p.add_argument("--baud", type=int, help="pace the line at this bit rate (default: as fast as the ptys)")
-    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
-    args = p.parse_args(argv)
+    args = parse_simulator_args(p, argv)
     out = stdout if stdout is not None else sys.stdout
-    logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
-                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     def serve(hub: LineHub, stop: threading.Event, prog: str) -> int:
         hub.serve(stop)                 # in the foreground (a PhyError: the runner's device error)
         return EXIT_OK

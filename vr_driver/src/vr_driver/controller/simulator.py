@@ -2,13 +2,16 @@
 the virtual I/O island, :mod:`vr_driver.controller.io_island`; the line hub,
 :mod:`vr_driver.controller.line`): their errors, the checks of their numeric options, the
 life-cycle of their background thread (:class:`Simulator`) and their command-line life
-(:func:`run_simulator`, the exit codes). ROS-free."""
+(:func:`simulator_parser`, :func:`parse_simulator_args`, :func:`run_simulator`, the exit codes).
+ROS-free."""
 from __future__ import annotations
 
+import argparse
+import logging
 import signal
 import sys
 import threading
-from typing import IO, Any, Callable, Optional
+from typing import IO, Any, Callable, Optional, Sequence
 
 from pyprofibus_vendor.errors import PhyError
 
@@ -16,7 +19,7 @@ from .. import validate
 from ..errors import VrDriverError
 
 __all__ = ["EXIT_OK", "EXIT_FAILURE", "EXIT_USAGE", "EXIT_DEVICE", "SimError", "SimDeviceError", "Simulator",
-           "positive_option", "int_option", "run_simulator"]
+           "positive_option", "int_option", "simulator_parser", "parse_simulator_args", "run_simulator"]
 
 #: exit codes of the command line
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE, EXIT_DEVICE = 0, 1, 2, 3
@@ -109,6 +112,27 @@ def _watch(sim: Any, stop: threading.Event, prog: str) -> int:
             print("%s: internal error: %s" % (prog, sim.error), file=sys.stderr)
             return EXIT_FAILURE
     return EXIT_OK
+
+
+def simulator_parser(module: str, description: str, internal_error: bool = True) -> argparse.ArgumentParser:
+    """The command line every simulator starts from: ``python3 -m vr_driver.controller.<module>``,
+    its ``description``, :func:`run_simulator`'s exit statuses as the epilog (``internal_error``:
+    its threads can end in EXIT_FAILURE) and ``-v`` (:func:`parse_simulator_args`)."""
+    p = argparse.ArgumentParser(
+        prog="python3 -m vr_driver.controller." + module, description=description,
+        epilog="exit status: %d stopped by a signal, %d bad option, %d device problem%s" % (
+            EXIT_OK, EXIT_USAGE, EXIT_DEVICE, ", %d internal error" % EXIT_FAILURE if internal_error else ""))
+    p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")
+    return p
+
+
+def parse_simulator_args(parser: argparse.ArgumentParser, argv: Optional[Sequence[str]]) -> argparse.Namespace:
+    """``argv`` parsed (argparse exits 2 on a bad option); the log on stderr at WARNING, INFO with
+    ``-v``, DEBUG with ``-vv``."""
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING - 10 * min(2, args.verbose), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    return args
 
 
 def run_simulator(prog: str, make: Callable[[], Any], out: IO[str],
