@@ -154,7 +154,7 @@ class SessionProgram:
         self._last_read: Optional[bytes] = None
         self._view: Optional[bytes] = None
         self._bytes_link_up = False
-        self._safe_is_record = self._decodes(bytes(slave.output_size))
+        self._safe_is_record = self._command_of(bytes(slave.output_size)) is not None
         self._chained_outputs = slave.on_outputs
         self._chained_state = slave.on_state_change
         slave.on_outputs = self._on_outputs
@@ -273,18 +273,16 @@ class SessionProgram:
         if self._chained_state is not None:
             self._chained_state(old, new, reason)
 
-    def _idle_record(self, record: bytes) -> bool:
+    def _command_of(self, record: bytes) -> Optional[Any]:
+        """The program's command in ``record``, None when it is no valid record."""
         try:
-            return self.is_idle_command(self.decode_record(record))
+            return self.decode_record(record)
         except ProtocolError:
-            return False
+            return None
 
-    def _decodes(self, record: bytes) -> bool:
-        try:
-            self.decode_record(record)
-        except ProtocolError:
-            return False
-        return True
+    def _idle_record(self, record: bytes) -> bool:
+        command = self._command_of(record)
+        return command is not None and self.is_idle_command(command)
 
     # ---------------------------------------------------------------------------- read-outs
     @property

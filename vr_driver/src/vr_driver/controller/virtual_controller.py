@@ -38,7 +38,6 @@ from typing import IO, Any, Callable, Optional, Sequence, Tuple, Union
 from pyprofibus_vendor.config import default_robot_config
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer, SlaveState
 from pyprofibus_vendor.phy import Link
-from pyprofibus_vendor.phy_serial import PtyPair
 
 from ..errors import ProtocolError, VrDriverError
 from ..kinematics.solver import ConfigurationRule, Kinematics
@@ -218,17 +217,9 @@ class VirtualController(Simulator):
         except BaseException:
             self._close_log()
             raise
-        self.server = SlaveServer(self.link, self.slave, clock=clock)
+        self.server = SlaveServer(self.port.link, self.slave, clock=clock)
 
     # ----------------------------------------------------------------------- set-up / tear-down
-    @property
-    def link(self) -> Link:
-        return self.port.link
-
-    @property
-    def pty(self) -> Optional[PtyPair]:
-        return self.port.pty
-
     def start(self) -> "VirtualController":
         """Serve the bus and run the program loop in background threads."""
         if self._thread is not None:
@@ -238,7 +229,7 @@ class VirtualController(Simulator):
         self._thread = threading.Thread(target=self._run, name="vr-sim-program", daemon=True)
         self._thread.start()
         log.info("virtual G2 controller on %s: DP slave %d (ident 0x%04X), protocol %s, loop %.0f ms, "
-                 "speed x%g", self.device_path or self.link, self.slave.address, self.slave.ident,
+                 "speed x%g", self.device_path or self.port.link, self.slave.address, self.slave.ident,
                  self.protocol, self.loop_period * 1e3, self.arm.speed_factor)
         return self
 
