@@ -488,16 +488,18 @@ LOAD_CLASSES = {"idle": Idle, "plan": Plans, "validate": Validation, "hog": Hogs
 # ------------------------------------------------------------------------------------------ worker
 
 class LoopTimer:
-    """The driver's bus loop as it runs: the duration of each DriverCore.spin_once (one bus iteration:
+    """The driver's bus loop as it runs: the duration of each BusLoop.spin_once (one bus iteration:
     the DP cycle or, with a bus process, the wait for its report, then the joints, the sequencer and
-    the snapshot), wrapped on the instance before the core starts. A long one is the driver's loop
+    the snapshot), wrapped on the core's bus loop before the core starts (its thread calls that, not
+    DriverCore.spin_once: wrapping the core's measured nothing, 0.0 ms, once the core was carved). A long one is the driver's loop
     held up: the interpreter lock, or no CPU for the driver's process -- with a bus process, one
     beyond bus_node_timeout (3 s) makes the bus process take the driver for dead and stop the arm."""
 
     def __init__(self, core: Any) -> None:
         self.times: List[float] = []
         self._from = 0
-        spin = core.spin_once
+        bus_loop = core.bus_loop
+        spin = bus_loop.spin_once
 
         def timed() -> Any:
             t = time.monotonic()
@@ -505,7 +507,7 @@ class LoopTimer:
                 return spin()
             finally:
                 self.times.append(time.monotonic() - t)
-        core.spin_once = timed
+        bus_loop.spin_once = timed
 
     def mark(self) -> None:
         """The window starts: only iterations from here on count."""
