@@ -125,3 +125,21 @@ def test_further_seeds_count_by_the_worst_and_change_nothing_where_they_agree(ki
     assert t.error == pytest.approx(2 * math.pi, abs=0.01)          # the start's solution: a turn off
     assert t.joints[5] == pytest.approx(turned[5] - 2 * math.pi, abs=0.01)
     assert off(kin, t.pose, q, turned) == pytest.approx(t.error, abs=1e-12)
+
+
+def test_the_full_search_ends_at_the_first_pose_within_fine(kin):
+    """Within FULL_SEARCH_BAND the 729 poses are tried only until one lands within FINE (all 729
+    cost up to 0.24 s a target, and a goal's stream preparation held its start up to 0.36 s); one
+    that none brings within FINE (exactly on joint_5 = 0) still tries them all and keeps the best."""
+    rng = random.Random(11)
+    early = 0
+    for _ in range(10):
+        q = (rng.uniform(-1, 1), rng.uniform(0.2, 0.9), rng.uniform(-0.6, 0.2), rng.uniform(-1.5, 1.5),
+             rng.uniform(-0.4, 0.4) * DEG, rng.uniform(-1.5, 1.5))
+        t = wire_target(kin, V3, q, q)
+        full = wire_target(kin, V3, q, q, fine=0.0)          # nothing is fine enough: every pose tried
+        assert full.solved >= 729 - 1
+        assert t.error <= max(FINE, full.error), (t.error / DEG, full.error / DEG)
+        if t.error <= FINE:
+            early += t.solved < full.solved
+    assert early >= 3, "the search never ended early"

@@ -15,7 +15,7 @@ the planned joints -- for a controller that solves a target nearest the arm's jo
 it (``current_joints``), which the driver knows only to lie on a stretch of the planned path, from
 every seed of that stretch it is given (the worst of them counts): first the plain rounding; when that is off by more than ``fine``, a coordinate
 search over single steps (a few dozen IK solutions, ~0.4 ms each); within FULL_SEARCH_BAND of
-joint_5 = 0, where the coordinate search can stall, all 729. Measured on random wrists within 3 deg
+joint_5 = 0, where the coordinate search can stall, all 729 (until one lands within ``fine``). Measured on random wrists within 3 deg
 of the singularity (v3): the worst plain rounding 14.5 deg off, the chosen pose 0.44 deg off, most
 under 0.02 deg.
 
@@ -124,6 +124,8 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
             found = attempt(steps, best.error)
             if found is not None and _better(found, best):
                 best = found
+                if best.error <= fine:      # good enough: the rest would cost up to 0.24 s a target
+                    break
     return WireTarget(best.pose, best.joints, best.error, best.steps, count[0])
 
 
