@@ -151,7 +151,15 @@ class DriverV3Test(DriverTestBase):
         # no target started after the stop reached the controller (its first "stopped" entry),
         # beyond the one segment the arm may have been committed to blend into
         stopped = [e for e in entries if e["outcome"] == "stopped"]
-        self.assertTrue(stopped, "no target stopped: %s" % [(e["seq"], e["outcome"]) for e in entries])
+        if not stopped:
+            # the arm stood at a target waiting for the next when the cancel came (a loaded machine's
+            # bus let the look-ahead run dry: "the arm stopped at point k ... waiting"): there was
+            # nothing to stop -- then nothing ran past the cancel and nothing was taken after it (a
+            # target that was running would end after it)
+            self.assertFalse([e for e in entries if e["time"] > t_cancel or e["taken_time"] > t_cancel],
+                             "a target ran after the cancel without a stop: %s"
+                             % [(e["seq"], e["outcome"], round(e["time"] - t_cancel, 3)) for e in entries])
+            return
         t_stop = min(e["time"] for e in stopped)
         self.assertGreaterEqual(t_stop, t_cancel)
         self.assertFalse([e for e in entries if e["taken_time"] > t_stop],
