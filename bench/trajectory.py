@@ -1657,6 +1657,18 @@ def run_all(args: Any, names: Sequence[str], title_note: str, model: str, stage:
     return status, results
 
 
+def _completed(r: Dict[str, Any], key: str) -> List[float]:
+    """``key`` of every goal of configuration result ``r`` run to the end (that has it)."""
+    return [g[key] for g in r.get("goals", []) if g["completed"] and g.get(key) is not None]
+
+
+def _successful(r: Dict[str, Any]) -> str:
+    """"k / n" goals SUCCESSFUL of configuration result ``r``, or FAILED when it did not run."""
+    if "failed" in r:
+        return "FAILED"
+    return "%d / %d" % (sum(1 for g in r["goals"] if g["ok"]), len(r["goals"]))
+
+
 def compare_commissioning(before: List[Dict[str, Any]], after: List[Dict[str, Any]]) -> None:
     """The before / after commissioning table (Markdown), per configuration: goals SUCCESSFUL, the
     time margin, the deviation from the plan at the same time, the driver's own figure and the
@@ -1672,14 +1684,7 @@ def compare_commissioning(before: List[Dict[str, Any]], after: List[Dict[str, An
     by_name = {r["name"]: r for r in after}
     for b in before:
         a = by_name.get(b["name"], {"failed": "not run"})
-
-        def vals(r: Dict[str, Any], key: str) -> List[float]:
-            return [g[key] for g in r.get("goals", []) if g["completed"] and g.get(key) is not None]
-
-        def ok(r: Dict[str, Any]) -> str:
-            if "failed" in r:
-                return "FAILED"
-            return "%d / %d" % (sum(1 for g in r["goals"] if g["ok"]), len(r["goals"]))
+        vals, ok = _completed, _successful
         print("| %s | %s → %s | %s | %s | %s | %s | %s | %s | %s | %s | %s | %s |" % (
             b["name"], ok(b), ok(a), _mm(vals(b, "planned"), "%.2f"), _mm(vals(a, "planned"), "%.2f"),
             _mm(vals(b, "margin_s"), "%+.2f"), _mm(vals(a, "margin_s"), "%+.2f"),
@@ -1703,14 +1708,7 @@ def compare(before: List[Dict[str, Any]], after: List[Dict[str, Any]], calib: Di
     by_name = {r["name"]: r for r in after}
     for b in before:
         a = by_name.get(b["name"], {"failed": "not run"})
-
-        def vals(r: Dict[str, Any], key: str) -> List[float]:
-            return [g[key] for g in r.get("goals", []) if g["completed"] and g.get(key) is not None]
-
-        def ok(r: Dict[str, Any]) -> str:
-            if "failed" in r:
-                return "FAILED"
-            return "%d / %d" % (sum(1 for g in r["goals"] if g["ok"]), len(r["goals"]))
+        vals, ok = _completed, _successful
         print("| %s | %s → %s | %s | %s | %s | %s | %s | %s | %.4f mm / %.5f deg |" % (
             b["name"], ok(b), ok(a), _mm(vals(b, "dev_deg"), "%.3f"), _mm(vals(a, "dev_deg"), "%.3f"),
             _mm(vals(b, "path_deg"), "%.3f"), _mm(vals(a, "path_deg"), "%.3f"),
