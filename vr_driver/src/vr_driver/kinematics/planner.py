@@ -29,9 +29,9 @@ step and why, and nothing else happens:
    gives one result): vertex reduction, partial shortcuts, collapsing close vertices, B-spline
    smoothing of the corners; each step keeps the path valid (it checks its motions as the planner
    does).
-5. Timing: a cubic spline through the path (resampled densely, so that it stays on the checked
-   path), TOPP-RA time-optimal under the joint speed and acceleration limits times the scaling
-   factors (less :data:`TOPP_MARGIN`), from rest to rest.
+5. Timing (:mod:`~vr_driver.kinematics.plan_timing`): a cubic spline through the path (resampled
+   densely, so that it stays on the checked path), TOPP-RA time-optimal under the joint speed and
+   acceleration limits times the scaling factors (less :data:`TOPP_MARGIN`), from rest to rest.
 6. Sampling every ``dt`` (at most; evenly spaced over the duration): positions, velocities,
    accelerations, times. Every sample is checked again -- joint limits, speed and acceleration,
    validity -- and so is every straight chord between two samples (what the driver interpolates),
@@ -78,6 +78,7 @@ import numpy as np
 from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
+from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
 
 __all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
            "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN",
@@ -108,19 +109,9 @@ ESCAPE_SWEEP = 0.8
 #: [m] added to each joint's lever arm: the links' own size (their collision shapes stand out of
 #: the joint axes) and a tool on the flange
 LINK_ALLOWANCE = 0.3
-#: the fraction of each speed and acceleration limit TOPP-RA plans to: its constraints hold at its
-#: grid points, the spline between them may exceed them slightly; the sampled result is checked
-#: against the full limits
-TOPP_MARGIN = 0.97
 #: rounds of shortcutting at most (each tries as many shortcuts as the path has vertices)
 _SIMPLIFY_ROUNDS = 2
 _FEATURE = "collision-aware planning (vr_driver.kinematics.planner)"
-#: the timing's tries: ([rad] the largest joint step between two points of the path the timing
-#: spline goes through, the sample spacing as a fraction of ``dt``). The spline overshoots a corner of
-#: the path a little, and the straight chord between two samples cuts a curve by its sag: where the
-#: path runs along an obstacle, that can touch it. Closer spline points shrink the overshoot and
-#: half the spacing quarters the sag; the result is the first try that passes every check.
-_TIMING_ATTEMPTS = ((0.05, 1.0), (0.01, 0.5), (0.002, 0.25))
 
 
 class PlanningError(MotionError):
@@ -173,11 +164,6 @@ class PlannedTrajectory:
                                  time_from_start=duration(t))
                       for t, p, v, a in zip(self.times, self.positions, self.velocities, self.accelerations)]
         return msg
-
-
-#: [rad] a path whose joints move less than this is timed in closed form (TOPP-RA's grid finds no
-#: timing for moves of 1e-6 .. 1e-5 rad: an arm reported at home is 4e-7 rad from the SRDF's home)
-TINY_MOVE = 1e-4
 
 
 def joint_weights(kinematics: Any, allowance: float = LINK_ALLOWANCE) -> Tuple[float, ...]:
@@ -303,9 +289,10 @@ class Planner:
                                     % (n, lo, hi))
         self.weights = joint_weights(kinematics)
         self._ob, self._og, self._ou = (_require(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
-        self._toppra = _require("toppra")
+        toppra = _require("toppra")
         _require("toppra.algorithm")
         _require("toppra.constraint")
+        self._timing = PathTiming(toppra, self.limits.velocity, self.limits.acceleration)
         self._ou.setLogLevel(self._ou.LOG_WARN)
 
     # --------------------------------------------------------------------------------- checks
@@ -429,14 +416,17 @@ class Planner:
         path = self._geometric_path(q0, valid, budget, seed, timings)
         t = time.perf_counter()
         timings["time"] = timings["check"] = 0.0
-        for attempt, (step, dt) in enumerate(_TIMING_ATTEMPTS):
-            result = self._time(path, vs, acs, step, self.dt * dt)
+        for attempt, (step, dt) in enumerate(TIMING_ATTEMPTS):
+            try:
+                result = self._timing.time(path, vs, acs, step, self.dt * dt)
+            except TimingError as exc:
+                raise PlanningError("time", str(exc)) from exc
             timings["time"] += time.perf_counter() - t
             t = time.perf_counter()
             try:
                 self._check(*result)
             except PlanningError:
-                if attempt == len(_TIMING_ATTEMPTS) - 1:
+                if attempt == len(TIMING_ATTEMPTS) - 1:
                     raise
                 continue
             finally:
@@ -562,86 +552,7 @@ class Planner:
                 break
         simplifier.smoothBSpline(path, 3)
 
-    # ---------------------------------------------------------------------------- timing part
-    def _time_tiny(self, a: np.ndarray, b: np.ndarray, vs: float, acs: float, dt: float):
-        """A move shorter than TINY_MOVE (TOPP-RA's grid finds no timing for it): the straight move
-        from rest to rest at the acceleration limits, accelerating for half its time and braking for
-        the other half (at that length no joint comes near its speed limit)."""
-        d = b - a
-        amax = np.array(self.limits.acceleration) * acs
-        vmax = np.array(self.limits.velocity) * vs
-        total = max(float(np.max(2.0 * np.sqrt(np.abs(d) / amax))), float(np.max(2.0 * np.abs(d) / vmax)), 1e-3)
-        n = max(2, int(math.ceil(total / dt)))
-        ts = np.linspace(0.0, total, n + 1)
-        u = ts / total
-        shape = np.where(u < 0.5, 2.0 * u * u, 1.0 - 2.0 * (1.0 - u) ** 2)
-        rate = np.where(u < 0.5, 4.0 * u, 4.0 * (1.0 - u)) / total
-        curve = np.where(u < 0.5, 4.0, -4.0) / (total * total)
-        pos = a[None, :] + shape[:, None] * d[None, :]
-        vel = rate[:, None] * d[None, :]
-        acc = curve[:, None] * d[None, :]
-        pos[0], pos[-1] = a, b
-        vel[0] = vel[-1] = 0.0
-        return (tuple(float(t) for t in ts), tuple(tuple(float(v) for v in p) for p in pos),
-                tuple(tuple(float(v) for v in p) for p in vel), tuple(tuple(float(v) for v in p) for p in acc))
-
-    def _time(self, path: Sequence[Tuple[float, ...]], vs: float, acs: float, spline_step: float, dt: float):
-        """TOPP-RA along a spline through the (densified) path; sampled evenly every <= dt."""
-        ta = self._toppra
-        dense = [path[0]]
-        for a, b in zip(path, path[1:]):
-            n = max(1, int(math.ceil(max(abs(x - y) for x, y in zip(a, b)) / spline_step)))
-            dense.extend(tuple(x + (y - x) * k / n for x, y in zip(a, b)) for k in range(1, n + 1))
-        wp = np.array(dense)
-        seg = np.linalg.norm(np.diff(wp, axis=0), axis=1)
-        keep = np.concatenate(([True], seg > 1e-9))
-        wp = wp[keep]
-        if len(wp) < 2:                       # start == goal: one point, at rest
-            q = tuple(float(v) for v in path[0])
-            zero = (0.0,) * self.dof
-            return (0.0,), (q,), (zero,), (zero,)
-        if float(np.max(np.abs(wp - wp[0]))) < TINY_MOVE:
-            return self._time_tiny(wp[0], wp[-1], vs, acs, dt)
-        s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))))
-        s = s / s[-1]
-        curve = ta.SplineInterpolator(s, wp)
-        vmax = np.array(self.limits.velocity) * vs * TOPP_MARGIN
-        amax = np.array(self.limits.acceleration) * acs * TOPP_MARGIN
-        constraints = [ta.constraint.JointVelocityConstraint(np.stack([-vmax, vmax], axis=1)),
-                       ta.constraint.JointAccelerationConstraint(np.stack([-amax, amax], axis=1))]
-        gridpoints = np.linspace(0.0, 1.0, max(100, min(2000, 4 * len(wp))))
-        algo = ta.algorithm.TOPPRA(constraints, curve, gridpoints=gridpoints, parametrizer="ParametrizeConstAccel")
-        timed = algo.compute_trajectory(0.0, 0.0)
-        if timed is None:
-            raise PlanningError("time", "TOPP-RA found no timing of the path under the speed and acceleration limits")
-        duration = float(timed.duration)
-        # TOPP-RA's limits hold at its grid points; between them the spline may exceed them a little:
-        # where it does (checked on a grid 4 x finer than the samples), the whole timing is slowed
-        # by the factor that brings it back (speeds / k, accelerations / k^2)
-        vlim = np.array(self.limits.velocity) * vs
-        alim = np.array(self.limits.acceleration) * acs
-
-        def excess(u: np.ndarray, k: float) -> float:
-            return max(float(np.max(np.abs(timed(u, 1)) / k / vlim)),
-                       math.sqrt(float(np.max(np.abs(timed(u, 2)) / (k * k) / alim))))
-
-        k = max(1.0, excess(np.linspace(0.0, duration, 4 * max(1, int(math.ceil(duration / dt))) + 1), 1.0))
-        for _ in range(10):
-            n = max(1, int(math.ceil(k * duration / dt - 1e-9)))
-            ts = np.linspace(0.0, k * duration, n + 1)
-            u = np.minimum(ts / k, duration)
-            over = excess(u, k)
-            if over <= 1.0:
-                break
-            k *= over * (1.0 + 1e-6)
-        else:
-            raise PlanningError("time", "the timed path keeps exceeding the speed or acceleration limits")
-        pos, vel, acc = timed(u), timed(u, 1) / k, timed(u, 2) / (k * k)
-        pos[0], pos[-1] = path[0], path[-1]
-        vel[0] = vel[-1] = 0.0
-        return (tuple(float(t) for t in ts), tuple(tuple(float(v) for v in p) for p in pos),
-                tuple(tuple(float(v) for v in p) for p in vel), tuple(tuple(float(v) for v in p) for p in acc))
-
+    # ---------------------------------------------------------------------- the result's check
     def _check(self, times, positions, velocities, accelerations) -> None:
         """Every sample inside the joint, speed and acceleration limits (less nothing: the margin
         of the timing is the slack) and valid, every chord between two samples valid and within
