@@ -4,7 +4,8 @@ Publishes robot_status, joint_states, tool_pose, /diagnostics and ~markers; serv
 move_to_pose action; subscribes joint_path_command. The ROS-Industrial part (feedback_states,
 stop_motion, start_motion, the joint_path_command service, get_robot_info) is
 :mod:`vr_driver.ros.industrial`. The I/O line
-(set_io, get_io, io_states) is :mod:`vr_driver.ros.io_server`. All decisions
+(set_io, get_io, io_states) is :mod:`vr_driver.ros.io_server`; the node's own /diagnostics tasks
+(link, controller, bus) are :mod:`vr_driver.ros.diagnostics`. All decisions
 (validation, preview, handshake, reconnect) are in the ROS-free core.
 """
 from __future__ import annotations
@@ -15,9 +16,7 @@ import sys
 from typing import List, Optional, Tuple
 
 import actionlib
-import diagnostic_updater
 import rospy
-from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Point, PoseStamped
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory
@@ -29,6 +28,7 @@ from vr_driver.msg import (CartesianPose, MoveToPoseAction, MoveToPoseFeedback, 
 from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState, MoveJob, MoveRequest,
                      SubmitMode)
 from ..errors import MissingDependency, VrDriverError
+from .diagnostics import DriverDiagnostics
 from .goal_runner import Goal, GoalRunner
 from .industrial import IndustrialInterface
 from .io_server import IoServer
@@ -87,15 +87,6 @@ def pose_from_msg(msg: CartesianPose, what: str) -> ControllerPose:
         raise type(exc)("%s: %s" % (what, exc)) from None
 
 
-def _add_controller_notes(stat, notes):
-    """The commissioned G2's differences and what the driver does about each
-    (:func:`vr_driver.driver.commissioned.controller_notes`), one entry each, on the controller's
-    diagnostics (also logged at every connect)."""
-    for k, note in enumerate(notes, 1):
-        stat.add("commissioning %d" % k, note)
-    return stat
-
-
 class InterfaceNode:
     def __init__(self, params: DriverParams):
         self.params = params
@@ -105,13 +96,9 @@ class InterfaceNode:
         self.joint_pub = rospy.Publisher("joint_states", JointState, queue_size=10)
         self.pose_pub = rospy.Publisher("tool_pose", PoseStamped, queue_size=10)
         self.marker_pub = rospy.Publisher("~markers", MarkerArray, queue_size=2, latch=True)
-        self.diag = diagnostic_updater.Updater()
-        self.diag.setHardwareID("Panasonic G2 (PROFIBUS-DP slave %d on %s)"
-                                % (self.core.slave_config.address, self.core.bus.phy.device))
-        self.diag.add("link", self._diag_link)
-        self.diag.add("controller", self._diag_controller)
-        self.diag.add("bus", self._diag_bus)
-        self.diag.period = params.diagnostics_period
+        # /diagnostics: link, controller and bus (ros/diagnostics.py); the parts below add theirs
+        self.diagnostics = DriverDiagnostics(self.core, params.diagnostics_period)
+        self.diag = self.diagnostics.updater
         self.io_server = IoServer(self.core, params, self.diag)      # set_io, get_io, io_states
         # a plain ActionServer: a preview_only goal runs beside a moving goal and never preempts it
         # (SimpleActionServer would cancel the running move for any new goal, previews included);
@@ -230,78 +217,6 @@ class InterfaceNode:
         ps.pose.orientation.x, ps.pose.orientation.y = qx, qy
         ps.pose.orientation.z, ps.pose.orientation.w = qz, qw
         self.pose_pub.publish(ps)
-
-    def _diag_link(self, stat):
-        s = self.core.status()
-        if s.link is LinkState.CONNECTED:
-            stat.summary(DiagnosticStatus.OK, "connected, %.1f cycles/s" % s.cycle_rate)
-        else:
-            stat.summary(DiagnosticStatus.ERROR, "%s: %s" % (s.link.value, s.link_reason))
-        stat.add("link state", s.link.value)
-        stat.add("link reason", s.link_reason)
-        stat.add("device", self.core.bus.phy.device)
-        stat.add("baud", str(self.core.bus.baud))
-        stat.add("slave state", s.slave_state)
-        stat.add("cycle rate [1/s]", "%.1f" % s.cycle_rate)
-        for key in ("cycles", "retries", "timeouts", "fcs_errors", "invalid_replies", "losses",
-                    "reconnects", "phy_errors"):
-            if key in s.master_counters:
-                stat.add("bus %s" % key.replace("_", " "), str(s.master_counters[key]))
-        c = s.counters
-        for key in ("port_opens", "port_errors", "reconnect_attempts", "losses", "reconnects",
-                    "protocol_errors", "stalled_cycles"):
-            stat.add("link %s" % key.replace("_", " "), str(getattr(c, key)))
-        if s.last_diag:
-            stat.add("last slave diag", s.last_diag)
-        return stat
-
-    def _diag_bus(self, stat):
-        """The card's view of the master: the gaps between its Data_Exchange replies over the last
-        minute (vr_driver.bus.health), WARN when one passed half its watchdog."""
-        h = self.core.status().bus_health
-        if h is None:
-            stat.summary(DiagnosticStatus.WARN, "no bus yet (the port is not open)")
-            return stat
-        if h.late:
-            stat.summary(DiagnosticStatus.WARN, "a gap of %.0f ms between two Data_Exchange cycles in the "
-                         "last minute: more than half the card's watchdog (%.0f ms)" % (
-                             1e3 * h.max_gap, 1e3 * h.watchdog))
-        else:
-            stat.summary(DiagnosticStatus.OK, h.describe())
-        stat.add("longest gap, last minute [ms]", "%.1f" % (1e3 * h.max_gap))
-        stat.add("jitter p99, last minute [ms]", "%.1f" % (1e3 * h.jitter_p99))
-        stat.add("jitter max, last minute [ms]", "%.1f" % (1e3 * h.jitter_max))
-        stat.add("nominal period [ms]", "%.1f" % (1e3 * h.period))
-        stat.add("watchdog [ms]", "off" if h.watchdog is None else "%.0f" % (1e3 * h.watchdog))
-        stat.add("watchdog margin [ms]", "-" if h.margin is None else "%.1f" % (1e3 * h.margin))
-        stat.add("replies, last minute", str(h.replies))
-        stat.add("longest gap since start [ms]", "%.1f" % (1e3 * h.worst_gap))
-        stat.add("gaps past half the watchdog since start", str(h.late_gaps))
-        stat.add("bus process", h.scheduling)
-        return stat
-
-    def _diag_controller(self, stat):
-        s = self.core.status()
-        fb = s.feedback
-        if fb is None:
-            stat.summary(DiagnosticStatus.STALE, "no feedback (%s)" % s.link_reason)
-        else:
-            level = DiagnosticStatus.OK if s.motion_possible else DiagnosticStatus.WARN
-            if fb.status & (StatusBits.ERROR | StatusBits.ESTOP):
-                level = DiagnosticStatus.ERROR
-            stat.summary(level, "%s; %s" % (fb.state.name, fb.status.describe()))
-            stat.add("pose", " ".join(str(v) for v in fb.values))
-            stat.add("why no motion", s.why_no_motion() or "-")
-        check = s.model_check
-        if check is not None:
-            stat.add("model check", check.describe())
-            if not check.ok and fb is not None:
-                stat.mergeSummary(DiagnosticStatus.WARN, "the model differs from the controller's by "
-                                  "%.2f mm / %.3f deg" % (check.position_mm, check.angle_deg))
-        for key in ("targets_sent", "targets_done", "targets_rejected", "targets_aborted"):
-            stat.add(key.replace("_", " "), str(getattr(s.counters, key)))
-        stat.add("queue", str(s.queue_length))
-        return _add_controller_notes(stat, self.core.controller_notes)
 
     def _publish_markers(self, job: MoveJob) -> None:
         """Goal arrow and previewed TCP path on ~markers (a failure here never blocks a move)."""
