@@ -1,5 +1,8 @@
 """The pose terminal's logic, ROS-free: parse and validate what an operator types, and run the
-dialogue (prompt, preview, confirm, send, progress, result) against a :class:`Backend`.
+dialogue (prompt, preview, confirm, send, progress, result) against a :class:`Backend`. A sent
+move's handle, progress display and watch until it ends (Ctrl-C, timeout, the outcome) are
+:mod:`vr_driver.terminal.sent_move`; how poses are written, :mod:`vr_driver.terminal.pose_text`
+(both re-exported here).
 
 The ROS node ``pose_terminal`` (vr_driver.ros.pose_terminal) only provides the backend (the
 driver's ``move_to_pose`` action, ``stop_motion``, ``robot_status``, ``tool_pose``); tests use a fake.
@@ -43,6 +46,8 @@ from typing import Any, Callable, List, Optional, Sequence, TextIO, Tuple
 from ..kinematics.preview import MoveType
 from ..poses import HOME_POSE, ControllerPose, Workspace
 from ..protocol.common import round_half_away
+from .pose_text import FIELDS, Field, fmt_joints_deg, fmt_number, fmt_pose
+from .sent_move import MoveHandle, MoveProgress, MoveResult, MoveWatch, ProgressPrinter
 
 __all__ = [
     "EXIT_OK", "EXIT_REFUSED", "EXIT_USAGE", "EXIT_NO_DRIVER",
@@ -59,22 +64,6 @@ EXIT_OK = 0            # the target was reached (or, with --preview, it is valid
 EXIT_REFUSED = 1       # refused (invalid, unreachable, motion not possible), not confirmed, failed, stopped
 EXIT_USAGE = 2         # bad command line
 EXIT_NO_DRIVER = 3     # no ROS master / driver, or no answer in time
-
-
-@dataclass(frozen=True)
-class Field:
-    name: str          # attribute of ControllerPose
-    label: str         # what the controller calls it
-    unit: str
-
-    @property
-    def quantity(self) -> str:
-        """What a value of this field is, with its article: 'a position' (mm) or 'an angle' (deg)."""
-        return "an angle" if self.unit == "deg" else "a position"
-
-
-FIELDS = (Field("x", "X", "mm"), Field("y", "Y", "mm"), Field("z", "Z", "mm"),
-          Field("rx", "Rx", "deg"), Field("ry", "Ry", "deg"), Field("rz", "Rz", "deg"))
 
 COMMANDS = ("home", "stop", "status", "history", "help", "quit", "cancel")
 _COMMAND_ALIASES = {"exit": "quit", "q": "quit", "?": "help", "h": "help"}
@@ -103,20 +92,6 @@ class RangeError(InputError):
 
 
 # ------------------------------------------------------------------------------------ formatting
-
-def fmt_number(value: float, decimals: int = 3) -> str:
-    """1120.0 -> '1120', 12.5 -> '12.5', -0.0 -> '0'."""
-    text = ("%.*f" % (decimals, value)).rstrip("0").rstrip(".") if decimals else "%.0f" % value
-    return "0" if text in ("-0", "") else text
-
-
-def fmt_pose(pose: ControllerPose) -> str:
-    return "  ".join("%s %s" % (f.label, fmt_number(getattr(pose, f.name), 1)) for f in FIELDS)
-
-
-def fmt_joints_deg(joints_rad: Sequence[float]) -> str:
-    return "  ".join("J%d %.1f" % (i + 1, math.degrees(q)) for i, q in enumerate(joints_rad))
-
 
 def field_range(workspace: Workspace, name: str) -> Tuple[float, float]:
     return getattr(workspace, name) if len(name) == 1 else workspace.angle
@@ -354,21 +329,6 @@ class PreviewResult:
 
 
 @dataclass(frozen=True)
-class MoveProgress:
-    phase: str                                        # validating, preview, sending, moving, stopping
-    distance_to_go: float = 0.0                       # mm
-    angle_to_go: float = 0.0                          # deg
-    current: Optional[ControllerPose] = None
-
-
-@dataclass(frozen=True)
-class MoveResult:
-    outcome: str                                      # "succeeded", "cancelled" or "failed"
-    reason: str = ""
-    reached: Optional[ControllerPose] = None
-
-
-@dataclass(frozen=True)
 class StatusInfo:
     """What the driver reports (None = unknown)."""
 
@@ -419,24 +379,6 @@ class PlanPreview:
         return text
 
 
-class MoveHandle:
-    """A move on its way (returned by Backend.start_move)."""
-
-    def wait(self, timeout: float) -> bool:
-        """Block up to ``timeout`` s; True once the move has ended."""
-        raise NotImplementedError
-
-    def progress(self) -> Optional[MoveProgress]:
-        raise NotImplementedError
-
-    def cancel(self) -> None:
-        """Ask the driver to stop this move (the arm stops)."""
-        raise NotImplementedError
-
-    def result(self) -> MoveResult:
-        raise NotImplementedError
-
-
 class Backend:
     """What the terminal needs from the driver (the ROS node implements it with the action)."""
 
@@ -459,61 +401,6 @@ class Backend:
 
     def status(self) -> Optional[StatusInfo]:
         raise NotImplementedError
-
-
-# ------------------------------------------------------------------------------------ progress
-
-class ProgressPrinter:
-    """Shows a move's progress: one line per phase; on a terminal the line is updated in place."""
-
-    def __init__(self, out: TextIO, tty: bool, period: float = 1.0,
-                 clock: Callable[[], float] = time.monotonic):
-        self.out = out
-        self.tty = tty
-        self.period = period
-        self.clock = clock
-        self._phase: Optional[str] = None
-        self._width = 0
-        self._last_print = -math.inf
-        self._open = False
-        self._text = ""
-
-    @staticmethod
-    def line(p: MoveProgress) -> str:
-        if p.phase in ("moving", "stopping", "sending"):
-            return "  %-8s distance to go %7.1f mm, angle to go %5.1f deg" % (p.phase, p.distance_to_go,
-                                                                              p.angle_to_go)
-        return "  %s" % p.phase
-
-    def update(self, p: MoveProgress) -> None:
-        text = self.line(p)
-        now = self.clock()
-        if self.tty:
-            if p.phase != self._phase:
-                self._newline()
-            elif text == self._text:
-                return
-            pad = max(0, self._width - len(text))
-            self.out.write("\r" + text + " " * pad)
-            self._width = len(text)
-            self._text = text
-            self._open = True
-        elif p.phase != self._phase or now - self._last_print >= self.period:
-            self.out.write(text + "\n")
-            self._last_print = now
-        self._phase = p.phase
-        self.out.flush()
-
-    def _newline(self) -> None:
-        if self._open:
-            self.out.write("\n")
-            self._open = False
-            self._width = 0
-            self._text = ""
-
-    def finish(self) -> None:
-        self._newline()
-        self.out.flush()
 
 
 # ------------------------------------------------------------------------------------ terminal
@@ -595,6 +482,22 @@ def status_lines(s: Any) -> List[str]:
     lines.append("pose:            %s" % (fmt_pose(s.pose) if s.pose is not None else "unknown (no feedback)"))
     if s.joints is not None:
         lines.append("joints [deg]:    %s" % fmt_joints_deg(s.joints))
+    return lines
+
+
+def plan_lines(request: PlanRequest, preview: PlanPreview) -> List[str]:
+    """A plan's preview in words (before the confirmation): its duration, points, planning time and
+    planner, the joint target, the TCP at the end and the speed it runs at."""
+    lines = ["Plan: collision-free; duration %.1f s (%d points), planned in %.0f ms%s"
+             % (preview.duration, preview.points, preview.planning_time * 1000.0,
+                " by %s" % preview.planner if preview.planner else ""),
+             "  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target)]
+    if preview.target is not None:
+        lines.append("  TCP at the end: %s" % fmt_pose(preview.target))
+    speed = preview.describe_speed(default=not request.velocity_scaling)
+    lines.append("  speed: %s" % (speed or "not reported by the driver (velocity scaling %s)"
+                                  % ("%g" % request.velocity_scaling if request.velocity_scaling
+                                     else "the driver's default")))
     return lines
 
 
@@ -879,16 +782,8 @@ class Terminal:
                      % (preview.planning_time * 1000.0))
             self._record(request, "already there")
             return EXIT_OK
-        self.say("Plan: collision-free; duration %.1f s (%d points), planned in %.0f ms%s"
-                 % (preview.duration, preview.points, preview.planning_time * 1000.0,
-                    " by %s" % preview.planner if preview.planner else ""))
-        self.say("  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target))
-        if preview.target is not None:
-            self.say("  TCP at the end: %s" % fmt_pose(preview.target))
-        speed = preview.describe_speed(default=not request.velocity_scaling)
-        self.say("  speed: %s" % (speed or "not reported by the driver (velocity scaling %s)"
-                                  % ("%g" % request.velocity_scaling if request.velocity_scaling
-                                     else "the driver's default")))
+        for line in plan_lines(request, preview):
+            self.say(line)
         stop = self._go_ahead(request, preview_only, confirm, "planned (not run)",
                               "Run this planned motion on the robot? [y/N]: ")
         if stop is not None:
@@ -897,6 +792,8 @@ class Terminal:
 
     def _run_move(self, request, preview, move_timeout: Optional[float],
                   start: Optional[Callable[[], MoveHandle]] = None) -> int:
+        """Send the previewed ``request`` (``start``: how, the backend's start_move by default) and
+        watch it to its end (:class:`MoveWatch`); it becomes the next entry's defaults."""
         started = self.clock()
         timeout = move_timeout if move_timeout is not None else 3.0 * preview.duration + 15.0
         target = getattr(request, "target", None) or getattr(preview, "target", None)
@@ -905,75 +802,12 @@ class Terminal:
         self._sending = False
         self._remember(request, target)
         self.say("Sent. Ctrl-C stops the arm.")
-        printer = ProgressPrinter(self.out, self.tty, clock=self.clock)
-        timed_out = False
-        try:
-            while not handle.wait(self.poll_period):
-                progress = handle.progress()
-                if progress is not None:
-                    printer.update(progress)
-                if self.clock() - started > timeout:
-                    timed_out = True
-                    break
-            progress = handle.progress()          # the last word: how far it got
-            if progress is not None:
-                printer.update(progress)
-        except KeyboardInterrupt:
-            printer.finish()
-            self.say("Ctrl-C: stopping the arm ...")
-            self._stop_move(handle)
-        printer.finish()
-        if timed_out:
-            self.say("No result from the driver within %.0f s: stopping the move." % timeout)
-            ended = self._stop_move(handle)
-            result = handle.result() if ended else None
-            where = fmt_pose(result.reached) if result is not None and result.reached is not None else "unknown"
-            self.say("The move %s; the arm is at %s." % ("was stopped" if ended else "did not end", where))
-            self._record(request, "no result in time")
-            return EXIT_NO_DRIVER
-        result = handle.result()
-        elapsed = self.clock() - started
-        where = fmt_pose(result.reached) if result.reached is not None else "unknown"
-        if result.outcome == "succeeded":
-            off = ""
-            if result.reached is not None and target is not None:
-                dp, da = result.reached.distance_to(target)
-                off = " (%.1f mm, %.1f deg from the target)" % (dp, da)
-            self.say("Reached %s%s in %.1f s." % (where, off, elapsed))
-            self._record(request, "reached")
-            return EXIT_OK
-        if result.outcome == "cancelled":
-            self.say("Stopped at %s: %s" % (where, result.reason or "cancelled"))
-            self._record(request, "stopped at %s (at rest): %s" % (where, result.reason or "cancelled"))
-            return EXIT_REFUSED
-        self.say("Failed: %s; the arm is at %s" % (result.reason or "no reason given", where))
-        self._record(request, "failed at %s: %s" % (where, result.reason or "no reason given"))
-        return EXIT_REFUSED
-
-    def _stop_move(self, handle: MoveHandle) -> bool:
-        """Cancel the goal; when the driver has not ended it after half of ``stop_wait`` (or on a
-        second Ctrl-C), call stop_motion as well. True once the move has ended."""
-        handle.cancel()
-        now = self.clock()
-        escalate, end = now + self.stop_wait / 2.0, now + self.stop_wait
-        stop_sent = False
-        while True:
-            try:
-                if handle.wait(self.poll_period):
-                    return True
-            except KeyboardInterrupt:
-                if not stop_sent:
-                    self.say("Ctrl-C again: calling stop_motion ...")
-                    self._call_stop()
-                    stop_sent = True
-                continue
-            now = self.clock()
-            if not stop_sent and now >= escalate:
-                self.say("The move has not ended yet: calling stop_motion ...")
-                self._call_stop()
-                stop_sent = True
-            if now >= end:
-                return False
+        watch = MoveWatch(handle, ProgressPrinter(self.out, self.tty, clock=self.clock), self.say,
+                          self._call_stop, clock=self.clock, poll_period=self.poll_period,
+                          stop_wait=self.stop_wait)
+        end = watch.follow(target, started, timeout)
+        self._record(request, end.outcome)
+        return EXIT_OK if end.reached else EXIT_REFUSED if end.answered else EXIT_NO_DRIVER
 
     def _call_stop(self) -> None:
         ok, message = self.backend.stop()
