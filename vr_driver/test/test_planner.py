@@ -297,6 +297,64 @@ def test_converts_to_a_real_joint_trajectory_message(around):
     assert tuple(back.points[-1].positions) == around.goal
 
 
+# ------------------------------------------------------------- the parts: OMPL's search, the timing
+
+def test_the_ompl_search_alone_finds_one_path_a_seed_and_says_why_it_found_none(kin):
+    """kinematics.plan_search: a seeded search around the wall gives one valid path from START to
+    GOAL (in joints); a search that cannot finish in time returns None with OMPL's status."""
+    import importlib
+    from vr_driver.kinematics.plan_search import OmplSearch
+    from vr_driver.kinematics.planner import joint_weights
+    ompl = tuple(importlib.import_module(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+    lim = kin.limits
+
+    def search(validity, seed):
+        return OmplSearch(ompl, joint_weights(kin), lim.lower, lim.upper, 0.02, validity, seed)
+
+    first = search(wall, 7)
+    path = first.simplified(first.solve("RRTConnect", START, [GOAL], 5.0))
+    assert np.allclose(path[0], START, atol=1e-12) and np.allclose(path[-1], GOAL, atol=1e-12)
+    assert len(path) > 2 and max(q[1] for q in path) >= 1.2      # over the wall, not through it
+    again = search(wall, 7)
+    assert again.simplified(again.solve("RRTConnect", START, [GOAL], 5.0)) == path
+
+    def caged(q):                                                # the goal is valid, enclosed by a shell
+        return not 0.05 < max(abs(a - b) for a, b in zip(q, GOAL)) < 0.15
+
+    walled_in = search(caged, 1)
+    assert walled_in.solve("RRTConnect", START, [GOAL], 0.05) is None
+    assert walled_in.status in ("Approximate solution", "Timeout")   # no exact one: none
+
+
+def test_the_timing_alone_keeps_the_scaled_limits_from_rest_to_rest(kin):
+    """kinematics.plan_timing: a path with a corner, timed at half speed and a quarter of the
+    acceleration, sampled evenly every <= dt; it ends where the path ends, at rest."""
+    import toppra
+    from vr_driver.kinematics.plan_timing import PathTiming
+    lim = kin.limits
+    path = [START, (0.0, 1.3, -0.3, 0.0, 0.4, 0.0), GOAL]
+    times, pos, vel, acc = PathTiming(toppra, lim.velocity, lim.acceleration).time(path, 0.5, 0.25, 0.05, 0.05)
+    assert pos[0] == START and pos[-1] == GOAL and vel[0] == vel[-1] == (0.0,) * 6
+    dt = np.diff(times)
+    assert times[0] == 0.0 and dt.max() <= 0.05 + 1e-12 and np.allclose(dt, dt[0])
+    vmax, amax = 0.5 * np.array(lim.velocity), 0.25 * np.array(lim.acceleration)
+    assert np.all(np.abs(vel) <= vmax * (1 + 1e-9)) and np.all(np.abs(acc) <= amax * (1 + 1e-9))
+    assert max(np.max(np.abs(vel) / vmax), np.max(np.abs(acc) / amax)) > 0.9     # time-optimal: near a limit
+
+
+def test_a_timing_failure_is_the_planner_s_error_of_the_step_time(kin, monkeypatch):
+    from vr_driver.kinematics.plan_timing import TimingError
+    planner = Planner(kin, None, seed=1)
+
+    def no_timing(*args):
+        raise TimingError("TOPP-RA found no timing of the path under the speed and acceleration limits")
+
+    monkeypatch.setattr(planner._timing, "time", no_timing)
+    with pytest.raises(PlanningError, match="^TOPP-RA found no timing of the path") as info:
+        planner.plan(START, GOAL)
+    assert info.value.step == "time"
+
+
 # ---------------------------------------------------------------------------- the example cell
 
 @pytest.fixture(scope="module")

@@ -68,7 +68,6 @@ from __future__ import annotations
 
 import importlib
 import math
-import random
 import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
@@ -78,6 +77,7 @@ import numpy as np
 from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
+from .plan_search import OmplSearch
 from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
 
 __all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
@@ -109,8 +109,6 @@ ESCAPE_SWEEP = 0.8
 #: [m] added to each joint's lever arm: the links' own size (their collision shapes stand out of
 #: the joint axes) and a tool on the flange
 LINK_ALLOWANCE = 0.3
-#: rounds of shortcutting at most (each tries as many shortcuts as the path has vertices)
-_SIMPLIFY_ROUNDS = 2
 _FEATURE = "collision-aware planning (vr_driver.kinematics.planner)"
 
 
@@ -288,12 +286,13 @@ class Planner:
                 raise PlanningError("plan", "joint %s needs finite position limits to plan in, got [%r, %r]"
                                     % (n, lo, hi))
         self.weights = joint_weights(kinematics)
-        self._ob, self._og, self._ou = (_require(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+        ob, og, ou = (_require(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+        ou.setLogLevel(ou.LOG_WARN)
+        self._ompl = (ob, og, ou)
         toppra = _require("toppra")
         _require("toppra.algorithm")
         _require("toppra.constraint")
         self._timing = PathTiming(toppra, self.limits.velocity, self.limits.acceleration)
-        self._ou.setLogLevel(self._ou.LOG_WARN)
 
     # --------------------------------------------------------------------------------- checks
     def _strict_validity(self, validity: Any, given: Optional[Callable]) -> Callable[[Sequence[float]], bool]:
@@ -437,34 +436,7 @@ class Planner:
         times, pos, vel, acc = result
         return PlannedTrajectory(self.names, times, pos, vel, acc, tuple(path), self.planner_name, timings)
 
-    # ------------------------------------------------------------------------------ OMPL part
-    def _space(self):
-        ob = self._ob
-        space = ob.RealVectorStateSpace(self.dof)
-        bounds = ob.RealVectorBounds(self.dof)
-        for i, (w, lo, hi) in enumerate(zip(self.weights, self.lower, self.upper)):
-            bounds.setLow(i, w * lo)
-            bounds.setHigh(i, w * hi)
-        space.setBounds(bounds)
-        si = ob.SpaceInformation(space)
-        weights, dof, is_valid = self.weights, self.dof, self.planning_valid
-
-        def valid(state) -> bool:
-            return bool(is_valid(tuple(state[i] / weights[i] for i in range(dof))))
-
-        si.setStateValidityChecker(valid)
-        # the longest segment checked in one piece: |dx| <= max_sweep / sqrt(n) bounds the sweep
-        # sum_i w_i |dq_i| by max_sweep (module text)
-        si.setStateValidityCheckingResolution(self.max_sweep / math.sqrt(dof) / space.getMaximumExtent())
-        si.setup()
-        return si
-
-    def _state(self, si, q: Sequence[float]):
-        s = si.allocState()
-        for i, (w, v) in enumerate(zip(self.weights, q)):
-            s[i] = w * v
-        return s
-
+    # ------------------------------------------------------------------- the path (OMPL's search)
     def _geometric_path(self, q0, goals: Sequence[Tuple[float, ...]], budget: float, seed: Optional[int],
                         timings: Dict[str, float]) -> List[Tuple[float, ...]]:
         """A valid path from ``q0`` to the first of ``goals`` (the nearest) -- or, when there are
@@ -482,16 +454,8 @@ class Planner:
             timings["plan"] = time.perf_counter() - t
             timings["simplify"] = 0.0
             return [q0, q1]
-        ob, og, ou = self._ob, self._og, self._ou
-        # reseed OMPL's seed generator before anything here draws a seed from it (module text); OMPL
-        # logs an error when it has drawn seeds before, but reseeds all the same
-        previous = ou.getLogLevel()
-        ou.setLogLevel(ou.LOG_NONE)
-        try:
-            ou.RNG.setSeed(int(seed) if seed is not None else random.SystemRandom().randrange(1, 2 ** 31))
-        finally:
-            ou.setLogLevel(previous)
-        si = self._space()
+        search = OmplSearch(self._ompl, self.weights, self.lower, self.upper, self.max_sweep,
+                            self.planning_valid, seed)
         stages = [(goals[:1], budget)] if len(goals) == 1 else [(goals[:1], budget * NEAREST_SHARE), (goals[1:], None)]
         for n_stage, (targets, share) in enumerate(stages):
             if n_stage:
@@ -501,30 +465,20 @@ class Planner:
                         timings["plan"] = time.perf_counter() - t
                         timings["simplify"] = 0.0
                         return [q0, g]
-            pdef = ob.ProblemDefinition(si)
-            pdef.addStartState(self._state(si, q0))
-            goal = ob.GoalStates(si)
-            for g in targets:
-                goal.addState(self._state(si, g))
-            pdef.setGoal(goal)
-            planner = getattr(og, self.planner_name)(si)
-            planner.setProblemDefinition(pdef)
-            planner.setup()
-            left = budget - (time.perf_counter() - t) if share is None else share
-            status = planner.solve(max(left, 1e-3))
-            if status.getStatus() == ob.PlannerStatus.EXACT_SOLUTION and pdef.hasExactSolution():
+            # a stage with a share of the budget: that long; the last of two: what is left of it
+            path = (search.solve(self.planner_name, q0, targets, share) if share is not None else
+                    search.solve(self.planner_name, q0, targets, budget, since=t))
+            if path is not None:
                 break
         timings["plan"] = time.perf_counter() - t
-        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION or not pdef.hasExactSolution():
+        if path is None:
             raise PlanningError("plan", "%s found no path within %.3g s (%s) from %s to %s%s"
-                                % (self.planner_name, budget, status.asString(), _fmt(q0), _fmt(q1),
+                                % (self.planner_name, budget, search.status, _fmt(q0), _fmt(q1),
                                    " nor to any other of its %d valid joint solutions" % (len(goals) - 1)
                                    if len(goals) > 1 else ""))
-        path = pdef.getSolutionPath()
         t = time.perf_counter()
-        self._simplify(path, og, si)
+        out = search.simplified(path)
         timings["simplify"] = time.perf_counter() - t
-        out = [tuple(s[i] / self.weights[i] for i in range(self.dof)) for s in path.getStates()]
         reached = min(goals, key=lambda g: sum((a - b) ** 2 for a, b in zip(g, out[-1])))
         out[0], out[-1] = tuple(q0), reached
         # the simplifier keeps the path valid; the check here is the planner's own guarantee
@@ -535,22 +489,6 @@ class Planner:
                 raise PlanningError("plan", "the simplified path passes an invalid configuration %s%s"
                                     % (_fmt(bad), why), contacts)
         return out
-
-    @staticmethod
-    def _simplify(path, og, si) -> None:
-        """OMPL's simplification steps with step counts, not a time limit (a seed gives one path):
-        rounds of vertex reduction (random shortcuts between vertices), partial shortcuts (a subset
-        of the joints at a time) and collapsing close vertices, until a round changes nothing (at
-        most ``_SIMPLIFY_ROUNDS``), then B-spline smoothing of the corners. (OMPL's rope
-        shortcutting gave 4 % shorter motions on the example cell for twice the time: left out.)"""
-        simplifier = og.PathSimplifier(si)
-        for _ in range(_SIMPLIFY_ROUNDS):
-            changed = simplifier.reduceVertices(path, 0, 0)
-            changed = simplifier.partialShortcutPath(path, 0, 0) or changed
-            changed = simplifier.collapseCloseVertices(path) or changed
-            if not changed:
-                break
-        simplifier.smoothBSpline(path, 3)
 
     # ---------------------------------------------------------------------- the result's check
     def _check(self, times, positions, velocities, accelerations) -> None:

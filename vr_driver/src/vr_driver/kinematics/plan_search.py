@@ -1,0 +1,125 @@
+"""OMPL in the planner's scaled joint space, steps 3 and 4 of :mod:`vr_driver.kinematics.planner`:
+the state space x_i = w_i q_i inside the joint limits with its validity checker and motion-check
+resolution (the planner's module text, "Motion-check resolution"), the reseeding of OMPL's random
+numbers, a search by one of OMPL's geometric planners to any of some goals, and the simplification
+of the path found. Which goals to search for, in which stages, and the check of the result are
+the planner's.
+
+    search = OmplSearch((ompl.base, ompl.geometric, ompl.util), weights, lower, upper, max_sweep,
+                        is_valid, seed)                          # reseeds OMPL, makes the space
+    path = search.solve("RRTConnect", q0, goals, seconds)        # None: none found (search.status)
+    joints = search.simplified(path)                             # [rad], start to goal
+
+ROS-free. The OMPL modules are handed in by the planner, which imports them (``kinematics.deps``);
+this module imports no optional library. Not thread-safe: OMPL's seed generator is process-wide.
+"""
+from __future__ import annotations
+
+import math
+import random
+import time
+from typing import Any, Callable, List, Optional, Sequence, Tuple
+
+__all__ = ["OmplSearch", "SIMPLIFY_ROUNDS"]
+
+#: rounds of shortcutting at most (each tries as many shortcuts as the path has vertices)
+SIMPLIFY_ROUNDS = 2
+
+
+class OmplSearch:
+    """One plan's OMPL: made with OMPL's modules ``ompl`` (base, geometric, util), the joints'
+    ``weights`` [m/rad] (``planner.joint_weights``), their ``lower`` and ``upper`` limits [rad],
+    ``max_sweep`` [m] (no point of the arm moves farther between two checked states) and
+    ``is_valid(q)`` (joints [rad]) -- it reseeds OMPL's seed generator with ``seed`` (None: a random
+    one) before anything draws a seed from it, then makes the space, so that one seed and one
+    problem give one path (as long as the search finishes within its time)."""
+
+    def __init__(self, ompl: Tuple[Any, Any, Any], weights: Sequence[float], lower: Sequence[float],
+                 upper: Sequence[float], max_sweep: float, is_valid: Callable[[Sequence[float]], bool],
+                 seed: Optional[int]) -> None:
+        self._ob, self._og, ou = ompl
+        self.weights = tuple(weights)
+        self.dof = len(self.weights)
+        #: the last search's outcome in OMPL's words (its planner status)
+        self.status = ""
+        self._found: Any = None
+        # OMPL logs an error when it has drawn seeds before, but reseeds all the same
+        previous = ou.getLogLevel()
+        ou.setLogLevel(ou.LOG_NONE)
+        try:
+            ou.RNG.setSeed(int(seed) if seed is not None else random.SystemRandom().randrange(1, 2 ** 31))
+        finally:
+            ou.setLogLevel(previous)
+        self.si = self._space(lower, upper, max_sweep, is_valid)
+
+    def _space(self, lower: Sequence[float], upper: Sequence[float], max_sweep: float,
+               is_valid: Callable[[Sequence[float]], bool]) -> Any:
+        """OMPL's space information: the scaled joint box, ``is_valid`` on the joints, the
+        motion-check resolution of ``max_sweep``."""
+        ob = self._ob
+        space = ob.RealVectorStateSpace(self.dof)
+        bounds = ob.RealVectorBounds(self.dof)
+        for i, (w, lo, hi) in enumerate(zip(self.weights, lower, upper)):
+            bounds.setLow(i, w * lo)
+            bounds.setHigh(i, w * hi)
+        space.setBounds(bounds)
+        si = ob.SpaceInformation(space)
+        weights, dof = self.weights, self.dof
+
+        def valid(state) -> bool:
+            return bool(is_valid(tuple(state[i] / weights[i] for i in range(dof))))
+
+        si.setStateValidityChecker(valid)
+        # the longest segment checked in one piece: |dx| <= max_sweep / sqrt(n) bounds the sweep
+        # sum_i w_i |dq_i| by max_sweep (the planner's module text)
+        si.setStateValidityCheckingResolution(max_sweep / math.sqrt(dof) / space.getMaximumExtent())
+        si.setup()
+        return si
+
+    def _state(self, q: Sequence[float]) -> Any:
+        s = self.si.allocState()
+        for i, (w, v) in enumerate(zip(self.weights, q)):
+            s[i] = w * v
+        return s
+
+    def solve(self, planner: str, q0: Sequence[float], goals: Sequence[Sequence[float]], seconds: float,
+              since: Optional[float] = None) -> Any:
+        """A search by OMPL's geometric planner ``planner`` (e.g. "RRTConnect") from the joints
+        ``q0`` to any of ``goals`` within ``seconds`` (at least 1 ms), counted from ``since`` (a
+        ``time.perf_counter()`` reading) when given, else from the search's start: OMPL's path
+        (exact solutions only), or None; ``status`` says how it ended."""
+        ob, si = self._ob, self.si
+        pdef = ob.ProblemDefinition(si)
+        pdef.addStartState(self._state(q0))
+        goal = ob.GoalStates(si)
+        for g in goals:
+            goal.addState(self._state(g))
+        pdef.setGoal(goal)
+        search = getattr(self._og, planner)(si)
+        search.setProblemDefinition(pdef)
+        search.setup()
+        left = seconds - (time.perf_counter() - since) if since is not None else seconds
+        status = search.solve(max(left, 1e-3))
+        self.status = status.asString()
+        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION or not pdef.hasExactSolution():
+            return None
+        self._found = (search, pdef)          # the path is theirs: kept alive as long as this search
+        return pdef.getSolutionPath()
+
+    def simplified(self, path: Any) -> List[Tuple[float, ...]]:
+        """``path`` (of :meth:`solve`) simplified, as joints [rad]: OMPL's simplification steps with
+        step counts, not a time limit (a seed gives one path): rounds of vertex reduction (random
+        shortcuts between vertices), partial shortcuts (a subset of the joints at a time) and
+        collapsing close vertices, until a round changes nothing (at most ``SIMPLIFY_ROUNDS``),
+        then B-spline smoothing of the corners. Each step keeps the path valid (it checks its
+        motions as the search does). (OMPL's rope shortcutting gave 4 % shorter motions on the
+        example cell for twice the time: left out.)"""
+        simplifier = self._og.PathSimplifier(self.si)
+        for _ in range(SIMPLIFY_ROUNDS):
+            changed = simplifier.reduceVertices(path, 0, 0)
+            changed = simplifier.partialShortcutPath(path, 0, 0) or changed
+            changed = simplifier.collapseCloseVertices(path) or changed
+            if not changed:
+                break
+        simplifier.smoothBSpline(path, 3)
+        return [tuple(s[i] / self.weights[i] for i in range(self.dof)) for s in path.getStates()]
