@@ -21,10 +21,11 @@ step and why, and nothing else happens:
    chosen ("nearest": the shortest synchronous joint move, max over joints of |dq| / speed limit);
    only when the planner finds no path to it within half the budget may it end at another of them.
 3. Planning: when the straight joint-space move is valid it is the path; otherwise OMPL's planner
-   (``planner``, one of :data:`PLANNERS`) within ``time_budget`` seconds. The planner keeps
-   ``clearance`` more than the validity asks (a checker: a copy of it padded by that much more;
-   a callable: ``planning_validity`` when given) except near the start and the goal, so that what
-   the later steps deviate from the checked path stays valid.
+   (``planner``, one of :data:`PLANNERS`; :mod:`~vr_driver.kinematics.plan_search` holds OMPL's part
+   of steps 3 and 4) within ``time_budget`` seconds. The planner keeps ``clearance`` more than the
+   validity asks (a checker: a copy of it padded by that much more; a callable:
+   ``planning_validity`` when given) except near the start and the goal, so that what the later
+   steps deviate from the checked path stays valid.
 4. Simplification (OMPL's PathSimplifier, step counts rather than a time limit, so that a seed
    gives one result): vertex reduction, partial shortcuts, collapsing close vertices, B-spline
    smoothing of the corners; each step keeps the path valid (it checks its motions as the planner
