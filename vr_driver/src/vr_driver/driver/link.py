@@ -16,6 +16,10 @@ Rules:
 - the first record of a session starts a new session number: the sequencer learns from it that
   everything in flight before was lost.
 
+How the port and the DP master are opened, and when again: :mod:`~vr_driver.driver.link_port`;
+why the controller's card is not in Data_Exchange, in words:
+:class:`~vr_driver.driver.card_diagnosis.CardDiagnosis`.
+
 Other stations on the line (I/O islands, PLCs): ``stations`` (a
 :class:`~vr_driver.driver.stations.IoLine`, optional) gets every master this supervisor creates
 (:meth:`IoLine.add_slaves`) and is detached when the port closes; the DriverCore judges it after
@@ -26,24 +30,23 @@ from __future__ import annotations
 
 import collections
 import enum
-import errno
 import logging
 import math
-import os
-import re
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from typing import Any, Callable, Deque, Dict, Optional, Tuple
 
-from pyprofibus_vendor.dp import DiagStatus1
-from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState, SlaveSpec
-from pyprofibus_vendor.errors import PhyError, ProfibusError
+from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState
+from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 
 from ..bus.health import BusHealth, BusHealthSummary
-from ..bus.process import BusProcessMaster, BusSettings, RemoteSlave
+from ..bus.process import BusProcessMaster, RemoteSlave
 from ..errors import ProtocolError
 from ..params import DriverParams
 from ..protocol.common import FeedbackRecord
+from .card_diagnosis import CardDiagnosis, diag_words
+from .link_port import (PORT_ERROR_AFTER, Reopening, controller_spec, idle_record, master_settings,
+                        start_bus_process)
 from .record_clock import RecordClock
 
 log = logging.getLogger("vr_driver.driver")
@@ -56,10 +59,6 @@ ERROR_NONE = 0
 ERROR_LINK = 1                     # link to the controller down (or the driver's status stale)
 ERROR_CONTROLLER = 2               # the controller reports its error bit
 ERROR_PROTOCOL = 3                 # the controller's feedback cannot be decoded
-
-# a port that cannot be opened is a warning at first (a virtual controller may still be starting),
-# an error once it has been missing this long [s]
-PORT_ERROR_AFTER = 5.0
 
 
 class LinkState(enum.Enum):
@@ -113,38 +112,6 @@ class LinkSample:
         return self.state is LinkState.CONNECTED
 
 
-def _port_hint(exc: BaseException) -> str:
-    """What an error opening the port most likely means, for the errors with a clear remedy."""
-    codes = set()
-    seen: Optional[BaseException] = exc
-    for _ in range(5):
-        if seen is None:
-            break
-        if isinstance(getattr(seen, "errno", None), int):
-            codes.add(seen.errno)
-        seen = seen.__cause__ or seen.__context__
-    text = str(exc)
-    if codes & {errno.EACCES, errno.EPERM} or "Permission denied" in text:
-        return (" (permission denied: the driver's user needs read and write access to the device, "
-                "usually membership of its group, e.g. dialout)")
-    if errno.EBUSY in codes or "Device or resource busy" in text:
-        return " (the device is busy: another program has it open)"
-    return ""
-
-
-def _diag_words(diag: Any) -> str:
-    from pyprofibus_vendor.dp import explain_diag
-    try:
-        return explain_diag(diag)
-    except Exception:  # a diag we cannot explain is still worth showing raw
-        return repr(diag)
-
-
-def idle_record(params: DriverParams) -> bytes:
-    """The record that asks nothing of the controller (the flag at 0 / both slots empty)."""
-    return params.wire.idle_record(params.byte_order)
-
-
 def open_serial_link(device: str, baud: int) -> Link:
     """Default link factory: the serial PHY (raises PhyError with the OS reason)."""
     from pyprofibus_vendor.phy_serial import SerialLink
@@ -174,7 +141,6 @@ class LinkSupervisor:
         self._slave = None
         self._state = LinkState.STARTING
         self._reason = "not started"
-        self._next_open = 0.0
         self._session = 0
         self._session_start = 0.0           # the slave (re)entered Data_Exchange
         self._session_records = 0            # good records received in this DP session
@@ -182,11 +148,9 @@ class LinkSupervisor:
         self._good_time: Optional[float] = None      # when the last good record arrived
         self._feedback: Optional[FeedbackRecord] = None
         self._bad_record = ""                # why the last record could not be decoded
-        self._slave_reason = ""
-        self._logged_slave_reason = ""
-        self._garbage_seen = 0
-        self._port_missing_since = 0.0
-        self._port_error_logged = False
+        # why the controller's card is not in Data_Exchange; when to open the port again
+        self._diagnosis = CardDiagnosis(self.slave_config, bus.baud)
+        self._reopen = Reopening(params.reconnect_period)
         self._error_code = ERROR_LINK
         self._error_reason = "not started"
         self._cycle_times: Deque[Tuple[float, int]] = collections.deque(maxlen=50)
@@ -240,7 +204,7 @@ class LinkSupervisor:
     @property
     def last_diag(self) -> str:
         slave = self._slave
-        return _diag_words(slave.last_diag) if slave is not None and slave.last_diag is not None else ""
+        return diag_words(slave.last_diag) if slave is not None and slave.last_diag is not None else ""
 
     @property
     def paced(self) -> bool:
@@ -282,7 +246,7 @@ class LinkSupervisor:
     def step(self, now: float) -> LinkSample:
         """One bus iteration: open the port if due, run one DP cycle, judge the record."""
         if self._master is None:
-            if now >= self._next_open:
+            if self._reopen.due(now):
                 self._open(now)
             if self._master is None:
                 return self._sample(now, None, cycled=False)
@@ -294,7 +258,7 @@ class LinkSupervisor:
             self.counters.port_errors += 1
             self.close()
             now = self.clock()
-            self._next_open = now + self.params.reconnect_period
+            self._reopen.later(now)
             self._down(LinkState.PORT_ERROR, "serial port %s failed: %s" % (self.bus.phy.device, exc))
             return self._sample(now, None, cycled=False)
         now = self.clock()
@@ -325,7 +289,7 @@ class LinkSupervisor:
         reason = ""
         if slave is None or not slave.connected:
             state = slave.state.value if slave is not None else "none"
-            reason = self._slave_reason or "controller's PROFIBUS card not in Data_Exchange (%s)" % state
+            reason = self._diagnosis.reason or "controller's PROFIBUS card not in Data_Exchange (%s)" % state
         else:
             data, at = slave.inputs, slave.inputs_time
             new = data is not None and at is not None and at >= self._session_start \
@@ -351,9 +315,7 @@ class LinkSupervisor:
                 self._record_stamp = self.record_clock.stamp(at - self.reply_time,
                                                              self._wire.feedback_heartbeat(fresh))
                 self._session_records += 1
-                master = self._master
-                if master is not None:        # garbled bytes are counted from the last good record
-                    self._garbage_seen = master.counters.garbage_bytes + master.counters.fcs_errors
+                self._diagnosis.good_record(self._master)
             last = max(self._session_start, self._good_time or 0.0)
             if self._good_time is None or self._good_time < self._session_start \
                     or now - last > self.params.link_timeout:
@@ -372,7 +334,7 @@ class LinkSupervisor:
                     self.counters.reconnects += 1
                 self._session += 1
                 log.info("link to the controller up: %s", fresh.describe())
-            self._slave_reason = ""
+            self._diagnosis.link_up()
             self._state, self._reason = LinkState.CONNECTED, "Data_Exchange"
             self._feedback = fresh
             self._error_code, self._error_reason = 0, ""
@@ -400,51 +362,20 @@ class LinkSupervisor:
     def _open(self, now: float) -> None:
         device, baud = self.bus.phy.device, self.bus.baud
         self.counters.reconnect_attempts += 1
-        timing = BusTiming.for_baud(self.bus.baud, self.bus.retry_limit)
-        if self.bus.slot_time is not None:
-            timing = replace(timing, slot_bits=self.bus.slot_time)
         sc = self.slave_config
-        spec = SlaveSpec(sc.address, sc.ident, sc.cfg, user_prm_data=sc.user_prm_data,
-                         group_ident=sc.group_mask,
-                         watchdog=None if not sc.watchdog_ms else sc.watchdog_ms / 1000.0)
-        # dx_tolerance: a Data_Exchange without a reply (a corrupted telegram) does not drop the
-        # slave -- and with its Set_Prm the controller's program session -- before the link counts
-        # as lost here anyway (link_timeout without a good record); retry_steps: a lost reply in
-        # the start-up sequence repeats that step instead of restarting it after a back-off
-        settings = dict(timing=timing, backoff_max=min(1.0, self.params.reconnect_period),
-                        dx_tolerance=self.params.link_timeout, retry_steps=True)
+        spec = controller_spec(sc)
+        settings = master_settings(self.params, self.bus)
         link: Optional[Link] = None
         try:
             if self.uses_bus_process:
-                # a device that is not there (an unplugged adapter, a virtual controller not started
-                # yet) is said here, as the serial link says it, without starting a process for it
-                # at every reconnect attempt (each start holds the bus loop: the status went stale)
-                if "://" not in device and not os.path.exists(device):
-                    raise PhyError("serial device %s does not exist" % device)
-                master: Any = BusProcessMaster(BusSettings(
-                    device=device, baud=baud, master_address=self.bus.master_address,
-                    cycle_rate_hz=self.bus.cycle_rate_hz, controller=sc.address,
-                    idle_record=idle_record(self.params), watchdog=spec.watchdog,
-                    rt_priority=self.params.bus_rt_priority, node_timeout=self.params.bus_node_timeout,
-                    stop_hold=self.params.bus_stop_hold, **settings),
-                    on_state_change=self._on_slave_state)
+                master: Any = start_bus_process(self.params, self.bus, spec, settings, self._on_slave_state)
             else:
                 link = self.open_link(device, baud)
         except (ProfibusError, OSError, ValueError) as exc:
-            self._next_open = now + self.params.reconnect_period
-            reason = "cannot open %s: %s%s" % (device, exc, _port_hint(exc))
-            if reason != self._reason:
-                self._port_missing_since = now
-                log.warning("%s (retrying every %.2g s)", reason, self.params.reconnect_period)
-            elif now - self._port_missing_since >= PORT_ERROR_AFTER and not self._port_error_logged:
-                log.error("%s for %.0f s now (still retrying every %.2g s)", reason,
-                          now - self._port_missing_since, self.params.reconnect_period)
-            self._port_error_logged = now - self._port_missing_since >= PORT_ERROR_AFTER
-            self._down(LinkState.PORT_ERROR, reason)
+            self._down(LinkState.PORT_ERROR, self._reopen.cannot_open(now, device, exc, self._reason))
             return
         self.counters.port_opens += 1
-        self._slave_reason = ""
-        self._garbage_seen = 0
+        self._diagnosis.port_opened()
         if link is not None:
             master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
                               on_state_change=self._on_slave_state, **settings)
@@ -476,7 +407,7 @@ class LinkSupervisor:
     def fail(self, reason: str) -> None:
         """Drop the link after an internal error: close the port, reopen after the period."""
         self.close()
-        self._next_open = self.clock() + self.params.reconnect_period
+        self._reopen.later(self.clock())
         self._down(LinkState.PORT_ERROR, reason)
 
     def _on_slave_state(self, slave, old: MasterSlaveState, new: MasterSlaveState, reason: str) -> None:
@@ -498,44 +429,6 @@ class LinkSupervisor:
             if self.health is not None:
                 self.health.session_ended()
         if new is MasterSlaveState.BACKOFF:
-            self._slave_reason = "controller's PROFIBUS card (slave %d): %s" % (
-                slave.address, self._explain_failure(slave, reason))
-            key = re.sub(r"[0-9]+(\.[0-9]+)?", "#", self._slave_reason)   # not for new numbers
-            if key != self._logged_slave_reason:
-                self._logged_slave_reason = key
-                log.warning("%s", self._slave_reason)
+            self._diagnosis.attempt_failed(slave, reason, self._master)
         elif new in connected:
-            self._logged_slave_reason = ""
-
-    def _explain_failure(self, slave, reason: str) -> str:
-        """The master's reason for ending an attempt, with what it most likely means."""
-        diag = slave.last_diag
-        sc = self.slave_config
-        master = self._master
-        garbage = master.counters.garbage_bytes + master.counters.fcs_errors if master is not None else 0
-        garbled, self._garbage_seen = garbage > self._garbage_seen, garbage
-        if reason.startswith("diag:") and diag is not None:
-            if diag.ident != sc.ident:
-                hint = ("the station at address %d reports ident 0x%04X, the driver expects 0x%04X "
-                        "(another device at this address, or the wrong slave_address?)"
-                        % (slave.address, diag.ident, sc.ident))
-            elif diag.status1 & DiagStatus1.CFG_FAULT:
-                hint = ("the card rejects the configuration %s (%d bytes in / %d out): its modules "
-                        "differ from the bus config" % (sc.cfg.hex(" "), slave.spec.input_size,
-                                                        slave.spec.output_size))
-            elif diag.status1 & DiagStatus1.PRM_FAULT:
-                hint = "the card rejects the parameters (Set_Prm: ident, watchdog, user data)"
-            else:
-                hint = ""
-            return "%s%s (diag bytes %s)" % (hint + "; " if hint else "", reason,
-                                             diag.encode()[:3].hex(" "))
-        if reason.startswith("no reply"):
-            if garbled:
-                hint = ("bytes arrive but form no valid telegram: wrong baud rate or parity at the "
-                        "other end, or a noisy line")
-            else:
-                hint = ("nothing valid received: is the controller on, the cable connected, the card "
-                        "at address %d and %d bit/s?" % (slave.address, self.bus.baud))
-            return "%s; %s" % (reason, hint)
-        extra = "; diag: %s" % _diag_words(diag) if diag is not None else ""
-        return reason + extra
+            self._diagnosis.data_exchange()
