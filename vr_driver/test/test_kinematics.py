@@ -295,6 +295,32 @@ def _fmt(v):
     return ("%g" % v) if v != 0 else "0"
 
 
+def test_the_ik_search_and_the_joint_limits_stand_on_their_own(kin):
+    """kinematics.ik.IkSolver (the IK search) and kinematics.limits.JointLimits (the joint-space
+    operations), built on their own from the chain, answer as the Kinematics that delegates to
+    them; the names older code imports from kinematics.solver are theirs."""
+    from vr_driver.kinematics import analytic, ik, limits
+    assert (kin_mod.IkSettings, kin_mod.JointLimits, kin_mod.model_accelerations) == (
+        ik.IkSettings, limits.JointLimits, limits.model_accelerations)
+    assert isinstance(kin.ik_solver.analytic, analytic.AnalyticSolver)
+    movable = [j for j in kin.chain_joints if j.movable]
+    lim = limits.JointLimits.of_joints(movable)
+    assert lim == kin.limits
+    solver = ik.IkSolver(kin.chain_joints, kin.chain, lim, kin.settings)
+    rng = random.Random(3)
+    for _ in range(20):
+        q_true, seed = kin.random_joints(rng), kin.random_joints(rng)
+        target = kin.fk(q_true)
+        r, p = ik.rotation_and_position(target)
+        assert solver.nearest(r, p, seed, time.perf_counter() + 1.0, 1.0, random.Random(1)) == kin.ik(target, seed)
+        assert solver.solutions(r, p, seed) == kin.ik_solutions(target, seed)
+    assert lim.clamp([10.0] * 6) == lim.upper and lim.clamp([-10.0] * 6) == lim.lower
+    assert [v.split(" =")[0] for v in lim.violations((0.0, 0.0, 10.0, 0.0, -10.0, 0.0))] == ["joint_3", "joint_5"]
+    assert not lim.violations(lim.random_joints(rng))
+    with pytest.raises(ModelError, match="joint_2: acceleration limit must be a number > 0, got 0"):
+        limits.JointLimits.of_joints(movable, accelerations={"joint_1": 1.0, "joint_2": 0})
+
+
 # ------------------------------------------------------------------------------------- bad input
 
 def test_bad_inputs_raise_pose_error(kin):
