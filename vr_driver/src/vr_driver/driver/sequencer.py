@@ -2,9 +2,9 @@
 bus loop. ROS-free, no I/O, no planning.
 
 :class:`SequencerBase` is what every protocol shares; a protocol's sequencer implements its small
-public hook interface (``follow``, ``advance``, ``record``, ``idle_command``, ``stop_job``,
-``stop_untracked``, ``replaced``, ``apply_replan``, ``on_lost``, ``resting``, ``end_due``):
-:class:`HandshakeSequencer` (v1: one target at a time through the handshake) here, and
+public hook interface, :class:`SequencerHooks` (``follow``, ``advance``, ``record``, ``idle_command``,
+``stop_job``, ``stop_untracked``, ``replaced``, ``apply_replan``, ``on_lost``, ``resting``,
+``end_due``): :class:`HandshakeSequencer` (v1: one target at a time through the handshake) here, and
 :class:`~vr_driver.driver.streaming.StreamSequencer` (the streaming protocols). The driver core
 runs the one the protocol object names (:meth:`vr_driver.protocol.base.Protocol.sequencer`, registered
 by :mod:`vr_driver.driver.sequencers`).
@@ -13,9 +13,10 @@ by :mod:`vr_driver.driver.sequencers`).
 :class:`~vr_driver.driver.link.LinkSample` and the arm's current joints; it returns the command to
 send next. Other threads never touch its state: they post requests (:meth:`~SequencerBase.add`,
 :meth:`~SequencerBase.cancel`, :meth:`~SequencerBase.stop_all`), which the next step takes in the
-order they were posted. Planning never runs here: a job whose planned start no longer matches the
-arm is handed to ``replan(job, joints)`` (the driver core runs it on its planning thread) and
-waits in REPLANNING until :meth:`~SequencerBase.replanned` brings the new plan back.
+order they were posted (:mod:`vr_driver.driver.inbox`). Planning never runs here: a job whose
+planned start no longer matches the arm is handed to ``replan(job, joints)`` (the driver core runs
+it on its planning thread) and waits in REPLANNING until :meth:`~SequencerBase.replanned` brings
+the new plan back.
 
 Rules (README "Reliability", doc/README.md):
 
@@ -24,7 +25,7 @@ Rules (README "Reliability", doc/README.md):
 - **truth at the end**: a job that is stopped (cancel, stop_motion, preempted), rejected while the
   arm moved, or timed out ends only when the controller reports the arm at rest -- the in-motion
   bit clear and the reported pose unchanged for ``stop_settle_time`` -- and its result carries that
-  pose; nothing new is sent before that;
+  pose; nothing new is sent before that (:mod:`vr_driver.driver.settling`);
 - **order**: requests take effect in the order they were posted; a PREEMPT job whose ticket is
   older than the newest ticket claimed (:meth:`claim_ticket`) is superseded, never run; a PREEMPT
   job stops the move in flight and drops the queue; a REPLACE job (a new joint path) drops every
@@ -36,22 +37,23 @@ from __future__ import annotations
 
 import collections
 import logging
-import threading
 from dataclasses import dataclass
-from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple
 
 from ..errors import HandshakeError
 from ..params import DriverParams
 from ..poses import ControllerPose
 from ..protocol.common import FeedbackRecord, StatusBits
 from ..protocol.v1 import Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected, TimedOut
+from .inbox import AddJobs, CancelJobs, ExtendJob, Inbox, Replanned, Request
 from .jobs import JobPhase, MoveJob, SubmitMode
 from .link import LinkSample
+from .settling import Settle, Settling, pose_text
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["SequencerBase", "HandshakeSequencer", "SequencerView", "START_TOLERANCE", "SESSION_RECORDS_BEFORE_REQUEST",
-           "why_no_motion"]
+__all__ = ["SequencerBase", "SequencerHooks", "HandshakeSequencer", "SequencerView", "START_TOLERANCE",
+           "SESSION_RECORDS_BEFORE_REQUEST", "why_no_motion"]
 
 # a queued job whose planned start differs from the current joints by more than this [rad] is
 # planned again before it is sent (whole-mm / whole-degree feedback alone stays well below it)
@@ -96,58 +98,15 @@ class SequencerView:
     #                                              (None: none yet, the job's start is the anchor)
 
 
-@dataclass(frozen=True)
-class _Add:
-    jobs: Tuple[MoveJob, ...]
-    mode: SubmitMode
+_Settle = Settle        # the name streaming.py imports it by
 
 
-@dataclass(frozen=True)
-class _Cancel:
-    job: Optional[MoveJob]      # None: stop everything
-    reason: str
-
-
-@dataclass(frozen=True)
-class _Replanned:
-    job: MoveJob
-    preview: Optional[Any]          # v1: a Preview; v2: the job's new stream points (None: failed)
-    error: str
-
-
-@dataclass(frozen=True)
-class _Extend:
-    job: MoveJob                    # a live job (a joint_command stream)
-    point: Any                      # the validated StreamPoint of the new command
-    anchored: Any                   # the same point as the successor of ``anchor`` (see extend)
-    stamp: float                    # clock time the command was accepted
-
-
-_Request = Union[_Add, _Cancel, _Replanned, _Extend]
-
-
-def _pose_text(pose: Any) -> str:
-    """A reported pose in a log line, in controller units (a record's values are the wire's
-    integers: 0.1 mm / 0.01 deg on v3, 0.01 mm / 0.001 deg on v2)."""
-    return "(%.1f, %.1f, %.1f mm, %.2f, %.2f, %.2f deg)" % pose.as_tuple()
-
-
-class _Settle:
-    """A job that ends when the arm is at rest."""
-
-    def __init__(self, job: Optional[MoveJob], phase: JobPhase, reason: str, since: float) -> None:
-        self.job = job
-        self.phase = phase
-        self.reason = reason
-        self.since = since
-
-
-class SequencerBase:
-    """What every protocol's sequencer shares (see the module docstring): the requests posted by
-    other threads, tickets, the queue, the job in flight, waiting for rest, outcomes, the link
-    session and the view. A protocol's sequencer implements the public hooks below and nothing else
-    (it may call the base's helpers: :meth:`next_job`, :meth:`starts_here`, :meth:`begin_settle`,
-    :meth:`fail_queue`, :meth:`end_all`):
+class SequencerHooks:
+    """What a protocol's sequencer implements, and nothing else: :class:`SequencerBase` calls
+    these hooks from its :meth:`~SequencerBase.step` (a protocol's sequencer may call the base's
+    helpers: :meth:`~SequencerBase.next_job`, :meth:`~SequencerBase.starts_here`,
+    :meth:`~SequencerBase.begin_settle`, :meth:`~SequencerBase.fail_queue`,
+    :meth:`~SequencerBase.end_all`):
 
     - :meth:`follow` reads the controller's progress from a feedback record and ends jobs;
     - :meth:`advance` sends (or starts) what is next when everything allows it;
@@ -156,76 +115,11 @@ class SequencerBase:
     - :meth:`replaced`: a REPLACE request arrived while ``job`` runs;
     - :meth:`apply_replan`: put a new plan (from ``replan``) into a job;
     - :meth:`on_lost`: the link was lost (the base then ends every job);
-    - :meth:`resting` (the protocol's own "at rest" condition) and :meth:`end_due`.
+    - :meth:`resting` (the protocol's own "at rest" condition) and :meth:`end_due`;
+    - a streaming protocol's: :meth:`take_point` (a live job's new command) and
+      :meth:`live_anchor`.
     """
 
-    def __init__(self, params: DriverParams, clock: Callable[[], float],
-                 replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
-        self.params = params
-        self.clock = clock
-        self.replan = replan
-        self._lock = threading.Lock()            # guards only the inbox and the ticket counter
-        self._inbox: Deque[_Request] = collections.deque()
-        self._claimed = 0                         # newest ticket handed out
-        self._newest = 0                          # newest ticket of a PREEMPT job taken in
-        self._queue: Deque[MoveJob] = collections.deque()
-        self._job: Optional[MoveJob] = None
-        self._settle: Optional[_Settle] = None
-        self._session: Optional[int] = None       # the link session our handshake belongs to
-        self._last_pose: Optional[ControllerPose] = None
-        self._rest_values: Optional[Tuple[int, ...]] = None
-        self._rest_since = 0.0
-        self.targets_sent = self.targets_done = self.targets_rejected = self.targets_aborted = 0
-        self.view = SequencerView(None, 0, None, None, False)
-
-    # ------------------------------------------------------------------ any thread
-    def claim_ticket(self) -> int:
-        """A number in arrival order for a goal that will preempt (take it when the goal arrives;
-        a job carrying an older ticket than the newest claimed one is superseded)."""
-        with self._lock:
-            self._claimed += 1
-            return self._claimed
-
-    def add(self, jobs: Sequence[MoveJob], mode: SubmitMode = SubmitMode.APPEND) -> None:
-        self._post(_Add(tuple(jobs), mode))
-
-    def cancel(self, job: MoveJob, reason: str) -> None:
-        self._post(_Cancel(job, reason))
-
-    def stop_all(self, reason: str) -> None:
-        self._post(_Cancel(None, reason))
-
-    def replanned(self, job: MoveJob, preview: Optional[Any], error: str = "") -> None:
-        self._post(_Replanned(job, preview, error))
-
-    def extend(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
-        """A new command of the live job ``job`` (a joint_command stream): ``point`` follows the
-        job's last point; ``anchored`` is the same target as the successor of the view's
-        ``live_anchor`` (the last point put on the wire when it was validated), used where the
-        new point replaces one not put on the wire yet (streaming protocols only)."""
-        self._post(_Extend(job, point, anchored, stamp))
-
-    def _post(self, request: _Request) -> None:
-        with self._lock:
-            self._inbox.append(request)
-
-    # ------------------------------------------------------------------ bus thread
-    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
-        """One bus iteration: take the requests, follow the controller, end jobs, send the next
-        target when everything allows it. Returns the command to send."""
-        fb = self._begin_step(now, sample)
-        if fb is None:
-            command = self.idle_command(now)
-            self._publish()
-            return command
-        self._track_rest(now, fb)
-        self.follow(now, fb, sample)
-        self._check_settle(now, fb)
-        self.advance(now, fb, sample, joints)
-        self._publish()
-        return self.record(now)
-
-    # ------------------------------------------------------------------ the hooks
     def follow(self, now: float, fb: Any, sample: LinkSample) -> None:
         """Read the controller's progress in ``fb`` (this session's latest record; ``sample.fresh``
         is set when it arrived in this cycle); end the jobs it ends."""
@@ -246,7 +140,8 @@ class SequencerBase:
 
     def stop_job(self, job: MoveJob, reason: str, now: float) -> None:
         """Stop the job in flight (it is no longer the current job when this is called): stop the
-        arm and :meth:`begin_settle`, or end the job at once when nothing of it was sent."""
+        arm and :meth:`~SequencerBase.begin_settle`, or end the job at once when nothing of it was
+        sent."""
         raise NotImplementedError
 
     def stop_untracked(self, reason: str, now: float) -> None:
@@ -267,7 +162,7 @@ class SequencerBase:
         raise NotImplementedError
 
     def take_point(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
-        """A new command of a live job (:meth:`extend`). Only a streaming protocol's sequencer
+        """A new command of a live job (:meth:`~SequencerBase.extend`). Only a streaming protocol's sequencer
         takes one (the driver core refuses joint commands on the others)."""
         raise NotImplementedError("this protocol does not stream joint commands")
 
@@ -280,6 +175,72 @@ class SequencerBase:
         """True while the current motion's end is due and worth polling for."""
         return False
 
+    def live_anchor(self) -> Optional[Tuple[float, ...]]:
+        """The last point of the live job in flight put on the wire (None: none)."""
+        return None
+
+
+class SequencerBase(SequencerHooks):
+    """What every protocol's sequencer shares (see the module docstring): the requests posted by
+    other threads (:class:`~vr_driver.driver.inbox.Inbox`), tickets, the queue, the job in flight,
+    waiting for rest (:class:`~vr_driver.driver.settling.Settling`), outcomes, the link session and
+    the view. A protocol's sequencer implements the hooks of :class:`SequencerHooks`."""
+
+    def __init__(self, params: DriverParams, clock: Callable[[], float],
+                 replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
+        self.params = params
+        self.clock = clock
+        self.replan = replan
+        self._inbox = Inbox()                     # the only state other threads touch
+        self._queue: Deque[MoveJob] = collections.deque()
+        self._job: Optional[MoveJob] = None
+        self._settling = Settling(params)         # the stopped job waiting for rest (_settle)
+        self._session: Optional[int] = None       # the link session our handshake belongs to
+        self._last_pose: Optional[ControllerPose] = None
+        self.targets_sent = self.targets_done = self.targets_rejected = self.targets_aborted = 0
+        self.view = SequencerView(None, 0, None, None, False)
+
+    # ------------------------------------------------------------------ any thread
+    def claim_ticket(self) -> int:
+        """A number in arrival order for a goal that will preempt (take it when the goal arrives;
+        a job carrying an older ticket than the newest claimed one is superseded)."""
+        return self._inbox.claim_ticket()
+
+    def add(self, jobs: Sequence[MoveJob], mode: SubmitMode = SubmitMode.APPEND) -> None:
+        self._inbox.post(AddJobs(tuple(jobs), mode))
+
+    def cancel(self, job: MoveJob, reason: str) -> None:
+        self._inbox.post(CancelJobs(job, reason))
+
+    def stop_all(self, reason: str) -> None:
+        self._inbox.post(CancelJobs(None, reason))
+
+    def replanned(self, job: MoveJob, preview: Optional[Any], error: str = "") -> None:
+        self._inbox.post(Replanned(job, preview, error))
+
+    def extend(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
+        """A new command of the live job ``job`` (a joint_command stream): ``point`` follows the
+        job's last point; ``anchored`` is the same target as the successor of the view's
+        ``live_anchor`` (the last point put on the wire when it was validated), used where the
+        new point replaces one not put on the wire yet (streaming protocols only)."""
+        self._inbox.post(ExtendJob(job, point, anchored, stamp))
+
+    # ------------------------------------------------------------------ bus thread
+    def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
+        """One bus iteration: take the requests, follow the controller, end jobs, send the next
+        target when everything allows it. Returns the command to send."""
+        fb = self._begin_step(now, sample)
+        if fb is None:
+            command = self.idle_command(now)
+            self._publish()
+            return command
+        self._settling.track(now, fb)
+        self.follow(now, fb, sample)
+        self._settling.check(now, fb, self.resting)
+        self.advance(now, fb, sample, joints)
+        self._publish()
+        return self.record(now)
+
     def _begin_step(self, now: float, sample: LinkSample) -> Optional[Any]:
         """The start of every step (v1 and v2): take the posted requests; on a lost link or a new
         Data_Exchange session end everything in flight (:meth:`_lost`). Returns the feedback to act
@@ -287,10 +248,7 @@ class SequencerBase:
         fb = sample.feedback
         if fb is not None:
             self._last_pose = fb.pose
-        with self._lock:
-            requests = list(self._inbox)
-            self._inbox.clear()
-        for request in requests:
+        for request in self._inbox.take():
             self._take(request, now, fb)
         if not sample.connected or (self._session is not None and sample.session != self._session):
             if self._session is not None:
@@ -304,20 +262,18 @@ class SequencerBase:
 
     def shutdown(self, reason: str) -> None:
         """End every job (after the bus loop stopped): queued, in flight, posted but not taken."""
-        with self._lock:
-            requests = list(self._inbox)
-            self._inbox.clear()
-        posted = [job for request in requests if isinstance(request, _Add) for job in request.jobs]
+        posted = [job for request in self._inbox.take() if isinstance(request, AddJobs)
+                  for job in request.jobs]
         self.end_all(JobPhase.CANCELLED, reason, posted)
         self._publish()
 
     # ------------------------------------------------------------------ requests
-    def _take(self, request: _Request, now: float, fb: Optional[FeedbackRecord]) -> None:
-        if isinstance(request, _Add):
+    def _take(self, request: Request, now: float, fb: Optional[FeedbackRecord]) -> None:
+        if isinstance(request, AddJobs):
             self._take_add(request, now)
-        elif isinstance(request, _Extend):
+        elif isinstance(request, ExtendJob):
             self.take_point(request.job, request.point, request.anchored, request.stamp)
-        elif isinstance(request, _Cancel):
+        elif isinstance(request, CancelJobs):
             if request.job is None:
                 self._stop_everything(request.reason, now)
             else:
@@ -340,22 +296,19 @@ class SequencerBase:
                          job.duration)
                 job.set_phase(JobPhase.QUEUED)
 
-    def _take_add(self, request: _Add, now: float) -> None:
+    def _take_add(self, request: AddJobs, now: float) -> None:
         jobs = [j for j in request.jobs if not j.done]
         if not jobs:
             return
         if request.mode is SubmitMode.PREEMPT:
             ticket = jobs[0].ticket
-            with self._lock:
-                newest_claimed = self._claimed
-            if ticket is not None and (ticket < self._newest or ticket < newest_claimed):
+            if self._inbox.superseded(ticket):
                 for job in jobs:
                     job.finish(False, JobPhase.CANCELLED, "superseded by a newer goal (received "
                                "later, it takes precedence); nothing was sent for this one", None)
                 log.info("job %d superseded by a newer goal", jobs[0].id)
                 return
-            if ticket is not None:
-                self._newest = ticket
+            self._inbox.preempts(ticket)
             self._stop_everything("preempted by a newer goal", now)
         elif request.mode is SubmitMode.REPLACE:
             dropped = len(self._queue)
@@ -383,7 +336,7 @@ class SequencerBase:
             self._stop_current(reason, now)
         elif self._settle is not None and self._settle.job is job:
             self._settle.phase, self._settle.reason = JobPhase.CANCELLED, reason
-        # else: not posted yet (its _Add is behind this request) or already finished
+        # else: not posted yet (its AddJobs is behind this request) or already finished
 
     def _stop_everything(self, reason: str, now: float) -> None:
         for queued in list(self._queue):
@@ -401,42 +354,21 @@ class SequencerBase:
         job.stop_reason = reason
         self.stop_job(job, reason, now)
 
+    # ------------------------------------------------------------------ at rest
+    @property
+    def _settle(self) -> Optional[Settle]:
+        """The stopped job waiting for the arm to come to rest (None: none; set by
+        :meth:`begin_settle`, by a protocol's sequencer for a motion of no job)."""
+        return self._settling.pending
 
-        # ------------------------------------------------------------------ at rest
-    def _track_rest(self, now: float, fb: FeedbackRecord) -> None:
-        values = fb.values
-        if values != self._rest_values or fb.status & StatusBits.IN_MOTION:
-            self._rest_values = values
-            self._rest_since = now
-
-    def at_rest(self, now: float, fb: Any) -> bool:
-        """The arm at rest: the protocol's own condition (:meth:`resting`), the in-motion bit clear
-        and the reported pose unchanged for ``stop_settle_time``."""
-        return self.resting(fb) and not fb.status & StatusBits.IN_MOTION and \
-            now - self._rest_since >= self.params.stop_settle_time
+    @_settle.setter
+    def _settle(self, settle: Optional[Settle]) -> None:
+        self._settling.pending = settle
 
     def begin_settle(self, job: MoveJob, phase: JobPhase, reason: str, now: float) -> None:
-        job.set_phase(JobPhase.STOPPING)
-        self._settle = _Settle(job, phase, reason, now)
-
-    def _check_settle(self, now: float, fb: FeedbackRecord) -> None:
-        settle = self._settle
-        if settle is None:
-            return
-        job = settle.job
-        if self.at_rest(now, fb):
-            self._settle = None
-            if job is not None:
-                log.info("job %d: the arm is at rest at %s", job.id, _pose_text(fb.pose))
-                job.finish(False, settle.phase, settle.reason, fb.pose)
-            return
-        if now - settle.since > self.params.stop_timeout:
-            self._settle = None
-            why = ("%s; the arm did not come to rest within %.3g s (stop_timeout); last reported "
-                   "pose %s" % (settle.reason, self.params.stop_timeout, _pose_text(fb.pose)))
-            log.error("job %s: %s", job.id if job is not None else "-", why)
-            if job is not None:
-                job.finish(False, JobPhase.FAILED, why, fb.pose)
+        """``job`` was stopped: it ends with ``phase`` and ``reason`` when the arm is at rest
+        (:class:`~vr_driver.driver.settling.Settling`)."""
+        self._settling.begin(job, phase, reason, now)
 
     # ------------------------------------------------------------------ helpers
     def next_job(self, fb: Any) -> Optional[MoveJob]:
@@ -478,7 +410,7 @@ class SequencerBase:
     def _lost(self, now: float, reason: str) -> None:
         self.on_lost(now, reason)
         self._session = None
-        self._rest_values = None
+        self._settling.forget()
         self.end_all(JobPhase.FAILED, "link to the controller lost (%s); what was sent is not re-sent; "
                      "the last pose seen is reported, where the arm came to rest is unknown" % reason)
 
@@ -510,10 +442,6 @@ class SequencerBase:
             settling=self._settle is not None, targets_sent=self.targets_sent,
             targets_done=self.targets_done, targets_rejected=self.targets_rejected,
             targets_aborted=self.targets_aborted, live_anchor=self.live_anchor())
-
-    def live_anchor(self) -> Optional[Tuple[float, ...]]:
-        """The last point of the live job in flight put on the wire (None: none)."""
-        return None
 
 
 class HandshakeSequencer(SequencerBase):
@@ -577,7 +505,7 @@ class HandshakeSequencer(SequencerBase):
             if job.next_command < len(job.preview.commands):
                 return                       # the via point of a CIRC: the end point follows
             self._job = None
-            log.info("job %d done at %s", job.id, _pose_text(fb.pose))
+            log.info("job %d done at %s", job.id, pose_text(fb.pose))
             job.finish(True, JobPhase.SUCCEEDED, "", fb.pose)
             return
         if isinstance(event, TimedOut) and not event.final:
