@@ -677,11 +677,12 @@ def main(argv: Optional[List[str]] = None) -> int:
     p.add_argument("--validate-window", type=float, default=12.0,
                    help="validate: the window ends this many seconds into the validation, or with it "
                         "(default 12; 0: the whole validation, about a minute for 400000 points)")
-    p.add_argument("--window", type=float, default=6.0, help="idle and hog: the window [s] (default 6)")
+    p.add_argument("--window", type=float, default=None, help="idle and hog: the window [s] (default 6; --quick 3)")
     p.add_argument("--cycle-rate", type=float, default=20.0, help="bus cycles per second (default 20, the parameter file's)")
     p.add_argument("--protocol", default="v1", choices=("v1", "v2", "v3"), help="controller protocol (default v1)")
     p.add_argument("--seed", type=int, default=1, help="seed of the plan goals (default 1)")
-    p.add_argument("--quick", action="store_true", help="smoke run: 5 goals, 20 000 points, 3 s windows")
+    p.add_argument("--quick", action="store_true",
+                   help="smoke run: 5 goals, 20 000 points, 3 s windows (unless --window says otherwise)")
     args = p.parse_args(argv)
     try:
         bauds = [int(b) for b in args.bauds.split(",") if b.strip()]
@@ -691,8 +692,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         loads = choice_list(args.loads, LOADS, "--loads")
     except (argparse.ArgumentTypeError, ValueError) as exc:
         p.error(str(exc))
+    if args.window is None:
+        args.window = 3.0 if args.quick else 6.0
     if args.quick:
-        args.goals, args.points, args.window, args.validate_window = min(args.goals, 5), min(args.points, 20_000), 3.0, 0.0
+        args.goals, args.points, args.validate_window = min(args.goals, 5), min(args.points, 20_000), 0.0
     if args.goals < 1 or args.points < 2 or args.window <= 0 or args.validate_window < 0:
         p.error("--goals >= 1, --points >= 2, --window > 0 and --validate-window >= 0")
     from vr_driver.kinematics.deps import missing_dependencies

@@ -22,6 +22,8 @@ from vr_driver.commission.steps import STEP_NAMES
 from vr_driver.controller.program import VirtualController
 from vr_driver.params import DriverParams, ParamError
 
+from _priority import threads_at_real_time
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 NODE = os.path.join(os.path.dirname(HERE), "nodes", "commission")
 BAUD = 187500
@@ -31,7 +33,10 @@ LOOP = 0.01
 # quick sizes: degrees, percent, seconds (doc/commissioning.md has the real arm's)
 QUICK = ["--watchdog-ms", "1000", "--heartbeat-time", "1.0", "--loop-move", "20", "--loop-percent", "30", "--speed-move", "25",
          "--speed-percent", "50", "--stream-step", "8", "--stream-percent", "50", "--config-percent", "100",
-         "--ramp-move", "25", "--ramp-percent", "100", "--hold-time", "0.2"]
+         "--ramp-move", "25", "--ramp-percent", "100", "--hold-time", "0.2",
+         # the tool's bus at real-time priority where the system allows it (above the virtual G2's
+         # HARDWARE_PRIORITY): scripts/test then runs this module beside the computing tests
+         "--rt-priority", "20"]
 MOTION = ["speed", "lookahead", "configuration", "ramps"]
 
 
@@ -40,25 +45,16 @@ def skip(*names: str) -> List[str]:
 
 
 #: SCHED_FIFO priority of the virtual G2's threads where allowed (as the virtual hardware's ROS nodes:
-#: below the tool's own bus, 20)
+#: below the tool's own bus, --rt-priority 20)
 HARDWARE_PRIORITY = 10
 
 
 def start_as_hardware(vc: VirtualController) -> None:
     """``vc.start()`` with its threads at real-time priority where the system allows it: the virtual
     G2 stands for hardware, which is never late -- the tool measures its loop period to 1 ms, and a
-    starved controller thread once measured 15.5 ms for 10 ms in a loaded test run. Its threads
-    inherit the policy of the thread that starts them; this one goes back to normal scheduling."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(HARDWARE_PRIORITY))
-        realtime = True
-    except (PermissionError, OSError, AttributeError):
-        realtime = False
-    try:
+    starved controller thread once measured 15.5 ms for 10 ms in a loaded test run."""
+    with threads_at_real_time(HARDWARE_PRIORITY):
         vc.start()
-    finally:
-        if realtime:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
 
 
 def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeout: float = 120.0,
@@ -80,6 +76,7 @@ def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeou
     assert vc.error is None and vc.server_error is None, (vc.error, vc.server_error)
     assert proc.returncode == 0, proc.stdout[-3000:]
     assert "robot time: " in proc.stdout
+    assert "scheduling: " in proc.stdout           # how the tool's bus was scheduled, in words
     with open(out, encoding="utf-8") as fh:
         doc = yaml.safe_load(fh)
     # the file is the driver's parameters as they are: DriverParams takes it (driver.launch loads it)

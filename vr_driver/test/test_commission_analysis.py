@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import io
 import math
+import threading
+import time
 import random
 
 import pytest
@@ -135,6 +137,9 @@ def test_cli_refuses_bad_arguments_and_asks_before_anything_is_sent(tmp_path):
     assert main(["--skip", "nope"], out=out, ask=lambda q: "y") == 2
     assert "unknown step nope" in out.getvalue()
     assert main(["--speed-percent", "150"], out=io.StringIO(), ask=lambda q: "y") == 2
+    out = io.StringIO()
+    assert main(["--rt-priority", "120"], out=out, ask=lambda q: "y") == 2
+    assert "--rt-priority 120: give 0 (normal scheduling) or 1..99" in out.getvalue()
     asked = []
     out = io.StringIO()
     port = str(tmp_path / "no_such_port")
@@ -143,6 +148,24 @@ def test_cli_refuses_bad_arguments_and_asks_before_anything_is_sent(tmp_path):
     assert asked and "clear space" in asked[0]
     assert "nothing was sent" in out.getvalue()
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_the_analysis_thread_leaves_the_bus_threads_real_time_priority(monkeypatch):
+    """--rt-priority puts the bus thread at SCHED_FIFO; the analyses it starts (while_cycling) must
+    not inherit it: the first thing the worker does is normal_scheduling() (recorded here: the real
+    call needs a privilege a test cannot count on)."""
+    from vr_driver.commission import steps
+
+    calls = []
+    monkeypatch.setattr(steps, "normal_scheduling", lambda: calls.append(threading.get_ident()))
+
+    class Bus:
+        def run(self, until, timeout):
+            while not until(None):
+                time.sleep(0.001)           # one bus cycle, as the real bus runs until the worker ends
+    ctx = steps.Context.__new__(steps.Context)
+    ctx.bus = Bus()
+    assert ctx.while_cycling(lambda x: threading.get_ident() + x, 0) == calls[0] != threading.get_ident()
 
 
 def test_loops_are_counted_by_the_heartbeats_advance_not_by_the_records():

@@ -13,6 +13,8 @@ import sys
 
 import pytest
 
+from _priority import threads_at_real_time
+
 _BENCH = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
                       "bench", "soak.py")
 
@@ -35,6 +37,10 @@ soak = _load_soak()
 #: the seq copy instead of the CRC) at v2's 0.5 %; its shorter records make it faster: 60 moves keep
 #: the run past the second cut with > 500 bytes corrupted (about 30 s)
 RUNS = {"v1": (100, 0.02, 0.8), "v2": (40, 0.005, 0.6), "v3": (60, 0.005, 0.6)}
+#: SCHED_FIFO priority of the run's threads (the driver core's bus, the virtual G2's) where the system
+#: allows it, as the driver's bus process runs (doc/reliability.md): scripts/test then runs the soak
+#: beside the computing tests, which cannot delay it; below the commissioning test's (10 and 20)
+SOAK_PRIORITY = 5
 
 
 @pytest.fixture(scope="module", params=sorted(RUNS))
@@ -44,7 +50,8 @@ def result(request, kin, tmp_path_factory):
         targets=targets, corrupt=corrupt, cut_times=(8.0, 20.0), cut_min=0.5, cut_max=1.0, seed=7,
         speed_factor=100.0, cycle_rate=100.0, driver_params={"accept_timeout": 0.5},
         workdir=str(tmp_path_factory.mktemp("soak")), protocol=request.param)
-    res = soak.run_soak(config, kin=kin)
+    with threads_at_real_time(SOAK_PRIORITY):
+        res = soak.run_soak(config, kin=kin)
     print("\n".join(res.summary() + [res.final_line()]))
     return res
 

@@ -62,7 +62,7 @@ from .health import BusHealth, BusHealthSummary
 
 log = logging.getLogger("vr_driver.bus")
 
-__all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "set_priority", "main"]
+__all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "set_priority", "normal_scheduling", "main"]
 
 _CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
 #: state changes kept for a driver that does not read (the oldest are dropped beyond)
@@ -112,6 +112,16 @@ def set_priority(priority: int) -> str:
                 "driver under `chrt -f %d`" % (priority, getattr(exc, "strerror", None) or exc,
                                                priority, priority))
     return "SCHED_FIFO %d" % priority
+
+
+def normal_scheduling() -> None:
+    """The calling thread back at normal scheduling (SCHED_OTHER) -- on Linux the policy is a
+    thread's, and a thread inherits the one of the thread that starts it; leaving SCHED_FIFO needs
+    no privilege. Nothing where the system has no such call."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    except (PermissionError, OSError, AttributeError):
+        pass
 
 
 class _NodeGone(Exception):

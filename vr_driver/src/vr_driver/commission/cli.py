@@ -19,6 +19,7 @@ import sys
 import time
 from typing import Callable, List, Optional, Sequence, TextIO
 
+from ..bus.process import set_priority
 from ..errors import VrDriverError
 from ..params import DriverParams, ParamError
 from .bus import CommissionBus, CommissionError, LinkDown, port_users
@@ -58,6 +59,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="commissioning.yaml", help="the YAML written at the end (default %(default)s)")
     p.add_argument("--log", default="", help="every bus cycle as JSON lines (default: OUT with .cycles.jsonl)")
     p.add_argument("--yes", action="store_true", help="ask nothing: the arm's space is clear, run every step")
+    p.add_argument("--rt-priority", type=int, default=0, metavar="N",
+                   help="run the bus at SCHED_FIFO priority N (1..99) where the system allows it, as the "
+                        "driver's bus process does (doc/reliability.md, \"Real-time priority\"): the tool "
+                        "dates the program loop to the millisecond; its analyses stay at normal priority "
+                        "(default 0: normal scheduling)")
     p.add_argument("--skip", action="append", default=[], metavar="NAME",
                    help="skip a step (repeat, or a comma list): %s" % ", ".join(STEP_NAMES))
     g = p.add_argument_group("sizes of the moves (degrees, percent of the joint speed limits, seconds)")
@@ -175,6 +181,9 @@ class _Runner:
         except (ValueError, ParamError) as exc:
             self.say("commission: %s" % exc)
             return 2
+        if not 0 <= args.rt_priority <= 99:
+            self.say("commission: --rt-priority %d: give 0 (normal scheduling) or 1..99" % args.rt_priority)
+            return 2
         skip = {name.strip() for item in args.skip for name in item.split(",") if name.strip()}
         unknown = sorted(skip - set(STEP_NAMES))
         if unknown:
@@ -202,6 +211,7 @@ class _Runner:
             return 1
         log_path = args.log or os.path.splitext(args.out)[0] + ".cycles.jsonl"
         results: List[StepResult] = []
+        self.say("scheduling: %s" % set_priority(args.rt_priority))
         t_connect = self.clock()
         self.say("connecting to %s at %d bit/s (%g cycles/s)..." % (device, bus_config.baud, args.cycle_rate))
         try:

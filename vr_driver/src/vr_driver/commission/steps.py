@@ -39,6 +39,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
+from ..bus.process import normal_scheduling
 from ..errors import KinematicsError, PoseError
 from ..poses import ControllerPose
 from ..protocol.common import ByteOrder, StatusBits
@@ -222,6 +223,7 @@ class Context:
         out: Dict[str, Any] = {}
 
         def work() -> None:
+            normal_scheduling()         # a thread inherits the bus thread's SCHED_FIFO (--rt-priority)
             try:
                 out["value"] = fn(*args)
             except BaseException as exc:  # raised again below, in the step's thread
