@@ -24,10 +24,9 @@ trajectory_msgs for ``--from-topic``.
 The shape of the code, checked the same way:
 
 - **No long class**: no class in src/vr_driver is longer than MAX_CLASS_LINES (from its ``class``
-  line to its last line, ``ast``'s ``end_lineno``): a class that long has more than one job. The
-  classes that were longer when the rule came are LONG_CLASSES, each with its length then (it may
-  not grow past it) and the reason it may stay so for now; one that is no longer long fails the
-  test, so the list only shrinks.
+  line to its last line, ``ast``'s ``end_lineno``): a class that long has more than one job. There
+  are no exceptions: the six classes that were longer when the rule came (Kinematics, Planner,
+  LinkSupervisor, Terminal, SequencerBase, InterfaceNode) have been carved.
 - **No import circle** among the modules of vr_driver: module-level and function-level imports
   both count (a lazy import hides a circle from the interpreter, not from the reader); ``from
   package import name`` counts as an import of the submodule ``package.name`` when there is one.
@@ -84,15 +83,6 @@ KNOWN = {
 }
 #: the longest a class may be [lines]
 MAX_CLASS_LINES = 350
-#: classes longer than MAX_CLASS_LINES when the rule came, and why they may stay so for now
-LONG_CLASSES = {     # class: (its length when listed, at most: it may shrink, never grow; why it may stay)
-    "vr_driver.kinematics.solver.Kinematics": (512, "the model, FK, IK and its branches in one class; to be carved"),
-    "vr_driver.kinematics.planner.Planner": (416, "OMPL set-up, planning, timing and checks in one class; to be carved"),
-    "vr_driver.ros.interface.InterfaceNode": (370, "the node's topics, services and diagnostics; to be carved"),
-    "vr_driver.terminal.pose_input.Terminal": (387, "the pose terminal's commands; to be carved"),
-    "vr_driver.driver.link.LinkSupervisor": (388, "the link and the bus process's seam (being reworked with the bus process)"),
-    "vr_driver.driver.sequencer.SequencerBase": (372, "the queue, stops and outcomes common to v1 and the streams"),
-}
 #: import edges (importer, imported) left out of the circle check, and why; each closes a circle today
 CIRCLE_EDGES: dict = {}
 
@@ -226,28 +216,17 @@ def violations(root=PACKAGE):
 
 
 def long_classes(root=PACKAGE):
-    """Every class longer than MAX_CLASS_LINES that is not in LONG_CLASSES, and every class of
-    LONG_CLASSES that is no longer that long (or gone), as readable lines."""
-    bad, long = [], set()
+    """Every class longer than MAX_CLASS_LINES, as readable lines."""
+    bad = []
     for path in modules(root):
         name = module_name(root, path)
         tree = parsed(path)
         for node in ast.walk(tree):
             if isinstance(node, ast.ClassDef):
                 lines = node.end_lineno - node.lineno + 1
-                qualified = "%s.%s" % (name, node.name)
-                if lines <= MAX_CLASS_LINES:
-                    continue
-                long.add(qualified)
-                if qualified not in LONG_CLASSES:
+                if lines > MAX_CLASS_LINES:
                     bad.append("%s:%d: class %s is %d lines (at most %d: give its jobs classes of "
                                "their own)" % (name, node.lineno, node.name, lines, MAX_CLASS_LINES))
-                elif lines > LONG_CLASSES[qualified][0]:
-                    bad.append("%s:%d: class %s grew to %d lines (listed long at %d: it may only shrink)"
-                               % (name, node.lineno, node.name, lines, LONG_CLASSES[qualified][0]))
-    if root == PACKAGE:
-        bad += ["%s is no longer over %d lines: remove it from LONG_CLASSES" % (c, MAX_CLASS_LINES)
-                for c in sorted(set(LONG_CLASSES) - long)]
     return bad
 
 
@@ -430,13 +409,3 @@ def test_each_rule_can_fail(path, statement, expected):
     finally:
         del _OVERRIDE[full]
     assert any(expected in v for v in found), found
-
-
-def test_a_listed_long_class_may_not_grow(monkeypatch):
-    """A class of LONG_CLASSES past the length it was listed at is reported (here: its ceiling set
-    ten lines below its length today)."""
-    name = "vr_driver.kinematics.solver.Kinematics"
-    ceiling, why = LONG_CLASSES[name]
-    monkeypatch.setitem(LONG_CLASSES, name, (ceiling - 10, why))
-    assert any("class Kinematics grew to %d lines (listed long at %d" % (ceiling, ceiling - 10) in v
-               for v in long_classes()), long_classes()

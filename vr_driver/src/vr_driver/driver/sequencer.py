@@ -98,7 +98,6 @@ class SequencerView:
     #                                              (None: none yet, the job's start is the anchor)
 
 
-_Settle = Settle        # the name streaming.py imports it by
 
 
 class SequencerHooks:

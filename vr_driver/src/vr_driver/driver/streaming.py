@@ -54,7 +54,8 @@ from ..protocol.base import WireTarget
 from ..protocol.common import SEQ_MAX, StatusBits, StreamState, blend_window, next_seq, seq_offset
 from .jobs import JobPhase, MoveJob, StreamPoint
 from .link import LinkSample
-from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, SequencerBase, _Settle
+from .sequencer import SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, SequencerBase
+from .settling import Settle
 from .trajectories import split_keep
 
 log = logging.getLogger("vr_driver.driver")
@@ -383,7 +384,7 @@ class StreamSequencer(SequencerBase):
         if self._last_state in (StreamState.MOVING, StreamState.STOPPING):
             self._stopping = True                 # not ours (an earlier stream's end): stop it too
             if self._settle is None:
-                self._settle = _Settle(None, JobPhase.CANCELLED, reason, now)
+                self._settle = Settle(None, JobPhase.CANCELLED, reason, now)
 
     def stop_job(self, job: MoveJob, reason: str, now: float) -> None:
         self._end_current()
