@@ -63,6 +63,7 @@ import PyKDL as kdl
 from ..errors import KinematicsError
 from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import ControllerPose, MoveType
+from ..protocol.base import rounded_pose
 from .resolution import WRIST_BAND
 
 log = logging.getLogger("vr_driver.driver")
@@ -502,12 +503,7 @@ class JointTracker:
         """``pose`` as a Cartesian target carries it to the controller, which solves that: each field
         rounded half away from zero to the pose resolution (Protocol.wire_pose; a point's pose
         rounded already stays as it is)."""
-        mm, deg = self.resolution
-        out = []
-        for value, unit in zip(pose.as_tuple(), (mm, mm, mm, deg, deg, deg)):
-            steps = math.floor(abs(value) / unit + 0.5)
-            out.append(math.copysign(steps, value) * unit if steps else 0.0)
-        return ControllerPose(*out)
+        return rounded_pose(pose, self.resolution)
 
     def _tcp(self, q: Sequence[float]) -> Tuple[Tuple[float, ...], Tuple[float, ...]]:
         """(TCP position [mm], rotation row-major) in ``base`` at joints ``q`` (KDL, no numpy: it

@@ -31,7 +31,18 @@ from typing import Any, Dict, Optional, Sequence, Tuple
 from ..errors import ProtocolError
 from ..poses import ControllerPose
 
-__all__ = ["Protocol", "WireTarget", "framed_record"]
+__all__ = ["Protocol", "WireTarget", "framed_record", "rounded_pose"]
+
+
+def rounded_pose(pose: ControllerPose, resolution: Tuple[float, float]) -> ControllerPose:
+    """``pose`` with each field rounded half away from zero to ``resolution`` (mm for X Y Z, deg for
+    Rx Ry Rz): what a Cartesian target on the wire carries (a pose rounded already stays as it is)."""
+    mm, deg = resolution
+    out = []
+    for value, unit in zip(pose.as_tuple(), (mm, mm, mm, deg, deg, deg)):
+        steps = math.floor(abs(value) / unit + 0.5)
+        out.append(math.copysign(steps, value) * unit if steps else 0.0)
+    return ControllerPose(*out)
 
 #: each registered protocol's version byte by its name (vr_driver.protocol.registry keeps it), so
 #: that a record of another protocol is named in the error
@@ -245,12 +256,7 @@ class Protocol:
     def wire_pose(self, pose: ControllerPose) -> ControllerPose:
         """``pose`` as a Cartesian target of this protocol carries it: each field rounded half away
         from zero to ``pose_resolution`` (mm for X Y Z, deg for Rx Ry Rz), the controller's view."""
-        mm, deg = self.pose_resolution
-        out = []
-        for value, unit in zip(pose.as_tuple(), (mm, mm, mm, deg, deg, deg)):
-            steps = math.floor(abs(value) / unit + 0.5)
-            out.append(math.copysign(steps, value) * unit if steps else 0.0)
-        return ControllerPose(*out)
+        return rounded_pose(pose, self.pose_resolution)
 
     # ------------------------------------------------------------------ the code at each end
     def implement(self, *, controller_program: Any = None, sequencer: Any = None) -> None:

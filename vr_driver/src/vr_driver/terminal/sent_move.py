@@ -120,22 +120,20 @@ class MoveEnd:
     outcome: str
 
 
+@dataclass
 class MoveWatch:
     """One sent move seen to its end: its progress on ``printer`` every ``poll_period`` s; on Ctrl-C
     or when it has no result after ``timeout`` s, the goal cancelled and, when the move has not
     ended after half of ``stop_wait`` (or on a second Ctrl-C), ``call_stop`` (stop_motion) as well;
     how it ended said with ``say``."""
 
-    def __init__(self, handle: MoveHandle, printer: ProgressPrinter, say: Callable[[str], None],
-                 call_stop: Callable[[], None], clock: Callable[[], float] = time.monotonic,
-                 poll_period: float = 0.1, stop_wait: float = 10.0) -> None:
-        self.handle = handle
-        self.printer = printer
-        self.say = say
-        self.call_stop = call_stop
-        self.clock = clock
-        self.poll_period = poll_period
-        self.stop_wait = stop_wait
+    handle: MoveHandle
+    printer: ProgressPrinter
+    say: Callable[[str], None]
+    call_stop: Callable[[], None]
+    clock: Callable[[], float] = time.monotonic
+    poll_period: float = 0.1
+    stop_wait: float = 10.0
 
     def follow(self, target: Optional[ControllerPose], started: float, timeout: float) -> MoveEnd:
         """Until the move ends (or ``timeout`` s after ``started``, the clock's time it was sent);
