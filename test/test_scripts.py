@@ -11,6 +11,31 @@ import unittest
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+def signal_state(root_pid):
+    """For a failed Ctrl-C: each process below ``root_pid`` with its process group, the foreground
+    process group of its terminal (``tpgid``: the group a Ctrl-C signals) and its SIGINT bit in the
+    blocked / ignored / caught masks -- what decides whether a Ctrl-C reaches it (/proc)."""
+    lines, todo = [], [root_pid]
+    while todo:
+        pid = todo.pop()
+        try:
+            with open("/proc/%d/stat" % pid) as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+            with open("/proc/%d/status" % pid) as f:
+                masks = dict(line.split(":\t", 1) for line in f.read().splitlines() if ":\t" in line)
+            with open("/proc/%d/cmdline" % pid, "rb") as f:
+                cmd = f.read().replace(b"\0", b" ").decode(errors="replace")[:90]
+            with open("/proc/%d/task/%d/children" % (pid, pid)) as f:
+                todo += [int(c) for c in f.read().split()]
+        except OSError as exc:
+            lines.append("pid %d: %s" % (pid, exc))
+            continue
+        sigint = 1 << (signal.SIGINT - 1)
+        bits = ", ".join("%s %d" % (k, bool(int(masks.get(k, "0"), 16) & sigint)) for k in ("SigBlk", "SigIgn", "SigCgt"))
+        lines.append("pid %d pgrp %s tpgid %s SIGINT: %s  %s" % (pid, fields[2], fields[5], bits, cmd))
+    return "\n".join(lines)
+
+
 def script(name, *args, env=None, timeout=120):
     e = dict(os.environ)
     e.update(env or {})
@@ -156,7 +181,13 @@ class ScriptsTest(unittest.TestCase):
                 expect(prompt)
                 if stopped:
                     break
-            self.assertTrue(stopped, "3 moves ended before the Ctrl-C: " + child.logfile_read.getvalue()[-3000:])
+            if not stopped:
+                # the whole dialogue from the first Ctrl-C on (progress lines left out), and who
+                # a Ctrl-C signals now: a Ctrl-C that never stops a move is a bug to find
+                said = child.logfile_read.getvalue()
+                said = "\n".join(line for line in said[said.find("1000 -600 800"):].splitlines()
+                                  if "distance to go" not in line)
+                self.fail("3 moves ended before the Ctrl-C:\n%s\n%s" % (said[-6000:], signal_state(child.pid)))
             child.sendline("status")                                       # the driver survived the Ctrl-C
             expect(r"motion possible: yes")
             expect(prompt)
