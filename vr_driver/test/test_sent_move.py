@@ -3,6 +3,10 @@ fake clock in one thread: each wait of the handle advances the clock by its time
 from __future__ import annotations
 
 import io
+import os
+import signal
+import subprocess
+import sys
 
 from vr_driver.poses import ControllerPose
 from vr_driver.terminal.sent_move import (MoveEnd, MoveHandle, MoveProgress, MoveResult, MoveWatch,
@@ -95,3 +99,60 @@ def test_a_move_that_does_not_end_even_after_stop_motion_is_said_so():
     assert len(stops) == 1
     assert handle.cancelled_at + 2.0 <= clock.now < handle.cancelled_at + 2.0 + 0.2   # gave up at stop_wait
     assert said[-1] == "The move did not end; the arm is at unknown."
+
+
+# ------------------------------------------------------------------ Ctrl-C, whatever was inherited
+
+_SIGINT_PROBE = """
+import os, signal, sys
+from vr_driver.terminal.sent_move import ctrl_c_raises
+print("inherited", "ignored" if signal.getsignal(signal.SIGINT) == signal.SIG_IGN else "other")
+if sys.argv[1] == "fix":
+    ctrl_c_raises()
+try:
+    os.kill(os.getpid(), signal.SIGINT)
+    for _ in range(100000):          # a handler runs between two bytecodes: long before this ends
+        pass
+    print("Ctrl-C did nothing")
+except KeyboardInterrupt:
+    print("Ctrl-C raised")
+"""
+
+
+def _ignoring_sigint():
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def test_ctrl_c_raises_in_a_process_started_with_sigint_ignored():
+    """A process started with SIGINT ignored (a script's background job, a CI runner) keeps it
+    ignored: without ctrl_c_raises() the terminal's Ctrl-C would do nothing during a move (a
+    fresh-clone run saw three moves run to their end through the test's Ctrl-Cs)."""
+    out = {}
+    for mode in ("fix", "without"):
+        res = subprocess.run([sys.executable, "-c", _SIGINT_PROBE, mode], capture_output=True, text=True,
+                             timeout=60, preexec_fn=_ignoring_sigint, env=dict(os.environ, PYTHONPATH=os.pathsep.join(sys.path)))
+        assert res.returncode == 0, res.stderr
+        out[mode] = res.stdout.split("\n")
+    assert out["fix"][:2] == ["inherited ignored", "Ctrl-C raised"], out
+    assert out["without"][:2] == ["inherited ignored", "Ctrl-C did nothing"], out       # the probe can fail
+
+
+def test_the_pose_terminal_takes_ctrl_c_when_started_with_sigint_ignored():
+    """The node itself: started with SIGINT ignored and no ROS master, it waits for one; a Ctrl-C
+    (SIGINT) then ends the wait with the shell's 130, long before its --wait runs out."""
+    node = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "nodes", "pose_terminal")
+    proc = subprocess.Popen([sys.executable, node, "--pose", "1000", "0", "800", "0", "45", "0", "--wait", "60"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, preexec_fn=_ignoring_sigint,
+                            env=dict(os.environ, ROS_MASTER_URI="http://localhost:9",
+                                     PYTHONPATH=os.pathsep.join(sys.path)))
+    try:
+        first = proc.stdout.readline()                      # said once it waits (the event awaited)
+        assert "Waiting for the ROS master" in first, first
+        proc.send_signal(signal.SIGINT)
+        rest, _ = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, first + rest
+    assert "Interrupted while waiting for the driver" in rest

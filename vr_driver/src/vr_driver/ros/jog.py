@@ -30,6 +30,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..params import DEFAULT_JOINT_NAMES
 from ..terminal.jog import Jogger, decode_keys
+from ..terminal.sent_move import ctrl_c_raises
 
 HELP = ("keys: 1-6 joint, +/- (or arrows left/right) move, [ ] (or arrows down/up) speed, "
         "space stop, q quit")
@@ -93,6 +94,7 @@ def say(line: str) -> None:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
+    ctrl_c_raises()                      # Ctrl-C ends jogging, even where SIGINT came in ignored
     rospy.init_node("jog", anonymous=True, disable_signals=True)
     rate = float(rospy.get_param("~rate", 20.0))
     if not 1.0 <= rate <= 200.0:

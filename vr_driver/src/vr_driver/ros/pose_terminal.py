@@ -20,6 +20,7 @@ import time
 from typing import List, Optional, Tuple
 
 from ..errors import VrDriverError
+from ..terminal.sent_move import ctrl_c_raises
 from ..terminal.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_USAGE, Backend, InputError, MoveHandle,
                          MoveProgress, MoveResult, PlanPreview, PlanRequest, PoseRequest, PreviewResult, RangeError,
                          StatusInfo, Terminal, build_arg_parser, fmt_pose, in_namespace, request_from_args)
@@ -478,6 +479,7 @@ def _readline_input():
 
 
 def main(argv: Optional[List[str]] = None) -> int:
+    ctrl_c_raises()                      # Ctrl-C stops a move, even where SIGINT came in ignored
     if argv is None:
         try:
             import rospy

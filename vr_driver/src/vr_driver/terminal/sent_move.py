@@ -10,6 +10,7 @@ The dialogue that previews, confirms and sends the move is
 from __future__ import annotations
 
 import math
+import signal
 import time
 from dataclasses import dataclass
 from typing import Callable, Optional, TextIO
@@ -17,7 +18,7 @@ from typing import Callable, Optional, TextIO
 from ..poses import ControllerPose
 from .pose_text import fmt_pose
 
-__all__ = ["MoveProgress", "MoveResult", "MoveHandle", "ProgressPrinter", "MoveEnd", "MoveWatch"]
+__all__ = ["MoveProgress", "MoveResult", "MoveHandle", "ProgressPrinter", "MoveEnd", "MoveWatch", "ctrl_c_raises"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +119,15 @@ class MoveEnd:
     reached: bool
     answered: bool
     outcome: str
+
+
+def ctrl_c_raises() -> None:
+    """Ctrl-C raises KeyboardInterrupt in this process (call it from the main thread), whatever the
+    process inherited: one started with SIGINT ignored (a script's background job, ``nohup``, a CI
+    runner) keeps it ignored, Python then installs no handler -- and a terminal's promise "Ctrl-C
+    stops the arm" (:class:`MoveWatch`) would silently fail: a fresh-clone test run saw three moves
+    in a row run to their end through the test's Ctrl-Cs."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @dataclass
