@@ -1247,9 +1247,16 @@ def worker(cfg: Dict[str, Any]) -> int:
         return cfg.get("keep_logs", False) if isinstance(exc, Failure) else True
     return stack_worker(
         cfg, "vr_traj_bench_", "trajectory_bench",
-        "--- %s: %s (ROS master port {port}, speed_factor %g; %s set; tolerances %s)"
-        % (cfg["name"], cfg["title"], cfg["speed_factor"], cfg["set"], cfg["tolerances"]),
+        "--- %s: %s (ROS master port {port}, speed_factor %g; %s set; tolerances %s; virtual hardware %s)"
+        % (cfg["name"], cfg["title"], cfg["speed_factor"], cfg["set"], cfg["tolerances"],
+           "at SCHED_FIFO %d where allowed" % cfg["sim_rt_priority"] if cfg.get("sim_rt_priority")
+           else "at normal scheduling"),
         launch_args(cfg), measure, failed)
+
+
+#: SCHED_FIFO priority of the virtual hardware's nodes (driver.launch sim_rt_priority) where allowed:
+#: above the driver's bus process (20), as bench/bus_health.py's rig -- the bench runs alone
+SIM_RT_PRIORITY = 30
 
 
 def launch_args(cfg: Dict[str, Any]) -> List[str]:
@@ -1268,6 +1275,8 @@ def launch_args(cfg: Dict[str, Any]) -> List[str]:
         args.append("model:=%s" % cfg["model"])
     if cfg.get("commissioning"):
         args.append("commissioning:=%s" % cfg["commissioning"])
+    if cfg.get("sim_rt_priority"):
+        args.append("sim_rt_priority:=%d" % cfg["sim_rt_priority"])
     return args
 
 
@@ -1515,6 +1524,11 @@ def main(argv: Optional[List[str]] = None) -> int:
                    help="goal tolerance per joint [deg]; 0: none given (default: none given; --set dense: v1 %g)"
                         % V1_TOLERANCE)
     p.add_argument("--ready-timeout", type=float, default=60.0, help="driver ready within [s] (default 60)")
+    p.add_argument("--sim-rt-priority", type=int, default=SIM_RT_PRIORITY, metavar="N",
+                   help="SCHED_FIFO priority of the virtual G2, line and island where the system allows it "
+                        "(driver.launch sim_rt_priority:=; default %(default)s, above the driver's bus process: a "
+                        "real G2 is never late, and the bench measures the driver, not the simulator starved "
+                        "by its neighbours; 0: normal scheduling)")
     p.add_argument("--ros-port", type=int, default=0, help="ROS master port (default: a free one from 11700)")
     p.add_argument("--keep-logs", action="store_true", help="keep the ROS logs and print where")
     p.add_argument("--dump", default="", help="append each goal's plan and joint_states samples to this file "
@@ -1562,6 +1576,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         p.error("unknown configuration(s) %s (known: %s)" % (", ".join(bad), ", ".join(CONFIGS)))
     if args.n < 1:
         p.error("--n must be >= 1")
+    if not 0 <= args.sim_rt_priority <= 99:
+        p.error("--sim-rt-priority: 0 (normal scheduling) or 1..99")
     started = time.perf_counter()
     plans = generate(args.seed, args.n, timing=args.set)
     print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned%s), "
@@ -1634,7 +1650,8 @@ def run_all(args: Any, names: Sequence[str], title_note: str, model: str, stage:
                "title": title(protocol, baud, rate, paced, opts.get("lookahead"), opts.get("ramp_time")),
                "plot": os.path.abspath(args.plot) if args.plot else "",
                "dump": os.path.abspath(args.dump) if args.dump else "",
-               "true_model": args.true_model, "model": model, "model_zero": zero}
+               "true_model": args.true_model, "model": model, "model_zero": zero,
+               "sim_rt_priority": args.sim_rt_priority}
         if args.true_model:
             cfg["title"] += ", true robot %s%s" % (os.path.basename(args.true_model), title_note)
         if stage == "before":

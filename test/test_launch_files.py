@@ -163,6 +163,18 @@ class DriverLaunchParamsTest(unittest.TestCase):
         own = {k[len("/virtual_controller/"):]: v for k, v in params.items() if k.startswith("/virtual_controller/")}
         self.assertEqual(SimOptions.from_mapping(own).ramp_time, 0.5)
 
+    def test_sim_rt_priority_reaches_the_virtual_hardware_only(self):
+        """The virtual hardware's real-time priority: 0 (normal scheduling) by default on each of
+        the virtual G2, the line and the island; sim_rt_priority:=30 (a benchmark run alone, where a
+        real G2 is never late) on those three and on no other node."""
+        hardware = ["/virtual_controller/rt_priority", "/virtual_io_island/rt_priority", "/virtual_line/rt_priority"]
+        _, params = self.check()
+        self.assertEqual(sorted(k for k in params if k.endswith("/rt_priority")), hardware)
+        self.assertEqual({params[k] for k in hardware}, {0})
+        _, params = self.check("sim_rt_priority:=30")
+        self.assertEqual(sorted(k for k in params if k.endswith("/rt_priority")), hardware)
+        self.assertEqual({params[k] for k in hardware}, {30})
+
     def test_true_model_reaches_the_virtual_controller_only(self):
         """issue 25: true_model:=FILE gives the virtual G2 its own kinematics; the driver (and the
         robot description) keep the model's. Unset by default (the model's)."""
