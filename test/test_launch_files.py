@@ -93,6 +93,17 @@ class LaunchFilesTest(unittest.TestCase):
 
 
 
+def sim_options(params):
+    """The virtual controller's options among a launch's parameters, as the node takes them
+    (vr_driver.ros.virtual_controller.split_params: its own parameters, e.g. rt_priority, are not
+    options of the virtual G2); an unknown one fails the test."""
+    from vr_driver.ros.virtual_controller import split_params
+    own = {k[len("/virtual_controller/"):]: v for k, v in params.items() if k.startswith("/virtual_controller/")}
+    options, unknown = split_params(own)
+    assert not unknown, unknown
+    return options
+
+
 class DriverLaunchParamsTest(unittest.TestCase):
     """The parameters driver.launch gives the node `interface` pass the node's own validation
     (vr_driver.params), for the virtual controller and for a real port."""
@@ -160,8 +171,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
         _, params = self.check("protocol:=v3", "ramp_time:=0.5")
         self.assertEqual([k for k in params if k.endswith("/ramp_time")], ["/virtual_controller/ramp_time"])
         self.assertEqual(params["/virtual_controller/ramp_time"], 0.5)
-        own = {k[len("/virtual_controller/"):]: v for k, v in params.items() if k.startswith("/virtual_controller/")}
-        self.assertEqual(SimOptions.from_mapping(own).ramp_time, 0.5)
+        self.assertEqual(SimOptions.from_mapping(sim_options(params)).ramp_time, 0.5)
 
     def test_sim_rt_priority_reaches_the_virtual_hardware_only(self):
         """The virtual hardware's real-time priority: 0 (normal scheduling) by default on each of
@@ -184,8 +194,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
         self.assertFalse(any(k.endswith("/true_model") for k in params))
         _, plain = self.check("protocol:=v3", "true_model:=" + example)
         self.assertEqual([k for k in plain if k.endswith("/true_model")], ["/virtual_controller/true_model"])
-        own = {k[len("/virtual_controller/"):]: v for k, v in plain.items() if k.startswith("/virtual_controller/")}
-        self.assertEqual(SimOptions.from_mapping(own).true_model, example)
+        self.assertEqual(SimOptions.from_mapping(sim_options(plain)).true_model, example)
         self.assertEqual(plain["/robot_description"], params["/robot_description"])
 
     def test_model_reaches_the_driver_and_the_robot_description(self):

@@ -49,14 +49,6 @@ def skip(*names: str) -> List[str]:
 HARDWARE_PRIORITY = 10
 
 
-def start_as_hardware(vc: VirtualController) -> None:
-    """``vc.start()`` with its threads at real-time priority where the system allows it: the virtual
-    G2 stands for hardware, which is never late -- the tool measures its loop period to 1 ms, and a
-    starved controller thread once measured 15.5 ms for 10 ms in a loaded test run."""
-    with threads_at_real_time(HARDWARE_PRIORITY):
-        vc.start()
-
-
 def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeout: float = 120.0,
                    cycle_rate: float = CYCLE_RATE) -> Tuple[Dict[str, Any], str, VirtualController]:
     """Start the virtual G2 with ``vc_options``, run the tool against it, return (its YAML, its
@@ -65,14 +57,20 @@ def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeou
                            **vc_options)
     out = tmp_path / "commissioning.yaml"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
-    start_as_hardware(vc)
-    try:
-        proc = subprocess.run([sys.executable, NODE, "--port", vc.device_path, "--baud", str(BAUD),
-                               "--cycle-rate", str(cycle_rate), "--yes", "--out", str(out)] + QUICK + args,
-                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
-                              timeout=timeout)
-    finally:
-        vc.stop()
+    # the virtual G2 stands for hardware, which is never late: its threads at real-time priority
+    # where the system allows it (the tool measures the loop period to 1 ms; a starved controller
+    # thread once measured 15.5 ms for 10 ms in a loaded run) -- and this thread too while it waits
+    # on the tool: at normal priority, preempted while it held the interpreter's lock (reading the
+    # tool's output), it would hold the controller's threads back with it
+    with threads_at_real_time(HARDWARE_PRIORITY):
+        vc.start()
+        try:
+            proc = subprocess.run([sys.executable, NODE, "--port", vc.device_path, "--baud", str(BAUD),
+                                   "--cycle-rate", str(cycle_rate), "--yes", "--out", str(out)] + QUICK + args,
+                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env,
+                                  timeout=timeout)
+        finally:
+            vc.stop()
     assert vc.error is None and vc.server_error is None, (vc.error, vc.server_error)
     assert proc.returncode == 0, proc.stdout[-3000:]
     assert "robot time: " in proc.stdout
