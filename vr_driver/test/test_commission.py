@@ -35,7 +35,7 @@ QUICK = ["--watchdog-ms", "1000", "--heartbeat-time", "1.0", "--loop-move", "20"
          "--speed-percent", "50", "--stream-step", "8", "--stream-percent", "50", "--config-percent", "100",
          "--ramp-move", "25", "--ramp-percent", "100", "--hold-time", "0.2",
          # the tool's bus at real-time priority where the system allows it (above the virtual G2's
-         # HARDWARE_PRIORITY): scripts/test then runs this module beside the computing tests
+         # HARDWARE_PRIORITY), as a user's commissioning would run it
          "--rt-priority", "20"]
 MOTION = ["speed", "lookahead", "configuration", "ramps"]
 
