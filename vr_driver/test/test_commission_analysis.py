@@ -86,6 +86,26 @@ def test_a_move_without_cruise_is_not_fitted():
     assert analysis.fit_move(tri) is None
 
 
+def test_one_late_record_is_not_a_stop():
+    """A blend through three points at a steady 36 deg/s, records every 10 ms, with the record
+    after each point dated 20 ms late (a loaded machine): sample to sample the speed dips to 33 %
+    there and looked like a stop at every point (a fresh-clone run judged such a stream "stops at 4
+    of 4"); the steady speeds keep it near 36. A real stop -- several records slow -- still dips."""
+    v, points = 36.0, [3.6, 7.2, 10.8]
+    blend = [(0.01 * i + (0.02 if i in (11, 21, 31) else 0.0), v * 0.01 * i) for i in range(45)]
+    raw = min(abs(q2 - q1) / (t2 - t1) for (t1, q1), (t2, q2) in zip(blend, blend[1:]))
+    assert raw < 0.35 * v                                   # what the old sample-to-sample speed saw
+    lows = analysis.min_speed_near(blend, points, 0.03)
+    assert all(low > 0.8 * v for low in lows), lows
+    assert analysis.top_speed([s for _, s in analysis.steady_speeds(blend)]) == pytest.approx(v, rel=0.05)
+    stop, q = [], 0.0
+    for i in range(60):                                     # a stop at 7.2: slow for 4 records
+        speed = 3.0 if 18 <= i < 22 else v
+        stop.append((0.01 * i, q))
+        q += speed * 0.01
+    assert analysis.min_speed_near(stop, [q for t, q in stop if t == pytest.approx(0.2)], 0.03)[0] < 0.35 * v
+
+
 def test_min_speed_near_points():
     stop = [(0.01 * i, min(i, 20) * 0.01 + max(0, i - 25) * 0.01) for i in range(50)]   # rests at 0.2 for 5 samples
     assert analysis.min_speed_near(stop, [0.2], 0.03)[0] == 0.0

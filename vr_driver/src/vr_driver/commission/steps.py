@@ -702,7 +702,7 @@ class LookAheadStep(Step):
             return None
         track = ctx.track(cycles, q0)
         samples = [(t, q[0]) for t, q in track]
-        speeds = [abs(q2 - q1) / (t2 - t1) for (t1, q1), (t2, q2) in zip(samples, samples[1:]) if t2 > t1]
+        speeds = [v for _, v in analysis.steady_speeds(samples)]
         if len(speeds) < 4 * len(pts):
             return None
         cruise = analysis.top_speed(speeds)
