@@ -15,7 +15,7 @@ from vr_driver.commission import analysis
 from vr_driver.commission.bus import port_users
 from vr_driver.commission.cli import main
 from vr_driver.commission.report import driver_values, joint_limits
-from vr_driver.commission.steps import _verdict
+from vr_driver.commission.steps import STOP_SPEED, _verdict
 
 
 def brackets_of(times, cycle):
@@ -96,14 +96,14 @@ def test_one_late_record_is_not_a_stop():
     raw = min(abs(q2 - q1) / (t2 - t1) for (t1, q1), (t2, q2) in zip(blend, blend[1:]))
     assert raw < 0.35 * v                                   # what the old sample-to-sample speed saw
     lows = analysis.min_speed_near(blend, points, 0.03)
-    assert all(low > 0.8 * v for low in lows), lows
+    assert all(low > 0.8 * v > STOP_SPEED * v for low in lows), lows
     assert analysis.top_speed([s for _, s in analysis.steady_speeds(blend)]) == pytest.approx(v, rel=0.05)
     stop, q = [], 0.0
     for i in range(60):                                     # a stop at 7.2: slow for 4 records
         speed = 3.0 if 18 <= i < 22 else v
         stop.append((0.01 * i, q))
         q += speed * 0.01
-    assert analysis.min_speed_near(stop, [q for t, q in stop if t == pytest.approx(0.2)], 0.03)[0] < 0.35 * v
+    assert analysis.min_speed_near(stop, [q for t, q in stop if t == pytest.approx(0.2)], 0.03)[0] < STOP_SPEED * v
 
 
 def test_min_speed_near_points():
