@@ -9,22 +9,19 @@ succeeds -- nothing at normal priority can then delay them -- and in the real-ti
 from __future__ import annotations
 
 import contextlib
-import os
 from typing import Iterator
+
+from vr_driver.bus.process import normal_scheduling, set_priority
 
 
 @contextlib.contextmanager
 def threads_at_real_time(priority: int) -> Iterator[bool]:
     """Within the block, the calling thread -- and every thread or process it starts there, for
-    their whole lives -- at SCHED_FIFO ``priority`` where the system allows it (yields whether it
-    did); the calling thread back at normal scheduling after it."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-        granted = True
-    except (PermissionError, OSError, AttributeError):
-        granted = False
+    their whole lives -- at SCHED_FIFO ``priority`` where the system allows it (the bus process's
+    own set_priority; yields whether it did); the calling thread back at normal scheduling after it."""
+    granted = set_priority(priority).startswith("SCHED_FIFO")
     try:
         yield granted
     finally:
         if granted:
-            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+            normal_scheduling()
