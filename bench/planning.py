@@ -2,8 +2,8 @@
 """Collision-aware planning in the example cell (printed, never asserted).
 
     scripts/env python3 bench/planning.py [--n 100] [--seed 1] [--budget 1.0] [--planner RRTConnect]
-                                          [--velocity-scaling 1.0]
-                                          [--no-execute] [--protocol v2] [--quick]
+                                          [--velocity-scaling 1.0] [--ramp-time S]
+                                          [--no-execute] [--protocol v2] [--driver] [--quick]
 
 The VR-006L (support package's xacro, moveit_config's SRDF) in the example cell
 (panasonic_vr006l_support/config/cell_example.yaml: table, pillar, shelf), collision padding the
@@ -32,6 +32,11 @@ reach, ``REACH_BOX``, as the driver's default box is an envelope of its own); ev
 fake clock the driver's reported joints (what joint_states publishes) and the simulated arm's own
 joints are checked for collisions (true shapes). The next query starts from the reported joints.
 
+``--ramp-time S``: an arm that reaches full speed in S seconds (the simulated arm's ``ramp_time``, an
+older controller's 0.5 s for example) and the planner matched to it, as the commissioning sets it:
+each joint's acceleration limit its speed limit / S, written to a ``joint_limits.yaml`` that the
+plan action reads (``planning_limits``) and the bare planner plans with.
+
 Figures: success rate (a plan) and success within the budget (the whole call <= --budget),
 median / p95 / max planning time (the whole call, and the OMPL part alone), the share of queries
 the straight move solved, path duration (median / p95), collisions of the planned samples and
@@ -45,6 +50,7 @@ import os
 import random
 import statistics
 import sys
+import tempfile
 import time
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -101,10 +107,13 @@ def chord_collisions(checker, positions):
 class Executor:
     """The in-memory driver rig; :meth:`run` executes one plan and checks every tick's joints."""
 
-    def __init__(self, kin, checker, protocol):
+    def __init__(self, kin, checker, protocol, ramp_time=None, planning_limits=""):
         sys.path.insert(0, os.path.join(REPO, "vr_driver", "test", "driver"))
         from _world import World
-        self.world = World(kin, {"workspace": REACH_BOX, "scene": CELL}, protocol=protocol)
+        params = {"workspace": REACH_BOX, "scene": CELL}
+        if planning_limits:
+            params["planning_limits"] = planning_limits
+        self.world = World(kin, params, protocol=protocol, ramp_time=ramp_time)
         self.world.ready()
         self.kin, self.checker = kin, checker
         self.samples = self.collisions = 0
@@ -147,6 +156,21 @@ class Executor:
         return True, ""
 
 
+def matched_limits(kin, ramp_time, directory):
+    """(the path of a joint_limits.yaml in ``directory`` whose accelerations are each joint's speed
+    limit / ``ramp_time``, the planning model with those limits): an arm with that ramp and the
+    planner matched to it, written by the commissioning's own writer."""
+    from vr_driver.commission.report import write_joint_limits
+    from vr_driver.driver.commissioned import planning_kinematics
+    from vr_driver.params import DriverParams
+    path = os.path.join(directory, "joint_limits.yaml")
+    names = [n.split("/")[-1] for n in kin.joint_names]
+    write_joint_limits(path, {n: {"max_velocity": v, "max_acceleration": v / ramp_time}
+                              for n, v in zip(names, kin.limits.velocity)},
+                       "bench/planning.py --ramp-time %g" % ramp_time, ())
+    return path, planning_kinematics(DriverParams.from_dict({"port": "/dev/null", "planning_limits": path}), kin)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--n", type=int, default=100, help="number of queries (default 100)")
@@ -156,6 +180,9 @@ def main() -> int:
     parser.add_argument("--velocity-scaling", type=float, default=1.0,
                         help="fraction of the joint speed and acceleration limits, (0, 1] (default 1: the full "
                              "speed; the plan action's default is 0.1)")
+    parser.add_argument("--ramp-time", type=float, default=None, metavar="S",
+                        help="the simulated arm reaches full speed in S s (its ramp_time; default: the model's "
+                             "accelerations) and the planner's accelerations are matched to it (speed / S)")
     parser.add_argument("--no-execute", action="store_true", help="plan and check only, no driver rig")
     parser.add_argument("--protocol", default="v2", help="the rig's protocol (default v2: joint targets)")
     parser.add_argument("--driver", action="store_true",
@@ -165,6 +192,8 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
     args = parser.parse_args()
     n = 10 if args.quick else args.n
+    if args.ramp_time is not None and not (math.isfinite(args.ramp_time) and 0.0 < args.ramp_time <= 5.0):
+        parser.error("--ramp-time must be in (0, 5] s, got %r" % args.ramp_time)
     started = time.perf_counter()
     try:
         from vr_driver.kinematics.collision import CollisionChecker
@@ -175,14 +204,18 @@ def main() -> int:
         exact = CollisionChecker.default(scene=load_scene(CELL), padding=0.0)
         from vr_driver.kinematics.solver import Kinematics
         kin = Kinematics.default()
-        planner = Planner(kin, checker, planner=args.planner, time_budget=args.budget, seed=args.seed,
+        limits_file, planning_kin = "", kin
+        if args.ramp_time is not None:
+            tmp = tempfile.TemporaryDirectory(prefix="planning_bench_")
+            limits_file, planning_kin = matched_limits(kin, args.ramp_time, tmp.name)
+        planner = Planner(planning_kin, checker, planner=args.planner, time_budget=args.budget, seed=args.seed,
                           velocity_scaling=args.velocity_scaling, acceleration_scaling=args.velocity_scaling)
     except MissingDependency as exc:
         print("planning benchmark skipped: %s" % exc)
         return 0
     if args.driver and args.no_execute:
         parser.error("--driver plans on the rig's driver: it cannot go with --no-execute")
-    executor = None if args.no_execute else Executor(kin, exact, args.protocol)
+    executor = None if args.no_execute else Executor(kin, exact, args.protocol, args.ramp_time, limits_file)
     driver_planning = None
     if args.driver:
         from vr_driver.driver.planning import PlanActionCore, PlanGoal
@@ -193,6 +226,8 @@ def main() -> int:
           % (n, args.seed, os.path.relpath(CELL, REPO), ", ".join(checker.scene.names()), padding * 1e3, args.planner,
              args.budget, args.velocity_scaling, planner.clearance * 1e3, planner.max_sweep * 1e3, planner.dt,
              "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol)
+          + ("" if args.ramp_time is None else ", the arm's ramp %g s and the planner's accelerations matched "
+             "(speed / %g s)" % (args.ramp_time, args.ramp_time))
           + ("; planned by the plan action's core (driver.planning)" if driver_planning is not None else ""))
     start = executor.joints if executor is not None else tuple(kin.named_states["home"])
     total, solved, ompl_times, durations, failures, direct = [], [], [], [], [], 0
