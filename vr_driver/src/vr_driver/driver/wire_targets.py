@@ -49,6 +49,7 @@ FULL_SEARCH_BAND = math.radians(0.5)
 #: one within GOOD_ENOUGH; the rest of the grid only when none is (very near joint_5 = 0 the model is
 #: poor and a split off by degrees would be refused as another configuration)
 SEARCH_LIMIT = 96
+#: [rad] ... and the error it then takes
 GOOD_ENOUGH = math.radians(0.1)
 #: the index of joint_5 (the wrist's bend) in the joint vector
 WRIST_BEND = 4
@@ -92,13 +93,16 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
     sizes = (mm, mm, mm, deg, deg, deg)
     count = [0]
 
+    def pose_at(steps: Tuple[int, ...]) -> ControllerPose:
+        """The wire pose ``steps`` (X Y Z Rx Ry Rz, in resolution steps) off the plain rounding."""
+        if not any(steps):
+            return base
+        return protocol.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
+
     def attempt(steps: Tuple[int, ...], bound: float = math.inf) -> Optional[WireTarget]:
         """The pose ``steps`` off the plain rounding, solved from every seed -- from the first only
         when that is already farther than ``bound`` off the plan (it cannot be the better one)."""
-        if any(steps):
-            pose = protocol.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
-        else:
-            pose = base
+        pose = pose_at(steps)
         worst: Optional[Tuple[float, Tuple[float, ...]]] = None
         for s in seeds:
             count[0] += 1
@@ -134,9 +138,8 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
     if best.error > fine and abs(planned[WRIST_BEND]) < full_band:
         def solve(steps: Tuple[int, ...]) -> Optional[Tuple[float, ...]]:
             count[0] += 1
-            pose = protocol.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
             try:
-                return tuple(kin.ik_pose(pose, seed=seed))
+                return tuple(kin.ik_pose(pose_at(steps), seed=seed))
             except VrDriverError:
                 return None
         at_base = solve((0,) * 6)
