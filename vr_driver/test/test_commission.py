@@ -84,6 +84,14 @@ def run_commission(tmp_path, vc_options: Dict[str, Any], args: List[str], timeou
     return doc, proc.stdout, vc
 
 
+def lookahead_words(text: str) -> str:
+    """The tool's look-ahead step from its output, for a failing verdict's message (one fresh clone in
+    ten found a look-ahead of 0 for the virtual G2's 1, beside the computing tests: the step's own
+    figures say why)."""
+    start = text.find("lookahead")
+    return text[max(0, start - 200):start + 2500] if start >= 0 else text[-3000:]
+
+
 def limits_of(doc: Dict[str, Any]) -> Dict[str, Any]:
     """The planner's limits the YAML names (planning_limits: the joint_limits.yaml beside it)."""
     with open(doc["planning_limits"], encoding="utf-8") as fh:
@@ -105,7 +113,7 @@ def model_accelerations(kin) -> Tuple[float, ...]:
 def test_default_g2_every_step_as_assumed(tmp_path, kin):
     doc, text, vc = run_commission(tmp_path, {}, [])
     assert doc["protocol"] == "v3" and doc["byte_order"] == "little"
-    assert doc["controller"]["interpreter_lookahead"] == 1
+    assert doc["controller"]["interpreter_lookahead"] == 1, lookahead_words(text)
     assert abs(doc["controller"]["loop_period"] - LOOP) < 0.001
     assert doc["controller"]["loop_blocks_during_move"] is False
     assert abs(doc["controller"]["speed_scale"] - 1.0) < 0.02
@@ -149,7 +157,7 @@ def test_default_g2_every_step_as_assumed(tmp_path, kin):
 
 def test_no_lookahead(tmp_path):
     doc, text, _ = run_commission(tmp_path, {"interpreter_lookahead": 0}, skip("loop", "speed", "configuration", "ramps"))
-    assert doc["controller"]["interpreter_lookahead"] == 0
+    assert doc["controller"]["interpreter_lookahead"] == 0, lookahead_words(text)
     assert doc["stream_smooth"] == 0                       # the driver times every point as a stop
     row = finding(doc, "interpreter look-ahead")
     assert row.get("ok") is False and "string of stops" in row["consequence"]
@@ -159,7 +167,7 @@ def test_lookahead_2_and_a_slower_speed_unit(tmp_path):
     doc, text, _ = run_commission(tmp_path, {"interpreter_lookahead": 2, "speed_scale": 0.6},
                                   skip("loop", "configuration", "ramps"))
     # 1 and 2 look alike on the bus (the program's ring feeds the interpreter): ">= 1", written as 1
-    assert doc["controller"]["interpreter_lookahead"] == 1
+    assert doc["controller"]["interpreter_lookahead"] == 1, lookahead_words(text)
     assert ">= 1" in finding(doc, "interpreter look-ahead")["measured"]
     assert "stream_smooth" not in doc
     assert abs(doc["controller"]["speed_scale"] - 0.6) <= 0.02 * 0.6
