@@ -23,7 +23,7 @@ rounding 14.5 deg off, the chosen pose 0.44 deg off, most under 0.02 deg. The pr
 against all 729 (40 random wrists within 0.5 deg of the singularity): the best of the grid among
 the first 40 predicted in 37, among the first 80 in 38; the others within 0.06 deg of joint_5 = 0,
 where the model is poor (one step there swings joint_4 - joint_6 by degrees). A target 0.2-0.45 deg
-from the singularity now costs ~130 IK solutions (37 ms) instead of ~750 (0.27 s), which a goal
+from the singularity now costs ~115 IK solutions (38 ms) instead of ~750 (0.27 s), which a goal
 ending near it spent before its arm moved.
 
 Pure computation on the driver's kinematics model; used by the stream preparation of the Cartesian
@@ -92,6 +92,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
     mm, deg = protocol.pose_resolution
     sizes = (mm, mm, mm, deg, deg, deg)
     count = [0]
+    known: dict = {}
 
     def pose_at(steps: Tuple[int, ...]) -> ControllerPose:
         """The wire pose ``steps`` (X Y Z Rx Ry Rz, in resolution steps) off the plain rounding."""
@@ -99,15 +100,29 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
             return base
         return protocol.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
 
+    def solution(steps: Tuple[int, ...], s: Tuple[float, ...]) -> Tuple[float, ...]:
+        """The controller's solution of the pose ``steps`` off the plain rounding, seeded with ``s``
+        (each computed once: the coordinate search, the model and the grid meet the same poses);
+        raises the kinematics' VrDriverError when it has none."""
+        key = (steps, s)
+        if key not in known:
+            count[0] += 1
+            try:
+                known[key] = tuple(kin.ik_pose(pose_at(steps), seed=s))
+            except VrDriverError as exc:
+                known[key] = exc
+        out = known[key]
+        if isinstance(out, VrDriverError):
+            raise out
+        return out
+
     def attempt(steps: Tuple[int, ...], bound: float = math.inf) -> Optional[WireTarget]:
         """The pose ``steps`` off the plain rounding, solved from every seed -- from the first only
         when that is already farther than ``bound`` off the plan (it cannot be the better one)."""
-        pose = pose_at(steps)
         worst: Optional[Tuple[float, Tuple[float, ...]]] = None
         for s in seeds:
-            count[0] += 1
             try:
-                q = tuple(kin.ik_pose(pose, seed=s))
+                q = solution(steps, s)
             except VrDriverError:
                 if not any(steps):
                     raise
@@ -118,7 +133,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
             if worst[0] > bound:
                 break
         assert worst is not None
-        return WireTarget(pose, worst[1], worst[0], steps, 0)
+        return WireTarget(pose_at(steps), worst[1], worst[0], steps, 0)
 
     try:
         best = attempt((0,) * 6)
@@ -137,9 +152,8 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
         best = _coordinate_search(best, attempt, fine)
     if best.error > fine and abs(planned[WRIST_BEND]) < full_band:
         def solve(steps: Tuple[int, ...]) -> Optional[Tuple[float, ...]]:
-            count[0] += 1
             try:
-                return tuple(kin.ik_pose(pose_at(steps), seed=seed))
+                return solution(steps, seed)
             except VrDriverError:
                 return None
         at_base = solve((0,) * 6)
