@@ -263,7 +263,11 @@ class JointCommandTest(unittest.TestCase):
         cycle = 1.0 / self.bus_rate
         stamps = [s for s, _q in during]
         cycle_seen = (stamps[-1] - stamps[0]) / (len(stamps) - 1)
-        stall = max(0.0, max(b - a for a, b in zip(stamps, stamps[1:])) - 2 * cycle)
+
+        def standing_still(times):
+            """The longest gap between records beyond two cycles [s] (0: none)."""
+            return max([0.0] + [b - a - 2 * cycle for a, b in zip(times, times[1:])])
+        stall = standing_still(stamps)
         # the same for this test's own commands: one late by a sleep that overran leaves the arm a
         # step behind the sine until the next
         late = max(0.0, max(b[0] - a[0] for a, b in zip(sent, sent[1:])) - period)
@@ -280,7 +284,7 @@ class JointCommandTest(unittest.TestCase):
         age_spread = max(0.0, age_max - age_min)
         # the end: the bus standing still from the last command on (beyond two cycles between records)
         end = [s for s, _q in self.js.since(t_last - 0.1) if s <= nominal + 1.0]
-        end_stall = max([0.0] + [b - a - 2 * cycle for a, b in zip(end, end[1:])])
+        end_stall = standing_still(end)
         settle = nominal + end_stall + late + age_spread
         after = [q for s, q in self.js.since(settle)]
         last = sent[-1][1]
