@@ -106,6 +106,28 @@ def test_one_late_record_is_not_a_stop():
     assert analysis.min_speed_near(stop, [q for t, q in stop if t == pytest.approx(0.2)], 0.03)[0] < STOP_SPEED * v
 
 
+def test_a_record_dated_early_at_the_end_is_not_the_cruise():
+    """The look-ahead stream of a fresh-clone run beside the soak (its cycle log replayed): joint_1
+    blended through four points at a steady 60 deg/s, then the tool's bus stalled 60 ms and the
+    stream's last record (the arm at its end) came 2.4 ms after the one before, 1.4 deg further: 583
+    deg/s. The end's median of two kept that, it set the "cruise", and every point read as a stop
+    ("stops at 4 of 4 inner points at smooth 5: look-ahead 0" for a G2 that blends). Neither the
+    steady speeds nor the cruise may take it, at either end of the samples."""
+    v, points = 60.0, [8.0, 16.0, 24.0, 32.0]
+    blend = [(0.01 * i, v * 0.01 * i) for i in range(65)]          # 0 .. 38.4 deg
+    blend.append((blend[-1][0] + 0.0024, 40.0))                   # the last record, dated 2.4 ms later
+    speeds = [s for _, s in analysis.steady_speeds(blend)]
+    assert max(speeds) < 1.1 * v, max(speeds)
+    assert analysis.top_speed(speeds) == pytest.approx(v, rel=0.02)
+    lows = analysis.min_speed_near(blend, points, 0.047)
+    assert all(low > STOP_SPEED * v for low in lows), lows
+    first = [(0.0, 0.0), (0.0024, 1.4)] + [(0.0024 + 0.01 * i, 1.4 + v * 0.01 * i) for i in range(1, 60)]
+    assert max(s for _, s in analysis.steady_speeds(first)) < 1.1 * v     # the same at the start
+    # two outliers together (a pair of records, one dated early) do not set the cruise either
+    assert analysis.top_speed([v] * 40 + [583.0, 560.0]) == pytest.approx(v)
+    assert analysis.top_speed([0.0, 0.0]) == 0.0 and analysis.top_speed([]) == 0.0
+
+
 def test_min_speed_near_points():
     stop = [(0.01 * i, min(i, 20) * 0.01 + max(0, i - 25) * 0.01) for i in range(50)]   # rests at 0.2 for 5 samples
     assert analysis.min_speed_near(stop, [0.2], 0.03)[0] == 0.0

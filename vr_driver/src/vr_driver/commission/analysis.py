@@ -154,12 +154,18 @@ def moved_interval(samples: Samples, eps: float) -> Optional[Tuple[int, int]]:
 
 
 def top_speed(speeds: Sequence[float]) -> float:
-    """The speed a move cruises at: the median of the speeds within 20 % of the fastest (a single
-    fast outlier, a sample's timing error, does not set it; the ramps and the rest do not count)."""
+    """The speed a move cruises at: the median of the speeds within 20 % of the third fastest (one or
+    two fast outliers -- a sample's timing error, a record dated too early after a bus stall -- do not
+    set it: a fresh-clone run's look-ahead stream, steady at 60 deg/s, ended on one such record at
+    583 deg/s, which set the "cruise" and made every point a stop; the ramps and the rest do not
+    count)."""
     mags = sorted(abs(v) for v in speeds)
-    if not mags or mags[-1] <= 0.0:
+    if not mags:
         return 0.0
-    top = [m for m in mags if m >= 0.8 * mags[-1]]
+    ref = mags[-min(3, len(mags))]
+    if ref <= 0.0:
+        return 0.0
+    top = [m for m in mags if 0.8 * ref <= m <= ref / 0.8]
     return top[len(top) // 2]
 
 
@@ -348,16 +354,20 @@ def passing_times(samples: Samples, points: Sequence[float]) -> List[Optional[fl
 
 
 def steady_speeds(samples: Samples) -> List[Tuple[float, float]]:
-    """(time, speed) between consecutive samples, each the median of it and its two neighbours: a
-    sample's speed carries the timing error of both its dates, and one pair dated too far apart
-    (a record late on a loaded machine) reads as a dip -- a blend through a point taken for a
-    stop at every point (a fresh-clone test run: joint_1 steady at 36 deg/s through four blended
-    points, judged "stops at 4 of 4"). A real stop's dip lasts several samples and stays."""
+    """(time, speed) between consecutive samples, each the median of it and its two neighbours (at
+    either end: of the three nearest): a sample's speed carries the timing error of both its dates,
+    and one pair dated too far apart (a record late on a loaded machine) reads as a dip -- a blend
+    through a point taken for a stop at every point (a fresh-clone test run: joint_1 steady at 36
+    deg/s through four blended points, judged "stops at 4 of 4") -- or, the other way, as a peak (the
+    last record of a stream after a bus stall: 583 deg/s for 60; the median of the last two kept it).
+    A real stop's dip lasts several samples and stays."""
     raw = [((t1 + t2) / 2.0, abs(q2 - q1) / (t2 - t1)) for (t1, q1), (t2, q2) in zip(samples, samples[1:])
            if t2 > t1]
     out = []
+    n = len(raw)
     for i, (t, v) in enumerate(raw):
-        near = sorted(x for _, x in raw[max(0, i - 1):i + 2])
+        lo = min(max(0, i - 1), max(0, n - 3))
+        near = sorted(x for _, x in raw[lo:lo + 3])
         out.append((t, near[len(near) // 2]))
     return out
 
