@@ -152,13 +152,19 @@ class DriverV3Test(DriverTestBase):
         # beyond the one segment the arm may have been committed to blend into
         stopped = [e for e in entries if e["outcome"] == "stopped"]
         if not stopped:
-            # the arm stood at a target waiting for the next when the cancel came (a loaded machine's
-            # bus let the look-ahead run dry: "the arm stopped at point k ... waiting"): there was
-            # nothing to stop -- then nothing ran past the cancel and nothing was taken after it (a
-            # target that was running would end after it)
-            self.assertFalse([e for e in entries if e["time"] > t_cancel or e["taken_time"] > t_cancel],
-                             "a target ran after the cancel without a stop: %s"
+            # nothing was queued beyond the target the arm ran to when the cancel came (a loaded
+            # machine's bus let the look-ahead run dry), so nothing was dropped: the arm stood at a
+            # target waiting for the next, or it braked on its one running segment -- a brake that
+            # ends on that segment's point is logged "executed" (a fresh clone beside CPU hogs: #52
+            # started 31 ms before the cancel, at rest on its point 0.21 s after). Then nothing was
+            # taken or started after the cancel, and at most that one target ended after it
+            self.assertFalse([e for e in entries if e["taken_time"] > t_cancel
+                              or (e["start_time"] is not None and e["start_time"] > t_cancel)],
+                             "a target taken or started after the cancel without a stop: %s"
                              % [(e["seq"], e["outcome"], round(e["time"] - t_cancel, 3)) for e in entries])
+            self.assertLessEqual(len([e for e in entries if e["time"] > t_cancel]), 1,
+                                 "targets ran after the cancel without a stop: %s"
+                                 % [(e["seq"], e["outcome"], round(e["time"] - t_cancel, 3)) for e in entries])
             return
         t_stop = min(e["time"] for e in stopped)
         self.assertGreaterEqual(t_stop, t_cancel)
