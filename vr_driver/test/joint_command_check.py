@@ -16,7 +16,9 @@ stays put.
 """
 from __future__ import annotations
 
+import json
 import math
+import os
 import re
 import threading
 import time
@@ -306,6 +308,18 @@ class JointCommandTest(unittest.TestCase):
         self.assertLessEqual(spread, 0.0005 * DEG, "still moving %.3f s after the last command"
                              % (settle - t_last))
         allowed = 1.0 * DEG + speed * (stall + late + age_spread)
+        if worst > allowed:
+            # the run's samples for a look afterwards (a fresh clone once measured a lag of 0.218 s,
+            # 11.7 deg off, with no stall, no late command and no wait reported: cause not found)
+            dump = os.path.join(os.environ.get("ROS_HOME", "/tmp"), "joint_command_sine_failure.json")
+            try:
+                with open(dump, "w") as fh:
+                    json.dump({"t0": t0, "t_last": t_last, "lag": lag, "bus_rate": self.bus_rate, "sent": sent,
+                               "joint_states": self.js.since(t0 - 0.5),
+                               "rosout": self.rosout.matching("", since=t0 - 0.5)}, fh, default=str)
+                print("joint_command: the run's commands and joint_states are in %s" % dump)
+            except (OSError, TypeError, ValueError) as exc:        # never hide the verdict below
+                print("joint_command: could not keep the run's samples: %s" % exc)
         self.assertLessEqual(worst, allowed, "%.3f deg off the sine shifted by %.3f s (allowed %.3f deg: 1 deg + "
                              "%.3f s of the bus standing still + a command %.3f s late + %.3f s spread of the "
                              "commands' age on arrival)" % (worst / DEG, lag, allowed / DEG, stall, late, age_spread))
