@@ -43,6 +43,7 @@ class ExtendJob:
     job: MoveJob                    # a live job (a joint_command stream)
     point: Any                      # the validated StreamPoint of the new command
     anchored: Any                   # the same point as the successor of ``anchor`` (see extend)
+    anchor: Optional[Tuple[float, ...]]   # the joints ``anchored`` was validated from
     stamp: float                    # clock time the command was accepted
 
 

@@ -302,10 +302,12 @@ class JobControl:
         self.sequencer.add([job], SubmitMode.APPEND)
         self.wake()
 
-    def extend_live(self, job: MoveJob, point: StreamPoint, anchored: StreamPoint, now: float) -> None:
-        """Add ``point`` to the live stream ``job`` (``anchored``: the same point, its speed from
-        the last target on the wire); see :meth:`StreamSequencer.extend`."""
-        self.sequencer.extend(job, point, anchored, now)      # type: ignore[attr-defined]
+    def extend_live(self, job: MoveJob, point: StreamPoint, anchored: StreamPoint,
+                    anchor: Optional[Tuple[float, ...]], now: float) -> None:
+        """Add ``point`` to the live stream ``job`` (``anchored``: the same point, validated and
+        its speed worked out from ``anchor``, the last target on the wire as the view showed it);
+        see :meth:`SequencerBase.extend`."""
+        self.sequencer.extend(job, point, anchored, anchor, now)      # type: ignore[attr-defined]
 
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:
         """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when

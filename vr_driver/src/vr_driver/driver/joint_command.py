@@ -222,7 +222,7 @@ class JointCommander:
             t = now - self._created + step_time          # its planned arrival from the stream's start
             point = StreamPoint(q, speed, smooth, t, len(job.points), pose=pose)
             anchored = StreamPoint(q, anchored_speed, smooth, t, len(job.points), pose=pose)
-            self.jobs.extend_live(job, point, anchored, now)
+            self.jobs.extend_live(job, point, anchored, anchor, now)
         else:
             point = StreamPoint(q, speed, smooth, step_time, 1, pose=pose)
             job = MoveJob(None, None, points=(point,), start=prev, live=True, stamp=now)

@@ -160,7 +160,8 @@ class SequencerHooks:
         base then ends every job with the reason)."""
         raise NotImplementedError
 
-    def take_point(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
+    def take_point(self, job: MoveJob, point: Any, anchored: Any, anchor: Optional[Tuple[float, ...]],
+                   stamp: float) -> None:
         """A new command of a live job (:meth:`~SequencerBase.extend`). Only a streaming protocol's sequencer
         takes one (the driver core refuses joint commands on the others)."""
         raise NotImplementedError("this protocol does not stream joint commands")
@@ -217,12 +218,14 @@ class SequencerBase(SequencerHooks):
     def replanned(self, job: MoveJob, preview: Optional[Any], error: str = "") -> None:
         self._inbox.post(Replanned(job, preview, error))
 
-    def extend(self, job: MoveJob, point: Any, anchored: Any, stamp: float) -> None:
+    def extend(self, job: MoveJob, point: Any, anchored: Any, anchor: Optional[Tuple[float, ...]],
+               stamp: float) -> None:
         """A new command of the live job ``job`` (a joint_command stream): ``point`` follows the
-        job's last point; ``anchored`` is the same target as the successor of the view's
-        ``live_anchor`` (the last point put on the wire when it was validated), used where the
-        new point replaces one not put on the wire yet (streaming protocols only)."""
-        self._inbox.post(ExtendJob(job, point, anchored, stamp))
+        job's last point; ``anchored`` is the same target as the successor of ``anchor`` (the
+        view's ``live_anchor`` when it was validated: the last point put on the wire then), used
+        where the new point replaces one not put on the wire yet -- and only while ``anchor`` is
+        still the last point on the wire (streaming protocols only)."""
+        self._inbox.post(ExtendJob(job, point, anchored, anchor, stamp))
 
     # ------------------------------------------------------------------ bus thread
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
@@ -237,8 +240,9 @@ class SequencerBase(SequencerHooks):
         self.follow(now, fb, sample)
         self._settling.check(now, fb, self.resting)
         self.advance(now, fb, sample, joints)
-        self._publish()
-        return self.record(now)
+        command = self.record(now)
+        self._publish()                 # after the record: the view's live_anchor is what it put on the wire
+        return command
 
     def _begin_step(self, now: float, sample: LinkSample) -> Optional[Any]:
         """The start of every step (v1 and v2): take the posted requests; on a lost link or a new
@@ -271,7 +275,7 @@ class SequencerBase(SequencerHooks):
         if isinstance(request, AddJobs):
             self._take_add(request, now)
         elif isinstance(request, ExtendJob):
-            self.take_point(request.job, request.point, request.anchored, request.stamp)
+            self.take_point(request.job, request.point, request.anchored, request.anchor, request.stamp)
         elif isinstance(request, CancelJobs):
             if request.job is None:
                 self._stop_everything(request.reason, now)

@@ -33,9 +33,10 @@ of the stream is re-sent: the job fails with the reason.
 **A live stream** (``MoveJob.live``: the ``joint_command`` topic, :meth:`DriverCore.joint_command`):
 the same job, whose points grow while commands come (:meth:`StreamSequencer.take_point`, posted
 through :meth:`~vr_driver.driver.sequencer.SequencerBase.extend`). A new point replaces the job's
-last point when that one was not put on the wire yet (at most one point is ever waiting: the newest
-command wins; a point on the wire is never changed or recalled -- the controller may have taken it),
-else it is appended with the next sequence number. Every point passes through (smooth level
+last point when that one was not put on the wire yet and the point the replacement was checked from
+is still the last on the wire (at most one point is ever waiting: the newest command wins; a point
+on the wire is never changed or recalled -- the controller may have taken it); else it is appended
+with the next sequence number. Every point passes through (smooth level
 ``stream_smooth``): the controller blends into the next one only when it already has it, and
 otherwise stops exactly at the point (state WAITING) -- it never runs past the last command. When no
 command came for ``joint_command_timeout`` the job is closed: it takes no more points and ends
@@ -349,10 +350,15 @@ class StreamSequencer(SequencerBase):
             return None
         return job.points[self._high].joints
 
-    def take_point(self, job: MoveJob, point: StreamPoint, anchored: StreamPoint, stamp: float) -> None:
+    def take_point(self, job: MoveJob, point: StreamPoint, anchored: StreamPoint,
+                   anchor: Optional[Tuple[float, ...]], stamp: float) -> None:
         """A new command of the live job ``job`` (module docstring): it replaces the job's last point
-        when that one is not on the wire yet (``anchored``: validated from the last point that is),
-        else it is appended (``point``: validated from the last accepted command)."""
+        when that one is not on the wire yet and ``anchor`` (what ``anchored`` was validated from
+        and timed from) is still the last point that is; else it is appended (``point``: validated
+        from the last accepted command, which is the job's last point). The commander reads the
+        view before this step: when points went on the wire since (two commands in one step, a
+        bus stall), the anchor is an older point, and a replacement would run a segment nobody
+        checked at a speed worked out for another (at a turning point, the wire's slowest)."""
         if job.done or job.closed:
             log.warning("job %d: a joint command arrived as its stream ended (%s); dropped -- the next "
                         "one starts a new stream", job.id, job.phase.value)
@@ -360,7 +366,8 @@ class StreamSequencer(SequencerBase):
         job.last_command = stamp
         started = job is self._job and bool(self._base)
         high = self._high if started else -1
-        if len(job.points) - 1 > high:
+        on_wire = job.points[high].joints if high >= 0 else job.start
+        if len(job.points) - 1 > high and anchor is not None and tuple(anchor) == tuple(on_wire):
             job.points = job.points[:-1] + (anchored,)
             job.replaced += 1
         else:
