@@ -42,13 +42,30 @@ class Loaded:
 
 
 _LOADED = {}
+_COMMANDS = {}
+
+
+def _loader():
+    """roslaunch's XmlLoader with its ``command=`` parameters run once per command line in this
+    process (robot_description's xacro: about 0.5 s of CPU each, the same command line for most of
+    the launch files and arguments here); a command that fails raises, is not kept and runs again."""
+    import roslaunch.xmlloader
+
+    class RememberingLoader(roslaunch.xmlloader.XmlLoader):
+        def param_value(self, verbose, name, ptype, value, textfile, binfile, command):
+            if command is None:
+                return super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+            key = (ptype, command)
+            if key not in _COMMANDS:
+                _COMMANDS[key] = super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+            return _COMMANDS[key]
+    return RememberingLoader()
 
 
 def dump_params(path, args=()):
     """``path`` loaded with the launch arguments ``args`` (name:=value) by roslaunch's XmlLoader, as
     `roslaunch --dump-params path args` does (roslaunch.param_dump), once per file content and args."""
     import roslaunch.config
-    import roslaunch.xmlloader
     with open(path, "rb") as fh:
         key = (os.path.abspath(path), fh.read(), tuple(args))
     if key not in _LOADED:
@@ -57,7 +74,7 @@ def dump_params(path, args=()):
         ok = True
         with redirect_stderr(err), redirect_stdout(out):
             try:
-                roslaunch.xmlloader.XmlLoader().load(path, config, argv=["roslaunch"] + list(args), verbose=False)
+                _loader().load(path, config, argv=["roslaunch"] + list(args), verbose=False)
             except Exception as exc:            # what --dump-params reports as "Unable to load file"
                 ok = False
                 err.write("Unable to load file %s: %s" % (path, exc))
