@@ -48,3 +48,40 @@ def test_own_link(tmp_path, monkeypatch):
     assert own_link("auto:io_island", "line") == str(tmp_path / "log" / "vr006l_virtual_io_island_11399")
     with pytest.raises(SimError, match="~pty_link must be a path"):
         own_link(5, "line")
+
+
+RAISE_ALL = r'''
+import os, sys, threading
+from vr_driver.bus.process import set_process_priority
+started = threading.Event(); release = threading.Event()
+def idle():
+    started.set(); release.wait()
+before = threading.Thread(target=idle, daemon=True)        # as rospy's threads, started first
+before.start(); started.wait()
+words = set_process_priority(int(sys.argv[1]))
+tids = [int(t) for t in os.listdir("/proc/self/task")]
+policies = sorted({(os.sched_getscheduler(t), os.sched_getparam(t).sched_priority) for t in tids})
+print(words); print(len(tids), policies)
+release.set()
+'''
+
+
+def test_virtual_hardware_threads_started_before_are_raised_too():
+    """A virtual device's node asks for SCHED_FIFO after rospy started its threads: every thread of
+    the process gets it (one left at normal scheduling, holding the interpreter's lock under a CPU
+    hog, held the device's real-time threads back); 0 changes nothing. In a process of its own."""
+    import subprocess
+    import sys
+
+    def run(priority):
+        res = subprocess.run([sys.executable, "-c", RAISE_ALL, str(priority)], capture_output=True, text=True,
+                             timeout=60, env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
+        assert res.returncode == 0, res.stderr
+        return res.stdout.splitlines()
+    words, threads = run(0)
+    assert words == "normal scheduling (rt_priority 0)" and threads.endswith("[(%d, 0)]" % os.SCHED_OTHER), threads
+    words, threads = run(3)
+    if not words.startswith("SCHED_FIFO"):
+        pytest.skip("real-time priority not granted here: " + words)
+    assert words == "SCHED_FIFO 3", words
+    assert threads.startswith("2 ") and threads.endswith("[(%d, 3)]" % os.SCHED_FIFO), threads

@@ -114,6 +114,33 @@ def set_priority(priority: int) -> str:
     return "SCHED_FIFO %d" % priority
 
 
+def set_process_priority(priority: int, tasks: str = "/proc/self/task") -> str:
+    """:func:`set_priority` for the calling thread, then the same policy for every other thread the
+    process has already (on Linux the policy is a thread's: those started before -- rospy's, at
+    init_node -- keep normal scheduling, and one of them holding the interpreter's lock while a
+    CPU hog runs holds the real-time threads back with it: a virtual G2 at SCHED_FIFO 30 whose
+    loop then ran late let the arm stop at a point whose next target was already in its card).
+    Threads started later inherit the policy of the thread that starts them. Returns the words of
+    :func:`set_priority`, with the threads that could not be raised."""
+    words = set_priority(priority)
+    if priority <= 0 or not words.startswith("SCHED_FIFO"):
+        return words
+    me = threading.get_native_id()
+    failed = 0
+    try:
+        tids = [int(t) for t in os.listdir(tasks) if t.isdigit()]
+    except OSError:
+        return words
+    for tid in tids:
+        if tid == me:
+            continue
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
+        except (PermissionError, OSError):
+            failed += 1                     # a thread that ended meanwhile, or refused
+    return words + ("" if not failed else " (%d of its other threads not raised)" % failed)
+
+
 def normal_scheduling() -> None:
     """The calling thread back at normal scheduling (SCHED_OTHER) -- on Linux the policy is a
     thread's, and a thread inherits the one of the thread that starts it; leaving SCHED_FIFO needs

@@ -44,15 +44,16 @@ VIRTUAL_RT_PRIORITY = 0
 
 def virtual_hardware_priority(name: str) -> str:
     """Ask for SCHED_FIFO ``~rt_priority`` (default VIRTUAL_RT_PRIORITY: 0, normal) for this node's
-    calling thread -- call it before the device's threads start: they inherit it -- and log how it
-    is scheduled, once. Returns that, in words."""
-    from ..bus.process import set_priority
+    threads -- the calling one and those rospy started at init_node
+    (:func:`~vr_driver.bus.process.set_process_priority`); call it before the device's threads
+    start: they inherit it -- and log how it is scheduled, once. Returns that, in words."""
+    from ..bus.process import set_process_priority
     try:
         priority = int(rospy.get_param("~rt_priority", VIRTUAL_RT_PRIORITY))
     except (TypeError, ValueError):
         rospy.logwarn("%s: ~rt_priority must be an integer 0..99: normal scheduling", name)
         priority = 0
-    words = set_priority(max(0, min(99, priority)))
+    words = set_process_priority(max(0, min(99, priority)))
     rospy.loginfo("%s: %s (virtual hardware: ~rt_priority)", name, words)
     return words
 
