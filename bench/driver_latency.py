@@ -489,6 +489,9 @@ class Measure:
                 raise Failure("the driver was not ready within %.0f s" % READY_TIMEOUT)
         while not self.client.wait_for_server(rospy.Duration(0.5)):
             alive()
+        while self.joint_command.get_num_connections() == 0:    # the node subscribes it last
+            alive()
+            time.sleep(0.05)
         while True:
             try:
                 rospy.wait_for_service("/virtual_controller/set_estop", 0.5)

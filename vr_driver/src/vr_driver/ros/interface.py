@@ -118,10 +118,10 @@ class InterfaceNode:
         self.trajectory_server.on_run = self.industrial.follow
         # collision-aware planning (ros/plan_server.py): advertised in start() when OMPL etc. are there
         self.plan_server = PlanServer(self.core, params, "joint_trajectory_action")
-        self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
-                                         queue_size=1)
-        # joint targets streamed on the fly (ros/joint_command.py)
-        self.joint_command = JointCommandSubscriber(self.core, self.diag)
+        # joint_path_command and joint_command (ros/joint_command.py: joint targets streamed on the
+        # fly) are subscribed in start(), with the other ways in for motion, once the rest is up
+        self.path_sub: Optional[rospy.Subscriber] = None
+        self.joint_command: Optional[JointCommandSubscriber] = None
         # the collision scene: ~scene/add, remove, list, load, ~scene_markers (ros/scene_server.py)
         self.scene_server = SceneServer(self.core, params, self.diag)
         self._last_link = None
@@ -130,21 +130,31 @@ class InterfaceNode:
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> None:
+        """The bus, robot_status and /diagnostics first; then the plan action; the ways in for motion
+        last (move_to_pose, joint_trajectory_action, joint_path_command, joint_command), so that no
+        motion runs while the node still starts: the plan action's start (its worker process, its
+        own kinematics, an action client and server) took the interpreter for a few hundred ms on a
+        loaded machine, and a joint_command stream that began before it lost its commands then
+        (refused as "busy", its own stream taken for another) and a trajectory's first targets came
+        late (the arm stopped at its first point)."""
         self.core.add_listener(self._on_status)
         self.core.start()
-        self.server.start()
-        self.trajectory_server.start()
         self.io_server.start()
+        # robot_status must not wait for the plan action (driver.test saw no robot_status for 2 s
+        # after the link was up when the timers were made after it)
         self.timers = [
             rospy.Timer(rospy.Duration(1.0 / self.params.status_rate), self._publish_status),
             # force_update: Updater.update() compares against its own period (and re-reads it from
             # ~diagnostic_period), so a timer of the same period skipped every other call (0.67 Hz)
             rospy.Timer(rospy.Duration(self.params.diagnostics_period), lambda _e: self.diag.force_update()),
         ]
-        # last: it waits for its worker process to be ready (1-2 s, longer on a loaded machine), and
-        # robot_status must not wait with it (driver.test saw no robot_status for 2 s after the link
-        # was up: the timers were made after this wait)
+        # it waits for its worker process to be ready (1-2 s, longer on a loaded machine)
         self.plan_server.start()
+        self.server.start()
+        self.trajectory_server.start()
+        self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
+                                         queue_size=1)
+        self.joint_command = JointCommandSubscriber(self.core, self.diag)
         # a shutdown hook (e.g. rosnode kill) only asks; main() does the real stop
         rospy.on_shutdown(self.core.request_stop)
         sc = self.core.slave_config
