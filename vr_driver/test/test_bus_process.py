@@ -76,6 +76,75 @@ def test_health_without_a_watchdog_has_no_margin():
     assert s.margin is None and not s.late and "watchdog" not in s.describe()
 
 
+# ------------------------------------------------------------------ which record a cycle carried
+def test_a_report_says_which_of_the_drivers_records_its_cycle_carried():
+    """The driver's side (RemoteSlave) and the bus process's loop (BusServer) joined by hand, the
+    messages passed in the order the processes would see them, the DP cycle stubbed to carry the
+    output image: a record set while a cycle runs is not on the wire until the next one carries it;
+    two set between two cycles, only the second ever is; after a reset the image is the idle record
+    and the report says none of the driver's records went out."""
+    from multiprocessing import Pipe
+    from pyprofibus_vendor.dp_master import BusTiming, MasterCounters, MasterSlaveState, SlaveSpec
+    from vr_driver.bus.process import BusProcessMaster, BusServer, BusSettings, RemoteSlave
+
+    ours, theirs = Pipe()
+    spec = SlaveSpec(address=4, ident=0x06C6, cfg=bytes([0x13, 0x23]), input_size=4, output_size=4, watchdog=None)
+    settings = BusSettings(device="test", baud=19200, master_address=2, timing=BusTiming.for_baud(19200),
+                           cycle_rate_hz=20.0, controller=4, idle_record=bytes(4), watchdog=None)
+    server = BusServer(theirs, link=object(), settings=settings)
+    server._handle(("slave", spec))
+    carried = []
+    server.master.cycle = lambda timeout=None: carried.append(bytes(server.master.slave(4).outputs))
+
+    sent = []
+    driver = object.__new__(BusProcessMaster)          # its receiving half only, no process
+    driver.reports, driver.on_state_change, driver.counters = 0, None, MasterCounters()
+    driver.send = sent.append
+    slave = RemoteSlave(driver, spec, 0.0)
+    driver._slaves = {4: slave}
+
+    def deliver():                                     # the bus process takes what the driver sent
+        while sent:
+            server._handle(sent.pop(0))
+
+    def cycle():                                       # one DP cycle and its report, applied
+        assert server._cycle()
+        kind, report, events = ours.recv()
+        assert kind == "r"
+        driver._apply(report, events)
+
+    slave.outputs = b"\x01\x00\x00\x00"
+    assert not slave.outputs_on_wire
+    deliver()
+    cycle()
+    assert carried[-1] == b"\x01\x00\x00\x00" and slave.outputs_on_wire
+    slave.outputs = b"\x02\x00\x00\x00"              # while the cycle runs: it waits for the next
+    cycle()
+    assert carried[-1] == b"\x01\x00\x00\x00" and not slave.outputs_on_wire
+    deliver()
+    cycle()
+    assert carried[-1] == b"\x02\x00\x00\x00" and slave.outputs_on_wire
+    slave.outputs = b"\x03\x00\x00\x00"              # two between two cycles: the first never goes out
+    slave.outputs = b"\x04\x00\x00\x00"
+    assert not slave.outputs_on_wire
+    deliver()
+    cycle()
+    assert carried[-1] == b"\x04\x00\x00\x00" and slave.outputs_on_wire
+    assert b"\x03\x00\x00\x00" not in carried
+    slave.outputs = b"\x04\x00\x00\x00"              # the same again: no new message, still on the wire
+    assert not sent and slave.outputs_on_wire
+    # the card leaves Data_Exchange and comes back: the idle record, none of the driver's; a record
+    # the driver made before it learnt of the new session is dropped
+    handle = server.master.slave(4)
+    server._on_state(handle, MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.INIT, "test")
+    server._on_state(handle, MasterSlaveState.INIT, MasterSlaveState.DATA_EXCHANGE, "test")
+    slave.outputs = b"\x05\x00\x00\x00"
+    deliver()
+    cycle()
+    assert carried[-1] == bytes(4) and not slave.outputs_on_wire
+    server._sender.final(("close",))
+
+
 # ------------------------------------------------------------------------------ over a real pty
 class Rig:
     """A virtual controller on a pty at ``path`` and a DriverCore on a bus process driving it."""
