@@ -31,12 +31,6 @@ Rules:
   Data_Exchange session it was made for: one made before the driver learnt of the new session is
   dropped. The card's first records of a new session are the idle record, until the driver has
   seen the new session and decided anew.
-- **Which record went out.** Every outputs message carries a serial, and every report the serial of
-  the outputs its cycle carried (the output image as it was when the cycle began: 0 when it was not
-  one of the driver's, the idle record after a reset). A record that arrives while a cycle runs
-  waits for the next; one replaced before that never goes out. The driver reads it as
-  ``RemoteSlave.outputs_on_wire``: a sequencer that sends the next target before the last was
-  acknowledged moves on only past records the bus carried (vr_driver.driver.streaming).
 - **The driver dies** (its socket ends) **or falls silent** for ``node_timeout``: the bus process
   sends the controller's stop record (the driver sends it beside each change of the outputs: the
   protocol's stop for what runs, vr_driver.protocol ``stop_record``) for ``stop_hold`` seconds,
@@ -229,10 +223,6 @@ class BusServer:
                                dx_tolerance=settings.dx_tolerance, retry_steps=settings.retry_steps,
                                on_state_change=self._on_state)
         self.sessions: Dict[int, int] = {}
-        #: per slave, the serial of the driver's outputs message in its output image now (0: none of
-        #: the driver's -- the idle record after a reset); the report says which a cycle carried
-        self.serials: Dict[int, int] = {}
-        self._carried: Dict[int, int] = {}
         self._events: List[Tuple[Any, ...]] = []
         self.health = BusHealth(settings.period, settings.watchdog, scheduling=scheduling)
         now = clock()
@@ -248,7 +238,7 @@ class BusServer:
     def _handle(self, msg: Tuple[Any, ...]) -> None:
         kind = msg[0]
         if kind == "out":
-            _, address, session, data, stop, serial = msg
+            _, address, session, data, stop = msg
             if address == self.settings.controller:
                 if session != self.sessions.get(address):
                     return          # made before the driver learnt of this Data_Exchange session
@@ -256,7 +246,6 @@ class BusServer:
                     self._stop_record = stop
             try:
                 self.master.slave(address).outputs = data
-                self.serials[address] = serial
             except (DpError, ProfibusError) as exc:
                 log.error("outputs for slave %d refused: %s", address, exc)
         elif kind == "slave":
@@ -289,7 +278,6 @@ class BusServer:
             self.sessions[address] = self.sessions.get(address, 0) + 1
         elif old in _CONNECTED and new not in _CONNECTED and address == self.settings.controller:
             slave.outputs = self.settings.idle_record      # exactly once across a reset
-            self.serials[address] = 0
             self.health.session_ended()
         self._events.append((address, old.value, new.value, reason, slave.state_since,
                              self.sessions.get(address, 0)))
@@ -313,9 +301,6 @@ class BusServer:
             return 2
 
     def _cycle(self) -> bool:
-        # what this cycle's Data_Exchange carries: the output images as they are now (no message is
-        # taken while it runs)
-        self._carried = dict(self.serials)
         try:
             self.master.cycle(timeout=self.settings.cycle_timeout)
         except ProfibusError as exc:
@@ -343,7 +328,7 @@ class BusServer:
         for address, sessions in self.sessions.items():
             s = self.master.slave(address)
             slaves.append((address, s.state.value, s.state_since, sessions, s.inputs, s.inputs_time,
-                           s.last_diag, dict(vars(s.counters)), self._carried.get(address, 0)))
+                           s.last_diag, dict(vars(s.counters))))
         return {"time": now, "counters": dict(vars(self.master.counters)), "slaves": slaves,
                 "health": self._summary, "dropped_events": self._sender.dropped_events}
 
@@ -412,8 +397,6 @@ class RemoteSlave:
         self._inputs: Optional[bytes] = None
         self._inputs_time: Optional[float] = None
         self._sent: Optional[Tuple[Any, ...]] = None
-        self._serial = 0                       # of the last outputs message sent
-        self.carried_serial = 0                # of the outputs the last reported cycle carried
 
     @property
     def connected(self) -> bool:
@@ -432,19 +415,10 @@ class RemoteSlave:
         message = ("out", self.address, self.session, data, self.stop_outputs)
         if message != self._sent:
             self._sent = message
-            self._serial += 1
             try:
-                self._master.send(message + (self._serial,))
+                self._master.send(message)
             except PhyError:
                 pass        # the bus process is gone: the bus thread's next cycle() says so
-
-    @property
-    def outputs_on_wire(self) -> bool:
-        """Whether the outputs set last went out: a cycle the bus process reported carried them. A
-        new value set before the bus process's next cycle began replaces one that never went out
-        (the bus never waits for the driver), so a driver that counts its records sent asks this
-        first."""
-        return self.carried_serial >= self._serial
 
     @property
     def inputs(self) -> Optional[bytes]:
@@ -640,13 +614,12 @@ class BusProcessMaster:
             slave.state, slave.state_since, slave.session = new_state, since, session
             if self.on_state_change is not None:
                 self.on_state_change(slave, old_state, new_state, reason)
-        for address, state, since, session, inputs, inputs_time, diag, counters, carried in report["slaves"]:
+        for address, state, since, session, inputs, inputs_time, diag, counters in report["slaves"]:
             slave = self._slaves.get(address)
             if slave is None:
                 continue
             slave.state, slave.state_since, slave.session = MasterSlaveState(state), since, session
             slave._inputs, slave._inputs_time, slave.last_diag = inputs, inputs_time, diag
-            slave.carried_serial = max(slave.carried_serial, carried)
             for key, value in counters.items():
                 setattr(slave.counters, key, value)
         for key, value in report["counters"].items():

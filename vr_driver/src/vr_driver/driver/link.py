@@ -106,9 +106,6 @@ class LinkSample:
     record_time: Optional[float] = None    # when the controller's ``feedback`` was taken: the
     #                                        reply that carried it began then (its arrival less its
     #                                        time on the wire); what joint_states are stamped with
-    record_on_wire: bool = True            # the record set last went out (a bus process cycles on
-    #                                        its own: one set after its cycle began waits for the
-    #                                        next, and a newer one set before that replaces it)
 
     @property
     def connected(self) -> bool:
@@ -351,8 +348,7 @@ class LinkSupervisor:
             feedback_time=self._good_time if connected else None,
             record_time=self._record_stamp if connected else None,
             session=self._session, session_records=self._session_records,
-            error_code=self._error_code, error_reason=self._error_reason, cycled=cycled,
-            record_on_wire=bool(getattr(self._slave, "outputs_on_wire", True)))
+            error_code=self._error_code, error_reason=self._error_reason, cycled=cycled)
 
     def _down(self, state: LinkState, reason: str) -> None:
         if self._state is LinkState.CONNECTED and state is not LinkState.CONNECTED:

@@ -199,9 +199,6 @@ class SequencerBase(SequencerHooks):
         self._last_pose: Optional[ControllerPose] = None
         self.targets_sent = self.targets_done = self.targets_rejected = self.targets_aborted = 0
         self.view = SequencerView(None, 0, None, None, False)
-        #: whether the record of the step before went out (LinkSample.record_on_wire): a protocol
-        #: that sends ahead repeats it instead of moving on while it did not
-        self.record_on_wire = True
 
     # ------------------------------------------------------------------ any thread
     def claim_ticket(self) -> int:
@@ -243,7 +240,6 @@ class SequencerBase(SequencerHooks):
         self.follow(now, fb, sample)
         self._settling.check(now, fb, self.resting)
         self.advance(now, fb, sample, joints)
-        self.record_on_wire = sample.record_on_wire
         command = self.record(now)
         self._publish()                 # after the record: the view's live_anchor is what it put on the wire
         return command

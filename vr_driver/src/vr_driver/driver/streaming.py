@@ -19,10 +19,7 @@ the job's points get consecutive sequence numbers from the one after the control
 START for the stream's first point) and the one after it in slot 1. The controller takes a slot when
 it has room (the target it moves to and one look-ahead) and reports ``accepted_seq``; the record
 then moves on. A number the controller took is never offered again, and after a link loss nothing
-of the stream is re-sent: the job fails with the reason. With the bus in a process of its own a
-record may not go out (made between two cycles, or too late for the next, and replaced before the
-one after): until the bus reports the last record carried (``LinkSample.record_on_wire``) the next
-record is the same again, never one that sends the following target ahead in its place.
+of the stream is re-sent: the job fails with the reason.
 
 - done: every point reached (``done_seq`` = the last, the arm at rest) -> SUCCEEDED at that pose;
 - a point refused (``rejected_seq`` one of ours): STOP, the job FAILED when the arm is at rest;
@@ -316,7 +313,6 @@ class StreamSequencer(SequencerBase):
         self._started = 0.0
         self._stopping = False             # send STOP until the arm is at rest
         self._offered: Optional[int] = None   # the last point of the current job put on the wire
-        self._first: Optional[int] = None     # the first point the last record offered
         self._high = -1                       # the highest point of the current job ever put on it
         self._acked = -1                      # points_taken at the last record
         self._ahead = True                    # send ahead of the acknowledgements (send_ahead)
@@ -529,7 +525,6 @@ class StreamSequencer(SequencerBase):
             return
         self._base = next_seq(fb.accepted_seq)
         self._offered, self._acked, self._ahead, self._high = None, -1, True, -1
-        self._first = None
         self._limit = len(job.points)
         self._rejected_before = fb.rejected_seq
         self._started = now
@@ -571,19 +566,11 @@ class StreamSequencer(SequencerBase):
         first = k
         ahead = self.wire.send_ahead - self.wire.look_ahead_slots
         last = self._offered
-        if not self.record_on_wire and self._first is not None and self._first >= k:
-            # the last record has not gone out yet (a bus process cycles on its own: it was set after
-            # its cycle began, or it was made between two cycles): the same again, which keeps it
-            # -- a new one would replace it and its target would never have been on the wire (the
-            # wrist bench's stream start: START #1 made between two cycles, replaced by #2 sent
-            # ahead, #1 went out a record later and the arm stopped at it, #2 not taken)
-            first = self._first
-        elif ahead > 0 and last is not None:
+        if ahead > 0 and last is not None:
             if last - k >= ahead:
                 self._ahead = False           # sent ahead, not taken: wait for the acknowledgement
             elif self._ahead and last >= k and offered(last + 1):
                 first = last + 1
-        self._first = first
         targets = []
         for i in range(first, first + self.wire.look_ahead_slots):
             if not offered(i):
