@@ -43,23 +43,26 @@ class Loaded:
 
 _LOADED = {}
 _COMMANDS = {}
+_LOADER_CLASS = []
 
 
 def _loader():
     """roslaunch's XmlLoader with its ``command=`` parameters run once per command line in this
     process (robot_description's xacro: about 0.5 s of CPU each, the same command line for most of
     the launch files and arguments here); a command that fails raises, is not kept and runs again."""
-    import roslaunch.xmlloader
+    if not _LOADER_CLASS:
+        import roslaunch.xmlloader
 
-    class RememberingLoader(roslaunch.xmlloader.XmlLoader):
-        def param_value(self, verbose, name, ptype, value, textfile, binfile, command):
-            if command is None:
-                return super().param_value(verbose, name, ptype, value, textfile, binfile, command)
-            key = (ptype, command)
-            if key not in _COMMANDS:
-                _COMMANDS[key] = super().param_value(verbose, name, ptype, value, textfile, binfile, command)
-            return _COMMANDS[key]
-    return RememberingLoader()
+        class RememberingLoader(roslaunch.xmlloader.XmlLoader):
+            def param_value(self, verbose, name, ptype, value, textfile, binfile, command):
+                if command is None:
+                    return super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+                key = (ptype, command)
+                if key not in _COMMANDS:
+                    _COMMANDS[key] = super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+                return _COMMANDS[key]
+        _LOADER_CLASS.append(RememberingLoader)
+    return _LOADER_CLASS[0]()
 
 
 def dump_params(path, args=()):

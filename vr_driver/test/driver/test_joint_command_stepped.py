@@ -335,11 +335,12 @@ def slowest_step(kin, job, times, commands):
     time_from_start). At most 1: the arm keeps up with the commands. A ratio far above 1 is a point
     whose speed was worked out from another predecessor than the one on the wire."""
     vmax = kin.limits.velocity
-    given = {q: t - t_before for q, t, t_before in zip(commands[1:], times[1:], times)}
     ratios = []
+    j = 0                                     # the command each point is (in order: a sine repeats values)
     for a, b in zip(job.points, job.points[1:]):
+        j = next(k for k in range(j + 1, len(commands)) if commands[k] == b.joints)
         move = max(abs(y - x) / (b.speed / 1000.0 * v) for x, y, v in zip(a.joints, b.joints, vmax))
-        ratios.append(move / given[b.joints])
+        ratios.append(move / (times[j] - times[j - 1]))
     return max(ratios)
 
 
