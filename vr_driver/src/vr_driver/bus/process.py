@@ -26,6 +26,14 @@ Rules:
   command repeated (the protocols' handshake and sequence numbers count each command once). Reports
   go out through a thread of their own: a driver that does not read them never blocks a cycle
   (the newest report wins; state changes are kept in order).
+- **Every record at least once.** The controller's program reads each record the master sends
+  (a stream's target sent ahead, a START): a record the driver decided is carried by at least one
+  Data_Exchange that the card answered before the next one replaces it. The driver decides a
+  record at each report and, when a request wakes it, between two reports; two records within
+  one cycle would otherwise lose the first (a stream's START replaced by its next target before
+  any telegram carried it: the controller never began). So a record that arrives while the one
+  before it has not been carried waits for the next cycle, the newest of such replacing an older
+  one waiting; a stop (the protocol's ``is_stop``) never waits.
 - **Exactly once across a reset.** When the controller's card leaves Data_Exchange (its watchdog, a
   new Set_Prm), its outputs become the idle record at once, and every outputs message carries the
   Data_Exchange session it was made for: one made before the driver learnt of the new session is
@@ -229,6 +237,9 @@ class BusServer:
         self._summary: BusHealthSummary = self.health.summary(now)
         self._summary_at = now
         self._stop_record: Optional[bytes] = None
+        self._uncarried: Optional[bytes] = None   # the controller's record not yet carried by a cycle
+        self._held: Optional[bytes] = None        # the driver's newer one, waiting for it
+        self.held = 0                             # records that waited a cycle so (a count)
         self._next = now
         self._last_heard = now
         self._last_reply: Optional[float] = None
@@ -238,14 +249,18 @@ class BusServer:
     def _handle(self, msg: Tuple[Any, ...]) -> None:
         kind = msg[0]
         if kind == "out":
-            _, address, session, data, stop = msg
+            _, address, session, data, stop, urgent = msg
             if address == self.settings.controller:
                 if session != self.sessions.get(address):
                     return          # made before the driver learnt of this Data_Exchange session
                 if stop is not None:
                     self._stop_record = stop
             try:
-                self.master.slave(address).outputs = data
+                handle = self.master.slave(address)
+                if address == self.settings.controller:
+                    self._controller_outputs(handle, data, urgent)
+                else:
+                    handle.outputs = data
             except (DpError, ProfibusError) as exc:
                 log.error("outputs for slave %d refused: %s", address, exc)
         elif kind == "slave":
@@ -259,6 +274,27 @@ class BusServer:
         elif kind == "close":
             raise _Close()
         # "tick": only that the driver is alive
+
+    def _controller_outputs(self, handle: Any, data: bytes, urgent: bool) -> None:
+        """The controller's new record: on the wire from the next cycle, or -- while the one before
+        has not been carried yet and this is not a stop -- held until it was (module docstring)."""
+        if data == handle.outputs:
+            self._held = None                   # the driver's newest word is what waits for the wire
+            return
+        if self._uncarried is not None and handle.connected and not urgent:
+            self._held = data
+            self.held += 1
+            return
+        handle.outputs = data                   # DpError for a wrong size: nothing changes
+        self._held = None
+        self._uncarried = data if handle.connected else None
+
+    def _carried(self, handle: Any) -> None:
+        """A Data_Exchange of the controller was answered: what it carried was read; a held record
+        goes out next."""
+        self._uncarried = None
+        if self._held is not None:
+            handle.outputs, self._uncarried, self._held = self._held, self._held, None
 
     def _drain(self) -> None:
         """Every message waiting now; _NodeGone when the driver's end closed."""
@@ -278,6 +314,7 @@ class BusServer:
             self.sessions[address] = self.sessions.get(address, 0) + 1
         elif old in _CONNECTED and new not in _CONNECTED and address == self.settings.controller:
             slave.outputs = self.settings.idle_record      # exactly once across a reset
+            self._held = self._uncarried = None
             self.health.session_ended()
         self._events.append((address, old.value, new.value, reason, slave.state_since,
                              self.sessions.get(address, 0)))
@@ -317,6 +354,7 @@ class BusServer:
                 and ctrl.inputs_time != self._last_reply:
             self._last_reply = ctrl.inputs_time
             self.health.reply(ctrl.inputs_time)
+            self._carried(ctrl)
         if now - self._summary_at >= SUMMARY_PERIOD:
             self._summary, self._summary_at = self.health.summary(now), now
         events, self._events = self._events, []
@@ -393,6 +431,7 @@ class RemoteSlave:
         self.counters = SlaveCounters()
         self.last_diag: Any = None
         self.stop_outputs: Optional[bytes] = None   # the controller's: what stops the arm
+        self.urgent = False                         # the controller's outputs are a stop
         self._outputs = bytes(spec.output_size or 0)
         self._inputs: Optional[bytes] = None
         self._inputs_time: Optional[float] = None
@@ -412,7 +451,7 @@ class RemoteSlave:
         if len(data) != self.spec.output_size:
             raise DpError(f"slave {self.address}: {len(data)} output bytes, expected {self.spec.output_size}")
         self._outputs = data
-        message = ("out", self.address, self.session, data, self.stop_outputs)
+        message = ("out", self.address, self.session, data, self.stop_outputs, self.urgent)
         if message != self._sent:
             self._sent = message
             try:

@@ -230,7 +230,8 @@ class LinkSupervisor:
 
     def set_outputs(self, record: bytes) -> None:
         """The record sent in the next DP cycles (to a bus process with the record that stops
-        what it sets going: sent there if the driver dies)."""
+        what it sets going: sent there if the driver dies; and whether it is a stop, which goes on
+        the wire at once -- any other record waits until the one before it was carried)."""
         slave = self._slave
         if slave is None:
             return
@@ -240,6 +241,7 @@ class LinkSupervisor:
                 slave.stop_outputs = self._wire.stop_record(record, self.params.byte_order)
             except ProtocolError as exc:    # never: the record was encoded by the same protocol
                 log.error("no stop record for %s: %s", record.hex(), exc)
+            slave.urgent = self._wire.is_stop(record, self.params.byte_order)
         slave.outputs = record
 
     # ----------------------------------------------------------------------- the step
