@@ -1,16 +1,16 @@
-"""The bus process's loop (vr_driver.bus.process.BusServer) stepped by hand on the fake clock, with
-the virtual G2's DP slave on an in-memory link: every record the driver decides is carried by a
-Data_Exchange the card answered before the next one replaces it -- the driver decides a record at
-each report and, woken by a request, between two reports, and a stream's START replaced by the next
-target before any telegram carried it left the arm standing. A stop never waits."""
+"""The bus process's loop (vr_driver.bus.process.BusServer) stepped by hand, with the virtual G2's DP
+slave on an in-memory link: each report says which of the driver's records its cycle carried (a
+record set while a cycle was under way is not carried by it, and the driver learns so), and a cycle
+that is due at once waits -- at most ``answer_wait`` -- for the driver's answer to the last report,
+so that what the driver decided on a report goes out in the next cycle."""
 from __future__ import annotations
 
+import time
 from multiprocessing import Pipe
 
-import pytest
 from pyprofibus_vendor.dp_master import BusTiming, SlaveSpec
 
-from vr_driver.bus.process import BusServer, BusSettings
+from vr_driver.bus.process import BusServer, BusSettings, RemoteSlave
 from vr_driver.controller.virtual_controller import robot_slave
 from vr_driver.protocol.v3 import V3
 
@@ -25,19 +25,21 @@ def record(n: int) -> bytes:
 
 
 class Rig:
-    def __init__(self) -> None:
-        self.clock = FakeClock()
+    def __init__(self, clock=None, answer_wait: float = 0.01) -> None:
+        self.clock = clock or FakeClock()
         self.slave = robot_slave(ADDRESS, clock=self.clock, protocol="v3")
         self.carried = []
         self.slave.on_outputs = self.carried.append
-        self.link = SteppedLink(self.slave, self.clock)
-        spec = SlaveSpec(ADDRESS, self.slave.ident, self.slave.cfg, watchdog=0.3)
+        self.link = SteppedLink(self.slave, FakeClock()) if clock is not None else SteppedLink(self.slave, self.clock)
+        spec = SlaveSpec(ADDRESS, self.slave.ident, self.slave.cfg, watchdog=None)
         settings = BusSettings(device="memory", baud=19200, master_address=2,
                                timing=BusTiming.for_baud(19200), cycle_rate_hz=20.0, controller=ADDRESS,
-                               idle_record=V3.idle_record(), watchdog=0.3)
+                               idle_record=V3.idle_record(), watchdog=None, answer_wait=answer_wait)
         self.conn, theirs = Pipe()
         self.server = BusServer(theirs, self.link, settings, clock=self.clock)
         self.server._handle(("slave", spec))
+        self.serial = 0
+        self.report = None
         for _ in range(50):
             if self.handle.connected:
                 break
@@ -48,102 +50,105 @@ class Rig:
     def handle(self):
         return self.server.master.slave(ADDRESS)
 
-    def out(self, data: bytes, urgent: bool = False) -> None:
-        self.server._handle(("out", ADDRESS, self.server.sessions[ADDRESS], data, None, urgent))
+    def out(self, data: bytes) -> int:
+        self.serial += 1
+        self.server._handle(("out", ADDRESS, self.server.sessions[ADDRESS], data, None, self.serial))
+        return self.serial
 
-    def cycle(self) -> bytes:
-        """One bus cycle; what the card took in it (None: nothing)."""
+    def cycle(self):
+        """One bus cycle: what the card took in it (None: nothing); the report is kept."""
         before = len(self.carried)
         assert self.server._cycle()
-        while self.conn.poll(0):          # read the reports: the sender never blocks on a full pipe
-            self.conn.recv()
-        self.clock.advance(0.05)
+        deadline = time.monotonic() + 5.0
+        while True:                        # the report sender's thread posts it
+            assert self.conn.poll(max(0.0, deadline - time.monotonic())), "no report"
+            msg = self.conn.recv()
+            if msg[0] == "r" and msg[1]["seq"] == self.server._report_seq:
+                self.report = msg[1]
+                break
+        if isinstance(self.clock, FakeClock):
+            self.clock.advance(0.05)
         return self.carried[-1] if len(self.carried) > before else None
 
 
-@pytest.fixture
-def rig():
-    return Rig()
-
-
-def test_two_records_between_cycles_are_both_carried_in_order(rig):
-    assert rig.cycle() == V3.idle_record()
-    rig.out(record(1))                    # a request woke the driver: its record
-    rig.out(record(2))                    # the next report's record, before a cycle carried the first
+def test_each_report_names_the_record_its_cycle_carried():
+    rig = Rig()
+    first = rig.out(record(1))
     assert rig.cycle() == record(1)
-    assert rig.cycle() == record(2)
-    assert rig.cycle() == record(2)       # repeated as a DP master repeats its image
-    assert rig.server.held == 1
-
-
-def test_of_several_records_waiting_the_newest_goes_next(rig):
-    rig.cycle()
-    rig.out(record(1))
+    assert rig.report["carried"][ADDRESS] == first
     rig.out(record(2))
-    rig.out(record(3))
-    assert rig.cycle() == record(1)
+    second = rig.out(record(3))          # two records before a cycle: the newer replaces the older
     assert rig.cycle() == record(3)
+    assert rig.report["carried"][ADDRESS] == second
     assert record(2) not in rig.carried
 
 
-def test_a_record_after_a_carried_one_goes_out_at_once(rig):
+def test_a_cycle_without_a_reply_carried_nothing_the_driver_can_count_on():
+    rig = Rig()
+    rig.server.master.dx_tolerance = 10.0      # the slave stays in Data_Exchange through one lost reply
+    first = rig.out(record(1))
     rig.cycle()
-    rig.out(record(1))
-    assert rig.cycle() == record(1)
-    rig.out(record(2))
-    assert rig.cycle() == record(2)
-    assert rig.server.held == 0
-
-
-def test_the_newest_word_back_to_what_waits_for_the_wire_drops_the_held_one(rig):
-    rig.cycle()
-    rig.out(record(1))
-    rig.out(record(2))
-    rig.out(record(1))                    # the driver took it back
-    assert rig.cycle() == record(1)
-    assert rig.cycle() == record(1)
-    assert record(2) not in rig.carried
-
-
-def test_a_stop_never_waits(rig):
-    rig.cycle()
-    stop = V3.encode(V3.stream_command((), stop=True))
-    assert V3.is_stop(stop)
-    rig.out(record(1))
-    rig.out(stop, urgent=True)
-    assert rig.cycle() == stop
-    assert record(1) not in rig.carried
-
-
-def test_a_record_without_a_reply_is_carried_again_before_the_next(rig):
-    rig.cycle()
-    rig.link.cut = True                   # the telegram is lost: no reply (dx_tolerance keeps the slave)
-    rig.server.master.dx_tolerance = 10.0
-    rig.out(record(1))
+    rig.link.cut = True
     rig.out(record(2))
     assert rig.cycle() is None
+    assert rig.report["carried"][ADDRESS] == first
     rig.link.cut = False
-    assert rig.cycle() == record(1)
-    assert rig.cycle() == record(2)
-
-
-def test_a_record_held_across_a_reset_is_never_carried(rig):
     rig.cycle()
+    assert rig.report["carried"][ADDRESS] == rig.serial
+
+
+def test_the_driver_side_knows_whether_the_last_record_was_carried():
+    slave = RemoteSlave.__new__(RemoteSlave)
+    slave.serial, slave.carried_serial = 5, 4
+    assert not slave.carried
+    slave.carried_serial = 5
+    assert slave.carried
+
+
+def test_a_new_session_starts_from_the_idle_record_and_carries_no_old_serial():
+    rig = Rig()
     rig.out(record(1))
-    rig.out(record(2))
-    rig.link.cut = True                   # the card is gone before the first was carried
+    rig.cycle()
+    rig.link.cut = True
     for _ in range(20):
         rig.cycle()
         if not rig.handle.connected:
             break
-    assert not rig.handle.connected
-    assert rig.handle.outputs == V3.idle_record()
+    assert not rig.handle.connected and rig.handle.outputs == V3.idle_record()
     rig.link.cut = False
     for _ in range(200):
         rig.cycle()
         if rig.handle.connected:
             break
-    assert rig.handle.connected
     rig.cycle()
     assert rig.carried[-1] == V3.idle_record()
-    assert record(1) not in rig.carried and record(2) not in rig.carried
+    assert rig.report["carried"][ADDRESS] == 0
+
+
+def test_a_due_cycle_waits_for_the_answer_to_the_last_report_at_most_answer_wait():
+    """On the real clock (the wait is a poll of the driver's socket): the counts, not the times."""
+    rig = Rig(clock=time.monotonic, answer_wait=0.05)
+    server = rig.server
+    rig.cycle()
+    server._next = time.monotonic() - 1.0           # the next cycle is due at once (a slow line)
+    before = server.unanswered
+    rig.conn.send(("answer", server._report_seq))  # the driver answered the last report
+    server._wait()
+    assert server.unanswered == before
+    rig.cycle()
+    server._next = time.monotonic() - 1.0
+    server._wait()                                   # no answer: the cycle begins after answer_wait
+    assert server.unanswered == before + 1
+    rig.cycle()
+    server._next = time.monotonic() - 1.0
+    rig.conn.send(("answer", server._report_seq - 1))   # an answer to an older report does not count
+    server._wait()
+    assert server.unanswered == before + 2
+
+
+def test_answer_wait_zero_never_waits():
+    rig = Rig(clock=time.monotonic, answer_wait=0.0)
+    rig.cycle()
+    rig.server._next = time.monotonic() - 1.0
+    rig.server._wait()
+    assert rig.server.unanswered == 1

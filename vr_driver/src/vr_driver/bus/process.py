@@ -21,19 +21,23 @@ bus process at once. The driver's loop is paced by the bus (``paced``), not the 
 
 Rules:
 
-- **The bus never waits for the driver.** It cycles at its rate with the outputs the driver sent
-  last. A DP master repeats its output image every cycle anyway: a record repeated is never a
-  command repeated (the protocols' handshake and sequence numbers count each command once). Reports
+- **The bus never waits for the driver** beyond ``answer_wait`` (10 ms). It cycles at its rate with
+  the outputs the driver sent last. When a cycle is due at once (a slow line whose cycle fills the
+  period, as the thesis' 19.2 kbit/s with the I/O island), it first waits up to ``answer_wait`` for
+  the driver's answer to the report it just posted (the driver sends it when it has set its
+  outputs for that report), so that a decision made on a report goes out in the next cycle, not
+  the one after: otherwise every target, acknowledgement and stop reached the controller a whole
+  cycle (62 ms) later than the stepped world, where the driver decides between two cycles. A DP
+  master repeats its output image every cycle anyway: a record repeated is never a command repeated (the protocols' handshake and sequence numbers count each command once). Reports
   go out through a thread of their own: a driver that does not read them never blocks a cycle
   (the newest report wins; state changes are kept in order).
-- **Every record at least once.** The controller's program reads each record the master sends
-  (a stream's target sent ahead, a START): a record the driver decided is carried by at least one
-  Data_Exchange that the card answered before the next one replaces it. The driver decides a
-  record at each report and, when a request wakes it, between two reports; two records within
-  one cycle would otherwise lose the first (a stream's START replaced by its next target before
-  any telegram carried it: the controller never began). So a record that arrives while the one
-  before it has not been carried waits for the next cycle, the newest of such replacing an older
-  one waiting; a stop (the protocol's ``is_stop``) never waits.
+- **Which record a cycle carried.** Every outputs message has a serial number; each report says
+  the serial of the controller's record that the cycle's answered Data_Exchange carried. The driver
+  decides a record at each report and, woken by a request, between two reports: one made while a
+  cycle was under way is replaced by the next report's before any telegram carried it, and the
+  driver learns so from that report (:attr:`RemoteSlave.carried`) -- its stream then offers again
+  what that record offered (vr_driver.driver.streaming), instead of going on as if the controller
+  could have read it (a stream's START replaced by its next target: the arm stood at point 1).
 - **Exactly once across a reset.** When the controller's card leaves Data_Exchange (its watchdog, a
   new Set_Prm), its outputs become the idle record at once, and every outputs message carries the
   Data_Exchange session it was made for: one made before the driver learnt of the new session is
@@ -97,6 +101,7 @@ class BusSettings:
     rt_priority: int = 0                 # SCHED_FIFO priority (1..99); 0: normal scheduling
     node_timeout: float = 1.0            # [s] no word from the driver this long: it is dead
     stop_hold: float = 2.0               # [s] the stop record is sent this long before the end
+    answer_wait: float = 0.01            # [s] a due cycle waits this long for the driver's answer
 
     @property
     def period(self) -> float:
@@ -237,9 +242,13 @@ class BusServer:
         self._summary: BusHealthSummary = self.health.summary(now)
         self._summary_at = now
         self._stop_record: Optional[bytes] = None
-        self._uncarried: Optional[bytes] = None   # the controller's record not yet carried by a cycle
-        self._held: Optional[bytes] = None        # the driver's newer one, waiting for it
-        self.held = 0                             # records that waited a cycle so (a count)
+        self._serials: Dict[int, int] = {}        # per slave: the serial of its outputs now
+        self._carried: Dict[int, int] = {}        # per slave: the serial the last answered exchange carried
+        self._answered_at: Dict[int, float] = {}
+        self._report_seq = 0                      # the last report posted (its number)
+        self._reported_at = now
+        self._answered = 0                        # the last report the driver answered
+        self.unanswered = 0                       # cycles begun without the answer (answer_wait over)
         self._next = now
         self._last_heard = now
         self._last_reply: Optional[float] = None
@@ -249,18 +258,15 @@ class BusServer:
     def _handle(self, msg: Tuple[Any, ...]) -> None:
         kind = msg[0]
         if kind == "out":
-            _, address, session, data, stop, urgent = msg
+            _, address, session, data, stop, serial = msg
             if address == self.settings.controller:
                 if session != self.sessions.get(address):
                     return          # made before the driver learnt of this Data_Exchange session
                 if stop is not None:
                     self._stop_record = stop
             try:
-                handle = self.master.slave(address)
-                if address == self.settings.controller:
-                    self._controller_outputs(handle, data, urgent)
-                else:
-                    handle.outputs = data
+                self.master.slave(address).outputs = data
+                self._serials[address] = serial
             except (DpError, ProfibusError) as exc:
                 log.error("outputs for slave %d refused: %s", address, exc)
         elif kind == "slave":
@@ -269,32 +275,13 @@ class BusServer:
             self.sessions[spec.address] = 0
             if spec.address == self.settings.controller:
                 handle.outputs = self.settings.idle_record
+        elif kind == "answer":
+            self._answered = max(self._answered, int(msg[1]))
         elif kind == "cycle_at":
             self._next = min(self._next, float(msg[1]))
         elif kind == "close":
             raise _Close()
         # "tick": only that the driver is alive
-
-    def _controller_outputs(self, handle: Any, data: bytes, urgent: bool) -> None:
-        """The controller's new record: on the wire from the next cycle, or -- while the one before
-        has not been carried yet and this is not a stop -- held until it was (module docstring)."""
-        if data == handle.outputs:
-            self._held = None                   # the driver's newest word is what waits for the wire
-            return
-        if self._uncarried is not None and handle.connected and not urgent:
-            self._held = data
-            self.held += 1
-            return
-        handle.outputs = data                   # DpError for a wrong size: nothing changes
-        self._held = None
-        self._uncarried = data if handle.connected else None
-
-    def _carried(self, handle: Any) -> None:
-        """A Data_Exchange of the controller was answered: what it carried was read; a held record
-        goes out next."""
-        self._uncarried = None
-        if self._held is not None:
-            handle.outputs, self._uncarried, self._held = self._held, self._held, None
 
     def _drain(self) -> None:
         """Every message waiting now; _NodeGone when the driver's end closed."""
@@ -314,7 +301,7 @@ class BusServer:
             self.sessions[address] = self.sessions.get(address, 0) + 1
         elif old in _CONNECTED and new not in _CONNECTED and address == self.settings.controller:
             slave.outputs = self.settings.idle_record      # exactly once across a reset
-            self._held = self._uncarried = None
+            self._serials[address] = 0
             self.health.session_ended()
         self._events.append((address, old.value, new.value, reason, slave.state_since,
                              self.sessions.get(address, 0)))
@@ -338,6 +325,7 @@ class BusServer:
             return 2
 
     def _cycle(self) -> bool:
+        serials = dict(self._serials)         # the records this cycle's telegrams carry
         try:
             self.master.cycle(timeout=self.settings.cycle_timeout)
         except ProfibusError as exc:
@@ -354,10 +342,20 @@ class BusServer:
                 and ctrl.inputs_time != self._last_reply:
             self._last_reply = ctrl.inputs_time
             self.health.reply(ctrl.inputs_time)
-            self._carried(ctrl)
+        for address, serial in serials.items():
+            try:
+                handle = self.master.slave(address)
+            except ProfibusError:
+                continue
+            if handle.connected and handle.inputs_time is not None \
+                    and handle.inputs_time != self._answered_at.get(address):
+                self._answered_at[address] = handle.inputs_time
+                self._carried[address] = serial
         if now - self._summary_at >= SUMMARY_PERIOD:
             self._summary, self._summary_at = self.health.summary(now), now
         events, self._events = self._events, []
+        self._report_seq += 1
+        self._reported_at = now
         self._sender.post(self._report(now), events)
         return True
 
@@ -367,7 +365,8 @@ class BusServer:
             s = self.master.slave(address)
             slaves.append((address, s.state.value, s.state_since, sessions, s.inputs, s.inputs_time,
                            s.last_diag, dict(vars(s.counters))))
-        return {"time": now, "counters": dict(vars(self.master.counters)), "slaves": slaves,
+        return {"time": now, "seq": self._report_seq, "carried": dict(self._carried),
+                "counters": dict(vars(self.master.counters)), "slaves": slaves,
                 "health": self._summary, "dropped_events": self._sender.dropped_events}
 
     def _wait(self) -> None:
@@ -380,7 +379,12 @@ class BusServer:
         while True:
             left = self._next - self.clock()
             if left <= 0:
-                return
+                left = self._reported_at + self.settings.answer_wait - self.clock()
+                if self._answered >= self._report_seq:
+                    return
+                if left <= 0:
+                    self.unanswered += 1
+                    return
             if self.conn.poll(left):
                 self._drain()
 
@@ -431,7 +435,8 @@ class RemoteSlave:
         self.counters = SlaveCounters()
         self.last_diag: Any = None
         self.stop_outputs: Optional[bytes] = None   # the controller's: what stops the arm
-        self.urgent = False                         # the controller's outputs are a stop
+        self.serial = 0                             # of the last outputs message sent
+        self.carried_serial = 0                     # of the outputs the last answered exchange carried
         self._outputs = bytes(spec.output_size or 0)
         self._inputs: Optional[bytes] = None
         self._inputs_time: Optional[float] = None
@@ -451,13 +456,21 @@ class RemoteSlave:
         if len(data) != self.spec.output_size:
             raise DpError(f"slave {self.address}: {len(data)} output bytes, expected {self.spec.output_size}")
         self._outputs = data
-        message = ("out", self.address, self.session, data, self.stop_outputs, self.urgent)
+        message = ("out", self.address, self.session, data, self.stop_outputs)
         if message != self._sent:
             self._sent = message
+            self.serial += 1
+            message += (self.serial,)
             try:
                 self._master.send(message)
             except PhyError:
                 pass        # the bus process is gone: the bus thread's next cycle() says so
+
+    @property
+    def carried(self) -> bool:
+        """The last answered Data_Exchange carried the outputs set last (False: they were set after
+        that cycle began; the next one carries them, unless newer ones replace them first)."""
+        return self.carried_serial >= self.serial
 
     @property
     def inputs(self) -> Optional[bytes]:
@@ -491,6 +504,7 @@ class BusProcessMaster:
         self._slaves: Dict[int, RemoteSlave] = {}
         self._urgent = False
         self._closed = False
+        self._report_seq = 0                 # the last report applied
         self._send_lock = threading.Lock()
         ours, theirs = socket.socketpair()
         # blocking, whatever socket.setdefaulttimeout() says: rospy sets one (60 s), which makes
@@ -643,8 +657,18 @@ class BusProcessMaster:
             raise PhyError("the bus process ended (%s)" % self._exit_status()) from None
         return got
 
+    def answered(self) -> None:
+        """The driver has set its outputs for the last report it took: the bus process may begin the
+        next cycle (it waits at most ``answer_wait`` for this)."""
+        self.send(("answer", self._report_seq))
+
     def _apply(self, report: Dict[str, Any], events: List[Tuple[Any, ...]]) -> None:
         self.reports += 1
+        self._report_seq = report.get("seq", self._report_seq)
+        for address, serial in report.get("carried", {}).items():
+            slave = self._slaves.get(address)
+            if slave is not None:
+                slave.carried_serial = serial
         for address, old, new, reason, since, session in events:
             slave = self._slaves.get(address)
             if slave is None:

@@ -106,6 +106,9 @@ class LinkSample:
     record_time: Optional[float] = None    # when the controller's ``feedback`` was taken: the
     #                                        reply that carried it began then (its arrival less its
     #                                        time on the wire); what joint_states are stamped with
+    carried: bool = True                   # the cycle carried the record set last (False: a bus
+    #                                        process's cycle was under way when it was set; the
+    #                                        record set next replaces it before any telegram does)
 
     @property
     def connected(self) -> bool:
@@ -230,8 +233,8 @@ class LinkSupervisor:
 
     def set_outputs(self, record: bytes) -> None:
         """The record sent in the next DP cycles (to a bus process with the record that stops
-        what it sets going: sent there if the driver dies; and whether it is a stop, which goes on
-        the wire at once -- any other record waits until the one before it was carried)."""
+        what it sets going: sent there if the driver dies), and then the bus process told that the
+        driver has answered its last report (it waits at most its ``answer_wait`` for that)."""
         slave = self._slave
         if slave is None:
             return
@@ -241,8 +244,12 @@ class LinkSupervisor:
                 slave.stop_outputs = self._wire.stop_record(record, self.params.byte_order)
             except ProtocolError as exc:    # never: the record was encoded by the same protocol
                 log.error("no stop record for %s: %s", record.hex(), exc)
-            slave.urgent = self._wire.is_stop(record, self.params.byte_order)
         slave.outputs = record
+        if isinstance(self._master, BusProcessMaster):
+            try:
+                self._master.answered()
+            except ProfibusError:
+                pass           # the bus process is gone: the next step says so
 
     # ----------------------------------------------------------------------- the step
     def step(self, now: float) -> LinkSample:
@@ -350,7 +357,8 @@ class LinkSupervisor:
             feedback_time=self._good_time if connected else None,
             record_time=self._record_stamp if connected else None,
             session=self._session, session_records=self._session_records,
-            error_code=self._error_code, error_reason=self._error_reason, cycled=cycled)
+            error_code=self._error_code, error_reason=self._error_reason, cycled=cycled,
+            carried=getattr(self._slave, "carried", True))
 
     def _down(self, state: LinkState, reason: str) -> None:
         if self._state is LinkState.CONNECTED and state is not LinkState.CONNECTED:

@@ -240,9 +240,15 @@ class SequencerBase(SequencerHooks):
         self.follow(now, fb, sample)
         self._settling.check(now, fb, self.resting)
         self.advance(now, fb, sample, joints)
+        self.before_record(sample)
         command = self.record(now)
         self._publish()                 # after the record: the view's live_anchor is what it put on the wire
         return command
+
+    def before_record(self, sample: LinkSample) -> None:
+        """Hook before :meth:`record`: ``sample`` says whether this step follows a bus cycle and
+        whether that cycle carried the record set last (a streaming sequencer forgets a record that
+        a woken step made and the next one replaces before any telegram carried it)."""
 
     def _begin_step(self, now: float, sample: LinkSample) -> Optional[Any]:
         """The start of every step (v1 and v2): take the posted requests; on a lost link or a new

@@ -316,6 +316,7 @@ class StreamSequencer(SequencerBase):
         self._high = -1                       # the highest point of the current job ever put on it
         self._acked = -1                      # points_taken at the last record
         self._ahead = True                    # send ahead of the acknowledgements (send_ahead)
+        self._woken: Optional[Tuple[Any, ...]] = None   # what was offered before a woken step's record
         self._last_state: Optional[StreamState] = None
         self._unarmed_since: Optional[float] = None   # the controller reported "not armed" since
         # the controller's general-purpose outputs 1..16 (§9.5), sent in every record; back to 0 (their
@@ -480,6 +481,7 @@ class StreamSequencer(SequencerBase):
 
     def _end_current(self) -> None:
         self._job = None
+        self._woken = None
         self._base = 0
         self._limit = 0
         self._high = -1
@@ -525,6 +527,7 @@ class StreamSequencer(SequencerBase):
             return
         self._base = next_seq(fb.accepted_seq)
         self._offered, self._acked, self._ahead, self._high = None, -1, True, -1
+        self._woken = None
         self._limit = len(job.points)
         self._rejected_before = fb.rejected_seq
         self._started = now
@@ -541,6 +544,20 @@ class StreamSequencer(SequencerBase):
         point = job.points[k]
         return WireTarget(self._seq(k), point.joints, point.pose,
                           wire_speed(point.speed, self.params.controller.speed_scale), point.smooth)
+
+    def before_record(self, sample: LinkSample) -> None:
+        """A step woken by a request (no bus cycle) makes a record while the bus process may be
+        under way with a cycle; the report of that cycle then finds it not carried, and this step's
+        record replaces it before any telegram did. So what it offered counts as never offered: the
+        state before it comes back, and this record offers it again (a START replaced by the next
+        target sent ahead left the controller without a stream: the arm stood at point 1)."""
+        if not sample.cycled:
+            if self._woken is None:
+                self._woken = (self._offered, self._high, self._acked, self._ahead)
+            return
+        if self._woken is not None and not sample.carried and self._base:
+            self._offered, self._high, self._acked, self._ahead = self._woken
+        self._woken = None
 
     def record(self, now: float) -> Any:
         outputs = self.outputs

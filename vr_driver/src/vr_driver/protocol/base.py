@@ -201,15 +201,6 @@ class Protocol:
         STOP; a handshake protocol overrides it (v1: the same target with the stop flag)."""
         return self.encode(self.stream_command((), stop=True), byte_order)
 
-    def is_stop(self, record: bytes, byte_order: Any = "little") -> bool:
-        """True when ``record`` is a stop (its command's ``stop``): the bus process puts it on the
-        wire at once, never behind a record not yet carried (vr_driver.bus.process, "every record
-        at least once"). False for bytes that are not a command of this protocol."""
-        try:
-            return bool(self.decode_command(record, byte_order).stop)
-        except ProtocolError:
-            return False
-
     def decode_feedback(self, data: Any, byte_order: Any = "little") -> Any:
         """A controller record as this protocol's feedback object; ProtocolError (with the reason)
         for bytes that are not one."""

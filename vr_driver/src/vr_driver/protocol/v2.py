@@ -195,11 +195,6 @@ class CommandV2:
         if Control.STOP in self.control and not self.slot0.empty:
             raise ProtocolError("STOP carries no target")
 
-    @property
-    def stop(self) -> bool:
-        """The master's STOP (the arm stops what it runs)."""
-        return Control.STOP in self.control
-
     def encode(self) -> bytes:
         body = _COMMAND.pack(VERSION, int(self.control), 0, self.slot0.pack(), self.slot1.pack(),
                              self.outputs, 0)

@@ -241,11 +241,6 @@ class CommandV3:
         if Control.STOP in self.control and not self.slot.empty:
             raise ProtocolError("STOP carries no target")
 
-    @property
-    def stop(self) -> bool:
-        """The master's STOP (the arm stops what it runs)."""
-        return Control.STOP in self.control
-
     def encode(self, byte_order: Any = ByteOrder.LITTLE) -> bytes:
         order = ByteOrder.parse(byte_order)
         s = self.slot
