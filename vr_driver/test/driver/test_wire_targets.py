@@ -9,7 +9,7 @@ import random
 
 import pytest
 
-from vr_driver.driver.wire_targets import FINE, GOOD_ENOUGH, WireTarget, wire_target
+from vr_driver.driver.wire_targets import FINE, GOOD_ENOUGH, MODEL_MARGIN, GridModel, WireTarget, wire_target
 from vr_driver.errors import VrDriverError
 from vr_driver.poses import ControllerPose
 from vr_driver.protocol import registry
@@ -144,12 +144,13 @@ def grid_best(kin, q, seed):
 
 
 def test_the_grid_search_tries_the_predicted_best_first_and_stops(kin):
-    """Within FULL_SEARCH_BAND the grid is tried in the order a linear model predicts, until one lands
-    within FINE, or after SEARCH_LIMIT poses one within GOOD_ENOUGH (all 729 cost up to 0.27 s a
-    target, which a goal ending near the singularity spent before its arm moved); else all of it.
-    Against all 729, solved here: it keeps the best of the grid (within 0.005 deg), or one within
-    FINE, or one within GOOD_ENOUGH after at most a third of the grid; never worse than the plain
-    rounding."""
+    """Within FULL_SEARCH_BAND the grid is tried in the order a linear model predicts (GridModel),
+    until one lands within FINE, or after SEARCH_LIMIT poses one within GOOD_ENOUGH, or the model
+    says nothing left can land nearer than the best found (all 729 cost up to 0.27 s a target, which
+    a goal ending near the singularity spent before its arm moved). Against all 729, solved here: it
+    keeps the best of the grid (within 0.005 deg), or one within FINE, or one within GOOD_ENOUGH
+    after at most a third of the grid; never worse than the plain rounding; and never all 729 for a
+    wrist the model holds for."""
     rng = random.Random(11)
     early = 0
     for _ in range(10):
@@ -158,17 +159,50 @@ def test_the_grid_search_tries_the_predicted_best_first_and_stops(kin):
         t = wire_target(kin, V3, q, q)
         assert t.error <= off(kin, V3.wire_pose(kin.fk_pose(q)), q, q)
         best = grid_best(kin, q, q)
-        if t.error > GOOD_ENOUGH:                # nothing good enough: the whole grid, its best kept
-            assert t.solved >= 729 and t.error <= best + 1e-12, (t.solved, t.error / DEG, best / DEG)
+        if t.error > GOOD_ENOUGH:                # nothing good enough: the best of the grid, found early
+            assert t.error <= best + 0.005 * DEG, (t.solved, t.error / DEG, best / DEG)
+            assert t.solved < 729
         elif t.error > max(FINE, best + 0.005 * DEG):
             assert t.solved <= 250, t.solved     # the coordinate search, the model's 13, SEARCH_LIMIT of the grid
         early += t.solved <= 250
-    assert early >= 5, early
+    assert early >= 8, early
 
 
-def test_on_the_singularity_the_whole_grid_is_searched(kin):
-    """Exactly on joint_5 = 0 no pose lands within GOOD_ENOUGH (the pose does not fix joint_4 -
-    joint_6): every pose of the grid is tried and the best kept."""
+def test_the_model_predicts_the_solution_through_the_singularity(kin):
+    """In wrist_features the controller's solution is linear in the wire pose at joint_5 = 0 too: over
+    all 729 poses the predicted error is within MODEL_MARGIN of the solution's, and the best pose is
+    among the first two predicted (random wrists, joint_5 from 0 to 0.45 deg)."""
+    rng = random.Random(3)
+    for bend in (0.0, 0.03, 0.45):
+        q = (rng.uniform(-1, 1), rng.uniform(0.2, 0.9), rng.uniform(-0.6, 0.2), rng.uniform(-1.5, 1.5),
+             bend * DEG, rng.uniform(-1.5, 1.5))
+        base = V3.wire_pose(kin.fk_pose(q))
+        mm, deg = V3.pose_resolution
+
+        def solve(steps):
+            pose = V3.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, (mm,) * 3 + (deg,) * 3))))
+            return tuple(kin.ik_pose(pose, seed=q))
+        model = GridModel(q, solve((0,) * 6), solve, q)
+        assert model.trusted
+        actual = [max(abs(a - b) for a, b in zip(solve(steps), q)) for steps, _p in model.order]
+        misses = [abs(a - p) for a, (_s, p) in zip(actual, model.order)]
+        assert max(misses) <= MODEL_MARGIN, (bend, max(misses) / DEG)
+        assert actual.index(min(actual)) <= 1
+
+
+def test_on_the_singularity_the_best_of_the_grid_is_found_without_solving_it_all(kin):
+    """Exactly on joint_5 = 0 the pose does not fix joint_4 - joint_6: the best of the grid is kept,
+    found by the model in a few dozen solutions instead of 729 (0.6 s: the bench's goal ending on
+    joint_5 = 0 waited that long before its arm moved)."""
+    for q in ((0.4, 0.5, -0.3, 0.5, 0.0, -0.7), (-0.5, 0.6, -0.3, 0.3, 0.0, 0.4)):
+        t = wire_target(kin, V3, q, q)
+        assert t.solved < 150
+        assert t.error <= grid_best(kin, q, q) + 0.005 * DEG
+
+
+def test_near_another_branch_the_model_is_not_trusted_and_the_whole_grid_is_searched(kin):
+    """On joint_5 = 0 where some roundings land on another elbow (the nearest solution changes
+    branch): no linear model holds, every pose of the grid is tried and the best kept."""
     q = (0.3, -0.2, -0.9, 0.5, 0.0, -0.7)
     t = wire_target(kin, V3, q, q)
     assert t.error > GOOD_ENOUGH and t.solved >= 729

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-import pytest
 
 from vr_driver.driver.sequencer import SequencerBase
 from vr_driver.driver.streaming import StreamSequencer

@@ -16,15 +16,20 @@ it (``current_joints``), which the driver knows only to lie on a stretch of the 
 every seed of that stretch it is given (the worst of them counts): first the plain rounding; when that is off by more than ``fine``, a coordinate
 search over single steps (a few dozen IK solutions, ~0.3 ms each); within FULL_SEARCH_BAND of
 joint_5 = 0, where the coordinate search can stall, the grid in the order a linear model predicts
-(the solution's change per step of each number, from the twelve one-step neighbours of the plain
-rounding), until one lands within ``fine``, or after SEARCH_LIMIT of them one within GOOD_ENOUGH;
-else all 729. Measured on random wrists within 3 deg of the singularity (v3): the worst plain
-rounding 14.5 deg off, the chosen pose 0.44 deg off, most under 0.02 deg. The predicted order
-against all 729 (40 random wrists within 0.5 deg of the singularity): the best of the grid among
-the first 40 predicted in 37, among the first 80 in 38; the others within 0.06 deg of joint_5 = 0,
-where the model is poor (one step there swings joint_4 - joint_6 by degrees). A target 0.2-0.45 deg
-from the singularity now costs ~115 IK solutions (38 ms) instead of ~750 (0.27 s), which a goal
-ending near it spent before its arm moved.
+(:class:`GridModel`), until one lands within ``fine``, or after SEARCH_LIMIT of them one within
+GOOD_ENOUGH, or the model says no pose left can land nearer than the best found (its prediction
+less its largest miss so far and MODEL_MARGIN); else all 729. The model is linear in
+:func:`wrist_features` -- joint_1..3, joint_5 x (cos, sin) joint_4 and joint_4 + joint_6 -- in which
+the controller's solution changes linearly with the pose even at joint_5 = 0, where joint_4 -
+joint_6 is the angle of the wrist's small residual rotation and one step of the wire swings it by
+degrees (a model linear in the joints themselves, used before, found the best pose late or never
+there, and a goal ending on joint_5 = 0 solved all 729 poses, 0.6 s, before its arm moved; now
+~30). Measured on random wrists within 0.45 deg of the singularity (v3): the prediction within 0.075
+deg of the solution over the whole grid, the best pose the first or second predicted. Near a branch
+boundary (a rounding lands on another elbow) no linear model holds: when a one-step neighbour is
+solved on another branch (or not at all) the model is not trusted and the grid is searched to its
+end. Measured before (random wrists within 3 deg): the worst plain rounding 14.5 deg off, the
+chosen pose 0.44 deg off, most under 0.02 deg.
 
 Pure computation on the driver's kinematics model; used by the stream preparation of the Cartesian
 protocols (:mod:`.stream_prep`)."""
@@ -157,37 +162,100 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
             except VrDriverError:
                 return None
         at_base = solve((0,) * 6)
-        order = (predicted_order(planned, at_base, solve) if at_base is not None
-                 else itertools.product(STEPS, repeat=6))
-        for tried, steps in enumerate(order):
+        model = GridModel(planned, at_base, solve, seed) if at_base is not None else None
+        order = model.order if model is not None else \
+            [(steps, math.nan) for steps in itertools.product(STEPS, repeat=6)]
+        missed = 0.0                 # the model's largest miss so far on the poses solved
+        for tried, (steps, predicted) in enumerate(order):
             if best.error <= fine or (tried >= SEARCH_LIMIT and best.error <= GOOD_ENOUGH):
                 break
+            if model is not None and model.trusted and predicted - missed - MODEL_MARGIN > best.error:
+                break                # nothing left can land nearer (the order is by the prediction)
             if steps == best.steps:
                 continue
             found = attempt(steps, best.error)
             if found is not None and _better(found, best):
                 best = found
+            q = solve(steps)
+            if q is None:
+                continue
+            missed = max(missed, abs(_error(q, planned) - predicted))
     return WireTarget(best.pose, best.joints, best.error, best.steps, count[0])
 
 
-def predicted_order(planned: Sequence[float], at_base: Sequence[float], solve) -> List[Tuple[int, ...]]:
-    """The 729 grid offsets (each number -1, 0, +1 step) in the order a linear model puts their
-    solutions near ``planned``, nearest first: the solution at the plain rounding ``at_base`` plus, per
-    number, its change per step (central differences of ``solve(offset)``, the controller's
+#: [rad] the margin the grid search adds to the model's largest miss so far before it trusts the
+#: model's word that no pose left can land nearer than the best one found
+MODEL_MARGIN = math.radians(0.1)
+#: [rad] the model is trusted only when every one-step neighbour of the plain rounding was solved
+#: with joint_1..joint_3 within this of its solution (one branch: near a branch boundary a rounding
+#: may land on another, and no linear model holds there)
+ONE_BRANCH = math.radians(1.0)
+
+
+def _error(q: Sequence[float], planned: Sequence[float]) -> float:
+    return max(abs(a - b) for a, b in zip(q, planned))
+
+
+def wrist_features(q: Sequence[float]) -> np.ndarray:
+    """The joints in coordinates in which the controller's solution changes linearly with the wire
+    pose, even at joint_5 = 0: joint_1..3, joint_5 x (cos, sin) joint_4 -- the wrist's residual
+    rotation out of joint_4 + joint_6, which a pose fixes -- and joint_4 + joint_6. (Near joint_5 = 0
+    joint_4 - joint_6 is the angle of that residual: not linear in the pose, linear through it.)
+    The same for both wrist branches (joint_5 negated, joint_4 and joint_6 half a turn on)."""
+    return np.array([q[0], q[1], q[2], q[4] * math.cos(q[3]), q[4] * math.sin(q[3]), q[3] + q[5]])
+
+
+def joints_of(features: np.ndarray, seed: Sequence[float]) -> Tuple[float, ...]:
+    """The joints of :func:`wrist_features` on the wrist branch (and turns) nearest ``seed``, as the
+    controller's IK chooses them."""
+    four = math.atan2(features[4], features[3])
+    bend = math.hypot(features[3], features[4])
+    choices = []
+    for j4, j5 in ((four, bend), (four + math.pi, -bend)):
+        j4 = seed[3] + math.remainder(j4 - seed[3], 2.0 * math.pi)
+        j6 = seed[5] + math.remainder(features[5] - j4 - seed[5], 2.0 * math.pi)
+        choices.append(((j4 - seed[3]) ** 2 + (j5 - seed[4]) ** 2 + (j6 - seed[5]) ** 2, j4, j5, j6))
+    _d, j4, j5, j6 = min(choices)
+    return (float(features[0]), float(features[1]), float(features[2]), j4, j5, j6)
+
+
+class GridModel:
+    """The 729 grid offsets (each number -1, 0, +1 step) with the error a linear model predicts for
+    the controller's solution of each, nearest the plan first (:attr:`order`: (offset, predicted
+    error)). The model: the solution at the plain rounding ``at_base`` plus, per number, the change
+    per step of its :func:`wrist_features` (central differences of ``solve(offset)``, the controller's
     solution of the plain rounding moved by the offset, or None; a number whose neighbours cannot
-    both be solved counts as changing nothing)."""
-    q0 = np.asarray(at_base, dtype=float)
-    rows = []
-    for i in range(6):
-        up = solve(tuple(1 if k == i else 0 for k in range(6)))
-        down = solve(tuple(-1 if k == i else 0 for k in range(6)))
-        rows.append((np.asarray(up) - np.asarray(down)) / 2.0 if up is not None and down is not None
-                    else np.zeros(len(q0)))
-    grid = np.array(list(itertools.product(STEPS, repeat=6)), dtype=float)
-    predicted = q0[None, :] + grid @ np.array(rows)
-    error = np.max(np.abs(predicted - np.asarray(planned, dtype=float)[None, :]), axis=1)
-    order = np.argsort(error, kind="stable")
-    return [tuple(int(v) for v in grid[i]) for i in order]
+    both be solved counts as changing nothing). In those coordinates the solution is linear in the
+    pose at joint_5 = 0 too (measured on random wrists within 0.45 deg of it: the prediction within
+    0.075 deg of the solution over all 729, the best pose the first predicted). :attr:`trusted`: every
+    neighbour solved on the branch of ``at_base``. ``seed``: the controller's seed (its IK takes the
+    wrist branch nearest it)."""
+
+    def __init__(self, planned: Sequence[float], at_base: Sequence[float], solve,
+                 seed: Sequence[float]) -> None:
+        f0 = wrist_features(at_base)
+        rows = []
+        trusted = True
+        for i in range(6):
+            up = solve(tuple(1 if k == i else 0 for k in range(6)))
+            down = solve(tuple(-1 if k == i else 0 for k in range(6)))
+            if up is None or down is None:
+                trusted = False
+                rows.append(np.zeros(6))
+                continue
+            if max(abs(a - b) for q in (up, down) for a, b in zip(q[:3], at_base[:3])) > ONE_BRANCH:
+                trusted = False
+            fu, fd = wrist_features(up), wrist_features(down)
+            row = (fu - fd) / 2.0
+            row[5] = math.remainder(fu[5] - fd[5], 2.0 * math.pi) / 2.0
+            rows.append(row)
+        self.trusted = trusted
+        grid = np.array(list(itertools.product(STEPS, repeat=6)), dtype=float)
+        predicted = f0[None, :] + grid @ np.array(rows)
+        errors = [_error(joints_of(f, seed), planned) for f in predicted]
+        order = np.argsort(errors, kind="stable")
+        self.order: List[Tuple[Tuple[int, ...], float]] = [
+            (tuple(int(v) for v in grid[i]), float(errors[i])) for i in order]
 
 
 def _better(a: WireTarget, b: WireTarget) -> bool:
