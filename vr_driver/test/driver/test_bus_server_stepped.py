@@ -30,7 +30,8 @@ class Rig:
         self.slave = robot_slave(ADDRESS, clock=self.clock, protocol="v3")
         self.carried = []
         self.slave.on_outputs = self.carried.append
-        self.link = SteppedLink(self.slave, FakeClock()) if clock is not None else SteppedLink(self.slave, self.clock)
+        # (on the real clock the link's waits still pass on a fake one of its own)
+        self.link = SteppedLink(self.slave, self.clock if isinstance(self.clock, FakeClock) else FakeClock())
         spec = SlaveSpec(ADDRESS, self.slave.ident, self.slave.cfg, watchdog=None)
         settings = BusSettings(device="memory", baud=19200, master_address=2,
                                timing=BusTiming.for_baud(19200), cycle_rate_hz=20.0, controller=ADDRESS,
@@ -75,11 +76,11 @@ def test_each_report_names_the_record_its_cycle_carried():
     rig = Rig()
     first = rig.out(record(1))
     assert rig.cycle() == record(1)
-    assert rig.report["carried"][ADDRESS] == first
+    assert rig.report["carried"] == first
     rig.out(record(2))
     second = rig.out(record(3))          # two records before a cycle: the newer replaces the older
     assert rig.cycle() == record(3)
-    assert rig.report["carried"][ADDRESS] == second
+    assert rig.report["carried"] == second
     assert record(2) not in rig.carried
 
 
@@ -91,10 +92,10 @@ def test_a_cycle_without_a_reply_carried_nothing_the_driver_can_count_on():
     rig.link.cut = True
     rig.out(record(2))
     assert rig.cycle() is None
-    assert rig.report["carried"][ADDRESS] == first
+    assert rig.report["carried"] == first
     rig.link.cut = False
     rig.cycle()
-    assert rig.report["carried"][ADDRESS] == rig.serial
+    assert rig.report["carried"] == rig.serial
 
 
 def test_the_driver_side_knows_whether_the_last_record_was_carried():
@@ -122,7 +123,7 @@ def test_a_new_session_starts_from_the_idle_record_and_carries_no_old_serial():
             break
     rig.cycle()
     assert rig.carried[-1] == V3.idle_record()
-    assert rig.report["carried"][ADDRESS] == 0
+    assert rig.report["carried"] == 0
 
 
 def test_a_due_cycle_waits_for_the_answer_to_the_last_report_at_most_answer_wait():

@@ -28,11 +28,12 @@ Rules:
   outputs for that report), so that a decision made on a report goes out in the next cycle, not
   the one after: otherwise every target, acknowledgement and stop reached the controller a whole
   cycle (62 ms) later than the stepped world, where the driver decides between two cycles. A DP
-  master repeats its output image every cycle anyway: a record repeated is never a command repeated (the protocols' handshake and sequence numbers count each command once). Reports
-  go out through a thread of their own: a driver that does not read them never blocks a cycle
-  (the newest report wins; state changes are kept in order).
+  master repeats its output image every cycle anyway: a record repeated is never a command
+  repeated (the protocols' handshake and sequence numbers count each command once). Reports go out
+  through a thread of their own: a driver that does not read them never blocks a cycle (the newest
+  report wins; state changes are kept in order).
 - **Which record a cycle carried.** Every outputs message has a serial number; each report says
-  the serial of the controller's record that the cycle's answered Data_Exchange carried. The driver
+  the serial of the controller's record that its last answered Data_Exchange carried. The driver
   decides a record at each report and, woken by a request, between two reports: one made while a
   cycle was under way is replaced by the next report's before any telegram carried it, and the
   driver learns so from that report (:attr:`RemoteSlave.carried`) -- its stream then offers again
@@ -243,8 +244,7 @@ class BusServer:
         self._summary_at = now
         self._stop_record: Optional[bytes] = None
         self._serials: Dict[int, int] = {}        # per slave: the serial of its outputs now
-        self._carried: Dict[int, int] = {}        # per slave: the serial the last answered exchange carried
-        self._answered_at: Dict[int, float] = {}
+        self._carried = 0                         # the serial the controller's last answered exchange carried
         self._report_seq = 0                      # the last report posted (its number)
         self._reported_at = now
         self._answered = 0                        # the last report the driver answered
@@ -325,7 +325,7 @@ class BusServer:
             return 2
 
     def _cycle(self) -> bool:
-        serials = dict(self._serials)         # the records this cycle's telegrams carry
+        serial = self._serials.get(self.settings.controller, 0)   # the record this cycle carries
         try:
             self.master.cycle(timeout=self.settings.cycle_timeout)
         except ProfibusError as exc:
@@ -342,15 +342,7 @@ class BusServer:
                 and ctrl.inputs_time != self._last_reply:
             self._last_reply = ctrl.inputs_time
             self.health.reply(ctrl.inputs_time)
-        for address, serial in serials.items():
-            try:
-                handle = self.master.slave(address)
-            except ProfibusError:
-                continue
-            if handle.connected and handle.inputs_time is not None \
-                    and handle.inputs_time != self._answered_at.get(address):
-                self._answered_at[address] = handle.inputs_time
-                self._carried[address] = serial
+            self._carried = serial
         if now - self._summary_at >= SUMMARY_PERIOD:
             self._summary, self._summary_at = self.health.summary(now), now
         events, self._events = self._events, []
@@ -365,7 +357,7 @@ class BusServer:
             s = self.master.slave(address)
             slaves.append((address, s.state.value, s.state_since, sessions, s.inputs, s.inputs_time,
                            s.last_diag, dict(vars(s.counters))))
-        return {"time": now, "seq": self._report_seq, "carried": dict(self._carried),
+        return {"time": now, "seq": self._report_seq, "carried": self._carried,
                 "counters": dict(vars(self.master.counters)), "slaves": slaves,
                 "health": self._summary, "dropped_events": self._sender.dropped_events}
 
@@ -664,11 +656,10 @@ class BusProcessMaster:
 
     def _apply(self, report: Dict[str, Any], events: List[Tuple[Any, ...]]) -> None:
         self.reports += 1
-        self._report_seq = report.get("seq", self._report_seq)
-        for address, serial in report.get("carried", {}).items():
-            slave = self._slaves.get(address)
-            if slave is not None:
-                slave.carried_serial = serial
+        self._report_seq = report["seq"]
+        controller = self._slaves.get(self.settings.controller)
+        if controller is not None:
+            controller.carried_serial = report["carried"]
         for address, old, new, reason, since, session in events:
             slave = self._slaves.get(address)
             if slave is None:

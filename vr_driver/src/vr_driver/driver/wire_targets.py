@@ -132,7 +132,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
                 if not any(steps):
                     raise
                 return None
-            error = max(abs(a - b) for a, b in zip(q, planned))
+            error = _error(q, planned)
             if worst is None or error > worst[0]:
                 worst = (error, q)
             if worst[0] > bound:
