@@ -271,3 +271,27 @@ def test_an_analysis_runs_while_the_bus_keeps_cycling():
     Ctx.bus = Bus()
     with pytest.raises(ValueError, match="bad record"):
         Context.while_cycling(Ctx, broken)
+
+
+def test_cruise_move_from_a_move_without_a_cruise():
+    # a linear ramp: a = 4 rad/s^2, a move of 0.5 rad peaked at sqrt(a d) = 1.414 rad/s
+    a, d = 4.0, 0.5
+    peak = math.sqrt(a * d)
+    distance, speed = analysis.cruise_move(d, peak, 2.0, room=10.0, cruise_time=0.3, margin=1.0)
+    assert speed == 2.0
+    assert distance == pytest.approx(2.0 ** 2 / a + 2.0 * 0.3)
+    # the room too short: the speed lowered until ramps and cruise fit in it
+    distance, speed = analysis.cruise_move(d, peak, 2.0, room=1.0, cruise_time=0.3, margin=1.0)
+    assert distance == 1.0 and speed < 2.0
+    assert speed ** 2 / a + speed * 0.3 == pytest.approx(1.0)
+    # the margin is room taken, not speed given
+    long, _ = analysis.cruise_move(d, peak, 2.0, room=10.0, cruise_time=0.3, margin=1.3)
+    assert long == pytest.approx(1.3 * (1.0 + 0.6))
+
+
+def test_cruise_move_says_none_when_it_cannot():
+    assert analysis.cruise_move(0.5, 0.0, 2.0, room=10.0, cruise_time=0.3) is None          # no peak
+    assert analysis.cruise_move(0.5, float("nan"), 2.0, room=10.0, cruise_time=0.3) is None
+    assert analysis.cruise_move(0.5, 1.0, 2.0, room=0.0, cruise_time=0.3) is None           # no room
+    # room for only a crawl (under a tenth of the cruise asked)
+    assert analysis.cruise_move(0.5, 1.0, 2.0, room=0.01, cruise_time=0.3) is None

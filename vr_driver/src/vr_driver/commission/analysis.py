@@ -10,6 +10,7 @@ functions over (time, value) samples, tested on synthetic profiles.
 - :func:`fit_ramp`: the speed ramp from rest (and to rest): its duration, linear or S-shaped,
   with the cruise line fixing where it is centred (a ramp of duration r ends r / 2 after the cruise
   line leaves the rest position, for either shape).
+- :func:`cruise_move`: a move long (or slow) enough to reach a cruise, from one that reached none.
 - :func:`min_speed_near`: the lowest speed of a stream near each of its points (a stop or a blend),
   from :func:`steady_speeds` (each the median of three: one mis-dated record is not a stop).
 """
@@ -20,7 +21,8 @@ from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 __all__ = ["LoopTiming", "loop_timing", "date_loops", "Cruise", "top_speed", "cruise", "RampFit", "fit_ramp",
-           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "passing_times", "steady_speeds", "min_speed_near", "moved_interval"]
+           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "passing_times", "steady_speeds", "min_speed_near", "moved_interval",
+           "cruise_move"]
 
 Samples = Sequence[Tuple[float, float]]
 
@@ -382,3 +384,30 @@ def min_speed_near(samples: Samples, points: Sequence[float], window: float) -> 
         near = [v for t, v in speeds if at is not None and abs(t - at) <= window]
         out.append(min(near) if near else None)
     return out
+
+
+def cruise_move(distance: float, peak: float, cruise_speed: float, room: float, cruise_time: float,
+                margin: float = 1.3, slowest: float = 0.1) -> Optional[Tuple[float, float]]:
+    """(distance, speed) of a move from rest to rest that reaches ``cruise_speed`` and holds it
+    ``cruise_time``, sized from one that went ``distance`` and peaked at ``peak`` without a cruise.
+
+    A move that never reached its cruise ramped up and straight back down: with the mean
+    acceleration ``a`` of its ramps, ``peak ** 2 = a * distance`` (either ramp shape: the distance of
+    a ramp is its mean speed times its time). The new move needs ``speed ** 2 / a`` for its two
+    ramps and ``speed * cruise_time`` at cruise, times ``margin``. Where that is longer than
+    ``room``, the speed is lowered until it fits in ``room`` (the G2 accelerates the same to a lower
+    speed: the constant-acceleration assumption the ramps step measures by). None when the peak says
+    nothing (not above 0) or the speed that fits is under ``slowest`` times ``cruise_speed``."""
+    values = (distance, peak, cruise_speed, room, cruise_time, margin)
+    if not all(math.isfinite(v) for v in values) or min(distance, cruise_speed, room, margin) <= 0.0 or peak <= 0.0:
+        return None
+    a = peak * peak / distance
+    need = margin * (cruise_speed * cruise_speed / a + cruise_speed * cruise_time)
+    if need <= room:
+        return need, cruise_speed
+    # margin * (v^2 / a + v T) = room, for v > 0
+    t = max(0.0, cruise_time)
+    v = a * (-t + math.sqrt(t * t + 4.0 * room / (margin * a))) / 2.0
+    if v < slowest * cruise_speed:
+        return None
+    return room, v

@@ -81,6 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--config-percent", type=float, default=d.config_percent)
     g.add_argument("--axes", default=",".join(str(a) for a in d.ramp_axes), help="ramps: the joints (1..6)")
     g.add_argument("--ramp-move", type=float, default=d.ramp_move, help="ramps: joints 1-4 (joints 5-6 twice)")
+    g.add_argument("--ramp-move-max", type=float, default=d.ramp_move_max,
+                   help="ramps: a joint that reaches no cruise speed moves again, up to this far (joints 5-6 twice)")
     g.add_argument("--ramp-percent", type=float, default=d.ramp_percent)
     g.add_argument("--hold-time", type=float, default=d.hold_time,
                    help="seconds a record that must not be taken is held (at least 10 loops)")
@@ -96,7 +98,8 @@ def _sizes(args: argparse.Namespace) -> Sizes:
     if not axes or any(not 1 <= a <= 6 for a in axes):
         raise ValueError("--axes: a comma list of joints 1..6, got %r" % args.axes)
     for name in ("heartbeat_time", "loop_move", "loop_percent", "speed_move", "speed_percent", "stream_step",
-                 "stream_percent", "config_percent", "ramp_move", "ramp_percent", "hold_time", "connect_timeout"):
+                 "stream_percent", "config_percent", "ramp_move", "ramp_move_max", "ramp_percent", "hold_time",
+                 "connect_timeout"):
         value = getattr(args, name)
         if not value > 0:
             raise ValueError("--%s must be > 0, got %r" % (name.replace("_", "-"), value))
@@ -110,7 +113,8 @@ def _sizes(args: argparse.Namespace) -> Sizes:
                  speed_percent=args.speed_percent, stream_points=args.stream_points, stream_step=args.stream_step,
                  stream_percent=args.stream_percent, config_turn=args.config_turn,
                  config_percent=args.config_percent, ramp_axes=axes, ramp_move=args.ramp_move,
-                 ramp_percent=args.ramp_percent, hold_time=args.hold_time)
+                 ramp_move_max=max(args.ramp_move, args.ramp_move_max), ramp_percent=args.ramp_percent,
+                 hold_time=args.hold_time)
 
 
 def _params(args: argparse.Namespace, byte_order: str) -> DriverParams:
@@ -202,7 +206,7 @@ class _Runner:
         except VrDriverError as exc:
             self.say("commission: the model: %s" % exc)
             return 2
-        reach = max(sizes.ramp_move * 2 if "ramps" not in skip else 0.0, 2 * sizes.config_turn
+        reach = max(sizes.ramp_move_max * 2 if "ramps" not in skip else 0.0, 2 * sizes.config_turn
                     if "configuration" not in skip else 0.0, 2 * sizes.speed_move, sizes.stream_points * sizes.stream_step)
         self.say(PENDANT.format(address=bus_config.slaves[0].address, baud=bus_config.baud, reach=reach))
         self.say()

@@ -41,6 +41,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
 from ..bus.process import normal_scheduling
 from ..errors import KinematicsError, PoseError
+from ..kinematics.solver import stretched_elbow
 from ..poses import ControllerPose
 from ..protocol.common import ByteOrder, StatusBits
 from ..protocol.v3 import (CartesianSlot, CommandV3, Control, FeedbackV3, RejectCode, StreamState, check_word,
@@ -99,6 +100,7 @@ class Sizes:
     config_percent: float = 20.0
     ramp_axes: Tuple[int, ...] = (1, 2, 3, 4, 5, 6)
     ramp_move: float = 60.0            # joints 1-4 (joints 5-6: twice this)
+    ramp_move_max: float = 120.0       # a joint that reached no cruise moves again, up to this (5-6: twice)
     ramp_percent: float = 100.0
     hold_time: float = 0.3             # a record that must not be taken is held this long (and 10 loops)
 
@@ -117,6 +119,7 @@ class Context:
         self.seq = 0                   # the last sequence number sent
         self.start_joints: Optional[Tuple[float, ...]] = None
         self.vmax = tuple(kin.limits.velocity)
+        self.elbow = stretched_elbow(kin)
 
     # ------------------------------------------------------------------------- the program
     @property
@@ -266,10 +269,25 @@ class Context:
         return tuple(q)
 
     def fits(self, base: Sequence[float], joint: int, degrees: float) -> bool:
-        """Whether ``joint`` (1-based) turned by ``degrees`` from ``base`` stays 2 deg inside its limits."""
-        q = base[joint - 1] + math.radians(degrees)
-        margin = math.radians(2.0)
-        return self.kin.limits.lower[joint - 1] + margin <= q <= self.kin.limits.upper[joint - 1] - margin
+        """Whether ``joint`` (1-based) turned by ``degrees`` from ``base`` stays 2 deg inside its limits
+        (and, joint_3, short of the stretched elbow: :meth:`room`)."""
+        return abs(degrees) <= self.room(base, joint, 1.0 if degrees >= 0 else -1.0)
+
+    #: [deg] a joint_3 move stops this short of the stretched elbow
+    ELBOW_MARGIN = 5.0
+
+    def room(self, base: Sequence[float], joint: int, sign: float) -> float:
+        """[deg] how far ``joint`` (1-based) can turn from ``base`` in the direction ``sign`` and stay
+        2 deg inside its limits (0 when it cannot); joint_3 also stays :attr:`ELBOW_MARGIN` short of the
+        stretched elbow, where the two elbow branches of a pose meet and the joints worked out from the
+        reported poses (:meth:`track`) could not follow the arm through."""
+        q, margin = base[joint - 1], math.radians(2.0)
+        far = (self.kin.limits.upper[joint - 1] - margin - q) if sign > 0 else (q - self.kin.limits.lower[joint - 1] - margin)
+        if joint == 3 and self.elbow is not None:
+            ahead = (self.elbow - q) * (1.0 if sign > 0 else -1.0)
+            if ahead > 0.0:
+                far = min(far, ahead - math.radians(self.ELBOW_MARGIN))
+        return max(0.0, math.degrees(far))
 
     def direction(self, base: Sequence[float], joint: int, *reaches: float) -> float:
         """+1 or -1: the sign for which ``joint`` (1-based) turned by every one of ``reaches``
@@ -278,10 +296,12 @@ class Context:
             if all(self.fits(base, joint, sign * r) for r in reaches):
                 return sign
         lo, hi = self.kin.limits.lower[joint - 1], self.kin.limits.upper[joint - 1]
-        raise CommissionError("joint_%d at %.1f deg has no room for %s deg within its limits (%.0f .. %.0f deg): "
+        raise CommissionError("joint_%d at %.1f deg has no room for %s deg within its limits (%.0f .. %.0f deg%s): "
                               "move the arm nearer the middle of its range, or give smaller moves"
                               % (joint, math.degrees(base[joint - 1]), " and ".join("%+.0f" % r for r in reaches),
-                                 math.degrees(lo), math.degrees(hi)))
+                                 math.degrees(lo), math.degrees(hi),
+                                 "" if joint != 3 or self.elbow is None else
+                                 "; the stretched elbow at %.1f deg" % math.degrees(self.elbow)))
 
 
 def _at_rest(fb: FeedbackV3) -> bool:
@@ -811,8 +831,10 @@ class RampStep(Step):
     def describe(self, ctx: Context) -> str:
         s = ctx.sizes
         return ("each of joints %s in turn: +%.0f deg (joints 5-6: %.0f) at %.0f %% and back, every record logged; "
-                "the speed ramp fitted at each start and stop." % (
-                    ", ".join(str(a) for a in s.ramp_axes), s.ramp_move, 2 * s.ramp_move, s.ramp_percent))
+                "the speed ramp fitted at each start and stop. A joint that reaches no cruise speed moves again, "
+                "further (up to %.0f deg, joints 5-6: %.0f, within its limits) or slower." % (
+                    ", ".join(str(a) for a in s.ramp_axes), s.ramp_move, 2 * s.ramp_move, s.ramp_percent,
+                    s.ramp_move_max, 2 * s.ramp_move_max))
 
     def run(self, ctx: Context) -> List[Finding]:
         s = ctx.sizes
@@ -824,21 +846,35 @@ class RampStep(Step):
         measured: Dict[int, Tuple[float, List[analysis.RampFit]]] = {}     # axis: cruise speed, its ramps
         findings = []
         for axis in s.ramp_axes:
-            move = s.ramp_move * (2.0 if axis >= 5 else 1.0)
+            double = 2.0 if axis >= 5 else 1.0
+            move, percent = s.ramp_move * double, s.ramp_percent
             sign = ctx.direction(q0, axis, move)
             fits: List[Tuple[float, analysis.RampFit]] = []        # (cruise speed, ramp)
             q = q0
-            for attempt in range(2):
+            resized = False
+            for attempt in range(3):
+                peak, record_dt = 0.0, []
                 for leg in (sign * move, -sign * move):
                     target = ctx.offset(q, axis, leg)
-                    cycles = ctx.move_to(target, s.ramp_percent)
+                    cycles = ctx.move_to(target, percent)
                     track = ctx.track(cycles, q)
-                    fit = ctx.while_cycling(analysis.fit_move, [(t, qq[axis - 1]) for t, qq in track],
-                                            ctx.loop_period)
-                    log.debug("joint_%d %+.0f deg: %s", axis, leg, fit)
+                    samples = [(t, qq[axis - 1]) for t, qq in track]
+                    fit = ctx.while_cycling(analysis.fit_move, samples, ctx.loop_period)
+                    log.debug("joint_%d %+.0f deg at %.0f %%: %s", axis, leg, percent, fit)
                     if fit is not None:
                         fits.extend((abs(fit.speed), f) for f in (fit.ramp_in, fit.ramp_out))
+                    peak = max([peak] + [v for _, v in analysis.steady_speeds(samples)])
+                    record_dt.extend(b[0] - a[0] for a, b in zip(samples, samples[1:]))
                     q = ctx.current_joints(target)
+                if not fits:
+                    # no cruise: once, a move sized from this one's peak (module analysis.cruise_move)
+                    bigger = None if resized else self._reaching(ctx, q, axis, move, percent, peak, record_dt,
+                                                                 s.ramp_move_max * double)
+                    if bigger is None:
+                        break
+                    sign, move, percent = bigger
+                    resized = True
+                    continue
                 # the four ramps agree (within 10 %): done; else once more (a record dated late on a
                 # busy line or machine bends a ramp), and the median of all
                 each = [v / f.duration for v, f in fits]
@@ -846,7 +882,9 @@ class RampStep(Step):
                     break
             if not fits:
                 findings.append(Finding("joint_%d acceleration" % axis, "%.1f rad/s^2 (model)" % model[axis - 1],
-                                        "not measured: no cruise reached", "give a longer --ramp-move", None))
+                                        "not measured: no cruise reached in %.0f deg at %.0f %%" % (move, percent),
+                                        "give a longer --ramp-move-max, or move the arm where joint_%d has more room"
+                                        % axis, None))
                 continue
             v = sorted(v for v, _ in fits)[len(fits) // 2]
             measured[axis] = (v, [f for _, f in fits])
@@ -876,6 +914,37 @@ class RampStep(Step):
             "none" if shape == "linear" else "S-shaped: the peak acceleration is 1.5 times the mean the planner "
             "is given (the ramp's time and distance are the linear one's)", shape == "linear"))
         return findings
+
+
+    #: [s] the cruise a resized move holds, at least: the cruise's fit needs about six records at the
+    #: bus's rate, the ramps' fits some on either side
+    CRUISE_RECORDS = 12
+    CRUISE_TIME = 0.3
+
+    def _reaching(self, ctx: Context, q: Sequence[float], axis: int, move: float, percent: float, peak: float,
+                  record_dt: Sequence[float], longest: float) -> Optional[Tuple[float, float, float]]:
+        """(sign, degrees, percent) of a move of ``axis`` that reaches a cruise where ``move`` at
+        ``percent`` (which peaked at ``peak`` rad/s) did not: longer, within ``longest`` and the
+        joint's room, or else slower; said before it runs. None (said) when none fits."""
+        dt = sorted(record_dt)[len(record_dt) // 2] if record_dt else 0.05
+        scale = ctx.measured.get("speed_scale") or 1.0
+        cruise_speed = ctx.vmax[axis - 1] * percent / 100.0 * scale
+        best = None
+        for sign in (1.0, -1.0):
+            room = min(ctx.room(q, axis, sign), longest)
+            size = analysis.cruise_move(math.radians(move), peak, cruise_speed, math.radians(room),
+                                        max(self.CRUISE_TIME, self.CRUISE_RECORDS * dt))
+            if size is not None and (best is None or size[1] > best[2]):
+                best = (sign, math.degrees(size[0]), size[1])
+        if best is None:
+            ctx.say("  joint_%d: no cruise speed in %.0f deg at %.0f %% (peak %.1f deg/s), and no move within %.0f deg "
+                    "and its limits reaches one" % (axis, move, percent, math.degrees(peak), longest))
+            return None
+        sign, degrees, speed = best
+        new_percent = min(percent, 100.0 * speed / (ctx.vmax[axis - 1] * scale))
+        ctx.say("  joint_%d: no cruise speed in %.0f deg at %.0f %% (peak %.1f deg/s): moving %+.0f deg at %.0f %% "
+                "and back" % (axis, move, percent, math.degrees(peak), sign * degrees, new_percent))
+        return sign, degrees, new_percent
 
 
 class UnreachableStep(Step):
