@@ -1035,6 +1035,10 @@ class Run:
         wrist = cfg.get("set") == "wrist"
         self.wrist = WristRule.of(self.chk.kin) if wrist else None
         self.amax = planner_setup(self.chk, cfg)
+        # the virtual arm's accelerations (its ramp_time, else the model's): what bounds how closely
+        # any arm could follow a plan (vr_driver.driver.following)
+        self.arm_acc = (self.chk.accelerations(cfg["ramp_time"]) if cfg.get("ramp_time")
+                        else tuple(self.chk.kin.limits.acceleration))
 
     def q_of(self, msg: Any) -> Optional[Tuple[float, ...]]:
         try:
@@ -1188,6 +1192,12 @@ class Run:
                    code=result.error_code if result is not None else None,
                    error_string=result.error_string if result is not None else "no result within %.0f s" % timeout,
                    note=note)
+        if self.wrist is not None:
+            from vr_driver.driver.following import following_floor
+            # the least deviation any arm with the virtual arm's accelerations could have from this plan
+            floor, where = following_floor(plan.times, plan.points, self.arm_acc, band=self.wrist.band,
+                                           sign=self.wrist.sign)
+            rec["floor_deg"], rec["floor_where"] = math.degrees(floor), where
         found = DRIVER_DEV.search(rec["error_string"])
         rec["driver_dev_deg"] = float(found.group(1)) if found else None
         rec["ok"] = status == GoalStatus.SUCCEEDED and result is not None and result.error_code == 0
@@ -1387,6 +1397,13 @@ def goal_verdicts(rec: Dict[str, Any], protocol: str) -> List[Tuple[str, Optiona
     return out
 
 
+def beyond_any_arm(rec: Dict[str, Any]) -> bool:
+    """Whether the goal's plan asks more than any arm with the virtual arm's accelerations can do for
+    the deviation target (its floor, vr_driver.driver.following, above the target)."""
+    return rec.get("floor_deg") is not None and rec["floor_deg"] > dict(
+        (key, limit) for _label, key, limit in WRIST_TARGETS)["dev_deg"]
+
+
 def _met(met: Optional[bool]) -> str:
     return "reported (not judged)" if met is None else "met" if met else "NOT met"
 
@@ -1396,13 +1413,16 @@ def wrist_words(rec: Dict[str, Any], protocol: str) -> str:
     the sum, the deviation outside the band and the sum's inside it, the final error, the verdicts."""
     j5 = rec.get("j5_deg") or [math.nan] * 3
     return ("wrist: joint_5 %+.1f -> %+.1f deg (nearest 0: %+.2f), %d of %d samples in the band; deviation outside "
-            "it %s deg, %s in it %s deg; final %s deg%s; %s" % (
+            "it %s deg, %s in it %s deg; final %s deg%s; %s%s" % (
                 j5[0], j5[2], j5[1], rec.get("band_samples", 0), rec["samples"],
                 "%.2f" % max(rec["dev_joints_deg"], default=0.0), rec.get("sum_name", "J4+J6"),
                 "n/a" if rec.get("dev_sum_deg") is None else "%.3f" % rec["dev_sum_deg"],
                 "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
                 " (J4 / J6 by their sum)" if rec.get("final_by_sum") else "",
-                ", ".join("%s %s" % (label.split(" [")[0], _met(met)) for label, met in goal_verdicts(rec, protocol))))
+                ", ".join("%s %s" % (label.split(" [")[0], _met(met)) for label, met in goal_verdicts(rec, protocol)),
+                "" if rec.get("floor_deg") is None else "; no arm with these accelerations comes closer than %.2f deg "
+                "to this plan (%s)%s" % (rec["floor_deg"], rec["floor_where"],
+                                         ": the deviation target is beyond any arm" if beyond_any_arm(rec) else "")))
 
 
 def summary(results: List[Dict[str, Any]]) -> None:
@@ -1455,6 +1475,12 @@ def summary(results: List[Dict[str, Any]]) -> None:
             continue
         print("%s against the targets (every goal): %s" % (
             r["name"], ", ".join("%s %s" % (label, _met(met)) for label, met in verdicts(r))))
+        beyond = [g for g in r["goals"] if beyond_any_arm(g)]
+        if beyond:
+            print("  beyond any arm with the virtual arm's accelerations (vr_driver.driver.following): %s" % "; ".join(
+                "goal %d no closer than %.2f deg (%s), measured %.2f by joint_states' samples (which may miss the "
+                "moment)" % (g["index"], g["floor_deg"], g["floor_where"],
+                                                                       g["dev_deg"]) for g in beyond))
 
 
 def wrist_summary(results: List[Dict[str, Any]]) -> None:

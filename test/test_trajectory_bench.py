@@ -459,6 +459,15 @@ class WristJudgingTest(unittest.TestCase):
         self.assertFalse(dict(b.verdicts({"set": "wrist", "protocol": "v1", "goals": [good, failed]}))[
             "all goals SUCCESSFUL"])
         self.assertEqual([m for _l, m in b.goal_verdicts(failed, "v3")], [False] * 4)
+        # a goal whose plan no arm follows within the target says so in its line (the floor: vr_driver.driver.following)
+        words = dict(good, samples=10, dev_joints_deg=[0.6] * 6, j5_deg=[20.0, 1.0, -20.0], floor_deg=0.75,
+                     floor_where="joint_6 at point 3 of 3 (stops from 162 deg/s)")
+        self.assertTrue(b.beyond_any_arm(words))
+        self.assertIn("comes closer than 0.75 deg to this plan (joint_6 at point 3 of 3 (stops from 162 deg/s)): the "
+                      "deviation target is beyond any arm", b.wrist_words(words, "v3"))
+        self.assertFalse(b.beyond_any_arm(dict(words, floor_deg=0.4)))
+        self.assertNotIn("beyond any arm", b.wrist_words(dict(words, floor_deg=0.4), "v3"))
+        self.assertFalse(b.beyond_any_arm(good))
         # the topp set's verdicts are unchanged: TARGETS, still included
         self.assertEqual([label for label, _m in b.verdicts({"set": "topp", "protocol": "v1", "goals": [good]})],
                          ["all goals SUCCESSFUL"] + [label for label, _k, _l in b.TARGETS])

