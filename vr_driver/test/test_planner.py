@@ -108,6 +108,25 @@ def test_a_free_straight_move_is_one_segment(kin):
         assert max(abs(a + f * (b - a) - v) for a, b, v in zip(START, GOAL, q)) < 1e-6
 
 
+def test_a_plan_through_waypoints_passes_each_in_order(kin):
+    """``via``: the path goes through each waypoint in turn (each leg planned, here straight), the
+    timing through them too; a waypoint in collision or outside the limits is refused naming it."""
+    mid = tuple((a + b) / 2.0 + (0.3 if i == 1 else 0.0) for i, (a, b) in enumerate(zip(START, GOAL)))
+    plan = Planner(kin, None, seed=1).plan(START, GOAL, via=[mid])
+    assert plan.path == (START, mid, GOAL)
+    assert min(max(abs(a - b) for a, b in zip(q, mid)) for q in plan.positions) < math.radians(0.5)
+    assert max(q[1] for q in plan.positions) >= mid[1] - math.radians(0.5)     # not the straight line
+    # around the wall: the legs are planned, the waypoint on the far side of it is passed
+    over = (START[0] / 2.0, 1.3) + tuple(START[2:])
+    plan = Planner(kin, wall, seed=7).plan(START, GOAL, via=[over])
+    assert over in plan.path and chords_valid(plan, wall) is None
+    with pytest.raises(PlanningError, match=r"waypoint 1 \(0\.0, .*\) deg is in collision") as info:
+        Planner(kin, wall).plan(START, GOAL, via=[(0.0, 0.3, -0.3, 0.0, 0.4, 0.0)])
+    assert info.value.step == "plan"
+    with pytest.raises(PlanningError, match=r"waypoint 2 .* outside the joint limits"):
+        Planner(kin, wall).plan(START, GOAL, via=[over, (-1.0, 0.3, 2.0, 0.0, 0.4, 0.0)])
+
+
 def test_start_equal_to_goal_is_one_point(kin):
     plan = Planner(kin, wall, seed=1).plan(START, START)
     assert plan.positions == (START,) and plan.times == (0.0,) and plan.duration == 0.0

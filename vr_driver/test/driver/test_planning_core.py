@@ -247,7 +247,8 @@ def test_a_cartesian_protocol_plans_away_from_the_stretched_elbow(kin):
         valid = planning._planning_validity(planning.snapshot())
         assert valid(near) is expected, protocol
         assert valid(clear), protocol
-        assert planning._planning_validity(planning.snapshot(), wrist_margin=False)(near)
+        assert planning._planning_validity(planning.snapshot(), elbow_margin=False)(near)
+        assert planning._planning_validity(planning.snapshot(), wrist_margin=False)(near) is expected
 
 
 def test_a_plan_the_driver_would_refuse_is_planned_again(kin, monkeypatch):
@@ -360,11 +361,12 @@ def test_on_v1_the_driver_refusal_is_the_ptp_moves_between_the_stop_points(kin):
     assert text.startswith("PTP 1 to stop point %d of the plan" % n) and "pillar" in text, text
 
 
-def test_a_goal_across_the_wrist_singularity_is_planned_on_the_last_try_without_the_margin(kin):
+def test_a_goal_across_the_wrist_singularity_is_planned_without_the_margin(kin):
     """With v3 the planner keeps |joint_5| >= WRIST_MARGIN, which walls joint_5 = 0 off: from where a
     cancelled plan left the arm (joint_5 -39.8 deg) a goal with joint_5 +28.6 deg had no path (the
-    planning rostest failed on it once). The last try plans without the margin; the driver's stream
-    check still decides, and accepts it."""
+    planning rostest failed on it once). A joint goal with joint_5 of the other sign is planned
+    without the margin from the first try (a pose goal: on the last); the driver's stream check
+    still decides, and accepts it."""
     import math
     w = world(kin)
     planning = PlanActionCore(w.core, kinematics=kin)
@@ -374,11 +376,11 @@ def test_a_goal_across_the_wrist_singularity_is_planned_on_the_last_try_without_
     assert not planning._planning_validity(validity)(q)
     assert planning._planning_validity(validity, wrist_margin=False)(q)
     start = tuple(math.radians(v) for v in (14.3, -4.9, 11.5, 11.6, -39.8, -126.0))
-    # (the two tries with the margin find nothing and take the whole budget each: 2 s, not the
-    # world's 20; the last try needs a fraction of it idle)
+    # (with the margin, a try would find nothing and take its whole budget: 2 s, not the world's 20)
     out = planning.plan(PlanGoal(joints=(kin.joint_names, (0.3, 0.5, -0.2, 0.0, 0.5, 0.0)), planning_time=2.0),
                         start=start, seed=0)
     assert out.ok, out.text
+    assert out.planning_time < 2.0, out.planning_time        # the first try: no budget spent walled in
     assert planning.driver_refusal(out.trajectory) == ""
     assert min(p[4] for p in out.trajectory.positions) < 0.0 < max(p[4] for p in out.trajectory.positions)
 
@@ -420,3 +422,71 @@ def test_a_goal_across_the_stretched_elbow_refused_every_time_says_so(kin, monke
     same = start[:2] + (start[2] + 0.02,) + start[3:]
     out = planning.plan(PlanGoal(joints=(kin.joint_names, same)), start=start, seed=1)
     assert out.code == P.INVALID_MOTION_PLAN and "stretched elbow" not in out.text, out.text
+
+
+#: a start and a joint goal across the stretched elbow whose straight joint line folds joint_2 and
+#: joint_3 in together (the wrist centre out to full reach and back): bench/planning.py --driver
+#: --protocol v3, seed 1, query 20 [deg]
+FOLD_START = (22.5, -22.2, -48.0, -25.9, 15.3, 0.8)
+FOLD_GOAL = (37.2, 32.7, -83.3, -188.4, -59.8, -53.3)
+
+
+def test_a_joint_goal_across_the_stretched_elbow_is_planned_through_it_and_run(kin, monkeypatch):
+    """v3: the plan passes the stretch where the straight line does and turns joint_3 alone from
+    ELBOW_APPROACH before it to ELBOW_CROSS past it (or the goal's, if nearer); the driver's stream
+    check accepts it (a target past the stretch is nearest the planned branch from there), and the
+    stepped controller runs it to the goal on the goal's branch. Without those waypoints every plan
+    is refused: the controller keeps the start's branch."""
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    start, goal = (tuple(math.radians(v) for v in q) for q in (FOLD_START, FOLD_GOAL))
+    reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
+    w = World(kin, dict(scene=CELL, planning_time=20.0, velocity_scaling=1.0, workspace=reach), protocol="v3",
+              initial_pose=kin.fk_pose(start))
+    w.ready()
+    assert w.status().joints == pytest.approx(start, abs=1e-3)
+    planning = PlanActionCore(w.core, kinematics=kin)
+    via, target = planning._elbow_crossing(start, goal)
+    assert target == goal and len(via) == 2
+    near, past = via
+    assert near[2] - stretch == pytest.approx(P.ELBOW_APPROACH)               # the start's side (above)
+    assert past[2] - stretch == pytest.approx(goal[2] - stretch)               # the goal, 6.4 deg past: nearer
+    assert near[:2] + near[3:] == past[:2] + past[3:]                          # joint_3 alone between them
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, goal)), seed=1)
+    assert out.ok, out.text
+    plan = out.trajectory
+    for q in via:
+        assert min(max(abs(a - b) for a, b in zip(p, q)) for p in plan.path) < 1e-3    # (from the read joints)
+    traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), w.status().joints, kin.limits.lower,
+                    kin.limits.upper, w.now)
+    run = w.core.submit_trajectory(traj)
+    w.run_until(lambda: run.done, 3.0 * plan.duration + 10.0, "the run")
+    assert run.success, run.failure().result.reason
+    w.run_for(0.5)
+    assert w.arm.joints == pytest.approx(goal, abs=math.radians(0.05))         # the goal's branch: the arm's own
+    assert w.status().joints == pytest.approx(goal, abs=math.radians(0.05))    # ... and what the driver reads
+    # without the waypoints the controller keeps the start's branch: refused every time
+    monkeypatch.setattr(planning, "_elbow_crossing", lambda s, t: ((), t))
+    back = World(kin, dict(scene=CELL, velocity_scaling=1.0, workspace=reach), protocol="v3",
+                 initial_pose=kin.fk_pose(start))
+    back.ready()
+    planning.core = back.core
+    # (1 s: the tries with the elbow's margin find nothing and take their whole budget)
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, goal), planning_time=1.0), start=start, seed=1)
+    assert out.code == P.INVALID_MOTION_PLAN and "another configuration" in out.text, out.text
+
+
+def test_no_crossing_waypoints_where_they_would_not_help(kin):
+    """(): a goal on the start's side, a goal within ELBOW_CROSS / 2 past the stretch, joint targets (v2)."""
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    start = tuple(math.radians(v) for v in FOLD_START)
+    reach = {"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1000.0, 2500.0], "angle": [-180.0, 180.0]}
+    v3 = PlanActionCore(world(kin, workspace=reach).core, kinematics=kin)
+    same = start[:2] + (start[2] - 0.1,) + start[3:]
+    assert v3._elbow_crossing(start, same) == ((), same)
+    close = start[:2] + (stretch - 0.9 * P.ELBOW_CROSS / 2,) + start[3:]
+    assert v3._elbow_crossing(start, close) == ((), close)
+    goal = tuple(math.radians(v) for v in FOLD_GOAL)
+    v2 = PlanActionCore(world(kin, protocol="v2", workspace=reach).core, kinematics=kin)
+    assert v2._elbow_crossing(start, goal) == ((), goal)

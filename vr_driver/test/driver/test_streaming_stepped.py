@@ -97,6 +97,31 @@ def test_split_long_puts_planned_points_back_where_the_controller_would_not_reac
     assert split_long(line, [0, 10], 2.0, lambda a, b: False) == list(range(11))
 
 
+def test_split_long_skips_planned_points_the_controller_would_not_reach_to_one_it_would():
+    """Across the elbow's stretch: the planned points just past it are solved onto the other branch
+    from the last one before it, farther ones are not. With ``times`` the stream skips to the first
+    reached one -- dropping a thinned-in point too -- when the straight move over the skipped ones
+    stays within ``skip_tolerance`` of each at its planned time; else they stay (the stream check
+    says why)."""
+    from vr_driver.driver.streaming import split_long
+    line = [(0.0, 0.1 * k) for k in range(11)]
+    times = [0.1 * k for k in range(11)]
+    stretch = 0.45                        # between points 4 and 5
+
+    def reaches(a, b):                    # past the stretch only from 0.25 beyond it
+        return not (a[1] < stretch < b[1] and b[1] - stretch < 0.25)
+    # 4 -> 5 and 4 -> 6 are not reached, 4 -> 7 is: points 5 and 6 (5 thinned in) are skipped
+    assert split_long(line, [0, 5, 10], 2.0, reaches, times, skip_tolerance=0.01) == [0, 4, 7, 10]
+    # without the times, or with the skipped points off the straight move: as before, planned steps kept
+    assert split_long(line, [0, 5, 10], 2.0, reaches) == [0, 4, 5, 10]
+    bent = [(0.0, 0.1 * k) if k != 6 else (0.05, 0.6) for k in range(11)]
+    assert split_long(bent, [0, 5, 10], 2.0, reaches, times, skip_tolerance=0.01) == [0, 4, 5, 10]
+    assert split_long(bent, [0, 5, 10], 2.0, reaches, times, skip_tolerance=0.1) == [0, 4, 7, 10]
+    # timed unevenly (the arm speeding up out of the stretch): the timing counts, not only the path
+    slow = [0.0, 0.1, 0.2, 0.3, 0.4, 0.6, 0.65, 0.7, 0.8, 0.9, 1.0]
+    assert split_long(line, [0, 5, 10], 2.0, reaches, slow, skip_tolerance=0.01) == [0, 4, 5, 10]
+
+
 def test_thin_timed_keeps_ends_and_timing():
     times = [0.0, 1.0, 2.0, 3.0, 4.0]
     line = [(0.1 * k,) * 6 for k in range(5)]                  # constant speed: nothing in between

@@ -46,7 +46,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 
 from ..errors import MissingDependency, VrDriverError
 from ..kinematics import deps
-from ..kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError
+from ..kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError, pose_target
 from ..kinematics.solver import stretched_elbow
 from ..poses import ControllerPose, Workspace
 from .commissioned import planning_kinematics
@@ -77,6 +77,15 @@ WRIST_MARGIN = 0.0524          # 3 deg
 #: rounded pose may take the other one, or find the pose beyond its reach (0.1 mm past a stretched
 #: arm); 8 deg costs the arm about 3 mm of its reach
 ELBOW_MARGIN = math.radians(8.0)
+#: [rad] a plan across the stretched elbow turns joint_3 alone from this near the stretch on the
+#: start's side to ELBOW_CROSS past it (PlanActionCore._elbow_crossing): after a target e from the
+#: stretch, one d past it is nearest the planned branch once d > about 4 e (joint_2's share of the
+#: mirror); 2 deg keeps the first target's wire pose well solved (at the stretch the rounding alone
+#: moves the wrist by 1.5 deg: bench/planning.py, query 52)
+ELBOW_APPROACH = math.radians(2.0)
+ELBOW_CROSS = math.radians(12.0)
+#: [rad] ... with |joint_5| at least this there
+ELBOW_WRIST = math.radians(6.0)
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
@@ -334,6 +343,12 @@ class PlanActionCore:
             if isinstance(start, str):
                 return PlanOutcome(INVALID_ROBOT_STATE, start, planner_id=planner_id)
         refusal = ""
+        try:
+            crossing, target = self._elbow_crossing(tuple(start), target)
+        except PlanningError:
+            crossing = ()           # (the planner says why, below)
+        # a joint goal with joint_5 of the other sign: the wrist margin would wall every path off
+        wrist_across = isinstance(target, tuple) and len(target) == len(start) and start[_WRIST] * target[_WRIST] < 0.0
         for attempt in range(ATTEMPTS):
             try:
                 with self._lock:
@@ -342,9 +357,11 @@ class PlanActionCore:
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(
-                                          validity, wrist_margin=attempt < ATTEMPTS - 1),
+                                          validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
+                                          elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._goal_preference())
-                    plan = self._at_goal(planner, tuple(start), target) or planner.plan(tuple(start), target)
+                    plan = self._at_goal(planner, tuple(start), target) or planner.plan(tuple(start), target,
+                                                                                         via=crossing)
             except PlanningError as exc:
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
                     continue
@@ -416,25 +433,78 @@ class PlanActionCore:
             return 0 if side * other >= 0.0 else 1
         return rank
 
-    def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True):
+    def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:
+        """(the two waypoints a plan crosses the stretched elbow by, the target), with a Cartesian
+        protocol and a goal across the stretch from ``start`` -- a joint goal, a named state, or a
+        pose with no valid solution on the start's side (then the target becomes the valid solution
+        the planner would take, its joints); else ((), ``target``).
+
+        The controller solves each target nearest the one before: a pose just past the stretch it
+        solves onto the branch it is on (the other branch's solution lies farther than its mirror),
+        and a plan that crosses in the direction joint_2 and joint_3 fold in together (the wrist
+        centre out to full reach and back) never leaves it. Turning joint_3 alone from near the
+        stretch does: from ELBOW_APPROACH on the start's side, ELBOW_CROSS past it the planned
+        branch is the nearest (bench/README.md, "Across the stretched elbow"). So the plan passes
+        the stretch where the straight joint line from the start to the goal does (joint_5 moved
+        to ELBOW_WRIST from 0, on the start's side, if it is nearer: the wrist singularity there too
+        would leave joint_4 / joint_6 to the controller) -- or, where that is not valid, with the
+        other joints at the start's, or at the goal's -- and turns joint_3 alone between those two
+        places. None for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair is
+        valid (the planner's clearance, the limits, the box): the plan is made as before and the
+        driver's stream check decides."""
+        none: Tuple[Tuple[float, ...], ...] = ()
+        rank = self._goal_preference()
+        stretched = stretched_elbow(self.kin)
+        if rank is None or stretched is None:
+            return none, target
+        with self.core.planning_gate:
+            validity = self.snapshot()
+        strict = self._planning_validity(validity, wrist_margin=False, elbow_margin=False)
+        goal = target
+        if isinstance(target, str) or pose_target(self.kin, target) is not None:
+            planner = Planner(self.kin, validity, goal_preference=rank)
+            valid = [q for q in planner.goal_candidates(start, target) if planner.is_valid(q)]
+            if not valid:
+                return none, target
+            goal = valid[0]
+        if len(goal) != len(start) or not rank(start, goal):
+            return none, target
+        a, b = start[_ELBOW], goal[_ELBOW]
+        if abs(b - stretched) < ELBOW_CROSS / 2.0:
+            return none, target     # that close to the stretch, the planned branch is not the nearest
+        lim = self.kin.limits
+        # the other joints where the straight line crosses; else the start's, else the goal's
+        for f in ((stretched - a) / (b - a), 0.0, 1.0):
+            near = [x + f * (y - x) for x, y in zip(start, goal)]
+            if abs(near[_WRIST]) < ELBOW_WRIST:
+                near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
+            near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
+            past = list(near)
+            past[_ELBOW] = stretched + math.copysign(min(ELBOW_CROSS, abs(b - stretched)), b - stretched)
+            if all(all(lo <= v <= hi for v, lo, hi in zip(q, lim.lower, lim.upper)) and strict(q)
+                   for q in (near, past)):
+                return (tuple(near), tuple(past)), tuple(goal)
+        return none, target
+
+    def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True, elbow_margin: bool = True):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the
-        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN and joint_3
-        ELBOW_MARGIN from the stretched arm -- except on the last try: the margins wall joint_5 = 0
+        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN (``wrist_margin``)
+        and joint_3 ELBOW_MARGIN from the stretched arm (``elbow_margin``). The margins wall joint_5 = 0
         and the stretch off, and a goal on the other side of one (joint_5 of the other sign, the
-        other elbow branch, farther than the start's and goal's own zones) then has no path at all;
-        without them the driver's stream check still decides whether the controller would run the
-        plan."""
+        other elbow branch, farther than the start's and goal's own zones) then has no path at all:
+        :meth:`plan` drops the wrist's for a joint goal with joint_5 of the other sign, the elbow's
+        for a plan through the stretch (:meth:`_elbow_crossing`), and both on its last try; without
+        them the driver's stream check still decides whether the controller would run the plan."""
         strict = validity.copy()
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
-        if getattr(self.core.protocol, "joint_targets", True):
-            return lambda q: not strict.in_collision(q)
-        if not wrist_margin:
+        if getattr(self.core.protocol, "joint_targets", True) or not (wrist_margin or elbow_margin):
             return lambda q: not strict.in_collision(q)
         stretched = stretched_elbow(self.kin)
 
         def clear(q) -> bool:
-            return abs(q[_WRIST]) >= WRIST_MARGIN and (
-                stretched is None or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
+            return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
+                stretched is None or not elbow_margin
+                or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
         return lambda q: clear(q) and not strict.in_collision(q)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:

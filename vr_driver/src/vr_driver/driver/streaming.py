@@ -69,6 +69,12 @@ __all__ = ["StreamSequencer", "stream_points", "thin_timed", "stream_speeds", "w
 #: corners and the timing share it; a Cartesian move's: 0.05 deg)
 MAX_STREAM_TOLERANCE = math.radians(0.25)
 MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
+#: [rad] a Cartesian stream skips planned points across the elbow's stretch (:func:`split_long`) when
+#: the straight move over them stays this close to each at its planned time: a plan turns joint_3
+#: alone there (driver.planning, ELBOW_CROSS), so the straight move keeps to the path and differs only
+#: in its timing -- the arm speeding up out of the stretch at the planner's acceleration, which the
+#: constant speed of a segment puts up to ~1 deg ahead for a tenth of a second
+SKIP_TOLERANCE = math.radians(1.0)
 #: a kept segment lasts at least this many bus cycles (the record moves on once the feedback says
 #: the controller took its target, one cycle after it was sent: shorter segments would starve the
 #: look-ahead)
@@ -212,28 +218,67 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
 
 
 def split_long(positions: Sequence[Sequence[float]], kept: Sequence[int], max_step: float,
-               reaches: Optional[Callable[[Sequence[float], Sequence[float]], bool]] = None) -> List[int]:
+               reaches: Optional[Callable[[Sequence[float], Sequence[float]], bool]] = None,
+               times: Optional[Sequence[float]] = None, skip_tolerance: float = 0.0) -> List[int]:
     """``kept`` with planned points added between two kept ones whose joints differ by more than
     ``max_step`` [rad] (any joint), or -- with ``reaches`` (a Cartesian protocol: would the
     controller, after a target at the first joints, solve the pose of the second onto them?) --
     where the controller would not reach the next kept point from the one before: from each kept
     point the farthest planned point still within ``max_step`` of it and reached from it, until the
-    next kept one is (a planned step that is not stays: the stream check then says why)."""
+    next kept one is.
+
+    Where not even the next planned point is reached (across the elbow's stretch the controller
+    solves a pose just past it onto the branch it is on: the other branch's solution lies farther
+    from the previous target than its mirror does) a point farther on may be -- the farther past the
+    stretch, the nearer the planned branch -- and with ``times`` the stream skips to the first one
+    that is, provided the straight move there at constant speed stays within ``skip_tolerance``
+    [rad, every joint] of each planned point it skips at its planned time (:func:`thin_timed`'s
+    rule). Else the planned step stays, and the stream check says why."""
     def near(a: int, b: int) -> bool:
         return max(abs(x - y) for x, y in zip(positions[a], positions[b])) <= max_step and (
             reaches is None or reaches(positions[a], positions[b]))
+
+    def excess(a: int, b: int, k: int) -> float:
+        assert times is not None
+        f = (times[k] - times[a]) / (times[b] - times[a])
+        return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
+
+    def skip_to(a: int, b: int) -> Optional[int]:
+        if reaches is None or times is None or skip_tolerance <= 0.0:
+            return None
+        for m in range(a + 2, b + 1):
+            if max(abs(x - y) for x, y in zip(positions[a], positions[m])) > max_step:
+                return None
+            if any(excess(a, m, k) > skip_tolerance for k in range(a + 1, m)):
+                return None
+            if reaches(positions[a], positions[m]):
+                return m
+        return None
+
     out = [kept[0]]
-    for b in kept[1:]:
-        a = out[-1]
-        while not near(a, b):
-            j = a + 1
-            while j + 1 < b and near(a, j + 1):
-                j += 1
-            if j >= b:
-                break
-            out.append(j)
-            a = j
-        out.append(b)
+    i = 1
+    while i < len(kept):
+        a, b = out[-1], kept[i]
+        if near(a, b):
+            out.append(b)
+            i += 1
+            continue
+        if not near(a, a + 1):
+            # not even the next planned point: skip to the first one that is, dropping kept ones
+            m = skip_to(a, kept[-1])
+            if m is not None:
+                out.append(m)
+                while i < len(kept) and kept[i] <= m:
+                    i += 1
+                continue
+        j = a + 1
+        while j + 1 < b and near(a, j + 1):
+            j += 1
+        if j >= b:              # a planned step the controller would not take: the stream check says why
+            out.append(b)
+            i += 1
+            continue
+        out.append(j)
     return out
 
 
@@ -273,7 +318,8 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     if len(kept) < 2:
         return ()
     corner_tol = tolerance if corner_tolerance is None else corner_tolerance
-    chosen = set(kept if max_step is None else split_long(positions, kept, max_step, reaches))
+    chosen = set(kept if max_step is None else split_long(positions, kept, max_step, reaches, times,
+                                                          max(tol, SKIP_TOLERANCE)))
     while True:
         order = sorted(chosen)
         stream, tight = _timed(times, positions, order[1:], vmax, smooth, corner_tol)

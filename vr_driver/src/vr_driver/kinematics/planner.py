@@ -388,11 +388,13 @@ class Planner:
     # ------------------------------------------------------------------------------------ plan
     def plan(self, start: Any, goal: Any, velocity_scaling: Optional[float] = None,
              acceleration_scaling: Optional[float] = None, time_budget: Optional[float] = None,
-             seed: Optional[int] = None) -> PlannedTrajectory:
+             seed: Optional[int] = None, via: Sequence[Sequence[float]] = ()) -> PlannedTrajectory:
         """A collision-free timed trajectory from the joints ``start`` to ``goal`` (joints, a named
         state, a ControllerPose, ((x, y, z), (qx, qy, qz, qw)) of tool0 in base_link, or a 4x4 tip
-        pose). Per-call overrides of the constructor's scaling, budget and seed. PlanningError when
-        there is none (see the module text)."""
+        pose). Per-call overrides of the constructor's scaling, budget and seed. ``via``: joints the
+        path passes through, in order (each leg planned in an equal share of the budget; the timing
+        goes through them as through any point of the path). PlanningError when there is none (see
+        the module text)."""
         t0 = time.perf_counter()
         vs = self.velocity_scaling if velocity_scaling is None else _number(velocity_scaling, "velocity_scaling",
                                                                             0.0, 1.0)
@@ -412,8 +414,19 @@ class Planner:
                     "all %d joint solutions of the goal pose are in collision; the nearest, %s"
                     % (len(candidates), _fmt(candidates[0])))
             raise PlanningError("goal", what + why, contacts)
+        stops = [self._joints(w, "waypoint %d" % (k + 1)) for k, w in enumerate(via)]
+        for k, w in enumerate(stops):
+            if not self.is_valid(w):
+                why, contacts = self._why_invalid(w)
+                raise PlanningError("plan", "waypoint %d %s is in collision%s" % (k + 1, _fmt(w), why), contacts)
         timings = {"goal": time.perf_counter() - t0}
-        path = self._geometric_path(q0, valid, budget, seed, timings)
+        path = [q0]
+        share = budget / (len(stops) + 1)
+        for k, targets in enumerate([[w] for w in stops] + [valid]):
+            leg: Dict[str, float] = {}
+            path += self._geometric_path(path[-1], targets, share, None if seed is None else seed + k, leg)[1:]
+            for key, value in leg.items():
+                timings[key] = timings.get(key, 0.0) + value
         t = time.perf_counter()
         timings["time"] = timings["check"] = 0.0
         for attempt, (step, dt) in enumerate(TIMING_ATTEMPTS):
