@@ -444,7 +444,7 @@ class PlanActionCore:
         and a plan that crosses in the direction joint_2 and joint_3 fold in together (the wrist
         centre out to full reach and back) never leaves it. Turning joint_3 alone from near the
         stretch does: from ELBOW_APPROACH on the start's side, ELBOW_CROSS past it the planned
-        branch is the nearest (bench/README.md, "Across the stretched elbow"). So the plan passes
+        branch is the nearest (bench/README.md, "Planning"). So the plan passes
         the stretch where the straight joint line from the start to the goal does (joint_5 moved
         to ELBOW_WRIST from 0, on the start's side, if it is nearer: the wrist singularity there too
         would leave joint_4 / joint_6 to the controller) -- or, where that is not valid, with the
