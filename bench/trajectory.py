@@ -1420,9 +1420,9 @@ def wrist_words(rec: Dict[str, Any], protocol: str) -> str:
                 "n/a" if rec["final_deg"] is None else "%.3f" % rec["final_deg"],
                 " (J4 / J6 by their sum)" if rec.get("final_by_sum") else "",
                 ", ".join("%s %s" % (label.split(" [")[0], _met(met)) for label, met in goal_verdicts(rec, protocol)),
-                "" if rec.get("floor_deg") is None else "; no arm with these accelerations comes closer than %.2f deg "
+                "" if rec.get("floor_deg") is None else "; no arm that keeps these accelerations comes closer than %.2f deg "
                 "to this plan (%s)%s" % (rec["floor_deg"], rec["floor_where"],
-                                         ": the deviation target is beyond any arm" if beyond_any_arm(rec) else "")))
+                                         ": the deviation target is beyond any such arm" if beyond_any_arm(rec) else "")))
 
 
 def summary(results: List[Dict[str, Any]]) -> None:
@@ -1477,7 +1477,8 @@ def summary(results: List[Dict[str, Any]]) -> None:
             r["name"], ", ".join("%s %s" % (label, _met(met)) for label, met in verdicts(r))))
         beyond = [g for g in r["goals"] if beyond_any_arm(g)]
         if beyond:
-            print("  beyond any arm with the virtual arm's accelerations (vr_driver.driver.following): %s" % "; ".join(
+            print("  beyond any arm that keeps the virtual arm's accelerations (vr_driver.driver.following; the "
+                  "virtual arm itself exceeds them in blends and moves shorter than its ramp): %s" % "; ".join(
                 "goal %d no closer than %.2f deg (%s), measured %.2f by joint_states' samples (which may miss the "
                 "moment)" % (g["index"], g["floor_deg"], g["floor_where"],
                                                                        g["dev_deg"]) for g in beyond))

@@ -464,7 +464,7 @@ class WristJudgingTest(unittest.TestCase):
                      floor_where="joint_6 at point 3 of 3 (stops from 162 deg/s)")
         self.assertTrue(b.beyond_any_arm(words))
         self.assertIn("comes closer than 0.75 deg to this plan (joint_6 at point 3 of 3 (stops from 162 deg/s)): the "
-                      "deviation target is beyond any arm", b.wrist_words(words, "v3"))
+                      "deviation target is beyond any such arm", b.wrist_words(words, "v3"))
         self.assertFalse(b.beyond_any_arm(dict(words, floor_deg=0.4)))
         self.assertNotIn("beyond any arm", b.wrist_words(dict(words, floor_deg=0.4), "v3"))
         self.assertFalse(b.beyond_any_arm(good))

@@ -9,12 +9,14 @@ wrist band), at most 0.05 deg from the goal at the end (the same rule).
 
 This is the driver's part of those figures with the timing of every process exact (the bench runs
 the same goals in real time: real processes, ptys, the virtual line; bench/README.md). Nine of the
-twelve meet every target. Two ask what no arm can do: the shortest goal's plan (0.32 s, joint_6 at
-up to 300 deg/s) joined by straight lines stops joint_6 from 162 deg/s at once at its last point,
-and no arm with the model's accelerations comes within 0.75 deg of that at any start delay
-(:mod:`vr_driver.driver.following`); at the 0.5 s ramp its corners keep any arm 0.51 deg away. For
-those two the deviation is held to FLOOR_FACTOR times that floor (today 1.47 and 1.39 times), and
-the test says so if the floor drops under the target. One is a known gap of the driver (strict: a
+twelve meet every target. Two ask what no arm that keeps its accelerations can do: the shortest
+goal's plan (0.32 s, joint_6 at up to 300 deg/s) joined by straight lines stops joint_6 from 162
+deg/s at once at its last point, and no arm within the model's accelerations comes within 0.75 deg
+of that at any start delay (:mod:`vr_driver.driver.following`); at the 0.5 s ramp its corners keep
+any such arm 0.51 deg away. (The virtual arm is not quite such an arm: its blends and its moves
+shorter than its ramp change speed faster than its ramp, as documented in
+:mod:`vr_driver.controller.stream_arm`.) For those two the deviation is held to FLOOR_FACTOR times
+that floor (today 1.47 and 1.39 times), and the test says so if the floor drops under the target. One is a known gap of the driver (strict: a
 fix must update it): goal 5 (onto joint_5 = 0) 0.51 deg at the model's ramp, its floor 0.19 deg.
 Which records the driver sees (a 55 ms bus cycle) decides how much of a deviation shows: the same
 runs started 30 ms later measured 0.76 deg for the first."""

@@ -23,7 +23,9 @@ Within the wrist band (joint_5 near 0, where a pose fixes only joint_4 + sign jo
 judged instead of the two joints, its acceleration the sum of theirs (a bound, not a reach).
 
 :func:`following_floor` gives the largest of these bounds over a plan: a deviation target below it
-cannot be met by any arm with those accelerations. The bench prints it beside every goal's
+cannot be met by any arm that keeps those accelerations. (The virtual G2's arm does not quite:
+its blend windows and its moves shorter than its ramp change speed faster, by its documented
+model, :mod:`vr_driver.controller.stream_arm`; a sampled figure may also miss the moment.) The bench prints it beside every goal's
 deviation (bench/trajectory.py), and the stepped test of the wrist goals asserts it where it says a
 target is out of reach.
 """
