@@ -101,6 +101,29 @@ def test_a_run_on_plan_succeeds_with_its_note():
     assert out.samples == 21 and out.max_time_deviation < 1e-9
 
 
+def test_the_note_says_how_closely_any_arm_could_follow_the_plan():
+    """Given the arm's accelerations, the result says the plan's floor (driver.following) where it is
+    FLOOR_WORDS or more, in the controller's joint names: this plan starts and stops joint_1 at
+    0.5 rad/s at once; at 1 rad/s^2 no arm follows it closer than 1.23 deg, at the model's 20.9 rad/s^2
+    0.06 deg (not said)."""
+    from vr_driver.driver.following import REST_FACTOR
+    traj = plan(V2)
+    names = tuple("arm/j%d" % i for i in range(1, 7))
+    words = {}
+    for acc in (1.0, 20.9, None):
+        run = stream_run(traj)
+        sup = TrajectorySupervisor(traj, run, T0, V2, names, accelerations=None if acc is None else (acc,) * 6)
+        follow(sup, traj)
+        succeed(run)
+        words[acc] = sup.finish(T0 + 2.0, True, END).error_string
+        if acc is not None:
+            assert sup.floor()[0] == pytest.approx(REST_FACTOR * 0.25 / acc)
+    assert ("; no arm within the joint acceleration limits follows this plan closer than %.3f deg (arm/j1 at point 0 "
+            "of 2 (starts at 29 deg/s))" % math.degrees(REST_FACTOR * 0.25)) in words[1.0], words[1.0]
+    assert "no arm" not in words[20.9] and "no arm" not in words[None]
+    assert words[20.9] == words[None]
+
+
 def test_the_note_names_the_protocol_and_its_way_of_running():
     traj = plan(V1)
     run = v1_run(traj)

@@ -49,13 +49,15 @@ _WRIST = (3, 4, 5)
 
 
 def following_floor(times: Sequence[float], points: Sequence[Sequence[float]], accelerations: Sequence[float],
-                    band: Optional[float] = None, sign: float = 1.0) -> Tuple[float, str]:
+                    band: Optional[float] = None, sign: float = 1.0,
+                    names: Optional[Sequence[str]] = None) -> Tuple[float, str]:
     """(floor [rad], where in words): the least largest deviation from the plan (``points`` at
     ``times``, joined by straight lines, at rest before the first and after the last) that an arm
     whose joints accelerate at most ``accelerations`` [rad/s^2] and that does not overshoot the
     first and last points can reach, for any start delay (module text). ``band`` [rad]: where |joint_5| at a point is under it, joint_4 and joint_6 count there by
     ``joint_4 + sign * joint_6`` (None: every joint by itself). (0.0, "") for a plan that does not
-    move, or whose every speed change lies too near the next one for a bound."""
+    move, or whose every speed change lies too near the next one for a bound. ``names``: the joints'
+    names in the words (default joint_1 ...)."""
     n = len(times)
     if n != len(points) or n < 2:
         return 0.0, ""
@@ -66,11 +68,12 @@ def following_floor(times: Sequence[float], points: Sequence[Sequence[float]], a
     def in_band(k: int) -> bool:
         return band is not None and abs(points[k][_WRIST[1]]) < band
 
-    series = [("joint_%d" % (j + 1), (lambda q, j=j: q[j]), accelerations[j],
+    label = list(names) if names is not None else ["joint_%d" % (j + 1) for j in range(len(accelerations))]
+    series = [(label[j], (lambda q, j=j: q[j]), accelerations[j],
                (lambda k, j=j: not (j in (_WRIST[0], _WRIST[2]) and in_band(k))))
               for j in range(len(accelerations))]
     if band is not None:
-        series.append(("joint_4 %s joint_6" % ("+" if sign > 0 else "-"),
+        series.append(("%s %s %s" % (label[_WRIST[0]], "+" if sign > 0 else "-", label[_WRIST[2]]),
                        lambda q: q[_WRIST[0]] + sign * q[_WRIST[2]],
                        accelerations[_WRIST[0]] + accelerations[_WRIST[2]], in_band))
     best, where = 0.0, ""

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from typing import Any, List, Optional, Sequence, Tuple
 
+from .following import following_floor
 from .trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL, ValidTrajectory,
                            path_check)
 
@@ -45,6 +46,9 @@ __all__ = ["SUCCEEDED", "ABORTED", "CANCELED", "SHUTDOWN", "PREEMPTED", "CANCELL
 #: a stream that took this many times its plan, with no target late, says it may have stopped at
 #: each point (the interpreter look-ahead of the controller: 1.45 x with look-ahead 0 in the bench)
 SLOW_STREAM = 1.25
+#: [rad] the result says the plan's floor (how close any arm within the acceleration limits could
+#: follow it) from this on
+FLOOR_WORDS = math.radians(0.1)
 #: the start delays the at-time deviation is fitted over [s], and the step
 MAX_START_DELAY = 0.5
 DELAY_STEP = 0.005
@@ -105,11 +109,18 @@ class TrajectorySupervisor:
     The caller's loop: ``while sup.running:`` read the status, :meth:`step_status` (or
     :meth:`step`), publish the returned sample; :meth:`cancel` / :meth:`shutdown` on a request
     from outside. After the loop: if :attr:`stops_arm`, stop the arm (reason :attr:`stop_reason`)
-    and wait for the run's jobs; then :meth:`finish` (or :meth:`finish_status`)."""
+    and wait for the run's jobs; then :meth:`finish` (or :meth:`finish_status`).
+
+    ``accelerations`` [rad/s^2] (the arm's joint acceleration limits; None: not said): the result
+    also says how close any arm within them could follow the plan, where that is FLOOR_WORDS or more
+    (:func:`vr_driver.driver.following.following_floor`: a plan's points joined by straight lines
+    change speed at once)."""
 
     def __init__(self, traj: ValidTrajectory, run: Any, started: float, protocol: Any,
-                 joint_names: Optional[Sequence[str]] = None) -> None:
+                 joint_names: Optional[Sequence[str]] = None,
+                 accelerations: Optional[Sequence[float]] = None) -> None:
         self.traj = traj
+        self.accelerations = None if accelerations is None else tuple(float(a) for a in accelerations)
         self.run = run
         self.started = started
         self.protocol = protocol
@@ -267,7 +278,21 @@ class TrajectorySupervisor:
                          math.degrees(off), delay, self._label(joint, at, delay), at, math.degrees(self.max_time_deviation)))
         if traj.wire is not None and self.samples_by_sum:
             text += "; %s (%d of %d samples)" % (traj.wire.band_words(self.names), self.samples_by_sum, self.samples)
+        floor, where = self.floor()
+        if floor >= FLOOR_WORDS:
+            text += ("; no arm within the joint acceleration limits follows this plan closer than %.3f deg (%s)"
+                     % (math.degrees(floor), where))
         return text
+
+    def floor(self) -> Tuple[float, str]:
+        """(floor [rad], where): the least deviation from the plan at the same time any arm within
+        :attr:`accelerations` could reach (judged as this supervisor judges, joint_4 / joint_6 by
+        their sum in the wrist band); (0.0, "") without accelerations."""
+        if self.accelerations is None or len(self.accelerations) != len(self.traj.positions[0]):
+            return 0.0, ""
+        wire = self.traj.wire
+        return following_floor(self.traj.times, self.traj.positions, self.accelerations,
+                               band=getattr(wire, "band", None), sign=getattr(wire, "sign", 1.0), names=self.names)
 
     def fit_delay(self) -> Tuple[float, float, Optional[int], float]:
         """The constant start delay in [0, MAX_START_DELAY] that makes the samples deviate least

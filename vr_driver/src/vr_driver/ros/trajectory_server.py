@@ -34,6 +34,7 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from vr_driver.msg import FollowJointTrajectoryAction, FollowJointTrajectoryFeedback, FollowJointTrajectoryResult
 
 from ..driver import DriverCore, DriverError
+from ..driver.commissioned import planning_kinematics
 from ..driver.resolution import WireResolution
 from ..driver.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
 from ..driver.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
@@ -71,6 +72,7 @@ class TrajectoryServer:
         self.core = core
         self.names = list(core.joint_names)
         self._wire: Optional[Tuple[Optional[WireResolution]]] = None     # made at the first goal
+        self._acc: Optional[Tuple[float, ...]] = None                      # read at the first goal
         self.period = 1.0 / max(1.0, feedback_rate)
         # each goal checked at arrival (a refusal preempts nothing); a new goal preempts the running one
         self.goals = GoalRunner(name, self._execute,
@@ -111,6 +113,17 @@ class TrajectoryServer:
         segment_speeds(traj, lim.velocity, self.names)
         return traj
 
+    def _accelerations(self) -> Tuple[float, ...]:
+        """The arm's joint acceleration limits: the commissioned ones (``planning_limits``) where
+        measured, else the model's -- for the result's words on how closely any arm could follow."""
+        if self._acc is None:
+            try:
+                self._acc = tuple(planning_kinematics(self.core.params, self.core.kin).limits.acceleration)
+            except VrDriverError as exc:        # (checked at start; a file changed since: the model's)
+                rospy.logwarn("planning_limits: %s; the model's accelerations are used", exc)
+                self._acc = tuple(self.core.kin.limits.acceleration)
+        return self._acc
+
     def _dense(self, traj) -> List[Tuple[float, ...]]:
         """The plan sampled every 0.05 rad of the largest joint motion (a smooth line in RViz)."""
         out = [traj.positions[0]]
@@ -144,7 +157,8 @@ class TrajectoryServer:
             return
         if self.on_run is not None:
             self.on_run(run)                 # feedback_states: desired = this plan from now on
-        sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names)
+        sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names,
+                                   accelerations=self._accelerations())
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
         last_draw = rospy.get_time()
         fb = FollowJointTrajectoryFeedback(joint_names=self.names)
