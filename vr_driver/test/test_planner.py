@@ -127,6 +127,24 @@ def test_a_plan_through_waypoints_passes_each_in_order(kin):
         Planner(kin, wall).plan(START, GOAL, via=[over, (-1.0, 0.3, 2.0, 0.0, 0.4, 0.0)])
 
 
+def test_two_plans_joined_with_a_hold(kin):
+    """PlannedTrajectory.then: the first at rest at its end for ``hold`` (its end's sample again),
+    then the second, which must start there."""
+    planner = Planner(kin, None, seed=1)
+    mid = tuple((a + b) / 2.0 for a, b in zip(START, GOAL))
+    first, second = planner.plan(START, mid), planner.plan(mid, GOAL)
+    both = first.then(second, 0.25)
+    n = len(first.times)
+    assert both.positions == first.positions + second.positions
+    assert both.times[:n] == first.times and both.times[n] == pytest.approx(first.duration + 0.25)
+    assert both.duration == pytest.approx(first.duration + 0.25 + second.duration)
+    assert both.path == first.path + second.path[1:] and both.goal == GOAL
+    with pytest.raises(ValueError, match="not where the first ends"):
+        first.then(first, 0.25)
+    with pytest.raises(ValueError, match="hold must be > 0"):
+        first.then(second, 0.0)
+
+
 def test_start_equal_to_goal_is_one_point(kin):
     plan = Planner(kin, wall, seed=1).plan(START, START)
     assert plan.positions == (START,) and plan.times == (0.0,) and plan.duration == 0.0

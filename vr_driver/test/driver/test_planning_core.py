@@ -480,12 +480,43 @@ def test_a_joint_goal_across_the_stretched_elbow_is_planned_through_it_and_run(k
     assert out.code == P.INVALID_MOTION_PLAN and "another configuration" in out.text, out.text
 
 
-def test_under_current_joints_a_goal_across_the_stretched_elbow_is_refused_in_words(kin):
+def test_under_current_joints_the_crossing_holds_at_the_stretch_and_runs(kin):
     """A G2 that solves a target nearest its joints when it takes it (``current_joints``, a
     commissioning's finding) takes targets up to ring_size + 1 points ahead, while the arm may still
-    be on the start's branch far from the stretch: the driver's stream check, solving each target
-    from each of those places, refuses the plan through the stretch, in words, and nothing is sent
-    (a known limit: bench/README.md, "Planning")."""
+    be on the start's branch far from the stretch. The plan holds ELBOW_HOLD at the first waypoint
+    (a pause: the next target goes out once the arm is at rest there), so the target past the
+    stretch is solved from there; this one (joint_3 35 deg before the stretch to 45 deg past it)
+    runs to its goal on the goal's branch."""
+    from vr_driver.kinematics.solver import ConfigurationRule, stretched_elbow
+    stretch = stretched_elbow(kin)
+    start = (0.4, -0.3, stretch - math.radians(35), 0.1, -0.6, 0.2)
+    goal = (0.2, 0.3, stretch + math.radians(45), -0.2, -0.5, 0.4)
+    w = World(kin, dict(scene=CELL, velocity_scaling=1.0, workspace=REACH, planning_time=20.0,
+                        controller={"configuration": "current_joints"}), protocol="v3", initial_pose=kin.fk_pose(start))
+    w.arm.configuration = ConfigurationRule.CURRENT_JOINTS
+    w.ready()
+    planning = PlanActionCore(w.core, kinematics=kin)
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, goal)), seed=1)
+    assert out.ok, out.text
+    plan = out.trajectory
+    near = planning._elbow_crossing(w.status().joints, goal)[0][0]
+    pauses = [k for k in range(1, len(plan.times)) if plan.positions[k] == plan.positions[k - 1]]
+    assert len(pauses) == 1 and plan.positions[pauses[0]] == pytest.approx(near, abs=1e-3)
+    assert plan.times[pauses[0]] - plan.times[pauses[0] - 1] == pytest.approx(P.ELBOW_HOLD)
+    traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), w.status().joints, kin.limits.lower,
+                    kin.limits.upper, w.now)
+    run = w.core.submit_trajectory(traj)
+    w.run_until(lambda: run.done, 3.0 * plan.duration + 10.0, "the run")
+    assert run.success, run.failure().result.reason
+    w.run_for(0.5)
+    assert w.arm.joints == pytest.approx(goal, abs=math.radians(0.05))
+
+
+def test_under_current_joints_a_crossing_too_near_the_goal_is_refused_in_words(kin):
+    """The fold goal ends 6.4 deg past the stretch: after the hold 2 deg before it, the G2 under
+    ``current_joints`` may take a target past it from the hold, where the start's branch is the
+    nearer; the driver's stream check, solving each target from each place the arm may be, refuses
+    the plan in words, and nothing is sent (a known limit: bench/README.md, "Planning")."""
     w = fold_world(kin, "current_joints", planning_time=1.0)
     planning = PlanActionCore(w.core, kinematics=kin)
     goal = tuple(math.radians(v) for v in FOLD_GOAL)

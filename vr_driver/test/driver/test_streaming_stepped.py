@@ -131,6 +131,16 @@ def test_thin_timed_keeps_ends_and_timing():
     assert thin_timed(times, accel, 0.5) == [0, 4]
 
 
+def test_thin_timed_keeps_both_ends_of_a_pause_however_short():
+    """A pause of the plan (a point where the one before is, later) is a hold: both its samples are
+    kept even where the straight move around it would pass within the tolerance (at a large one:
+    an 0.01 s pause in a slow move moves the chord by 0.0005 rad)."""
+    times = [0.0, 0.5, 1.0, 1.01, 1.5, 2.0]
+    path = [(0.0,) * 6, (0.025,) * 6, (0.05,) * 6, (0.05,) * 6, (0.075,) * 6, (0.1,) * 6]
+    assert thin_timed(times, path, 0.01) == [0, 2, 3, 5]
+    assert thin_timed(times[:3] + times[4:], path[:3] + path[4:], 0.01) == [0, 4]      # no pause: a line
+
+
 def test_stream_speeds_round_up_and_do_not_drift():
     vmax = (1.0,) * 6
     start = (0.0,) * 6
@@ -355,6 +365,32 @@ def test_the_arm_holds_at_a_pause_of_the_plan_for_its_planned_time(world):
     assert entries[1].taken_time - t0 >= 2.0
     assert entries[1].end_time - t0 <= 3.0 + 0.2
     assert taken_seqs(world) == job.seqs
+
+
+def test_after_a_pause_the_next_target_waits_for_the_arm_to_reach_the_held_point(kin):
+    """An arm slower than planned (MOVEP's speed unit half the assumed one) reaches P1 long after the
+    pause of the plan there ended: the target after the pause is offered only once P1 is done, so the
+    controller takes it with the arm at rest at P1 (what a G2 that solves a target nearest its joints
+    when it takes it needs, stream_prep); the arm then goes on to P2. Before, it went out when the
+    pause's time was over, with the arm still on its way."""
+    w = World(kin, protocol="v2")
+    w.arm.speed_scale = 0.5
+    w.ready()
+    q0 = tuple(w.arm.joints)
+    p1 = (q0[0] + 0.2,) + q0[1:]
+    p2 = (p1[0], p1[1] + 0.2) + p1[2:]
+    traj = trajectory(w, [0.0, 1.0, 1.1, 2.0], [q0, p1, p1, p2])
+    t0 = w.now
+    run = w.core.submit_trajectory(traj)
+    job = run.jobs[0]
+    assert job.points[1].release == pytest.approx(1.1)
+    record(w, job)
+    assert job.result.success, job.result.reason
+    first, second = w.log.entries()
+    assert first.end_time - t0 > 1.5                          # the slow arm reached P1 late
+    assert second.taken_time >= first.end_time                # ... and P2 was taken after that
+    assert taken_seqs(w) == job.seqs
+    assert max(abs(a - b) for a, b in zip(w.arm.joints, p2)) < 1e-4
 
 
 def test_joints_and_pose_come_from_the_v2_feedback(world):

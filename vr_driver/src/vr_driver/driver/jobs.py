@@ -73,7 +73,8 @@ class StreamPoint:
     time: float                  # planned arrival, seconds from the stream's start
     index: int                   # the planned point it is (index into the trajectory's points)
     release: float = 0.0         # not offered before this many seconds from the stream's start (the
-    #                              end of a pause of the plan: the arm holds at the point before)
+    #                              end of a pause of the plan: the arm holds at the point before),
+    #                              nor before the arm reached that point
     pose: Optional[ControllerPose] = None   # FK of ``joints`` in controller units (mm, deg): what a
     #                              Cartesian streaming protocol sends (None for a joint protocol)
 

@@ -47,7 +47,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 from ..errors import MissingDependency, VrDriverError
 from ..kinematics import deps
 from ..kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError, pose_target
-from ..kinematics.solver import stretched_elbow
+from ..kinematics.solver import ConfigurationRule, stretched_elbow
 from ..poses import ControllerPose, Workspace
 from .commissioned import planning_kinematics
 
@@ -86,6 +86,9 @@ ELBOW_APPROACH = math.radians(2.0)
 ELBOW_CROSS = math.radians(12.0)
 #: [rad] ... with |joint_5| at least this there
 ELBOW_WRIST = math.radians(6.0)
+#: [s] under the G2 rule current_joints the arm holds this long at the first of the two
+#: (PlanActionCore._plan)
+ELBOW_HOLD = 0.1
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
@@ -360,8 +363,8 @@ class PlanActionCore:
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._goal_preference())
-                    plan = self._at_goal(planner, tuple(start), target) or planner.plan(tuple(start), target,
-                                                                                         via=crossing)
+                    plan = self._at_goal(planner, tuple(start), target) or self._plan(planner, tuple(start), target,
+                                                                                      crossing)
             except PlanningError as exc:
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
                     continue
@@ -388,6 +391,19 @@ class PlanActionCore:
             text += "; collisions NOT checked (collision_check: false)"
         return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end)
 
+
+    def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
+              crossing: Tuple[Tuple[float, ...], ...]) -> PlannedTrajectory:
+        """``planner``'s plan from ``start`` to ``target`` through ``crossing`` (:meth:`_elbow_crossing`'s
+        waypoints, or none). A G2 that solves a target nearest its joints when it takes it
+        (``current_joints``) may take the target past the stretch while the arm is still points back on
+        the start's branch: there the plan holds ELBOW_HOLD at the first waypoint (a pause: the next
+        target goes out once the arm is at rest there, StreamSequencer.record) and goes on from it."""
+        if not crossing or ConfigurationRule.parse(self.params.controller.configuration) \
+                is not ConfigurationRule.CURRENT_JOINTS:
+            return planner.plan(start, target, via=crossing)
+        near, past = crossing
+        return planner.plan(start, near).then(planner.plan(near, target, via=(past,)), ELBOW_HOLD)
 
     def _at_goal(self, planner: Planner, start: Tuple[float, ...], target: Any) -> Optional[PlannedTrajectory]:
         """A one-point trajectory (at rest where the arm is) when a joint solution of the goal is within

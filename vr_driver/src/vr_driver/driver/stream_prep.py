@@ -229,13 +229,18 @@ class CartesianStreams(JointStreams):
         target's joints (the controller's own solution of the previous target; the arm's,
         ``start``, for the first), or -- current_joints -- nearest each of the :attr:`window`
         points before it (the controller's solutions; ``start`` the first of them: the module
-        docstring says why these). It must be the planned point within CONFIGURATION_TOLERANCE.
-        Raises DriverError naming the point (nothing is sent)."""
+        docstring says why these; after a pause of the plan only the point it holds at: the
+        sequencer offers the next point once the arm is there). It must be the planned point within
+        CONFIGURATION_TOLERANCE. Raises DriverError naming the point (nothing is sent)."""
         out = []
         prev = tuple(start)
         history = [prev]            # the arm's path so far: start, then each point as solved
         for i, point in enumerate(points):
             where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
+            if point.release > 0.0:
+                # after a pause of the plan: offered once the arm reached the point before, at rest there
+                # (StreamSequencer.record), so the G2 takes it with the arm at that point, whatever its rule
+                history = [prev]
             try:
                 found = self.target(prev, point.joints, earlier=history[-self.window:-1])
             except VrDriverError as exc:

@@ -96,7 +96,19 @@ def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tol
     def excess(a: int, b: int, k: int) -> float:
         f = (times[k] - times[a]) / (times[b] - times[a])
         return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
-    return split_keep(len(times), excess, tolerance)
+    # a pause of the plan (a point where the one before is, later) is always kept, both its ends:
+    # the arm holds there (a short one could otherwise be thinned into the motion around it)
+    pauses = []
+    for k in range(1, len(times)):
+        if times[k] > times[k - 1] and max(abs(x - y) for x, y in zip(positions[k], positions[k - 1])) <= PAUSE_EPS:
+            pauses += [k - 1, k]
+    if not pauses:
+        return split_keep(len(times), excess, tolerance)
+    kept = set()
+    bounds = sorted({0, len(times) - 1, *pauses})
+    for a, b in zip(bounds, bounds[1:]):
+        kept.update(a + k for k in split_keep(b - a + 1, lambda x, y, z: excess(a + x, a + y, a + z), tolerance))
+    return sorted(kept)
 
 
 def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], times: Sequence[float],
@@ -615,8 +627,12 @@ class StreamSequencer(SequencerBase):
         k = job.points_taken
         elapsed = now - self._started
 
-        def offered(i: int) -> bool:          # not past the limit, and its pause (if any) is over
-            return i < self._limit and job.points[i].release <= elapsed
+        def offered(i: int) -> bool:
+            # not past the limit, and its pause (if any) over: its time passed, and the arm reached the
+            # point it holds at (a G2 that solves a target nearest its joints when it takes it then
+            # solves this one from there: stream_prep.CartesianStreams.with_poses)
+            point = job.points[i] if i < self._limit else None
+            return point is not None and point.release <= elapsed and (point.release <= 0.0 or job.points_done >= i)
         # the first target not acknowledged -- or, when the record has fewer slots than the master
         # may send ahead (protocol.send_ahead), the one after the last offered: the acknowledgement
         # of a record comes two records later (the reply to the telegram that carries it was

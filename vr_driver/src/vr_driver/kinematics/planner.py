@@ -152,6 +152,23 @@ class PlannedTrajectory:
     def goal(self) -> Tuple[float, ...]:
         return self.positions[-1]
 
+    def then(self, other: "PlannedTrajectory", hold: float) -> "PlannedTrajectory":
+        """This trajectory, at rest at its end for ``hold`` seconds (a pause: the end's sample again,
+        ``hold`` later), then ``other``, which must start where this one ends."""
+        if not hold > 0.0:
+            raise ValueError("hold must be > 0 s, got %r" % (hold,))
+        if max(abs(a - b) for a, b in zip(self.goal, other.start)) > 1e-9:
+            raise ValueError("the second trajectory starts at %s, not where the first ends, %s"
+                             % (_fmt(other.start), _fmt(self.goal)))
+        t0 = self.duration + hold
+        timings = dict(self.timings)
+        for key, value in other.timings.items():
+            timings[key] = timings.get(key, 0.0) + value
+        return PlannedTrajectory(self.joint_names, self.times + tuple(t0 + t for t in other.times),
+                                 self.positions + other.positions, self.velocities + other.velocities,
+                                 self.accelerations + other.accelerations, self.path + other.path[1:],
+                                 self.planner, timings)
+
     def to_msg(self, trajectory_type: Callable[..., Any], point_type: Callable[..., Any],
                duration: Callable[[float], Any]) -> Any:
         """A trajectory_msgs/JointTrajectory, the message classes and the Duration maker given by
