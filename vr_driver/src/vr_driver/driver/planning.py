@@ -28,7 +28,9 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another
   configuration than planned"); near the stretched-out arm the two elbow branches of a pose meet,
   with the same effect. So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` and joint_3
-  :data:`ELBOW_MARGIN` from the stretch away from the start and the goal (as it keeps its clearance), and a plan is checked by the driver's own stream
+  :data:`ELBOW_MARGIN` from the stretch away from the start and the goal (as it keeps its clearance);
+  a goal on the other elbow branch is planned through the stretch where the controller does change
+  branch (:meth:`PlanActionCore._elbow_crossing`); and a plan is checked by the driver's own stream
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
   all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
@@ -465,8 +467,8 @@ class PlanActionCore:
         to ELBOW_WRIST from 0, on the start's side, if it is nearer: the wrist singularity there too
         would leave joint_4 / joint_6 to the controller) -- or, where that is not valid, with the
         other joints at the start's, or at the goal's -- and turns joint_3 alone between those two
-        places. None for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair is
-        valid (the planner's clearance, the limits, the box): the plan is made as before and the
+        places. No waypoints for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair
+        is valid (the planner's clearance, the limits, the box): the plan is made as before and the
         driver's stream check decides."""
         none: Tuple[Tuple[float, ...], ...] = ()
         rank = self._goal_preference()
