@@ -431,6 +431,16 @@ FOLD_START = (22.5, -22.2, -48.0, -25.9, 15.3, 0.8)
 FOLD_GOAL = (37.2, 32.7, -83.3, -188.4, -59.8, -53.3)
 
 
+def run_to_the_end(w, plan):
+    """``plan`` validated as the action validates it and run on ``w`` to its end; then at rest."""
+    traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), w.status().joints, w.kin.limits.lower,
+                    w.kin.limits.upper, w.now)
+    run = w.core.submit_trajectory(traj)
+    w.run_until(lambda: run.done, 3.0 * plan.duration + 10.0, "the run")
+    assert run.success, run.failure().result.reason
+    w.run_for(0.5)
+
+
 def fold_world(kin, rule, **params):
     """The stepped v3 world at FOLD_START, the G2 and the driver at configuration ``rule``."""
     from vr_driver.kinematics.solver import ConfigurationRule
@@ -464,12 +474,7 @@ def test_a_joint_goal_across_the_stretched_elbow_is_planned_through_it_and_run(k
     plan = out.trajectory
     for q in via:
         assert min(max(abs(a - b) for a, b in zip(p, q)) for p in plan.path) < 1e-3    # (from the read joints)
-    traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), w.status().joints, kin.limits.lower,
-                    kin.limits.upper, w.now)
-    run = w.core.submit_trajectory(traj)
-    w.run_until(lambda: run.done, 3.0 * plan.duration + 10.0, "the run")
-    assert run.success, run.failure().result.reason
-    w.run_for(0.5)
+    run_to_the_end(w, plan)
     assert w.arm.joints == pytest.approx(goal, abs=math.radians(0.05))         # the goal's branch: the arm's own
     assert w.status().joints == pytest.approx(goal, abs=math.radians(0.05))    # ... and what the driver reads
     # without the waypoints the controller keeps the start's branch: refused every time
@@ -503,12 +508,7 @@ def test_under_current_joints_the_crossing_holds_at_the_stretch_and_runs(kin):
     pauses = [k for k in range(1, len(plan.times)) if plan.positions[k] == plan.positions[k - 1]]
     assert len(pauses) == 1 and plan.positions[pauses[0]] == pytest.approx(near, abs=1e-3)
     assert plan.times[pauses[0]] - plan.times[pauses[0] - 1] == pytest.approx(P.ELBOW_HOLD)
-    traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), w.status().joints, kin.limits.lower,
-                    kin.limits.upper, w.now)
-    run = w.core.submit_trajectory(traj)
-    w.run_until(lambda: run.done, 3.0 * plan.duration + 10.0, "the run")
-    assert run.success, run.failure().result.reason
-    w.run_for(0.5)
+    run_to_the_end(w, plan)
     assert w.arm.joints == pytest.approx(goal, abs=math.radians(0.05))
 
 

@@ -117,6 +117,10 @@ def test_split_long_skips_planned_points_the_controller_would_not_reach_to_one_i
     bent = [(0.0, 0.1 * k) if k != 6 else (0.05, 0.6) for k in range(11)]
     assert split_long(bent, [0, 5, 10], 2.0, reaches, times, skip_tolerance=0.01) == [0, 4, 5, 10]
     assert split_long(bent, [0, 5, 10], 2.0, reaches, times, skip_tolerance=0.1) == [0, 4, 7, 10]
+    # a pause of the plan among the points it would skip: kept (the arm holds there)
+    held = line[:6] + [line[5]] + line[6:]
+    held_times = times[:6] + [0.55] + [t + 0.05 for t in times[6:]]
+    assert split_long(held, [0, 5, 6, 11], 2.0, reaches, held_times, skip_tolerance=0.1) == [0, 4, 5, 6, 11]
     # timed unevenly (the arm speeding up out of the stretch): the timing counts, not only the path
     slow = [0.0, 0.1, 0.2, 0.3, 0.4, 0.6, 0.65, 0.7, 0.8, 0.9, 1.0]
     assert split_long(line, [0, 5, 10], 2.0, reaches, slow, skip_tolerance=0.01) == [0, 4, 5, 10]

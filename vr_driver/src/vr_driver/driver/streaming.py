@@ -88,27 +88,33 @@ END_WATCH = 0.5
 
 
 
+def _timed_excess(times: Sequence[float], positions: Sequence[Sequence[float]], a: int, b: int, k: int) -> float:
+    """[rad, the worst joint] how far planned point ``k`` is from the constant-speed straight joint
+    move from point ``a`` to point ``b``, at its planned time."""
+    f = (times[k] - times[a]) / (times[b] - times[a])
+    return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
+
+
+def _paused(positions: Sequence[Sequence[float]], k: int) -> bool:
+    """Planned point ``k`` is where the one before is: the end of a pause of the plan."""
+    return k > 0 and max(abs(x - y) for x, y in zip(positions[k], positions[k - 1])) <= PAUSE_EPS
+
+
 def thin_timed(times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float) -> List[int]:
     """Indices of the points to keep (always the first and the last): a point is dropped where the
     constant-speed straight joint move between the kept points around it is within ``tolerance``
     [rad, every joint] of it *at its planned time* (segments too short for the bus are
     :func:`stream_points`' concern: it raises the tolerance)."""
-    def excess(a: int, b: int, k: int) -> float:
-        f = (times[k] - times[a]) / (times[b] - times[a])
-        return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
     # a pause of the plan (a point where the one before is, later) is always kept, both its ends:
     # the arm holds there (a short one could otherwise be thinned into the motion around it)
-    pauses = []
-    for k in range(1, len(times)):
-        if times[k] > times[k - 1] and max(abs(x - y) for x, y in zip(positions[k], positions[k - 1])) <= PAUSE_EPS:
-            pauses += [k - 1, k]
-    if not pauses:
-        return split_keep(len(times), excess, tolerance)
-    kept = set()
+    pauses = [j for k in range(1, len(times)) if times[k] > times[k - 1] and _paused(positions, k)
+              for j in (k - 1, k)]
     bounds = sorted({0, len(times) - 1, *pauses})
+    kept = set()
     for a, b in zip(bounds, bounds[1:]):
-        kept.update(a + k for k in split_keep(b - a + 1, lambda x, y, z: excess(a + x, a + y, a + z), tolerance))
-    return sorted(kept)
+        kept.update(a + k for k in split_keep(
+            b - a + 1, lambda x, y, z, a=a: _timed_excess(times, positions, a + x, a + y, a + z), tolerance))
+    return sorted(kept) if len(times) > 1 else list(range(len(times)))
 
 
 def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], times: Sequence[float],
@@ -245,23 +251,20 @@ def split_long(positions: Sequence[Sequence[float]], kept: Sequence[int], max_st
     stretch, the nearer the planned branch -- and with ``times`` the stream skips to the first one
     that is, provided the straight move there at constant speed stays within ``skip_tolerance``
     [rad, every joint] of each planned point it skips at its planned time (:func:`thin_timed`'s
-    rule). Else the planned step stays, and the stream check says why."""
+    rule), and no pause of the plan lies among them. Else the planned step stays, and the stream
+    check says why."""
     def near(a: int, b: int) -> bool:
         return max(abs(x - y) for x, y in zip(positions[a], positions[b])) <= max_step and (
             reaches is None or reaches(positions[a], positions[b]))
-
-    def excess(a: int, b: int, k: int) -> float:
-        assert times is not None
-        f = (times[k] - times[a]) / (times[b] - times[a])
-        return max(abs(pa + f * (pb - pa) - pk) for pa, pb, pk in zip(positions[a], positions[b], positions[k]))
 
     def skip_to(a: int, b: int) -> Optional[int]:
         if reaches is None or times is None or skip_tolerance <= 0.0:
             return None
         for m in range(a + 2, b + 1):
-            if max(abs(x - y) for x, y in zip(positions[a], positions[m])) > max_step:
+            if _paused(positions, m - 1) or _paused(positions, m) or \
+                    max(abs(x - y) for x, y in zip(positions[a], positions[m])) > max_step:
                 return None
-            if any(excess(a, m, k) > skip_tolerance for k in range(a + 1, m)):
+            if any(_timed_excess(times, positions, a, m, k) > skip_tolerance for k in range(a + 1, m)):
                 return None
             if reaches(positions[a], positions[m]):
                 return m
