@@ -1480,8 +1480,7 @@ def summary(results: List[Dict[str, Any]]) -> None:
             print("  beyond any arm that keeps the virtual arm's accelerations (vr_driver.driver.following; the "
                   "virtual arm itself exceeds them in blends and moves shorter than its ramp): %s" % "; ".join(
                 "goal %d no closer than %.2f deg (%s), measured %.2f by joint_states' samples (which may miss the "
-                "moment)" % (g["index"], g["floor_deg"], g["floor_where"],
-                                                                       g["dev_deg"]) for g in beyond))
+                "moment)" % (g["index"], g["floor_deg"], g["floor_where"], g["dev_deg"]) for g in beyond))
 
 
 def wrist_summary(results: List[Dict[str, Any]]) -> None:

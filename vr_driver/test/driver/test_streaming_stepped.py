@@ -348,17 +348,22 @@ def test_a_late_target_is_a_gap_the_arm_waits_at_the_point_and_it_is_counted(kin
     assert max(abs(a - b) for a, b in zip(world.arm.joints, points[-1])) <= 0.001 * DEG
 
 
+def paused_job(world, times):
+    """A plan from where the arm is to P1 (joint_1 + 0.2 rad), P1 again (a pause), P2 (joint_2 + 0.2
+    rad) at ``times``, submitted: (t0, its job, P1, P2)."""
+    q0 = tuple(world.arm.joints)
+    p1 = (q0[0] + 0.2,) + q0[1:]
+    p2 = (p1[0], p1[1] + 0.2) + p1[2:]
+    traj = trajectory(world, times, [q0, p1, p1, p2])
+    t0 = world.now
+    return t0, world.core.submit_trajectory(traj).jobs[0], p1, p2
+
+
 def test_the_arm_holds_at_a_pause_of_the_plan_for_its_planned_time(world):
     """P1 at 1 s, P1 again at 2 s, P2 at 3 s: the arm stops exactly at P1 and stays there until the
     pause ends (the next target is not even offered before), then reaches P2 on time; each target
     is taken once."""
-    q0 = tuple(world.arm.joints)
-    p1 = (q0[0] + 0.2,) + q0[1:]
-    p2 = (p1[0], p1[1] + 0.2) + p1[2:]
-    traj = trajectory(world, [0.0, 1.0, 2.0, 3.0], [q0, p1, p1, p2])
-    t0 = world.now
-    run = world.core.submit_trajectory(traj)
-    job = run.jobs[0]
+    t0, job, p1, _p2 = paused_job(world, [0.0, 1.0, 2.0, 3.0])
     assert len(job.points) == 2 and job.points[0].smooth == 0 and job.points[1].release == 2.0
     samples = record(world, job)
     assert job.result.success, job.result.reason
@@ -380,13 +385,7 @@ def test_after_a_pause_the_next_target_waits_for_the_arm_to_reach_the_held_point
     w = World(kin, protocol="v2")
     w.arm.speed_scale = 0.5
     w.ready()
-    q0 = tuple(w.arm.joints)
-    p1 = (q0[0] + 0.2,) + q0[1:]
-    p2 = (p1[0], p1[1] + 0.2) + p1[2:]
-    traj = trajectory(w, [0.0, 1.0, 1.1, 2.0], [q0, p1, p1, p2])
-    t0 = w.now
-    run = w.core.submit_trajectory(traj)
-    job = run.jobs[0]
+    t0, job, _p1, p2 = paused_job(w, [0.0, 1.0, 1.1, 2.0])
     assert job.points[1].release == pytest.approx(1.1)
     record(w, job)
     assert job.result.success, job.result.reason

@@ -915,7 +915,6 @@ class RampStep(Step):
             "is given (the ramp's time and distance are the linear one's)", shape == "linear"))
         return findings
 
-
     #: [s] the cruise a resized move holds, at least: the cruise's fit needs about six records at the
     #: bus's rate, the ramps' fits some on either side
     CRUISE_RECORDS = 12

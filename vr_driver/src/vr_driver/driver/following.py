@@ -25,14 +25,17 @@ judged instead of the two joints, its acceleration the sum of theirs (a bound, n
 :func:`following_floor` gives the largest of these bounds over a plan: a deviation target below it
 cannot be met by any arm that keeps those accelerations. (The virtual G2's arm does not quite:
 its blend windows and its moves shorter than its ramp change speed faster, by its documented
-model, :mod:`vr_driver.controller.stream_arm`; a sampled figure may also miss the moment.) The bench prints it beside every goal's
-deviation (bench/trajectory.py), and the stepped test of the wrist goals asserts it where it says a
-target is out of reach.
+model, :mod:`vr_driver.controller.stream_arm`; a sampled figure may also miss the moment.) The
+bench prints it beside every goal's deviation (bench/trajectory.py), the trajectory action's result
+says it (:class:`~vr_driver.driver.supervision.TrajectorySupervisor`), and the stepped test of the
+wrist goals asserts it where it says a target is out of reach.
 """
 from __future__ import annotations
 
 import math
 from typing import Optional, Sequence, Tuple
+
+from .resolution import WRIST
 
 __all__ = ["REST_FACTOR", "CORNER_FACTOR", "CORNER_REACH", "REST_REACH", "following_floor"]
 
@@ -44,8 +47,6 @@ CORNER_FACTOR = 1.0 / 16.0
 CORNER_REACH = 0.5
 #: ... and of an end (or a start) before (after) it, times v / a
 REST_REACH = 2.0 - math.sqrt(2.0)
-#: (joint_4, joint_5, joint_6) chain indices
-_WRIST = (3, 4, 5)
 
 
 def following_floor(times: Sequence[float], points: Sequence[Sequence[float]], accelerations: Sequence[float],
@@ -54,8 +55,9 @@ def following_floor(times: Sequence[float], points: Sequence[Sequence[float]], a
     """(floor [rad], where in words): the least largest deviation from the plan (``points`` at
     ``times``, joined by straight lines, at rest before the first and after the last) that an arm
     whose joints accelerate at most ``accelerations`` [rad/s^2] and that does not overshoot the
-    first and last points can reach, for any start delay (module text). ``band`` [rad]: where |joint_5| at a point is under it, joint_4 and joint_6 count there by
-    ``joint_4 + sign * joint_6`` (None: every joint by itself). (0.0, "") for a plan that does not
+    first and last points can reach, for any start delay (module text). ``band`` [rad]: where
+    |joint_5| at a point is under it, joint_4 and joint_6 count there by ``joint_4 + sign *
+    joint_6`` (None: every joint by itself). (0.0, "") for a plan that does not
     move, or whose every speed change lies too near the next one for a bound. ``names``: the joints'
     names in the words (default joint_1 ...)."""
     n = len(times)
@@ -66,16 +68,16 @@ def following_floor(times: Sequence[float], points: Sequence[Sequence[float]], a
     dt = [b - a for a, b in zip(times, times[1:])]
 
     def in_band(k: int) -> bool:
-        return band is not None and abs(points[k][_WRIST[1]]) < band
+        return band is not None and abs(points[k][WRIST[1]]) < band
 
     label = list(names) if names is not None else ["joint_%d" % (j + 1) for j in range(len(accelerations))]
     series = [(label[j], (lambda q, j=j: q[j]), accelerations[j],
-               (lambda k, j=j: not (j in (_WRIST[0], _WRIST[2]) and in_band(k))))
+               (lambda k, j=j: not (j in (WRIST[0], WRIST[2]) and in_band(k))))
               for j in range(len(accelerations))]
     if band is not None:
-        series.append(("%s %s %s" % (label[_WRIST[0]], "+" if sign > 0 else "-", label[_WRIST[2]]),
-                       lambda q: q[_WRIST[0]] + sign * q[_WRIST[2]],
-                       accelerations[_WRIST[0]] + accelerations[_WRIST[2]], in_band))
+        series.append(("%s %s %s" % (label[WRIST[0]], "+" if sign > 0 else "-", label[WRIST[2]]),
+                       lambda q: q[WRIST[0]] + sign * q[WRIST[2]],
+                       accelerations[WRIST[0]] + accelerations[WRIST[2]], in_band))
     best, where = 0.0, ""
     for name, value, a, judged in series:
         if not a > 0.0:

@@ -475,21 +475,22 @@ class PlanActionCore:
         stretched = stretched_elbow(self.kin)
         if rank is None or stretched is None:
             return none, target
+        pose = not isinstance(target, str) and pose_target(self.kin, target) is not None
+        goal = self.kin.named_states.get(target) if isinstance(target, str) else target
+        if not pose and (goal is None or len(goal) != len(start) or not rank(start, goal)):
+            return none, target     # (a goal on the start's side: no copy of the checker made)
         with self.core.planning_gate:
             validity = self.snapshot()
-        strict = self._planning_validity(validity, wrist_margin=False, elbow_margin=False)
-        goal = target
-        if isinstance(target, str) or pose_target(self.kin, target) is not None:
+        if pose:
             planner = Planner(self.kin, validity, goal_preference=rank)
             valid = [q for q in planner.goal_candidates(start, target) if planner.is_valid(q)]
-            if not valid:
+            if not valid or not rank(start, valid[0]):
                 return none, target
             goal = valid[0]
-        if len(goal) != len(start) or not rank(start, goal):
-            return none, target
         a, b = start[_ELBOW], goal[_ELBOW]
         if abs(b - stretched) < ELBOW_CROSS / 2.0:
             return none, target     # that close to the stretch, the planned branch is not the nearest
+        strict = self._planning_validity(validity, wrist_margin=False, elbow_margin=False)
         lim = self.kin.limits
         # the other joints where the straight line crosses; else the start's, else the goal's
         for f in ((stretched - a) / (b - a), 0.0, 1.0):
