@@ -265,6 +265,54 @@ class DescriptionErrorsTest(unittest.TestCase):
             RobotModel.from_urdf_string("<robot name='x'><link name='a'/>")
 
 
+class LightSubstitutionsTest(unittest.TestCase):
+    """``$(find)`` and ``$(arg)`` resolved without roslaunch give the very URDF roslaunch gives."""
+
+    def _render_both(self, path, mappings):
+        """The URDF through render_urdf, and through stock xacro with roslaunch's resolver."""
+        import xacro
+        from panasonic_vr006l_support import description
+
+        ours = render_urdf(path, mappings)
+        light = xacro.eval_extension
+        xacro.eval_extension = xacro._vr006l_original_eval_extension
+        try:
+            theirs = xacro.process_file(path or description.default_xacro_path(),
+                                        mappings=dict(mappings or {})).toprettyxml(indent="  ")
+        finally:
+            xacro.eval_extension = light
+        return ours, theirs
+
+    def test_same_urdf_as_roslaunch_substitutions(self):
+        two_arms = os.path.join(PKG_DIR, "urdf", "vr006l_two_arms.xacro")
+        for path, mappings in ((None, None), (None, {"prefix": "r1_"}),
+                               (None, {"kinematics_config": default_kinematics_yaml()}), (two_arms, None)):
+            with self.subTest(path=path, mappings=mappings):
+                ours, theirs = self._render_both(path, mappings)
+                self.assertEqual(ours, theirs)
+
+    def test_model_renders_without_importing_roslaunch(self):
+        code = ("import sys; from panasonic_vr006l_support.description import render_urdf; "
+                "render_urdf(); render_urdf(None, {'prefix': 'r2_'}); print('roslaunch' in sys.modules)")
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(
+            [os.path.join(PKG_DIR, "src")] + os.environ.get("PYTHONPATH", "").split(os.pathsep)))
+        out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+        self.assertEqual(out.stdout.strip(), "False")
+
+    def test_undefined_arg_and_unknown_package_are_clear_errors(self):
+        with tempfile.TemporaryDirectory() as d:
+            for body, words in (("$(arg no_such_arg)", "no_such_arg"),
+                                ("$(find no_such_package_xyz)", "no_such_package_xyz")):
+                path = os.path.join(d, "bad.xacro")
+                with open(path, "w") as f:
+                    f.write('<robot name="x" xmlns:xacro="http://www.ros.org/wiki/xacro">'
+                            '<link name="%s"/></robot>' % body)
+                with self.subTest(body=body):
+                    with self.assertRaises(DescriptionError) as ctx:
+                        render_urdf(path)
+                    self.assertIn(words, str(ctx.exception))
+
+
 class RpyTest(unittest.TestCase):
     def test_rpy_is_fixed_axes_x_then_y_then_z(self):
         r, p, y = 0.3, -0.7, 1.1

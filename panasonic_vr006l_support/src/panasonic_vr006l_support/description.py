@@ -9,6 +9,11 @@ this module swaps in a safe YAML loader inside xacro's expression namespace for 
 the process changes). On a ROS distribution whose xacro already works with PyYAML 6 the swap changes
 nothing.
 
+It also resolves the two substitutions the model uses, ``$(find PKG)`` and ``$(arg NAME)``, itself
+(rospkg and xacro's own argument table): xacro 1.13 imports the whole of ``roslaunch`` for any
+``$(...)``, about 0.3 s of CPU (0.06 s for rospkg alone) in every process that renders the model
+through this module (the tests, the tools, the planning bench). Any other substitution still goes to roslaunch, as before.
+
 Command line (what the launch files call)::
 
     xacro_compat FILE.xacro [name:=value ...] [-o OUT.urdf]
@@ -74,6 +79,37 @@ def _install_safe_load_yaml(xacro_module) -> None:
     xacro_module.global_symbols["load_yaml"] = load_yaml
 
 
+def _install_light_substitutions(xacro_module) -> None:
+    """Resolve ``$(find PKG)``, ``$(arg NAME)`` and ``$(cwd)`` without importing roslaunch (see the
+    module docstring); anything else goes to xacro's own ``eval_extension``. Idempotent."""
+    original = getattr(xacro_module, "_vr006l_original_eval_extension", None)
+    if original is None:
+        original = xacro_module.eval_extension
+        xacro_module._vr006l_original_eval_extension = original
+    packages = {}
+
+    def eval_extension(text):
+        words = text[2:-1].split() if text.startswith("$(") and text.endswith(")") else []
+        if len(words) == 2 and words[0] == "arg":
+            args = xacro_module.substitution_args_context.get("arg", {})
+            if words[1] not in args:
+                raise xacro_module.XacroException(
+                    "Undefined substitution argument", exc=KeyError("arg '%s' is not defined" % words[1]))
+            return args[words[1]]
+        if len(words) == 2 and words[0] == "find":
+            if words[1] not in packages:
+                import rospkg
+
+                try:
+                    packages[words[1]] = rospkg.RosPack().get_path(words[1])
+                except rospkg.ResourceNotFound as exc:
+                    raise xacro_module.XacroException("resource not found:", exc=exc) from exc
+            return packages[words[1]]
+        return original(text)
+
+    xacro_module.eval_extension = eval_extension
+
+
 def _ensure_package_path() -> None:
     """Let ``$(find panasonic_vr006l_support)`` resolve outside a sourced workspace (plain pytest on
     the source tree): append the folder holding this package to ROS_PACKAGE_PATH when it is missing."""
@@ -98,6 +134,7 @@ def render_urdf(xacro_path: Optional[str] = None, mappings: Optional[Dict[str, s
     if not os.path.isfile(path):
         raise DescriptionError("xacro file not found: %s" % path)
     _install_safe_load_yaml(xacro)
+    _install_light_substitutions(xacro)
     _ensure_package_path()
     try:
         doc = xacro.process_file(path, mappings=dict(mappings or {}))
