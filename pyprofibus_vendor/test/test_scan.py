@@ -59,6 +59,10 @@ class Line(RespondingLink):
         return None
 
     def recv(self, max_bytes: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+        if not self._rx and self._later:             # wait until the next delayed reply, if it comes in time
+            wait = min(d[0] for d in self._later) - self.clock()
+            if 0 < wait <= (timeout or 0.0):
+                self.clock.advance(wait)
         due = [d for d in self._later if d[0] <= self.clock()]
         for d in due:
             self._later.remove(d)
@@ -172,6 +176,8 @@ def test_a_late_reply_still_names_its_station():
     result = scanner(bus, rates=(19200,)).scan()
     assert [s.address for s in result.stations] == [6, 9]
     assert all(s.late for s in result.stations)
+    # Slave_Diag and Get_Cfg are asked twice (same FCB): the first reply, late, answers the second try
+    assert result.stations[0].cfg == ROBOT_CFG and result.stations[1].gsd.name == "VRIO0F1A.gsd"
 
 
 def test_a_station_locked_by_another_master_is_named_as_such_and_left_alone():

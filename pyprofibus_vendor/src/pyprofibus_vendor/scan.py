@@ -21,10 +21,10 @@ The replies are matched to the GSD files given (by default those shipped in ``py
 the file with the station's ident number and, where the configuration is made of that file's
 modules, the module names. Two properties of the adapter are measured on the way: whether it
 **echoes** its own transmission (each request's bytes come back verbatim before the reply; the scan
-skips them and says so) and the **reply latency** per station, from the end of the request on the
-line (the echo's last byte when the adapter echoes, else the write's return plus the request's
-transmission time at the rate) to the reply's first byte -- what the port, the adapter and the
-station add, which a master's reply timeout must cover.
+skips them and says so) and the **reply latency** per station, from the write's return (the echo's
+last byte when the adapter echoes: the request has left the adapter then) to the reply's first byte
+-- the request's transmission, what the port and the adapter add and the station's turnaround: what
+a master's reply timeout must cover.
 
 A reply that comes after its window (a slow adapter) is still taken: it names its source, so the
 station is listed (marked late) whatever was asked next.
@@ -48,8 +48,8 @@ from typing import Any, Callable, Dict, Iterable, List, Optional, Sequence, Tupl
 from . import _cli
 from .dp import MASTER_SAP, Sap, SlaveDiag, cfg_io_lengths, explain_diag, request_frame
 from .errors import DpError, GsdError, PhyError
-from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction, Sd1, Sd4,
-                  ShortAck, StationType)
+from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction, ResponseStatus, Sd1,
+                  Sd4, ShortAck, StationType)
 from .gsd import STANDARD_BAUDRATES, Gsd, load_gsd
 from .phy import Link
 
@@ -297,6 +297,10 @@ class Scanner:
     """See the module docstring. ``open_link(rate)`` gives a link at that rate (PhyError: the port
     refuses the rate); ``reply_timeout(rate)`` the reply window. :meth:`scan` runs it."""
 
+    #: Slave_Diag and Get_Cfg are asked again this often without a reply (FDL status is not: a
+    #: missing station would cost the time twice, and a late reply still names its station)
+    SERVICE_RETRIES = 1
+
     def __init__(self, open_link: Opener, *, device: str = "", rates: Sequence[int] = RATE_ORDER,
                  addresses: Sequence[int] = tuple(range(126)), master_address: int = DEFAULT_MASTER_ADDRESS,
                  reply_timeout: Callable[[int], float] = lambda rate: default_reply_timeout(rate, False),
@@ -413,7 +417,18 @@ class Scanner:
             self._res.stations[frame.sa] = st                           # type: ignore[union-attr]
         return st
 
-    def _transact(self, frame: Frame, address: int) -> Tuple[Optional[Frame], Optional[float]]:
+    def _answers(self, f: Frame, address: int, sap: Optional[int]) -> bool:
+        """``f`` is the reply of ``address`` to our request (to ``sap``: its data from that SAP or a
+        refusal; a stale reply to an earlier request of ours is not)."""
+        if isinstance(f, (Sd4, ShortAck)) or f.fc.request or f.da != self.master_address or f.sa != address:
+            return False
+        if sap is None:
+            return True
+        if isinstance(f, Sd1):
+            return f.fc.status != ResponseStatus.OK
+        return getattr(f, "ssap", None) == sap
+
+    def _transact(self, frame: Frame, address: int, sap: Optional[int] = None) -> Tuple[Optional[Frame], Optional[float]]:
         """Send ``frame``; the reply from ``address`` to us and its latency, or (None, None).
         Telegrams of another master raise _Abort; late replies of other stations are noted."""
         link = self._link
@@ -430,11 +445,11 @@ class Scanner:
         sent = self.clock()
         link.send(raw)
         self._res.requests += 1
-        line_end = sent + len(raw) * _CHAR_BITS / self._rate
+        line_end = sent
         echo_pos = 0
         echoing = True
         first: Optional[float] = None
-        deadline = line_end + window
+        deadline = sent + len(raw) * _CHAR_BITS / self._rate + window
         extended = False
         while True:
             now = self.clock()
@@ -468,9 +483,8 @@ class Scanner:
             if first is None:
                 first = at
             for f in self._feed(data, listening=False):
-                if not isinstance(f, (Sd4, ShortAck)) and not f.fc.request and f.da == self.master_address \
-                        and f.sa == address:
-                    return f, max(0.0, first - line_end)
+                if self._answers(f, address, sap):
+                    return f, first - line_end
                 if self._foreign(f):
                     raise _Abort()
         self._deframer.discard_partial()
@@ -500,10 +514,13 @@ class Scanner:
     def _service(self, st: StationFound, fcb: FcbRequester, sap: Sap) -> Optional[bytes]:
         fc_bits = fcb.bits()
         frame = request_frame(st.address, self.master_address, fc_bits[0], fc_bits[1], sap)
-        reply, latency = self._transact(frame, st.address)
         name = sap.name.title()
-        if reply is None:
-            st.problems.append("no reply to %s" % name)
+        for _ in range(1 + self.SERVICE_RETRIES):       # a retry keeps the FCB: the station answers it once
+            reply, latency = self._transact(frame, st.address, int(sap))
+            if reply is not None:
+                break
+        else:
+            st.problems.append("no reply to %s (%d tries)" % (name, 1 + self.SERVICE_RETRIES))
             return None
         fcb.acknowledge()
         if latency is not None:
@@ -532,8 +549,8 @@ def _ms(seconds: float) -> str:
     return "%.1f ms" % (seconds * 1e3)
 
 
-def describe_station(st: StationFound) -> List[str]:
-    """Lines about one station."""
+def describe_station(st: StationFound, rate: int, echo: bool = False) -> List[str]:
+    """Lines about one station, found at ``rate`` (``echo``: through an adapter that echoes)."""
     head = "station %d: %s" % (st.address, _STATION_WORDS[st.station_type])
     if st.late:
         head += ", answered late (after its reply window)"
@@ -561,8 +578,10 @@ def describe_station(st: StationFound) -> List[str]:
     elif st.passive and st.ident is not None:
         lines.append("  GSD: none of the files given has ident 0x%04X" % st.ident)
     if st.latencies:
-        lines.append("  reply latency: median %s, max %s (%d replies)" % (
-            _ms(statistics.median(st.latencies)), _ms(max(st.latencies)), len(st.latencies)))
+        lines.append("  reply latency: median %s, max %s over %d replies (%s to the reply's first byte; an FDL "
+                     "status request alone takes %s on the wire at this rate)" % (
+                         _ms(statistics.median(st.latencies)), _ms(max(st.latencies)), len(st.latencies),
+                         "the echo's end" if echo else "the write", _ms(6 * _CHAR_BITS / rate)))
     for problem in st.problems:
         lines.append("  problem: %s" % problem)
     return lines
@@ -589,7 +608,7 @@ def format_result(result: ScanResult) -> List[str]:
                 r.rate, r.probed, r.seconds,
                 "no station answers" if not r.stations else "%d station%s" % (len(r.stations), "s" * (len(r.stations) > 1))))
         for address in sorted(r.stations):
-            lines += ["  " + line for line in describe_station(r.stations[address])]
+            lines += ["  " + line for line in describe_station(r.stations[address], r.rate, r.echoes * 2 > r.requests)]
         if r.garbage_bytes:
             lines.append("  %d received bytes formed no telegram" % r.garbage_bytes)
     echo = result.echo
@@ -659,15 +678,20 @@ def _rate_list(text: str) -> Tuple[int, ...]:
     return tuple(out)
 
 
-def add_scan_arguments(p: argparse.ArgumentParser) -> None:
-    """The scan's options (shared with vr_driver's ``scan``)."""
-    p.add_argument("--device", required=True, help="the serial port (or a pyserial URL)")
+def add_scan_arguments(p: argparse.ArgumentParser, device_default: Optional[str] = None) -> None:
+    """The scan's options (shared with vr_driver's ``scan``); ``--device`` is required unless a
+    default is given."""
+    if device_default is None:
+        p.add_argument("--device", required=True, help="the serial port (or a pyserial URL)")
+    else:
+        p.add_argument("--device", default=device_default,
+                       help="the serial port (or a pyserial URL; default %s)" % device_default)
     p.add_argument("--rates", type=_rate_list, default=RATE_ORDER, metavar="R1,R2,...",
                    help="the bit rates to try, in order (default: 19200, then the other standard rates "
                         "from 9600 up)")
     p.add_argument("--all-rates", action="store_true", help="try every rate, not only up to the first with a station")
     p.add_argument("--addresses", type=_address_list, default=tuple(range(126)), metavar="A..B,C",
-                   help="the addresses to probe (default 0..125), e.g. 0..15,126 is refused, 3..9,20")
+                   help="the addresses to probe (default 0..125), e.g. 0..15 or 3..9,20")
     p.add_argument("--master-addr", type=_cli.address_arg, default=DEFAULT_MASTER_ADDRESS,
                    help="the scan's own address, not probed (default %d)" % DEFAULT_MASTER_ADDRESS)
     p.add_argument("--reply-timeout", type=_cli.seconds_arg, default=None, metavar="S",
