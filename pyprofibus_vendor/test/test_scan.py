@@ -171,6 +171,13 @@ def test_foreign_bytes_at_a_rate_keep_it_silent():
     assert "form no telegram at this rate" in "\n".join(scan.format_result(result))
 
 
+def test_a_stray_byte_or_two_do_not_keep_the_scan_silent():
+    bus = make_bus(19200, preload=b"\x00\xff")
+    result = scanner(bus, rates=(19200,)).scan()
+    assert result.rates[0].foreign_bytes == 2 and [s.address for s in result.stations] == [6, 9]
+    assert "(2 stray bytes heard before)" in "\n".join(scan.format_result(result))
+
+
 def test_a_late_reply_still_names_its_station():
     bus = make_bus(19200, delay=0.03)          # every reply after its 0.02 s window
     result = scanner(bus, rates=(19200,)).scan()

@@ -7,8 +7,9 @@ station; ``all_rates`` goes on) :class:`Scanner` does, on a link it opens at tha
 1. **listen** (``listen`` seconds) before sending anything. Telegrams of another master (a token,
    SD4 ``DC``, or a request from an address not ours) mean the line is someone else's: the scan
    sends nothing on it, lists the stations it heard answer and names that master
-   (:attr:`RateResult.other_masters`). Bytes that form no telegram at this rate (a line busy at
-   another rate) also keep it silent at this rate (:attr:`RateResult.foreign_bytes`).
+   (:attr:`RateResult.other_masters`); that rate is the line's. Bytes that form no telegram at this
+   rate (a line busy at another rate; more than :data:`STRAY_BYTES`, which a port may see when it
+   is opened) also keep it silent at this rate (:attr:`RateResult.foreign_bytes`).
 2. **FDL status** (SD1, FC ``Request FDL Status``) to every address of ``addresses`` except its own:
    the reply's FC tells the station type (passive: a slave; active: a master not ready, ready for
    the ring or in the ring).
@@ -53,7 +54,7 @@ from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction, 
 from .gsd import STANDARD_BAUDRATES, Gsd, load_gsd
 from .phy import Link
 
-__all__ = ["RATE_ORDER", "REPLY_FLOOR_SERIAL", "REPLY_FLOOR_VIRTUAL", "DEFAULT_LISTEN", "DEFAULT_MASTER_ADDRESS",
+__all__ = ["STRAY_BYTES", "RATE_ORDER", "REPLY_FLOOR_SERIAL", "REPLY_FLOOR_VIRTUAL", "DEFAULT_LISTEN", "DEFAULT_MASTER_ADDRESS",
            "GsdMatch", "StationFound", "RateResult", "ScanResult", "Scanner", "match_gsd", "shipped_gsds",
            "serial_opener", "default_reply_timeout", "build_parser", "scan_from_args", "format_result", "main"]
 
@@ -70,6 +71,9 @@ RATE_ORDER: Tuple[int, ...] = (19200,) + tuple(r for r in STANDARD_BAUDRATES if 
 REPLY_FLOOR_SERIAL = 0.05
 #: reply window [s] on a pty or a network URL, where software latency dominates
 REPLY_FLOOR_VIRTUAL = 0.1
+#: bytes heard while listening that form no telegram and still let the scan send (a port being
+#: opened, a line switching on, may show a character or two)
+STRAY_BYTES = 2
 #: seconds the scan listens on each rate before it sends
 DEFAULT_LISTEN = 0.5
 #: the scan's own station address: 0, a class 2 master's usual one (not the driver's 2, which a
@@ -173,7 +177,12 @@ class RateResult:
     @property
     def silent(self) -> bool:
         """The scan sent nothing at this rate (another master, or foreign traffic)."""
-        return bool(self.other_masters or self.foreign_bytes)
+        return bool(self.other_masters) or self.foreign_bytes > STRAY_BYTES
+
+    @property
+    def found(self) -> bool:
+        """Stations answered or were heard, or another master speaks at this rate."""
+        return bool(self.stations or self.heard or self.other_masters)
 
     def to_dict(self) -> Dict[str, Any]:
         return {"rate": self.rate, "opened": self.opened, "why_not": self.why_not, "probed": self.probed,
@@ -194,8 +203,8 @@ class ScanResult:
 
     @property
     def found(self) -> Optional[RateResult]:
-        """The first rate at which stations answered or were heard."""
-        return next((r for r in self.rates if r.stations or r.heard), None)
+        """The first rate at which stations answered or were heard, or another master spoke."""
+        return next((r for r in self.rates if r.found), None)
 
     @property
     def rate(self) -> Optional[int]:
@@ -338,7 +347,7 @@ class Scanner:
         for rate in self.rates:
             r = self.scan_rate(rate)
             result.rates.append(r)
-            if (r.stations or r.heard) and not self.all_rates:
+            if r.found and not self.all_rates:
                 break
         return result
 
@@ -600,12 +609,13 @@ def format_result(result: ScanResult) -> List[str]:
                              "sent nothing more at this rate" % (r.rate, address, what))
             if r.heard:
                 lines.append("rate %d: stations heard answering it: %s" % (r.rate, ", ".join(map(str, sorted(r.heard)))))
-        elif r.foreign_bytes:
+        elif r.silent:
             lines.append("rate %d: %d bytes on the line form no telegram at this rate (another master at "
                          "another rate?) -- the scan sent nothing at this rate" % (r.rate, r.foreign_bytes))
         else:
-            lines.append("rate %d: %d addresses probed in %.1f s: %s" % (
-                r.rate, r.probed, r.seconds,
+            stray = " (%d stray bytes heard before)" % r.foreign_bytes if r.foreign_bytes else ""
+            lines.append("rate %d: %d addresses probed in %.1f s%s: %s" % (
+                r.rate, r.probed, r.seconds, stray,
                 "no station answers" if not r.stations else "%d station%s" % (len(r.stations), "s" * (len(r.stations) > 1))))
         for address in sorted(r.stations):
             lines += ["  " + line for line in describe_station(r.stations[address], r.rate, r.echoes * 2 > r.requests)]
