@@ -65,6 +65,11 @@ def test_an_owned_card_and_another_master_are_named_and_block_the_commands():
     assert next_commands(found) == [] and "stop master 1 first" in "\n".join(format_findings(found))
 
 
+def test_a_card_at_the_drivers_own_address_is_told_to_move_the_driver():
+    text = "\n".join(format_findings(g2_findings(result(g2(2, CHK_CFG_V3)))))
+    assert "the driver's own address is 2 too (master_address)" in text
+
+
 def test_two_cards_and_no_card():
     found = g2_findings(result(g2(4, CHK_CFG_V3), g2(5, V1_CFG)))
     assert [s.address for s in found.g2] == [4, 5]

@@ -515,10 +515,25 @@ class Scanner:
             if latency is not None:
                 st.latencies.append(latency)
             self.progress("rate %d: station %d answers: %s" % (self._rate, address, _STATION_WORDS[st.station_type]))
+        self._collect_late()
         for address in sorted(res.stations):
             st = res.stations[address]
             if st.passive:
                 self._read_slave(st)
+
+    def _collect_late(self) -> None:
+        """Wait one reply window for replies still under way (the last addresses' when late)."""
+        link = self._link
+        assert link is not None
+        deadline = self.clock() + self.reply_timeout(self._rate)
+        while True:
+            left = deadline - self.clock()
+            if left <= 0:
+                return
+            data = link.recv(4096, left)
+            for f in self._feed(data, listening=False) if data else ():
+                if self._foreign(f):
+                    raise _Abort()
 
     def _service(self, st: StationFound, fcb: FcbRequester, sap: Sap) -> Optional[bytes]:
         fc_bits = fcb.bits()

@@ -36,6 +36,8 @@ from ..protocol import registry as protocols
 
 __all__ = ["ProtocolFit", "G2Findings", "protocol_fit", "g2_findings", "next_commands", "build_parser", "main"]
 
+#: the driver's own station address by default (the built-in bus config's master_address)
+DRIVER_MASTER_ADDRESS = default_robot_config("virtual", phy_type="memory").master_address
 #: the protocol commission measures (doc/commissioning.md): the G2 program and card of protocol v3
 COMMISSION_PROTOCOL = "v3"
 
@@ -148,6 +150,10 @@ def format_findings(found: G2Findings) -> List[str]:
             lines.append(head + ": its modules (Chk_Cfg %s) fit none of this driver's protocols (%s); "
                          "configure them as protocol v3's, Chk_Cfg %s" % (
                              _cli.hexstr(fit.cfg), ", ".join(protocols.names()), _cli.hexstr(v3)))
+        if st.address == DRIVER_MASTER_ADDRESS:
+            lines.append("  the driver's own address is %d too (master_address): give the driver another one, "
+                         "master_address: 1 in a copy of config/vr_driver.yaml (driver.launch config:=FILE), and "
+                         "commission a --bus-config file with master_address: 1" % DRIVER_MASTER_ADDRESS)
         if st.owner is not None:
             lines.append("  it is parameterised by master %d: stop that master (a running driver?) before "
                          "the driver or commission take the line" % st.owner)
