@@ -77,8 +77,8 @@ class EchoRelay:
 
     def _run(self) -> None:
         while not self._stop.is_set():
-            fds = [self.up.fd] + ([self.down._fd] if self.down is not None else [])
-            ready = select.select(fds, [], [], 0.05)[0]
+            down = self.down.serial.fileno() if self.down is not None else None
+            ready = select.select([self.up.fd] + ([down] if down is not None else []), [], [], 0.05)[0]
             if self.up.fd in ready:
                 data = self.up.recv(4096, 0.0)
                 rate = tty_speed(self.pty.keep_fd)
@@ -89,7 +89,7 @@ class EchoRelay:
                 self.up.send(data)                            # the echo, at once
                 self.echoed += len(data)
                 self.down.send(data)
-            elif self.down is not None and self.down._fd in ready:
+            elif down is not None and down in ready:
                 try:
                     self.up.send(self.down.recv(4096, 0.0))
                 except PhyError:

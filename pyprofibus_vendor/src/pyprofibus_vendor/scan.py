@@ -717,7 +717,7 @@ def add_scan_arguments(p: argparse.ArgumentParser, device_default: Optional[str]
     p.add_argument("--all-rates", action="store_true", help="try every rate, not only up to the first with a station")
     p.add_argument("--addresses", type=_address_list, default=tuple(range(126)), metavar="A..B,C",
                    help="the addresses to probe (default 0..125), e.g. 0..15 or 3..9,20")
-    p.add_argument("--master-addr", type=_cli.address_arg, default=DEFAULT_MASTER_ADDRESS,
+    p.add_argument("--master-addr", type=_cli.address_arg, default=DEFAULT_MASTER_ADDRESS, metavar="N",
                    help="the scan's own address, not probed (default %d)" % DEFAULT_MASTER_ADDRESS)
     p.add_argument("--reply-timeout", type=_cli.seconds_arg, default=None, metavar="S",
                    help="reply window per request (default %g s, %g s on a pty or a URL, or 4 slot times "
