@@ -151,7 +151,7 @@ def master_args(device: str, *extra: str, ident: int = ROBOT_IDENT, cfg: bytes =
 # --help and usage errors
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("tool", ["master", "slave", "sniff"])
+@pytest.mark.parametrize("tool", ["master", "slave", "sniff", "scan"])
 def test_help_describes_the_tool_and_lists_exit_codes(tool):
     result = run_tool(tool, "--help")
     assert result.returncode == 0
@@ -302,6 +302,19 @@ def test_slave_tool_stops_after_duration_and_on_sigterm():
         assert "counters:" in slave.lines["out"]
     finally:
         slave.kill()
+
+
+def test_scan_lists_the_slave_on_a_pty_and_leaves_it_unparameterised(pty_slave):
+    device, slave, _server = pty_slave()
+    result = run_tool("scan", "--device", device, "--rates", "19200", "--addresses", "1..6", "--listen", "0.05",
+                      "--reply-timeout", "0.1", "--json")
+    assert result.returncode == 0, result.err
+    data = json.loads(result.out)
+    assert data["rate"] == 19200 and data["echo"] is False and data["other_masters"] == {}
+    (station,) = data["rates"][0]["stations"]
+    assert (station["address"], station["station_type"], station["ident"], station["owner"]) == (SLAVE, "slave", "0x06C6", None)
+    assert station["cfg"] == hx(ROBOT_CFG) and station["gsd"]["file"] == "PAN06C6.gsd"
+    assert slave.state.name == "WAIT_PRM" and slave.counters.requests == 3    # FDL status, Slave_Diag, Get_Cfg
 
 
 def test_master_json_against_in_test_slave_server(pty_slave):

@@ -64,7 +64,6 @@ def test_bus_overrides_reach_the_profibus_config():
     ("baud", "fast", "integer"),
     ("master_address", 4, "also the address"),
     ("master_address", 126, "[0, 125]"),
-    ("slave_address", 5, "no such slave"),
     ("cycle_rate", math.nan, "finite"),
     ("cycle_rate", 0, "(0, 1000]"),
     ("byte_order", "middle", "little, big"),
@@ -97,6 +96,18 @@ def test_bus_config_file_errors_are_reported_with_the_parameter(tmp_path):
     with pytest.raises(ParamError) as err:
         DriverParams.from_dict({"bus_config": str(bad)}).bus()
     assert err.value.name == "bus_config" and "at least one slave" in str(err.value)
+
+
+def test_the_built_in_bus_puts_the_g2_at_slave_address_a_bus_config_must_have_it(tmp_path):
+    # a card at another address than 4 (what rosrun vr_driver scan finds) needs no bus config of its own
+    (slave,) = DriverParams.from_dict({"slave_address": 6, "protocol": "v3"}).bus().slaves
+    assert (slave.address, slave.cfg.hex(" ")) == (6, "17 17 17 13 27 27 27")
+    bus = tmp_path / "bus.yaml"
+    bus.write_text("master_address: 2\nbaud: 19200\nphy: {type: serial, device: /dev/x}\n"
+                   "slaves:\n  - {name: r, address: 4, gsd: PAN06C6.gsd, cfg: '13 13 13 11 23 23 23 21'}\n")
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"bus_config": str(bus), "slave_address": 5}).bus()
+    assert err.value.name == "slave_address" and "no such slave in the bus config (have 4)" in str(err.value)
 
 
 def test_wrong_io_length_is_refused(tmp_path):

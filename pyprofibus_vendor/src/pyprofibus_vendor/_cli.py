@@ -1,4 +1,5 @@
-"""Shared command-line plumbing of the commissioning tools (``gsd``, ``master``, ``slave``, ``sniff``).
+"""Shared command-line plumbing of the commissioning tools (``gsd``, ``master``, ``slave``, ``sniff``,
+``scan``).
 
 Every tool is run as ``python3 -m pyprofibus_vendor.<tool>``, has ``--help`` with a description and
 an epilog listing its exit status, prints expected errors as one line ``error: <message>`` on

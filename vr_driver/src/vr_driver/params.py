@@ -567,7 +567,7 @@ class DriverParams:
         from pyprofibus_vendor.config import BusConfig, ConfigError, load_config, default_robot_config
         try:
             base = (load_config(self.bus_config) if self.bus_config
-                    else default_robot_config(self.port or DEFAULT_PORT))
+                    else default_robot_config(self.port or DEFAULT_PORT, slave_address=self.slave_address))
         except ConfigError as exc:
             raise ParamError("bus_config", self.bus_config, str(exc)) from None
         data: Dict[str, Any] = base.to_dict()

@@ -20,7 +20,13 @@ before it could remove its symlink) is not opened: its pty number may already be
 on a real line at that bit rate (11 bits per character, one direction at a time), so cycle rates
 measured through the hub show the bus time. Without it the ptys move bytes as fast as they can.
 
-``python3 -m vr_driver.controller.line [--pty-link PATH] [--baud B] STATION_PATH...`` runs it from the
+``rate`` (optional) is the stations' bit rate: the line answers only a master whose port is set to it
+(the speed the master set on its pty, :func:`~vr_driver.controller.line_rate.tty_speed`). Bytes
+between a master at another rate and the stations pass through a UART's view of the wire
+(:func:`~vr_driver.controller.line_rate.resample`): the stations receive a few wrong characters or
+none and do not answer, as on a real line. Without it the line carries any rate's bytes intact.
+
+``python3 -m vr_driver.controller.line [--pty-link PATH] [--baud B] [--rate R] STATION_PATH...`` runs it from the
 shell (:func:`main`; the first line on stdout is the master's device path).
 """
 from __future__ import annotations
@@ -39,6 +45,7 @@ from typing import IO, Callable, List, Optional, Sequence, Tuple
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
+from .line_rate import resample, tty_speed
 from .pty_link import SimPort, pid_alive
 from .simulator import EXIT_OK, SimError, Simulator, parse_simulator_args, run_simulator, simulator_parser
 
@@ -55,6 +62,7 @@ class LineCounters:
     to_master: int = 0            # bytes from the stations copied to the master
     station_opens: int = 0
     station_drops: int = 0
+    off_rate_chunks: int = 0      # chunks carried between a master and stations at different rates
 
 
 class _Station:
@@ -79,13 +87,15 @@ class LineHub(Simulator):
     """See the module docstring. :meth:`start` serves in a thread; :meth:`serve` in the caller's."""
 
     def __init__(self, stations: Sequence[str], *, pty_link: Optional[str] = None, baud: Optional[int] = None,
-                 reopen_period: float = 0.2, clock: Clock = time.monotonic) -> None:
+                 reopen_period: float = 0.2, clock: Clock = time.monotonic, rate: Optional[int] = None) -> None:
         if not stations:
             raise SimError("the line needs at least one station path")
-        if baud is not None and not 9600 <= baud <= 12_000_000:
-            raise SimError("baud %r outside 9600..12000000" % (baud,))
+        for name, value in (("baud", baud), ("rate", rate)):
+            if value is not None and not 9600 <= value <= 12_000_000:
+                raise SimError("%s %r outside 9600..12000000" % (name, value))
         self.stations = [_Station(p) for p in stations]
         self.baud = baud
+        self.rate = rate
         self.reopen_period = reopen_period
         self.clock = clock
         self.counters = LineCounters()
@@ -130,6 +140,19 @@ class LineHub(Simulator):
         st.next_open = now + self.reopen_period
 
     # ------------------------------------------------------------------------ the loop
+    def master_rate(self) -> Optional[int]:
+        """The bit rate the master set on its end of the line (None: not readable)."""
+        pty = self.port.pty
+        return tty_speed(pty.keep_fd if pty is not None and pty.keep_fd >= 0 else self.master.fd)
+
+    def _at_rates(self, data: bytes, to_master: bool) -> bytes:
+        """``data`` as received across the line's rate and the master's (unchanged when they agree)."""
+        theirs = self.master_rate()
+        if self.rate is None or theirs is None or theirs == self.rate:
+            return data
+        self.counters.off_rate_chunks += 1
+        return resample(data, self.rate, theirs) if to_master else resample(data, theirs, self.rate)
+
     def _deliver(self, target: int, data: bytes, now: float) -> None:
         if target < 0:
             self.master.send(data)
@@ -170,6 +193,8 @@ class LineHub(Simulator):
             st = fds[fd]
             if st is None:
                 data = self.master.recv(4096, 0.0)      # PhyError: the hub's own pty failed
+                if data and self.rate is not None:
+                    data = self._at_rates(data, to_master=False)
                 if data:
                     self._forward(len(self.stations), data, now)
                 continue
@@ -178,6 +203,8 @@ class LineHub(Simulator):
             except PhyError as exc:
                 self._drop(st, str(exc), now)
                 continue
+            if data and self.rate is not None:
+                data = self._at_rates(data, to_master=True)
             if data:
                 self._forward(-1, data, now)
 
@@ -214,12 +241,15 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
     p.add_argument("stations", nargs="+", metavar="STATION_PATH", help="a station's pty (or its symlink)")
     p.add_argument("--pty-link", metavar="PATH", help="symlink the master's pty at PATH (removed on exit)")
     p.add_argument("--baud", type=int, help="pace the line at this bit rate (default: as fast as the ptys)")
+    p.add_argument("--rate", type=int, help="the stations' bit rate: a master whose port is set to another rate "
+                   "meets garbled characters and no reply, as on a wire (default: any rate's bytes pass)")
     args = parse_simulator_args(p, argv)
     out = stdout if stdout is not None else sys.stdout
     def serve(hub: LineHub, stop: threading.Event, prog: str) -> int:
         hub.serve(stop)                 # in the foreground (a PhyError: the runner's device error)
         return EXIT_OK
-    return run_simulator(p.prog, lambda: LineHub(args.stations, pty_link=args.pty_link, baud=args.baud),
+    return run_simulator(p.prog, lambda: LineHub(args.stations, pty_link=args.pty_link, baud=args.baud,
+                                                         rate=args.rate),
                          out, serve)
 
 

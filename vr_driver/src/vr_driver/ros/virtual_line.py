@@ -5,7 +5,9 @@ Private parameters: ``~stations`` [["auto", "auto:io_island"]] the stations' pty
 launch's virtual controller link, ``auto:NAME`` this launch's link of station NAME
 (``controller.program.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
 linked (``auto``: ``<ROS log dir>/vr006l_virtual_line_<master port>``; the driver's ``port``);
-``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys).
+``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys); ``~rate`` [0] the stations' bit rate: a
+master whose port is set to another one meets garbled characters and no reply, as on a wire (0: any rate's
+bytes pass; :mod:`vr_driver.controller.line_rate`).
 
 Sets ``~device_path`` (the master's pty). Exit status: 0 on shutdown, 2 bad parameter, 3 device problem.
 """
@@ -35,7 +37,9 @@ def main() -> int:
             raise SimError("~stations must be a list of pty paths, got %r" % (raw,))
         stations: List[str] = [resolve_link(p) for p in raw]
         baud = int(rospy.get_param("~baud", 0)) or None
-        return LineHub(stations, pty_link=own_link(rospy.get_param("~pty_link", AUTO_LINK), "line"), baud=baud)
+        rate = int(rospy.get_param("~rate", 0)) or None
+        return LineHub(stations, pty_link=own_link(rospy.get_param("~pty_link", AUTO_LINK), "line"), baud=baud,
+                       rate=rate)
     hub, status = open_device("virtual_line", make)
     if hub is None:
         return status
