@@ -203,3 +203,44 @@ def test_the_real_machine_on_loopback():
         machine.connect("127.0.0.1", port, 1.0)
     verdict, address = check_master("http://localhost:%d" % port, machine)
     assert verdict.level == ERROR and address == "127.0.0.1"
+
+
+# ------------------------------------------------------------------------------ the driver's side
+class FakeMaster:
+    def __init__(self, publishers, subscribers, uris):
+        self.state = (publishers, subscribers, [])
+        self.uris = dict(uris)
+
+    def getSystemState(self):  # noqa: N802 (rosgraph's name)
+        return self.state
+
+    def lookupNode(self, name):  # noqa: N802
+        return self.uris[name]
+
+
+def test_the_driver_names_a_sender_it_cannot_reach_once_per_uri():
+    from vr_driver.ros.graph_watch import SenderWatch
+    machine = workstation(**{"ws": ["127.0.1.1"]})
+    machine.listening[(DRIVER_PC, 40001)] = None
+    master = FakeMaster(
+        publishers=[["/joint_trajectory_action/goal", ["/client", "/reachable"]],
+                    ["/joint_trajectory_action/cancel", ["/client"]], ["/joint_states", ["/interface"]],
+                    ["/other/goal", ["/elsewhere"]]],
+        subscribers=[["/joint_trajectory_action/goal", ["/interface"]],
+                     ["/joint_trajectory_action/cancel", ["/interface"]], ["/other/goal", ["/someone"]]],
+        uris={"/client": "http://ws:40002/", "/reachable": "http://driver-pc:40001/",
+              "/elsewhere": "http://ws:40003/"})
+    logged = []
+    watch = SenderWatch("/interface", master=master, machine=machine, log=logged.append)
+    said = watch.poll()
+    assert said == logged and len(said) == 1, said        # /reachable is fine, /elsewhere sends elsewhere
+    assert said[0].startswith("/interface: nothing /client publishes to it (/joint_trajectory_action/cancel, "
+                              "/joint_trajectory_action/goal) arrives: node /client advertises http://ws:40002/, "
+                              "which this machine cannot reach (ws = 127.0.1.1 here: connection refused): set ROS_IP")
+    assert watch.poll() == []                               # said once
+    master.uris["/client"] = "http://192.168.7.20:40004/"  # restarted with ROS_IP: checked again, now fine
+    machine.listening[(WORKSTATION, 40004)] = None
+    machine.names[WORKSTATION] = [WORKSTATION]
+    assert watch.poll() == []
+    master.uris["/client"] = "http://ws:40005/"             # and without it again: said again
+    assert len(watch.poll()) == 1

@@ -200,9 +200,18 @@ def test_workstation_launch_checks_the_network_all_ok(cell):
 
 
 def test_without_ros_ip_the_workstation_is_told_what_to_set(cell):
-    # the pitfall is real: the driver cannot connect back to this client's goal topic, no error anywhere
-    res = client(cell, "server", "5", ros_ip=None)
-    assert "SERVER NOT SEEN" in res.stdout, res.stdout + res.stderr
+    # the pitfall is real: the driver cannot connect back to this client's goal topic, and the client
+    # is told nothing; the driver says so in its log (its sender watch), naming what to set
+    waiting = subprocess.Popen(["ip", "netns", "exec", NS_B, sys.executable, CLIENT, "server", "6"],
+                               env=ns_env(cell[0], None), stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                               text=True)
+    said = cell[1].wait_line(r"nothing /workstation_client\S* publishes to it", 30.0)
+    out = waiting.communicate(timeout=60)[0]
+    assert "SERVER NOT SEEN" in out, out
+    assert said is not None, driver_pc_said(cell)
+    assert re.search(r"\(/joint_trajectory_action/cancel, /joint_trajectory_action/goal\) arrives: node "
+                     r"/workstation_client\S* advertises http://[^ ]+, which this machine cannot reach \(.*\): "
+                     r"set ROS_IP to its machine's address", said), said
     fix = "set ROS_IP=%s (this machine's address toward the master)" % ADDR_B
     res = in_b(cell, ["rosrun", "vr_driver", "check_network"], ros_ip=None)
     assert res.returncode == 1, res.stdout + res.stderr
