@@ -39,17 +39,25 @@ def ip(*args, check=True):
     return subprocess.run(["ip"] + list(args), capture_output=True, text=True, timeout=20, check=check)
 
 
-def remove_namespaces():
-    """Both namespaces (and so the veth pair) gone, whatever exists of them."""
-    for ns, veth in ((NS_A, VETH_A), (NS_B, VETH_B)):
+def remove_namespaces(names=((NS_A, VETH_A), (NS_B, VETH_B))):
+    """The namespaces (and so the veth pair) gone, whatever exists of them."""
+    for ns, veth in names:
         ip("-n", ns, "link", "del", veth, check=False)
         ip("netns", "del", ns, check=False)
 
 
+def remove_left_behind():
+    """The namespaces of an earlier run of this test that was killed before it could remove them
+    (their process is gone)."""
+    listed = ip("netns", "list", check=False).stdout if shutil.which("ip") else ""
+    for pid in sorted({int(m) for m in re.findall(r"^vrnet_[ab](\d+)\b", listed, re.M)}):
+        if pid != os.getpid() and not os.path.exists("/proc/%d" % pid):
+            remove_namespaces((("vrnet_a%d" % pid, "vrna%d" % pid), ("vrnet_b%d" % pid, "vrnb%d" % pid)))
+
+
 def make_namespaces():
     """A and B joined by the veth pair; skip when the kernel refuses a namespace (not root)."""
-    if shutil.which("ip") is None:
-        pytest.skip("iproute2's `ip` is not installed")
+    assert shutil.which("ip") is not None, "iproute2's `ip` is not installed (scripts/setup installs it)"
     made = ip("netns", "add", NS_A, check=False)
     if made.returncode != 0:
         pytest.skip("the kernel refused a network namespace (`ip netns add`: %s): this test needs root "
@@ -121,7 +129,7 @@ def cell():
     """The driver PC (A) running driver_pc.launch; yields (the log folder, its launch). Removes
     everything after."""
     logdir = tempfile.mkdtemp(prefix="vr_two_machines_")
-    remove_namespaces()
+    remove_left_behind()
     driver = None
     try:
         make_namespaces()
