@@ -149,9 +149,11 @@ def test_loopback_is_fine_with_the_master_on_this_machine_unless_others_connect(
     assert "nodes on other machines (the workstation) would connect to themselves" in verdict.text
 
 
-def test_an_unknown_master_is_not_judged():
+def test_an_unknown_master_and_ipv6_are_not_judged():
     verdict = check_own_host("ws", UNSET, None, workstation())
-    assert verdict.level == WARNING and "not checked" in verdict.text
+    assert verdict.level == WARNING and "not checked: the master's address is not known" in verdict.text
+    verdict = check_own_host("fd00::20", "ROS_IP", DRIVER_PC, workstation())
+    assert verdict.level == WARNING and "an IPv6 address: not checked" in verdict.text
 
 
 # ------------------------------------------------------------------------------ the other nodes
@@ -159,13 +161,14 @@ def test_nodes_out_of_reach_by_their_names_are_each_named():
     machine = workstation(**{"cell-pc": ["127.0.1.1"]})
     machine.listening[(DRIVER_PC, 40001)] = None
     verdicts = check_nodes({"/interface": "http://driver-pc:40001/", "/rosout": "http://cell-pc:40002/",
-                            "/probe": "http://nowhere:40003/"}, machine, timeout=0.1)
+                            "/probe": "http://nowhere:40003/", "/v6": "http://[fd00::5]:40004/"},
+                           machine, timeout=0.1)
     assert [v.level for v in verdicts] == [ERROR, ERROR, OK]
     assert verdicts[0].text.startswith("node /probe advertises http://nowhere:40003/, which this machine cannot "
                                        "reach ('nowhere' does not resolve here): set ROS_IP")
     assert "node /rosout advertises http://cell-pc:40002/, which this machine cannot reach (cell-pc = 127.0.1.1 " \
            "here: connection refused)" in verdicts[1].text
-    assert verdicts[2].text == "1 node reachable by the URIs they advertise"
+    assert verdicts[2].text == "2 nodes reachable by the URIs they advertise"
 
 
 # ------------------------------------------------------------------------------ time

@@ -179,6 +179,9 @@ def check_own_host(host: str, source: str, master: Optional[str], machine: Machi
     one; with ``remote_clients`` (the driver PC beside its own master) the other machines' nodes
     must. The address to set is this machine's own toward the master, or, for remote clients, its
     addresses but loopback."""
+    if ":" in host:
+        return Verdict(WARNING, "this machine's nodes advertise %r (%s), an IPv6 address: not checked (these "
+                                "checks know IPv4 only)" % (host, source))
     remote_master = master is not None and not is_loopback(master) and not machine.is_own(master)
     if master is None and not remote_clients:
         return Verdict(WARNING, "this machine's nodes advertise %r (%s); not checked: the master's address "
@@ -232,11 +235,15 @@ def _fix(candidates: Sequence[str], where: str) -> str:
 def check_nodes(nodes: Mapping[str, str], machine: Machine, timeout: float = CONNECT_TIMEOUT) -> List[Verdict]:
     """Whether this machine reaches every node by the URI it advertises (name -> XML-RPC URI), all
     at once (one thread each): an ERROR per node it cannot, naming the host, what it resolves to here
-    and what to set on the node's machine; one OK line for the rest."""
+    and what to set on the node's machine; one OK line for the rest (an IPv6 host counts there: not
+    judged)."""
     results: Dict[str, Optional[str]] = {}
 
     def probe(name: str, uri: str) -> None:
         parts = urlparse(uri)
+        if ":" in (parts.hostname or ""):      # IPv6 (ROS_IPV6): not judged, these checks know IPv4 only
+            results[name] = None
+            return
         try:
             address = machine.resolve(parts.hostname or "")[0]
         except (OSError, IndexError):
