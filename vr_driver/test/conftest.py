@@ -43,6 +43,7 @@ LANE_OF = {
     "test_sim_line_pty.py": "realtime",
     "test_scan_line.py": "realtime",               # `scan` on the virtual line at a drawn rate
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
+    "test_two_machines.py": "realtime",            # driver PC and workstation in two network namespaces
     "test_commission.py": "solo",                  # `commission` measures the virtual G2 to the ms: alone
     "test_soak.py": "soak",                        # the longest: a lane of its own
     "test_plan_process.py": "planning",

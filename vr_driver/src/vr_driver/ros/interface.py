@@ -30,6 +30,7 @@ from ..driver import (DriverCore, DriverError, DriverStatus, JobPhase, LinkState
 from ..errors import MissingDependency, VrDriverError
 from .diagnostics import DriverDiagnostics
 from .goal_runner import Goal, GoalRunner
+from .graph_watch import SenderWatch
 from .industrial import IndustrialInterface
 from .io_server import IoServer
 from .joint_command import JointCommandSubscriber
@@ -155,6 +156,9 @@ class InterfaceNode:
         self.path_sub = rospy.Subscriber("joint_path_command", JointTrajectory, self._joint_path,
                                          queue_size=1)
         self.joint_command = JointCommandSubscriber(self.core, self.diag)
+        # a sender on another machine this node cannot reach back is said in the log (doc/network.md)
+        self.sender_watch = SenderWatch(rospy.get_name())
+        self.sender_watch.start()
         # a shutdown hook (e.g. rosnode kill) only asks; main() does the real stop
         rospy.on_shutdown(self.core.request_stop)
         sc = self.core.slave_config
@@ -171,6 +175,8 @@ class InterfaceNode:
         for timer in getattr(self, "timers", []):
             timer.shutdown()
         self.io_server.shutdown()
+        if getattr(self, "sender_watch", None) is not None:
+            self.sender_watch.stop()
         plan_server = getattr(self, "plan_server", None)
         if plan_server is not None:
             plan_server.shutdown()          # its worker ends by EOF anyway; this ends it now

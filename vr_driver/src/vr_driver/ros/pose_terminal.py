@@ -26,6 +26,7 @@ from ..terminal.pose_input import (EXIT_NO_DRIVER, EXIT_OK, EXIT_REFUSED, EXIT_U
                          StatusInfo, Terminal, build_arg_parser, fmt_pose, in_namespace, request_from_args)
 from ..kinematics.preview import MoveType
 from ..poses import ControllerPose, Workspace
+from .network_check import OK, Machine, check_master, own_host_error
 
 #: exit status after Ctrl-C while waiting for the driver (the shell's convention for SIGINT)
 EXIT_INTERRUPTED = 130
@@ -222,11 +223,18 @@ class RosBackend(Backend):
             if not _pid_alive(launch_pid):
                 return "the launch (pid %d) has ended before the ROS master came up" % launch_pid
             if time.monotonic() >= end:
-                return "no ROS master at %s (waited %.0f s): start the driver first (scripts/run)" % (uri, wait)
+                verdict, _address = check_master(uri, Machine())
+                return "no ROS master at %s (waited %.0f s): start the driver first (scripts/run)%s" % (
+                    uri, wait, "" if verdict.level == OK else "; " + verdict.text)
             if not announced:
                 say("Waiting for the ROS master at %s ..." % uri)
                 announced = True
             time.sleep(0.2)
+        # a master on another machine must reach this one by the host it advertises: else every goal
+        # from here would be lost without a word (doc/network.md)
+        unreachable = own_host_error(uri)
+        if unreachable is not None:
+            return unreachable
         rospy.init_node("pose_terminal", anonymous=True, disable_signals=True)
 
         def name(relative: str) -> str:
