@@ -172,10 +172,15 @@ class MoveItReadsTest(unittest.TestCase):
         (scene,) = [n for n in config.nodes if n.name == "moveit_scene"]
         self.assertEqual((scene.package, scene.type), ("vr_driver", "moveit_scene"))
         self.assertIn("--padding=0.02", scene.args)
+        self.assertIn("--model=" + model, scene.args)
+        self.assertIn("--workspace", scene.args.split())
         self.assertTrue(scene.args.endswith(CELL))
         # the URDF MoveIt plans with is the calibrated model's (upper arm 570 mm)
         model_urdf = RobotModel.from_urdf_string(p["/robot_description"])
         self.assertAlmostEqual(model_urdf.joints["joint_3"].origin[2, 3], 0.570)
+        config, p = self.load("sim:=true", "workspace_walls:=false")
+        (scene,) = [n for n in config.nodes if n.name == "moveit_scene"]
+        self.assertNotIn("--workspace", scene.args.split())
 
     def test_demo_runs_the_virtual_g2_on_v3_with_the_example_cell(self):
         config, p = self.load(name="demo.launch")

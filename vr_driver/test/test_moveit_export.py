@@ -161,6 +161,46 @@ class TestScene:
         assert scene_text.scene_text(Scene(), 0.01, "empty") == "empty\n.\n"
 
 
+class TestWorkspaceWalls:
+    def test_walls_lie_on_the_faces_of_the_box_beyond_the_robot(self):
+        from vr_driver.poses import Workspace
+        walls = {w.name: w for w in scene_text.workspace_walls(Workspace(), base_frame_z=0.05)}
+        assert sorted(walls) == ["workspace_x_max", "workspace_y_max", "workspace_y_min", "workspace_z_max"]
+
+        def inner(name, axis, side):
+            w = walls[name]
+            return w.position[axis] + side * w.size[axis] / 2.0
+
+        assert inner("workspace_x_max", 0, -1) == pytest.approx(1.4)
+        assert inner("workspace_y_min", 1, +1) == pytest.approx(-0.9)
+        assert inner("workspace_y_max", 1, -1) == pytest.approx(0.9)
+        assert inner("workspace_z_max", 2, -1) == pytest.approx(1.45)       # 1400 mm above base, base 50 mm up
+        _, objects = read_scene(scene_text.scene_text(Scene(), 0.01, walls=list(walls.values())))
+        ((kind, dims, _, rgba),) = objects["workspace_x_max"][1]
+        assert dims == pytest.approx(walls["workspace_x_max"].size) and rgba[3] < 0.5     # not padded, faint
+
+    @pytest.mark.skipif(bool(__import__("vr_driver.kinematics.deps", fromlist=["x"]).missing_dependencies(
+        ("pinocchio", "coal"))), reason="pinocchio / coal missing")
+    def test_the_named_states_are_free_and_a_flange_beyond_the_box_touches_a_wall(self, kin):
+        """With the example cell and the default box (the driver's checker, its padding): home and zero
+        are free; the arm stretched up (flange above 1400 mm) or home turned right (flange 1080 mm to
+        the right, beyond -900 mm) is not."""
+        from vr_driver.kinematics.collision import CollisionChecker
+        from vr_driver.poses import Workspace
+        scene = load_scene(CELL)
+        for wall in scene_text.workspace_walls(Workspace()):
+            scene.add(wall)
+        checker = CollisionChecker.default(padding=0.01, scene=scene)
+        for q in kin.named_states.values():
+            assert checker.contacts(q) == [], q
+        up = (0.0, 0.0, -math.pi / 2, 0.0, 0.0, 0.0)              # forearm straight up: flange at 2.0 m
+        assert kin.fk(up)[2, 3] > 1.4
+        assert "workspace_z_max" in {c.other for c in checker.contacts(up)}
+        right = (-1.3,) + tuple(kin.named_states["home"][1:])
+        assert kin.fk(right)[1, 3] < -0.9
+        assert "workspace_y_min" in {c.other for c in checker.contacts(right)}
+
+
 class TestOpw:
     @pytest.fixture(scope="class")
     def kin(self):

@@ -2,6 +2,7 @@
 files, printed for a launch file (``<param type="yaml" command="...">``) or a user (doc/moveit.md):
 
     scene [CELL]          the cell as MoveIt's .scene text, inflated by the driver's padding
+                          (--workspace: and walls beyond the driver's workspace box)
     srdf                  the SRDF (with --prefix: every link and joint name prefixed)
     controllers           the simple controller manager's controller_list (YAML)
     joint-limits          robot_description_planning/joint_limits (YAML; --commissioning: its file's)
@@ -25,9 +26,7 @@ from . import config, opw, scene_text
 DEFAULT_PADDING = 0.01      # m: vr_driver.yaml's collision_padding when no file says otherwise
 
 
-def driver_scene_and_padding(cell: str, padding: str, config_file: str):
-    """(cell path, padding [m]) as the driver takes them: an argument given wins over the driver's
-    parameter file (``scene``, ``collision_padding``), which wins over none / 0.01 m."""
+def _driver_params(config_file: str) -> Dict[str, Any]:
     params: Dict[str, Any] = {}
     if config_file:
         try:
@@ -35,6 +34,13 @@ def driver_scene_and_padding(cell: str, padding: str, config_file: str):
                 params = yaml.safe_load(fh) or {}
         except (OSError, yaml.YAMLError) as exc:
             raise config.MoveItConfigError("driver parameter file %s: %s" % (config_file, exc)) from None
+    return params
+
+
+def driver_scene_and_padding(cell: str, padding: str, config_file: str):
+    """(cell path, padding [m]) as the driver takes them: an argument given wins over the driver's
+    parameter file (``scene``, ``collision_padding``), which wins over none / 0.01 m."""
+    params = _driver_params(config_file)
     cell = cell or str(params.get("scene") or "")
     if padding == "":
         value: Any = params.get("collision_padding", DEFAULT_PADDING)
@@ -46,12 +52,27 @@ def driver_scene_and_padding(cell: str, padding: str, config_file: str):
     return cell, value
 
 
-def scene_for(cell: str, padding: Any, name: str = "") -> str:
-    """The .scene text of the cell file ``cell`` ("" : an empty scene) with ``padding``."""
+def walls_for(config_file: str, model: str = "") -> list:
+    """The walls of the driver's workspace box (its parameter file's ``workspace``, else the
+    default), the box's z measured from the model's ``base`` frame."""
+    from panasonic_vr006l_support import kinematic_calibration as kc
+
+    from vr_driver.poses import Workspace
+    ws = _driver_params(config_file).get("workspace") or {}
+    try:
+        workspace = Workspace.from_dict(ws)
+    except (TypeError, ValueError) as exc:
+        raise config.MoveItConfigError("driver parameter file %s: workspace: %s" % (config_file, exc)) from None
+    base_z = (kc.nominal_parameters(model) if model else kc.nominal_parameters())["base_frame_z"]
+    return scene_text.workspace_walls(workspace, base_z)
+
+
+def scene_for(cell: str, padding: Any, name: str = "", walls: Sequence[Any] = ()) -> str:
+    """The .scene text of the cell file ``cell`` ("" : an empty scene) with ``padding`` and ``walls``."""
     from vr_driver.kinematics.scene import Scene, load_scene
     scene = load_scene(cell) if cell else Scene()
-    base = os.path.splitext(os.path.basename(cell))[0] if cell else "empty"
-    return scene_text.scene_text(scene, padding, name or base)
+    base = os.path.splitext(os.path.basename(cell))[0] if cell else "workspace"
+    return scene_text.scene_text(scene, padding, name or base, walls=walls)
 
 
 def _dump(value: Any) -> str:
@@ -67,6 +88,9 @@ def build_parser(prog: Optional[str] = None) -> argparse.ArgumentParser:
     s.add_argument("--padding", default="", help="m (default: the driver parameter file's collision_padding, 0.01)")
     s.add_argument("--config", default="", help="the driver's parameter file (vr_driver.yaml)")
     s.add_argument("--name", default="", help="the scene's name (default: the cell file's)")
+    s.add_argument("--workspace", action="store_true",
+                   help="add walls beyond the driver's workspace box (x max, y min / max, z max)")
+    s.add_argument("--model", default="", help="the kinematics YAML (its base_frame_z places the box)")
     s.add_argument("-o", "--out", default="", help="write here instead of stdout")
     for name in ("srdf", "controllers", "joint-limits"):
         p = sub.add_parser(name)
@@ -89,7 +113,8 @@ def build_parser(prog: Optional[str] = None) -> argparse.ArgumentParser:
 def render(args: argparse.Namespace) -> str:
     if args.what == "scene":
         cell, padding = driver_scene_and_padding(args.cell, args.padding, args.config)
-        return scene_for(cell, padding, args.name)
+        walls = walls_for(args.config, args.model) if args.workspace else []
+        return scene_for(cell, padding, args.name, walls)
     if args.what == "srdf":
         return config.srdf(args.prefix)
     if args.what == "controllers":

@@ -23,8 +23,9 @@ def _hint(exc: BaseException, text: str, padding: Optional[float]) -> str:
         return ("MoveIt checks the arm against itself without the driver's padding%s: plan with more room "
                 "between the links, or lower collision_padding" % pad)
     if "workspace" in text:
-        return ("the driver's workspace box (parameter workspace, vr_driver.yaml) is not MoveIt's: keep the "
-                "goal and the path inside it, or widen the box in the driver's parameter file")
+        return ("MoveIt knows the driver's workspace box (parameter workspace) only as walls at x max, y min / "
+                "max and z max (%s workspace_walls:=true, the default) and not a TCP offset: keep the goal and "
+                "the path inside the box, or widen it in the driver's parameter file" % LAUNCH)
     if "configuration" in text or "cannot solve its pose" in text:
         return ("the G2 takes Cartesian targets (v1 / v3) and keeps its configuration: plan a goal in the "
                 "start's configuration (kinematics_solver:=opw gives the branch nearest the start), or run "
