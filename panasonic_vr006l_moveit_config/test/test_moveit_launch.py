@@ -7,6 +7,7 @@ only arguments the included file declares; roslaunch's own loader resolves the e
 their argument variants and yields the parameters move_group reads; and the only nodes whose packages
 are missing here are MoveIt's and RViz's (listed below, with the reason).
 """
+import copy
 import os
 import re
 import subprocess
@@ -89,13 +90,28 @@ def resolve(text, args):
         return None
 
 
+_COMMANDS = {}
+
+
 def roslaunch_load(path, *args):
     """roslaunch's XML loader on one file, as `roslaunch --dump-params` does: includes, args,
-    params, node declarations; nothing started, node executables not looked up."""
+    params, node declarations; nothing started, node executables not looked up. A ``command=``
+    parameter runs once per command line in this process (xacro, vr_driver's moveit_config: the
+    same lines for most loads); one that fails raises and is not kept."""
     import roslaunch.config
     import roslaunch.xmlloader
+
+    class RememberingLoader(roslaunch.xmlloader.XmlLoader):
+        def param_value(self, verbose, name, ptype, value, textfile, binfile, command):
+            if command is None:
+                return super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+            key = (ptype, command)
+            if key not in _COMMANDS:
+                _COMMANDS[key] = super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+            return copy.deepcopy(_COMMANDS[key])
+
     config = roslaunch.config.ROSLaunchConfig()
-    roslaunch.xmlloader.XmlLoader().load(path, config, argv=["roslaunch"] + list(args), verbose=False)
+    RememberingLoader().load(path, config, argv=["roslaunch"] + list(args), verbose=False)
     return config
 
 
