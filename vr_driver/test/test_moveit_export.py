@@ -343,6 +343,33 @@ class TestCommandLine:
         assert res.returncode == 2 and "joint_limits.yaml" in res.stderr
 
 
+class TestSceneNode:
+    """``moveit_scene`` as the launch file starts it (roslaunch's ``__name:=`` handed on): it writes
+    the .scene file, then becomes MoveIt's publish_scene_from_text -- not installed here, which it
+    says (exit 1) after writing; without a cell and walls it says so and ends (exit 0)."""
+
+    NODE = os.path.join(REPO, "vr_driver", "nodes", "moveit_scene")
+
+    def test_it_writes_the_scene_and_names_the_missing_publisher(self, tmp_path):
+        out = tmp_path / "cell.scene"
+        res = subprocess.run([sys.executable, self.NODE, "--config=", "--padding=0.02", "--model=", "--workspace",
+                              "-o", str(out), CELL, "__name:=moveit_scene"], capture_output=True, text=True,
+                             timeout=60)
+        name, objects = read_scene(out.read_text())
+        assert name == "cell_example"
+        assert sorted(objects) == ["pillar", "shelf", "table", "workspace_x_max", "workspace_y_max",
+                                   "workspace_y_min", "workspace_z_max"]
+        assert objects["pillar"][1][0][1] == pytest.approx([0.12, 2.24])
+        assert res.returncode == 1 and "publish_scene_from_text is not installed" in res.stderr, res.stderr
+
+    def test_without_a_cell_it_ends(self, tmp_path):
+        params = tmp_path / "driver.yaml"
+        params.write_text("scene: ''\n")
+        res = subprocess.run([sys.executable, self.NODE, "--config=%s" % params, "--padding="],
+                             capture_output=True, text=True, timeout=60)
+        assert res.returncode == 0 and "stays empty" in res.stdout, res.stdout + res.stderr
+
+
 class TestRefusal:
     def test_a_collision_with_an_object_names_the_cell_and_the_launch_argument(self):
         exc = CollisionError("trajectory collides between samples 3 and 4 of 9 (t = 0.4 s): link_4 with pillar\n"

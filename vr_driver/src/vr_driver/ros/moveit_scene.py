@@ -36,7 +36,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     os.makedirs(os.path.dirname(out), exist_ok=True)
     with open(out, "w", encoding="utf-8") as fh:
         fh.write(text)
-    found = find_node("moveit_ros_planning", "publish_scene_from_text")
+    try:
+        found = find_node("moveit_ros_planning", "publish_scene_from_text")
+    except rospkg.ResourceNotFound:            # the package itself is not there
+        found = []
     if not found:
         print("moveit_scene: wrote %s, but moveit_ros_planning's publish_scene_from_text is not installed "
               "(sudo apt install ros-noetic-moveit)" % out, file=sys.stderr, flush=True)
