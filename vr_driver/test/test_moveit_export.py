@@ -285,6 +285,19 @@ class TestConfig:
             plain = yaml.safe_load(fh)["joint_limits"]
         assert {k[len("left_"):]: v for k, v in limits.items()} == plain
 
+    def test_a_models_limits_without_a_commissioning(self, tmp_path):
+        with open(TRUE_MODEL) as fh:
+            model = yaml.safe_load(fh)
+        model["joints"]["joint_5"]["velocity"] = 4.0
+        path = tmp_path / "model.yaml"
+        path.write_text(yaml.safe_dump(model))
+        limits = config.joint_limits(model=str(path))
+        assert (limits["joint_5"]["max_velocity"], limits["joint_1"]["max_velocity"]) == (4.0, 2.09)
+        del model["joints"]["joint_6"]
+        path.write_text(yaml.safe_dump(model))
+        with pytest.raises(config.MoveItConfigError, match="joint_6"):
+            config.joint_limits(model=str(path))
+
     def test_the_commissioned_limits_are_the_file_beside_the_commissioning(self, tmp_path):
         commissioning = tmp_path / "g2.yaml"
         commissioning.write_text("controller: {interpreter_lookahead: 0}\n")

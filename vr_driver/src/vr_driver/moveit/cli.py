@@ -97,6 +97,7 @@ def build_parser(prog: Optional[str] = None) -> argparse.ArgumentParser:
         p.add_argument("--prefix", default="", help="the URDF's name prefix (driver.launch prefix:=)")
         if name == "joint-limits":
             p.add_argument("--commissioning", default="", help="the commissioning file: its joint_limits.yaml")
+            p.add_argument("--model", default="", help="the kinematics YAML: its joints' limits (no commissioning)")
     e = sub.add_parser("execution")
     e.add_argument("--protocol", required=True, choices=sorted(config.EXECUTION))
     e.add_argument("--commissioning", default="")
@@ -120,7 +121,7 @@ def render(args: argparse.Namespace) -> str:
     if args.what == "controllers":
         return _dump(config.controller_list(args.prefix))
     if args.what == "joint-limits":
-        return _dump(config.joint_limits(args.commissioning, args.prefix))
+        return _dump(config.joint_limits(args.commissioning, args.prefix, args.model))
     if args.what == "execution":
         out = config.execution_limits(args.protocol, args.commissioning)
         out["execution_duration_monitoring"] = args.monitoring == "true"

@@ -8,7 +8,8 @@ commissioned joint limits, and with the driver's padding (doc/moveit.md).
   robot's namespace reaches the driver's action in that namespace;
 - :func:`joint_limits` -- MoveIt's ``joint_limits`` mapping, the commissioned file's when a
   commissioning file is given (the ``joint_limits.yaml`` beside it, as ``driver.launch
-  commissioning:=`` gives the driver's planner), the package's otherwise, the names prefixed;
+  commissioning:=`` gives the driver's planner), else a model YAML's, else the package's, the
+  names prefixed;
 - :func:`execution_limits` -- MoveIt's execution-duration parameters for a protocol."""
 from __future__ import annotations
 
@@ -79,14 +80,28 @@ def limits_file(commissioning: str = "") -> str:
     return os.path.join(moveit_config_dir(), "config", "joint_limits.yaml")
 
 
-def joint_limits(commissioning: str = "", prefix: str = "") -> Dict[str, Dict[str, Any]]:
-    """MoveIt's ``joint_limits`` mapping (``robot_description_planning/joint_limits``) from
-    :func:`limits_file`, checked as the driver checks ``planning_limits``, names prefixed."""
-    path = limits_file(commissioning)
-    try:
-        velocity, acceleration = read_planning_limits(path, JOINTS)
-    except VrDriverError as exc:
-        raise MoveItConfigError(str(exc)) from None
+def joint_limits(commissioning: str = "", prefix: str = "", model: str = "") -> Dict[str, Dict[str, Any]]:
+    """MoveIt's ``joint_limits`` mapping (``robot_description_planning/joint_limits``), names
+    prefixed, the limits the driver's planner uses: with a commissioning file the joint_limits.yaml
+    beside it (checked as the driver checks ``planning_limits``), else with a ``model`` YAML its
+    joints' velocity and acceleration, else the package's joint_limits.yaml (the model's set)."""
+    if model and not commissioning:
+        from panasonic_vr006l_support import joint_limits as model_limits
+        try:
+            limits = model_limits.load(model)
+        except model_limits.LimitsError as exc:
+            raise MoveItConfigError("model %s: %s" % (model, exc)) from None
+        missing = [j for j in JOINTS if j not in limits]
+        if missing:
+            raise MoveItConfigError("model %s: joints.%s missing" % (model, missing[0]))
+        velocity = tuple(limits[j]["velocity"] for j in JOINTS)
+        acceleration = tuple(limits[j]["acceleration"] for j in JOINTS)
+    else:
+        path = limits_file(commissioning)
+        try:
+            velocity, acceleration = read_planning_limits(path, JOINTS)
+        except VrDriverError as exc:
+            raise MoveItConfigError(str(exc)) from None
     return {prefix + j: {"has_velocity_limits": True, "max_velocity": v,
                          "has_acceleration_limits": True, "max_acceleration": a}
             for j, v, a in zip(JOINTS, velocity, acceleration)}
