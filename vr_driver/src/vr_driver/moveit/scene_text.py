@@ -51,7 +51,8 @@ def padded_size(obj: SceneObject, padding: float) -> Tuple[float, ...]:
 #: cut the base and the shoulder, which MoveIt checks against every object: they stay the driver's.
 WALL_FACES = ("x_max", "y_min", "y_max", "z_max")
 WALL_THICKNESS = 0.1            # m
-#: walls are drawn faint: they bound the view, they are not things in it
+#: walls faint (where the colours are read: RViz's Scene Objects import; publish_scene_from_text
+#: sends the objects without them, RViz then draws its scene colour)
 WALL_COLOUR = (0.9, 0.6, 0.2, 0.12)
 
 
