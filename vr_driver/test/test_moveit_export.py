@@ -352,6 +352,10 @@ class TestCommandLine:
         assert res.returncode == 2 and res.stdout == "" and "objects[0]" in res.stderr and "type" in res.stderr
         res = self.run("scene", CELL, "--padding", "ten")
         assert res.returncode == 2 and "--padding" in res.stderr
+        listed = tmp_path / "list.yaml"
+        listed.write_text("- 1\n- 2\n")
+        res = self.run("scene", "--config", str(listed))
+        assert res.returncode == 2 and "expected a mapping" in res.stderr, res.stderr
         res = self.run("joint-limits", "--commissioning", str(tmp_path / "nowhere" / "g2.yaml"))
         assert res.returncode == 2 and "joint_limits.yaml" in res.stderr
 

@@ -34,6 +34,9 @@ def _driver_params(config_file: str) -> Dict[str, Any]:
                 params = yaml.safe_load(fh) or {}
         except (OSError, yaml.YAMLError) as exc:
             raise config.MoveItConfigError("driver parameter file %s: %s" % (config_file, exc)) from None
+        if not isinstance(params, dict):
+            raise config.MoveItConfigError("driver parameter file %s: expected a mapping of parameters, got %s"
+                                           % (config_file, type(params).__name__))
     return params
 
 
