@@ -35,10 +35,10 @@ class Loaded:
     parameters), ``params`` (name -> value, as the YAML that command prints reads back: a copy of
     its own for each caller) and ``stderr`` (why it did not load, and the loader's warnings)."""
 
-    def __init__(self, ok: bool, params: dict, stderr: str) -> None:
+    def __init__(self, ok: bool, params: dict, stderr: str, nodes: int = 0) -> None:
         self.params = copy.deepcopy(params)
         self.stderr = stderr
-        self.ok = ok and bool(params)
+        self.ok = ok and (bool(params) or nodes > 0)      # a file may only start nodes (moveit_rviz.launch)
 
 
 _LOADED = {}
@@ -83,7 +83,7 @@ def dump_params(path, args=()):
                 err.write("Unable to load file %s: %s" % (path, exc))
         params = {str(k): v.value for k, v in config.params.items()} if ok else {}
         # through YAML, as the command's output: the values a reader of it gets
-        _LOADED[key] = (ok, yaml.safe_load(yaml.safe_dump(params)) or {}, err.getvalue())
+        _LOADED[key] = (ok, yaml.safe_load(yaml.safe_dump(params)) or {}, err.getvalue(), len(config.nodes))
     return Loaded(*_LOADED[key])
 
 

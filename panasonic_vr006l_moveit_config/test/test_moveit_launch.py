@@ -7,6 +7,7 @@ only arguments the included file declares; roslaunch's own loader resolves the e
 their argument variants and yields the parameters move_group reads; and the only nodes whose packages
 are missing here are MoveIt's and RViz's (listed below, with the reason).
 """
+import copy
 import os
 import re
 import subprocess
@@ -89,13 +90,28 @@ def resolve(text, args):
         return None
 
 
+_COMMANDS = {}
+
+
 def roslaunch_load(path, *args):
     """roslaunch's XML loader on one file, as `roslaunch --dump-params` does: includes, args,
-    params, node declarations; nothing started, node executables not looked up."""
+    params, node declarations; nothing started, node executables not looked up. A ``command=``
+    parameter runs once per command line in this process (xacro, vr_driver's moveit_config: the
+    same lines for most loads); one that fails raises and is not kept."""
     import roslaunch.config
     import roslaunch.xmlloader
+
+    class RememberingLoader(roslaunch.xmlloader.XmlLoader):
+        def param_value(self, verbose, name, ptype, value, textfile, binfile, command):
+            if command is None:
+                return super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+            key = (ptype, command)
+            if key not in _COMMANDS:
+                _COMMANDS[key] = super().param_value(verbose, name, ptype, value, textfile, binfile, command)
+            return copy.deepcopy(_COMMANDS[key])
+
     config = roslaunch.config.ROSLaunchConfig()
-    roslaunch.xmlloader.XmlLoader().load(path, config, argv=["roslaunch"] + list(args), verbose=False)
+    RememberingLoader().load(path, config, argv=["roslaunch"] + list(args), verbose=False)
     return config
 
 
@@ -106,8 +122,10 @@ class ControllersTest(unittest.TestCase):
     def test_one_follow_joint_trajectory_controller_at_joint_trajectory_action(self):
         self.assertEqual(len(self.controllers), 1)
         (c,) = self.controllers
-        self.assertEqual(c["name"], "")                       # ROS-Industrial: /joint_trajectory_action
-        self.assertEqual(c["action_ns"], "joint_trajectory_action")
+        # MoveIt 1.1 names the action `name` when action_ns is empty: relative, so move_group reaches
+        # the driver's joint_trajectory_action in its own namespace (ROS-Industrial's name "" would
+        # make it /joint_trajectory_action, absolute)
+        self.assertEqual((c["name"], c["action_ns"]), ("joint_trajectory_action", ""))
         self.assertEqual(c["type"], "FollowJointTrajectory")
         self.assertIs(c["default"], True)
 
@@ -143,7 +161,7 @@ class LaunchFilesStaticTest(unittest.TestCase):
 
     def test_the_moveit_launch_files_are_there(self):
         names = {os.path.basename(p) for p in launch_files()}
-        for name in ("move_group.launch", "moveit_planning_execution.launch", "moveit_rviz.launch",
+        for name in ("move_group.launch", "moveit_planning_execution.launch", "moveit_rviz.launch", "demo.launch",
                      "planning_context.launch", "planning_pipeline.launch.xml", "ompl_planning_pipeline.launch.xml",
                      "trajectory_execution.launch.xml", "panasonic_vr006l_moveit_controller_manager.launch.xml"):
             self.assertIn(name, names)
@@ -198,14 +216,16 @@ class LaunchFilesStaticTest(unittest.TestCase):
         includes = {inc.get("file"): {a.get("name"): a.get("value") for a in inc.findall("arg")}
                     for inc in root.iter("include")}
         driver = includes["$(find vr_driver)/launch/driver.launch"]
-        for name in ("sim", "port", "sim_port", "baud", "cycle_rate", "config"):
+        for name in ("sim", "port", "sim_port", "baud", "cycle_rate", "config", "commissioning", "protocol",
+                     "prefix", "model", "scene", "collision_padding"):
             self.assertEqual(driver[name], "$(arg %s)" % name)
         self.assertEqual(driver["rviz"], "false")
         self.assertIn("$(find panasonic_vr006l_moveit_config)/launch/move_group.launch", includes)
         # the same defaults as driver.launch, so a bare launch behaves as the driver alone does
         mine = declared_args(root)
         theirs = declared_args(ET.parse(os.path.join(REPO, "vr_driver", "launch", "driver.launch")).getroot())
-        for name in ("sim", "port", "sim_port", "baud", "cycle_rate", "config"):
+        for name in ("sim", "port", "sim_port", "baud", "cycle_rate", "config", "commissioning", "protocol",
+                     "prefix", "model", "scene", "collision_padding"):
             self.assertEqual(mine[name], theirs[name], name)
 
     def test_a_broken_reference_is_caught(self):
@@ -241,7 +261,7 @@ class LaunchFilesLoadTest(unittest.TestCase):
         self.assertEqual(p["/move_group/planning_pipelines/ompl/manipulator/default_planner_config"], "RRTConnect")
         self.assertEqual(p["/move_group/moveit_controller_manager"],
                          "moveit_simple_controller_manager/MoveItSimpleControllerManager")
-        self.assertEqual(p["/move_group/controller_list"][0]["action_ns"], "joint_trajectory_action")
+        self.assertEqual(p["/move_group/controller_list"][0]["name"], "joint_trajectory_action")
         self.assertIn('<group name="manipulator">', p["/robot_description_semantic"])
         self.assertIn("/robot_description_kinematics/manipulator/kinematics_solver", p)
         self.assertNotIn("/robot_description", p)
@@ -257,7 +277,7 @@ class LaunchFilesLoadTest(unittest.TestCase):
         nodes = {n.name: n for n in c.nodes}
         # the virtual controller and the virtual I/O island on the virtual line (driver.launch io:=true)
         self.assertEqual(set(nodes), {"robot_state_publisher", "virtual_controller", "virtual_io_island",
-                                      "virtual_line", "interface", "move_group"}
+                                      "virtual_line", "interface", "move_group", "moveit_scene"}
                          | {n for n in nodes if n.startswith("rviz")})
         self.assertEqual(c.params["/interface/port"].value, c.params["/virtual_line/pty_link"].value)
         self.assertIn(c.params["/virtual_controller/pty_link"].value, c.params["/virtual_line/stations"].value)
@@ -267,7 +287,7 @@ class LaunchFilesLoadTest(unittest.TestCase):
         c = self.load("moveit_planning_execution.launch", "sim:=false", "port:=/dev/ttyUSB7", "baud:=187500",
                       "rviz:=false")
         nodes = {n.name for n in c.nodes}
-        self.assertEqual(nodes, {"robot_state_publisher", "interface", "move_group"})
+        self.assertEqual(nodes, {"robot_state_publisher", "interface", "move_group", "moveit_scene"})
         self.assertEqual(c.params["/interface/port"].value, "/dev/ttyUSB7")
         self.assertEqual(c.params["/interface/baud"].value, 187500)
 

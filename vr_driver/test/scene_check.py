@@ -3,7 +3,8 @@
 scene:=the example cell, against the virtual controller): ~scene/list gives the cell, the latched
 ~scene_markers show it, ~scene/add / remove / load change it and the verdict of move_to_pose, bad
 input changes nothing, /diagnostics reports it; a PTP into the pillar is refused naming the link
-and the object, and the controller executes only the motions that were accepted."""
+and the object, and the controller executes only the motions that were accepted; a trajectory sent
+as MoveIt sends one, through the pillar, ends with one line saying why and what to change."""
 from __future__ import annotations
 
 import json
@@ -15,7 +16,7 @@ from geometry_msgs.msg import Pose
 from visualization_msgs.msg import Marker, MarkerArray
 
 from driver_check import DriverTestBase, Recorder
-from vr_driver.msg import MoveToPoseGoal, SceneObject
+from vr_driver.msg import FollowJointTrajectoryResult, MoveToPoseGoal, SceneObject
 from vr_driver.srv import AddSceneObject, ListSceneObjects, LoadScene, RemoveSceneObject
 
 PKG = "vr_driver"
@@ -105,6 +106,23 @@ class SceneTest(DriverTestBase):
         self.assertEqual(state, GoalStatus.SUCCEEDED, result.reason)
         self.assertIsNotNone(self.executed.wait_for(lambda m: json.loads(m.data)["target"] == list(accepted), 10.0))
         self.assertNotIn(list(refused), [e["target"] for e in self.entries()])
+
+    def test_2b_a_moveit_trajectory_through_the_pillar_says_why_and_what_to_change(self):
+        """MoveIt without the cell plans through the pillar; the driver refuses, and the result's
+        error_string (logged by MoveIt's controller manager) is one line naming the object, the
+        padding and the launch argument that gives MoveIt the cell."""
+        start = self.at_home()
+        q = list(HOME_Q)
+        q[0] = 0.8
+        state, result = self.follow(self.trajectory_goal([start, q], [0.0, 2.0]))
+        self.assertEqual(state, GoalStatus.ABORTED, result.error_string)
+        self.assertEqual(result.error_code, FollowJointTrajectoryResult.INVALID_GOAL)
+        text = result.error_string
+        self.assertNotIn("\n", text)
+        self.assertRegex(text, r"^refused by the driver: trajectory collides .*with pillar.*nothing was sent -- ")
+        self.assertIn("MoveIt's planning scene lacks pillar or the driver's padding (padding 10 mm)", text)
+        self.assertIn("moveit_planning_execution.launch scene:=", text)
+        self.assertNotIn(list(target(self.kin, q)), [e["target"] for e in self.entries()])
 
     def test_3_add_remove_change_the_verdict(self):
         self.at_home()

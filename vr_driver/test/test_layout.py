@@ -49,7 +49,8 @@ SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), 
 PACKAGE = os.path.join(SRC, "vr_driver")
 
 VOCABULARY = ("errors", "poses", "params", "validate", "io_signals")
-SUBPACKAGES = ("protocol", "kinematics", "bus", "driver", "commission", "controller", "terminal", "csr", "ros")
+SUBPACKAGES = ("protocol", "kinematics", "bus", "driver", "commission", "controller", "terminal", "csr", "moveit",
+               "ros")
 #: per layer: the layers it may import (whitelist) ...
 MAY_IMPORT = {
     "vocabulary": {"vocabulary"},
@@ -60,6 +61,8 @@ MAY_IMPORT = {
     # the commissioning tool: the driver's link and the protocols against a real (or virtual) G2,
     # never the virtual G2 itself, the terminal or ROS
     "commission": {"vocabulary", "protocol", "kinematics", "bus", "driver", "commission"},
+    # what MoveIt 1 is given (the cell as .scene text, the prefixed config, OPW): the cell and the errors
+    "moveit": {"vocabulary", "kinematics", "moveit"},
 }
 #: ... or the layers it must not import (blacklist)
 MUST_NOT_IMPORT = {

@@ -39,6 +39,7 @@ from ..driver.resolution import WireResolution
 from ..driver.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
 from ..driver.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
 from ..errors import VrDriverError
+from ..moveit.refusal import for_moveit
 from .goal_runner import Goal, GoalRefused, GoalRunner
 
 
@@ -152,8 +153,10 @@ class TrajectoryServer:
         try:
             run = self.core.submit_trajectory(traj)
         except (VrDriverError, DriverError) as exc:
-            result = FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=str(exc))
-            goal.set_aborted(result, str(exc))
+            # one line for MoveIt's user: why, and what to change (vr_driver.moveit.refusal)
+            text = for_moveit(exc, self.core.params.collision_padding)
+            rospy.logwarn("joint_trajectory_action: %s", text)
+            goal.set_aborted(FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=text), text)
             return
         if self.on_run is not None:
             self.on_run(run)                 # feedback_states: desired = this plan from now on
