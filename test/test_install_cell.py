@@ -140,7 +140,7 @@ class InstallCellTest(unittest.TestCase):
         for unit in (master, driver):
             s = unit["Service"]
             self.assertEqual((s["User"], s["Restart"], s["RestartSec"], s["KillSignal"]),
-                             ([USER], ["always"], ["2"], ["SIGINT"]))
+                             ([USER], ["always"], ["1"], ["SIGINT"]))
             self.assertEqual(s["EnvironmentFile"], [self.path("etc/vr006l/cell.env")])
             self.assertEqual(s["Environment"], ["PYTHONUNBUFFERED=1"])
             self.assertEqual(unit["Install"]["WantedBy"], ["multi-user.target"])
