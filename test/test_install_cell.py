@@ -182,7 +182,12 @@ class InstallCellTest(unittest.TestCase):
         with open(bad_yaml, "w") as f:
             f.write("a: [1, 2\n")
         self.addCleanup(os.remove, bad_yaml)
+        greedy = os.path.join(self.root, "..", os.path.basename(self.root) + "_rt30.yaml")
+        with open(greedy, "w") as f:
+            f.write("bus_rt_priority: 30\n")
+        self.addCleanup(os.remove, greedy)
         cases = [(["--adapter-serial", 'FT1"; RUN+="/bin/sh'], "--adapter-serial"),
+                 (["--adapter-serial", "FT1", "--config", greedy], "below the config's bus_rt_priority 30"),
                  ([], "--adapter-serial is needed"),
                  (["--adapter-serial", "FT1", "--vendor", "04030"], "--vendor"),
                  (["--adapter-serial", "FT1", "--user", "no_such_user_vr006l"], "no such user"),
@@ -198,6 +203,26 @@ class InstallCellTest(unittest.TestCase):
             self.assertEqual(res.returncode, 2, (args, res.stdout, res.stderr))
             self.assertIn(words, res.stderr, args)
             self.assertEqual(files_under(self.root), [], args)
+
+    def test_a_workspace_the_user_cannot_enter_is_found(self):
+        """The service runs from this clone as --user: a directory on the way that the user may not
+        enter (a home directory of mode 0700) would stop it at every boot; install-cell names it."""
+        import importlib.machinery
+        import importlib.util
+        loader = importlib.machinery.SourceFileLoader("install_cell", INSTALL)
+        spec = importlib.util.spec_from_loader("install_cell", loader)
+        module = importlib.util.module_from_spec(spec)
+        loader.exec_module(module)
+        other = next((p.pw_name for p in pwd.getpwall() if p.pw_uid not in (0, os.getuid())), None)
+        self.assertIsNotNone(other)
+        inner = os.path.join(self.root, "home", "ws")
+        os.makedirs(inner)
+        os.chmod(self.root, 0o755)
+        os.chmod(os.path.join(self.root, "home"), 0o700)
+        self.assertEqual(module.unreachable(inner, other), os.path.join(self.root, "home"))
+        os.chmod(os.path.join(self.root, "home"), 0o711)
+        self.assertIsNone(module.unreachable(inner, other))
+        self.assertIsNone(module.unreachable(inner, "root"))
 
     def test_a_file_it_did_not_write_is_not_overwritten_and_a_dropped_yaml_is_removed(self):
         os.makedirs(self.path("etc/udev/rules.d"))
