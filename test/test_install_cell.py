@@ -55,7 +55,10 @@ def udev_rules(text):
             m = UDEV_KEY.match(part)
             assert m, "not a udev key we know: %r in %r" % (part, line)
             key, op, value = m.groups()
-            assert (op in ("==", "!=")) == key.startswith(MATCH_ONLY), "operator %s on %s" % (op, key)
+            if key.startswith(MATCH_ONLY):
+                assert op in ("==", "!="), "operator %s on %s" % (op, key)
+            elif not key.startswith("ENV{"):                    # ENV: a match or an assignment
+                assert op in ("=", "+="), "operator %s on %s" % (op, key)
             pairs.append((key, op, value))
         rules.append(pairs)
     return rules
@@ -198,12 +201,32 @@ class InstallCellTest(unittest.TestCase):
                  (["--adapter-serial", "FT1", "--commissioning", SCENE], "joint_limits.yaml beside it"),
                  (["--adapter-serial", "FT1", "--arg", "port:=/dev/ttyS0"], "set by install-cell"),
                  (["--adapter-serial", "FT1", "--rt-priority", "0"], "--rt-priority"),
-                 (["--adapter-serial", "FT1", "--latency", "fast"], "")]
+                 (["--adapter-serial", "FT1", "--latency", "fast"], ""),
+                 (["--adapter-path", "pci-0000:00:14.0-usb-0:2:1.0"], "--latency ftdi"),
+                 (["--adapter-path", "usb 0:2", "--latency", "none"], "--adapter-path"),
+                 (["--adapter-path", "p1", "--adapter-serial", "FT1", "--latency", "none"], "not both")]
         for args, words in cases:
             res = install(*args, "--yes", root=self.root)
             self.assertEqual(res.returncode, 2, (args, res.stdout, res.stderr))
             self.assertIn(words, res.stderr, args)
             self.assertEqual(files_under(self.root), [], args)
+
+    def test_an_adapter_without_a_serial_number_by_its_socket(self):
+        """A CH340 (vendor 1a86) has no serial number: the rule names the socket's ID_PATH, and the
+        low-latency flag through setserial."""
+        path = "pci-0000:00:14.0-usb-0:2:1.0"
+        res = install("--adapter-path", path, "--vendor", "1A86", "--latency", "setserial", "--user", USER, "--yes",
+                      root=self.root)
+        self.assertEqual(res.returncode, 0, res.stderr)
+        rules = [dict((k, (op, v)) for k, op, v in rule)
+                 for rule in udev_rules(self.read("etc/udev/rules.d/70-vr006l-bus.rules"))]
+        self.assertEqual(len(rules), 2)
+        for rule in rules:
+            self.assertEqual((rule["SUBSYSTEM"], rule["ENV{ID_PATH}"], rule["ATTRS{idVendor}"]),
+                             (("==", "tty"), ("==", path), ("==", "1a86")))
+            self.assertNotIn("ATTRS{serial}", rule)
+        self.assertEqual(rules[0]["SYMLINK"], ("+=", "vr006l_bus"))
+        self.assertEqual(rules[1]["RUN"], ("+=", "/bin/setserial /dev/%k low_latency"))
 
     def test_a_workspace_the_user_cannot_enter_is_found(self):
         """The service runs from this clone as --user: a directory on the way that the user may not
