@@ -166,6 +166,13 @@ class InstallCellTest(unittest.TestCase):
         self.assertEqual(files_under(self.root), [])
         self.assertFalse(os.path.exists(self.path("etc/vr006l")))
 
+    def test_help_names_every_file_it_writes(self):
+        res = subprocess.run([INSTALL, "--help"], capture_output=True, text=True, timeout=30)
+        self.assertEqual(res.returncode, 0, res.stderr)
+        self.assertIn("scripts/install-cell", res.stdout)
+        for rel in WRITTEN[:2] + WRITTEN[-3:-1]:
+            self.assertIn("/" + rel, res.stdout)
+
     def test_dry_run_and_a_no_at_the_prompt_change_nothing(self):
         dry = install(*self.full, "--dry-run", root=self.root)
         self.assertEqual(dry.returncode, 0, dry.stderr)
