@@ -197,6 +197,7 @@ class CellServiceTest(unittest.TestCase):
         print("served again %.1f s after the node was killed" % (time.monotonic() - killed))
 
         # 2. roslaunch itself is killed: what it leaves is stopped before the new start
+        node = interface_pid()
         left = [int(c) for c in open("/proc/%s/task/%s/children" % (second_main, second_main)).read().split()]
         self.assertTrue(left)
         os.kill(int(second_main), signal.SIGKILL)
@@ -209,6 +210,7 @@ class CellServiceTest(unittest.TestCase):
         driver.expect("restart", 5)
         restarted, _ = driver.expect("started", 5)
         serves_after(restarted)
+        self.assertNotEqual(interface_pid(), node)
         print("served again %.1f s after roslaunch was killed" % (time.monotonic() - killed))
 
         # the master stayed up all along: the workstation's subscription was never lost
