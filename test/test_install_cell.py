@@ -208,7 +208,8 @@ class InstallCellTest(unittest.TestCase):
                  (["--adapter-serial", "FT1", "--commissioning", SCENE], "joint_limits.yaml beside it"),
                  (["--adapter-serial", "FT1", "--arg", "port:=/dev/ttyS0"], "set by install-cell"),
                  (["--adapter-serial", "FT1", "--rt-priority", "0"], "--rt-priority"),
-                 (["--adapter-serial", "FT1", "--latency", "fast"], ""),
+                 (["--adapter-serial", "FT1", "--latency", "fast"], "--latency"),
+                 (["--adapter-serial", "FT1", "--bogus"], "--bogus"),
                  (["--adapter-path", "pci-0000:00:14.0-usb-0:2:1.0"], "--latency ftdi"),
                  (["--adapter-path", "usb 0:2", "--latency", "none"], "--adapter-path"),
                  (["--adapter-path", "p1", "--adapter-serial", "FT1", "--latency", "none"], "not both")]
