@@ -147,6 +147,7 @@ class InstallCellTest(unittest.TestCase):
             self.assertEqual(s["EnvironmentFile"], [self.path("etc/vr006l/cell.env")])
             self.assertEqual(s["Environment"], ["PYTHONUNBUFFERED=1"])
             self.assertEqual(unit["Install"]["WantedBy"], ["multi-user.target"])
+            self.assertEqual(unit["Unit"]["StartLimitIntervalSec"], ["0"])
         self.assertEqual(driver["Service"]["LimitRTPRIO"], ["20"])
         self.assertEqual(driver["Service"]["SupplementaryGroups"], ["dialout"])
         self.assertEqual(driver["Unit"]["Requires"], ["vr006l-master.service"])
