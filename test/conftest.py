@@ -8,6 +8,7 @@ REALTIME = {
     "test_scripts.py",             # scripts/run with the driver and the virtual controller, scripts/setup
     "test_benches.py",             # the benchmarks' smoke runs (latency, bus cycles, a roscore of its own)
     "test_interface_node.py",      # the node as a process with a roscore
+    "test_cell_service.py",        # the cell PC's units (install-cell) run, killed and restarted, against the virtual G2
 }
 LANES = ("computation", "realtime")
 
