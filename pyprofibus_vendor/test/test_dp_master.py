@@ -226,6 +226,44 @@ class DataExchangeTest(unittest.TestCase):
         self.assertEqual(rig.slave_outputs.count(b"\x09" * 14), 1)   # executed once
         self.assertTrue(rig.h.connected)
 
+    def test_adapter_echo_is_recognised_and_skipped(self):
+        """An RS-485 adapter whose receiver stays on while it sends reads the master's own request
+        back before the reply: counted as the adapter's echo, never as a telegram of the line."""
+        rig = Rig()
+        real_send = rig.link.send
+        echoed = {"n": 0}
+
+        def echoing_send(data: bytes) -> None:
+            real_send(data)
+            reply = rig.link.recv(4096, 0.0)
+            rig.link._rx[:0] = bytes(data)        # the echo is read before the reply
+            rig.link._rx += reply
+            echoed["n"] += 1
+
+        rig.link.send = echoing_send
+        rig.until(lambda: rig.h.connected)
+        rig.h.outputs = b"\x03" * 14
+        rig.until(lambda: rig.h.inputs == transform(b"\x03" * 14))
+        c = rig.master.counters
+        self.assertEqual(c.echoes, echoed["n"])
+        self.assertEqual(c.unexpected_frames, 0)
+        self.assertEqual(c.retries, 0)
+        self.assertEqual(c.invalid_replies, 0)
+        self.assertGreater(c.dx_timed, 0)
+
+    def test_a_request_not_at_the_start_of_the_window_is_no_echo(self):
+        rig = Rig()
+        real_send = rig.link.send
+
+        def late_copy(data: bytes) -> None:
+            real_send(data)
+            rig.link._rx += bytes(data)           # the same bytes, after the reply: not an echo
+
+        rig.link.send = late_copy
+        rig.until(lambda: rig.h.connected)
+        rig.steps(10)
+        self.assertEqual(rig.master.counters.echoes, 0)
+
     def test_output_only_slave(self):
         spec = SlaveSpec(SLAVE, ROBOT_IDENT, b"\x2D")
         rig = Rig(spec, slave_cfg=b"\x2D")

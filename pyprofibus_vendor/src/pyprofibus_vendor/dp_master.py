@@ -236,6 +236,11 @@ class MasterCounters:
     fcs_errors: int = 0         # copied from the deframer
     garbage_bytes: int = 0      # copied from the deframer
     dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
+    echoes: int = 0             # our own request read back at the start of its receive window:
+    #                             an RS-485 adapter that echoes its transmission (skipped)
+    dx_timed: int = 0           # good Data_Exchange replies timed (reply_wait below)
+    reply_wait: float = 0.0     # [s] their summed time beyond the telegrams' time on the wire:
+    #                             the station's delay plus what the adapter held them back
 
 
 @dataclass
@@ -317,6 +322,7 @@ class _Pending:
     timeout: float
     retries: int = 0
     job: Optional[AcyclicRequest] = None
+    sent: float = 0.0         # when the request (or its last retry) went out
 
 
 class DpMaster:
@@ -364,6 +370,7 @@ class DpMaster:
         self._turn = 0
         self._turns = 0               # completed turns (for step() bookkeeping)
         self._pending: Optional[_Pending] = None
+        self._echo: Optional[bytes] = None   # the request just sent, until the first telegram read
         self._gc_queue: List[GlobalControl] = []
         self._sent_in_round = False
         self._round_idle = False
@@ -503,7 +510,7 @@ class DpMaster:
     def _send(self, slave: SlaveHandle, kind: str, raw: bytes, reply_len: int,
               now: float, job: Optional[AcyclicRequest] = None) -> None:
         timeout = self._reply_timeout(len(raw), reply_len)
-        self._pending = _Pending(slave, kind, raw, now + timeout, timeout, job=job)
+        self._pending = _Pending(slave, kind, raw, now + timeout, timeout, job=job, sent=now)
         self._transmit(raw)
         slave.counters.requests += 1
         self.counters.requests += 1
@@ -513,6 +520,7 @@ class DpMaster:
         # TSYN: the line must be quiet before a request; drop stale bytes
         self.link.flush_input()
         self.deframer.reset()
+        self._echo = raw          # the first telegram read back may be the adapter's echo of it
         self.link.send(raw)
 
     def _end_turn(self) -> None:
@@ -604,6 +612,7 @@ class DpMaster:
             # split or merged chunks, errors -- takes the general path through the deframer.
             inputs = sd2_data(data, self.address, p.slave.address, _FC_DL)
             if inputs is not None and len(inputs) == (p.slave.spec.input_size or 0):
+                self._echo = None
                 self._dx_done(p, inputs, ResponseStatus.DL, now)
                 return
         garbage = self.deframer.counters.garbage_bytes
@@ -611,6 +620,13 @@ class DpMaster:
         self.counters.fcs_errors = self.deframer.counters.fcs_errors
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
         for frame in frames:
+            echo, self._echo = self._echo, None
+            if echo is not None and isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request \
+                    and frame.encode() == echo:
+                # our own request, read back before anything else: an adapter that echoes what it
+                # transmits (its receiver stays on while it sends) -- not a telegram of the line
+                self.counters.echoes += 1
+                continue
             pending = self._pending
             if pending is None:
                 self.counters.unexpected_frames += 1
@@ -654,6 +670,7 @@ class DpMaster:
             p.slave.counters.retries += 1
             self.counters.retries += 1
             p.deadline = now + p.timeout
+            p.sent = now
             self._transmit(p.raw)  # same bytes, same FCB
             return
         p.slave.counters.timeouts += 1
@@ -868,6 +885,9 @@ class DpMaster:
         """A good Data_Exchange reply: deliver the inputs, end the turn."""
         slave = p.slave
         self._pending = None
+        # the reply's time beyond both telegrams' time on the wire (9 characters of SD2 framing)
+        self.counters.dx_timed += 1
+        self.counters.reply_wait += max(0.0, now - p.sent - self.timing.chars(len(p.raw) + len(data) + 9))
         slave.fcb.acknowledge()
         slave._store_inputs(data, now)
         slave.dx_ok_time = now
