@@ -11,7 +11,7 @@ from pyprofibus_vendor.dp import (DiagStatus1, GcCommand, Sap, SlaveDiag, reply_
 from pyprofibus_vendor.dp_master import (BusTiming, DpMaster, MasterSlaveState as S, SlaveSpec)
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveLink, SlaveServer, SlaveState
 from pyprofibus_vendor.errors import ConfigError, DpError, DpTimeoutError, PhyError
-from pyprofibus_vendor.fdl import (Frame, FrameControl, ResponseStatus, Sd1, Sd2, ShortAck,
+from pyprofibus_vendor.fdl import (Frame, FrameControl, RequestFunction, ResponseStatus, Sd1, Sd2, ShortAck,
                                    StationType, decode_frame)
 from pyprofibus_vendor.phy import FaultyLink, MemoryLink
 
@@ -251,18 +251,20 @@ class DataExchangeTest(unittest.TestCase):
         self.assertEqual(c.invalid_replies, 0)
         self.assertGreater(c.dx_timed, 0)
 
-    def test_a_request_not_at_the_start_of_the_window_is_no_echo(self):
+    def test_another_masters_request_is_no_echo(self):
         rig = Rig()
-        real_send = rig.link.send
-
-        def late_copy(data: bytes) -> None:
-            real_send(data)
-            rig.link._rx += bytes(data)           # the same bytes, after the reply: not an echo
-
-        rig.link.send = late_copy
         rig.until(lambda: rig.h.connected)
+        real_send = rig.link.send
+        other = Sd1(SLAVE, MASTER + 1, FrameControl.req(RequestFunction.FDL_STATUS)).encode()
+
+        def with_other(data: bytes) -> None:
+            rig.link._rx += other                 # another master's request heard on the line
+            real_send(data)
+
+        rig.link.send = with_other
         rig.steps(10)
         self.assertEqual(rig.master.counters.echoes, 0)
+        self.assertGreater(rig.master.counters.unexpected_frames, 0)
 
     def test_output_only_slave(self):
         spec = SlaveSpec(SLAVE, ROBOT_IDENT, b"\x2D")

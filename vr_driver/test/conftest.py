@@ -41,6 +41,7 @@ LANE_OF = {
     "test_controller_sim_pty.py": "pty",           # the v1 program on a real pty: a lane of its own (84 s)
     "test_controller_v2_pty.py": "realtime",
     "test_sim_line_pty.py": "realtime",
+    "test_adapter_line_pty.py": "realtime",        # the USB adapter model on the virtual line (~10 s)
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
     "test_commission.py": "solo",                  # `commission` measures the virtual G2 to the ms: alone
     "test_soak.py": "soak",                        # the longest: a lane of its own

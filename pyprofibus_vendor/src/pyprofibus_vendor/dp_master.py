@@ -236,8 +236,8 @@ class MasterCounters:
     fcs_errors: int = 0         # copied from the deframer
     garbage_bytes: int = 0      # copied from the deframer
     dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
-    echoes: int = 0             # our own request read back at the start of its receive window:
-    #                             an RS-485 adapter that echoes its transmission (skipped)
+    echoes: int = 0             # requests from our own address read back: an RS-485 adapter that
+    #                             echoes its transmission (skipped)
     dx_timed: int = 0           # good Data_Exchange replies timed (reply_wait below)
     reply_wait: float = 0.0     # [s] their summed time beyond the telegrams' time on the wire:
     #                             the station's delay plus what the adapter held them back
@@ -370,7 +370,6 @@ class DpMaster:
         self._turn = 0
         self._turns = 0               # completed turns (for step() bookkeeping)
         self._pending: Optional[_Pending] = None
-        self._echo: Optional[bytes] = None   # the request just sent, until the first telegram read
         self._gc_queue: List[GlobalControl] = []
         self._sent_in_round = False
         self._round_idle = False
@@ -520,7 +519,6 @@ class DpMaster:
         # TSYN: the line must be quiet before a request; drop stale bytes
         self.link.flush_input()
         self.deframer.reset()
-        self._echo = raw          # the first telegram read back may be the adapter's echo of it
         self.link.send(raw)
 
     def _end_turn(self) -> None:
@@ -612,7 +610,6 @@ class DpMaster:
             # split or merged chunks, errors -- takes the general path through the deframer.
             inputs = sd2_data(data, self.address, p.slave.address, _FC_DL)
             if inputs is not None and len(inputs) == (p.slave.spec.input_size or 0):
-                self._echo = None
                 self._dx_done(p, inputs, ResponseStatus.DL, now)
                 return
         garbage = self.deframer.counters.garbage_bytes
@@ -620,11 +617,11 @@ class DpMaster:
         self.counters.fcs_errors = self.deframer.counters.fcs_errors
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
         for frame in frames:
-            echo, self._echo = self._echo, None
-            if echo is not None and isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request \
-                    and frame.encode() == echo:
-                # our own request, read back before anything else: an adapter that echoes what it
-                # transmits (its receiver stays on while it sends) -- not a telegram of the line
+            if isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request and frame.sa == self.address:
+                # a request from our own address is one we sent, read back: an adapter that echoes
+                # what it transmits (its receiver stays on while it sends) -- usually the request
+                # just sent, at the start of its window; a late one (an earlier try's echo held in
+                # the adapter past a resend) too. Not a telegram of another station
                 self.counters.echoes += 1
                 continue
             pending = self._pending

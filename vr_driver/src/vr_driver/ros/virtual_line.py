@@ -5,7 +5,9 @@ Private parameters: ``~stations`` [["auto", "auto:io_island"]] the stations' pty
 launch's virtual controller link, ``auto:NAME`` this launch's link of station NAME
 (``controller.program.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
 linked (``auto``: ``<ROS log dir>/vr006l_virtual_line_<master port>``; the driver's ``port``);
-``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys).
+``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys); the USB adapter on the master's side
+(vr_driver.controller.adapter_model, doc/adapters.md): ``~latency_ms`` [0] its latency timer, ``~echo`` [false]
+it echoes the master's transmission, ``~turnaround_ms`` [0] its receiver deaf this long after sending.
 
 Sets ``~device_path`` (the master's pty). Exit status: 0 on shutdown, 2 bad parameter, 3 device problem.
 """
@@ -20,6 +22,7 @@ from pyprofibus_vendor.errors import PhyError
 
 from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, SimError, resolve_link
 from .support import open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority
+from ..controller.adapter_model import AdapterBehaviour
 from ..controller.line import LineHub
 
 
@@ -35,13 +38,21 @@ def main() -> int:
             raise SimError("~stations must be a list of pty paths, got %r" % (raw,))
         stations: List[str] = [resolve_link(p) for p in raw]
         baud = int(rospy.get_param("~baud", 0)) or None
-        return LineHub(stations, pty_link=own_link(rospy.get_param("~pty_link", AUTO_LINK), "line"), baud=baud)
+        try:
+            adapter = AdapterBehaviour(latency_ms=float(rospy.get_param("~latency_ms", 0.0)),
+                                       echo=bool(rospy.get_param("~echo", False)),
+                                       turnaround_ms=float(rospy.get_param("~turnaround_ms", 0.0)))
+        except (TypeError, ValueError) as exc:
+            raise SimError("~latency_ms / ~echo / ~turnaround_ms: %s" % exc) from None
+        return LineHub(stations, pty_link=own_link(rospy.get_param("~pty_link", AUTO_LINK), "line"), baud=baud,
+                       adapter=adapter)
     hub, status = open_device("virtual_line", make)
     if hub is None:
         return status
     rospy.set_param("~device_path", hub.device_path)
-    rospy.loginfo("virtual_line: master end %s%s; stations %s", hub.device_path,
-                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(s.path for s in hub.stations))
+    rospy.loginfo("virtual_line: master end %s%s; stations %s; adapter: %s", hub.device_path,
+                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(s.path for s in hub.stations),
+                  hub.adapter.behaviour.describe() if hub.adapter is not None else "a perfect one")
     halt = threading.Event()
     rospy.on_shutdown(halt.set)
     status = EXIT_OK
