@@ -90,6 +90,17 @@ class TimingTest(unittest.TestCase):
         m2 = DpMaster(SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)), baud=12_000_000)
         self.assertEqual(m2._reply_timeout(23, 23), 0.05)
 
+    def test_a_known_adapter_latency_timer_lengthens_the_reply_timeout(self):
+        from pyprofibus_vendor.adapter import AdapterSetup
+        link = SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG))
+        link.adapter = AdapterSetup("/dev/ttyUSB0", True, 32, None)
+        m = DpMaster(link, baud=19200)
+        wire = 46 * 11 / 19200 + 133 / 19200
+        self.assertAlmostEqual(m._reply_timeout(23, 23), wire + 0.032)      # past the 50 ms floor
+        link.adapter = AdapterSetup("/dev/ttyUSB0", True, 1, 16)             # lowered at open: 1 ms
+        m.replace_link(link)
+        self.assertEqual(m._reply_timeout(23, 23), 0.05)
+
 
 class SpecTest(unittest.TestCase):
     def test_derived(self):

@@ -36,7 +36,10 @@ A *turn* is one transaction with one slave (request, then reply or timeout
 after ``max_retry`` repetitions with the same FCB); slaves take turns in
 order and a completed round is a *cycle*. Slot time and retry limit come
 from the baud rate (:class:`BusTiming`); on a pty or USB adapter software
-latency dominates, so the reply timeout never goes below ``reply_timeout_floor``.
+latency dominates, so the reply timeout never goes below ``reply_timeout_floor``; a USB adapter
+whose latency timer the link knows (:attr:`SerialLink.adapter`, pyprofibus_vendor.adapter) holds
+each reply up to that long, so the wire time of a transaction is given that much more before a
+resend (a 32 ms FTDI timer otherwise had a third of the requests resent at 19.2 kbit/s).
 
 Outputs are latched (the application sets them whenever it likes; every
 Data_Exchange sends the latest). Inputs are kept as the last good image
@@ -325,6 +328,12 @@ class _Pending:
     sent: float = 0.0         # when the request (or its last retry) went out
 
 
+def _adapter_latency(link: Link) -> float:
+    """[s] the latency timer of the USB adapter under ``link`` where it is known, else 0."""
+    ms = getattr(getattr(link, "adapter", None), "latency_timer_ms", None)
+    return ms / 1000.0 if isinstance(ms, int) and ms > 0 else 0.0
+
+
 class DpMaster:
     """DP master class 1 on one link.
 
@@ -356,6 +365,7 @@ class DpMaster:
                                     self.timing.max_tsdr_bits, max_retry)
         self.clock = clock
         self.reply_timeout_floor = reply_timeout_floor
+        self.rx_latency = _adapter_latency(link)   # [s] the adapter may hold a reply this long
         self.backoff_min = backoff_min
         self.backoff_max = backoff_max
         if not dx_tolerance >= 0.0:
@@ -374,7 +384,7 @@ class DpMaster:
         self._sent_in_round = False
         self._round_idle = False
         self._timeouts: Dict[Tuple[int, int], float] = {}   # by request/reply length, for
-        self._timeouts_for: Optional[Tuple[BusTiming, float]] = None   # these settings
+        self._timeouts_for: Optional[Tuple[BusTiming, float, float]] = None   # these settings
         self._handlers: Dict[MasterSlaveState, Callable[[SlaveHandle, float], bool]] = {
             MasterSlaveState.INIT: self._do_init,
             MasterSlaveState.WAIT_DIAG: self._do_diag,
@@ -445,6 +455,7 @@ class DpMaster:
     def replace_link(self, link: Link) -> None:
         """Continue on a new link (e.g. a reopened serial port)."""
         self.link = link
+        self.rx_latency = _adapter_latency(link)
         self._pending = None
         self.deframer.reset()
 
@@ -495,15 +506,15 @@ class DpMaster:
                          f"{reason}; retry in {delay:.2f} s", now)
 
     def _reply_timeout(self, request_len: int, reply_len: int) -> float:
-        if self._timeouts_for != (self.timing, self.reply_timeout_floor):  # settings changed
+        if self._timeouts_for != (self.timing, self.reply_timeout_floor, self.rx_latency):  # settings changed
             self._timeouts.clear()
-            self._timeouts_for = (self.timing, self.reply_timeout_floor)
+            self._timeouts_for = (self.timing, self.reply_timeout_floor, self.rx_latency)
         key = (request_len, reply_len)
         timeout = self._timeouts.get(key)
         if timeout is None:
             t = self.timing
             wire = t.chars(request_len + reply_len) + t.bits(t.tsyn_bits) + t.slot_time
-            timeout = self._timeouts[key] = max(self.reply_timeout_floor, wire)
+            timeout = self._timeouts[key] = max(self.reply_timeout_floor, wire + self.rx_latency)
         return timeout
 
     def _send(self, slave: SlaveHandle, kind: str, raw: bytes, reply_len: int,
