@@ -61,7 +61,7 @@ class DriverDiagnostics:
         stat.add("slave state", s.slave_state)
         stat.add("cycle rate [1/s]", "%.1f" % s.cycle_rate)
         for key in ("cycles", "retries", "timeouts", "fcs_errors", "invalid_replies", "losses",
-                    "reconnects", "phy_errors"):
+                    "reconnects", "phy_errors", "echoes", "unexpected_frames"):
             if key in s.master_counters:
                 stat.add("bus %s" % key.replace("_", " "), str(s.master_counters[key]))
         c = s.counters
