@@ -11,7 +11,7 @@ from pyprofibus_vendor.dp import (DiagStatus1, GcCommand, Sap, SlaveDiag, reply_
 from pyprofibus_vendor.dp_master import (BusTiming, DpMaster, MasterSlaveState as S, SlaveSpec)
 from pyprofibus_vendor.dp_slave import DpSlave, SlaveLink, SlaveServer, SlaveState
 from pyprofibus_vendor.errors import ConfigError, DpError, DpTimeoutError, PhyError
-from pyprofibus_vendor.fdl import (Frame, FrameControl, ResponseStatus, Sd1, Sd2, ShortAck,
+from pyprofibus_vendor.fdl import (Frame, FrameControl, RequestFunction, ResponseStatus, Sd1, Sd2, ShortAck,
                                    StationType, decode_frame)
 from pyprofibus_vendor.phy import FaultyLink, MemoryLink
 
@@ -89,6 +89,17 @@ class TimingTest(unittest.TestCase):
         self.assertAlmostEqual(m._reply_timeout(23, 23), 46 * 11 / 9600 + 133 / 9600)
         m2 = DpMaster(SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG)), baud=12_000_000)
         self.assertEqual(m2._reply_timeout(23, 23), 0.05)
+
+    def test_a_known_adapter_latency_timer_lengthens_the_reply_timeout(self):
+        from pyprofibus_vendor.adapter import AdapterSetup
+        link = SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG))
+        link.adapter = AdapterSetup("/dev/ttyUSB0", True, 32, None)
+        m = DpMaster(link, baud=19200)
+        wire = 46 * 11 / 19200 + 133 / 19200
+        self.assertAlmostEqual(m._reply_timeout(23, 23), wire + 0.032)      # past the 50 ms floor
+        link.adapter = AdapterSetup("/dev/ttyUSB0", True, 1, 16)             # lowered at open: 1 ms
+        m.replace_link(link)
+        self.assertEqual(m._reply_timeout(23, 23), 0.05)
 
 
 class SpecTest(unittest.TestCase):
@@ -225,6 +236,46 @@ class DataExchangeTest(unittest.TestCase):
         self.assertEqual(rig.slave.counters.duplicates, 1)
         self.assertEqual(rig.slave_outputs.count(b"\x09" * 14), 1)   # executed once
         self.assertTrue(rig.h.connected)
+
+    def test_adapter_echo_is_recognised_and_skipped(self):
+        """An RS-485 adapter whose receiver stays on while it sends reads the master's own request
+        back before the reply: counted as the adapter's echo, never as a telegram of the line."""
+        rig = Rig()
+        real_send = rig.link.send
+        echoed = {"n": 0}
+
+        def echoing_send(data: bytes) -> None:
+            real_send(data)
+            reply = rig.link.recv(4096, 0.0)
+            rig.link._rx[:0] = bytes(data)        # the echo is read before the reply
+            rig.link._rx += reply
+            echoed["n"] += 1
+
+        rig.link.send = echoing_send
+        rig.until(lambda: rig.h.connected)
+        rig.h.outputs = b"\x03" * 14
+        rig.until(lambda: rig.h.inputs == transform(b"\x03" * 14))
+        c = rig.master.counters
+        self.assertEqual(c.echoes, echoed["n"])
+        self.assertEqual(c.unexpected_frames, 0)
+        self.assertEqual(c.retries, 0)
+        self.assertEqual(c.invalid_replies, 0)
+        self.assertGreater(c.dx_timed, 0)
+
+    def test_another_masters_request_is_no_echo(self):
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        real_send = rig.link.send
+        other = Sd1(SLAVE, MASTER + 1, FrameControl.req(RequestFunction.FDL_STATUS)).encode()
+
+        def with_other(data: bytes) -> None:
+            rig.link._rx += other                 # another master's request heard on the line
+            real_send(data)
+
+        rig.link.send = with_other
+        rig.steps(10)
+        self.assertEqual(rig.master.counters.echoes, 0)
+        self.assertGreater(rig.master.counters.unexpected_frames, 0)
 
     def test_output_only_slave(self):
         spec = SlaveSpec(SLAVE, ROBOT_IDENT, b"\x2D")

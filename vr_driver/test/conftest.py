@@ -42,6 +42,7 @@ LANE_OF = {
     "test_controller_v2_pty.py": "realtime",
     "test_sim_line_pty.py": "realtime",
     "test_scan_line.py": "realtime",               # `scan` on the virtual line at a drawn rate
+    "test_adapter_line_pty.py": "realtime",        # the USB adapter model on the virtual line (~10 s)
     "test_bus_process.py": "realtime",             # the bus process over a real pty, killed mid-move
     "test_two_machines.py": "realtime",            # driver PC and workstation in two network namespaces
     "test_commission.py": "solo",                  # `commission` measures the virtual G2 to the ms: alone

@@ -120,7 +120,7 @@ def test_wrong_io_length_is_refused(tmp_path):
 
 
 @pytest.mark.parametrize("values, words", [
-    ({"watchdog_ms": 10}, "at least two bus cycles (>= 100 ms at cycle_rate 20 Hz)"),
+    ({"watchdog_ms": 10}, "at least two bus cycles (>= 134 ms at cycle_rate 15 Hz)"),
     ({"watchdog_ms": 30, "cycle_rate": 50.0, "link_timeout": 0.3}, ">= 40 ms"),
     ({"watchdog_ms": 650000}, "must not exceed link_timeout (500 ms)"),
     ({"watchdog_ms": 600, "link_timeout": 0.5}, "must not exceed link_timeout"),
@@ -153,7 +153,7 @@ def test_no_watchdog_only_when_allowed():
 
 
 @pytest.mark.parametrize("values, name", [
-    ({"stop_settle_time": 0.05}, "stop_settle_time"),          # less than two 20 Hz cycles
+    ({"stop_settle_time": 0.05}, "stop_settle_time"),          # less than two 15 Hz cycles
     ({"stop_settle_time": 0.0}, "stop_settle_time"),
     ({"stop_timeout": 0.2}, "stop_timeout"),                   # not longer than the settle time
     ({"stop_timeout": float("nan")}, "stop_timeout"),

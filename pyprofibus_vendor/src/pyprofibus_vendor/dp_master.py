@@ -36,7 +36,10 @@ A *turn* is one transaction with one slave (request, then reply or timeout
 after ``max_retry`` repetitions with the same FCB); slaves take turns in
 order and a completed round is a *cycle*. Slot time and retry limit come
 from the baud rate (:class:`BusTiming`); on a pty or USB adapter software
-latency dominates, so the reply timeout never goes below ``reply_timeout_floor``.
+latency dominates, so the reply timeout never goes below ``reply_timeout_floor``; a USB adapter
+whose latency timer the link knows (:attr:`SerialLink.adapter`, pyprofibus_vendor.adapter) holds
+each reply up to that long, so the wire time of a transaction is given that much more before a
+resend (a 32 ms FTDI timer otherwise had a third of the requests resent at 19.2 kbit/s).
 
 Outputs are latched (the application sets them whenever it likes; every
 Data_Exchange sends the latest). Inputs are kept as the last good image
@@ -236,6 +239,11 @@ class MasterCounters:
     fcs_errors: int = 0         # copied from the deframer
     garbage_bytes: int = 0      # copied from the deframer
     dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
+    echoes: int = 0             # requests from our own address read back: an RS-485 adapter that
+    #                             echoes its transmission (skipped)
+    dx_timed: int = 0           # good Data_Exchange replies timed (reply_wait below)
+    reply_wait: float = 0.0     # [s] their summed time beyond the telegrams' time on the wire:
+    #                             the station's delay plus what the adapter held them back
 
 
 @dataclass
@@ -317,6 +325,13 @@ class _Pending:
     timeout: float
     retries: int = 0
     job: Optional[AcyclicRequest] = None
+    sent: float = 0.0         # when the request (or its last retry) went out
+
+
+def _adapter_latency(link: Link) -> float:
+    """[s] the latency timer of the USB adapter under ``link`` where it is known, else 0."""
+    ms = getattr(getattr(link, "adapter", None), "latency_timer_ms", None)
+    return ms / 1000.0 if isinstance(ms, int) and ms > 0 else 0.0
 
 
 class DpMaster:
@@ -350,6 +365,7 @@ class DpMaster:
                                     self.timing.max_tsdr_bits, max_retry)
         self.clock = clock
         self.reply_timeout_floor = reply_timeout_floor
+        self.rx_latency = _adapter_latency(link)   # [s] the adapter may hold a reply this long
         self.backoff_min = backoff_min
         self.backoff_max = backoff_max
         if not dx_tolerance >= 0.0:
@@ -368,7 +384,7 @@ class DpMaster:
         self._sent_in_round = False
         self._round_idle = False
         self._timeouts: Dict[Tuple[int, int], float] = {}   # by request/reply length, for
-        self._timeouts_for: Optional[Tuple[BusTiming, float]] = None   # these settings
+        self._timeouts_for: Optional[Tuple[BusTiming, float, float]] = None   # these settings
         self._handlers: Dict[MasterSlaveState, Callable[[SlaveHandle, float], bool]] = {
             MasterSlaveState.INIT: self._do_init,
             MasterSlaveState.WAIT_DIAG: self._do_diag,
@@ -439,6 +455,7 @@ class DpMaster:
     def replace_link(self, link: Link) -> None:
         """Continue on a new link (e.g. a reopened serial port)."""
         self.link = link
+        self.rx_latency = _adapter_latency(link)
         self._pending = None
         self.deframer.reset()
 
@@ -489,21 +506,21 @@ class DpMaster:
                          f"{reason}; retry in {delay:.2f} s", now)
 
     def _reply_timeout(self, request_len: int, reply_len: int) -> float:
-        if self._timeouts_for != (self.timing, self.reply_timeout_floor):  # settings changed
+        if self._timeouts_for != (self.timing, self.reply_timeout_floor, self.rx_latency):  # settings changed
             self._timeouts.clear()
-            self._timeouts_for = (self.timing, self.reply_timeout_floor)
+            self._timeouts_for = (self.timing, self.reply_timeout_floor, self.rx_latency)
         key = (request_len, reply_len)
         timeout = self._timeouts.get(key)
         if timeout is None:
             t = self.timing
             wire = t.chars(request_len + reply_len) + t.bits(t.tsyn_bits) + t.slot_time
-            timeout = self._timeouts[key] = max(self.reply_timeout_floor, wire)
+            timeout = self._timeouts[key] = max(self.reply_timeout_floor, wire + self.rx_latency)
         return timeout
 
     def _send(self, slave: SlaveHandle, kind: str, raw: bytes, reply_len: int,
               now: float, job: Optional[AcyclicRequest] = None) -> None:
         timeout = self._reply_timeout(len(raw), reply_len)
-        self._pending = _Pending(slave, kind, raw, now + timeout, timeout, job=job)
+        self._pending = _Pending(slave, kind, raw, now + timeout, timeout, job=job, sent=now)
         self._transmit(raw)
         slave.counters.requests += 1
         self.counters.requests += 1
@@ -611,6 +628,13 @@ class DpMaster:
         self.counters.fcs_errors = self.deframer.counters.fcs_errors
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
         for frame in frames:
+            if isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request and frame.sa == self.address:
+                # a request from our own address is one we sent, read back: an adapter that echoes
+                # what it transmits (its receiver stays on while it sends) -- usually the request
+                # just sent, at the start of its window; a late one (an earlier try's echo held in
+                # the adapter past a resend) too. Not a telegram of another station
+                self.counters.echoes += 1
+                continue
             pending = self._pending
             if pending is None:
                 self.counters.unexpected_frames += 1
@@ -654,6 +678,7 @@ class DpMaster:
             p.slave.counters.retries += 1
             self.counters.retries += 1
             p.deadline = now + p.timeout
+            p.sent = now
             self._transmit(p.raw)  # same bytes, same FCB
             return
         p.slave.counters.timeouts += 1
@@ -868,6 +893,9 @@ class DpMaster:
         """A good Data_Exchange reply: deliver the inputs, end the turn."""
         slave = p.slave
         self._pending = None
+        # the reply's time beyond both telegrams' time on the wire (9 characters of SD2 framing)
+        self.counters.dx_timed += 1
+        self.counters.reply_wait += max(0.0, now - p.sent - self.timing.chars(len(p.raw) + len(data) + 9))
         slave.fcb.acknowledge()
         slave._store_inputs(data, now)
         slave.dx_ok_time = now

@@ -17,6 +17,10 @@ lets pyserial open. If that still fails it falls back to no parity (with a
 warning; a pty has no parity anyway). Any other failure is a
 :class:`PhyError` naming the device.
 
+After opening a device the link sets its low-latency mode and reads (and where allowed lowers)
+a USB adapter's latency timer: :mod:`pyprofibus_vendor.adapter`; :attr:`SerialLink.adapter` says
+what it found.
+
 On real UARTs pyserial leaves input parity checking off; with
 ``check_parity=True`` (default) the link turns on ``INPCK | IGNPAR`` so
 characters with a parity error are dropped by the driver and the frame fails
@@ -39,6 +43,7 @@ from typing import Optional
 
 import serial
 
+from .adapter import AdapterSetup, tune_port
 from .errors import PhyError
 from .phy import Link
 
@@ -95,6 +100,7 @@ class SerialLink(Link):
         self._fd: Optional[int] = None
         self._raw = False
         self._timeout: Optional[float] = -1.0
+        self.adapter: Optional[AdapterSetup] = None   # the adapter's low-latency mode, latency timer
         self._open()
 
     def _make(self, parity: str) -> serial.SerialBase:
@@ -146,7 +152,10 @@ class SerialLink(Link):
             except termios.error as err:
                 log.warning("%s: cannot enable input parity checking: %s", self.url, err)
         self._timeout = -1.0
-        log.info("opened %s at %d baud, parity %s", self.url, self.baud, ser.parity)
+        # a device (not a URL): low-latency mode and the adapter's latency timer (adapter.py)
+        self.adapter = tune_port(self.url, self._fd, self.is_pty) if self._raw else None
+        log.info("opened %s at %d baud, parity %s%s", self.url, self.baud, ser.parity,
+                 "; " + self.adapter.describe() if self.adapter is not None else "")
 
     @property
     def serial(self) -> serial.SerialBase:

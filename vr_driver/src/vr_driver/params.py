@@ -320,7 +320,7 @@ class DriverParams:
                                          # allow_no_watchdog)
     allow_no_watchdog: bool = False      # accept a watchdog of 0 (the arm no longer stops when the
                                          # master dies); warned at every start
-    cycle_rate: float = 20.0             # Data_Exchange cycles per second
+    cycle_rate: float = 15.0             # Data_Exchange cycles per second (19.2 kbit/s with the I/O island)
     byte_order: str = "little"
     link_timeout: float = 0.5            # no good reply for this long = link lost [s]
     reconnect_period: float = 0.5        # between reopen attempts while the link is lost [s]

@@ -492,6 +492,7 @@ class BusProcessMaster:
         self.counters = MasterCounters()
         self.health: Optional[BusHealthSummary] = None
         self.scheduling = ""
+        self.adapter: Any = None
         self.reports = 0
         self._slaves: Dict[int, RemoteSlave] = {}
         self._urgent = False
@@ -533,6 +534,7 @@ class BusProcessMaster:
                 raise OSError(code, text)
             raise PhyError(text)
         self.scheduling = reply[1]
+        self.adapter = reply[2]          # the port's AdapterSetup (pyprofibus_vendor.adapter) or None
         log.info("bus process %d: %s on %s at %d bit/s", self._proc.pid, self.scheduling,
                  settings.device, settings.baud)
 
@@ -546,6 +548,11 @@ class BusProcessMaster:
         self._slaves[spec.address] = slave
         self.send(("slave", spec))
         return slave
+
+    @property
+    def slaves(self) -> List[RemoteSlave]:
+        """Every slave added, in order (as DpMaster.slaves)."""
+        return list(self._slaves.values())
 
     def slave(self, address: int) -> RemoteSlave:
         try:
@@ -711,7 +718,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             code = getattr(seen, "errno", None)
         conn.send(("error", str(exc), code if isinstance(code, int) and code in errno_mod.errorcode else None))
         return 1
-    conn.send(("opened", scheduling))
+    conn.send(("opened", scheduling, getattr(link, "adapter", None)))
     if not scheduling.startswith("SCHED_FIFO"):
         log.warning("%s", scheduling)
     return BusServer(conn, link, settings, "process %d, %s" % (os.getpid(), scheduling)).run()

@@ -26,7 +26,13 @@ between a master at another rate and the stations pass through a UART's view of 
 (:func:`~vr_driver.controller.line_rate.resample`): the stations receive a few wrong characters or
 none and do not answer, as on a real line. Without it the line carries any rate's bytes intact.
 
-``python3 -m vr_driver.controller.line [--pty-link PATH] [--baud B] [--rate R] STATION_PATH...`` runs it from the
+``adapter`` (optional, an :class:`~vr_driver.controller.adapter_model.AdapterBehaviour`) puts the
+USB-RS-485 adapter's behaviours on the master's side: a latency timer (replies handed over in
+bursts), the echo of the master's own transmission, a slow turnaround that loses a prompt reply's
+first bytes (:mod:`~vr_driver.controller.adapter_model`).
+
+``python3 -m vr_driver.controller.line [--pty-link PATH] [--baud B] [--rate R] [--latency-ms MS] [--echo]
+[--turnaround-ms MS] STATION_PATH...`` runs it from the
 shell (:func:`main`; the first line on stdout is the master's device path).
 """
 from __future__ import annotations
@@ -40,16 +46,17 @@ import threading
 import time
 import tty
 from dataclasses import dataclass
-from typing import IO, Callable, List, Optional, Sequence, Tuple
+from typing import IO, Any, Callable, List, Optional, Sequence, Tuple
 
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import FdLink
 
+from .adapter_model import AdapterBehaviour, AdapterModel
 from .line_rate import resample, tty_speed
 from .pty_link import SimPort, pid_alive
 from .simulator import EXIT_OK, SimError, Simulator, parse_simulator_args, run_simulator, simulator_parser
 
-__all__ = ["LineCounters", "LineHub", "main"]
+__all__ = ["LineCounters", "LineHub", "add_adapter_args", "adapter_from_args", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +94,8 @@ class LineHub(Simulator):
     """See the module docstring. :meth:`start` serves in a thread; :meth:`serve` in the caller's."""
 
     def __init__(self, stations: Sequence[str], *, pty_link: Optional[str] = None, baud: Optional[int] = None,
-                 reopen_period: float = 0.2, clock: Clock = time.monotonic, rate: Optional[int] = None) -> None:
+                 reopen_period: float = 0.2, clock: Clock = time.monotonic, rate: Optional[int] = None,
+                 adapter: Optional[AdapterBehaviour] = None) -> None:
         if not stations:
             raise SimError("the line needs at least one station path")
         for name, value in (("baud", baud), ("rate", rate)):
@@ -104,6 +112,8 @@ class LineHub(Simulator):
         self._queue: List[Tuple[float, int, int, bytes]] = []     # (due, seq, target (-1 master), bytes)
         self._seq = 0
         self._line_free = 0.0
+        # the USB adapter on the master's side (adapter_model.py), None: a perfect one
+        self.adapter = AdapterModel(adapter) if adapter is not None and adapter.active else None
         super().__init__()
 
     def connected(self) -> List[str]:
@@ -155,8 +165,11 @@ class LineHub(Simulator):
 
     def _deliver(self, target: int, data: bytes, now: float) -> None:
         if target < 0:
-            self.master.send(data)
-            self.counters.to_master += len(data)
+            if self.adapter is not None:
+                data = self.adapter.hold(data, now)
+            if data:
+                self.master.send(data)
+                self.counters.to_master += len(data)
             return
         for i, st in enumerate(self.stations):
             if st.link is None or (target != len(self.stations) and target != i):
@@ -167,12 +180,30 @@ class LineHub(Simulator):
             except PhyError as exc:
                 self._drop(st, str(exc), now)
 
-    def _forward(self, target: int, data: bytes, now: float) -> None:
-        if self.baud is None:
+    def _forward(self, target: int, data: bytes, now: float, sent: Optional[bytes] = None) -> None:
+        """``data`` onto the line for ``target`` (-1: the master). ``sent``: what the master wrote, when
+        the line's rate made the wire's bytes differ from it (its adapter echoes what it sent)."""
+        char = 11.0 / self.baud if self.baud is not None else 0.0
+        start = max(now, self._line_free) if self.baud is not None else now
+        end = start + len(data) * char
+        if self.baud is not None:
+            self._line_free = end
+        adapter = self.adapter
+        if adapter is not None:
+            if target < 0:
+                data = adapter.heard(data, start, char)
+            else:
+                echo = adapter.sent(data if sent is None else sent, end)
+                if echo:
+                    self._queue_at(end, -1, echo, now)
+        if data:
+            self._queue_at(end, target, data, now)
+
+    def _queue_at(self, due: float, target: int, data: bytes, now: float) -> None:
+        if due <= now and not self._queue:
             return self._deliver(target, data, now)
-        self._line_free = max(now, self._line_free) + len(data) * 11.0 / self.baud
         self._seq += 1
-        heapq.heappush(self._queue, (self._line_free, self._seq, target, data))
+        heapq.heappush(self._queue, (due, self._seq, target, data))
 
     def step(self, timeout: float) -> None:
         """Wait up to ``timeout`` for bytes, copy them; reopen stations that are due."""
@@ -183,6 +214,14 @@ class LineHub(Simulator):
         while self._queue and self._queue[0][0] <= now:
             _, _, target, data = heapq.heappop(self._queue)
             self._deliver(target, data, now)
+        if self.adapter is not None:
+            burst = self.adapter.due(now)
+            if burst:
+                self.master.send(burst)
+                self.counters.to_master += len(burst)
+            due = self.adapter.next_due()
+            if due is not None:
+                timeout = min(timeout, max(0.0, due - now))
         if self._queue:
             timeout = min(timeout, max(0.0, self._queue[0][0] - now))
         fds = {self.master.fd: None}
@@ -192,11 +231,10 @@ class LineHub(Simulator):
         for fd in ready:
             st = fds[fd]
             if st is None:
-                data = self.master.recv(4096, 0.0)      # PhyError: the hub's own pty failed
-                if data and self.rate is not None:
-                    data = self._at_rates(data, to_master=False)
+                raw = self.master.recv(4096, 0.0)       # PhyError: the hub's own pty failed
+                data = self._at_rates(raw, to_master=False) if raw and self.rate is not None else raw
                 if data:
-                    self._forward(len(self.stations), data, now)
+                    self._forward(len(self.stations), data, now, sent=raw)
                 continue
             try:
                 data = st.link.recv(4096, 0.0) if st.link is not None else b""
@@ -234,6 +272,22 @@ class LineHub(Simulator):
         self.port.close()
 
 
+def add_adapter_args(p: Any) -> None:
+    """The adapter's options of the line's command line (and the bench's)."""
+    p.add_argument("--latency-ms", type=float, default=0.0, metavar="MS",
+                   help="the USB adapter's latency timer: replies reach the master in bursts (0: at once)")
+    p.add_argument("--echo", action="store_true", help="the adapter echoes the master's transmission back to it")
+    p.add_argument("--turnaround-ms", type=float, default=0.0, metavar="MS",
+                   help="the adapter's receiver is deaf this long after sending (a prompt reply loses its "
+                        "first bytes)")
+
+
+def adapter_from_args(args: Any) -> Optional[AdapterBehaviour]:
+    """The behaviour the options ask for (ValueError out of range), None for a perfect adapter."""
+    b = AdapterBehaviour(latency_ms=args.latency_ms, echo=args.echo, turnaround_ms=args.turnaround_ms)
+    return b if b.active else None
+
+
 def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None) -> int:
     p = simulator_parser("line", "The virtual RS-485 line: joins the ptys of simulated DP stations (virtual "
                          "controller, virtual I/O island) into one multi-drop line. The first line on stdout is "
@@ -243,13 +297,18 @@ def main(argv: Optional[Sequence[str]] = None, stdout: Optional[IO[str]] = None)
     p.add_argument("--baud", type=int, help="pace the line at this bit rate (default: as fast as the ptys)")
     p.add_argument("--rate", type=int, help="the stations' bit rate: a master whose port is set to another rate "
                    "meets garbled characters and no reply, as on a wire (default: any rate's bytes pass)")
+    add_adapter_args(p)
     args = parse_simulator_args(p, argv)
+    try:
+        adapter = adapter_from_args(args)
+    except ValueError as exc:
+        p.error(str(exc))
     out = stdout if stdout is not None else sys.stdout
     def serve(hub: LineHub, stop: threading.Event, prog: str) -> int:
         hub.serve(stop)                 # in the foreground (a PhyError: the runner's device error)
         return EXIT_OK
     return run_simulator(p.prog, lambda: LineHub(args.stations, pty_link=args.pty_link, baud=args.baud,
-                                                         rate=args.rate),
+                                                         rate=args.rate, adapter=adapter),
                          out, serve)
 
 

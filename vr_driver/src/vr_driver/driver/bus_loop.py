@@ -198,7 +198,7 @@ class BusLoop:
             model_check=self.arm.model_check,
             feedback_time=sample.feedback_time if sample is not None and fb is not None else None,
             record_time=sample.record_time if sample is not None and fb is not None else None,
-            settling=view.settling, bus_health=self.link.health_summary(now))
+            settling=view.settling, bus_health=self.link.health_summary(now), line=self.link.line_verdict())
 
     def _publish(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
         status = self._status = self._snapshot(now, sample)

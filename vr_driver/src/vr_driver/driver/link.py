@@ -40,6 +40,7 @@ from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 
 from ..bus.health import BusHealth, BusHealthSummary
+from ..bus.line_check import LineCheck, LineVerdict
 from ..bus.process import BusProcessMaster, RemoteSlave
 from ..errors import ProtocolError
 from ..params import DriverParams
@@ -173,6 +174,8 @@ class LinkSupervisor:
         self._wire = wire
         self._record_stamp: Optional[float] = None
         self._stop_source = b""
+        # the rate the line really gives against cycle_rate, and the adapter (bus/line_check.py)
+        self.line_check: Optional[LineCheck] = None
 
     # ----------------------------------------------------------------------- read-outs
     @property
@@ -196,6 +199,14 @@ class LinkSupervisor:
         if self.health is not None and now - self._health_at >= 1.0:
             self._health_summary, self._health_at = self.health.summary(now), now
         return self._health_summary
+
+    def line_verdict(self) -> Optional[LineVerdict]:
+        """The cycle rate against the asked one and the adapter, in words (None before a port)."""
+        return self.line_check.verdict() if self.line_check is not None else None
+
+    def _check_line(self, now: float) -> None:
+        if self.line_check is not None and self._master is not None:
+            self.line_check.update(now, vars(self._master.counters), self._state is LinkState.CONNECTED)
 
     def master_counters(self) -> Dict[str, int]:
         return dict(vars(self._master.counters)) if self._master is not None else {}
@@ -278,7 +289,10 @@ class LinkSupervisor:
             if ran:
                 self.counters.cycles += 1
                 self._cycle_times.append((now, master.counters.cycles))
-            return self._sample(now, self._judge(now), cycled=bool(ran))
+            fresh = self._judge(now)
+            if ran:
+                self._check_line(now)
+            return self._sample(now, fresh, cycled=bool(ran))
         self.counters.cycles += 1
         self._cycle_times.append((now, self.counters.cycles))
         stalled = now - begin > self.params.link_timeout
@@ -287,6 +301,7 @@ class LinkSupervisor:
             log.warning("a bus cycle took %.2f s (the process was stopped or starved): the record "
                         "it brought may be that old and is not used", now - begin)
         fresh = self._judge(now, stalled)
+        self._check_line(now)
         return self._sample(now, fresh, cycled=True)
 
     def _judge(self, now: float, stalled: bool = False) -> Optional[FeedbackRecord]:
@@ -397,6 +412,10 @@ class LinkSupervisor:
         self._link = link
         if self.stations is not None:
             self.stations.add_slaves(master, self.bus)   # the I/O stations, cycled by the same master
+        self.line_check = LineCheck(
+            baud, self.bus.cycle_rate_hz,
+            [(s.spec.output_size or 0, s.spec.input_size or 0) for s in master.slaves],
+            getattr(master, "adapter", None) or getattr(link, "adapter", None))
         log.info("opened %s at %d bit/s; bringing slave %d (ident 0x%04X) to Data_Exchange",
                  device, baud, sc.address, sc.ident)
         self._down(LinkState.CONNECTING, "port open, waiting for the controller's PROFIBUS card")

@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 from typing import Dict, Optional, Tuple
 
 from ..bus.health import BusHealthSummary
+from ..bus.line_check import LineVerdict
 from ..errors import VrDriverError
 from ..poses import ControllerPose
 from ..protocol.common import FeedbackRecord
@@ -70,6 +71,7 @@ class DriverStatus:
     settling: bool = False                    # a stopped move is waiting for the arm to be at rest
     model_check: Optional[ModelCheck] = None  # the model against the controller (v2), latest connection
     bus_health: Optional[BusHealthSummary] = None   # the gaps between the card's replies, last minute
+    line: Optional[LineVerdict] = None         # the rate the line gives against cycle_rate; the adapter
 
     @property
     def connected(self) -> bool:

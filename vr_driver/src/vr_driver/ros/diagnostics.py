@@ -7,7 +7,9 @@
   is not possible, STALE without feedback), the pose, why no motion, the model check, the target
   counters, the queue, and the commissioned controller's notes;
 - ``bus``: the card's view of the master, the gaps between its Data_Exchange replies over the
-  last minute (vr_driver.bus.health), WARN when one passed half its watchdog.
+  last minute (vr_driver.bus.health), WARN when one passed half its watchdog; the cycle rate the
+  line really gives against ``cycle_rate`` and the USB adapter (vr_driver.bus.line_check), WARN
+  with the cause and the fix when it stays under.
 
 The other parts of the node add their tasks to the same :attr:`DriverDiagnostics.updater` (I/O
 stations, joint_command, collision).
@@ -59,7 +61,7 @@ class DriverDiagnostics:
         stat.add("slave state", s.slave_state)
         stat.add("cycle rate [1/s]", "%.1f" % s.cycle_rate)
         for key in ("cycles", "retries", "timeouts", "fcs_errors", "invalid_replies", "losses",
-                    "reconnects", "phy_errors"):
+                    "reconnects", "phy_errors", "echoes", "unexpected_frames"):
             if key in s.master_counters:
                 stat.add("bus %s" % key.replace("_", " "), str(s.master_counters[key]))
         c = s.counters
@@ -93,6 +95,23 @@ class DriverDiagnostics:
         stat.add("longest gap since start [ms]", "%.1f" % (1e3 * h.worst_gap))
         stat.add("gaps past half the watchdog since start", str(h.late_gaps))
         stat.add("bus process", h.scheduling)
+        line = self.core.status().line
+        if line is not None:
+            # the rate the line really gives against cycle_rate, and the USB adapter (bus/line_check.py)
+            if line.slow:
+                stat.mergeSummary(DiagnosticStatus.WARN, line.summary)
+            elif line.echoes:
+                stat.mergeSummary(DiagnosticStatus.OK, "the adapter echoes its transmission (%d frames)"
+                                  % line.echoes)
+            stat.add("line", line.summary)
+            stat.add("cycle rate asked [1/s]", "%.1f" % line.asked)
+            stat.add("cycle rate measured [1/s]", "%.1f" % line.measured)
+            stat.add("cycle rate the telegrams allow [1/s]", "%.1f" % line.line_max)
+            stat.add("reply beyond the wire, mean [ms]", "-" if line.reply_wait is None
+                     else "%.1f" % (1e3 * line.reply_wait))
+            stat.add("requests resent [%]", "%.1f" % (100 * line.resent))
+            stat.add("adapter echoes", str(line.echoes))
+            stat.add("adapter", line.adapter or "-")
         return stat
 
     def controller(self, stat):

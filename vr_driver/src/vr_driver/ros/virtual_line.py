@@ -8,6 +8,9 @@ linked (``auto``: ``<ROS log dir>/vr006l_virtual_line_<master port>``; the drive
 ``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys); ``~rate`` [0] the stations' bit rate: a
 master whose port is set to another one meets garbled characters and no reply, as on a wire (0: any rate's
 bytes pass; :mod:`vr_driver.controller.line_rate`).
+The USB adapter on the master's side
+(vr_driver.controller.adapter_model, doc/adapters.md): ``~latency_ms`` [0] its latency timer, ``~echo`` [false]
+it echoes the master's transmission, ``~turnaround_ms`` [0] its receiver deaf this long after sending.
 
 Sets ``~device_path`` (the master's pty). Exit status: 0 on shutdown, 2 bad parameter, 3 device problem.
 """
@@ -22,6 +25,7 @@ from pyprofibus_vendor.errors import PhyError
 
 from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, SimError, resolve_link
 from .support import open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority
+from ..controller.adapter_model import AdapterBehaviour
 from ..controller.line import LineHub
 
 
@@ -38,14 +42,21 @@ def main() -> int:
         stations: List[str] = [resolve_link(p) for p in raw]
         baud = int(rospy.get_param("~baud", 0)) or None
         rate = int(rospy.get_param("~rate", 0)) or None
+        try:
+            adapter = AdapterBehaviour(latency_ms=float(rospy.get_param("~latency_ms", 0.0)),
+                                       echo=bool(rospy.get_param("~echo", False)),
+                                       turnaround_ms=float(rospy.get_param("~turnaround_ms", 0.0)))
+        except (TypeError, ValueError) as exc:
+            raise SimError("~latency_ms / ~echo / ~turnaround_ms: %s" % exc) from None
         return LineHub(stations, pty_link=own_link(rospy.get_param("~pty_link", AUTO_LINK), "line"), baud=baud,
-                       rate=rate)
+                       rate=rate, adapter=adapter)
     hub, status = open_device("virtual_line", make)
     if hub is None:
         return status
     rospy.set_param("~device_path", hub.device_path)
-    rospy.loginfo("virtual_line: master end %s%s; stations %s", hub.device_path,
-                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(s.path for s in hub.stations))
+    rospy.loginfo("virtual_line: master end %s%s; stations %s; adapter: %s", hub.device_path,
+                  " (linked at %s)" % hub.symlink if hub.symlink else "", ", ".join(s.path for s in hub.stations),
+                  hub.adapter.behaviour.describe() if hub.adapter is not None else "a perfect one")
     halt = threading.Event()
     rospy.on_shutdown(halt.set)
     status = EXIT_OK
