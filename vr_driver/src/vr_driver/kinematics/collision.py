@@ -235,6 +235,16 @@ class CollisionChecker:
 
     # ------------------------------------------------------------------------------------ queries
     def _config(self, q: Sequence[float]) -> np.ndarray:
+        full = self._q.copy()
+        try:
+            # the common case in one step (a planner checks hundreds of thousands of configurations
+            # a plan): the right length, every value finite; anything else is looked at below
+            if len(q) == len(self._q_index):          # (not broadcast from one value)
+                full[self._q_index] = q
+                if np.isfinite(full).all():
+                    return full
+        except (TypeError, ValueError):
+            pass
         try:
             arr = np.asarray(q, dtype=float).reshape(-1)
         except (TypeError, ValueError) as exc:
