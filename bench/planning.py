@@ -244,6 +244,31 @@ class Executor:
         return True, ""
 
 
+def print_profile(profiles):
+    """Where the plan action's whole call went, per goal kind: the shares of its parts (the plan
+    action's PlanOutcome.profile), the validity checks, the tries and why they were made again."""
+    for kind in ("joints", "pose", "all"):
+        rows = [(t, p) for k, t, p in profiles if kind in ("all", k)]
+        if not rows:
+            continue
+        whole = sum(t for t, _ in rows)
+        part = {key: sum(p.get(key, 0.0) for _, p in rows)
+                for key in ("crossing", "snapshot", "planner", "goal", "plan", "simplify", "time", "check",
+                            "stream_check")}
+        checks = sum(p.get("checks", 0) for _, p in rows)
+        causes = [c.split(":")[0] for _, p in rows for c in p.get("replans", ())]
+        print("profile, %s goals (%d calls, %.2f s in all): planner %.0f %% (IK and goal checks %.0f %%, search %.0f %%, "
+              "simplification %.0f %%, timing %.0f %%, the result's check %.0f %%), the driver's stream check %.0f %%, "
+              "the elbow crossing %.0f %%, the checker's copy %.0f %%; %d validity checks (%.0f a call, %.1f us each "
+              "with the planner's part around them); %d tries, re-planned: %s"
+              % (kind, len(rows), whole, *(100.0 * part[k] / whole for k in ("planner", "goal", "plan", "simplify",
+                                                                             "time", "check", "stream_check",
+                                                                             "crossing", "snapshot")),
+                 checks, checks / len(rows), 1e6 * (part["plan"] + part["simplify"] + part["check"]) / max(1, checks),
+                 sum(p.get("tries", 0) for _, p in rows),
+                 ", ".join("%s %d" % (c, causes.count(c)) for c in sorted(set(causes))) or "none"))
+
+
 def print_peer(by_kind, total, answers, version):
     """Ours and the peer's whole call per goal kind and in all (median, p95), the ratios, the
     peer's successes and path durations."""
@@ -353,6 +378,7 @@ def main() -> int:
     exec_fail = []
     kinds = {"joints": [0, 0], "pose": [0, 0]}
     by_kind = {"joints": [], "pose": []}           # (our whole call [s], the peer's answer or None)
+    profiles = []                                  # (kind, whole call [s], PlanOutcome.profile)
     for i in range(n):
         target = region_free(kin, checker, rng, region) if region is not None and (i // 2) % 2 == 0 \
             else random_free(kin, checker, rng)
@@ -369,6 +395,7 @@ def main() -> int:
                     PlanGoal(pose=goal, velocity_scaling=args.velocity_scaling) if kind == "pose"
                     else PlanGoal(joints=(kin.joint_names, tuple(goal)), velocity_scaling=args.velocity_scaling),
                     start=start, seed=args.seed + i)
+                profiles.append((kind, time.perf_counter() - t, outcome.profile))
                 if not outcome.ok:
                     raise PlanningError("plan", outcome.text)
                 plan = outcome.trajectory
@@ -431,6 +458,8 @@ def main() -> int:
               "controller's nearest-solution IK may take another wrist" % (len(failures), crossing))
     for line in failures[:10]:
         print("  failed: %s" % line)
+    if profiles:
+        print_profile(profiles)
     if peer is not None:
         peer.close()
         print_peer(by_kind, total, [a for k in by_kind.values() for _, a in k], peer.version)

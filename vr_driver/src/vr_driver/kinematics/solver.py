@@ -407,6 +407,14 @@ class Kinematics:
         """The controller pose (TCP in ``base``, mm / deg) at joints ``q``."""
         return self.conventions.tip_to_controller(self.fk(q))
 
+    def tcp_in_tip(self) -> Tuple[np.ndarray, np.ndarray]:
+        """(``base`` in the chain root's terms: the 4x4 that takes a point in the root to ``base``
+        [m], the TCP's position in the tip's frame [m]) -- the two fixed parts of :meth:`tcp_position`."""
+        conv = self.conventions
+        root_to_base = conv.root_to_base(np.eye(4))
+        # tip_to_tcp(I) = root_in_base @ tcp_in_tip: less the base part, the TCP in the tip's frame
+        return root_to_base, np.linalg.solve(root_to_base, conv.tip_to_tcp(np.eye(4)))[:3, 3]
+
     def tcp_position(self, q: Sequence[float]) -> Tuple[float, float, float]:
         """The TCP's position in ``base`` [mm] at joints ``q`` (the X, Y, Z of :meth:`fk_pose`),
         without validating ``q`` and without the orientation: the fast path of a check that runs
@@ -415,11 +423,8 @@ class Kinematics:
         conv = self.conventions
         cached = self._tcp_frames
         if cached is None or cached[0] is not conv:
-            base = matrix_to_kdl_frame(conv.root_to_base(np.eye(4)))
-            tcp = conv.tip_to_tcp(np.eye(4))
-            # the TCP in the tip's frame: tip_to_tcp(I) = root_in_base @ tcp_in_tip, less the base part
-            offset = np.linalg.solve(conv.root_to_base(np.eye(4)), tcp)[:3, 3]
-            cached = self._tcp_frames = (conv, base, kdl.Vector(*(float(v) for v in offset)))
+            base, offset = self.tcp_in_tip()
+            cached = self._tcp_frames = (conv, matrix_to_kdl_frame(base), kdl.Vector(*(float(v) for v in offset)))
         p = cached[1] * (self.fk_frame(q) * cached[2])
         return p[0] * 1000.0, p[1] * 1000.0, p[2] * 1000.0
 
