@@ -395,7 +395,7 @@ def main() -> int:
                     PlanGoal(pose=goal, velocity_scaling=args.velocity_scaling) if kind == "pose"
                     else PlanGoal(joints=(kin.joint_names, tuple(goal)), velocity_scaling=args.velocity_scaling),
                     start=start, seed=args.seed + i)
-                profiles.append((kind, time.perf_counter() - t, outcome.profile))
+                profiles.append((kind, time.perf_counter() - t, getattr(outcome, "profile", None) or {}))
                 if not outcome.ok:
                     raise PlanningError("plan", outcome.text)
                 plan = outcome.trajectory
@@ -458,7 +458,7 @@ def main() -> int:
               "controller's nearest-solution IK may take another wrist" % (len(failures), crossing))
     for line in failures[:10]:
         print("  failed: %s" % line)
-    if profiles:
+    if any(p for _, _, p in profiles):
         print_profile(profiles)
     if peer is not None:
         peer.close()

@@ -78,7 +78,7 @@ import numpy as np
 from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
-from .plan_search import OmplSearch
+from .plan_search import SWEEP_VALIDATED, OmplSearch
 from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
 
 __all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
@@ -486,7 +486,7 @@ class Planner:
             timings["simplify"] = 0.0
             return [q0, q1]
         search = OmplSearch(self._ompl, self.weights, self.lower, self.upper, self.max_sweep,
-                            self.planning_valid, seed)
+                            self.planning_valid, seed, sweep_motions=self.planner_name in SWEEP_VALIDATED)
         stages = [(goals[:1], budget)] if len(goals) == 1 else [(goals[:1], budget * NEAREST_SHARE), (goals[1:], None)]
         for n_stage, (targets, share) in enumerate(stages):
             if n_stage:
