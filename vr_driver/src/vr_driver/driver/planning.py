@@ -221,7 +221,6 @@ class CellValidity:
             self._tcp = False
             if self.checker is not None and hasattr(self.checker, "frame_point") \
                     and hasattr(self.kin, "tcp_in_tip"):
-                import numpy as np
                 base, offset = self.kin.tcp_in_tip()
                 try:
                     n = len(self.kin.joint_names)
