@@ -219,6 +219,24 @@ def _with_tcp(kin):
     return out
 
 
+def test_a_pose_s_solutions_on_the_start_s_wrist_side_come_first_while_the_margin_holds(kin):
+    """v3: a pose goal's IK solutions with joint_5 across 0 from the start rank after those on its
+    side while the plan keeps the wrist margin (it walls joint_5 = 0 off), not on the last try
+    (no margin) nor from a start within the margin; the elbow's rank comes first; v2: no rank."""
+    w = world(kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
+    rank, last = planning._candidate_rank(wrist=True), planning._candidate_rank(wrist=False)
+    start = (0.0, 0.3, -0.3, 0.0, 0.5, 0.0)
+    same, across = (0.5, 0.4, -0.2, 1.0, 0.4, 0.5), (0.5, 0.4, -0.2, -2.1, -0.4, -2.6)
+    assert rank(start, same) == 0 and rank(start, across) == 1
+    assert last(start, same) == 0 and last(start, across) == 0
+    assert rank((0.0, 0.3, -0.3, 0.0, 0.02, 0.0), across) == 0          # within the 3 deg margin
+    elbow = planning._goal_preference()
+    other_branch = (0.5, 0.4, -2.6, 1.0, 0.4, 0.5)
+    assert elbow(start, other_branch) == 1 and rank(start, other_branch) == 2 > rank(start, across)
+    assert PlanActionCore(world(kin, "v2").core, kinematics=kin)._candidate_rank(wrist=True) is None
+
+
 def test_arm_points_run_from_the_base_to_the_tcp(kin):
     home = kin.named_states["home"]
     pts = arm_points(kin, home)

@@ -413,7 +413,8 @@ class PlanActionCore:
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
-                                      goal_preference=self._goal_preference())
+                                      goal_preference=self._candidate_rank(
+                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across))
                     plan = self._at_goal(planner, tuple(start), target) or self._plan(planner, tuple(start), target,
                                                                                       crossing)
             except PlanningError as exc:
@@ -510,6 +511,25 @@ class PlanActionCore:
             side = math.remainder(start[_ELBOW] - stretched, 2.0 * math.pi)
             other = math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)
             return 0 if side * other >= 0.0 else 1
+        return rank
+
+    def _candidate_rank(self, wrist: bool):
+        """The rank of a pose goal's IK solution the planner orders them by (lower first, then the
+        nearest): with a Cartesian protocol, :meth:`_goal_preference`'s (the start's elbow branch
+        first) and, while the plan keeps the wrist margin (``wrist``), the solutions with joint_5
+        on the start's side of 0 before the others: the margin walls joint_5 = 0 off, and the nearest
+        solution across it cost a try half its budget to find no path (bench/planning.py: 3 of
+        10 pose goals; their next solutions, on the start's side, were planned in the rest). A start
+        within the margin of 0 leaves both sides open. None with joint targets."""
+        elbow = self._goal_preference()
+        if elbow is None:
+            return None
+        if not wrist:
+            return elbow
+
+        def rank(start: Sequence[float], q: Sequence[float]) -> int:
+            across = abs(start[_WRIST]) >= WRIST_MARGIN and start[_WRIST] * q[_WRIST] < 0.0
+            return 2 * elbow(start, q) + int(across)
         return rank
 
     def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:

@@ -501,6 +501,8 @@ class Planner:
                     search.solve(self.planner_name, q0, targets, budget, since=t))
             if path is not None:
                 break
+            if len(stages) > 1 and not n_stage:
+                timings["nearest_given_up"] = timings.get("nearest_given_up", 0.0) + 1.0
         timings["plan"] = time.perf_counter() - t
         if path is None:
             raise PlanningError("plan", "%s found no path within %.3g s (%s) from %s to %s%s"
