@@ -77,7 +77,7 @@ from vr_driver.params import DriverParams  # noqa: E402
 CELL = os.path.join(REPO, "panasonic_vr006l_support", "config", "cell_example.yaml")
 #: the cells whose goals alternate in pairs between a region and the rest of the cell: (TCP x, y, z
 #: ranges [mm] in ``base``, Ry range [deg]; Rx and Rz within +-30 deg) -- inside the hood
-GOAL_REGIONS = {"hood_post.yaml": ((1000.0, 1300.0), (180.0, 420.0), (380.0, 560.0), (30.0, 90.0))}
+GOAL_REGIONS = {"hood_post.yaml": ((850.0, 1050.0), (250.0, 650.0), (420.0, 700.0), (30.0, 90.0))}
 #: the venv of the peer planner (scripts/setup --bench-peers) and its answering script
 PEER_VENV = os.path.join(os.environ.get("VR_WS", os.path.join(REPO, ".ws")), "peers-planning")
 PEER_SCRIPT = os.path.join(REPO, "bench", "planning_peer.py")

@@ -16,6 +16,7 @@ padding from the cell as the plan action does (the robot's own shapes are not gr
 the whole call (IK, search, simplification, timing), measured here, so that the pipe is not in it.
 """
 import json
+import os
 import sys
 import time
 
@@ -43,6 +44,11 @@ def _objects(fcl, Pose, objects, padding):
 
 
 def main():
+    # the answers on a stdout of their own: whatever mplib prints (Python or C++: "IK failed", ...)
+    # goes to stderr
+    answers = os.fdopen(os.dup(1), "w")
+    os.dup2(2, 1)
+    sys.stdout = sys.stderr
     import mplib
     from mplib import Pose
     from mplib.collision_detection import fcl
@@ -55,7 +61,7 @@ def main():
     budget = float(setup.get("budget", 1.0))
     dt = float(setup.get("dt", 0.05))
     print(json.dumps({"ready": True, "version": getattr(mplib, "__version__", "?"),
-                      "setup_s": time.perf_counter() - t}), flush=True)
+                      "setup_s": time.perf_counter() - t}), file=answers, flush=True)
     for line in sys.stdin:
         query = json.loads(line)
         start = np.array(query["start"], dtype=float)
@@ -75,7 +81,7 @@ def main():
         if ok:
             answer["duration"] = float(result["duration"])
             answer["positions"] = np.asarray(result["position"], dtype=float).tolist()
-        print(json.dumps(answer), flush=True)
+        print(json.dumps(answer), file=answers, flush=True)
     return 0
 
 
