@@ -46,9 +46,11 @@ point of the arm by more than sum_i w_i |dq_i| <= sqrt(n) |dx|. The segment leng
 this bound is ``max_sweep`` (default 20 mm): between two checked configurations no point of the
 arm travels farther than that, so a collision is missed only where less than ``max_sweep`` / 2 of
 the arm crosses less than ``max_sweep`` of an obstacle -- the checker's padding covers it. For the
-VR-006L (w = 2.09, 1.64, 1.08, 0.95, 0.39, 0.39 m/rad) the planner checks a move of joint 1 alone
-every 0.22 deg, of joint 6 alone every 1.2 deg; the check of the result (which subdivides each chord
-by the sum itself, not the sqrt(n) bound) every 0.55 and 2.9 deg. The scaled space also
+VR-006L (w = 2.09, 1.64, 1.08, 0.95, 0.39, 0.39 m/rad) OMPL's own resolution checks a move of joint
+1 alone every 0.22 deg, of joint 6 alone every 1.2 deg; RRTConnect (the default) and the
+simplification after it are given a motion validator that subdivides each motion by the sum itself
+(:mod:`~vr_driver.kinematics.plan_search`, ``SWEEP_VALIDATED``): the same bound with up to sqrt(n)
+fewer checks, every 0.55 and 2.9 deg, as the check of the result. The scaled space also
 makes the planner's distance (which tree node is nearest) a measure of how far the arm moves.
 
 ``time_budget`` bounds the planner's search (OMPL's solve); the goal's IK, the simplification, the
