@@ -2,7 +2,7 @@
 """The bus's gaps at the controller's card, with the bus in the driver's thread and in a process of
 its own, idle and under load (printed, never asserted).
 
-    scripts/bench bus_health [-- --bauds 19200,187500 --designs before,after --loads idle,plan,validate,hog
+    scripts/bench bus_health [-- --bauds 19200,187500 --designs before,after --loads idle,plan,validate,hog,plan+hog
                                  --goals 100 --points 400000 --validate-window 12 --window 6 --protocol v1 | --quick]
 
 The card's DP watchdog (300 ms, the driver's default) stops the arm when the master is silent: what
@@ -37,7 +37,8 @@ planner, no garbage of the case before), and in it:
                 What counts is the load while it is checked: the window ends with the validation or
                 --validate-window s into it (400 000 points take about a minute, most of it the same
                 collision check sample after sample); the worker then ends without waiting for it;
-  ``hog``       two CPU hog processes (busy loops at normal priority) for --window s.
+  ``hog``       two CPU hog processes (busy loops at normal priority) for --window s;
+  ``plan+hog``  the plan goals with the two hogs running beside them.
 
   Designs: ``before`` -- ``bus_process`` false (the DP master in the driver's bus thread) and the
   planning in the driver's interpreter (driver.planning.PlanActionCore, the plan action's old way);
@@ -87,7 +88,7 @@ RESULT_TAG = "@@BUS_HEALTH_RESULT "
 CARD_TAG = "@@BUS_HEALTH_CARD "
 BAUDS = (19200, 187500)
 DESIGNS = ("before", "after")
-LOADS = ("idle", "plan", "validate", "hog")
+LOADS = ("idle", "plan", "validate", "hog", "plan+hog")
 #: [s] the target: every gap below this (half the card's 300 ms watchdog)
 TARGET_GAP = 0.150
 #: SCHED_FIFO priority of the card's and the line's processes (above the bus process's 20: the rig
@@ -482,7 +483,26 @@ class Validation(Load):
         return self.thread is not None and self.thread.is_alive()
 
 
-LOAD_CLASSES = {"idle": Idle, "plan": Plans, "validate": Validation, "hog": Hogs}
+class PlansBesideHogs(Plans):
+    """The plan goals (Plans) with the two busy loops (Hogs) running all the while: the planning
+    process and the hogs take both cores from the bus process."""
+
+    def run(self) -> str:
+        self.hogs = Hogs(self.core, dict(self.cfg, window=0.0))
+        self.hogs.run()
+        try:
+            return super().run() + ", 2 busy loops beside"
+        finally:
+            self.hogs.close()
+
+    def close(self) -> None:
+        hogs = getattr(self, "hogs", None)
+        if hogs is not None:
+            hogs.close()
+        super().close()
+
+
+LOAD_CLASSES = {"idle": Idle, "plan": Plans, "validate": Validation, "hog": Hogs, "plan+hog": PlansBesideHogs}
 
 
 # ------------------------------------------------------------------------------------------ worker
@@ -701,8 +721,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     from vr_driver.kinematics.deps import missing_dependencies
     missing = missing_dependencies()
     if missing:
-        skipped = [x for x in loads if x in ("plan", "validate")]
-        loads = [x for x in loads if x not in ("plan", "validate")]
+        skipped = [x for x in loads if x in ("plan", "validate", "plan+hog")]
+        loads = [x for x in loads if x not in ("plan", "validate", "plan+hog")]
         print("without the example cell and the loads %s: %s" % (", ".join(skipped) or "-",
                                                                  "; ".join(reason for _, reason in missing)))
         if not loads:

@@ -4,6 +4,7 @@
     scripts/env python3 bench/planning.py [--n 100] [--seed 1] [--budget 1.0] [--planner RRTConnect]
                                           [--velocity-scaling 1.0] [--ramp-time S]
                                           [--no-execute] [--protocol v2] [--driver] [--quick]
+                                          [--cell PATH] [--peer]
 
 The VR-006L (support package's xacro, moveit_config's SRDF) in the example cell
 (panasonic_vr006l_support/config/cell_example.yaml: table, pillar, shelf), collision padding the
@@ -21,6 +22,17 @@ default is 0.1, this bench asks for the full speed explicitly), samples every 0.
 the time of the whole call; then, independently of the planner, every sample and every straight
 chord between two samples (0.25 deg steps) checked with a CollisionChecker of the true shapes
 (padding 0: collisions) and with the padded one (inside the padding).
+
+``--cell PATH``: another cell (default the example cell). In ``bench/cells/hood_post.yaml`` (a hood
+on the table, open towards the robot, and a post) every other pair of goals lies inside the hood
+(:data:`GOAL_REGIONS`: a random TCP pose there, a free IK solution of it), so that each query goes in
+or out of it: a detour around its walls and under its top; still every other goal a pose goal.
+
+``--peer``: an independent compiled planner answers the same queries in the same run
+(bench/planning_peer.py: mplib, OMPL's RRTConnect on FCL in C++, its own IK and TOPP-RA; in the venv
+``.ws/peers-planning`` that ``scripts/setup --bench-peers`` makes, which this bench runs when the
+venv is missing; never used by the driver): from the same start to the same goal, the same budget,
+its time measured inside its own process; figures per goal kind, ours / the peer's, printed.
 
 Execution (unless --no-execute): each plan, validated as joint_trajectory_action validates it
 (driver.trajectories.validate from the arm's reported joints, segment_speeds), runs on the in-memory
@@ -49,6 +61,7 @@ import math
 import os
 import random
 import statistics
+import subprocess
 import sys
 import tempfile
 import time
@@ -63,6 +76,12 @@ from vr_driver.errors import MissingDependency  # noqa: E402
 from vr_driver.params import DriverParams  # noqa: E402
 
 CELL = os.path.join(REPO, "panasonic_vr006l_support", "config", "cell_example.yaml")
+#: the cells whose goals alternate in pairs between a region and the rest of the cell: (TCP x, y, z
+#: ranges [mm] in ``base``, Ry range [deg]; Rx and Rz within +-30 deg) -- inside the hood
+GOAL_REGIONS = {"hood_post.yaml": ((850.0, 1050.0), (250.0, 650.0), (420.0, 700.0), (30.0, 90.0))}
+#: the venv of the peer planner (scripts/setup --bench-peers) and its answering script
+PEER_VENV = os.path.join(os.environ.get("VR_WS", os.path.join(REPO, ".ws")), "peers-planning")
+PEER_SCRIPT = os.path.join(REPO, "bench", "planning_peer.py")
 #: joint_5 stays within this (deg): the part of the free space home is in (module text)
 WRIST_FOLD = 100.0
 #: the rig's workspace box (mm, deg): the arm's whole reach. The driver's default box (vr_driver.yaml,
@@ -87,6 +106,75 @@ def random_free(kin, checker, rng):
             return q
 
 
+def region_free(kin, checker, rng, region):
+    """A free configuration (joint_5 within WRIST_FOLD) whose TCP is a random pose in ``region``
+    (GOAL_REGIONS): a free IK solution of it, at random."""
+    from vr_driver.errors import KinematicsError
+    from vr_driver.poses import ControllerPose
+    (x0, x1), (y0, y1), (z0, z1), (r0, r1) = region
+    lim = kin.limits
+    while True:
+        pose = ControllerPose(rng.uniform(x0, x1), rng.uniform(y0, y1), rng.uniform(z0, z1),
+                              rng.uniform(-30.0, 30.0), rng.uniform(r0, r1), rng.uniform(-30.0, 30.0))
+        try:
+            sols = kin.ik_solutions(kin.conventions.controller_to_tip(pose))
+        except KinematicsError:
+            continue
+        sols = [tuple(q) for q in sols if abs(q[4]) <= math.radians(WRIST_FOLD) and not checker.in_collision(q)
+                and all(lo <= v <= hi for v, lo, hi in zip(q, lim.lower, lim.upper))]
+        if sols:
+            return sols[rng.randrange(len(sols))]
+
+
+class Peer:
+    """The peer planner in its own process (bench/planning_peer.py in PEER_VENV): :meth:`plan` sends
+    one query, returns its answer (ok, time [s] of its whole call, duration [s])."""
+
+    def __init__(self, kin, scene, padding, budget, dt, vs):
+        import json
+        python = os.path.join(PEER_VENV, "bin", "python3")
+        if subprocess.run([python, "-c", "import mplib"], capture_output=True).returncode if os.path.exists(python) \
+                else True:
+            subprocess.run([os.path.join(REPO, "scripts", "setup"), "--quiet", "--no-build", "--bench-peers"],
+                           check=True)
+        from panasonic_vr006l_support.description import default_xacro_path, render_urdf
+        self._tmp = tempfile.TemporaryDirectory(prefix="planning_peer_")
+        urdf = os.path.join(self._tmp.name, "vr006l.urdf")
+        with open(urdf, "w") as f:
+            f.write(render_urdf(default_xacro_path()))
+        self._json = json
+        self.proc = subprocess.Popen([python, PEER_SCRIPT], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        objects = [{"name": o.name, "shape": o.shape, "size": list(o.size), "position": list(o.position),
+                    "quaternion": list(o.quaternion)} for o in scene.objects()]
+        ready = self._ask({"urdf": urdf, "objects": objects, "padding": padding, "budget": budget, "dt": dt,
+                           "srdf": os.path.join(REPO, "panasonic_vr006l_moveit_config", "config",
+                                                "panasonic_vr006l.srdf"),
+                           "velocity": [v * vs for v in kin.limits.velocity],
+                           "acceleration": [a * vs for a in kin.limits.acceleration]})
+        self.version = ready.get("version", "?")
+
+    def _ask(self, message):
+        self.proc.stdin.write(self._json.dumps(message) + "\n")
+        self.proc.stdin.flush()
+        line = self.proc.stdout.readline()
+        if not line:
+            raise RuntimeError("the peer planner ended (exit %s)" % self.proc.wait())
+        return self._json.loads(line)
+
+    def plan(self, start, goal_joints, goal_tip=None):
+        message = {"start": list(start)}
+        if goal_tip is not None:
+            message["pose"] = [list(map(float, row)) for row in goal_tip]
+        else:
+            message["joints"] = list(goal_joints)
+        return self._ask(message)
+
+    def close(self):
+        self.proc.stdin.close()
+        self.proc.wait(timeout=10)
+        self._tmp.cleanup()
+
+
 def chord_collisions(checker, positions):
     """(samples or chord points in collision, the first one's contacts as text)."""
     hits, first = 0, ""
@@ -107,10 +195,10 @@ def chord_collisions(checker, positions):
 class Executor:
     """The in-memory driver rig; :meth:`run` executes one plan and checks every tick's joints."""
 
-    def __init__(self, kin, checker, protocol, ramp_time=None, planning_limits=""):
+    def __init__(self, kin, checker, protocol, ramp_time=None, planning_limits="", cell=CELL):
         sys.path.insert(0, os.path.join(REPO, "vr_driver", "test", "driver"))
         from _world import World
-        params = {"workspace": REACH_BOX, "scene": CELL}
+        params = {"workspace": REACH_BOX, "scene": cell}
         if planning_limits:
             params["planning_limits"] = planning_limits
         self.world = World(kin, params, protocol=protocol, ramp_time=ramp_time)
@@ -156,6 +244,52 @@ class Executor:
         return True, ""
 
 
+def print_profile(profiles):
+    """Where the plan action's whole call went, per goal kind: the shares of its parts (the plan
+    action's PlanOutcome.profile), the validity checks, the tries and why they were made again."""
+    for kind in ("joints", "pose", "all"):
+        rows = [(t, p) for k, t, p in profiles if kind in ("all", k)]
+        if not rows:
+            continue
+        whole = sum(t for t, _ in rows)
+        part = {key: sum(p.get(key, 0.0) for _, p in rows)
+                for key in ("crossing", "snapshot", "planner", "goal", "plan", "simplify", "time", "check",
+                            "stream_check")}
+        checks = sum(p.get("checks", 0) for _, p in rows)
+        causes = [c.split(":")[0] for _, p in rows for c in p.get("replans", ())]
+        given_up = sum(p.get("nearest_given_up", 0.0) for _, p in rows)
+        print("profile, %s goals (%d calls, %.2f s in all): planner %.0f %% (IK and goal checks %.0f %%, search %.0f %%, "
+              "simplification %.0f %%, timing %.0f %%, the result's check %.0f %%), the driver's stream check %.0f %%, "
+              "the elbow crossing %.0f %%, the checker's copy %.0f %%; %d validity checks (%.0f a call, %.1f us each "
+              "with the planner's part around them); %d tries, re-planned: %s; a pose's nearest IK solution given up "
+              "after its share of the budget: %d"
+              % (kind, len(rows), whole, *(100.0 * part[k] / whole for k in ("planner", "goal", "plan", "simplify",
+                                                                             "time", "check", "stream_check",
+                                                                             "crossing", "snapshot")),
+                 checks, checks / len(rows), 1e6 * (part["plan"] + part["simplify"] + part["check"]) / max(1, checks),
+                 sum(p.get("tries", 0) for _, p in rows),
+                 ", ".join("%s %d" % (c, causes.count(c)) for c in sorted(set(causes))) or "none", given_up))
+
+
+def print_peer(by_kind, total, answers, version):
+    """Ours and the peer's whole call per goal kind and in all (median, p95), the ratios, the
+    peer's successes and path durations."""
+    rows = [(kind, [t for t, _ in pairs], [a for _, a in pairs]) for kind, pairs in by_kind.items()]
+    rows.append(("all", list(total), answers))
+    for kind, ours, theirs in rows:
+        times = [a["time"] for a in theirs]
+        ok = sum(1 for a in theirs if a["ok"])
+        if not ours or not times:
+            continue
+        m, p = statistics.median(ours), percentile(ours, 95)
+        pm, pp = statistics.median(times), percentile(times, 95)
+        print("vs the peer (mplib %s), %s goals: whole call median %.0f ms vs %.0f ms (ratio %.2f), p95 %.0f ms vs "
+              "%.0f ms (ratio %.2f); the peer planned %d / %d%s"
+              % (version, kind, 1e3 * m, 1e3 * pm, m / pm, 1e3 * p, 1e3 * pp, p / pp, ok, len(theirs),
+                 ", its path duration median %.2f s" % statistics.median(a["duration"] for a in theirs if a["ok"])
+                 if ok else ""))
+
+
 def matched_limits(kin, ramp_time, directory):
     """(the path of a joint_limits.yaml in ``directory`` whose accelerations are each joint's speed
     limit / ``ramp_time``, the planning model with those limits): an arm with that ramp and the
@@ -190,6 +324,11 @@ def main() -> int:
                              "its checker, the workspace box, with v1 / v3 the wrist margin, the driver's own "
                              "stream check and re-plans) instead of the bare planner")
     parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
+    parser.add_argument("--cell", default=CELL, help="the cell (a scene YAML; default the example cell; "
+                        "bench/cells/hood_post.yaml: goals in and out of a hood)")
+    parser.add_argument("--peer", action="store_true",
+                        help="an independent compiled planner (mplib, in its own venv) on the same queries: "
+                             "its times and ours / its per goal kind")
     args = parser.parse_args()
     n = 10 if args.quick else args.n
     if args.ramp_time is not None and not (math.isfinite(args.ramp_time) and 0.0 < args.ramp_time <= 5.0):
@@ -200,8 +339,8 @@ def main() -> int:
         from vr_driver.kinematics.planner import Planner, PlanningError
         from vr_driver.kinematics.scene import load_scene
         padding = getattr(DriverParams(), "collision_padding", 0.01)
-        checker = CollisionChecker.default(scene=load_scene(CELL), padding=padding)
-        exact = CollisionChecker.default(scene=load_scene(CELL), padding=0.0)
+        checker = CollisionChecker.default(scene=load_scene(args.cell), padding=padding)
+        exact = CollisionChecker.default(scene=load_scene(args.cell), padding=0.0)
         from vr_driver.kinematics.solver import Kinematics
         kin = Kinematics.default()
         limits_file, planning_kin = "", kin
@@ -215,7 +354,15 @@ def main() -> int:
         return 0
     if args.driver and args.no_execute:
         parser.error("--driver plans on the rig's driver: it cannot go with --no-execute")
-    executor = None if args.no_execute else Executor(kin, exact, args.protocol, args.ramp_time, limits_file)
+    executor = None if args.no_execute else Executor(kin, exact, args.protocol, args.ramp_time, limits_file,
+                                                     args.cell)
+    peer = None
+    if args.peer:
+        try:
+            peer = Peer(kin, checker.scene, padding, args.budget, planner.dt, args.velocity_scaling)
+        except (OSError, RuntimeError, ValueError, subprocess.CalledProcessError) as exc:
+            print("the peer planner is not there (%s: %s): the bench runs without it" % (type(exc).__name__, exc))
+    region = GOAL_REGIONS.get(os.path.basename(args.cell))
     driver_planning = None
     if args.driver:
         from vr_driver.driver.planning import PlanActionCore, PlanGoal
@@ -223,23 +370,31 @@ def main() -> int:
     rng = random.Random(args.seed)
     print("planning benchmark: %d queries, seed %d, cell %s (%s), padding %.0f mm (the driver's), planner %s, "
           "budget %.2f s, velocity scaling %g, clearance %.0f mm, max sweep %.0f mm, dt %.2f s%s"
-          % (n, args.seed, os.path.relpath(CELL, REPO), ", ".join(checker.scene.names()), padding * 1e3, args.planner,
+          % (n, args.seed, os.path.relpath(args.cell, REPO), ", ".join(checker.scene.names()), padding * 1e3, args.planner,
              args.budget, args.velocity_scaling, planner.clearance * 1e3, planner.max_sweep * 1e3, planner.dt,
              "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol)
           + ("" if args.ramp_time is None else ", the arm's ramp %g s and the planner's accelerations matched "
              "(speed / %g s)" % (args.ramp_time, args.ramp_time))
-          + ("; planned by the plan action's core (driver.planning)" if driver_planning is not None else ""))
+          + ("; planned by the plan action's core (driver.planning)" if driver_planning is not None else "")
+          + ("" if region is None else "; every other pair of goals inside %s" % (region,))
+          + ("" if peer is None else "; the peer: mplib %s" % peer.version))
     start = executor.joints if executor is not None else tuple(kin.named_states["home"])
     total, solved, ompl_times, durations, failures, direct = [], [], [], [], [], 0
     plan_hits = padding_hits = executed = crossing = 0
     first_hit = first_pad = ""
     exec_fail = []
     kinds = {"joints": [0, 0], "pose": [0, 0]}
+    by_kind = {"joints": [], "pose": []}           # (our whole call [s], the peer's answer or None)
+    profiles = []                                  # (kind, whole call [s], PlanOutcome.profile)
     for i in range(n):
-        target = random_free(kin, checker, rng)
+        target = region_free(kin, checker, rng, region) if region is not None and (i // 2) % 2 == 0 \
+            else random_free(kin, checker, rng)
         kind = "pose" if i % 2 else "joints"
         goal = kin.fk_pose(target) if kind == "pose" else target
         kinds[kind][1] += 1
+        answer = None
+        if peer is not None:
+            answer = peer.plan(start, target, kin.fk(target) if kind == "pose" else None)
         t = time.perf_counter()
         try:
             if driver_planning is not None:
@@ -247,6 +402,7 @@ def main() -> int:
                     PlanGoal(pose=goal, velocity_scaling=args.velocity_scaling) if kind == "pose"
                     else PlanGoal(joints=(kin.joint_names, tuple(goal)), velocity_scaling=args.velocity_scaling),
                     start=start, seed=args.seed + i)
+                profiles.append((kind, time.perf_counter() - t, getattr(outcome, "profile", None) or {}))
                 if not outcome.ok:
                     raise PlanningError("plan", outcome.text)
                 plan = outcome.trajectory
@@ -254,11 +410,13 @@ def main() -> int:
                 plan = planner.plan(start, goal)
         except PlanningError as exc:
             total.append(time.perf_counter() - t)
+            by_kind[kind].append((total[-1], answer))
             solved.append(False)
             failures.append("query %d (%s): %s" % (i, kind, exc))
             crossing += start[4] * target[4] < 0.0
             continue
         total.append(time.perf_counter() - t)
+        by_kind[kind].append((total[-1], answer))
         solved.append(True)
         kinds[kind][0] += 1
         ompl_times.append(plan.timings["plan"] + plan.timings["simplify"])
@@ -307,6 +465,11 @@ def main() -> int:
               "controller's nearest-solution IK may take another wrist" % (len(failures), crossing))
     for line in failures[:10]:
         print("  failed: %s" % line)
+    if any(p for _, _, p in profiles):
+        print_profile(profiles)
+    if peer is not None:
+        peer.close()
+        print_peer(by_kind, total, [a for k in by_kind.values() for _, a in k], peer.version)
     median_ms = 1e3 * statistics.median(total)
     print("%s success >= 99 %%: %.1f %%" % ("PASS" if ok >= 0.99 * n else "MISS", 100.0 * ok / max(1, n)))
     print("%s median <= 100 ms: %.1f ms" % ("PASS" if median_ms <= 100.0 else "MISS", median_ms))

@@ -47,6 +47,29 @@ class MatchedLimitsTest(unittest.TestCase):
         # the model's own accelerations are faster than a 0.5 s ramp: the match changes something
         self.assertTrue(all(a < m for a, m in zip(acceleration, before)), (acceleration, before))
 
+    def test_goals_in_the_hood_are_free_with_the_tcp_inside_it(self):
+        """--cell bench/cells/hood_post.yaml: a goal of the hood's region (GOAL_REGIONS) is a free
+        configuration (the driver's padding) whose TCP lies in the region, and the region is under
+        the hood's top and between its walls."""
+        import random
+        from vr_driver.kinematics.collision import CollisionChecker
+        from vr_driver.kinematics.scene import load_scene
+        cell = os.path.join(REPO, "bench", "cells", "hood_post.yaml")
+        checker = CollisionChecker.default(scene=load_scene(cell), padding=0.01)
+        region = self.bench.GOAL_REGIONS[os.path.basename(cell)]
+        scene = {o.name: o for o in checker.scene.objects()}
+        top = scene["hood_top"]
+        self.assertLess(region[2][1] / 1000.0, top.position[2] - top.size[2] / 2.0)
+        self.assertGreater(region[1][0] / 1000.0, scene["hood_right"].position[1])
+        self.assertLess(region[1][1] / 1000.0, scene["hood_left"].position[1])
+        rng = random.Random(2)
+        for _ in range(3):
+            q = self.bench.region_free(self.kin, checker, rng, region)
+            self.assertFalse(checker.in_collision(q))
+            pose = self.kin.fk_pose(q)
+            for value, (lo, hi) in zip((pose.x, pose.y, pose.z), region[:3]):
+                self.assertTrue(lo - 1e-6 <= value <= hi + 1e-6, (pose, region))
+
     def test_a_ramp_out_of_range_is_refused_by_name(self):
         for value in ("0", "-1", "nan", "6"):
             res = subprocess.run([sys.executable, BENCH, "--ramp-time", value], capture_output=True, text=True,

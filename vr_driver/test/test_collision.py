@@ -109,6 +109,26 @@ def test_the_joint_vector_is_the_solvers(checker, kin):
 
 
 @needs_libs
+def test_frame_point_and_in_collision_here_are_one_forward_kinematics(checker, kin):
+    """frame_point: a point of tool0 at q as KDL's FK puts it; in_collision_here: the verdict of
+    in_collision at that q (free and colliding configurations alike); an unknown frame is refused."""
+    rng = np.random.default_rng(3)
+    lo, hi = np.array(kin.limits.lower), np.array(kin.limits.upper)
+    point = np.array([0.01, -0.02, 0.1])
+    verdicts = []
+    for _ in range(60):
+        q = lo + rng.random(6) * (hi - lo)
+        tip = kin.fk(q)
+        np.testing.assert_allclose(checker.frame_point(q, "tool0", point), tip[:3, :3] @ point + tip[:3, 3],
+                                   atol=1e-9)
+        verdicts.append(checker.in_collision_here())
+        assert verdicts[-1] == checker.in_collision(q)
+    assert any(verdicts) and not all(verdicts)
+    with pytest.raises(ModelError, match="no frame 'tool9'"):
+        checker.frame_point(q, "tool9")
+
+
+@needs_libs
 def test_home_and_zero_are_free_in_the_example_cell(checker):
     for q in (HOME, np.zeros(6)):
         assert not checker.in_collision(q)
@@ -284,7 +304,7 @@ def test_set_scene_replaces_the_world(checker, cell):
 def test_bad_input_is_refused(checker, urdf):
     from vr_driver.kinematics.collision import CollisionChecker
 
-    for bad in ([0.0] * 5, [0.0] * 7, [0.0, float("nan"), 0, 0, 0, 0], "abc"):
+    for bad in ([0.0] * 5, [0.0] * 7, [0.0, float("nan"), 0, 0, 0, 0], "abc", [0.5], "abcdef", np.zeros(1)):
         with pytest.raises(PoseError):
             checker.in_collision(bad)
     with pytest.raises(PoseError, match="joint_3"):

@@ -109,6 +109,23 @@ def test_fk_agrees_with_the_independent_numpy_model(kin, urdf):
         assert np.allclose(kin.fk(q), model.chain_fk("base_link", "tool0", np.array(q)), atol=1e-12)
 
 
+def test_tcp_position_is_fk_pose_s_position_with_any_tcp_and_base(kin):
+    """Kinematics.tcp_position (the fast path of the plan action's box) gives fk_pose's X, Y, Z, also
+    after the conventions change (a TCP offset, a raised base)."""
+    import copy
+    from vr_driver.poses import FrameConventions
+    rng = random.Random(9)
+    other = copy.copy(kin)
+    raised = np.eye(4)
+    raised[:3, 3] = (0.1, -0.2, 0.3)
+    for conv in (kin.conventions, kin.conventions.with_tcp((10.0, -20.0, 150.0, 5.0, 40.0, -30.0)),
+                 FrameConventions(raised, kin.conventions.flange_in_tip, kin.conventions.tcp_in_flange)):
+        other.conventions = conv
+        for _ in range(30):
+            q = kin.random_joints(rng)
+            assert np.allclose(other.tcp_position(q), other.fk_pose(q).as_tuple()[:3], atol=1e-9)
+
+
 def test_base_and_flange_frames_come_from_the_urdf(kin):
     conv = kin.conventions
     assert np.allclose(conv.base_in_root, np.eye(4))                       # base_frame_z = 0

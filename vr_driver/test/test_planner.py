@@ -363,6 +363,55 @@ def test_the_ompl_search_alone_finds_one_path_a_seed_and_says_why_it_found_none(
     assert walled_in.status in ("Approximate solution", "Timeout")   # no exact one: none
 
 
+def test_bisection_order_visits_each_inner_step_once_middle_first():
+    from vr_driver.kinematics.plan_search import bisection_order
+    for n in range(0, 40):
+        order = bisection_order(n)
+        assert sorted(order) == list(range(1, n)), n
+    assert bisection_order(8)[:3] == (4, 2, 6)
+
+
+def test_the_sweep_validator_checks_each_motion_at_the_sweep_and_fewer_states(kin):
+    """OmplSearch with ``sweep_motions``: every motion OMPL asks about (search and simplification)
+    is checked at states whose sweep bound sum_i w_i |dq_i| is at most max_sweep apart -- never more
+    (the guarantee), and about the bound itself, not sqrt(n) times finer as OMPL's resolution --
+    and the path found around the wall is valid; OMPL's own validator asks for more states."""
+    import importlib
+    from vr_driver.kinematics.plan_search import OmplSearch
+    from vr_driver.kinematics.planner import joint_weights
+    ompl = tuple(importlib.import_module(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+    lim, w = kin.limits, joint_weights(kin)
+    seen = []
+
+    def counted(q):
+        seen.append(q)
+        return wall(q)
+
+    sweep = OmplSearch(ompl, w, lim.lower, lim.upper, 0.02, counted, 7, sweep_motions=True)
+    assert sweep.sweep_motions
+    path = sweep.simplified(sweep.solve("RRTConnect", START, [GOAL], 5.0))
+    assert sweep.counts["motions"] > 0 and sweep.counts["states"] >= sweep.counts["motions"]
+    for a, b in zip(path, path[1:]):              # the simplified path: valid at 0.1 deg
+        n = max(1, int(math.ceil(max(abs(x - y) for x, y in zip(a, b)) / math.radians(0.1))))
+        assert all(wall(tuple(x + (y - x) * k / n for x, y in zip(a, b))) for k in range(n + 1))
+    checks_sweep = len(seen)
+    # one motion by hand: the states checked lie at most max_sweep apart by the sweep bound
+    seen.clear()
+    si = sweep.si
+    s1, s2 = sweep._state(START), sweep._state((-0.5, 0.6, -0.1, 0.3, 0.2, -0.4))
+    assert si.checkMotion(s1, s2)
+    f = sorted(sum(wi * abs(x - y) for wi, x, y in zip(w, q, START)) for q in seen)
+    whole = sum(wi * abs(x - y) for wi, x, y in zip(w, START, (-0.5, 0.6, -0.1, 0.3, 0.2, -0.4)))
+    gaps = [b - a for a, b in zip([0.0] + f, f)]
+    assert max(gaps) <= 0.02 + 1e-12 and abs(f[-1] - whole) < 1e-9 and len(seen) == math.ceil(whole / 0.02)
+    # OMPL's own resolution (|dx| <= max_sweep / sqrt(n)) asks for more states on the same search
+    seen.clear()
+    own = OmplSearch(ompl, w, lim.lower, lim.upper, 0.02, counted, 7)
+    assert not own.sweep_motions
+    own.simplified(own.solve("RRTConnect", START, [GOAL], 5.0))
+    assert len(seen) > checks_sweep, (len(seen), checks_sweep)
+
+
 def test_the_timing_alone_keeps_the_scaled_limits_from_rest_to_rest(kin):
     """kinematics.plan_timing: a path with a corner, timed at half speed and a quarter of the
     acceleration, sampled evenly every <= dt; it ends where the path ends, at rest."""

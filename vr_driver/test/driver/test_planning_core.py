@@ -58,6 +58,12 @@ def test_a_pose_behind_the_pillar_is_planned_accepted_and_run_by_the_driver(kin)
     out = planning.plan(PlanGoal(pose=BEHIND), seed=1)
     assert out.ok and out.code == P.SUCCESS, out.text
     plan = out.trajectory
+    # the call's profile: the planner's steps and the driver's stream check took time, the
+    # validity was asked, one try per plan made (a re-plan gives its reason)
+    prof = out.profile
+    assert prof["tries"] == 1 + len(prof["replans"]) and prof["checks"] > 0
+    assert prof["planner"] > 0.0 and prof["stream_check"] > 0.0 and prof["plan"] > 0.0
+    assert prof["planner"] + prof["stream_check"] + prof["crossing"] <= out.planning_time + 1e-3
     assert out.text.startswith("planned with RRTConnect in ") and "over %.2f s" % plan.duration in out.text
     assert plan.positions[0] == pytest.approx(start, abs=1e-9)
     dp, da = out.target.distance_to(BEHIND)
@@ -180,6 +186,55 @@ def test_cell_validity_is_a_padded_copy_and_names_the_box(kin):
     assert v.in_collision(up)
     words = [str(c) for c in v.contacts(up)]
     assert any(t.startswith("the TCP outside the workspace box (Z by ") for t in words), words
+
+
+def test_cell_validity_checks_the_box_by_the_checker_s_kinematics_as_by_kdl(kin):
+    """The box and the collisions by the checker's one forward kinematics give the verdicts of the
+    KDL path (the TCP by Kinematics.tcp_position, then the checker) on random configurations, in a
+    box small enough that the TCP leaves it on every side; with a TCP offset too."""
+    import random
+    w = world(kin)
+    from vr_driver.poses import Workspace
+    box = Workspace.from_dict({"x": [200.0, 1200.0], "y": [-700.0, 700.0], "z": [100.0, 1300.0]})
+    rng = random.Random(5)
+    qs = [kin.random_joints(rng) for _ in range(400)]
+    for k in (kin, _with_tcp(kin)):
+        fast = CellValidity(w.core.collision.copy(), k, box, margin=10.0)
+        slow = CellValidity(w.core.collision.copy(), k, box, margin=10.0)
+        slow._tcp = False                                   # the KDL path
+        assert fast._tcp_by_checker()
+        verdicts = [fast.in_collision(q) for q in qs]
+        assert verdicts == [slow.in_collision(q) for q in qs]
+        outside = [q for q in qs if slow._outside(q) is not None]
+        hits = [q for q in qs if w.core.collision.in_collision(q)]
+        assert outside and hits and not all(verdicts)       # each reason occurs, and free ones too
+        assert fast.counter[0] == len(qs)
+
+
+def _with_tcp(kin):
+    import copy
+    out = copy.copy(kin)
+    out.conventions = kin.conventions.with_tcp((0.0, 50.0, 120.0, 0.0, 30.0, 0.0))
+    out._tcp_frames = None
+    return out
+
+
+def test_a_pose_s_solutions_on_the_start_s_wrist_side_come_first_while_the_margin_holds(kin):
+    """v3: a pose goal's IK solutions with joint_5 across 0 from the start rank after those on its
+    side while the plan keeps the wrist margin (it walls joint_5 = 0 off), not on the last try
+    (no margin) nor from a start within the margin; the elbow's rank comes first; v2: no rank."""
+    w = world(kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
+    rank, last = planning._candidate_rank(wrist=True), planning._candidate_rank(wrist=False)
+    start = (0.0, 0.3, -0.3, 0.0, 0.5, 0.0)
+    same, across = (0.5, 0.4, -0.2, 1.0, 0.4, 0.5), (0.5, 0.4, -0.2, -2.1, -0.4, -2.6)
+    assert rank(start, same) == 0 and rank(start, across) == 1
+    assert last(start, same) == 0 and last(start, across) == 0
+    assert rank((0.0, 0.3, -0.3, 0.0, 0.02, 0.0), across) == 0          # within the 3 deg margin
+    elbow = planning._goal_preference()
+    other_branch = (0.5, 0.4, -2.6, 1.0, 0.4, 0.5)
+    assert elbow(start, other_branch) == 1 and rank(start, other_branch) == 2 > rank(start, across)
+    assert PlanActionCore(world(kin, "v2").core, kinematics=kin)._candidate_rank(wrist=True) is None
 
 
 def test_arm_points_run_from_the_base_to_the_tcp(kin):

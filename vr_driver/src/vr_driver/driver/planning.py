@@ -44,7 +44,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 from ..errors import MissingDependency, VrDriverError
 from ..kinematics import deps
@@ -136,6 +136,12 @@ class PlanOutcome:
     planner_id: str = ""
     target: Optional[ControllerPose] = None
     contacts: Tuple[Any, ...] = field(default=())
+    #: where the call's time went [s] and what it did: ``crossing`` (the elbow crossing's waypoints),
+    #: ``snapshot`` (copying the checker), the planner's steps summed over the tries (``goal``,
+    #: ``plan``, ``simplify``, ``time``, ``check``), ``stream_check`` (the driver's own check of each
+    #: plan, :meth:`PlanActionCore.driver_refusal`), ``checks`` (validity checks made: the box and the
+    #: checker), ``tries`` (plans made) and ``replans`` (why a try was planned again, in words)
+    profile: Dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
@@ -173,8 +179,11 @@ class CellValidity:
     ``set_padding`` (the planner's clearance: raising the padding by x also shrinks the box by x)."""
 
     def __init__(self, checker: Any, kinematics: Any, workspace: Workspace, margin: float = 0.0,
-                 padding: float = 0.0) -> None:
+                 padding: float = 0.0, counter: Optional[List[int]] = None) -> None:
         self.checker = checker
+        #: [checks made by this validity and its copies] (the plan action's profile)
+        self.counter = counter if counter is not None else [0]
+        self._tcp: Any = None           # _tcp_by_checker's finding
         self.kin = kinematics
         self.workspace = workspace
         self.margin = float(margin)
@@ -192,24 +201,54 @@ class CellValidity:
 
     def copy(self) -> "CellValidity":
         return CellValidity(self.checker.copy() if self.checker is not None else None, self.kin, self.workspace,
-                            self.margin, self._padding)
+                            self.margin, self._padding, self.counter)
 
     def _outside(self, q: Sequence[float]) -> Optional[Tuple[str, float, str]]:
         """(field, excess, unit) of the TCP's worst field beyond the box less the margin, or None."""
-        pose = self.kin.fk_pose(q)
         worst = None
-        for name, unit in (("x", "mm"), ("y", "mm"), ("z", "mm")):
+        for name, value in zip(("x", "y", "z"), self.kin.tcp_position(q)):
             lo, hi = getattr(self.workspace, name)
-            value = getattr(pose, name)
             excess = max(lo + self.margin - value, value - (hi - self.margin))
             if excess > 0 and (worst is None or excess > worst[1]):
-                worst = (name.upper(), excess, unit)
+                worst = (name.upper(), excess, "mm")
         return worst
 
+    def _tcp_by_checker(self) -> Any:
+        """(the checker's frame of the chain's tip, the TCP in it [m], the 4x4 from the root to
+        ``base``) when the checker's model puts the TCP where the kinematics do (checked at three
+        configurations, to 1e-6 mm), else False: then the box is checked by KDL's FK."""
+        if self._tcp is None:
+            self._tcp = False
+            if self.checker is not None and hasattr(self.checker, "frame_point") \
+                    and hasattr(self.kin, "tcp_in_tip"):
+                base, offset = self.kin.tcp_in_tip()
+                try:
+                    n = len(self.kin.joint_names)
+                    for q in ((0.0,) * n, tuple(0.3 + 0.1 * i for i in range(n)), tuple(-0.9 + 0.2 * i for i in range(n))):
+                        p = base[:3, :3] @ self.checker.frame_point(q, self.kin.tip, offset) + base[:3, 3]
+                        if max(abs(a - b / 1000.0) for a, b in zip(p, self.kin.tcp_position(q))) > 1e-9:
+                            return self._tcp
+                except (VrDriverError, ValueError, TypeError):
+                    return self._tcp
+                self._tcp = (self.kin.tip, offset, base)
+        return self._tcp
+
     def in_collision(self, q: Sequence[float]) -> bool:
-        if self.checker is not None and self.checker.in_collision(q):
-            return True
-        return self._outside(q) is not None
+        self.counter[0] += 1
+        tcp = self._tcp_by_checker()
+        if not tcp:
+            # the box first: the TCP's position alone (KDL), a third of the checker's time
+            if self._outside(q) is not None:
+                return True
+            return self.checker is not None and self.checker.in_collision(q)
+        # one forward kinematics (the checker's pinocchio) for the box and the collisions
+        frame, offset, base = tcp
+        p = self.checker.frame_point(q, frame, offset)
+        ws, m = self.workspace, self.margin
+        for value, (lo, hi) in zip(base[:3, :3] @ p + base[:3, 3], (ws.x, ws.y, ws.z)):
+            if not lo + m <= value * 1000.0 <= hi - m:
+                return True
+        return self.checker.in_collision_here()
 
     def contacts(self, q: Sequence[float]) -> List[Any]:
         out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
@@ -348,40 +387,63 @@ class PlanActionCore:
             if isinstance(start, str):
                 return PlanOutcome(INVALID_ROBOT_STATE, start, planner_id=planner_id)
         refusal = ""
+        prof: Dict[str, Any] = {"crossing": 0.0, "snapshot": 0.0, "planner": 0.0, "stream_check": 0.0, "checks": 0,
+                                "tries": 0, "replans": []}
+        tick = time.perf_counter()
         try:
             crossing, target = self._elbow_crossing(tuple(start), target)
         except PlanningError:
             crossing = ()           # (the planner says why, below)
+        prof["crossing"] = time.perf_counter() - tick
         # a joint goal with joint_5 of the other sign: the wrist margin would wall every path off
         wrist_across = isinstance(target, tuple) and len(target) == len(start) and start[_WRIST] * target[_WRIST] < 0.0
+        validity = None
         for attempt in range(ATTEMPTS):
+            if validity is not None:
+                prof["checks"] += validity.counter[0]
+            prof["tries"] += 1
+            tick = time.perf_counter()
             try:
                 with self._lock:
                     with self.core.planning_gate:     # the checker is replaced as a whole under it
                         validity = self.snapshot()
+                    prof["snapshot"] += time.perf_counter() - tick
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
-                                      goal_preference=self._goal_preference())
+                                      goal_preference=self._candidate_rank(
+                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across))
                     plan = self._at_goal(planner, tuple(start), target) or self._plan(planner, tuple(start), target,
                                                                                       crossing)
             except PlanningError as exc:
+                prof["planner"] += time.perf_counter() - tick
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
+                    prof["replans"].append("%s: %s" % (exc.step, str(exc)[:80]))
                     continue
+                prof["checks"] += validity.counter[0] if validity is not None else 0
                 return PlanOutcome(code_of(exc), "%s: %s" % (_STEP_WORDS.get(exc.step, "refused"), exc),
-                                   planning_time=self.clock() - t0, planner_id=planner_id, contacts=exc.contacts)
+                                   planning_time=self.clock() - t0, planner_id=planner_id, contacts=exc.contacts,
+                                   profile=prof)
             except (VrDriverError, ValueError, TypeError) as exc:
                 return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planning_time=self.clock() - t0,
                                    planner_id=planner_id)
+            prof["planner"] += time.perf_counter() - tick
+            for key, value in plan.timings.items():
+                prof[key] = prof.get(key, 0.0) + value
+            tick = time.perf_counter()
             refusal = self.driver_refusal(plan)
+            prof["stream_check"] += time.perf_counter() - tick
             if not refusal:
                 break
+            prof["replans"].append("stream: %s" % refusal[:80])
         else:
+            prof["checks"] += validity.counter[0] if validity is not None else 0
             return PlanOutcome(INVALID_MOTION_PLAN, "the driver would refuse each of %d plans, the last: %s%s"
                                % (ATTEMPTS, refusal, self._across_the_elbow(start, plan.goal)),
-                               planning_time=self.clock() - t0, planner_id=planner_id)
+                               planning_time=self.clock() - t0, planner_id=planner_id, profile=prof)
+        prof["checks"] += validity.counter[0] if validity is not None else 0
         elapsed = self.clock() - t0
         end = self.kin.fk_pose(plan.goal)
         if len(plan.times) == 1:
@@ -391,7 +453,7 @@ class PlanActionCore:
                     % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling))
         if not self.collision_checked:
             text += "; collisions NOT checked (collision_check: false)"
-        return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end)
+        return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof)
 
 
     def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
@@ -449,6 +511,25 @@ class PlanActionCore:
             side = math.remainder(start[_ELBOW] - stretched, 2.0 * math.pi)
             other = math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)
             return 0 if side * other >= 0.0 else 1
+        return rank
+
+    def _candidate_rank(self, wrist: bool):
+        """The rank of a pose goal's IK solution the planner orders them by (lower first, then the
+        nearest): with a Cartesian protocol, :meth:`_goal_preference`'s (the start's elbow branch
+        first) and, while the plan keeps the wrist margin (``wrist``), the solutions with joint_5
+        on the start's side of 0 before the others: the margin walls joint_5 = 0 off, and the nearest
+        solution across it cost a try half its budget to find no path (bench/planning.py: 3 of
+        10 pose goals; their next solutions, on the start's side, were planned in the rest). A start
+        within the margin of 0 leaves both sides open. None with joint targets."""
+        elbow = self._goal_preference()
+        if elbow is None:
+            return None
+        if not wrist:
+            return elbow
+
+        def rank(start: Sequence[float], q: Sequence[float]) -> int:
+            across = abs(start[_WRIST]) >= WRIST_MARGIN and start[_WRIST] * q[_WRIST] < 0.0
+            return 2 * elbow(start, q) + int(across)
         return rank
 
     def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:

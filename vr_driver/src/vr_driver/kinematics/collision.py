@@ -95,6 +95,7 @@ class CollisionChecker:
         self.joint_names = tuple(names)
         self._q_index = np.array(idx, dtype=int)
         self._q = self._pin.neutral(model)
+        self._frames: dict = {}          # frame name -> id (frame_point)
         self.disabled = set(disabled)
         self.adjacent_free = adjacent_free
         # the link each robot geometry belongs to, and whether it moves
@@ -235,6 +236,16 @@ class CollisionChecker:
 
     # ------------------------------------------------------------------------------------ queries
     def _config(self, q: Sequence[float]) -> np.ndarray:
+        full = self._q.copy()
+        try:
+            # the common case in one step (a planner checks hundreds of thousands of configurations
+            # a plan): the right length, every value finite; anything else is looked at below
+            if len(q) == len(self._q_index):          # (not broadcast from one value)
+                full[self._q_index] = q
+                if np.isfinite(full).all():
+                    return full
+        except (TypeError, ValueError):
+            pass
         try:
             arr = np.asarray(q, dtype=float).reshape(-1)
         except (TypeError, ValueError) as exc:
@@ -253,6 +264,26 @@ class CollisionChecker:
         """True when any checked pair is closer than the padding (or overlaps) at ``q``."""
         return bool(self._pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data,
                                                 self._config(q), True))
+
+    def frame_point(self, q: Sequence[float], frame: str, point: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
+        """The point ``point`` [m] of the model's frame ``frame`` in the root frame at ``q``; the
+        kinematics of ``q`` are kept for :meth:`in_collision_here`. ModelError for a frame the model
+        has not. (Pinocchio's forward kinematics: a twentieth of KDL's through its Python wrapper.)"""
+        pin = self._pin
+        fid = self._frames.get(frame)
+        if fid is None:
+            if not self.model.existFrame(frame):
+                raise ModelError("collision model: no frame %r" % frame)
+            fid = self._frames[frame] = self.model.getFrameId(frame)
+        pin.forwardKinematics(self.model, self.data, self._config(q))
+        return pin.updateFramePlacement(self.model, self.data, fid).act(np.asarray(point, dtype=float))
+
+    def in_collision_here(self) -> bool:
+        """:meth:`in_collision` at the configuration of the last :meth:`frame_point` (its
+        kinematics not computed again)."""
+        pin = self._pin
+        pin.updateGeometryPlacements(self.model, self.data, self.geom_model, self.geom_data)
+        return bool(pin.computeCollisions(self.geom_model, self.geom_data, True))
 
     def contacts(self, q: Sequence[float]) -> List[Contact]:
         """Every colliding pair at ``q`` (one per link / object pair: the deepest geometry pair),

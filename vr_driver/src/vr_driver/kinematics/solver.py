@@ -39,7 +39,7 @@ from panasonic_vr006l_support import model as _support_model
 
 from .. import validate
 from ..errors import JointLimitError, KinematicsError, ModelError, NearSingularError, PoseError
-from ..poses import ControllerPose, FrameConventions, finite_number, rpy_to_matrix
+from ..poses import ControllerPose, FrameConventions, finite_number, matrix_to_kdl_frame, rpy_to_matrix
 from .ik import IkSettings, IkSolver, jnt_array, rotation_and_position
 from .limits import JointLimits, model_accelerations
 
@@ -242,6 +242,7 @@ class Kinematics:
         self.analytic_reason = self.ik_solver.analytic_reason
         self.named_states = {name: self.joint_vector(values) for name, values in (named_states or {}).items()}
         self.conventions = conventions or self._default_conventions()
+        self._tcp_frames: Optional[Tuple[FrameConventions, Any, Any]] = None   # (tcp_position's)
 
     # ------------------------------------------------------------------------------------ factories
     @classmethod
@@ -405,6 +406,27 @@ class Kinematics:
     def fk_pose(self, q: Sequence[float]) -> ControllerPose:
         """The controller pose (TCP in ``base``, mm / deg) at joints ``q``."""
         return self.conventions.tip_to_controller(self.fk(q))
+
+    def tcp_in_tip(self) -> Tuple[np.ndarray, np.ndarray]:
+        """(``base`` in the chain root's terms: the 4x4 that takes a point in the root to ``base``
+        [m], the TCP's position in the tip's frame [m]) -- the two fixed parts of :meth:`tcp_position`."""
+        conv = self.conventions
+        root_to_base = conv.root_to_base(np.eye(4))
+        # tip_to_tcp(I) = root_in_base @ tcp_in_tip: less the base part, the TCP in the tip's frame
+        return root_to_base, np.linalg.solve(root_to_base, conv.tip_to_tcp(np.eye(4)))[:3, 3]
+
+    def tcp_position(self, q: Sequence[float]) -> Tuple[float, float, float]:
+        """The TCP's position in ``base`` [mm] at joints ``q`` (the X, Y, Z of :meth:`fk_pose`),
+        without validating ``q`` and without the orientation: the fast path of a check that runs
+        per configuration (the plan action's workspace box, ``driver.planning.CellValidity``),
+        all in KDL's C++ (one ``fk_pose`` builds and checks a ControllerPose: 5 x as long)."""
+        conv = self.conventions
+        cached = self._tcp_frames
+        if cached is None or cached[0] is not conv:
+            base, offset = self.tcp_in_tip()
+            cached = self._tcp_frames = (conv, matrix_to_kdl_frame(base), kdl.Vector(*(float(v) for v in offset)))
+        p = cached[1] * (self.fk_frame(q) * cached[2])
+        return p[0] * 1000.0, p[1] * 1000.0, p[2] * 1000.0
 
     # -------------------------------------------------------------------------------- Jacobian
     def jacobian(self, q: Sequence[float]) -> np.ndarray:
