@@ -31,7 +31,7 @@ from ..errors import VrDriverError
 from ..params import DriverParams
 from ..protocol.v3 import FeedbackV3
 
-__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_users", "heartbeat_brackets", "new_loops"]
+__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_users", "heartbeat_brackets", "heartbeat_samples", "new_loops"]
 
 log = logging.getLogger("vr_driver.commission")
 
@@ -258,3 +258,22 @@ def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]
     (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
     return [(k, prev if prev is not None else c.request, c.arrival if c.arrival is not None else c.time)
             for c, k, prev in new_loops(cycles) if k > 0]
+
+
+def heartbeat_samples(cycles: Iterable[Cycle]) -> List[Tuple[float, int]]:
+    """(request time, unwrapped heartbeat) for EVERY record of ``cycles`` (the loop count the card
+    showed when the master asked; unwrapped mod 65536 from the first record): what
+    :func:`~vr_driver.commission.analysis.loop_spread` reads -- a record that brought no new loop
+    says as much as one that did."""
+    out: List[Tuple[float, int]] = []
+    last: Optional[int] = None
+    k = 0
+    for c in cycles:
+        fb = c.feedback
+        if fb is None:
+            continue
+        if last is not None:
+            k += (fb.heartbeat - last) % 65536
+        last = fb.heartbeat
+        out.append((c.request, k))
+    return out

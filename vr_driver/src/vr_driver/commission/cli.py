@@ -291,7 +291,8 @@ class _Runner:
         measured.pop("byte_order_tried", None)
         limits = joint_limits(kin.limits.names, kin.limits.velocity, kin.limits.acceleration, measured)
         limits_path = os.path.join(os.path.dirname(os.path.abspath(args.out)), "joint_limits.yaml")
-        write_yaml(args.out, measured, ctx.identity, results, limits_path, robot_time)
+        write_yaml(args.out, measured, ctx.identity, results, limits_path, robot_time,
+                   not_measured=ctx.not_measured)
         write_joint_limits(limits_path, limits, args.out, sorted((measured.get("accelerations") or {}).keys()))
         self.say("written: %s (driver.launch commissioning:=%s), %s, the bus log %s"
                  % (args.out, os.path.abspath(args.out), limits_path, log_path))

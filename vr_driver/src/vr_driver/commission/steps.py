@@ -47,7 +47,7 @@ from ..protocol.common import ByteOrder, StatusBits
 from ..protocol.v3 import (CartesianSlot, CommandV3, Control, FeedbackV3, RejectCode, StreamState, check_word,
                            next_seq, seq_after)
 from . import analysis
-from .bus import CommissionBus, CommissionError, Cycle, heartbeat_brackets, new_loops
+from .bus import CommissionBus, CommissionError, Cycle, heartbeat_brackets, heartbeat_samples, new_loops
 
 log = logging.getLogger("vr_driver.commission")
 
@@ -115,6 +115,9 @@ class Context:
         self.sizes = sizes
         self.say = say
         self.measured: Dict[str, Any] = {}
+        #: the controller facts a step could not measure: {key: why} (the YAML lists them under
+        #: controller/not_measured, the reasons under commissioning; the driver keeps its assumption)
+        self.not_measured: Dict[str, str] = {}
         self.identity: Dict[str, Any] = {}
         self.seq = 0                   # the last sequence number sent
         self.start_joints: Optional[Tuple[float, ...]] = None
@@ -477,22 +480,41 @@ class LoopStep(Step):
                 "watching it while the arm moves." % (ctx.sizes.heartbeat_time, ctx.sizes.loop_move,
                                                       ctx.sizes.loop_percent))
 
+    #: the longest the loop step watches the heartbeat at rest, in heartbeat times, where the spread
+    #: needs a longer watch (a bus cycle longer than the loop: 19.2 kbit/s)
+    LONGEST_WATCH = 4.0
+
     def run(self, ctx: Context) -> List[Finding]:
-        rest = analysis.loop_timing(heartbeat_brackets(ctx.idle(ctx.sizes.heartbeat_time)))
+        watched = ctx.idle(ctx.sizes.heartbeat_time)
+        rest = analysis.loop_timing(heartbeat_brackets(watched))
         if rest is None:
             raise _Abort([Finding("program loop", "the heartbeat counts every loop", "the heartbeat does not move",
                                   "the program is not running (or does not count): start it", False)],
                          "the heartbeat stands still")
+        spread = ctx.while_cycling(analysis.loop_spread, heartbeat_samples(watched), ctx.bus.period)
+        more = analysis.watch_more(spread, self.LONGEST_WATCH * ctx.sizes.heartbeat_time)
+        if more > 0.0:
+            ctx.say("  the loop's spread is not resolved in %.0f s at this bus rate: watching %.0f s more (nothing "
+                    "moves)" % (spread.span, more))
+            watched = watched + ctx.idle(more)
+            rest = analysis.loop_timing(heartbeat_brackets(watched)) or rest
+            spread = ctx.while_cycling(analysis.loop_spread, heartbeat_samples(watched), ctx.bus.period)
         ctx.measured["loop_period"] = rest.period
-        ctx.measured["loop_period_spread"] = rest.spread
-        steady = rest.spread is not None and rest.spread <= max(0.001, 0.1 * rest.period)
+        if spread.resolved and spread.spread is not None:
+            ctx.measured["loop_period_spread"] = spread.spread
+        else:
+            ctx.not_measured["loop_period_spread"] = "the spread of the loop's periods was not resolved: %s" % spread.why
+        verdict = {"steady": "steady: spread %s" % spread.why, "irregular": "irregular: spread %s" % spread.why,
+                   "not resolved": "spread not resolved: %s" % spread.why}[spread.verdict]
         findings = [Finding(
             "program loop at rest (heartbeat)", "steady",
-            "period %s, spread %s, longest gap %s (%d loops in %.1f s)" % (
-                _ms(rest.period), _ms(rest.spread) if rest.spread is not None else "not resolved at this bus rate",
-                _ms(rest.max_gap), rest.loops, rest.span),
-            "none" if steady else "the driver dates each record by the heartbeat (record_clock): its joint_states "
-            "stamps may be early by up to the spread", steady if rest.spread is not None else None)]
+            "period %s, longest gap %s (%d loops in %.1f s); %s" % (
+                _ms(rest.period), _ms(rest.max_gap), rest.loops, rest.span, verdict),
+            {"steady": "none", "irregular": "the driver dates each record by the heartbeat (record_clock), assuming a "
+             "steady loop: its joint_states stamps may be off by the loops' wander (%s a period)" % _ms(spread.spread),
+             "not resolved": "unknown: if the loop is irregular, the driver's joint_states stamps (dated by the "
+             "heartbeat) may be off by its wander -- watch longer (--heartbeat-time) or on a faster bus"}[spread.verdict],
+            {"steady": True, "irregular": False, "not resolved": None}[spread.verdict])]
         q0 = ctx.current_joints(ctx.start_joints)
         sign = ctx.direction(q0, 6, ctx.sizes.loop_move)
         moved = ctx.move_to(ctx.offset(q0, 6, sign * ctx.sizes.loop_move), ctx.sizes.loop_percent)
@@ -517,7 +539,8 @@ class LoopStep(Step):
             "program loop during a MOVE", "keeps running (inputs read, outputs written while the arm moves)",
             "blocks: %d new heartbeats in the %.2f s move (%.0f expected)" % (max(0, beats), duration, expected)
             if blocks else
-            "runs: period %s, longest gap %s" % (_ms(during.period if during else None), _ms(gap)),
+            ("runs: period %s, longest gap %s" % (_ms(during.period), _ms(gap)) if during is not None else
+             "runs: %d new heartbeats in the %.2f s move (%.0f expected)" % (beats, duration, expected)),
             "v3 cannot stream with it: the feedback freezes while the arm moves, a target is taken only between "
             "two MOVEs and STOP is not seen; the driver refuses v3 at start. Use protocol v1 (ROSLINK, §5; "
             "protocol: v1, the card's v1 modules) or run the fieldbus part of the program in a parallel task"
@@ -686,37 +709,51 @@ class LookAheadStep(Step):
                     ring = max(ring, (c.feedback.accepted_seq - c.feedback.done_seq) % 65535)
             results[smooth] = self._stops(ctx, cycles, q0, pts, seqs)
             ctx.move_to(q0, s.stream_percent)
-        ctx.measured["ring_size"] = ring
         blended, blended_words = _verdict(results[s.stream_smooth])
         exact, exact_words = _verdict(results[0])
         findings = []
+        hidden = ("the program loop blocks during a MOVE: each MOVE ends before the next record is read, so the "
+                  "bus shows neither the interpreter's look-ahead nor the ring (a program whose fieldbus part runs "
+                  "in a parallel task may have both -- commission again after that change)")
         if ctx.loop_blocks:
-            lookahead = 0
-            measured = "each point a stop (the loop blocks during a MOVE: each MOVE ends before the next is read)"
+            ctx.not_measured["interpreter_lookahead"] = hidden
+            ctx.not_measured["ring_size"] = hidden
+            lookahead = None
+            measured = "not measured: each point a stop under this program (the loop blocks during a MOVE)"
         elif blended is None:
             lookahead = None
+            ctx.not_measured["interpreter_lookahead"] = "unclear at smooth %d: %s" % (s.stream_smooth, blended_words)
             measured = "unclear at smooth %d: %s" % (s.stream_smooth, blended_words)
         else:
             lookahead = 0 if blended else 1
             measured = "%s at smooth %d" % (blended_words, s.stream_smooth)
         if lookahead is not None:
             ctx.measured["interpreter_lookahead"] = lookahead
+        if not ctx.loop_blocks and ring >= 1:
+            ctx.measured["ring_size"] = ring
         consequence = {0: "no blending: v3 runs a path as a string of stops (the smooth level is lost: no "
                           "look-ahead, or the input read between two MOVEPs ends the blend). Streams take longer "
                           "by a ramp at every point; stream_smooth: 0 (the driver then times each point as a stop)",
                        1: "none (at least 1: the bus cannot tell 1 from more while the program's ring feeds it)"}
+        if ctx.loop_blocks:
+            why = ("none under protocol v1 (one MOVE at a time); written as not measured (controller/not_measured): "
+                   "the driver keeps its assumption and says so, and a v3 program must be commissioned again")
+        else:
+            why = consequence.get(lookahead, "unclear: run the step again, watch the arm")
         findings.append(Finding("interpreter look-ahead (blending through a point)", "reads at least one MOVE ahead",
                                 measured + ("" if lookahead is None else ": look-ahead %s" %
                                             ("0" if lookahead == 0 else ">= 1")),
-                                consequence.get(lookahead, "unclear: run the step again, watch the arm"),
-                                None if lookahead is None else lookahead >= 1))
+                                why, None if lookahead is None else lookahead >= 1))
         if not ctx.loop_blocks:
             findings.append(Finding("smooth 0 (an exact stop)", "stops at every point", exact_words,
                                     "none" if exact else "unclear: run the step again, watch the arm" if exact is None
                                     else "the program does not pass the smooth level to MOVEP: check §10.7", exact))
-        findings.append(Finding("the program's ring (§10.4 rule 2)", "4 positions", "%d targets taken ahead of the "
-                                "arm at most" % ring, "none" if ring >= 2 else "fewer than two: the stream starves "
-                                "between points", ring >= 2))
+            findings.append(Finding("the program's ring (§10.4 rule 2)", "4 positions", "%d targets taken ahead of "
+                                    "the arm at most" % ring, "none" if ring >= 2 else "fewer than two: the stream "
+                                    "starves between points", ring >= 2))
+        else:
+            findings.append(Finding("the program's ring (§10.4 rule 2)", "4 positions", "not measured: the loop "
+                                    "blocks during a MOVE (one target at a time)", "as for the look-ahead", None))
         return findings
 
     def _stops(self, ctx: Context, cycles: Sequence[Cycle], q0: Sequence[float], pts: Sequence[Sequence[float]],
@@ -793,6 +830,8 @@ class ConfigurationStep(Step):
         j6 = math.degrees
         findings = []
         if ctx.loop_blocks or end6 is None:
+            ctx.not_measured["configuration"] = ("the loop blocks during a MOVE: each target is taken with the arm at "
+                                                 "the previous one, where both rules agree")
             findings.append(Finding("configuration of a Cartesian target", "nearest the previous target's joints",
                                     "not told apart: the loop blocks, each target is taken with the arm at the "
                                     "previous one (where both rules agree)", "none while targets are taken at rest",
@@ -839,6 +878,8 @@ class RampStep(Step):
     def run(self, ctx: Context) -> List[Finding]:
         s = ctx.sizes
         if ctx.loop_blocks:
+            for key in ("accelerations", "ramp_time", "ramp_shape"):
+                ctx.not_measured[key] = "the loop blocks during a MOVE: no record while the arm moves"
             return [Finding("per-axis acceleration", "model: full speed in 0.1 s", "not measured: the loop blocks "
                             "during a MOVE (no record while the arm moves)", "keep the model's accelerations", None)]
         q0 = ctx.current_joints(ctx.start_joints)
