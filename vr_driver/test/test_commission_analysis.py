@@ -245,12 +245,27 @@ def test_cli_refuses_bad_arguments_and_asks_before_anything_is_sent(tmp_path):
     assert "--rt-priority 120: give 0 (normal scheduling) or 1..99" in out.getvalue()
     asked = []
     out = io.StringIO()
-    port = str(tmp_path / "no_such_port")
-    assert main(["--port", port, "--out", str(tmp_path / "c.yaml")], out=out,
+    port = tmp_path / "ttyUSB7"
+    port.write_text("")                     # a port that exists (a file here): the question comes first
+    assert main(["--port", str(port), "--out", str(tmp_path / "c.yaml")], out=out,
                 ask=lambda q: asked.append(q) or "n") == 1
     assert asked and "clear space" in asked[0]
     assert "nothing was sent" in out.getvalue()
     assert not (tmp_path / "c.yaml").exists()
+
+
+def test_a_missing_port_is_said_at_once():
+    """A port that does not exist: said at once, before any question or the connect timeout (it was
+    said after the whole 10 s), with the serial ports there; the exit status of a controller that
+    cannot be reached."""
+    out, asked = io.StringIO(), []
+    t0 = time.monotonic()
+    assert main(["--port", "/dev/ttyUSB_nope", "--connect-timeout", "30"], out=out,
+                ask=lambda q: asked.append(q) or "y") == 1
+    assert time.monotonic() - t0 < 5.0 and not asked
+    text = out.getvalue()
+    assert "the port /dev/ttyUSB_nope does not exist" in text and "serial ports here:" in text
+    assert "give --port" in text
 
 
 def test_the_analysis_thread_leaves_the_bus_threads_real_time_priority(monkeypatch):
@@ -356,3 +371,36 @@ def test_cruise_move_says_none_when_it_cannot():
     assert analysis.cruise_move(0.5, 1.0, 2.0, room=0.0, cruise_time=0.3) is None           # no room
     # room for only a crawl (under a tenth of the cruise asked)
     assert analysis.cruise_move(0.5, 1.0, 2.0, room=0.01, cruise_time=0.3) is None
+
+
+def test_ramp_time_from_all_six_joints_with_its_uncertainty():
+    """Six joints sharing one ramp time (0.5 s), four ramps each, every duration off by up to a record
+    (20 cycles/s: +-25 ms) and the cruise at 60 % of full speed: one ramp time from all 24 ramps,
+    within its error of the truth -- not the largest of six (that came out 13 % long) -- and each
+    joint's acceleration its full speed over it, with an error."""
+    rng = random.Random(7)
+    vmax = {1: 2.09, 2: 2.09, 3: 2.18, 4: 3.49, 5: 3.49, 6: 6.11}
+    true = 0.5
+    largest = []
+    for trial in range(5):
+        ramps = {axis: (0.6 * v, [0.6 * true + rng.uniform(-0.025, 0.025) for _ in range(4)])
+                 for axis, v in vmax.items()}
+        fit = analysis.ramp_times(ramps, vmax)
+        assert fit.shared, fit.words
+        assert abs(fit.ramp_time - true) <= max(3.0 * fit.uncertainty, 0.01), (fit.ramp_time, fit.uncertainty)
+        assert 0.0 < fit.uncertainty < 0.03
+        for axis, (a, da) in fit.accelerations.items():
+            assert a == pytest.approx(vmax[axis] / fit.ramp_time) and 0.0 < da < 0.1 * a
+        largest.append(max(t for t, _ in fit.per_axis.values()))
+        assert "one ramp time for joints 1, 2, 3, 4, 5, 6" in fit.words
+    assert max(largest) > true * 1.02         # what taking the largest would have written
+
+
+def test_ramp_times_of_their_own_keep_each_joint_and_count_the_slowest():
+    vmax = {1: 2.0, 2: 2.0, 3: 2.0}
+    ramps = {1: (2.0, [0.25, 0.26, 0.25, 0.24]), 2: (1.0, [0.05, 0.051, 0.049, 0.05]), 3: (2.0, [0.1, 0.1, 0.11, 0.09])}
+    fit = analysis.ramp_times(ramps, vmax)
+    assert not fit.shared
+    assert fit.ramp_time == pytest.approx(0.25) and "joint_1's, the slowest" in fit.words
+    assert fit.accelerations[2][0] == pytest.approx(2.0 / 0.1)          # 1 rad/s in 0.05 s: full speed in 0.1 s
+    assert fit.accelerations[3][0] == pytest.approx(20.0)

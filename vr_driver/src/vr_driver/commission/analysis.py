@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 __all__ = ["LoopTiming", "loop_timing", "LoopSpread", "loop_spread", "watch_more", "STEADY_SPREAD", "date_loops", "Cruise", "top_speed", "cruise", "RampFit", "fit_ramp",
-           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "passing_times", "steady_speeds", "min_speed_near", "moved_interval",
+           "MoveFit", "fit_move", "RampTimes", "ramp_times", "ramp_linear", "ramp_s_curve", "passing_times", "steady_speeds", "min_speed_near", "moved_interval",
            "cruise_move"]
 
 Samples = Sequence[Tuple[float, float]]
@@ -453,6 +453,61 @@ def fit_move(samples: Samples, loop: float = 0.01) -> Optional[MoveFit]:
         count = len(pts)
     assert fit_in is not None and fit_out is not None
     return MoveFit(v, fit_in, fit_out, count)
+
+
+@dataclass(frozen=True)
+class RampTimes:
+    """The time from rest to full speed, from every measured joint's ramps together."""
+
+    ramp_time: float                              # [s] what the driver counts (ControllerFacts.ramp_time)
+    uncertainty: float                            # [s] its standard error
+    shared: bool                                  # True: every joint agrees with one ramp time
+    per_axis: Dict[int, Tuple[float, float]]      # axis: (time to full speed, its standard error) [s]
+    accelerations: Dict[int, Tuple[float, float]]  # axis: (rad/s^2, its standard error)
+    words: str
+
+
+def ramp_times(ramps: Mapping[int, Tuple[float, Sequence[float]]], vmax: Mapping[int, float],
+               floor: float = 0.02) -> RampTimes:
+    """The ramp time and each joint's acceleration from ``ramps`` -- axis: (the cruise speed its
+    ramps reached [rad/s], their durations [s]) -- and the joints' full speeds ``vmax``.
+
+    Each joint's time to full speed is its median ramp scaled to full speed (the G2 accelerates the
+    same to a lower speed), its standard error the durations' scatter over the root of their number
+    (at least ``floor`` of the time: a ramp dated to a record is not known better). Where every
+    joint agrees with one time (within 2.5 standard errors of their weighted mean) that mean is the
+    ramp time, with its error, and each joint's acceleration is its full speed over it -- every
+    ramp of the run counts, not the slowest joint's few (the largest of six noisy figures came out
+    13 % long at 20 cycles/s). Where they differ, each joint keeps its own and the ramp time is the
+    slowest joint's (what the driver must allow for)."""
+    per_axis: Dict[int, Tuple[float, float]] = {}
+    for axis, (v, durations) in ramps.items():
+        ds = sorted(durations)
+        scale = vmax[axis] / v
+        median = ds[len(ds) // 2] if len(ds) % 2 else (ds[len(ds) // 2 - 1] + ds[len(ds) // 2]) / 2.0
+        if len(ds) >= 2:
+            mean = sum(ds) / len(ds)
+            se = math.sqrt(sum((d - mean) ** 2 for d in ds) / (len(ds) - 1) / len(ds))
+        else:
+            se = 0.0
+        t = median * scale
+        per_axis[axis] = (t, max(se * scale, floor * t))
+    weights = {axis: 1.0 / (se * se) for axis, (_, se) in per_axis.items()}
+    total = sum(weights.values())
+    mean = sum(weights[axis] * t for axis, (t, _) in per_axis.items()) / total
+    error = math.sqrt(1.0 / total)
+    shared = all(abs(t - mean) <= 2.5 * math.sqrt(se * se + error * error) for t, se in per_axis.values())
+    n = sum(len(d) for _, d in ramps.values())
+    if shared:
+        acc = {axis: (vmax[axis] / mean, vmax[axis] / mean * error / mean) for axis in per_axis}
+        words = "one ramp time for joints %s: the weighted mean of their %d ramps" % (
+            ", ".join(str(a) for a in sorted(per_axis)), n)
+        return RampTimes(mean, error, True, per_axis, acc, words)
+    acc = {axis: (vmax[axis] / t, vmax[axis] / t * se / t) for axis, (t, se) in per_axis.items()}
+    slowest = max(per_axis, key=lambda axis: per_axis[axis][0])
+    words = "joint_%d's, the slowest (the joints ramp in times of their own: %s s)" % (
+        slowest, ", ".join("%d: %.3f" % (axis, per_axis[axis][0]) for axis in sorted(per_axis)))
+    return RampTimes(per_axis[slowest][0], per_axis[slowest][1], False, per_axis, acc, words)
 
 
 def passing_times(samples: Samples, points: Sequence[float]) -> List[Optional[float]]:

@@ -22,9 +22,9 @@ from typing import Callable, List, Optional, Sequence, TextIO
 from ..bus.process import set_priority
 from ..errors import VrDriverError
 from ..params import DriverParams, ParamError
-from .bus import CommissionBus, CommissionError, LinkDown, port_users
+from .bus import CommissionBus, CommissionError, LinkDown, port_problem, port_users
 from .report import joint_limits, table, write_joint_limits, write_yaml
-from .steps import STEP_NAMES, STEPS, Context, Finding, Sizes, StepResult, _Abort
+from .steps import STEP_NAMES, STEPS, Context, Finding, Sizes, StepResult, _Abort, clear_space, clear_space_words
 
 __all__ = ["main", "build_parser"]
 
@@ -38,7 +38,8 @@ Before you start, at the pendant (doc/commissioning.md, "What to have ready"):
   - the v3 program (ROSLINK3, section 10.7) loaded and running, override low, the arm's
     e-stop and the pendant's stop at hand;
   - the driver node stopped (this tool needs the port alone);
-  - the arm in a clear space: moves of up to {reach:.0f} deg of a joint from where it stands."""
+  - the arm in a clear space, near the middle of each joint's range: the steps turn single joints
+    up to {reach:.0f} deg from where the arm stands -- {joints}."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -194,6 +195,10 @@ class _Runner:
             self.say("commission: unknown step %s (steps: %s)" % (", ".join(unknown), ", ".join(STEP_NAMES)))
             return 2
         device = bus_config.phy.device
+        problem = port_problem(device)
+        if problem:
+            self.say("commission: %s" % problem)          # at once: not after the connect timeout
+            return 1
         users = port_users(device)
         if users:
             self.say("commission: %s is open by %s -- stop the driver (and anything else on the port) first: "
@@ -206,9 +211,10 @@ class _Runner:
         except VrDriverError as exc:
             self.say("commission: the model: %s" % exc)
             return 2
-        reach = max(sizes.ramp_move_max * 2 if "ramps" not in skip else 0.0, 2 * sizes.config_turn
-                    if "configuration" not in skip else 0.0, 2 * sizes.speed_move, sizes.stream_points * sizes.stream_step)
-        self.say(PENDANT.format(address=bus_config.slaves[0].address, baud=bus_config.baud, reach=reach))
+        space = clear_space(sizes, tuple(skip))
+        reach = max([far for far, _ in space.values()] or [0.0])
+        self.say(PENDANT.format(address=bus_config.slaves[0].address, baud=bus_config.baud, reach=reach,
+                                joints=clear_space_words(sizes, tuple(skip)) or "none (no step moves)"))
         self.say()
         if not args.yes and self.confirm("Is the arm in a clear space and the program running? [y/N] ", "ny") != "y":
             self.say("not started: nothing was sent")

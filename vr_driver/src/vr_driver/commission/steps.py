@@ -51,7 +51,8 @@ from .bus import CommissionBus, CommissionError, Cycle, heartbeat_brackets, hear
 
 log = logging.getLogger("vr_driver.commission")
 
-__all__ = ["Finding", "StepResult", "Sizes", "Context", "Step", "STEPS", "STEP_NAMES"]
+__all__ = ["Finding", "StepResult", "Sizes", "Context", "Step", "STEPS", "STEP_NAMES", "Reach", "clear_space",
+           "clear_space_words"]
 
 JOINTS = 6
 
@@ -307,6 +308,10 @@ class Context:
                                  "; the stretched elbow at %.1f deg" % math.degrees(self.elbow)))
 
 
+#: {joint (1-based): (degrees the way a step turns it first, degrees the other way)}
+Reach = Dict[int, Tuple[float, float]]
+
+
 def _at_rest(fb: FeedbackV3) -> bool:
     return fb.state in (StreamState.IDLE, StreamState.WAITING) and not (fb.status & StatusBits.IN_MOTION)
 
@@ -327,6 +332,12 @@ class Step:
 
     def describe(self, ctx: Context) -> str:
         raise NotImplementedError
+
+    def reach(self, sizes: Sizes) -> Reach:
+        """How far [deg] this step may turn each joint from where the arm stands: {joint (1-based):
+        (the way it turns first, the other way)} -- from the moves :meth:`run` makes (the clear space
+        the user must give it: :func:`clear_space`)."""
+        return {}
 
     def run(self, ctx: Context) -> List[Finding]:
         raise NotImplementedError
@@ -385,10 +396,46 @@ class CardStep(Step):
         if diag:
             ctx.identity["diag"] = diag
         ctx.measured["byte_order"] = found
+        findings.append(data_exchange_finding(bus.bus_config.baud, len(sc.cfg)))
         ctx.say("  the arm's joints as the driver's model solves the reported pose: %s deg -- compare them "
                 "with the pendant's joint display (they must agree within a degree, else calibrate first)"
                 % ", ".join("%.1f" % math.degrees(q) for q in ctx.start_joints))
         return findings
+
+
+#: characters of the quickest reset a master makes of its card, back to Data_Exchange: Slave_Diag
+#: (request 11, answer 11 + 6), Set_Prm (11 + 7, answer 1), Chk_Cfg (11 + the configuration's bytes,
+#: answer 1), Slave_Diag again; SD2 telegrams with SAPs. Each request after a sync pause of 33 bits,
+#: each answer after at least 11
+RESET_CHARS = 11 + 17 + 18 + 1 + 11 + 1 + 11 + 17
+RESET_PAUSE_BITS = 4 * (33 + 11)
+
+
+def reset_time(baud: int, cfg_bytes: int) -> float:
+    """[s] the quickest reset of the card the master can make at ``baud``: the card leaves
+    Data_Exchange and is back in it with a new session."""
+    return ((RESET_CHARS + cfg_bytes) * 11 + RESET_PAUSE_BITS) / float(baud)
+
+
+def data_exchange_finding(baud: int, cfg_bytes: int) -> Finding:
+    """The card's Data_Exchange status (§10.9: can the program read it?) -- not measurable from the
+    bus, and why: a v3 program without it sees a reset in the card's safe image (all zero: no v3
+    record) at its next loop; the two differ only for a reset over within one loop, and the quickest
+    the master can make takes :func:`reset_time` (63 ms at 19.2 kbit/s, 10-20 ms loops)."""
+    t = reset_time(baud, cfg_bytes)
+    return Finding(
+        "the card's Data_Exchange status read by the program (§10.9)", "readable: the program sees every reset "
+        "of its card",
+        "not measurable from the bus: a v3 program without it still sees a reset in the card's safe image (all "
+        "zero, no v3 record) at its next loop, and disarms as with it -- the two differ only for a reset over "
+        "within one program loop, and the quickest the master can make (Slave_Diag, Set_Prm, Chk_Cfg, "
+        "Slave_Diag) takes %.1f ms at %d bit/s%s" % (
+            t * 1e3, baud, ", longer than a loop of 10-20 ms: the bus cannot tell the two apart" if t >= 0.02 else
+            ": within a slow loop, but this tool does not reset the card under a running program"),
+        "none for v3 either way (exactly once across a reset holds: the program takes a target only after the "
+        "master's idle record of the new session); v1, whose idle record is the safe image, rests on the "
+        "master there -- check the program's card-status variable at the pendant (doc/controller_program.md "
+        "§10.9)", None)
 
 
 class _Abort(CommissionError):
@@ -474,6 +521,9 @@ class CheckWordStep(Step):
 class LoopStep(Step):
     name = "loop"
     title = "the program loop: period, steadiness, and during a MOVE"
+
+    def reach(self, sizes: Sizes) -> Reach:
+        return {6: (sizes.loop_move, 0.0)}
 
     def describe(self, ctx: Context) -> str:
         return ("watch the heartbeat for %.0f s at rest; then move joint_6 by %.0f deg at %.0f %% and back, "
@@ -595,6 +645,9 @@ class SpeedStep(Step):
     name = "speed"
     title = "MOVEP's speed unit"
 
+    def reach(self, sizes: Sizes) -> Reach:
+        return {sizes.speed_joint: (sizes.speed_move, sizes.speed_move)}        # +L, -2L, +L
+
     def describe(self, ctx: Context) -> str:
         s = ctx.sizes
         return ("joint_%d: three MOVEPs at speed %d (%.0f %% of its limit, %.0f deg/s as assumed): +%.0f deg, "
@@ -675,6 +728,9 @@ STOP_SPEED = 0.5
 class LookAheadStep(Step):
     name = "lookahead"
     title = "the interpreter look-ahead and blending"
+
+    def reach(self, sizes: Sizes) -> Reach:
+        return {1: (sizes.stream_points * sizes.stream_step, 0.0), 2: (sizes.stream_step / 3.0, 0.0)}
 
     def describe(self, ctx: Context) -> str:
         s = ctx.sizes
@@ -803,14 +859,21 @@ class ConfigurationStep(Step):
     name = "configuration"
     title = "the configuration rule (a pose with two solutions)"
 
+    def reach(self, sizes: Sizes) -> Reach:
+        # B lies 2 x turn one way; nearest the arm's joints the G2 runs it one turn back, 360 - 2 x turn
+        # the other way (both joints of the same pose)
+        return {6: (2.0 * sizes.config_turn, max(0.0, 360.0 - 2.0 * sizes.config_turn))}
+
     def describe(self, ctx: Context) -> str:
         s = ctx.sizes
+        ahead, back = self.reach(s)[6]
         return ("joint_6 turns %.0f deg (target A, at %.0f %%); the next target B, sent while the arm is on its way, "
                 "is %.0f deg further: reachable also one turn the other way. Nearest A's joints the arm goes on %.0f "
-                "deg; nearest its joints at the time it turns back %.0f deg. Then back in steps of 90 deg. Up to "
-                "%.0f deg of joint_6 in all: keep cables and tools clear."
-                % (s.config_turn, s.config_percent, s.config_turn, s.config_turn, 360.0 - 2 * s.config_turn,
-                   s.config_turn * 2 + 360.0))
+                "deg, to %.0f deg from where it stands; nearest its joints at the time it turns back %.0f deg, to %.0f "
+                "deg the other side. Then back in steps of 90 deg. Keep cables and tools clear for joint_6 %.0f deg "
+                "one way and %.0f deg the other."
+                % (s.config_turn, s.config_percent, s.config_turn, s.config_turn, ahead, s.config_turn + back, back,
+                   ahead, back))
 
     def run(self, ctx: Context) -> List[Finding]:
         s = ctx.sizes
@@ -867,6 +930,10 @@ class RampStep(Step):
     name = "ramps"
     title = "per-axis acceleration and ramp shape"
 
+    def reach(self, sizes: Sizes) -> Reach:
+        # out and back; a joint that reaches no cruise moves again, up to ramp_move_max (5-6: twice)
+        return {axis: (sizes.ramp_move_max * (2.0 if axis >= 5 else 1.0), 0.0) for axis in sizes.ramp_axes}
+
     def describe(self, ctx: Context) -> str:
         s = ctx.sizes
         return ("each of joints %s in turn: +%.0f deg (joints 5-6: %.0f) at %.0f %% and back, every record logged; "
@@ -918,8 +985,13 @@ class RampStep(Step):
                     continue
                 # the four ramps agree (within 10 %): done; else once more (a record dated late on a
                 # busy line or machine bends a ramp), and the median of all
+                # a spread the records' spacing explains (a ramp dated to a record) is no reason to
+                # move again: at 20 cycles/s every joint moved twice over for it (61 -> 87 s)
                 each = [v / f.duration for v, f in fits]
-                if len(each) >= 4 and max(each) - min(each) <= 0.1 * sorted(each)[len(each) // 2]:
+                durations = [f.duration for _, f in fits]
+                spacing = sorted(record_dt)[len(record_dt) // 2] if record_dt else 0.0
+                if len(each) >= 4 and (max(each) - min(each) <= 0.1 * sorted(each)[len(each) // 2]
+                                       or max(durations) - min(durations) <= spacing):
                     break
             if not fits:
                 findings.append(Finding("joint_%d acceleration" % axis, "%.1f rad/s^2 (model)" % model[axis - 1],
@@ -936,20 +1008,32 @@ class RampStep(Step):
         evidence = sum(f.s_curve_evidence for _, ramps in measured.values() for f in ramps)
         shape = "s_curve" if evidence > 0 else "linear"
         n = sum(len(ramps) for _, ramps in measured.values())
+        ramps_of = {axis: (v, [f.duration_as(shape) for f in ramps]) for axis, (v, ramps) in measured.items()}
+        fit = analysis.ramp_times(ramps_of, {axis: ctx.vmax[axis - 1] for axis in measured})
         accelerations = {}
-        for axis, (v, ramps) in sorted(measured.items()):
-            r = sorted(f.duration_as(shape) for f in ramps)[len(ramps) // 2]
-            a = accelerations[axis] = v / r
-            ok = abs(a - model[axis - 1]) <= 0.1 * model[axis - 1]
+        for axis in sorted(measured):
+            a, da = fit.accelerations[axis]
+            accelerations[axis] = a
+            t_axis, dt_axis = fit.per_axis[axis]
+            ok = abs(a - model[axis - 1]) <= max(0.1 * model[axis - 1], 2.0 * da)
             findings.append(Finding(
                 "joint_%d acceleration" % axis, "%.1f rad/s^2 (model: full speed in %.2f s)" % (
                     model[axis - 1], ctx.vmax[axis - 1] / model[axis - 1]),
-                "%.1f rad/s^2 (%.2f rad/s reached in %.3f s, the median of %d ramps)" % (a, v, r, len(ramps)),
+                "%.1f +- %.1f rad/s^2 (%s; this joint's own %d ramps: full speed in %.3f +- %.3f s)" % (
+                    a, da, "the ramp time all joints share" if fit.shared else "its own ramps",
+                    len(ramps_of[axis][1]), t_axis, dt_axis),
                 "none" if ok else "the plan action's max_acceleration (joint_limits.yaml, planning_limits) takes "
                 "the measured value", ok))
         ctx.measured["accelerations"] = {axis: round(a, 3) for axis, a in accelerations.items()}
-        ctx.measured["ramp_time"] = round(max(ctx.vmax[ax - 1] / a for ax, a in accelerations.items()), 4)
+        ctx.measured["ramp_time"] = round(fit.ramp_time, 4)
         ctx.measured["ramp_shape"] = shape
+        findings.append(Finding(
+            "ramp time (rest to full speed)", "%.2f s (the model's slowest joint)" % max(
+                v / a for v, a in zip(ctx.vmax, model)),
+            "%.3f +- %.3f s, %s" % (fit.ramp_time, fit.uncertainty, fit.words),
+            "none" if fit.shared else "the joints ramp in times of their own: the driver counts the slowest joint's",
+            None if not fit.shared else abs(fit.ramp_time - max(v / a for v, a in zip(ctx.vmax, model)))
+            <= max(0.1 * fit.ramp_time, 2.0 * fit.uncertainty)))
         findings.append(Finding("ramp shape", "linear (constant acceleration)", "%s (%d ramps, evidence %+.1f)" % (
             shape.replace("_", "-"), n, evidence),
             "none" if shape == "linear" else "S-shaped: the peak acceleration is 1.5 times the mean the planner "
@@ -1039,6 +1123,29 @@ class UnreachableStep(Step):
 STEPS: Tuple[Step, ...] = (CardStep(), CheckWordStep(), LoopStep(), SendAheadStep(), SpeedStep(), LookAheadStep(),
                            ConfigurationStep(), RampStep(), UnreachableStep())
 STEP_NAMES = tuple(s.name for s in STEPS)
+
+
+def clear_space(sizes: Sizes, skip: Sequence[str] = ()) -> Reach:
+    """The clear space the steps (less ``skip``) need: {joint: (degrees one way, degrees the other)}
+    from where the arm stands, the farthest of every step's moves (:meth:`Step.reach`), each side
+    the larger of the two ways (a step turns a joint the way its limits allow, +1 first). What the
+    start says, each step's words and doc/commissioning.md's table (a test compares them) all come
+    from here."""
+    out: Dict[int, Tuple[float, float]] = {}
+    for step in STEPS:
+        if step.name in skip:
+            continue
+        for joint, (ahead, back) in step.reach(sizes).items():
+            far, near = max(ahead, back), min(ahead, back)
+            old = out.get(joint, (0.0, 0.0))
+            out[joint] = (max(old[0], far), max(old[1], near))
+    return dict(sorted(out.items()))
+
+
+def clear_space_words(sizes: Sizes, skip: Sequence[str] = ()) -> str:
+    """:func:`clear_space` in words: "joint_1 120 deg one way, 20 the other; ..."."""
+    return "; ".join("joint_%d %.0f deg%s" % (joint, far, " one way, %.0f the other" % near if near else "")
+                     for joint, (far, near) in clear_space(sizes, skip).items())
 
 
 def timed(fn: Callable[[], Any], clock: Callable[[], float] = time.monotonic) -> Tuple[Any, float]:
