@@ -129,9 +129,12 @@ def test_default_g2_every_step_as_assumed(tmp_path, kin):
     assert doc["commissioning"]["date"] and doc["commissioning"]["robot_time"] > 0
     steps = doc["commissioning"]["steps"]
     assert all(s["status"] == "done" for s in steps.values()), steps
-    # every row as assumed, except the loop's steadiness, which is this machine's load
+    # the card's Data_Exchange status: never measured, listed with its reason
+    dx = finding(doc, "the card's Data_Exchange status")
+    assert "ok" not in dx and dx["measured"].startswith("not measurable from the bus")
+    # every other row as assumed, except the loop's steadiness, which is this machine's load
     bad = [f for f in doc["commissioning"]["findings"] if f.get("ok") is not True
-           and not f["assumption"].startswith("program loop at rest")]
+           and not f["assumption"].startswith(("program loop at rest", "the card's Data_Exchange status"))]
     # an unclear verdict ("run the step again, watch the arm": too few records near a point on a
     # loaded machine) is re-measured as the tool advises -- the look-ahead step alone, once -- and
     # must then be clear and as assumed; a verdict that is wrong (False) is never re-measured
@@ -216,7 +219,11 @@ def test_loop_blocking_during_a_move(tmp_path):
     assert doc["controller"]["loop_blocks_during_move"] is True
     row = finding(doc, "program loop during a MOVE")
     assert row.get("ok") is False and "protocol v1" in row["consequence"]
-    assert doc["controller"]["interpreter_lookahead"] == 0 and doc["stream_smooth"] == 0
+    # what the blocking loop hides is not measured, never a value (a look-ahead of 0, a ring of 1)
+    assert "interpreter_lookahead" not in doc["controller"] and "ring_size" not in doc["controller"]
+    assert {"interpreter_lookahead", "ring_size"} <= set(doc["controller"]["not_measured"])
+    assert "loop blocks during a MOVE" in doc["commissioning"]["not_measured"]["interpreter_lookahead"]
+    assert doc["stream_smooth"] == 0
     assert abs(doc["controller"]["speed_scale"] - 1.0) <= 0.05           # from the move times: the ramps cancel
     # the protocol that works with it; v3 with this G2 is refused at start, in words
     assert doc["protocol"] == "v1"

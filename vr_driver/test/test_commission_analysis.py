@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import io
 import math
+import os
 import threading
 import time
 import random
@@ -404,3 +405,41 @@ def test_ramp_times_of_their_own_keep_each_joint_and_count_the_slowest():
     assert fit.ramp_time == pytest.approx(0.25) and "joint_1's, the slowest" in fit.words
     assert fit.accelerations[2][0] == pytest.approx(2.0 / 0.1)          # 1 rad/s in 0.05 s: full speed in 0.1 s
     assert fit.accelerations[3][0] == pytest.approx(20.0)
+
+
+DOC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "doc", "commissioning.md")
+
+
+def test_the_clear_space_is_computed_from_the_moves_and_the_same_everywhere(tmp_path):
+    """Every clear-space figure from one function over the moves the steps make (Step.reach): the
+    table in doc/commissioning.md is its output at the default sizes; the configuration step's words
+    and the docs' row give its 220 / 140 deg and the 250 deg turn back; the start text and
+    ``--clear-space`` say the same per joint, with and without skipped steps."""
+    from vr_driver.commission.steps import ConfigurationStep, Sizes, clear_space, clear_space_table, clear_space_words
+    sizes = Sizes()
+    with open(DOC, encoding="utf-8") as fh:
+        doc = fh.read()
+    assert clear_space_table(sizes) in doc
+    space = clear_space(sizes)
+    ahead, back = ConfigurationStep().reach(sizes)[6]
+    assert (ahead, back) == (2 * sizes.config_turn, 360.0 - 2 * sizes.config_turn)      # 220 one way, 140 the other
+    assert space[6] == (max(ahead, 2 * sizes.ramp_move_max), back)                       # the ramps: 240 one way
+    assert space[5] == (2 * sizes.ramp_move_max, 0.0) and space[1] == (sizes.ramp_move_max, sizes.speed_move)
+    turn_back = sizes.config_turn + back
+    assert "turns back %.0f°, to %.0f° the other side" % (turn_back, back) in doc
+    assert "goes on %.0f°, to %.0f° from where it stood" % (sizes.config_turn, ahead) in doc
+
+    words = ConfigurationStep().describe(type("Ctx", (), {"sizes": sizes})())      # it reads only the sizes
+    assert "turns back %.0f deg, to %.0f deg the other side" % (turn_back, back) in words
+    assert "%.0f deg one way and %.0f deg the other" % (ahead, back) in words
+    # the start text and --clear-space: the same figures
+    port = tmp_path / "ttyUSB7"
+    port.write_text("")
+    out = io.StringIO()
+    assert main(["--port", str(port)], out=out, ask=lambda q: "n") == 1
+    assert "up to %.0f deg from where the arm stands -- %s." % (max(f for f, _ in space.values()),
+                                                               clear_space_words(sizes)) in out.getvalue()
+    out = io.StringIO()
+    assert main(["--clear-space", "--skip", "ramps"], out=out) == 0
+    assert out.getvalue().startswith("clear space: joint_1 50 deg one way, 20 the other; joint_2 3 deg; "
+                                     "joint_6 220 deg one way, 140 the other")

@@ -24,7 +24,8 @@ from ..errors import VrDriverError
 from ..params import DriverParams, ParamError
 from .bus import CommissionBus, CommissionError, LinkDown, port_problem, port_users
 from .report import joint_limits, table, write_joint_limits, write_yaml
-from .steps import STEP_NAMES, STEPS, Context, Finding, Sizes, StepResult, _Abort, clear_space, clear_space_words
+from .steps import (STEP_NAMES, STEPS, Context, Finding, Sizes, StepResult, _Abort, clear_space, clear_space_table,
+                    clear_space_words)
 
 __all__ = ["main", "build_parser"]
 
@@ -67,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 0: normal scheduling)")
     p.add_argument("--skip", action="append", default=[], metavar="NAME",
                    help="skip a step (repeat, or a comma list): %s" % ", ".join(STEP_NAMES))
+    p.add_argument("--clear-space", action="store_true",
+                   help="print how far the steps (less --skip, at these sizes) turn each joint from where the arm "
+                        "stands, and exit: nothing is opened or sent")
     g = p.add_argument_group("sizes of the moves (degrees, percent of the joint speed limits, seconds)")
     g.add_argument("--connect-timeout", type=float, default=d.connect_timeout)
     g.add_argument("--heartbeat-time", type=float, default=d.heartbeat_time, help="loop: seconds at rest")
@@ -194,6 +198,12 @@ class _Runner:
         if unknown:
             self.say("commission: unknown step %s (steps: %s)" % (", ".join(unknown), ", ".join(STEP_NAMES)))
             return 2
+        if args.clear_space:
+            self.say("clear space: %s (deg from where the arm stands)" % (
+                clear_space_words(sizes, tuple(skip)) or "none (no step moves)"))
+            if not skip:
+                self.say(clear_space_table(sizes))
+            return 0
         device = bus_config.phy.device
         problem = port_problem(device)
         if problem:

@@ -52,7 +52,7 @@ from .bus import CommissionBus, CommissionError, Cycle, heartbeat_brackets, hear
 log = logging.getLogger("vr_driver.commission")
 
 __all__ = ["Finding", "StepResult", "Sizes", "Context", "Step", "STEPS", "STEP_NAMES", "Reach", "clear_space",
-           "clear_space_words"]
+           "clear_space_table", "clear_space_words"]
 
 JOINTS = 6
 
@@ -1140,6 +1140,17 @@ def clear_space(sizes: Sizes, skip: Sequence[str] = ()) -> Reach:
             old = out.get(joint, (0.0, 0.0))
             out[joint] = (max(old[0], far), max(old[1], near))
     return dict(sorted(out.items()))
+
+
+def clear_space_table(sizes: Sizes) -> str:
+    """:func:`clear_space` as doc/commissioning.md's table (Markdown): per joint, the two ways and the
+    steps' own figures."""
+    lines = ["| joint | one way | the other way | the steps (one way / the other) |", "| --- | --- | --- | --- |"]
+    for joint, (far, near) in clear_space(sizes).items():
+        steps = ", ".join("`%s` %.0f°%s" % (step.name, reach[0], " / %.0f°" % reach[1] if reach[1] else "")
+                          for step in STEPS for reach in [step.reach(sizes).get(joint)] if reach)
+        lines.append("| joint %d | %.0f° | %.0f° | %s |" % (joint, far, near, steps))
+    return "\n".join(lines)
 
 
 def clear_space_words(sizes: Sizes, skip: Sequence[str] = ()) -> str:
