@@ -22,7 +22,7 @@ from _world import FakeClock
 from vr_driver.commission.bus import CommissionBus
 from vr_driver.commission.cli import _params, _sizes, build_parser
 from vr_driver.commission.report import driver_values
-from vr_driver.commission.steps import CardStep, Context, LookAheadStep, LoopStep
+from vr_driver.commission.steps import CardStep, Context, LookAheadStep, LoopStep, RampStep
 from vr_driver.controller.options import LoopTiming, SimOptions
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.virtual_controller import robot_slave
@@ -179,3 +179,27 @@ def test_the_data_exchange_bit_is_listed_as_not_measurable_and_the_bus_shows_why
         return bool(seen) and seen[-1] and False in seen
     ctx.bus.run(back, 10.0, need_link=False)
     assert seen[0] is False and seen[-1] is True
+
+
+def test_ramps_through_a_slow_bus_and_an_irregular_loop_come_from_every_joint(kin):
+    """The issue's slow bus and irregular loop (20 cycles/s, a 16 ms loop +-4 ms) against a G2 whose
+    joints all take 0.5 s to full speed: one ramp time from every measured joint's ramps, with its
+    error, within 4 errors and 8 % of the truth (in eight seeds -7 .. +4 %, errors 0.010-0.026 s;
+    the largest of six figures, what the tool took before, +2 .. +12 %), each sharing joint's
+    acceleration within 8 % (one joint off the others -- 0.37-0.42 s in three of the eight -- keeps
+    its own figure, said)."""
+    g2 = PacedG2(kin, loop_period=0.016, loop_jitter=0.004, loop_jitter_seed=1, ramp_time=0.5)
+    ctx, said = commission_context(kin, g2)
+    CardStep().run(ctx)
+    findings = RampStep().run(ctx)
+    row = next(f for f in findings if f.assumption.startswith("ramp time"))
+    assert "one ramp time for joints" in row.measured, row.measured
+    ramp = ctx.measured["ramp_time"]
+    error = float(row.measured.split("+-")[1].split()[0])
+    assert abs(ramp - 0.5) <= min(4.0 * error, 0.08 * 0.5), (ramp, error)
+    # the joints that share it (all, or all but one whose own figure is said): within 8 %
+    group = [int(a) for a in row.measured.split("one ramp time for joints ")[1].split(":")[0].split(", ")]
+    assert len(group) >= 4 and (len(group) == len(ctx.measured["accelerations"]) or "on its own" in row.measured)
+    for axis in group:
+        a = ctx.measured["accelerations"][axis]
+        assert a == pytest.approx(kin.limits.velocity[axis - 1] / 0.5, rel=0.08), (axis, a)

@@ -455,6 +455,11 @@ def fit_move(samples: Samples, loop: float = 0.01) -> Optional[MoveFit]:
     return MoveFit(v, fit_in, fit_out, count)
 
 
+#: joints whose times to full speed lie within this share of their mean share one ramp time (at 20
+#: cycles/s with an irregular loop a joint's own 0.5 s ramps came out 0.44-0.54 s)
+SHARED_RAMP = 0.15
+
+
 @dataclass(frozen=True)
 class RampTimes:
     """The time from rest to full speed, from every measured joint's ramps together."""
@@ -468,18 +473,23 @@ class RampTimes:
 
 
 def ramp_times(ramps: Mapping[int, Tuple[float, Sequence[float]]], vmax: Mapping[int, float],
-               floor: float = 0.02) -> RampTimes:
+               spacing: float = 0.0, floor: float = 0.02) -> RampTimes:
     """The ramp time and each joint's acceleration from ``ramps`` -- axis: (the cruise speed its
     ramps reached [rad/s], their durations [s]) -- and the joints' full speeds ``vmax``.
 
     Each joint's time to full speed is its median ramp scaled to full speed (the G2 accelerates the
-    same to a lower speed), its standard error the durations' scatter over the root of their number
-    (at least ``floor`` of the time: a ramp dated to a record is not known better). Where every
-    joint agrees with one time (within 2.5 standard errors of their weighted mean) that mean is the
-    ramp time, with its error, and each joint's acceleration is its full speed over it -- every
+    same to a lower speed), its standard error the durations' scatter over the root of their number,
+    but at least that of a time known to one record (``spacing`` [s] between records / sqrt 12: a
+    joint's few ramps share the records' dating -- through 50 ms cycles a jittery loop's 0.1 s
+    ramps scattered little and came out 10-40 % long) and ``floor`` of the time. Where every
+    joint agrees with one time (within 2.5 standard errors of their weighted mean, or SHARED_RAMP of
+    it) that mean is the ramp time, with its error (widened by the joints' scatter about it where
+    their own errors understate that), and each joint's acceleration is its full speed over it -- every
     ramp of the run counts, not the slowest joint's few (the largest of six noisy figures came out
-    13 % long at 20 cycles/s). Where they differ, each joint keeps its own and the ramp time is the
-    slowest joint's (what the driver must allow for)."""
+    13 % long at 20 cycles/s). Of four joints or more, one off the others keeps its own figure and
+    the rest share theirs; the ramp time is then the odd joint's only where it is the slower. Where
+    they differ more, each joint keeps its own and the ramp time is the slowest joint's (what the
+    driver must allow for)."""
     per_axis: Dict[int, Tuple[float, float]] = {}
     for axis, (v, durations) in ramps.items():
         ds = sorted(durations)
@@ -491,23 +501,54 @@ def ramp_times(ramps: Mapping[int, Tuple[float, Sequence[float]]], vmax: Mapping
         else:
             se = 0.0
         t = median * scale
-        per_axis[axis] = (t, max(se * scale, floor * t))
-    weights = {axis: 1.0 / (se * se) for axis, (_, se) in per_axis.items()}
-    total = sum(weights.values())
-    mean = sum(weights[axis] * t for axis, (t, _) in per_axis.items()) / total
-    error = math.sqrt(1.0 / total)
-    shared = all(abs(t - mean) <= 2.5 * math.sqrt(se * se + error * error) for t, se in per_axis.values())
+        per_axis[axis] = (t, max(se * scale, spacing / math.sqrt(12.0) * scale, floor * t))
     n = sum(len(d) for _, d in ramps.values())
+    group = sorted(per_axis)
+    mean, error, shared = _shared_time(per_axis, group)
+    odd: Optional[int] = None
+    if not shared and len(group) >= 4:
+        # one joint off the others (a mis-fitted joint, or one that really ramps in its own time):
+        # the rest share theirs, that joint keeps its own figure
+        odd = max(group, key=lambda axis: abs(per_axis[axis][0] - mean))
+        rest = [axis for axis in group if axis != odd]
+        mean, error, shared = _shared_time(per_axis, rest)
+        group = rest
+        if not shared:
+            odd, group = None, sorted(per_axis)
     if shared:
-        acc = {axis: (vmax[axis] / mean, vmax[axis] / mean * error / mean) for axis in per_axis}
+        acc = {axis: (vmax[axis] / mean, vmax[axis] / mean * error / mean) for axis in group}
         words = "one ramp time for joints %s: the weighted mean of their %d ramps" % (
-            ", ".join(str(a) for a in sorted(per_axis)), n)
-        return RampTimes(mean, error, True, per_axis, acc, words)
+            ", ".join(str(a) for a in group), sum(len(ramps[a][1]) for a in group))
+        if odd is None:
+            return RampTimes(mean, error, True, per_axis, acc, words)
+        t_odd, se_odd = per_axis[odd]
+        acc[odd] = (vmax[odd] / t_odd, vmax[odd] / t_odd * se_odd / t_odd)
+        if t_odd <= mean:
+            words += "; joint_%d faster, on its own (%.3f +- %.3f s)" % (odd, t_odd, se_odd)
+            return RampTimes(mean, error, True, per_axis, acc, words)
+        words = "joint_%d's, the slowest, on its own (%.3f +- %.3f s); %s" % (odd, t_odd, se_odd, words)
+        return RampTimes(t_odd, se_odd, False, per_axis, acc, words)
     acc = {axis: (vmax[axis] / t, vmax[axis] / t * se / t) for axis, (t, se) in per_axis.items()}
     slowest = max(per_axis, key=lambda axis: per_axis[axis][0])
-    words = "joint_%d's, the slowest (the joints ramp in times of their own: %s s)" % (
-        slowest, ", ".join("%d: %.3f" % (axis, per_axis[axis][0]) for axis in sorted(per_axis)))
+    words = "joint_%d's, the slowest (the joints ramp in times of their own: %s s, %d ramps)" % (
+        slowest, ", ".join("%d: %.3f" % (axis, per_axis[axis][0]) for axis in sorted(per_axis)), n)
     return RampTimes(per_axis[slowest][0], per_axis[slowest][1], False, per_axis, acc, words)
+
+
+def _shared_time(per_axis: Mapping[int, Tuple[float, float]], axes: Sequence[int]) -> Tuple[float, float, bool]:
+    """(weighted mean, its error, whether every one of ``axes`` agrees with it) of the joints' times
+    to full speed: the error widened by their scatter about the mean where their own errors
+    understate it; agreeing: within 2.5 errors or SHARED_RAMP of the mean."""
+    weights = {axis: 1.0 / (per_axis[axis][1] ** 2) for axis in axes}
+    total = sum(weights.values())
+    mean = sum(weights[axis] * per_axis[axis][0] for axis in axes) / total
+    error = math.sqrt(1.0 / total)
+    if len(axes) > 1:
+        chi2 = sum(weights[axis] * (per_axis[axis][0] - mean) ** 2 for axis in axes)
+        error *= math.sqrt(max(1.0, chi2 / (len(axes) - 1)))
+    shared = all(abs(per_axis[axis][0] - mean) <= max(2.5 * math.hypot(per_axis[axis][1], error), SHARED_RAMP * mean)
+                 for axis in axes)
+    return mean, error, shared
 
 
 def passing_times(samples: Samples, points: Sequence[float]) -> List[Optional[float]]:
