@@ -443,3 +443,18 @@ def test_the_clear_space_is_computed_from_the_moves_and_the_same_everywhere(tmp_
     assert main(["--clear-space", "--skip", "ramps"], out=out) == 0
     assert out.getvalue().startswith("clear space: joint_1 50 deg one way, 20 the other; joint_2 3 deg; "
                                      "joint_6 220 deg one way, 140 the other")
+
+
+def test_joints_with_accelerations_of_their_own_are_not_averaged():
+    """The virtual G2's per-axis accelerations of the pty test (8, 12, 15, 20, 30, 45 rad/s^2): full
+    speed in 0.26, 0.17, 0.15, 0.10, 0.17, 0.12 s -- every joint keeps its own figure (the scatter
+    must not widen the test of agreement until they all pass)."""
+    vmax = {1: 2.094, 2: 2.094, 3: 2.18, 4: 2.094, 5: 5.236, 6: 5.236}
+    acc = {1: 8.0, 2: 12.0, 3: 15.0, 4: 20.0, 5: 30.0, 6: 45.0}
+    rng = random.Random(2)
+    ramps = {axis: (0.6 * vmax[axis], [0.6 * vmax[axis] / acc[axis] * (1 + rng.uniform(-0.03, 0.03)) for _ in range(4)])
+             for axis in vmax}
+    fit = analysis.ramp_times(ramps, vmax, spacing=0.004)
+    assert not fit.shared and "joint_1's, the slowest" in fit.words
+    for axis, (a, _) in fit.accelerations.items():
+        assert a == pytest.approx(acc[axis], rel=0.05)

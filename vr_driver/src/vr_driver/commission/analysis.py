@@ -537,17 +537,17 @@ def ramp_times(ramps: Mapping[int, Tuple[float, Sequence[float]]], vmax: Mapping
 
 def _shared_time(per_axis: Mapping[int, Tuple[float, float]], axes: Sequence[int]) -> Tuple[float, float, bool]:
     """(weighted mean, its error, whether every one of ``axes`` agrees with it) of the joints' times
-    to full speed: the error widened by their scatter about the mean where their own errors
-    understate it; agreeing: within 2.5 errors or SHARED_RAMP of the mean."""
+    to full speed: agreeing, within 2.5 of their own errors or SHARED_RAMP of the mean; the error
+    then widened by their scatter about the mean where their own errors understate it."""
     weights = {axis: 1.0 / (per_axis[axis][1] ** 2) for axis in axes}
     total = sum(weights.values())
     mean = sum(weights[axis] * per_axis[axis][0] for axis in axes) / total
     error = math.sqrt(1.0 / total)
-    if len(axes) > 1:
-        chi2 = sum(weights[axis] * (per_axis[axis][0] - mean) ** 2 for axis in axes)
-        error *= math.sqrt(max(1.0, chi2 / (len(axes) - 1)))
     shared = all(abs(per_axis[axis][0] - mean) <= max(2.5 * math.hypot(per_axis[axis][1], error), SHARED_RAMP * mean)
                  for axis in axes)
+    if len(axes) > 1:                     # the error said: widened by the scatter (not the test above's)
+        chi2 = sum(weights[axis] * (per_axis[axis][0] - mean) ** 2 for axis in axes)
+        error *= math.sqrt(max(1.0, chi2 / (len(axes) - 1)))
     return mean, error, shared
 
 
