@@ -260,7 +260,8 @@ class ControllerFacts:
 
 
 def _not_measured(value: Mapping[str, Any], known: List[str]) -> Tuple[str, ...]:
-    """``controller/not_measured``: a list of the other keys, none of them also given a value."""
+    """``controller/not_measured``: a list of the other keys. A key listed keeps the value it is given
+    (the config file's: the assumption), and the driver treats it as not measured."""
     names = value.get("not_measured")
     if names is None:
         return ()
@@ -271,8 +272,6 @@ def _not_measured(value: Mapping[str, Any], known: List[str]) -> Tuple[str, ...]
         if name not in known or name == "not_measured":
             raise ParamError("controller/not_measured", names, "%r is no controller key (known: %s)"
                              % (name, ", ".join(k for k in known if k != "not_measured")))
-        if name in value:
-            raise ParamError("controller/%s" % name, value[name], "given a value and listed as not measured")
         out.append(str(name))
     return tuple(sorted(set(out)))
 

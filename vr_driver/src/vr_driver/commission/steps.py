@@ -1031,8 +1031,9 @@ class RampStep(Step):
             "ramp time (rest to full speed)", "%.2f s (the model's slowest joint)" % max(
                 v / a for v, a in zip(ctx.vmax, model)),
             "%.3f +- %.3f s, %s" % (fit.ramp_time, fit.uncertainty, fit.words),
-            "none" if fit.shared else "the joints ramp in times of their own: the driver counts the slowest joint's",
-            None if not fit.shared else abs(fit.ramp_time - max(v / a for v, a in zip(ctx.vmax, model)))
+            "none" if fit.shared else "the joints ramp in times of their own: the driver counts the slowest joint's "
+            "(ramp_time), the planner each joint's (joint_limits.yaml)",
+            fit.shared and abs(fit.ramp_time - max(v / a for v, a in zip(ctx.vmax, model)))
             <= max(0.1 * fit.ramp_time, 2.0 * fit.uncertainty)))
         findings.append(Finding("ramp shape", "linear (constant acceleration)", "%s (%d ramps, evidence %+.1f)" % (
             shape.replace("_", "-"), n, evidence),
