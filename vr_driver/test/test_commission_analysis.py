@@ -437,8 +437,9 @@ def test_the_clear_space_is_computed_from_the_moves_and_the_same_everywhere(tmp_
     port.write_text("")
     out = io.StringIO()
     assert main(["--port", str(port)], out=out, ask=lambda q: "n") == 1
-    assert "up to %.0f deg from where the arm stands -- %s." % (max(f for f, _ in space.values()),
-                                                               clear_space_words(sizes)) in out.getvalue()
+    said = " ".join(out.getvalue().split())               # the lines unwrapped
+    assert "up to %.0f deg from where the arm stands: %s." % (max(f for f, _ in space.values()),
+                                                             clear_space_words(sizes)) in said
     out = io.StringIO()
     assert main(["--clear-space", "--skip", "ramps"], out=out) == 0
     assert out.getvalue().startswith("clear space: joint_1 50 deg one way, 20 the other; joint_2 3 deg; "

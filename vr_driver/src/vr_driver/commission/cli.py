@@ -16,6 +16,7 @@ import argparse
 import logging
 import os
 import sys
+import textwrap
 import time
 from typing import Callable, List, Optional, Sequence, TextIO
 
@@ -40,7 +41,8 @@ Before you start, at the pendant (doc/commissioning.md, "What to have ready"):
     e-stop and the pendant's stop at hand;
   - the driver node stopped (this tool needs the port alone);
   - the arm in a clear space, near the middle of each joint's range: the steps turn single joints
-    up to {reach:.0f} deg from where the arm stands -- {joints}."""
+    up to {reach:.0f} deg from where the arm stands:
+{joints}."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -224,7 +226,8 @@ class _Runner:
         space = clear_space(sizes, tuple(skip))
         reach = max([far for far, _ in space.values()] or [0.0])
         self.say(PENDANT.format(address=bus_config.slaves[0].address, baud=bus_config.baud, reach=reach,
-                                joints=clear_space_words(sizes, tuple(skip)) or "none (no step moves)"))
+                                joints=textwrap.fill(clear_space_words(sizes, tuple(skip)) or "none (no step moves)",
+                                                     98, initial_indent="      ", subsequent_indent="      ")))
         self.say()
         if not args.yes and self.confirm("Is the arm in a clear space and the program running? [y/N] ", "ny") != "y":
             self.say("not started: nothing was sent")
