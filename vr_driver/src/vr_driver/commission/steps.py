@@ -7,12 +7,15 @@ the moves) and returns :class:`Finding` rows -- assumption, expected, measured, 
 the values it measured (:attr:`Context.measured`, the YAML's keys). The steps, in their order:
 
 ``card``          Data_Exchange with the v3 configuration, the byte order, the program armed; the
-                  controller's identity (no motion).
+                  controller's identity (no motion). The card's Data_Exchange status (§10.9) is listed
+                  as not measurable, with why (:func:`data_exchange_finding`).
 ``check_word``    the controller's records pass the check word; the program ignores a command whose
                   check word fails and one whose seq copy differs (a target at the arm's own pose:
                   nothing moves even if it is taken).
-``loop``          the heartbeat at rest (the loop's period and spread), then during a MOVE of joint 6:
-                  does the loop keep running, or block until the move ends?
+``loop``          the heartbeat at rest (the loop's period and spread, :func:`analysis.loop_spread`:
+                  "not resolved" where the watch cannot tell), then during a MOVE of joint 6: does the
+                  loop keep running, or block until the move ends? (What a blocking loop hides, the
+                  later steps list in :attr:`Context.not_measured`, never as values.)
 ``send_ahead``    a target one number ahead waits (the rule) or is refused (targets at the arm's pose).
 ``speed``         MOVEP's speed unit: three timed moves of one joint (+L, -2L, +L); the cruise speed
                   against the commanded one (from the move times when the loop blocks).
@@ -21,13 +24,16 @@ the values it measured (:attr:`Context.measured`, the YAML's keys). The steps, i
 ``configuration`` a pose with two solutions (joint 6 one turn apart), taken while the arm is on its
                   way: nearest the previous target's joints or the arm's?
 ``ramps``         per axis, a long move out and back, logged every cycle: the time from rest to full
-                  speed (the acceleration) and the ramp's shape.
+                  speed (the acceleration) and the ramp's shape; the ramp time from every joint's
+                  ramps with its error (:func:`analysis.ramp_times`).
 ``unreachable``   a pose out of reach: refused (code 4) or an alarm that halts the program (last:
                   a halted program needs the pendant).
 
-Moves are joint offsets from where the arm stands (its joints solved from the reported pose with
-the driver's model), sent as the Cartesian poses of those joints (the G2 solves them itself); the
-arm's joints during a move are tracked from the reported poses, each record dated by its heartbeat.
+Each moving step says how far it turns each joint (:meth:`Step.reach`); :func:`clear_space` is
+what the start, the steps' words and doc/commissioning.md say. Moves are joint offsets from where
+the arm stands (its joints solved from the reported pose with the driver's model), sent as the
+Cartesian poses of those joints (the G2 solves them itself); the arm's joints during a move are
+tracked from the reported poses, each record dated by its heartbeat.
 """
 from __future__ import annotations
 
