@@ -30,7 +30,7 @@ MEASURED = {"byte_order": "big", "check_word": True, "loop_period": 0.0102, "loo
             "ramp_shape": "linear", "unreachable": "skip"}
 
 
-def commissioning_files(tmp_path, kin, measured=MEASURED) -> str:
+def commissioning_files(tmp_path, kin, measured=MEASURED, not_measured=None) -> str:
     lim = kin.limits
     limits = joint_limits(lim.names, lim.velocity, lim.acceleration, measured)
     path = str(tmp_path / "g2.yaml")
@@ -42,7 +42,7 @@ def commissioning_files(tmp_path, kin, measured=MEASURED) -> str:
     identity = {"protocol": "v3", "ident": "0x06C6", "station_address": 4, "chk_cfg": "17 17 17 13 27 27 27",
                 "baud": 19200, "diag": None}
     write_yaml(path, measured, identity, results, beside, 61.3,
-               date=datetime.datetime(2025, 3, 4, 14, 5, tzinfo=datetime.timezone.utc))
+               date=datetime.datetime(2025, 3, 4, 14, 5, tzinfo=datetime.timezone.utc), not_measured=not_measured)
     write_joint_limits(beside, limits, path, sorted(measured.get("accelerations", {})))
     return path
 
@@ -121,3 +121,27 @@ def test_no_lookahead_file_sets_stream_smooth_0(tmp_path, kin):
     mine = node_params(dump("commissioning:=" + path))
     assert mine["stream_smooth"] == 0 and mine["controller"]["interpreter_lookahead"] == 0
     assert DriverParams.from_dict(dict(mine, port="/dev/null")).stream_smooth == 0
+
+
+def test_what_the_bus_hid_is_not_measured_in_the_file_and_the_driver(tmp_path, kin):
+    """A program loop that blocked during a MOVE hid the look-ahead and the ring: the file lists them
+    under controller/not_measured (the reasons under commissioning/not_measured), writes no value for
+    them, and loads through driver.launch; the driver keeps the assumptions, and on v3 runs every
+    stream point as a stop. An unknown key is refused by name."""
+    hidden = {k: v for k, v in MEASURED.items() if k not in ("interpreter_lookahead", "ring_size")}
+    why = "the program loop blocks during a MOVE"
+    path = commissioning_files(tmp_path, kin, hidden, {"interpreter_lookahead": why, "ring_size": why})
+    with open(path, encoding="utf-8") as fh:
+        doc = yaml.safe_load(fh)
+    assert doc["controller"]["not_measured"] == ["interpreter_lookahead", "ring_size"]
+    assert "interpreter_lookahead" not in doc["controller"] and "ring_size" not in doc["controller"]
+    assert doc["commissioning"]["not_measured"]["ring_size"] == why
+    mine = node_params(dump("commissioning:=" + path))
+    params = DriverParams.from_dict(dict(mine, port="/dev/null"))
+    assert params.protocol == "v3" and params.stream_smooth == 0
+    assert params.controller.not_measured == ("interpreter_lookahead", "ring_size")
+    assert params.controller.interpreter_lookahead == 1 and params.controller.ring_size == 4
+    from vr_driver.params import ParamError
+    with pytest.raises(ParamError) as err:
+        DriverParams.from_dict({"port": "/dev/null", "controller": {"not_measured": ["lookahead"]}})
+    assert err.value.name == "controller/not_measured" and "no controller key" in str(err.value)

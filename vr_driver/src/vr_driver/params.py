@@ -11,7 +11,7 @@ import math
 import os
 import re
 from dataclasses import dataclass, field, fields
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from . import validate
 from .errors import VrDriverError
@@ -34,7 +34,8 @@ def _protocols() -> Tuple[str, ...]:
 
 def _stream_smooth(protocol: str, facts: "ControllerFacts", stream_smooth: int) -> int:
     """``stream_smooth`` for the commissioned G2: 0 where it reads no MOVE ahead on a streaming
-    protocol (it stops at every point anyway: each is timed as a stop). A program loop that stops
+    protocol (it stops at every point anyway: each is timed as a stop), or where its look-ahead was
+    not measured (``controller/not_measured``: a program whose loop blocked during a MOVE hid it). A program loop that stops
     while a MOVE runs cannot serve a streaming protocol: ParamError naming
     ``controller/loop_blocks_during_move`` and the protocol that works."""
     from .protocol import registry
@@ -46,7 +47,9 @@ def _stream_smooth(protocol: str, facts: "ControllerFacts", stream_smooth: int) 
                          "(the feedback freezes while the arm moves, a target is taken only between MOVEs, "
                          "STOP is not seen until the move ends) -- use protocol %s (doc/commissioning.md)"
                          % (protocol, registry.DEFAULT))
-    return 0 if facts.interpreter_lookahead == 0 else stream_smooth
+    if facts.interpreter_lookahead == 0 or "interpreter_lookahead" in facts.not_measured:
+        return 0          # not measured: the safe side (a stop at every point runs on any look-ahead)
+    return stream_smooth
 
 
 def _io_protocols() -> Tuple[str, ...]:
@@ -209,6 +212,9 @@ class ControllerFacts:
     #                                      measured; None: not measured (the model's)
     accelerations: Tuple[Tuple[str, float], ...] = ()   # (plain joint name, rad/s^2) measured
     check_word: bool = True              # the program checks the master's check word and seq copy
+    not_measured: Tuple[str, ...] = ()   # keys the commissioning could not measure (the bus hid them):
+    #                                      their assumptions stand, and interpreter_lookahead among them
+    #                                      makes every stream point a stop (stream_smooth 0)
 
     @classmethod
     def from_dict(cls, value: Any, joint_names: Tuple[str, ...]) -> "ControllerFacts":
@@ -241,6 +247,7 @@ class ControllerFacts:
                 ramp_time=None if ramp is None else _number(value, "ramp_time", 0.0, 0.0, 10.0),
                 accelerations=_accelerations(value.get("accelerations"), joint_names),
                 check_word=_boolean(value, "check_word", d.check_word),
+                not_measured=_not_measured(value, known),
             )
         except ParamError as exc:
             if exc.name.startswith("controller/"):
@@ -250,6 +257,23 @@ class ControllerFacts:
     def acceleration(self, name: str) -> Optional[float]:
         """The measured acceleration [rad/s^2] of the joint called ``name`` (plain), or None."""
         return dict(self.accelerations).get(name)
+
+
+def _not_measured(value: Mapping[str, Any], known: List[str]) -> Tuple[str, ...]:
+    """``controller/not_measured``: a list of the other keys. A key listed keeps the value it is given
+    (the config file's: the assumption), and the driver treats it as not measured."""
+    names = value.get("not_measured")
+    if names is None:
+        return ()
+    if isinstance(names, str) or not isinstance(names, (list, tuple)):
+        raise ParamError("controller/not_measured", names, "expected a list of controller keys")
+    out = []
+    for name in names:
+        if name not in known or name == "not_measured":
+            raise ParamError("controller/not_measured", names, "%r is no controller key (known: %s)"
+                             % (name, ", ".join(k for k in known if k != "not_measured")))
+        out.append(str(name))
+    return tuple(sorted(set(out)))
 
 
 def _accelerations(value: Any, joint_names: Tuple[str, ...]) -> Tuple[Tuple[str, float], ...]:

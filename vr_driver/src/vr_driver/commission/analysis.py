@@ -1,9 +1,12 @@
 """The numbers of a commissioning, from the records logged every bus cycle. ROS-free, no I/O: plain
 functions over (time, value) samples, tested on synthetic profiles.
 
-- :func:`loop_timing`: the program loop's period (the heartbeat's rate), its spread and the longest
-  time the heartbeat stood still, from the intervals :func:`~vr_driver.commission.bus.heartbeat_brackets`
+- :func:`loop_timing`: the program loop's period (the heartbeat's rate) and the longest time the
+  heartbeat stood still, from the intervals :func:`~vr_driver.commission.bus.heartbeat_brackets`
   gives (each loop dated between two requests of the master).
+- :func:`loop_spread`: the spread of the loop's periods, from how the heartbeat wanders about a
+  line over windows of several lengths (also where the bus cycle is longer than the loop), or
+  "not resolved" and why.
 - :func:`date_loops`: a time for every loop of a window -- on the line ``a + P k`` through the
   brackets (a steady loop: no master scheduling in it), per run between two stalls.
 - :func:`cruise`: the constant-speed part of a move from rest to rest and its speed.
@@ -18,10 +21,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
-__all__ = ["LoopTiming", "loop_timing", "date_loops", "Cruise", "top_speed", "cruise", "RampFit", "fit_ramp",
-           "MoveFit", "fit_move", "ramp_linear", "ramp_s_curve", "passing_times", "steady_speeds", "min_speed_near", "moved_interval",
+__all__ = ["LoopTiming", "loop_timing", "LoopSpread", "loop_spread", "watch_more", "STEADY_SPREAD", "date_loops", "Cruise", "top_speed", "cruise", "RampFit", "fit_ramp",
+           "MoveFit", "fit_move", "RampTimes", "ramp_times", "ramp_linear", "ramp_s_curve", "passing_times", "steady_speeds", "min_speed_near", "moved_interval",
            "cruise_move"]
 
 Samples = Sequence[Tuple[float, float]]
@@ -31,11 +34,10 @@ Samples = Sequence[Tuple[float, float]]
 
 @dataclass(frozen=True)
 class LoopTiming:
-    """The program loop seen through the heartbeat."""
+    """The program loop seen through the heartbeat: its period and gaps (its spread:
+    :func:`loop_spread`)."""
 
     period: float                 # [s] the mean loop period (slope of loop time over loop count)
-    spread: Optional[float]       # [s] standard deviation of single periods, the part that adds up
-    #                               from loop to loop (None: the bus cycle is too long to see loops)
     max_gap: float                # [s] the longest time between two new heartbeats as seen
     loops: int                    # loops counted
     span: float                   # [s] over this time
@@ -74,30 +76,142 @@ def loops_seen(brackets: Sequence[Tuple[int, float, float]]) -> int:
 
 
 def loop_timing(brackets: Sequence[Tuple[int, float, float]]) -> Optional[LoopTiming]:
-    """The loop's timing from (loop count, earliest, latest) brackets; None with fewer than 3."""
+    """The loop's period and gaps from (loop count, earliest, latest) brackets; None with fewer than 3."""
     if len(brackets) < 3:
         return None
     ks = [float(k) for k, _, _ in brackets]
     mids = [(e + l) / 2.0 for _, e, l in brackets]
     _, period = _line(ks, mids)
-    # the spread of single periods that adds up (a loop that runs late stays late: what moves the
-    # driver's heartbeat dating, record_clock): the variance of m-loop spans grows as m x that
-    # variance; the brackets' own error (up to a bus cycle) does not grow with m, so the slope of
-    # the variance over m is free of it
-    at = {k: m for (k, _, _), m in zip(brackets, mids)}
-    points = []
-    for m in range(1, 9):
-        spans = [at[k + m] - at[k] for k in at if k + m in at]
-        if len(spans) >= 20:
-            mean = sum(spans) / len(spans)
-            points.append((float(m), sum((x - mean) ** 2 for x in spans) / (len(spans) - 1)))
-    spread: Optional[float] = None
-    if len(points) >= 4:
-        _, slope = _line([m for m, _ in points], [v for _, v in points])
-        spread = math.sqrt(max(0.0, slope))
     max_gap = max(l2 - l1 for (_, _, l1), (_, _, l2) in zip(brackets, brackets[1:]))
-    return LoopTiming(period, spread, max_gap, brackets[-1][0] - brackets[0][0],
-                      brackets[-1][2] - brackets[0][2])
+    return LoopTiming(period, max_gap, brackets[-1][0] - brackets[0][0], brackets[-1][2] - brackets[0][2])
+
+
+#: [s] a loop whose periods spread less than this is "steady" (the uniform +-2 ms of a 10-20 ms loop
+#: spreads 1.15 ms: never steady)
+STEADY_SPREAD = 0.0005
+#: a verdict needs a spread of STEADY_SPREAD to add at least this share to the heartbeat's scatter
+#: over the longest window (below it a jittery loop and a steady one look alike: "not resolved")
+SPREAD_SENSITIVITY = 0.5
+#: the fewest records a window of the spread's estimate holds
+SPREAD_WINDOW = 16
+
+
+@dataclass(frozen=True)
+class LoopSpread:
+    """The spread of the loop's periods as the heartbeat shows it over windows of several lengths."""
+
+    verdict: str                  # "steady", "irregular" or "not resolved"
+    spread: Optional[float]       # [s] the estimate (the median over the window lengths); None: too few records
+    low: float                    # [s] the lowest and highest estimate of the window lengths
+    high: float
+    why: str                      # the verdict's reason, in words
+    records: int
+    span: float                   # [s] the time the records cover
+    needed: Optional[float] = None   # [s] of records a verdict would need (not resolved for want of time)
+
+    @property
+    def resolved(self) -> bool:
+        return self.verdict != "not resolved"
+
+
+def _residual_variance(points: Sequence[Tuple[float, int]]) -> float:
+    """The variance of the times about the line time = a + P count fitted through ``points``."""
+    ks = [float(k) for _, k in points]
+    ts = [t for t, _ in points]
+    a, b = _line(ks, ts)
+    return sum((t - a - b * k) ** 2 for t, k in zip(ts, ks)) / max(1, len(points) - 2)
+
+
+def loop_spread(points: Sequence[Tuple[float, int]], bus_period: float, limit: float = STEADY_SPREAD
+                ) -> LoopSpread:
+    """The spread of the loop's periods from (time, heartbeat) of every record (:func:`~vr_driver.
+    commission.bus.heartbeat_samples`; the heartbeat unwrapped), whatever the bus cycle against the loop.
+
+    What the bus shows: at each record's time ``t`` the loop count ``k``. A steady loop keeps every
+    (k, t) within one period of a straight line however long the window -- the scatter about a line
+    fitted over a window is the same for a window of 2 s or of 20 s. Periods that spread by s each
+    add up (a loop that runs late stays late): over a window of N loops the times wander from the
+    line by a random walk, whose variance about the fitted line grows as s^2 N / 15 (a Brownian
+    path less its least-squares line). So the scatter is taken over windows of several lengths --
+    the whole record, halves, quarters, and short ones of 1/16 -- and s^2 = 15 x (its growth) /
+    (the loops it grew over), from each of the three long lengths against the short one. That
+    holds at a bus cycle longer than the loop (50 ms against 16 ms at 19.2 kbit/s): the heartbeat's
+    quantisation (a period, whatever the bus) does not grow with the window.
+
+    Verdict: "steady" when every estimate is below ``limit`` and a spread of ``limit`` would have
+    added at least SPREAD_SENSITIVITY of the short windows' scatter over the longest window;
+    "irregular" when every one is above it (with a fifth of that sensitivity: a spread well above
+    the limit shows sooner); else "not resolved", said why and how long a watch would tell
+    (``needed``). In synthetic runs of 10-20 ms loops, +-0-6 ms, through 50 ms bus cycles (a few
+    ms of the master's own timing noise), 20 s told every one right; 5 s left the steady ones and
+    some of +-2 ms "not resolved"."""
+    n = len(points)
+    span = points[-1][0] - points[0][0] if n >= 2 else 0.0
+    if n < 8 * SPREAD_WINDOW or points[-1][1] - points[0][1] < 8 * SPREAD_WINDOW:
+        return LoopSpread("not resolved", None, 0.0, 0.0, "too few records (%d over %.1f s; it needs at least %d, "
+                          "and as many loops)" % (n, span, 8 * SPREAD_WINDOW), n, span,
+                          span * 8 * SPREAD_WINDOW / max(1, min(n, points[-1][1] - points[0][1])) if span else None)
+    base = max(SPREAD_WINDOW, n // 16)
+
+    def scatter(size: int) -> Tuple[float, float]:
+        """(mean loops, mean residual variance) over the windows of ``size`` records."""
+        loops, var = [], []
+        for i in range(0, n - size + 1, size):
+            w = points[i:i + size]
+            loops.append(float(w[-1][1] - w[0][1]))
+            var.append(_residual_variance(w))
+        return sum(loops) / len(loops), sum(var) / len(var)
+
+    l0, v0 = scatter(base)
+    estimates, longest = [], 0.0
+    for size in (n, n // 2, n // 4):
+        if size < 2 * base:
+            continue
+        loops, var = scatter(size)
+        if loops <= l0:
+            continue
+        estimates.append(math.sqrt(max(0.0, 15.0 * (var - v0) / (loops - l0))))
+        longest = max(longest, loops - l0)
+    period = (points[-1][0] - points[0][0]) / max(1, points[-1][1] - points[0][1])
+    sampled = ("the bus cycle, %.0f ms, is longer than the loop, %.1f ms: the spread shows only in how the heartbeat "
+               "wanders over many loops" % (bus_period * 1e3, period * 1e3)) if bus_period > period else \
+        "from the heartbeat's wander over many loops"
+    if len(estimates) < 3:
+        return LoopSpread("not resolved", None, 0.0, 0.0, "too few records (%d over %.1f s) for windows of "
+                          "several lengths" % (n, span), n, span)
+    lo, hi = min(estimates), max(estimates)
+    spread = sorted(estimates)[len(estimates) // 2]
+    # the short windows' scatter less what the estimated spread adds to it there: the heartbeat's
+    # quantisation and the master's timing noise, against which a spread must show
+    floor = max(v0 - spread * spread * l0 / 15.0, 0.05 * v0, 1e-12)
+    sensitivity = limit * limit * longest / 15.0 / floor
+    windows = "windows of %.1f-%.1f s" % (span * base / n, span)
+    if hi < limit and sensitivity >= SPREAD_SENSITIVITY:
+        return LoopSpread("steady", spread, lo, hi, "under %.1f ms over %s; %s" % (limit * 1e3, windows, sampled),
+                          n, span)
+    if lo > limit and sensitivity >= SPREAD_SENSITIVITY / 5.0:
+        return LoopSpread("irregular", spread, lo, hi, "%.2f ms, %.2f-%.2f over %s; %s" % (
+            spread * 1e3, lo * 1e3, hi * 1e3, windows, sampled), n, span)
+    if sensitivity < SPREAD_SENSITIVITY:
+        needed = span * SPREAD_SENSITIVITY / max(sensitivity, 1e-9)
+        return LoopSpread("not resolved", spread, lo, hi, "%s, and %.1f s of it are too few loops to tell a spread "
+                          "of %.1f ms from none (%.2f-%.2f ms over %s): it needs about %.0f s at this bus rate, or a "
+                          "bus cycle well under the loop's %.1f ms (a higher line rate) for a shorter watch"
+                          % (sampled, span, limit * 1e3, lo * 1e3, hi * 1e3, windows, needed, period * 1e3),
+                          n, span, needed)
+    needed = 4.0 * span
+    return LoopSpread("not resolved", spread, lo, hi, "%s; the estimates over %s, %.2f-%.2f ms, lie on both sides "
+                      "of %.1f ms: a longer watch (about %.0f s) would tell"
+                      % (sampled, windows, lo * 1e3, hi * 1e3, limit * 1e3, needed), n, span, needed)
+
+
+def watch_more(spread: LoopSpread, longest: float) -> float:
+    """How much longer [s] to watch the heartbeat for a spread ``not resolved`` for want of loops,
+    where the watch it needs is within ``longest`` seconds in all (0: no longer watch helps, or none
+    is needed)."""
+    if spread.resolved or spread.needed is None or not spread.span < spread.needed <= longest:
+        return 0.0
+    return spread.needed * 1.1 - spread.span       # a tenth more: the estimate of the need is itself rough
 
 
 def date_loops(brackets: Sequence[Tuple[int, float, float]], stall: float) -> dict:
@@ -339,6 +453,102 @@ def fit_move(samples: Samples, loop: float = 0.01) -> Optional[MoveFit]:
         count = len(pts)
     assert fit_in is not None and fit_out is not None
     return MoveFit(v, fit_in, fit_out, count)
+
+
+#: joints whose times to full speed lie within this share of their mean share one ramp time (at 20
+#: cycles/s with an irregular loop a joint's own 0.5 s ramps came out 0.44-0.54 s)
+SHARED_RAMP = 0.15
+
+
+@dataclass(frozen=True)
+class RampTimes:
+    """The time from rest to full speed, from every measured joint's ramps together."""
+
+    ramp_time: float                              # [s] what the driver counts (ControllerFacts.ramp_time)
+    uncertainty: float                            # [s] its standard error
+    shared: bool                                  # True: every joint agrees with one ramp time
+    per_axis: Dict[int, Tuple[float, float]]      # axis: (time to full speed, its standard error) [s]
+    accelerations: Dict[int, Tuple[float, float]]  # axis: (rad/s^2, its standard error)
+    words: str
+
+
+def ramp_times(ramps: Mapping[int, Tuple[float, Sequence[float]]], vmax: Mapping[int, float],
+               spacing: float = 0.0, floor: float = 0.02) -> RampTimes:
+    """The ramp time and each joint's acceleration from ``ramps`` -- axis: (the cruise speed its
+    ramps reached [rad/s], their durations [s]) -- and the joints' full speeds ``vmax``.
+
+    Each joint's time to full speed is its median ramp scaled to full speed (the G2 accelerates the
+    same to a lower speed), its standard error the durations' scatter over the root of their number,
+    but at least that of a time known to one record (``spacing`` [s] between records / sqrt 12: a
+    joint's few ramps share the records' dating -- through 50 ms cycles a jittery loop's 0.1 s
+    ramps scattered little and came out 10-40 % long) and ``floor`` of the time. Where every
+    joint agrees with one time (within 2.5 standard errors of their weighted mean, or SHARED_RAMP of
+    it) that mean is the ramp time, with its error (widened by the joints' scatter about it where
+    their own errors understate that), and each joint's acceleration is its full speed over it -- every
+    ramp of the run counts, not the slowest joint's few (the largest of six noisy figures came out
+    13 % long at 20 cycles/s). Of four joints or more, one off the others keeps its own figure and
+    the rest share theirs; the ramp time is then the odd joint's only where it is the slower. Where
+    they differ more, each joint keeps its own and the ramp time is the slowest joint's (what the
+    driver must allow for)."""
+    per_axis: Dict[int, Tuple[float, float]] = {}
+    for axis, (v, durations) in ramps.items():
+        ds = sorted(durations)
+        scale = vmax[axis] / v
+        median = ds[len(ds) // 2] if len(ds) % 2 else (ds[len(ds) // 2 - 1] + ds[len(ds) // 2]) / 2.0
+        if len(ds) >= 2:
+            mean = sum(ds) / len(ds)
+            se = math.sqrt(sum((d - mean) ** 2 for d in ds) / (len(ds) - 1) / len(ds))
+        else:
+            se = 0.0
+        t = median * scale
+        per_axis[axis] = (t, max(se * scale, spacing / math.sqrt(12.0) * scale, floor * t))
+    n = sum(len(d) for _, d in ramps.values())
+    group = sorted(per_axis)
+    mean, error, shared = _shared_time(per_axis, group)
+    odd: Optional[int] = None
+    if not shared and len(group) >= 4:
+        # one joint off the others (a mis-fitted joint, or one that really ramps in its own time):
+        # the rest share theirs, that joint keeps its own figure
+        odd = max(group, key=lambda axis: abs(per_axis[axis][0] - mean))
+        rest = [axis for axis in group if axis != odd]
+        mean, error, shared = _shared_time(per_axis, rest)
+        group = rest
+        if not shared:
+            odd, group = None, sorted(per_axis)
+    if shared:
+        acc = {axis: (vmax[axis] / mean, vmax[axis] / mean * error / mean) for axis in group}
+        words = "one ramp time for joints %s: the weighted mean of their %d ramps" % (
+            ", ".join(str(a) for a in group), sum(len(ramps[a][1]) for a in group))
+        if odd is None:
+            return RampTimes(mean, error, True, per_axis, acc, words)
+        t_odd, se_odd = per_axis[odd]
+        acc[odd] = (vmax[odd] / t_odd, vmax[odd] / t_odd * se_odd / t_odd)
+        if t_odd <= mean:
+            words += "; joint_%d faster, on its own (%.3f +- %.3f s)" % (odd, t_odd, se_odd)
+            return RampTimes(mean, error, True, per_axis, acc, words)
+        words = "joint_%d's, the slowest, on its own (%.3f +- %.3f s); %s" % (odd, t_odd, se_odd, words)
+        return RampTimes(t_odd, se_odd, False, per_axis, acc, words)
+    acc = {axis: (vmax[axis] / t, vmax[axis] / t * se / t) for axis, (t, se) in per_axis.items()}
+    slowest = max(per_axis, key=lambda axis: per_axis[axis][0])
+    words = "joint_%d's, the slowest (the joints ramp in times of their own: %s s, %d ramps)" % (
+        slowest, ", ".join("%d: %.3f" % (axis, per_axis[axis][0]) for axis in sorted(per_axis)), n)
+    return RampTimes(per_axis[slowest][0], per_axis[slowest][1], False, per_axis, acc, words)
+
+
+def _shared_time(per_axis: Mapping[int, Tuple[float, float]], axes: Sequence[int]) -> Tuple[float, float, bool]:
+    """(weighted mean, its error, whether every one of ``axes`` agrees with it) of the joints' times
+    to full speed: agreeing, within 2.5 of their own errors or SHARED_RAMP of the mean; the error
+    then widened by their scatter about the mean where their own errors understate it."""
+    weights = {axis: 1.0 / (per_axis[axis][1] ** 2) for axis in axes}
+    total = sum(weights.values())
+    mean = sum(weights[axis] * per_axis[axis][0] for axis in axes) / total
+    error = math.sqrt(1.0 / total)
+    shared = all(abs(per_axis[axis][0] - mean) <= max(2.5 * math.hypot(per_axis[axis][1], error), SHARED_RAMP * mean)
+                 for axis in axes)
+    if len(axes) > 1:                     # the error said: widened by the scatter (not the test above's)
+        chi2 = sum(weights[axis] * (per_axis[axis][0] - mean) ** 2 for axis in axes)
+        error *= math.sqrt(max(1.0, chi2 / (len(axes) - 1)))
+    return mean, error, shared
 
 
 def passing_times(samples: Samples, points: Sequence[float]) -> List[Optional[float]]:

@@ -31,7 +31,7 @@ from ..errors import VrDriverError
 from ..params import DriverParams
 from ..protocol.v3 import FeedbackV3
 
-__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_users", "heartbeat_brackets", "new_loops"]
+__all__ = ["Cycle", "CommissionBus", "CommissionError", "LinkDown", "port_problem", "port_users", "heartbeat_brackets", "heartbeat_samples", "new_loops"]
 
 log = logging.getLogger("vr_driver.commission")
 
@@ -106,6 +106,32 @@ def port_users(device: str, proc: str = "/proc") -> List[Tuple[int, str]]:
             cmd = "?"
         out.append((pid, cmd))
     return out
+
+
+def port_problem(device: str, dev: str = "/dev") -> str:
+    """Why ``device`` cannot be opened, in words (empty: it can be tried) -- said at once, before the
+    connect timeout: a port that does not exist (the adapter unplugged, another name: the serial
+    ports there named) or that this user may not open. A URL (``socket://``, ``rfc2217://``) is
+    not checked."""
+    if not device or "://" in device:
+        return ""
+    if not os.path.exists(device):
+        try:
+            near = sorted(os.path.join(dev, n) for n in os.listdir(dev) if n.startswith(("ttyUSB", "ttyACM", "ttyS")))
+        except OSError:
+            near = []
+        by_id = os.path.join(dev, "serial", "by-id")
+        try:
+            near = sorted(os.path.join(by_id, n) for n in os.listdir(by_id)) + near
+        except OSError:
+            pass
+        shown = [p for p in near if "ttyS" not in p][:8] or near[:4]
+        return ("the port %s does not exist (is the USB-RS-485 adapter plugged in?); serial ports here: %s -- "
+                "give --port" % (device, ", ".join(shown) if shown else "none"))
+    if not os.access(device, os.R_OK | os.W_OK):
+        return ("no permission to open %s: add this user to the port's group (ls -l %s names it, usually "
+                "dialout: sudo adduser $USER dialout) and log in again" % (device, device))
+    return ""
 
 
 def _open_exclusive(device: str, baud: int) -> Any:
@@ -258,3 +284,22 @@ def heartbeat_brackets(cycles: Iterable[Cycle]) -> List[Tuple[int, float, float]
     (mod 65536) from the first record; a gap in the records (no reply) widens the bracket."""
     return [(k, prev if prev is not None else c.request, c.arrival if c.arrival is not None else c.time)
             for c, k, prev in new_loops(cycles) if k > 0]
+
+
+def heartbeat_samples(cycles: Iterable[Cycle]) -> List[Tuple[float, int]]:
+    """(request time, unwrapped heartbeat) for EVERY record of ``cycles`` (the loop count the card
+    showed when the master asked; unwrapped mod 65536 from the first record): what
+    :func:`~vr_driver.commission.analysis.loop_spread` reads -- a record that brought no new loop
+    says as much as one that did."""
+    out: List[Tuple[float, int]] = []
+    last: Optional[int] = None
+    k = 0
+    for c in cycles:
+        fb = c.feedback
+        if fb is None:
+            continue
+        if last is not None:
+            k += (fb.heartbeat - last) % 65536
+        last = fb.heartbeat
+        out.append((c.request, k))
+    return out

@@ -16,15 +16,17 @@ import argparse
 import logging
 import os
 import sys
+import textwrap
 import time
 from typing import Callable, List, Optional, Sequence, TextIO
 
 from ..bus.process import set_priority
 from ..errors import VrDriverError
 from ..params import DriverParams, ParamError
-from .bus import CommissionBus, CommissionError, LinkDown, port_users
+from .bus import CommissionBus, CommissionError, LinkDown, port_problem, port_users
 from .report import joint_limits, table, write_joint_limits, write_yaml
-from .steps import STEP_NAMES, STEPS, Context, Finding, Sizes, StepResult, _Abort
+from .steps import (STEP_NAMES, STEPS, Context, Finding, Sizes, StepResult, _Abort, clear_space, clear_space_table,
+                    clear_space_words)
 
 __all__ = ["main", "build_parser"]
 
@@ -38,7 +40,9 @@ Before you start, at the pendant (doc/commissioning.md, "What to have ready"):
   - the v3 program (ROSLINK3, section 10.7) loaded and running, override low, the arm's
     e-stop and the pendant's stop at hand;
   - the driver node stopped (this tool needs the port alone);
-  - the arm in a clear space: moves of up to {reach:.0f} deg of a joint from where it stands."""
+  - the arm in a clear space, near the middle of each joint's range: the steps turn single joints
+    up to {reach:.0f} deg from where the arm stands:
+{joints}."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -66,6 +70,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 0: normal scheduling)")
     p.add_argument("--skip", action="append", default=[], metavar="NAME",
                    help="skip a step (repeat, or a comma list): %s" % ", ".join(STEP_NAMES))
+    p.add_argument("--clear-space", action="store_true",
+                   help="print how far the steps (less --skip, at these sizes) turn each joint from where the arm "
+                        "stands, and exit: nothing is opened or sent")
     g = p.add_argument_group("sizes of the moves (degrees, percent of the joint speed limits, seconds)")
     g.add_argument("--connect-timeout", type=float, default=d.connect_timeout)
     g.add_argument("--heartbeat-time", type=float, default=d.heartbeat_time, help="loop: seconds at rest")
@@ -193,7 +200,17 @@ class _Runner:
         if unknown:
             self.say("commission: unknown step %s (steps: %s)" % (", ".join(unknown), ", ".join(STEP_NAMES)))
             return 2
+        if args.clear_space:
+            self.say("clear space: %s (deg from where the arm stands)" % (
+                clear_space_words(sizes, tuple(skip)) or "none (no step moves)"))
+            if not skip:
+                self.say(clear_space_table(sizes))
+            return 0
         device = bus_config.phy.device
+        problem = port_problem(device)
+        if problem:
+            self.say("commission: %s" % problem)          # at once: not after the connect timeout
+            return 1
         users = port_users(device)
         if users:
             self.say("commission: %s is open by %s -- stop the driver (and anything else on the port) first: "
@@ -206,9 +223,11 @@ class _Runner:
         except VrDriverError as exc:
             self.say("commission: the model: %s" % exc)
             return 2
-        reach = max(sizes.ramp_move_max * 2 if "ramps" not in skip else 0.0, 2 * sizes.config_turn
-                    if "configuration" not in skip else 0.0, 2 * sizes.speed_move, sizes.stream_points * sizes.stream_step)
-        self.say(PENDANT.format(address=bus_config.slaves[0].address, baud=bus_config.baud, reach=reach))
+        space = clear_space(sizes, tuple(skip))
+        reach = max([far for far, _ in space.values()] or [0.0])
+        self.say(PENDANT.format(address=bus_config.slaves[0].address, baud=bus_config.baud, reach=reach,
+                                joints=textwrap.fill(clear_space_words(sizes, tuple(skip)) or "none (no step moves)",
+                                                     98, initial_indent="      ", subsequent_indent="      ")))
         self.say()
         if not args.yes and self.confirm("Is the arm in a clear space and the program running? [y/N] ", "ny") != "y":
             self.say("not started: nothing was sent")
@@ -291,7 +310,8 @@ class _Runner:
         measured.pop("byte_order_tried", None)
         limits = joint_limits(kin.limits.names, kin.limits.velocity, kin.limits.acceleration, measured)
         limits_path = os.path.join(os.path.dirname(os.path.abspath(args.out)), "joint_limits.yaml")
-        write_yaml(args.out, measured, ctx.identity, results, limits_path, robot_time)
+        write_yaml(args.out, measured, ctx.identity, results, limits_path, robot_time,
+                   not_measured=ctx.not_measured)
         write_joint_limits(limits_path, limits, args.out, sorted((measured.get("accelerations") or {}).keys()))
         self.say("written: %s (driver.launch commissioning:=%s), %s, the bus log %s"
                  % (args.out, os.path.abspath(args.out), limits_path, log_path))

@@ -6,7 +6,8 @@
 measurements by their names (``protocol``, ``byte_order``, ``stream_smooth`` where the arm cannot
 blend), ``planning_limits`` (the ``joint_limits.yaml`` written beside it: the plan action's limits),
 the measured behaviours of the G2 under ``controller`` (:class:`~vr_driver.params.ControllerFacts`:
-``interpreter_lookahead``, ``speed_scale``, ``loop_blocks_during_move``, ...; only what was measured)
+``interpreter_lookahead``, ``speed_scale``, ``loop_blocks_during_move``, ...; only what was measured,
+and ``not_measured``: the keys the bus hid, their reasons under ``commissioning/not_measured``)
 and, under ``commissioning`` (information), the date, the controller's identity, the robot time and
 the table.
 :func:`write_joint_limits` writes the same limits as a MoveIt ``joint_limits.yaml`` beside it.
@@ -54,9 +55,11 @@ def table(findings: Sequence[Finding], width: int = 100) -> str:
     return "\n".join(lines)
 
 
-def driver_values(measured: Mapping[str, Any]) -> Dict[str, Any]:
+def driver_values(measured: Mapping[str, Any], not_measured: Optional[Mapping[str, str]] = None) -> Dict[str, Any]:
     """The driver's parameters (DriverParams names; the measured behaviours under ``controller``) from
-    what was measured. ``protocol`` v3, or v1 where the program loop blocks during a MOVE (v3 cannot
+    what was measured; the keys a step could not measure (``not_measured``: {key: why}) listed under
+    ``controller/not_measured``, never written as a value (the driver keeps their assumptions, and
+    takes an unmeasured look-ahead as a stop at every point). ``protocol`` v3, or v1 where the program loop blocks during a MOVE (v3 cannot
     stream with it: the driver refuses it at start); ``stream_smooth`` 0 where the arm cannot blend."""
     blocks = bool(measured.get("loop_blocks_during_move"))
     out: Dict[str, Any] = {"protocol": "v1" if blocks else "v3"}
@@ -74,6 +77,9 @@ def driver_values(measured: Mapping[str, Any]) -> Dict[str, Any]:
         elif isinstance(value, float):
             value = round(value, 6)
         controller[key] = value
+    hidden = sorted(k for k in (not_measured or {}) if k in CONTROLLER_KEYS and k not in controller)
+    if hidden:
+        controller["not_measured"] = hidden
     out["controller"] = controller
     return out
 
@@ -103,12 +109,12 @@ def _identity_lines(identity: Mapping[str, Any]) -> str:
 
 def write_yaml(path: str, measured: Mapping[str, Any], identity: Mapping[str, Any],
                results: Sequence[StepResult], limits_path: str, robot_time: float,
-               date: Optional[datetime.datetime] = None) -> None:
+               date: Optional[datetime.datetime] = None, not_measured: Optional[Mapping[str, str]] = None) -> None:
     """The commissioning file (module docstring); ``limits_path``: the joint_limits.yaml written
     beside it (stored absolute as ``planning_limits``; driver.launch sets it from the file's place)."""
     date = date or datetime.datetime.now(datetime.timezone.utc).astimezone()
     findings = [f for r in results for f in r.findings]
-    values = driver_values(measured)
+    values = driver_values(measured, not_measured)
     doc: Dict[str, Any] = {k: v for k, v in values.items() if k != "controller"}
     doc["planning_limits"] = os.path.abspath(limits_path)
     doc["controller"] = values["controller"]
@@ -120,6 +126,8 @@ def write_yaml(path: str, measured: Mapping[str, Any], identity: Mapping[str, An
                            **({"error": r.error} if r.error else {})} for r in results},
         "findings": [f.as_dict() for f in findings],
     }
+    if values["controller"].get("not_measured"):
+        doc["commissioning"]["not_measured"] = {k: (not_measured or {})[k] for k in values["controller"]["not_measured"]}
     doc = _no_none(doc)
     text = ("Written by `rosrun vr_driver commission` on %s (vr_driver/doc/commissioning.md). Controller: %s. "
             "driver.launch commissioning:=THIS_FILE loads it into the driver's parameters (DriverParams: %s); "

@@ -19,6 +19,9 @@ Where each fact acts:
   v3 stream check and the wire poses (:class:`~.stream_prep.CartesianStreams`: under
   ``current_joints`` each point checked from where the arm may be when the G2 takes it, up to
   ``ring_size`` + 1 points back, and points kept closer together);
+- ``not_measured`` (the keys the bus hid, e.g. the look-ahead and the ring where the program loop
+  blocked during a MOVE): their assumptions stand, said at connect; an unmeasured look-ahead runs
+  every stream point as a stop (``stream_smooth`` 0, DriverParams) and never shortens segments;
 - ``planning_limits`` (not a controller fact, the file beside the commissioning's): the plan
   action's joint speed and acceleration limits (:func:`planning_kinematics`).
 
@@ -32,7 +35,7 @@ import dataclasses
 import math
 from typing import Any, List, Optional, Tuple
 
-from ..params import DriverParams, read_planning_limits
+from ..params import ControllerFacts, DriverParams, read_planning_limits
 from .stream_prep import CARTESIAN_MAX_STEP
 from .streaming import MIN_SEGMENT_CYCLES
 
@@ -122,6 +125,8 @@ def controller_notes(params: DriverParams, kin: Any = None) -> Tuple[str, ...]:
             notes.append("the G2's program acts on a record whose check word is wrong (controller/check_word "
                          "false): a corrupted target could run -- edit GETCMD3 (doc/controller_program.md "
                          "§10.3) before running streams")
+    if facts.not_measured:
+        notes.append(_not_measured_words(params))
     if facts.unreachable == "alarm_halt":
         notes.append("an unreachable target raises an alarm that halts the G2's program (controller/"
                      "unreachable alarm_halt): the driver checks every pose against its model before sending "
@@ -137,6 +142,27 @@ def controller_notes(params: DriverParams, kin: Any = None) -> Tuple[str, ...]:
                      % (window, facts.ring_size, math.degrees(CARTESIAN_MAX_STEP / window)))
         notes.append(text)
     return tuple(notes)
+
+
+def _not_measured_words(params: DriverParams) -> str:
+    """What the driver does with the facts the commissioning could not measure."""
+    facts = params.controller
+    assumed = ControllerFacts()
+    text = ("the commissioning could not measure %s (controller/not_measured: the bus hid %s; the reasons are in "
+            "the file's commissioning/not_measured): the driver keeps the assumption%s" % (
+                ", ".join(facts.not_measured), "them" if len(facts.not_measured) > 1 else "it",
+                "s" if len(facts.not_measured) > 1 else ""))
+    kept = ["%s %s" % (key, getattr(assumed, key)) for key in facts.not_measured
+            if key in ("ring_size", "configuration", "ramp_shape", "loop_period_spread")]
+    if kept:
+        text += " (%s)" % ", ".join(kept)
+    if "interpreter_lookahead" in facts.not_measured and params.wire.streams:
+        text += ("; the look-ahead unknown, protocol %s runs every stream point as an exact stop (stream_smooth 0: "
+                 "right for any look-ahead, slower where the G2 could blend) and streams no shorter segments"
+                 % params.protocol)
+    if {"accelerations", "ramp_time"} & set(facts.not_measured):
+        text += "; the planner keeps the model's accelerations"
+    return text + " -- commission again once the program changed (doc/commissioning.md)"
 
 
 def _speed_words(params: DriverParams, kin: Any) -> str:
