@@ -5,6 +5,7 @@ that is due at once waits -- at most ``answer_wait`` -- for the driver's answer 
 so that what the driver decided on a report goes out in the next cycle."""
 from __future__ import annotations
 
+import pickle
 import time
 from multiprocessing import Pipe
 
@@ -154,3 +155,15 @@ def test_answer_wait_zero_never_waits():
     rig.server._next = time.monotonic() - 1.0
     rig.server._wait()
     assert rig.server.unanswered == 1
+
+
+def test_a_malformed_message_from_the_driver_is_refused_in_the_log_and_changes_nothing(caplog):
+    rig = Rig()
+    rig.out(record(1))
+    rig.cycle()
+    rig.conn.send_bytes(pickle.dumps(("out", ADDRESS, rig.server.sessions[ADDRESS], record(2), None, "7")))
+    rig.conn.send_bytes(b"not a pickle")
+    rig.server._drain()
+    assert "'out': field 5 is str '7', expected int" in caplog.text and "does not load" in caplog.text
+    assert rig.handle.outputs == record(1)
+    assert rig.cycle() == record(1) and rig.report.carried == rig.serial

@@ -27,6 +27,7 @@ The bus process sends (:data:`FROM_BUS`)::
                health: a BusHealthSummary when it changed since the last report, else None;
                events: StateChange tuples, in order
     SlaveReport (address, state, since, session, inputs, inputs_time, diag, counters)
+               diag: the slave's last Slave_Diag telegram (bytes) or None
     StateChange (address, old, new, reason, since, session)
     Failed     ("fail", text)                                 the port failed: the process ends
 
@@ -35,6 +36,7 @@ meant for its side.
 """
 from __future__ import annotations
 
+import functools
 import pickle
 from dataclasses import dataclass, fields
 from multiprocessing.connection import Connection
@@ -43,7 +45,7 @@ from typing import Dict, Optional, Tuple, Type, Union
 from pyprofibus_vendor.adapter import AdapterSetup
 from pyprofibus_vendor.dp import SlaveDiag
 from pyprofibus_vendor.dp_master import BusTiming, SlaveSpec
-from pyprofibus_vendor.errors import PhyError
+from pyprofibus_vendor.errors import PhyError, ProfibusError
 from pyprofibus_vendor.master_api import MasterCounters, MasterSlaveState, SlaveCounters
 
 from .health import BusHealthSummary
@@ -53,6 +55,7 @@ __all__ = ["MessageError", "Message", "BusSettings", "Start", "AddSlave", "Outpu
            "Channel", "driver_channel", "bus_channel", "TO_BUS", "FROM_BUS"]
 
 _NUMBER = (int, float)
+_NUMBER_TYPES = {int, float}
 _MASTER_FIELDS = tuple(f.name for f in fields(MasterCounters))
 _SLAVE_FIELDS = tuple(f.name for f in fields(SlaveCounters))
 
@@ -95,6 +98,8 @@ def _check(tag: str, values: tuple, types: tuple) -> None:
     the types include type(None))."""
     if len(values) != len(types):
         raise MessageError("bus message %r: %d fields, expected %d" % (tag, len(values), len(types)))
+    if all(map(isinstance, values, types)):
+        return
     for i, (value, kind) in enumerate(zip(values, types)):
         if not isinstance(value, kind):
             raise MessageError("bus message %r: field %d is %s %r, expected %s" % (
@@ -246,7 +251,8 @@ class StateChange:
 @dataclass(frozen=True)
 class SlaveReport:
     """(address, state, since, session, inputs, inputs_time, diag, counters): one slave after a
-    cycle; ``counters`` the SlaveCounters' values in field order."""
+    cycle; ``diag`` its last Slave_Diag as the telegram's bytes (or None), ``counters`` the
+    SlaveCounters' values in field order."""
 
     address: int
     state: MasterSlaveState
@@ -259,14 +265,15 @@ class SlaveReport:
 
     def values(self) -> tuple:
         return (self.address, self.state.value, self.since, self.session, self.inputs, self.inputs_time,
-                self.diag, tuple(vars(self.counters).values()))
+                None if self.diag is None else self.diag.encode(), tuple(vars(self.counters).values()))
 
     @classmethod
     def from_fields(cls, values: tuple) -> "SlaveReport":
         _check("slave report", values, ((int,), (str,), _NUMBER, (int,), (bytes, _NONE),
-                                        (int, float, _NONE), (SlaveDiag, _NONE), (tuple,)))
+                                        (int, float, _NONE), (bytes, _NONE), (tuple,)))
         address, state, since, session, inputs, inputs_time, diag, counters = values
-        return cls(address, _state(state), since, session, inputs, inputs_time, diag,
+        return cls(address, _state(state), since, session, inputs, inputs_time,
+                   None if diag is None else _diag(diag),
                    _counters(SlaveCounters, _SLAVE_FIELDS, counters))
 
 
@@ -309,6 +316,16 @@ def _tuple(value: object, what: str) -> tuple:
     return value
 
 
+@functools.lru_cache(maxsize=64)
+def _diag(data: bytes) -> SlaveDiag:
+    """A Slave_Diag from its bytes (a slave's diagnosis seldom changes: the same bytes every report
+    give the same frozen object, decoded once)."""
+    try:
+        return SlaveDiag.decode(data)
+    except ProfibusError as exc:
+        raise MessageError("bus message: a slave's diagnosis %s: %s" % (data.hex(" "), exc)) from None
+
+
 def _state(value: str) -> MasterSlaveState:
     try:
         return MasterSlaveState(value)
@@ -318,7 +335,7 @@ def _state(value: str) -> MasterSlaveState:
 
 def _counters(kind: Type[Union[MasterCounters, SlaveCounters]], names: Tuple[str, ...],
               values: tuple) -> Union[MasterCounters, SlaveCounters]:
-    if len(values) != len(names) or not all(isinstance(v, _NUMBER) for v in values):
+    if len(values) != len(names) or not set(map(type, values)) <= _NUMBER_TYPES:
         raise MessageError("bus message: %s %r, expected %d numbers (%s)" % (
             kind.__name__, values, len(names), ", ".join(names)))
     return kind(*values)

@@ -54,7 +54,6 @@ Rules:
 """
 from __future__ import annotations
 
-import copy
 import errno as errno_mod
 import logging
 import os
@@ -72,7 +71,7 @@ from pyprofibus_vendor.adapter import AdapterSetup
 from pyprofibus_vendor.dp_master import DpMaster, SlaveHandle, SlaveSpec
 from pyprofibus_vendor.errors import DpError, PhyError, ProfibusError
 from pyprofibus_vendor.master_api import (CONNECTED_STATES, MasterApi, MasterCounters, MasterSlaveState,
-                                          SlaveView)
+                                          SlaveCounters, SlaveView)
 from pyprofibus_vendor.phy import Link
 
 from .health import BusHealth, BusHealthSummary
@@ -362,10 +361,10 @@ class BusServer:
         for address, sessions in self.sessions.items():
             s = self.master.slave(address)
             slaves.append(SlaveReport(address, s.state, s.state_since, sessions, s.inputs, s.inputs_time,
-                                      s.last_diag, copy.copy(s.counters)))
+                                      s.last_diag, SlaveCounters(*vars(s.counters).values())))
         events, self._events = tuple(self._events), []
         summary, self._summary = self._summary, None
-        return Report(now, self._report_seq, self._carried, copy.copy(self.master.counters), tuple(slaves),
+        return Report(now, self._report_seq, self._carried, MasterCounters(*vars(self.master.counters).values()), tuple(slaves),
                       summary, self._sender.dropped_events, events)
 
     def _wait(self) -> None:
