@@ -38,9 +38,10 @@ from __future__ import annotations
 
 import functools
 import pickle
+import typing
 from dataclasses import dataclass, fields
 from multiprocessing.connection import Connection
-from typing import Dict, Optional, Tuple, Type, Union
+from typing import Callable, Dict, Optional, Tuple, Type, TypeVar, Union
 
 from pyprofibus_vendor.adapter import AdapterSetup
 from pyprofibus_vendor.dp import SlaveDiag
@@ -127,28 +128,43 @@ class Message:
 
 
 _NONE = type(None)
+M = TypeVar("M", bound=Message)
+
+
+def _accepts(hint: object) -> tuple:
+    """The types a field of type ``hint`` accepts on the wire (a float: an int too)."""
+    kinds = typing.get_args(hint) if typing.get_origin(hint) is Union else (hint,)
+    return tuple(t for k in kinds for t in (_NUMBER if k is float else (k,)))
+
+
+def message(tag: str) -> Callable[[Type[M]], Type[M]]:
+    """The class decorator of a message: a frozen dataclass with its ``TAG``, and the ``TYPES`` its
+    fields accept read from their annotations."""
+    def make(cls: Type[M]) -> Type[M]:
+        cls = dataclass(frozen=True)(cls)
+        cls.TAG = tag
+        hints = typing.get_type_hints(cls)
+        cls.TYPES = tuple(_accepts(hints[f.name]) for f in fields(cls))
+        return cls
+    return make
 
 
 # ---------------------------------------------------------------------------- the driver's
-@dataclass(frozen=True)
+@message("config")
 class Start(Message):
     """("config", settings): the first message; the bus process opens the port."""
 
     settings: BusSettings
-    TAG = "config"
-    TYPES = ((BusSettings,),)
 
 
-@dataclass(frozen=True)
+@message("slave")
 class AddSlave(Message):
     """("slave", spec): one more slave to cycle."""
 
     spec: SlaveSpec
-    TAG = "slave"
-    TYPES = ((SlaveSpec,),)
 
 
-@dataclass(frozen=True)
+@message("out")
 class Outputs(Message):
     """("out", address, session, data, stop, serial): a slave's outputs, made in Data_Exchange
     session ``session``; ``stop`` the controller's stop record for them (or None); ``serial``
@@ -159,71 +175,57 @@ class Outputs(Message):
     data: bytes
     stop: Optional[bytes]
     serial: int
-    TAG = "out"
-    TYPES = ((int,), (int,), (bytes,), (bytes, _NONE), (int,))
 
 
-@dataclass(frozen=True)
+@message("answer")
 class Answer(Message):
     """("answer", seq): the driver has set its outputs for report ``seq``."""
 
     seq: int
-    TAG = "answer"
-    TYPES = ((int,),)
 
 
-@dataclass(frozen=True)
+@message("cycle_at")
 class CycleAt(Message):
     """("cycle_at", when): the next cycle no later than ``when`` (the bus process's clock)."""
 
     when: float
-    TAG = "cycle_at"
-    TYPES = (_NUMBER,)
 
 
-@dataclass(frozen=True)
+@message("tick")
 class Tick(Message):
     """("tick",): the driver is alive."""
 
-    TAG = "tick"
 
 
-@dataclass(frozen=True)
+@message("close")
 class Close(Message):
     """("close",): end the bus process (the port is closed; nothing is sent after)."""
 
-    TAG = "close"
 
 
 # ---------------------------------------------------------------------------- the bus process's
-@dataclass(frozen=True)
+@message("opened")
 class Opened(Message):
     """("opened", scheduling, adapter): the port is open; how the process is scheduled, in words,
     and the USB adapter's setup (pyprofibus_vendor.adapter) or None."""
 
     scheduling: str
     adapter: Optional[AdapterSetup]
-    TAG = "opened"
-    TYPES = ((str,), (AdapterSetup, _NONE))
 
 
-@dataclass(frozen=True)
+@message("error")
 class OpenFailed(Message):
     """("error", text, errno): the port cannot be opened; the OS error number where there is one."""
 
     text: str
     errno: Optional[int]
-    TAG = "error"
-    TYPES = ((str,), (int, _NONE))
 
 
-@dataclass(frozen=True)
+@message("fail")
 class Failed(Message):
     """("fail", text): the port failed; the bus process ends."""
 
     text: str
-    TAG = "fail"
-    TYPES = ((str,),)
 
 
 @dataclass(frozen=True)
@@ -277,7 +279,7 @@ class SlaveReport:
                    _counters(SlaveCounters, _SLAVE_FIELDS, counters))
 
 
-@dataclass(frozen=True)
+@message("r")
 class Report(Message):
     """("r", time, seq, carried, counters, slaves, health, dropped_events, events): the bus after a
     cycle -- report number ``seq``; ``carried`` the serial of the controller's outputs its last
@@ -293,7 +295,6 @@ class Report(Message):
     health: Optional[BusHealthSummary]
     dropped_events: int
     events: Tuple[StateChange, ...]
-    TAG = "r"
 
     def values(self) -> tuple:
         return (self.time, self.seq, self.carried, tuple(vars(self.counters).values()),

@@ -33,7 +33,7 @@ import enum
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Deque, Dict, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, Optional, Tuple
 
 from pyprofibus_vendor.dp_master import BusTiming, DpMaster
 from pyprofibus_vendor.errors import ProfibusError
@@ -49,6 +49,9 @@ from .card_diagnosis import CardDiagnosis, diag_words
 from .link_port import (PORT_ERROR_AFTER, Reopening, controller_spec, idle_record, master_settings,
                         start_bus_process)
 from .record_clock import RecordClock
+
+if TYPE_CHECKING:
+    from pyprofibus_vendor.config import BusConfig
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -127,7 +130,7 @@ class LinkSupervisor:
     (:attr:`counters`, :meth:`master_counters`, :attr:`slave_state`, :attr:`last_diag`) are for
     the same thread's status snapshot."""
 
-    def __init__(self, params: DriverParams, bus: Any, clock: Callable[[], float],
+    def __init__(self, params: DriverParams, bus: BusConfig, clock: Callable[[], float],
                  open_link: Callable[[str, int], Link] = open_serial_link,
                  stations: Optional[Any] = None) -> None:
         self.params = params
