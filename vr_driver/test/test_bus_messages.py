@@ -20,7 +20,7 @@ from vr_driver.bus.health import BusHealthSummary
 from vr_driver.bus.messages import (FROM_BUS, TO_BUS, AddSlave, Answer, BusSettings, Channel, Close,
                                     CycleAt, Failed, MessageError, OpenFailed, Opened, Outputs, Report,
                                     SlaveReport, Start, StateChange, Tick, decode)
-from vr_driver.bus.process import BusProcessMaster, RemoteSlave
+from vr_driver.bus.process import BusProcessMaster, RemoteSlave, _ReportSender
 
 SPEC = SlaveSpec(8, 0x06C6, bytes.fromhex("1313131123232321"), watchdog=None)
 SETTINGS = BusSettings(device="/dev/ttyUSB0", baud=19200, master_address=2, timing=BusTiming.for_baud(19200),
@@ -129,3 +129,21 @@ def test_the_in_process_master_and_the_bus_processs_stand_in_share_one_interface
         handle.outputs = b"abc"
     handle.outputs = bytes(range(14))
     assert handle.outputs == bytes(range(14))
+
+
+def test_a_report_not_yet_sent_passes_its_state_changes_and_health_on_to_the_next():
+    """The bus process's report sender: a driver that does not read gets the newest report, with the
+    state changes and the health summary of the one it replaced."""
+    ours, theirs = Pipe()
+    sender = _ReportSender(Channel(theirs, TO_BUS))
+    up = StateChange(8, MasterSlaveState.CHECK_DIAG, MasterSlaveState.DATA_EXCHANGE, "ready", 1.0, 1)
+    down = StateChange(8, MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.BACKOFF, "no reply", 1.1, 1)
+    with sender._cond:                   # the sender's thread cannot take the first before the second
+        sender.post(Report(1.0, 1, 0, MasterCounters(), (), HEALTH, 0, (up,)))
+        sender.post(Report(1.1, 2, 0, MasterCounters(cycles=2), (), None, 0, (down,)))
+    assert ours.poll(5.0)
+    got = decode(ours.recv_bytes(), FROM_BUS)
+    assert got.seq == 2 and got.counters.cycles == 2
+    assert got.events == (up, down) and got.health == HEALTH
+    sender.final(Failed("the end"))
+    assert isinstance(decode(ours.recv_bytes(), FROM_BUS), Failed)
