@@ -52,12 +52,11 @@ blocking API (:meth:`DpMaster.cycle`, :meth:`DpMaster.run_cycles`,
 """
 from __future__ import annotations
 
-import enum
 import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, List, Optional, Tuple
 
 from .dp import (MASTER_SAP, ChkCfg, DiagStatus1, DiagStatus2, GcCommand, GlobalControl,
                  PrmStationStatus, Sap, SetPrm, SlaveDiag, cfg_io_lengths, explain_diag,
@@ -65,7 +64,12 @@ from .dp import (MASTER_SAP, ChkCfg, DiagStatus1, DiagStatus2, GcCommand, Global
 from .errors import ConfigError, DpError, DpTimeoutError, PhyError, ProfibusError
 from .fdl import (Deframer, FcbRequester, Frame, FrameControl, RequestFunction, ResponseStatus, Sd1,
                   Sd2, Sd3, ShortAck, StationType, sd2_data, sd2_encode)
+from .master_api import (CONNECTED_STATES as _CONNECTED, MasterApi, MasterCounters, MasterSlaveState,
+                         SlaveCounters, SlaveView)
 from .phy import Link
+
+if TYPE_CHECKING:
+    from .adapter import AdapterSetup
 
 __all__ = ["BusTiming", "SlaveSpec", "MasterSlaveState", "SlaveCounters", "MasterCounters",
            "SlaveHandle", "AcyclicRequest", "DpMaster"]
@@ -190,60 +194,8 @@ class SlaveSpec:
                       self.user_prm_data)
 
 
-class MasterSlaveState(enum.Enum):
-    INIT = "INIT"                    # FDL_Status request
-    WAIT_DIAG = "WAIT_DIAG"          # first Slave_Diag
-    SET_PRM = "SET_PRM"
-    CHK_CFG = "CHK_CFG"
-    CHECK_DIAG = "CHECK_DIAG"        # Slave_Diag after Chk_Cfg
-    DATA_EXCHANGE = "DATA_EXCHANGE"
-    DX_DIAG = "DX_DIAG"              # Slave_Diag fetched after a DH reply
-    BACKOFF = "BACKOFF"              # waiting before re-initialisation
-
-
-_CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
 _STEP_STATES = (MasterSlaveState.WAIT_DIAG, MasterSlaveState.SET_PRM, MasterSlaveState.CHK_CFG,
                 MasterSlaveState.CHECK_DIAG, MasterSlaveState.DX_DIAG)
-
-
-@dataclass
-class SlaveCounters:
-    requests: int = 0
-    retries: int = 0
-    timeouts: int = 0           # transactions without a valid reply after all retries
-    invalid_replies: int = 0    # valid telegrams that were not an acceptable reply
-    data_exchanges: int = 0     # good Data_Exchange replies
-    diag_reads: int = 0
-    losses: int = 0             # left Data_Exchange
-    reconnects: int = 0         # came back to Data_Exchange after a loss
-    state_changes: int = 0
-    faults: int = 0             # init attempts ended by a fault or time limit
-    dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
-
-
-@dataclass
-class MasterCounters:
-    cycles: int = 0
-    requests: int = 0
-    retries: int = 0
-    timeouts: int = 0
-    invalid_replies: int = 0
-    unexpected_frames: int = 0  # telegrams read while nothing was awaited (bytes still
-    # unread when the next request goes out are flushed uncounted: TSYN, see _transmit)
-    reconnects: int = 0
-    losses: int = 0
-    state_changes: int = 0
-    global_controls: int = 0
-    phy_errors: int = 0
-    overruns: int = 0           # fixed-rate loop cycles that started late
-    fcs_errors: int = 0         # copied from the deframer
-    garbage_bytes: int = 0      # copied from the deframer
-    dx_missed: int = 0          # Data_Exchange turns without a reply, tolerated (dx_tolerance)
-    echoes: int = 0             # requests from our own address read back: an RS-485 adapter that
-    #                             echoes its transmission (skipped)
-    dx_timed: int = 0           # good Data_Exchange replies timed (reply_wait below)
-    reply_wait: float = 0.0     # [s] their summed time beyond the telegrams' time on the wire:
-    #                             the station's delay plus what the adapter held them back
 
 
 @dataclass
@@ -256,59 +208,24 @@ class AcyclicRequest:
     error: Optional[ProfibusError] = None
 
 
-class SlaveHandle:
-    """The master's view of one slave (read by the application)."""
+class SlaveHandle(SlaveView):
+    """The master's view of one slave (read by the application; :class:`SlaveView` with the
+    master's own bookkeeping)."""
 
     def __init__(self, spec: SlaveSpec, now: float) -> None:
-        self.spec = spec
-        self.address = spec.address
-        self.state = MasterSlaveState.INIT
-        self.state_since = now
-        self.counters = SlaveCounters()
+        super().__init__(spec, now)
         self.fcb = FcbRequester()
-        self.last_diag: Optional[SlaveDiag] = None
         self.backoff_until = now
         self.failures = 0           # consecutive failed (re)initialisations
         self.failed_by_timeout = False   # the last failure was a missing reply
         self.dx_ok_time = now       # last good Data_Exchange reply (or entering Data_Exchange)
         self.was_connected = False
         self.jobs: List[AcyclicRequest] = []
-        self._outputs = bytes(spec.output_size or 0)
-        self._inputs: Optional[bytes] = None
-        self._inputs_time: Optional[float] = None
         self._lock = threading.Lock()
 
-    @property
-    def connected(self) -> bool:
-        """True while the slave is in Data_Exchange (or fetching diag from it)."""
-        return self.state in _CONNECTED
-
-    @property
-    def outputs(self) -> bytes:
-        """The latched output image sent in every Data_Exchange."""
-        return self._outputs
-
-    @outputs.setter
-    def outputs(self, data: bytes) -> None:
-        data = bytes(data)
-        if len(data) != self.spec.output_size:
-            raise DpError(f"slave {self.address}: {len(data)} output bytes, expected "
-                          f"{self.spec.output_size}")
+    def _put_outputs(self, data: bytes) -> None:
         with self._lock:
             self._outputs = data
-
-    @property
-    def inputs(self) -> Optional[bytes]:
-        """Last good input image, or None before the first one."""
-        return self._inputs
-
-    @property
-    def inputs_time(self) -> Optional[float]:
-        """Clock time when :attr:`inputs` arrived."""
-        return self._inputs_time
-
-    def inputs_age(self, now: float) -> Optional[float]:
-        return None if self._inputs_time is None else now - self._inputs_time
 
     def _store_inputs(self, data: bytes, now: float) -> None:
         with self._lock:
@@ -330,12 +247,12 @@ class _Pending:
 
 def _adapter_latency(link: Link) -> float:
     """[s] the latency timer of the USB adapter under ``link`` where it is known, else 0."""
-    ms = getattr(getattr(link, "adapter", None), "latency_timer_ms", None)
+    ms = link.adapter.latency_timer_ms if link.adapter is not None else None
     return ms / 1000.0 if isinstance(ms, int) and ms > 0 else 0.0
 
 
-class DpMaster:
-    """DP master class 1 on one link.
+class DpMaster(MasterApi):
+    """DP master class 1 on one link (:class:`~pyprofibus_vendor.master_api.MasterApi`).
 
     Typical use (one slave on a serial device)::
 
@@ -451,6 +368,10 @@ class DpMaster:
         job = AcyclicRequest(Sap(sap))
         self.slave(address).jobs.append(job)
         return job
+
+    @property
+    def adapter(self) -> Optional[AdapterSetup]:
+        return self.link.adapter
 
     def replace_link(self, link: Link) -> None:
         """Continue on a new link (e.g. a reopened serial port)."""

@@ -28,9 +28,12 @@ import threading
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Callable, List, Optional, Tuple
+from typing import TYPE_CHECKING, Callable, List, Optional, Tuple
 
 from .errors import PhyError
+
+if TYPE_CHECKING:
+    from .adapter import AdapterSetup
 
 __all__ = ["Link", "MemoryLink", "FaultyLink", "FaultCounters"]
 
@@ -41,6 +44,9 @@ Clock = Callable[[], float]
 
 class Link(ABC):
     """An abstract, bidirectional byte link (one end of a serial line)."""
+
+    #: the USB adapter under the port, where the link knows it (SerialLink; pyprofibus_vendor.adapter)
+    adapter: Optional["AdapterSetup"] = None
 
     @abstractmethod
     def send(self, data: bytes) -> None:

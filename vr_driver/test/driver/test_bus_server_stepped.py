@@ -5,11 +5,13 @@ that is due at once waits -- at most ``answer_wait`` -- for the driver's answer 
 so that what the driver decided on a report goes out in the next cycle."""
 from __future__ import annotations
 
+import pickle
 import time
 from multiprocessing import Pipe
 
 from pyprofibus_vendor.dp_master import BusTiming, SlaveSpec
 
+from vr_driver.bus.messages import FROM_BUS, AddSlave, Answer, Outputs, Report, decode
 from vr_driver.bus.process import BusServer, BusSettings, RemoteSlave
 from vr_driver.controller.virtual_controller import robot_slave
 from vr_driver.protocol.v3 import V3
@@ -38,7 +40,7 @@ class Rig:
                                idle_record=V3.idle_record(), watchdog=None, answer_wait=answer_wait)
         self.conn, theirs = Pipe()
         self.server = BusServer(theirs, self.link, settings, clock=self.clock)
-        self.server._handle(("slave", spec))
+        self.server._handle(AddSlave(spec))
         self.serial = 0
         self.report = None
         for _ in range(50):
@@ -53,7 +55,7 @@ class Rig:
 
     def out(self, data: bytes) -> int:
         self.serial += 1
-        self.server._handle(("out", ADDRESS, self.server.sessions[ADDRESS], data, None, self.serial))
+        self.server._handle(Outputs(ADDRESS, self.server.sessions[ADDRESS], data, None, self.serial))
         return self.serial
 
     def cycle(self):
@@ -63,9 +65,9 @@ class Rig:
         deadline = time.monotonic() + 5.0
         while True:                        # the report sender's thread posts it
             assert self.conn.poll(max(0.0, deadline - time.monotonic())), "no report"
-            msg = self.conn.recv()
-            if msg[0] == "r" and msg[1]["seq"] == self.server._report_seq:
-                self.report = msg[1]
+            msg = decode(self.conn.recv_bytes(), FROM_BUS)
+            if isinstance(msg, Report) and msg.seq == self.server._report_seq:
+                self.report = msg
                 break
         if isinstance(self.clock, FakeClock):
             self.clock.advance(0.05)
@@ -76,11 +78,11 @@ def test_each_report_names_the_record_its_cycle_carried():
     rig = Rig()
     first = rig.out(record(1))
     assert rig.cycle() == record(1)
-    assert rig.report["carried"] == first
+    assert rig.report.carried == first
     rig.out(record(2))
     second = rig.out(record(3))          # two records before a cycle: the newer replaces the older
     assert rig.cycle() == record(3)
-    assert rig.report["carried"] == second
+    assert rig.report.carried == second
     assert record(2) not in rig.carried
 
 
@@ -92,10 +94,10 @@ def test_a_cycle_without_a_reply_carried_nothing_the_driver_can_count_on():
     rig.link.cut = True
     rig.out(record(2))
     assert rig.cycle() is None
-    assert rig.report["carried"] == first
+    assert rig.report.carried == first
     rig.link.cut = False
     rig.cycle()
-    assert rig.report["carried"] == rig.serial
+    assert rig.report.carried == rig.serial
 
 
 def test_the_driver_side_knows_whether_the_last_record_was_carried():
@@ -123,7 +125,7 @@ def test_a_new_session_starts_from_the_idle_record_and_carries_no_old_serial():
             break
     rig.cycle()
     assert rig.carried[-1] == V3.idle_record()
-    assert rig.report["carried"] == 0
+    assert rig.report.carried == 0
 
 
 def test_a_due_cycle_waits_for_the_answer_to_the_last_report_at_most_answer_wait():
@@ -133,7 +135,7 @@ def test_a_due_cycle_waits_for_the_answer_to_the_last_report_at_most_answer_wait
     rig.cycle()
     server._next = time.monotonic() - 1.0           # the next cycle is due at once (a slow line)
     before = server.unanswered
-    rig.conn.send(("answer", server._report_seq))  # the driver answered the last report
+    rig.conn.send_bytes(Answer(server._report_seq).encode())  # the driver answered the last report
     server._wait()
     assert server.unanswered == before
     rig.cycle()
@@ -142,7 +144,7 @@ def test_a_due_cycle_waits_for_the_answer_to_the_last_report_at_most_answer_wait
     assert server.unanswered == before + 1
     rig.cycle()
     server._next = time.monotonic() - 1.0
-    rig.conn.send(("answer", server._report_seq - 1))   # an answer to an older report does not count
+    rig.conn.send_bytes(Answer(server._report_seq - 1).encode())   # an answer to an older report does not count
     server._wait()
     assert server.unanswered == before + 2
 
@@ -153,3 +155,15 @@ def test_answer_wait_zero_never_waits():
     rig.server._next = time.monotonic() - 1.0
     rig.server._wait()
     assert rig.server.unanswered == 1
+
+
+def test_a_malformed_message_from_the_driver_is_refused_in_the_log_and_changes_nothing(caplog):
+    rig = Rig()
+    rig.out(record(1))
+    rig.cycle()
+    rig.conn.send_bytes(pickle.dumps(("out", ADDRESS, rig.server.sessions[ADDRESS], record(2), None, "7")))
+    rig.conn.send_bytes(b"not a pickle")
+    rig.server._drain()
+    assert "'out': field 5 is str '7', expected int" in caplog.text and "does not load" in caplog.text
+    assert rig.handle.outputs == record(1)
+    assert rig.cycle() == record(1) and rig.report.carried == rig.serial

@@ -2,7 +2,9 @@
 library and pyprofibus_vendor, so the bus process starts in a fraction of a second and carries no
 planner, no kinematics, no ROS).
 
-    process.py   BusProcessMaster (the driver's side: a DpMaster stand-in) and the bus process itself
+    process.py   BusProcessMaster (the driver's side: a DpMaster stand-in, the same
+                 pyprofibus_vendor.master_api.MasterApi) and the bus process itself
+    messages.py  what the two send each other: one typed message class each, encoded and checked
     health.py    BusHealth: the gaps between the card's Data_Exchange replies, the jitter, the
                  watchdog margin
 

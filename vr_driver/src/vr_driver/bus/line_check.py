@@ -27,6 +27,7 @@ import logging
 from dataclasses import dataclass
 from typing import Any, Deque, Mapping, Optional, Sequence, Tuple
 
+from pyprofibus_vendor.adapter import AdapterSetup
 from pyprofibus_vendor.dp_master import BusTiming
 
 log = logging.getLogger("vr_driver.driver")
@@ -68,7 +69,8 @@ class LineCheck:
     """See the module docstring. ``exchanges``: per station cycled, its (outputs, inputs) bytes;
     ``setup``: the port's :class:`~pyprofibus_vendor.adapter.AdapterSetup` (or None)."""
 
-    def __init__(self, baud: int, asked: float, exchanges: Sequence[Tuple[int, int]], setup: Any = None,
+    def __init__(self, baud: int, asked: float, exchanges: Sequence[Tuple[int, int]],
+                 setup: Optional[AdapterSetup] = None,
                  window: float = 5.0, hold: float = 5.0, ratio: float = 0.9) -> None:
         self.baud = baud
         self.asked = float(asked)
@@ -180,7 +182,7 @@ class LineCheck:
                 fixes.append("fewer stations on the line")
             fixes.append("a higher baud rate if every station takes it")
         if wait is not None and wait > ADAPTER_WAIT:
-            timer = getattr(self.setup, "latency_timer_ms", None)
+            timer = self.setup.latency_timer_ms if self.setup is not None else None
             causes.append("the USB adapter's latency: each reply reaches the driver %.1f ms (mean) after its time "
                           "on the wire, %s" % (1e3 * wait, "its latency timer is %d ms" % timer if timer is not None
                                                else "the adapter's latency timer (an FTDI's default: 16 ms)"))

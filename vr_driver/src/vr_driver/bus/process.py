@@ -63,54 +63,30 @@ import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import replace
 from multiprocessing.connection import Connection, wait
-from typing import Any, Callable, Dict, List, Optional, Tuple
+from typing import Callable, Dict, List, Optional
 
-from pyprofibus_vendor.dp_master import (BusTiming, DpMaster, MasterCounters, MasterSlaveState,
-                                         SlaveCounters, SlaveSpec)
+from pyprofibus_vendor.adapter import AdapterSetup
+from pyprofibus_vendor.dp_master import DpMaster, SlaveHandle, SlaveSpec
 from pyprofibus_vendor.errors import DpError, PhyError, ProfibusError
+from pyprofibus_vendor.master_api import (CONNECTED_STATES, MasterApi, MasterCounters, MasterSlaveState,
+                                          SlaveCounters, SlaveView)
+from pyprofibus_vendor.phy import Link
 
 from .health import BusHealth, BusHealthSummary
+from .messages import (AddSlave, Answer, BusSettings, Close, CycleAt, Failed, Message, MessageError,
+                       OpenFailed, Opened, Outputs, Report, SlaveReport, Start, StateChange, Tick,
+                       Channel, bus_channel, driver_channel)
 
 log = logging.getLogger("vr_driver.bus")
 
 __all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "set_priority", "normal_scheduling", "main"]
 
-_CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
 #: state changes kept for a driver that does not read (the oldest are dropped beyond)
 MAX_EVENTS = 1000
 #: [s] how often the health summary (a sort of the last minute's gaps) is made
 SUMMARY_PERIOD = 1.0
-
-
-@dataclass(frozen=True)
-class BusSettings:
-    """Everything the bus process needs (pickled to it at start)."""
-
-    device: str
-    baud: int
-    master_address: int
-    timing: BusTiming
-    cycle_rate_hz: float
-    controller: int                      # the controller's slave address
-    idle_record: bytes                   # the controller's record that asks nothing
-    watchdog: Optional[float]            # the card's watchdog [s] (None: off)
-    backoff_max: float = 1.0
-    dx_tolerance: float = 0.0
-    retry_steps: bool = True
-    rt_priority: int = 0                 # SCHED_FIFO priority (1..99); 0: normal scheduling
-    node_timeout: float = 1.0            # [s] no word from the driver this long: it is dead
-    stop_hold: float = 2.0               # [s] the stop record is sent this long before the end
-    answer_wait: float = 0.01            # [s] a due cycle waits this long for the driver's answer
-
-    @property
-    def period(self) -> float:
-        return 1.0 / self.cycle_rate_hz
-
-    @property
-    def cycle_timeout(self) -> float:
-        return max(0.2, 2.0 / self.cycle_rate_hz)
 
 
 def set_priority(priority: int) -> str:
@@ -175,29 +151,33 @@ class _Close(Exception):
 
 class _ReportSender:
     """Sends the reports from a thread of its own: the bus loop never blocks on a driver that does
-    not read. The newest report replaces an unsent one; state changes accumulate in order."""
+    not read. The newest report replaces an unsent one; its state changes and a health summary
+    it carried go on in the newer one."""
 
-    def __init__(self, conn: Connection) -> None:
-        self._conn = conn
+    def __init__(self, channel: Channel) -> None:
+        self._channel = channel
         self._cond = threading.Condition()
-        self._report: Optional[Dict[str, Any]] = None
-        self._events: List[Tuple[Any, ...]] = []
-        self._final: Optional[Tuple[Any, ...]] = None
+        self._report: Optional[Report] = None
+        self._final: Optional[Message] = None
         self.dropped_events = 0
         self.dead = False
         self._thread = threading.Thread(target=self._run, name="vr_driver-bus-reports", daemon=True)
         self._thread.start()
 
-    def post(self, report: Dict[str, Any], events: List[Tuple[Any, ...]]) -> None:
+    def post(self, report: Report) -> None:
         with self._cond:
+            unsent = self._report
+            if unsent is not None:
+                events = unsent.events + report.events
+                if len(events) > MAX_EVENTS:
+                    self.dropped_events += len(events) - MAX_EVENTS
+                    events = events[len(events) - MAX_EVENTS:]
+                report = replace(report, events=events, health=report.health or unsent.health,
+                                 dropped_events=self.dropped_events)
             self._report = report
-            self._events.extend(events)
-            if len(self._events) > MAX_EVENTS:
-                self.dropped_events += len(self._events) - MAX_EVENTS
-                del self._events[:len(self._events) - MAX_EVENTS]
             self._cond.notify()
 
-    def final(self, message: Tuple[Any, ...], timeout: float = 0.5) -> None:
+    def final(self, message: Message, timeout: float = 0.5) -> None:
         """Send ``message`` after what is pending, then stop; wait at most ``timeout``."""
         with self._cond:
             self._final = message
@@ -209,13 +189,13 @@ class _ReportSender:
             with self._cond:
                 while self._report is None and self._final is None:
                     self._cond.wait()
-                report, events, final = self._report, self._events, self._final
-                self._report, self._events = None, []
+                report, final = self._report, self._final
+                self._report = None
             try:
                 if report is not None:
-                    self._conn.send(("r", report, events))
+                    self._channel.send(report)
                 if final is not None:
-                    self._conn.send(final)
+                    self._channel.send(final)
                     return
             except (OSError, ValueError, EOFError):
                 self.dead = True
@@ -226,9 +206,10 @@ class BusServer:
     """The bus process's loop (see the module docstring). ``link``: the open serial link; tests may
     run it in a thread with an in-memory link and a Pipe."""
 
-    def __init__(self, conn: Connection, link: Any, settings: BusSettings, scheduling: str = "",
+    def __init__(self, conn: Connection, link: Link, settings: BusSettings, scheduling: str = "",
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.conn = conn
+        self.channel = bus_channel(conn)
         self.link = link
         self.settings = settings
         self.clock = clock
@@ -237,10 +218,10 @@ class BusServer:
                                dx_tolerance=settings.dx_tolerance, retry_steps=settings.retry_steps,
                                on_state_change=self._on_state)
         self.sessions: Dict[int, int] = {}
-        self._events: List[Tuple[Any, ...]] = []
+        self._events: List[StateChange] = []
         self.health = BusHealth(settings.period, settings.watchdog, scheduling=scheduling)
         now = clock()
-        self._summary: BusHealthSummary = self.health.summary(now)
+        self._summary: Optional[BusHealthSummary] = self.health.summary(now)   # None: sent already
         self._summary_at = now
         self._stop_record: Optional[bytes] = None
         self._serials: Dict[int, int] = {}        # per slave: the serial of its outputs now
@@ -252,42 +233,65 @@ class BusServer:
         self._next = now
         self._last_heard = now
         self._last_reply: Optional[float] = None
-        self._sender = _ReportSender(conn)
+        self._sender = _ReportSender(self.channel)
+        self._handlers: Dict[type, Callable[..., None]] = {
+            Outputs: self._on_outputs, AddSlave: self._on_add_slave, Answer: self._on_answer,
+            CycleAt: self._on_cycle_at, Tick: self._on_tick, Close: self._on_close}
 
     # ------------------------------------------------------------------ the driver's messages
-    def _handle(self, msg: Tuple[Any, ...]) -> None:
-        kind = msg[0]
-        if kind == "out":
-            _, address, session, data, stop, serial = msg
-            if address == self.settings.controller:
-                if session != self.sessions.get(address):
-                    return          # made before the driver learnt of this Data_Exchange session
-                if stop is not None:
-                    self._stop_record = stop
-            try:
-                self.master.slave(address).outputs = data
-                self._serials[address] = serial
-            except (DpError, ProfibusError) as exc:
-                log.error("outputs for slave %d refused: %s", address, exc)
-        elif kind == "slave":
-            spec: SlaveSpec = msg[1]
+    def _handle(self, msg: Message) -> None:
+        handler = self._handlers.get(type(msg))
+        if handler is None:
+            log.error("bus message %s not expected once the bus runs (ignored)", type(msg).__name__)
+            return
+        handler(msg)
+
+    def _on_outputs(self, msg: Outputs) -> None:
+        address = msg.address
+        if address == self.settings.controller:
+            if msg.session != self.sessions.get(address):
+                return          # made before the driver learnt of this Data_Exchange session
+            if msg.stop is not None:
+                self._stop_record = msg.stop
+        try:
+            self.master.slave(address).outputs = msg.data
+            self._serials[address] = msg.serial
+        except (DpError, ProfibusError) as exc:
+            log.error("outputs for slave %d refused: %s", address, exc)
+
+    def _on_add_slave(self, msg: AddSlave) -> None:
+        spec = msg.spec
+        try:
             handle = self.master.add_slave(spec)
-            self.sessions[spec.address] = 0
-            if spec.address == self.settings.controller:
-                handle.outputs = self.settings.idle_record
-        elif kind == "answer":
-            self._answered = max(self._answered, int(msg[1]))
-        elif kind == "cycle_at":
-            self._next = min(self._next, float(msg[1]))
-        elif kind == "close":
-            raise _Close()
-        # "tick": only that the driver is alive
+        except ProfibusError as exc:
+            log.error("slave %d refused: %s", spec.address, exc)
+            return
+        self.sessions[spec.address] = 0
+        if spec.address == self.settings.controller:
+            handle.outputs = self.settings.idle_record
+
+    def _on_answer(self, msg: Answer) -> None:
+        self._answered = max(self._answered, msg.seq)
+
+    def _on_cycle_at(self, msg: CycleAt) -> None:
+        self._next = min(self._next, float(msg.when))
+
+    def _on_tick(self, msg: Tick) -> None:
+        """Only that the driver is alive (heard: _drain notes when)."""
+
+    def _on_close(self, msg: Close) -> None:
+        raise _Close()
 
     def _drain(self) -> None:
-        """Every message waiting now; _NodeGone when the driver's end closed."""
+        """Every message waiting now; _NodeGone when the driver's end closed. A malformed message
+        is logged and changes nothing."""
         try:
-            while self.conn.poll(0):
-                msg = self.conn.recv()
+            while self.channel.poll(0):
+                try:
+                    msg = self.channel.recv()
+                except MessageError as exc:
+                    log.error("%s (ignored)", exc)
+                    continue
                 self._last_heard = self.clock()
                 self._handle(msg)
         except (EOFError, OSError) as exc:
@@ -295,16 +299,16 @@ class BusServer:
                 type(exc).__name__ if not str(exc) else exc)) from None
 
     # ------------------------------------------------------------------ the master's events
-    def _on_state(self, slave: Any, old: MasterSlaveState, new: MasterSlaveState, reason: str) -> None:
+    def _on_state(self, slave: SlaveHandle, old: MasterSlaveState, new: MasterSlaveState, reason: str) -> None:
         address = slave.address
-        if new in _CONNECTED and old not in _CONNECTED:
+        if new in CONNECTED_STATES and old not in CONNECTED_STATES:
             self.sessions[address] = self.sessions.get(address, 0) + 1
-        elif old in _CONNECTED and new not in _CONNECTED and address == self.settings.controller:
+        elif old in CONNECTED_STATES and new not in CONNECTED_STATES and address == self.settings.controller:
             slave.outputs = self.settings.idle_record      # exactly once across a reset
             self._serials[address] = 0
             self.health.session_ended()
-        self._events.append((address, old.value, new.value, reason, slave.state_since,
-                             self.sessions.get(address, 0)))
+        self._events.append(StateChange(address, old, new, reason, slave.state_since,
+                                        self.sessions.get(address, 0)))
 
     # ------------------------------------------------------------------ the loop
     def run(self) -> int:
@@ -330,7 +334,7 @@ class BusServer:
             self.master.cycle(timeout=self.settings.cycle_timeout)
         except ProfibusError as exc:
             log.error("serial port %s failed: %s", self.settings.device, exc)
-            self._sender.final(("fail", "serial port %s failed: %s" % (self.settings.device, exc)))
+            self._sender.final(Failed("serial port %s failed: %s" % (self.settings.device, exc)))
             self._close_link()
             return False
         now = self.clock()
@@ -345,21 +349,23 @@ class BusServer:
             self._carried = serial
         if now - self._summary_at >= SUMMARY_PERIOD:
             self._summary, self._summary_at = self.health.summary(now), now
-        events, self._events = self._events, []
         self._report_seq += 1
         self._reported_at = now
-        self._sender.post(self._report(now), events)
+        self._sender.post(self._report(now))
         return True
 
-    def _report(self, now: float) -> Dict[str, Any]:
+    def _report(self, now: float) -> Report:
+        """This cycle's report (the health summary only when it is new; the state changes since the
+        last report)."""
         slaves = []
         for address, sessions in self.sessions.items():
             s = self.master.slave(address)
-            slaves.append((address, s.state.value, s.state_since, sessions, s.inputs, s.inputs_time,
-                           s.last_diag, dict(vars(s.counters))))
-        return {"time": now, "seq": self._report_seq, "carried": self._carried,
-                "counters": dict(vars(self.master.counters)), "slaves": slaves,
-                "health": self._summary, "dropped_events": self._sender.dropped_events}
+            slaves.append(SlaveReport(address, s.state, s.state_since, sessions, s.inputs, s.inputs_time,
+                                      s.last_diag, SlaveCounters(*vars(s.counters).values())))
+        events, self._events = tuple(self._events), []
+        summary, self._summary = self._summary, None
+        return Report(now, self._report_seq, self._carried, MasterCounters(*vars(self.master.counters).values()), tuple(slaves),
+                      summary, self._sender.dropped_events, events)
 
     def _wait(self) -> None:
         """Until the next cycle is due; messages are handled meanwhile (one may bring it forward)."""
@@ -412,49 +418,28 @@ class BusServer:
 
 
 # ---------------------------------------------------------------------------- the driver's side
-class RemoteSlave:
-    """The driver's view of one slave of the bus process (the attributes of
-    :class:`~pyprofibus_vendor.dp_master.SlaveHandle` the driver reads). Setting :attr:`outputs`
-    sends them to the bus process, tagged with the Data_Exchange session they were made in."""
+class RemoteSlave(SlaveView):
+    """The driver's view of one slave of the bus process (a
+    :class:`~pyprofibus_vendor.master_api.SlaveView`, as the DpMaster's). Setting :attr:`outputs`
+    sends them to the bus process, tagged with the Data_Exchange session they were made in, with
+    the :attr:`stop_outputs` for them."""
 
     def __init__(self, master: "BusProcessMaster", spec: SlaveSpec, now: float) -> None:
+        super().__init__(spec, now)
         self._master = master
-        self.spec = spec
-        self.address = spec.address
-        self.state = MasterSlaveState.INIT
-        self.state_since = now
         self.session = 0                       # the bus process's Data_Exchange session count
-        self.counters = SlaveCounters()
-        self.last_diag: Any = None
-        self.stop_outputs: Optional[bytes] = None   # the controller's: what stops the arm
         self.serial = 0                             # of the last outputs message sent
         self.carried_serial = 0                     # of the outputs the last answered exchange carried
-        self._outputs = bytes(spec.output_size or 0)
-        self._inputs: Optional[bytes] = None
-        self._inputs_time: Optional[float] = None
-        self._sent: Optional[Tuple[Any, ...]] = None
+        self._sent: Optional[tuple] = None          # (session, outputs, stop) sent last
 
-    @property
-    def connected(self) -> bool:
-        return self.state in _CONNECTED
-
-    @property
-    def outputs(self) -> bytes:
-        return self._outputs
-
-    @outputs.setter
-    def outputs(self, data: bytes) -> None:
-        data = bytes(data)
-        if len(data) != self.spec.output_size:
-            raise DpError(f"slave {self.address}: {len(data)} output bytes, expected {self.spec.output_size}")
+    def _put_outputs(self, data: bytes) -> None:
         self._outputs = data
-        message = ("out", self.address, self.session, data, self.stop_outputs)
-        if message != self._sent:
-            self._sent = message
+        sent = (self.session, data, self.stop_outputs)
+        if sent != self._sent:
+            self._sent = sent
             self.serial += 1
-            message += (self.serial,)
             try:
-                self._master.send(message)
+                self._master.send(Outputs(self.address, self.session, data, self.stop_outputs, self.serial))
             except PhyError:
                 pass        # the bus process is gone: the bus thread's next cycle() says so
 
@@ -464,21 +449,11 @@ class RemoteSlave:
         that cycle began; the next one carries them, unless newer ones replace them first)."""
         return self.carried_serial >= self.serial
 
-    @property
-    def inputs(self) -> Optional[bytes]:
-        return self._inputs
 
-    @property
-    def inputs_time(self) -> Optional[float]:
-        return self._inputs_time
-
-    def inputs_age(self, now: float) -> Optional[float]:
-        return None if self._inputs_time is None else now - self._inputs_time
-
-
-class BusProcessMaster:
-    """The DpMaster stand-in of the driver's side (see the module docstring). Raises OSError or
-    PhyError with the bus process's reason when it cannot open the port."""
+class BusProcessMaster(MasterApi):
+    """The DpMaster stand-in of the driver's side (see the module docstring): the same
+    :class:`~pyprofibus_vendor.master_api.MasterApi`. Raises OSError or PhyError with the bus
+    process's reason when it cannot open the port."""
 
     #: the bus keeps its own time: the driver's loop waits in :meth:`cycle`, never a period on top
     paced = True
@@ -492,7 +467,7 @@ class BusProcessMaster:
         self.counters = MasterCounters()
         self.health: Optional[BusHealthSummary] = None
         self.scheduling = ""
-        self.adapter: Any = None
+        self._adapter: Optional[AdapterSetup] = None
         self.reports = 0
         self._slaves: Dict[int, RemoteSlave] = {}
         self._urgent = False
@@ -508,49 +483,57 @@ class BusProcessMaster:
         env = dict(os.environ)
         env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
         try:
-            self._proc = subprocess.Popen(
+            self._proc: Optional[subprocess.Popen] = subprocess.Popen(
                 [sys.executable, "-m", "vr_driver.bus.process", str(theirs.fileno())],
                 pass_fds=(theirs.fileno(),), env=env, start_new_session=True)
         finally:
             theirs.close()
         self._conn = Connection(ours.detach())
+        self._channel = driver_channel(self._conn)
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
         os.set_blocking(self._wake_w, False)
         try:
-            self._conn.send(("config", settings))
-            if not self._conn.poll(start_timeout):
+            self._channel.send(Start(settings))
+            if not self._channel.poll(start_timeout):
                 raise PhyError("the bus process did not answer within %.0f s" % start_timeout)
-            reply = self._conn.recv()
+            reply = self._channel.recv()
         except (OSError, EOFError, PhyError) as exc:
             self.close()
             if isinstance(exc, PhyError):
                 raise
             raise PhyError("the bus process ended at its start (%s)" % self._exit_status()) from None
-        if reply[0] == "error":
+        if isinstance(reply, OpenFailed):
             self.close()
-            _, text, code = reply
-            if code:
-                raise OSError(code, text)
-            raise PhyError(text)
-        self.scheduling = reply[1]
-        self.adapter = reply[2]          # the port's AdapterSetup (pyprofibus_vendor.adapter) or None
-        log.info("bus process %d: %s on %s at %d bit/s", self._proc.pid, self.scheduling,
+            if reply.errno:
+                raise OSError(reply.errno, reply.text)
+            raise PhyError(reply.text)
+        if not isinstance(reply, Opened):
+            self.close()
+            raise PhyError("the bus process answered its start with %s" % type(reply).__name__)
+        self.scheduling = reply.scheduling
+        self._adapter = reply.adapter
+        log.info("bus process %d: %s on %s at %d bit/s", self.pid, self.scheduling,
                  settings.device, settings.baud)
 
     @property
     def pid(self) -> int:
-        return self._proc.pid
+        return self._proc.pid if self._proc is not None else 0
+
+    @property
+    def adapter(self) -> Optional[AdapterSetup]:
+        """The port's AdapterSetup (pyprofibus_vendor.adapter) as the bus process found it, or None."""
+        return self._adapter
 
     # ------------------------------------------------------------------ what the driver calls
     def add_slave(self, spec: SlaveSpec) -> RemoteSlave:
         slave = RemoteSlave(self, spec, self.clock())
         self._slaves[spec.address] = slave
-        self.send(("slave", spec))
+        self.send(AddSlave(spec))
         return slave
 
     @property
-    def slaves(self) -> List[RemoteSlave]:
+    def slaves(self) -> List[RemoteSlave]:  # type: ignore[override]
         """Every slave added, in order (as DpMaster.slaves)."""
         return list(self._slaves.values())
 
@@ -560,14 +543,14 @@ class BusProcessMaster:
         except KeyError:
             raise DpError("no slave %d configured" % address) from None
 
-    def send(self, message: Tuple[Any, ...]) -> None:
+    def send(self, message: Message) -> None:
         """One message to the bus process (any thread: set_io sets an I/O station's outputs from a
         service thread while the bus thread sends the controller's; one message at a time)."""
         with self._send_lock:
             if self._closed:
                 return
             try:
-                self._conn.send(message)
+                self._channel.send(message)
             except (OSError, ValueError):
                 raise PhyError("the bus process is gone (%s)" % self._exit_status()) from None
 
@@ -581,17 +564,17 @@ class BusProcessMaster:
 
     def cycle_at(self, when: float) -> None:
         """Ask for the next bus cycle no later than ``when`` (clock time)."""
-        self.send(("cycle_at", when))
+        self.send(CycleAt(when))
 
     def cycle(self, timeout: Optional[float] = None) -> bool:
         """Wait for the bus process's next report (at most ``timeout``) and take every report that
         came: state changes replayed in order, then the slaves' latest state and inputs. Returns
         False when no report came (a :meth:`poke`, or the timeout). PhyError when the bus process
-        is gone."""
+        is gone or sent a malformed message."""
         if self._urgent:
             self._urgent = False
-            self.send(("cycle_at", 0.0))
-        self.send(("tick",))
+            self.send(CycleAt(0.0))
+        self.send(Tick())
         ready = wait([self._conn, self._wake_r], timeout)
         if self._wake_r in ready:
             try:
@@ -608,7 +591,7 @@ class BusProcessMaster:
                 return
             self._closed = True
             try:
-                self._conn.send(("close",))
+                self._channel.send(Close())
             except (OSError, ValueError):
                 pass
             self._conn.close()
@@ -617,7 +600,7 @@ class BusProcessMaster:
                 os.close(fd)
             except OSError:
                 pass
-        proc = getattr(self, "_proc", None)
+        proc = self._proc
         if proc is not None:
             try:
                 proc.wait(1.0)
@@ -627,7 +610,7 @@ class BusProcessMaster:
 
     # ------------------------------------------------------------------ reports
     def _exit_status(self) -> str:
-        proc = getattr(self, "_proc", None)
+        proc = self._proc
         code = proc.poll() if proc is not None else None
         if code is None:
             return "still running"
@@ -641,55 +624,54 @@ class BusProcessMaster:
     def _receive(self) -> bool:
         got = False
         try:
-            while self._conn.poll(0):
-                msg = self._conn.recv()
-                if msg[0] == "r":
-                    self._apply(msg[1], msg[2])
+            while self._channel.poll(0):
+                msg = self._channel.recv()
+                if isinstance(msg, Report):
+                    self._apply(msg)
                     got = True
-                elif msg[0] == "fail":
-                    raise PhyError(msg[1])
+                elif isinstance(msg, Failed):
+                    raise PhyError(msg.text)
         except (EOFError, OSError):
-            try:
-                self._proc.wait(0.5)
-            except subprocess.TimeoutExpired:
-                pass
+            if self._proc is not None:
+                try:
+                    self._proc.wait(0.5)
+                except subprocess.TimeoutExpired:
+                    pass
             raise PhyError("the bus process ended (%s)" % self._exit_status()) from None
         return got
 
     def answered(self) -> None:
         """The driver has set its outputs for the last report it took: the bus process may begin the
         next cycle (it waits at most ``answer_wait`` for this)."""
-        self.send(("answer", self._report_seq))
+        self.send(Answer(self._report_seq))
 
-    def _apply(self, report: Dict[str, Any], events: List[Tuple[Any, ...]]) -> None:
+    def _apply(self, report: Report) -> None:
         self.reports += 1
-        self._report_seq = report["seq"]
+        self._report_seq = report.seq
         controller = self._slaves.get(self.settings.controller)
         if controller is not None:
-            controller.carried_serial = report["carried"]
-        for address, old, new, reason, since, session in events:
-            slave = self._slaves.get(address)
+            controller.carried_serial = report.carried
+        for event in report.events:
+            slave = self._slaves.get(event.address)
             if slave is None:
                 continue
-            old_state, new_state = MasterSlaveState(old), MasterSlaveState(new)
-            slave.state, slave.state_since, slave.session = new_state, since, session
+            slave.state, slave.state_since, slave.session = event.new, event.since, event.session
             if self.on_state_change is not None:
-                self.on_state_change(slave, old_state, new_state, reason)
-        for address, state, since, session, inputs, inputs_time, diag, counters in report["slaves"]:
-            slave = self._slaves.get(address)
+                self.on_state_change(slave, event.old, event.new, event.reason)
+        for s in report.slaves:
+            slave = self._slaves.get(s.address)
             if slave is None:
                 continue
-            slave.state, slave.state_since, slave.session = MasterSlaveState(state), since, session
-            slave._inputs, slave._inputs_time, slave.last_diag = inputs, inputs_time, diag
-            for key, value in counters.items():
-                setattr(slave.counters, key, value)
-        for key, value in report["counters"].items():
-            setattr(self.counters, key, value)
-        self.health = report["health"]
+            slave.state, slave.state_since, slave.session = s.state, s.since, s.session
+            slave._inputs, slave._inputs_time, slave.last_diag = s.inputs, s.inputs_time, s.diag
+            slave.counters = s.counters
+        self.counters = report.counters
+        if report.health is not None:
+            self.health = report.health
 
 
 # ---------------------------------------------------------------------------- the process
-def _open_serial(device: str, baud: int) -> Any:
+def _open_serial(device: str, baud: int) -> Link:
     from pyprofibus_vendor.phy_serial import SerialLink
     return SerialLink(device, baud)
 
@@ -704,10 +686,19 @@ def main(argv: Optional[List[str]] = None) -> int:
     fd = int(argv[0])
     os.set_blocking(fd, True)
     conn = Connection(fd)
+    channel = bus_channel(conn)
     try:
-        kind, settings = conn.recv()
+        start = channel.recv()
     except (EOFError, OSError):
         return 0
+    except MessageError as exc:
+        channel.send(OpenFailed("the bus process's start refused: %s" % exc, None))
+        return 1
+    if not isinstance(start, Start):
+        channel.send(OpenFailed("the bus process's first message must be its start, not %s"
+                                % type(start).__name__, None))
+        return 1
+    settings = start.settings
     scheduling = set_priority(settings.rt_priority)
     try:
         link = _open_serial(settings.device, settings.baud)
@@ -716,9 +707,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         seen = exc.__cause__ or exc.__context__
         if not isinstance(code, int) and seen is not None:
             code = getattr(seen, "errno", None)
-        conn.send(("error", str(exc), code if isinstance(code, int) and code in errno_mod.errorcode else None))
+        channel.send(OpenFailed(str(exc), code if isinstance(code, int) and code in errno_mod.errorcode else None))
         return 1
-    conn.send(("opened", scheduling, getattr(link, "adapter", None)))
+    channel.send(Opened(scheduling, link.adapter))
     if not scheduling.startswith("SCHED_FIFO"):
         log.warning("%s", scheduling)
     return BusServer(conn, link, settings, "process %d, %s" % (os.getpid(), scheduling)).run()

@@ -33,15 +33,15 @@ import enum
 import logging
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Deque, Dict, Optional, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Deque, Dict, Optional, Tuple
 
-from pyprofibus_vendor.dp_master import BusTiming, DpMaster, MasterSlaveState
+from pyprofibus_vendor.dp_master import BusTiming, DpMaster
 from pyprofibus_vendor.errors import ProfibusError
+from pyprofibus_vendor.master_api import MasterApi, MasterSlaveState, SlaveView
 from pyprofibus_vendor.phy import Link
 
 from ..bus.health import BusHealth, BusHealthSummary
 from ..bus.line_check import LineCheck, LineVerdict
-from ..bus.process import BusProcessMaster, RemoteSlave
 from ..errors import ProtocolError
 from ..params import DriverParams
 from ..protocol.common import FeedbackRecord
@@ -49,6 +49,9 @@ from .card_diagnosis import CardDiagnosis, diag_words
 from .link_port import (PORT_ERROR_AFTER, Reopening, controller_spec, idle_record, master_settings,
                         start_bus_process)
 from .record_clock import RecordClock
+
+if TYPE_CHECKING:
+    from pyprofibus_vendor.config import BusConfig
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -127,7 +130,7 @@ class LinkSupervisor:
     (:attr:`counters`, :meth:`master_counters`, :attr:`slave_state`, :attr:`last_diag`) are for
     the same thread's status snapshot."""
 
-    def __init__(self, params: DriverParams, bus: Any, clock: Callable[[], float],
+    def __init__(self, params: DriverParams, bus: BusConfig, clock: Callable[[], float],
                  open_link: Callable[[str, int], Link] = open_serial_link,
                  stations: Optional[Any] = None) -> None:
         self.params = params
@@ -141,8 +144,8 @@ class LinkSupervisor:
         wire, order = params.wire, params.byte_order
         self._decode: Callable[[bytes], Any] = lambda data: wire.decode_feedback(data, order)
         self._link: Optional[Link] = None
-        self._master: Optional[DpMaster] = None
-        self._slave = None
+        self._master: Optional[MasterApi] = None
+        self._slave: Optional[SlaveView] = None
         self._state = LinkState.STARTING
         self._reason = "not started"
         self._session = 0
@@ -194,8 +197,8 @@ class LinkSupervisor:
         """The bus's health over the last minute (None before the port was opened): the bus
         process's report, or (in-process) this supervisor's own, made at most once a second."""
         master = self._master
-        if isinstance(master, BusProcessMaster):
-            return master.health
+        if master is not None and master.paced:
+            return master.health         # a bus process measures the gaps itself
         if self.health is not None and now - self._health_at >= 1.0:
             self._health_summary, self._health_at = self.health.summary(now), now
         return self._health_summary
@@ -224,19 +227,19 @@ class LinkSupervisor:
     def paced(self) -> bool:
         """True when the master keeps the bus's time itself (a bus process): :meth:`step` then
         waits for its next cycle, and the caller's loop must not sleep a period on top."""
-        return bool(getattr(self._master, "paced", False))
+        return self._master is not None and self._master.paced
 
     def poke(self) -> None:
         """Wake a :meth:`step` waiting for a paced master's next cycle (a request was posted).
         Safe from any thread and from a signal handler."""
         master = self._master
-        if master is not None and hasattr(master, "poke"):
+        if master is not None:
             master.poke()
 
     def cycle_at(self, when: float) -> None:
         """Ask a paced master for its next cycle no later than ``when`` (clock time)."""
         master = self._master
-        if isinstance(master, BusProcessMaster):
+        if master is not None:
             try:
                 master.cycle_at(when)
             except ProfibusError:
@@ -249,14 +252,14 @@ class LinkSupervisor:
         slave = self._slave
         if slave is None:
             return
-        if isinstance(slave, RemoteSlave) and record != self._stop_source:
+        if record != self._stop_source:
             self._stop_source = record
             try:
                 slave.stop_outputs = self._wire.stop_record(record, self.params.byte_order)
             except ProtocolError as exc:    # never: the record was encoded by the same protocol
                 log.error("no stop record for %s: %s", record.hex(), exc)
         slave.outputs = record
-        if isinstance(self._master, BusProcessMaster):
+        if self._master is not None:
             try:
                 self._master.answered()
             except ProfibusError:
@@ -373,7 +376,7 @@ class LinkSupervisor:
             record_time=self._record_stamp if connected else None,
             session=self._session, session_records=self._session_records,
             error_code=self._error_code, error_reason=self._error_reason, cycled=cycled,
-            carried=getattr(self._slave, "carried", True))
+            carried=self._slave.carried if self._slave is not None else True)
 
     def _down(self, state: LinkState, reason: str) -> None:
         if self._state is LinkState.CONNECTED and state is not LinkState.CONNECTED:
@@ -393,7 +396,7 @@ class LinkSupervisor:
         link: Optional[Link] = None
         try:
             if self.uses_bus_process:
-                master: Any = start_bus_process(self.params, self.bus, spec, settings, self._on_slave_state)
+                master: MasterApi = start_bus_process(self.params, self.bus, spec, settings, self._on_slave_state)
             else:
                 link = self.open_link(device, baud)
         except (ProfibusError, OSError, ValueError) as exc:
@@ -405,7 +408,7 @@ class LinkSupervisor:
             master = DpMaster(link, self.bus.master_address, self.bus.baud, clock=self.clock,
                               on_state_change=self._on_slave_state, **settings)
         self.health = BusHealth(1.0 / self.bus.cycle_rate_hz, spec.watchdog,
-                                scheduling=getattr(master, "scheduling", "") or "in the driver's process")
+                                scheduling=master.scheduling or "in the driver's process")
         self._slave = master.add_slave(spec)
         self._slave.outputs = idle_record(self.params)
         self._master = master
@@ -415,21 +418,19 @@ class LinkSupervisor:
         self.line_check = LineCheck(
             baud, self.bus.cycle_rate_hz,
             [(s.spec.output_size or 0, s.spec.input_size or 0) for s in master.slaves],
-            getattr(master, "adapter", None) or getattr(link, "adapter", None))
+            master.adapter)
         log.info("opened %s at %d bit/s; bringing slave %d (ident 0x%04X) to Data_Exchange",
                  device, baud, sc.address, sc.ident)
         self._down(LinkState.CONNECTING, "port open, waiting for the controller's PROFIBUS card")
 
     def close(self) -> None:
-        link, master = self._link, self._master
+        master = self._master
         self._link, self._master, self._slave = None, None, None
         if self.stations is not None:
             self.stations.detach()
-        if isinstance(master, BusProcessMaster):
-            master.close()
-        if link is not None:
+        if master is not None:
             try:
-                link.close()
+                master.close()      # the port with it (or the bus process)
             except Exception:  # closing a dead port may fail; nothing to do about it
                 pass
 

@@ -15,13 +15,16 @@ import errno
 import logging
 import os
 from dataclasses import replace
-from typing import Any, Callable, Dict, Optional
+from typing import TYPE_CHECKING, Any, Callable, Dict, Optional
 
 from pyprofibus_vendor.dp_master import BusTiming, SlaveSpec
 from pyprofibus_vendor.errors import PhyError
 
 from ..bus.process import BusProcessMaster, BusSettings
 from ..params import DriverParams
+
+if TYPE_CHECKING:
+    from pyprofibus_vendor.config import BusConfig, SlaveConfig
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -57,7 +60,7 @@ def port_hint(exc: BaseException) -> str:
     return ""
 
 
-def controller_spec(slave_config: Any) -> SlaveSpec:
+def controller_spec(slave_config: SlaveConfig) -> SlaveSpec:
     """The DP master's spec of the controller's slave (the bus config's ``slaves[0]``)."""
     sc = slave_config
     return SlaveSpec(sc.address, sc.ident, sc.cfg, user_prm_data=sc.user_prm_data,
@@ -65,7 +68,7 @@ def controller_spec(slave_config: Any) -> SlaveSpec:
                      watchdog=None if not sc.watchdog_ms else sc.watchdog_ms / 1000.0)
 
 
-def master_settings(params: DriverParams, bus: Any) -> Dict[str, Any]:
+def master_settings(params: DriverParams, bus: BusConfig) -> Dict[str, Any]:
     """The DP master's keyword settings from the bus config and the driver's parameters (the
     same for an in-process master and a bus process)."""
     timing = BusTiming.for_baud(bus.baud, bus.retry_limit)
@@ -79,7 +82,7 @@ def master_settings(params: DriverParams, bus: Any) -> Dict[str, Any]:
                 dx_tolerance=params.link_timeout, retry_steps=True)
 
 
-def start_bus_process(params: DriverParams, bus: Any, spec: SlaveSpec, settings: Dict[str, Any],
+def start_bus_process(params: DriverParams, bus: BusConfig, spec: SlaveSpec, settings: Dict[str, Any],
                       on_state_change: Callable[..., None]) -> BusProcessMaster:
     """The serial port and the DP master in a process of their own (:mod:`vr_driver.bus.process`).
     Raises PhyError for a device that is not there."""

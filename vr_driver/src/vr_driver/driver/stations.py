@@ -33,7 +33,8 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, Optional, Tuple
 
 from pyprofibus_vendor.dp import DiagStatus1, explain_diag
-from pyprofibus_vendor.dp_master import DpMaster, MasterSlaveState, SlaveHandle, SlaveSpec
+from pyprofibus_vendor.dp_master import SlaveSpec
+from pyprofibus_vendor.master_api import MasterApi, MasterSlaveState, SlaveView
 
 from ..errors import SignalMapError
 from ..io_signals import Signal, SignalMap, StationSignals, Value
@@ -114,7 +115,7 @@ class IoResult:
     value: str = ""
 
 
-def _explain(handle: SlaveHandle, reason: str) -> str:
+def _explain(handle: SlaveView, reason: str) -> str:
     """The master's reason for ending an attempt with a station, with what it most likely means."""
     diag = handle.last_diag
     spec = handle.spec
@@ -202,7 +203,7 @@ class _Station:
         self.safe = signals.safe_image()
         self.image = bytearray(self.safe)
         self.outputs_safe = True
-        self.handle: Optional[SlaveHandle] = None
+        self.handle: Optional[SlaveView] = None
         self.session_start: Optional[float] = None   # entered Data_Exchange (this session)
         self.seen_losses = 0                        # the master's loss counter at the last update
         self.online = False
@@ -223,7 +224,7 @@ class IoLine:
         self.input_timeout = float(input_timeout)
         self._stations: Dict[int, _Station] = {st.address: _Station(st) for st in signal_map.stations}
         self._lock = threading.RLock()
-        self._master: Optional[DpMaster] = None
+        self._master: Optional[MasterApi] = None
         self._chained: Optional[Callable[..., None]] = None
         self._local: Dict[int, Any] = {}          # stations not cycled by the master (ControllerIo)
         self._snapshot = self._make_snapshot(0.0)
@@ -236,7 +237,7 @@ class IoLine:
         self._local[handle.address] = handle
 
     # ------------------------------------------------------------------------ the master
-    def add_slaves(self, master: DpMaster, bus: Any) -> None:
+    def add_slaves(self, master: MasterApi, bus: Any) -> None:
         """Add every station of the map to ``master`` from the bus configuration ``bus`` (a
         :class:`~pyprofibus_vendor.config.BusConfig`; each station's address must be one of its
         slaves), then :meth:`attach` it."""
@@ -245,7 +246,7 @@ class IoLine:
                 master.add_slave(SlaveSpec.from_config(bus.slave(address)))
         self.attach(master)
 
-    def attach(self, master: DpMaster) -> None:
+    def attach(self, master: MasterApi) -> None:
         """Take the stations' handles from ``master`` (every station must be one of its slaves;
         checked lengths) and follow its state changes (the master's own ``on_state_change`` keeps
         being called). Each station starts offline with its safe outputs."""
@@ -280,7 +281,7 @@ class IoLine:
                     st.handle = None
                 st.reason = "no port"
 
-    def _on_state_change(self, handle: SlaveHandle, old: MasterSlaveState, new: MasterSlaveState,
+    def _on_state_change(self, handle: SlaveView, old: MasterSlaveState, new: MasterSlaveState,
                          reason: str) -> None:
         """The master's per-slave state changes (in the bus loop, inside the cycle): a station
         leaving Data_Exchange falls back at once; one entering it starts a new session."""
