@@ -80,10 +80,10 @@ def test_latency_timer_and_echo_the_link_holds_and_both_are_said(line, caplog):
     assert robot.connected and c.losses == 0
     # every transmission's echo (a request's, a resend's) recognised: read before its reply, behind an
     # earlier try's late reply, or among the stale bytes the next request's TSYN drops. Uncounted only
-    # those of the last turn's resends when the first try's late reply ended it (still in the adapter
-    # when the run stops): at most max_retry
+    # those still in the adapter when the run stops: the last turn's transmissions after the one whose
+    # late reply ended it, or all of a turn ended without a reply (tolerated): at most 1 + max_retry
     sent = c.requests - before[0] + c.retries - before[1]
-    assert sent > 0 and c.echoes - before[2] >= sent - master.timing.max_retry, (sent, c)
+    assert sent > 0 and c.echoes - before[2] >= sent - 1 - master.timing.max_retry, (sent, c)
     assert c.unexpected_frames == before[3]                     # none taken for another station's
     v = check.verdict()
     assert v.reply_wait is not None and v.reply_wait > 0.004          # the timer's hold, seen

@@ -223,6 +223,7 @@ class SlaveCounters:
 
 #: where a telegram's source address is, by its start delimiter (SD1, SD2, SD3)
 _SA_AT = {0x10: 2, 0x68: 5, 0xA2: 2}
+_STALE_READS = 8    # reads of stale bytes before a request at most (then they are flushed unseen)
 
 
 @dataclass
@@ -538,13 +539,18 @@ class DpMaster:
     def _drop_stale(self) -> None:
         """Drop the bytes left unread from earlier turns -- after counting the echoes among them
         (an adapter's read-back of an earlier transmission, behind a late reply that ended its
-        turn: the echo is the adapter's, not lost). The rest (late replies, garbage) was never
-        awaited: it is not counted as garbage or as errors."""
-        data = self.link.recv(4096, 0.0)
-        if data:
+        turn: the echo is the adapter's, not lost). They are read, not flushed unseen: a burst
+        arriving between a read and a flush would go uncounted. The rest (late replies, garbage)
+        was never awaited: it is not counted as garbage or as errors."""
+        for _ in range(_STALE_READS):
+            data = self.link.recv(4096, 0.0)
+            if not data:
+                break
             kept = vars(self.deframer.counters).copy()
             self.counters.echoes += sum(1 for f in self.deframer.feed(data) if self._is_echo(f))
             vars(self.deframer.counters).update(kept)
+        else:
+            self.link.flush_input()     # a line that keeps talking: drop the rest unseen
         if self.deframer.pending:
             # an incomplete telegram (the adapter handed over a full USB packet, the rest waits for
             # its timer): the start of an echo when its source address is ours
@@ -552,7 +558,6 @@ class DpMaster:
             at = _SA_AT.get(head[0])
             if at is not None and len(head) > at and head[at] & 0x7F == self.address:
                 self.counters.echoes += 1
-        self.link.flush_input()
         self.deframer.reset()
 
     def _is_echo(self, frame: Frame) -> bool:
