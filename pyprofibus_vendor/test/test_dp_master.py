@@ -307,16 +307,27 @@ class DataExchangeTest(unittest.TestCase):
     def test_stale_echoes_dropped_before_a_request_are_counted(self):
         """Bytes still unread when the next request goes out (TSYN) are dropped, not parsed as its
         reply; the echoes among them -- a whole one and the start of one whose rest the adapter
-        still holds -- are counted, the rest is not taken for garbage or another station's."""
+        still holds, in a burst arriving while they are dropped -- are counted, the rest is not
+        taken for garbage or another station's."""
         rig = Rig()
         rig.until(lambda: rig.h.connected)
         c = rig.master.counters
-        stale = DX_REQ + DX_REPLY + DX_REQ[:6]
         rig.until(lambda: rig.master._pending is None)
-        rig.link._rx += stale
+        rig.link._rx += DX_REQ + DX_REPLY
+        real_recv, reads = rig.link.recv, []
+
+        def recv(n: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+            data = real_recv(n, timeout)
+            if not reads:                          # the next burst comes just after the first read
+                rig.link._rx += DX_REQ[:6]
+            reads.append(data)
+            return data
+
+        rig.link.recv = recv
         e0, g0, u0 = c.echoes, c.garbage_bytes, c.unexpected_frames
         rig.steps(1)                               # the next request: its TSYN drops them
         self.assertEqual(c.echoes - e0, 2)
+        self.assertEqual(reads[:2], [DX_REQ + DX_REPLY, DX_REQ[:6]])
         self.assertEqual((c.garbage_bytes, c.unexpected_frames), (g0, u0))
         rig.until(lambda: rig.master._pending is None)
         rig.link._rx += DX_REQ[:5]                 # too short to tell whose: dropped uncounted
