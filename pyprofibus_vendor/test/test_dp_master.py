@@ -262,6 +262,79 @@ class DataExchangeTest(unittest.TestCase):
         self.assertEqual(c.invalid_replies, 0)
         self.assertGreater(c.dx_timed, 0)
 
+    def _held_by_a_latency_timer(self, rig: Rig, period: float) -> dict:
+        """An echoing adapter with a latency timer longer than the reply timeout: each
+        transmission's echo and its reply are held to the timer's next expiry, so a try is often
+        resent before they come; then the first try's reply, the resend's echo and its reply come
+        in one chunk (the interleaving seen on a loaded pty through the virtual line)."""
+        link, real_send, real_recv = rig.link, rig.link.send, rig.link.recv
+        held = {"bytes": bytearray(), "due": None, "echoes": 0}
+
+        def send(data: bytes) -> None:
+            real_send(data)
+            reply = real_recv(4096, 0.0)
+            held["bytes"] += bytes(data) + reply
+            if held["due"] is None:
+                held["due"] = (int(rig.clock() / period) + 1) * period
+
+        def recv(n: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+            if held["due"] is not None and rig.clock() >= held["due"]:
+                held["echoes"] += held["bytes"].count(held["bytes"][:7])   # the requests, read back
+                link._rx += held["bytes"]
+                held["bytes"].clear()
+                held["due"] = None
+            return real_recv(n, timeout)
+
+        link.send, link.recv = send, recv
+        return held
+
+    def test_an_echo_behind_a_late_reply_is_counted(self):
+        """The resend's echo after the first try's late reply, in the chunk whose reply ends the
+        turn: the adapter's echo, counted (it was dropped uncounted with the rest of the chunk)."""
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        c = rig.master.counters
+        e0, q0, r0 = c.echoes, c.requests, c.retries
+        held = self._held_by_a_latency_timer(rig, 0.064)
+        rig.steps(3000)
+        rig.until(lambda: not held["bytes"])
+        self.assertGreater(c.retries - r0, 5)                 # the interleaving happened
+        self.assertTrue(rig.h.connected)
+        self.assertEqual(c.echoes - e0, c.requests - q0 + c.retries - r0)   # every transmission's
+        self.assertEqual(c.unexpected_frames, 0)
+        self.assertEqual(c.garbage_bytes, 0)
+
+    def test_stale_echoes_dropped_before_a_request_are_counted(self):
+        """Bytes still unread when the next request goes out (TSYN) are dropped, not parsed as its
+        reply; the echoes among them -- a whole one and the start of one whose rest the adapter
+        still holds, in a burst arriving while they are dropped -- are counted, the rest is not
+        taken for garbage or another station's."""
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        c = rig.master.counters
+        rig.until(lambda: rig.master._pending is None)
+        rig.link._rx += DX_REQ + DX_REPLY
+        real_recv, reads = rig.link.recv, []
+
+        def recv(n: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+            data = real_recv(n, timeout)
+            if not reads:                          # the next burst comes just after the first read
+                rig.link._rx += DX_REQ[:6]
+            reads.append(data)
+            return data
+
+        rig.link.recv = recv
+        e0, g0, u0 = c.echoes, c.garbage_bytes, c.unexpected_frames
+        rig.steps(1)                               # the next request: its TSYN drops them
+        self.assertEqual(c.echoes - e0, 2)
+        self.assertEqual(reads[:2], [DX_REQ + DX_REPLY, DX_REQ[:6]])
+        self.assertEqual((c.garbage_bytes, c.unexpected_frames), (g0, u0))
+        rig.until(lambda: rig.master._pending is None)
+        rig.link._rx += DX_REQ[:5]                 # too short to tell whose: dropped uncounted
+        rig.steps(1)
+        self.assertEqual(c.echoes - e0, 2)
+        self.assertTrue(rig.h.connected)
+
     def test_another_masters_request_is_no_echo(self):
         rig = Rig()
         rig.until(lambda: rig.h.connected)

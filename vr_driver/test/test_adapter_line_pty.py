@@ -74,13 +74,17 @@ def test_latency_timer_and_echo_the_link_holds_and_both_are_said(line, caplog):
         assert time.monotonic() < deadline, "no Data_Exchange through the adapter"
         master.cycle(timeout=1.0)
     c = master.counters
-    before = (c.requests, c.echoes, c.unexpected_frames)
+    before = (c.requests, c.retries, c.echoes, c.unexpected_frames)
     with caplog.at_level(logging.INFO, logger="vr_driver.driver"):
         run(master, robot, check, 4.0)
     assert robot.connected and c.losses == 0
-    # every request's echo recognised (one held past a resend is flushed, uncounted, before the next request)
-    assert c.echoes - before[1] >= c.requests - before[0] - 2 * c.retries - 1 > 0
-    assert c.unexpected_frames == before[2]                     # none taken for another station's
+    # every transmission's echo (a request's, a resend's) recognised: read before its reply, behind an
+    # earlier try's late reply, or among the stale bytes the next request's TSYN drops. Uncounted only
+    # those still in the adapter when the run stops: the last turn's transmissions after the one whose
+    # late reply ended it, or all of a turn ended without a reply (tolerated): at most 1 + max_retry
+    sent = c.requests - before[0] + c.retries - before[1]
+    assert sent > 0 and c.echoes - before[2] >= sent - 1 - master.timing.max_retry, (sent, c)
+    assert c.unexpected_frames == before[3]                     # none taken for another station's
     v = check.verdict()
     assert v.reply_wait is not None and v.reply_wait > 0.004          # the timer's hold, seen
     assert "the adapter echoes its transmission" in caplog.text

@@ -198,6 +198,11 @@ _STEP_STATES = (MasterSlaveState.WAIT_DIAG, MasterSlaveState.SET_PRM, MasterSlav
                 MasterSlaveState.CHECK_DIAG, MasterSlaveState.DX_DIAG)
 
 
+#: where a telegram's source address is, by its start delimiter (SD1, SD2, SD3)
+_SA_AT = {0x10: 2, 0x68: 5, 0xA2: 2}
+_STALE_READS = 8    # reads of stale bytes before a request at most (then they are flushed unseen)
+
+
 @dataclass
 class AcyclicRequest:
     """A queued Get_Cfg / Rd_Inp / Rd_Outp, executed in a Data_Exchange turn."""
@@ -449,9 +454,39 @@ class DpMaster(MasterApi):
 
     def _transmit(self, raw: bytes) -> None:
         # TSYN: the line must be quiet before a request; drop stale bytes
-        self.link.flush_input()
-        self.deframer.reset()
+        self._drop_stale()
         self.link.send(raw)
+
+    def _drop_stale(self) -> None:
+        """Drop the bytes left unread from earlier turns -- after counting the echoes among them
+        (an adapter's read-back of an earlier transmission, behind a late reply that ended its
+        turn: the echo is the adapter's, not lost). They are read, not flushed unseen: a burst
+        arriving between a read and a flush would go uncounted. The rest (late replies, garbage)
+        was never awaited: it is not counted as garbage or as errors."""
+        for _ in range(_STALE_READS):
+            data = self.link.recv(4096, 0.0)
+            if not data:
+                break
+            kept = vars(self.deframer.counters).copy()
+            self.counters.echoes += sum(1 for f in self.deframer.feed(data) if self._is_echo(f))
+            vars(self.deframer.counters).update(kept)
+        else:
+            self.link.flush_input()     # a line that keeps talking: drop the rest unseen
+        if self.deframer.pending:
+            # an incomplete telegram (the adapter handed over a full USB packet, the rest waits for
+            # its timer): the start of an echo when its source address is ours
+            head = self.deframer.head(6)
+            at = _SA_AT.get(head[0])
+            if at is not None and len(head) > at and head[at] & 0x7F == self.address:
+                self.counters.echoes += 1
+        self.deframer.reset()
+
+    def _is_echo(self, frame: Frame) -> bool:
+        # a request from our own address is one we sent, read back: an adapter that echoes
+        # what it transmits (its receiver stays on while it sends) -- usually the request just
+        # sent, at the start of its window; a late one (an earlier try's echo held in the adapter
+        # past a resend, or behind a reply that ended the turn) too. Not a telegram of another station
+        return isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request and frame.sa == self.address
 
     def _end_turn(self) -> None:
         self._pending = None
@@ -548,14 +583,13 @@ class DpMaster(MasterApi):
         frames = self.deframer.feed(data)
         self.counters.fcs_errors = self.deframer.counters.fcs_errors
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
+        ended = False
         for frame in frames:
-            if isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request and frame.sa == self.address:
-                # a request from our own address is one we sent, read back: an adapter that echoes
-                # what it transmits (its receiver stays on while it sends) -- usually the request
-                # just sent, at the start of its window; a late one (an earlier try's echo held in
-                # the adapter past a resend) too. Not a telegram of another station
+            if self._is_echo(frame):
                 self.counters.echoes += 1
                 continue
+            if ended:
+                continue  # after the reply that ended the turn: a later try's reply (not awaited)
             pending = self._pending
             if pending is None:
                 self.counters.unexpected_frames += 1
@@ -564,8 +598,9 @@ class DpMaster(MasterApi):
                 self.counters.unexpected_frames += 1
                 continue
             self._reply_handlers[pending.kind](pending, frame, now)
-            if self._pending is None:
-                return  # turn finished; ignore the rest (flushed before the next request)
+            # the turn finished: the rest of the chunk is no reply to wait for, but an echo in
+            # it (a resend's, read after the first try's late reply) is still counted
+            ended = self._pending is None
         if self._pending is not None:
             need = self.deframer.bytes_needed()
             if need:  # a reply is arriving: give it time to complete

@@ -587,6 +587,10 @@ class Deframer:
         """Forget buffered bytes without counting them (e.g. before a new request)."""
         self._buf.clear()
 
+    def head(self, n: int) -> bytes:
+        """The first ``n`` buffered bytes (of the telegram being received)."""
+        return bytes(self._buf[:n])
+
     def bytes_needed(self) -> Optional[int]:
         """Bytes still missing for the telegram being received (0: none
         started; None: not known yet, an SD2 header is incomplete)."""

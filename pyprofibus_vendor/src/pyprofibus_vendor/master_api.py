@@ -71,7 +71,7 @@ class MasterCounters:
     timeouts: int = 0
     invalid_replies: int = 0
     unexpected_frames: int = 0  # telegrams read while nothing was awaited (bytes still
-    # unread when the next request goes out are flushed uncounted: TSYN, see _transmit)
+    # unread when the next request goes out are dropped uncounted but for echoes: TSYN, _drop_stale)
     reconnects: int = 0
     losses: int = 0
     state_changes: int = 0
