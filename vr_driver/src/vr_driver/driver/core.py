@@ -275,8 +275,8 @@ class DriverCore:
         return self.jobs.submit_joint_path(names, points, on_update)
 
     def submit_trajectory(self, traj: ValidTrajectory, on_update: Optional[Callable[[MoveJob], None]] = None,
-                          mode: SubmitMode = SubmitMode.REPLACE) -> TrajectoryRun:
-        return self.jobs.submit_trajectory(traj, on_update, mode)
+                          mode: SubmitMode = SubmitMode.REPLACE, started: Optional[float] = None) -> TrajectoryRun:
+        return self.jobs.submit_trajectory(traj, on_update, mode, started)
 
     def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]):
         return self.jobs.prepare_trajectory(traj, start)

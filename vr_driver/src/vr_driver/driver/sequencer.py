@@ -231,11 +231,33 @@ class SequencerBase(SequencerHooks):
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
         """One bus iteration: take the requests, follow the controller, end jobs, send the next
         target when everything allows it. Returns the command to send."""
+        watched = self._unended()
+        try:
+            return self._step(now, sample, joints)
+        finally:
+            for job in watched:
+                if job.done and job.ended_at is None:
+                    job.ended_at = now
+
+    def _unended(self) -> List[MoveJob]:
+        """The jobs this step may end (in flight, waiting for rest, queued): each gets
+        :attr:`MoveJob.ended_at` = the step's time when it does (a status taken at or after it shows
+        the arm after the job)."""
+        out = list(self._queue)
+        if self._job is not None:
+            out.append(self._job)
+        settle = self._settle
+        if settle is not None and settle.job is not None:
+            out.append(settle.job)
+        return out
+
+    def _step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
         fb = self._begin_step(now, sample)
         if fb is None:
             command = self.idle_command(now)
             self._publish()
             return command
+        self._note_carried(sample)
         self._settling.track(now, fb)
         self.follow(now, fb, sample)
         self._settling.check(now, fb, self.resting)
@@ -244,6 +266,16 @@ class SequencerBase(SequencerHooks):
         command = self.record(now)
         self._publish()                 # after the record: the view's live_anchor is what it put on the wire
         return command
+
+    def _note_carried(self, sample: LinkSample) -> None:
+        """The job in flight's first target went out with this bus cycle (:attr:`MoveJob.left_at`):
+        the first cycle that carried the record set last after a record offered it."""
+        job = self._job
+        if job is None or job.sent_at is None or job.left_at is not None or not sample.cycled \
+                or not sample.carried:
+            return
+        fresh = sample.fresh is not None and sample.record_time is not None
+        job.left_at = sample.record_time if fresh else sample.time
 
     def before_record(self, sample: LinkSample) -> None:
         """Hook before :meth:`record`: ``sample`` says whether this step follows a bus cycle and
@@ -561,6 +593,8 @@ class HandshakeSequencer(SequencerBase):
             log.warning("job %d: %s", job.id, exc)
             return
         job.seqs.append(seq)
+        if job.sent_at is None:
+            job.sent_at = now
         job.next_command += 1
         self.targets_sent += 1
         log.info("job %d: sent target %d: %s", job.id, seq, command.describe())

@@ -20,7 +20,8 @@ feedback, pass on cancel / preempt / shutdown -> set the result it gives (and dr
   end when one is given.
 - The result's error_string always says how the run's time compares with the plan (v1 stops at
   each kept point and moves at the controller program's own speed; v2 streams the points with
-  their timing and blends through them).
+  their timing and blends through them), timed from the goal's arrival: how long the preparation
+  took and when the first target left are said apart.
 - Cancel stops the arm; the goal ends when it is at rest.
 """
 from __future__ import annotations
@@ -77,7 +78,7 @@ class TrajectoryServer:
         # each goal checked at arrival (a refusal preempts nothing); a new goal preempts the running one
         self.goals = GoalRunner(name, self._execute,
                                 lambda text: FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=text),
-                                check=self._check, exclusive=True, thread_name="trajectory")
+                                check=self._check, exclusive=True, thread_name="trajectory", clock=core.clock)
         self.server = actionlib.ActionServer(name, FollowJointTrajectoryAction, goal_cb=self.goals.on_goal,
                                              cancel_cb=self.goals.on_cancel, auto_start=False)
 
@@ -150,7 +151,9 @@ class TrajectoryServer:
         if traj.delay > 0.0:
             cancel.wait(traj.delay)
         try:
-            run = self.core.submit_trajectory(traj)
+            # the plan's time 0: the goal's arrival (or the start its header stamp asks for), so the
+            # run's figures include the preparation (said apart in the result)
+            run = self.core.submit_trajectory(traj, started=goal.arrived + traj.delay)
         except (VrDriverError, DriverError) as exc:
             result = FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=str(exc))
             goal.set_aborted(result, str(exc))
@@ -197,8 +200,12 @@ class TrajectoryServer:
             for job in run.jobs:
                 job.wait(self.core.params.stop_timeout + 5.0)
         self._draw("trajectory_executed", self._executed(sup), (0.2, 1.0, 0.2))
-        # the status of a bus iteration after the run ended (the one that ended it may not be out yet)
-        outcome = sup.finish_status(self.core.clock(), self.core.status_after(self.core.clock()))
+        # the status of the bus iteration that ended the run or a later one (the one that ended it may
+        # not be out yet; waiting for the next one delayed every result by a bus cycle)
+        ended = [job.ended_at for job in run.jobs if job.ended_at is not None]
+        since = max(ended) if run.jobs and len(ended) == len(run.jobs) else self.core.clock()
+        status = self.core.status_after(since)
+        outcome = sup.finish_status(self.core.clock(), status)
         rospy.loginfo("joint_trajectory_action: %s", outcome.note)
         result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string=outcome.error_string)
         if outcome.state == SUCCEEDED:
