@@ -209,6 +209,8 @@ class ControllerFacts:
     #                                      measured; None: not measured (the model's)
     accelerations: Tuple[Tuple[str, float], ...] = ()   # (plain joint name, rad/s^2) measured
     check_word: bool = True              # the program checks the master's check word and seq copy
+    program_speed: float = 10.0          # [m/min] v1: the program's MOVEP speed (a PTP target)
+    program_path_speed: float = 5.0      # [m/min] v1: its MOVEL / MOVEC speed (a LIN, a CIRC)
 
     @classmethod
     def from_dict(cls, value: Any, joint_names: Tuple[str, ...]) -> "ControllerFacts":
@@ -241,6 +243,9 @@ class ControllerFacts:
                 ramp_time=None if ramp is None else _number(value, "ramp_time", 0.0, 0.0, 10.0),
                 accelerations=_accelerations(value.get("accelerations"), joint_names),
                 check_word=_boolean(value, "check_word", d.check_word),
+                program_speed=_number(value, "program_speed", d.program_speed, 0.0, 1000.0, lo_open=True),
+                program_path_speed=_number(value, "program_path_speed", d.program_path_speed, 0.0, 1000.0,
+                                           lo_open=True),
             )
         except ParamError as exc:
             if exc.name.startswith("controller/"):

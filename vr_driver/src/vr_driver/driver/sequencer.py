@@ -45,6 +45,7 @@ from ..params import DriverParams
 from ..poses import ControllerPose
 from ..protocol.common import FeedbackRecord, StatusBits
 from ..protocol.v1 import Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected, TimedOut
+from .announced import program_duration
 from .inbox import AddJobs, CancelJobs, ExtendJob, Inbox, Replanned, Request
 from .jobs import JobPhase, MoveJob, SubmitMode
 from .link import LinkSample
@@ -585,7 +586,8 @@ class HandshakeSequencer(SequencerBase):
         if job.next_command == 0 and not self.starts_here(job, joints):
             return
         command = job.preview.commands[job.next_command]
-        timeout = (self.params.motion_timeout_factor * job.preview.duration
+        # the move at the program's own speed (MOVEP / MOVEL), not the arm's full speed it was previewed at
+        timeout = (self.params.motion_timeout_factor * program_duration(job.preview, self.params.controller)
                    + self.params.motion_timeout_margin)
         try:
             seq = self.handshake.submit(command, timeout, now)

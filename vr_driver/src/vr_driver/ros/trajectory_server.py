@@ -160,6 +160,11 @@ class TrajectoryServer:
             return
         if self.on_run is not None:
             self.on_run(run)                 # feedback_states: desired = this plan from now on
+        try:
+            announced = self.core.announce_run(run).words
+        except (VrDriverError, DriverError) as exc:     # (cannot happen: the run's own checks passed)
+            announced = "not worked out (%s)" % exc
+        rospy.loginfo("joint_trajectory_action: %s", announced)
         sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names,
                                    accelerations=self._accelerations())
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
@@ -207,7 +212,8 @@ class TrajectoryServer:
         status = self.core.status_after(since)
         outcome = sup.finish_status(self.core.clock(), status)
         rospy.loginfo("joint_trajectory_action: %s", outcome.note)
-        result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string=outcome.error_string)
+        result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string="%s; said before it ran: %s"
+                                             % (outcome.error_string, announced))
         if outcome.state == SUCCEEDED:
             goal.set_succeeded(result)
         elif outcome.state == CANCELED:
