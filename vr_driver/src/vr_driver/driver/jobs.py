@@ -135,8 +135,8 @@ class MoveJob:
         #: the clock time of the bus step that first put one of its targets in the record handed to
         #: the bus (it goes out with the next bus cycle); None while none was
         self.sent_at: Optional[float] = None
-        #: ... and of the bus cycle that carried that record to the controller (the time its reply
-        #: began, the end of the telegram: the controller has the target from then on)
+        #: ... and of the bus cycle that carried that record to the controller (when the driver learnt
+        #: that it ran: the controller has the target by then)
         self.left_at: Optional[float] = None
         #: the clock time of the bus step that ended it (None: not ended by a bus step, or not yet)
         self.ended_at: Optional[float] = None

@@ -270,13 +270,14 @@ class SequencerBase(SequencerHooks):
 
     def _note_carried(self, sample: LinkSample) -> None:
         """The job in flight's first target went out with this bus cycle (:attr:`MoveJob.left_at`):
-        the first cycle that carried the record set last after a record offered it."""
+        the first cycle that carried the record set last after a record offered it, dated when the
+        driver learnt that it ran (its end: an upper bound of when the target left; the record's own
+        stamp dates the controller's reply, which it may have written before it read the target)."""
         job = self._job
         if job is None or job.sent_at is None or job.left_at is not None or not sample.cycled \
                 or not sample.carried:
             return
-        fresh = sample.fresh is not None and sample.record_time is not None
-        job.left_at = sample.record_time if fresh else sample.time
+        job.left_at = sample.time
 
     def before_record(self, sample: LinkSample) -> None:
         """Hook before :meth:`record`: ``sample`` says whether this step follows a bus cycle and
