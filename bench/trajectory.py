@@ -86,7 +86,16 @@ their header stamps (the driver's wall clock, the same as this process's):
   succeeded      goals with state SUCCEEDED and error_code SUCCESSFUL;
   time margin    time - (1.10 x plan + 0.3 s);
   per joint      the path dev of each joint (at the goal's start delay), median / max over the goals;
-  driver's own   the driver's "at most X deg from the plan at the same time" of the result.
+  driver's own   the driver's "at most X deg from the plan at the same time" of the result;
+  goal start     send_goal -> the virtual G2 took the goal's first target (the taken_time of its entry
+                 on /virtual_controller/executed, on the same monotonic clock; v1: the request
+                 accepted), per goal and as median / p95 / max against START_MEDIAN / START_P95, beside
+                 the driver's own words (all from the goal's arrival: "prepared in P s; first target
+                 left F s after the goal arrived; ran R x ...") and how far the bench's time and
+                 start delay are from the driver's.
+``--kinds K,...`` (the wrist set): its goals' kinds, cycled (cross, near, on, and "end": across
+joint_5 = 0 to within WRIST_END = 1 deg of it on the other side, where the driver's wire-target
+search is longest; bench/README.md, "How soon a goal moves").
 joint_states are stamped with the time the controller took their record (no age window: ``age`` 0).
 The summary is Markdown tables, then per configuration each target (``TARGETS``: v3 on the paced
 19.2 kbit/s line at look-ahead >= 1; every configuration is judged against them) met or NOT met.
