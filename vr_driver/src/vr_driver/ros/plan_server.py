@@ -265,7 +265,8 @@ class PlanServer:
                 done.set()
         gh = self.client.send_goal(FollowJointTrajectoryGoal(trajectory=result.trajectory), transition_cb=transition)
         started = time.monotonic()
-        duration = max(outcome.trajectory.duration, 1e-3)
+        # the duration the protocol delivers (v1: the program's speed), as said before it ran
+        duration = max(result.run_duration or outcome.trajectory.duration, 1e-3)
         feedback = PlanFeedback(phase=PlanFeedback.PHASE_EXECUTING)
         cancelled = False
         while not done.wait(0.1):
