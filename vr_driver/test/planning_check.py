@@ -195,6 +195,8 @@ class PlanningTest(DriverTestBase):
         self.assertEqual(result.run_duration, result.duration)
         self.assertIn("protocol v3 runs the plan's timing", result.run_words)
         self.assertNotIn("does not apply", result.run_words)
+        self.assertRegex(fjt.error_string, r"; said before it ran: protocol v3 runs the plan's timing: %.2f s, the TCP "
+                                           r"at most [0-9]+ mm/s$" % result.run_duration)
         ran = float(re.search(r"ran ([0-9.]+) x the planned", fjt.error_string).group(1)) * result.duration
         first = float(re.search(r"first target left ([0-9.]+) s after the goal arrived", fjt.error_string).group(1))
         self.assertAlmostEqual(ran - first, result.run_duration, delta=0.1 * result.run_duration, msg=fjt.error_string)
