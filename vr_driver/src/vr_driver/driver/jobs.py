@@ -138,6 +138,7 @@ class MoveJob:
         #: ... and of the bus cycle that carried that record to the controller (when the driver learnt
         #: that it ran: the controller has the target by then)
         self.left_at: Optional[float] = None
+        self.sent_serial: Optional[int] = None    # a bus process's serial of the record that first offered it
         #: the clock time of the bus step that ended it (None: not ended by a bus step, or not yet)
         self.ended_at: Optional[float] = None
         # protocol v2: the stream of joint targets (empty for a v1 job), where it was planned to

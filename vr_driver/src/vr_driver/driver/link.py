@@ -109,6 +109,9 @@ class LinkSample:
     carried: bool = True                   # the cycle carried the record set last (False: a bus
     #                                        process's cycle was under way when it was set; the
     #                                        record set next replaces it before any telegram does)
+    outputs_serial: Optional[int] = None   # a bus process's: the serial of the record set last (None:
+    #                                        an in-process master, whose cycle carries every record)
+    carried_serial: Optional[int] = None   # ... and of the record its last answered cycle carried
 
     @property
     def connected(self) -> bool:
@@ -358,7 +361,9 @@ class LinkSupervisor:
             record_time=self._record_stamp if connected else None,
             session=self._session, session_records=self._session_records,
             error_code=self._error_code, error_reason=self._error_reason, cycled=cycled,
-            carried=getattr(self._slave, "carried", True))
+            carried=getattr(self._slave, "carried", True),
+            outputs_serial=getattr(self._slave, "serial", None),
+            carried_serial=getattr(self._slave, "carried_serial", None))
 
     def _down(self, state: LinkState, reason: str) -> None:
         if self._state is LinkState.CONNECTED and state is not LinkState.CONNECTED:

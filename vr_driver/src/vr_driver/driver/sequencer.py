@@ -239,6 +239,10 @@ class SequencerBase(SequencerHooks):
             for job in watched:
                 if job.done and job.ended_at is None:
                     job.ended_at = now
+            job = self._job
+            if job is not None and job.sent_at == now and job.sent_serial is None \
+                    and sample.outputs_serial is not None:
+                job.sent_serial = sample.outputs_serial + 1      # the serial this step's record gets
 
     def _unended(self) -> List[MoveJob]:
         """The jobs this step may end (in flight, waiting for rest, queued): each gets
@@ -270,14 +274,19 @@ class SequencerBase(SequencerHooks):
 
     def _note_carried(self, sample: LinkSample) -> None:
         """The job in flight's first target went out with this bus cycle (:attr:`MoveJob.left_at`):
-        the first cycle that carried the record set last after a record offered it, dated when the
+        the first cycle that carried the record that first offered it (a bus process's serials: the
+        record set last may be a newer one) or a later one, dated when the
         driver learnt that it ran (its end: an upper bound of when the target left; the record's own
         stamp dates the controller's reply, which it may have written before it read the target)."""
         job = self._job
-        if job is None or job.sent_at is None or job.left_at is not None or not sample.cycled \
-                or not sample.carried:
+        if job is None or job.sent_at is None or job.left_at is not None or not sample.cycled:
             return
-        job.left_at = sample.time
+        if job.sent_serial is not None and sample.carried_serial is not None:
+            carried = sample.carried_serial >= job.sent_serial    # that record, or a later one offering it again
+        else:
+            carried = sample.carried
+        if carried:
+            job.left_at = sample.time
 
     def before_record(self, sample: LinkSample) -> None:
         """Hook before :meth:`record`: ``sample`` says whether this step follows a bus cycle and
