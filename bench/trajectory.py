@@ -86,7 +86,16 @@ their header stamps (the driver's wall clock, the same as this process's):
   succeeded      goals with state SUCCEEDED and error_code SUCCESSFUL;
   time margin    time - (1.10 x plan + 0.3 s);
   per joint      the path dev of each joint (at the goal's start delay), median / max over the goals;
-  driver's own   the driver's "at most X deg from the plan at the same time" of the result.
+  driver's own   the driver's "at most X deg from the plan at the same time" of the result;
+  goal start     send_goal -> the virtual G2 took the goal's first target (the taken_time of its entry
+                 on /virtual_controller/executed, on the same monotonic clock; v1: the request
+                 accepted), per goal and as median / p95 / max against START_MEDIAN / START_P95, beside
+                 the driver's own words (all from the goal's arrival: "prepared in P s; first target
+                 left F s after the goal arrived; ran R x ...") and how far the bench's time and
+                 start delay are from the driver's.
+``--kinds K,...`` (the wrist set): its goals' kinds, cycled (cross, near, on, and "end": across
+joint_5 = 0 to within WRIST_END = 1 deg of it on the other side, where the driver's wire-target
+search is longest; bench/README.md, "How soon a goal moves").
 joint_states are stamped with the time the controller took their record (no age window: ``age`` 0).
 The summary is Markdown tables, then per configuration each target (``TARGETS``: v3 on the paced
 19.2 kbit/s line at look-ahead >= 1; every configuration is judged against them) met or NOT met.
@@ -334,18 +343,19 @@ def _waypoint(rng: random.Random, prev: Sequence[float], chk: Checker) -> Option
 
 def generate_one(rng: random.Random, start: Sequence[float], chk: Checker, n_points: Optional[int] = None,
                  speed: Tuple[float, float] = SPEED, timing: str = "topp", index: int = 0,
-                 amax: Optional[Sequence[float]] = None) -> Planned:
+                 amax: Optional[Sequence[float]] = None, kinds: Sequence[str] = ()) -> Planned:
     """One planner-like trajectory from ``start`` (see the module doc): ``timing`` "topp" (time-optimal
     under the velocity and acceleration limits, resampled every RESAMPLE_DT), "dense" (10-100
     points, each leg at its cruise fraction, :func:`time_law`) or "wrist" (:func:`wrist_plan`: the
-    goal ``WRIST_KINDS[index]`` of the set, timed as "topp" under the accelerations ``amax``, default
-    joint_limits.yaml's). Raises RuntimeError when no valid one is found in many attempts (cannot
+    goal ``kinds[index]`` of the set, cycled -- default WRIST_KINDS --, timed as "topp" under the
+    accelerations ``amax``, default joint_limits.yaml's). Raises RuntimeError when no valid one is found in many attempts (cannot
     happen from a valid start in practice)."""
     if timing not in TIMINGS:
         raise ValueError("timing %r: one of %s" % (timing, ", ".join(TIMINGS)))
     start = tuple(float(v) for v in start)
     if timing == "wrist":
-        return wrist_plan(rng, start, chk, WRIST_KINDS[index % len(WRIST_KINDS)], amax)
+        kinds = tuple(kinds) or WRIST_KINDS
+        return wrist_plan(rng, start, chk, kinds[index % len(kinds)], amax)
     for _attempt in range(200):
         n_legs = rng.randint(1, 3)
         ways, prev = [], start
@@ -468,17 +478,18 @@ def rng_for(seed: int, index: int) -> random.Random:
 
 
 def generate(seed: int, n: int, chk: Optional[Checker] = None, start: Optional[Sequence[float]] = None,
-             timing: str = "dense", ramp_time: Optional[float] = None) -> List[Planned]:
+             timing: str = "dense", ramp_time: Optional[float] = None, kinds: Sequence[str] = ()) -> List[Planned]:
     """``n`` chained trajectories (each from the previous one's end), from ``start`` (default home).
     The bench makes trajectory ``i`` the same way from where the arm really is (:func:`rng_for`):
     from the planned end, it is this one. ``ramp_time`` (the "wrist" set only): the planner's
-    accelerations matched to an arm reaching full speed in that time (:meth:`Checker.accelerations`)."""
+    accelerations matched to an arm reaching full speed in that time (:meth:`Checker.accelerations`);
+    ``kinds``: its goals' kinds (cycled; default WRIST_KINDS)."""
     chk = chk or Checker()
     q = tuple(start) if start is not None else chk.home()
     amax = chk.accelerations(ramp_time) if timing == "wrist" else None
     out = []
     for i in range(n):
-        traj = generate_one(rng_for(seed, i), q, chk, timing=timing, index=i, amax=amax)
+        traj = generate_one(rng_for(seed, i), q, chk, timing=timing, index=i, amax=amax, kinds=kinds)
         out.append(traj)
         q = traj.points[-1]
     return out
@@ -657,6 +668,11 @@ def resample(timed: Sequence[TimedLeg], dt: float = RESAMPLE_DT) -> Tuple[List[T
 WRIST_KINDS = ("cross", "cross", "near", "cross", "on", "cross")
 WRIST_SIDE = (15.0, 35.0)             # deg: |joint_5| of a goal's end or via point off the singularity
 WRIST_NEAR = (0.2, 2.0)               # deg: |joint_5| of a "near" goal's end
+#: deg: |joint_5| of an "end" goal's end: across joint_5 = 0 to within this of it on the other side (the
+#: driver's longest wire-target search: bench/README.md, "How soon a goal moves")
+WRIST_END = 1.0
+#: the kinds of wrist goal (``--kinds``)
+WRIST_KIND_NAMES = ("cross", "near", "on", "end")
 WRIST_J4 = (10.0, 40.0)               # deg: |joint_4| at every waypoint (away from 0) ...
 WRIST_J6 = (10.0, 60.0)               # deg: ... |joint_6| ...
 WRIST_SPLIT = 15.0                    # deg: ... and |joint_4 - joint_6| (the split a pose leaves open near 0)
@@ -696,8 +712,8 @@ def wrist_joint5(rng: random.Random, start_j5: float, kind: str) -> List[Tuple[s
     a start nearer the singularity first leaves it to a side drawn at random."""
     def side() -> float:
         return math.radians(rng.uniform(*WRIST_SIDE))
-    if kind not in ("cross", "near", "on"):
-        raise ValueError("wrist goal kind %r: cross, near or on" % (kind,))
+    if kind not in WRIST_KIND_NAMES:
+        raise ValueError("wrist goal kind %r: one of %s" % (kind, ", ".join(WRIST_KIND_NAMES)))
     on_side = abs(start_j5) >= math.radians(WRIST_SIDE[0]) - 1e-9
     if on_side:
         s = math.copysign(1.0, start_j5)
@@ -709,6 +725,8 @@ def wrist_joint5(rng: random.Random, start_j5: float, kind: str) -> List[Tuple[s
         out.append(("cross", -s * side()))
     elif kind == "near":
         out.append(("near", rng.choice((-1.0, 1.0)) * math.radians(rng.uniform(*WRIST_NEAR))))
+    elif kind == "end":
+        out.append(("end", -s * math.radians(rng.uniform(0.0, WRIST_END))))
     else:
         out.append(("on", 0.0))
     return out
@@ -920,6 +938,48 @@ def unit_band(plan: Planned, wrist: WristRule) -> Any:
 
 #: the driver's own figure in the result's error_string (driver.supervision's note)
 DRIVER_DEV = re.compile(r"at most ([0-9.]+) deg from the plan at the same time")
+#: the driver's own timing figures in the result's error_string (driver.supervision's note, timed from
+#: the goal's arrival): key -> pattern of its value [s or x]
+DRIVER_TIMING = {
+    "driver_prep_s": re.compile(r"prepared in ([0-9.]+) s"),
+    "driver_first_s": re.compile(r"first target left ([0-9.]+) s after"),
+    "driver_ratio": re.compile(r"ran ([0-9.]+) x the planned"),
+    "driver_delay_s": re.compile(r"after a start delay of ([0-9.]+) s"),
+}
+#: the start targets (issue 46: a goal moves within 0.1 s of its arrival), over the goals of a
+#: configuration: goal sent -> the controller took its first target, median and p95 [s]
+START_MEDIAN, START_P95 = 0.10, 0.15
+
+
+def driver_timing(text: str) -> Dict[str, Optional[float]]:
+    """The driver's timing figures of a result's error_string (:data:`DRIVER_TIMING`; None: not said)."""
+    out: Dict[str, Optional[float]] = {}
+    for key, pattern in DRIVER_TIMING.items():
+        found = pattern.search(text or "")
+        out[key] = float(found.group(1)) if found else None
+    return out
+
+
+def first_taken(entries: Sequence[Dict[str, Any]], since: float) -> Optional[float]:
+    """[s] from ``since`` (time.monotonic() at send_goal) to the first target the controller took
+    after it: the earliest ``taken_time`` (v2 / v3) or ``start_time`` (v1: the request accepted) of
+    its execution-log entries (/virtual_controller/executed, on the same monotonic clock) at or after
+    ``since``; None when none."""
+    times = [float(e.get("taken_time", e.get("start_time"))) for e in entries
+             if e.get("taken_time", e.get("start_time")) is not None]
+    times = [t for t in times if t >= since]
+    return min(times) - since if times else None
+
+
+def percentile(values: Sequence[float], q: float) -> float:
+    """The ``q`` quantile (0..1) of ``values``, linear between order statistics (nan: none)."""
+    v = sorted(values)
+    if not v:
+        return math.nan
+    x = q * (len(v) - 1)
+    lo = int(math.floor(x))
+    hi = min(lo + 1, len(v) - 1)
+    return v[lo] + (v[hi] - v[lo]) * (x - lo)
 
 
 def plot_goal(directory: str, config: str, index: int, plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]],
@@ -1022,7 +1082,10 @@ class Run:
         self.TRUE, self.FALSE = TriState.TRUE, TriState.FALSE
         self.chk = Checker()
         self.names = list(self.chk.params.controller_joint_names)
+        from std_msgs.msg import String
         self.status = Recorder(rospy, "/robot_status", RobotStatus)
+        # the virtual G2's execution log: when it took each target (the goal's start, from send_goal)
+        self.executed = Recorder(rospy, "/virtual_controller/executed", String)
         self.joints = Recorder(rospy, "/joint_states", JointState)
         # --true-model: the goals are judged on the arm's true joints, counted from the driver model's
         # zero pose (the true angles less the driver model's zero offsets)
@@ -1161,16 +1224,19 @@ class Run:
         note = ""
         try:
             plan = generate_one(rng_for(cfg["seed"], index - 1), q, self.chk, timing=cfg["set"], index=index - 1,
-                                amax=self.amax)
+                                amax=self.amax, kinds=cfg.get("kinds", ()))
         except RuntimeError:                  # the arm stopped somewhere odd: from home
             note = self.reposition(self.chk.home())
             self.wait_idle(time.monotonic() + 30.0, "the arm not idle after going home")
             plan = generate_one(rng_for(cfg["seed"], index - 1), self.current(), self.chk, timing=cfg["set"],
-                                index=index - 1, amax=self.amax)
+                                index=index - 1, amax=self.amax, kinds=cfg.get("kinds", ()))
         mark = self.joints.mark()
         true_mark = self.true.mark() if self.true is not None else 0
+        exec_mark = self.executed.mark()
         timeout = 30.0 + 4.0 * plan.duration + 1.5 * len(plan.points)
-        status, result, t_send, t_done = self.send(self.goal(plan, cfg["path_tol"], cfg["goal_tol"]), timeout)
+        goal = self.goal(plan, cfg["path_tol"], cfg["goal_tol"])
+        mono_send = time.monotonic()
+        status, result, t_send, t_done = self.send(goal, timeout)
         final, samples = self.stamped(self.joints, mark, self.q_of, t_send, t_done)
         judged = None
         if self.true is not None:             # judged on the true joints (at their stamps)
@@ -1200,6 +1266,12 @@ class Run:
             rec["floor_deg"], rec["floor_where"] = math.degrees(floor), where
         found = DRIVER_DEV.search(rec["error_string"])
         rec["driver_dev_deg"] = float(found.group(1)) if found else None
+        rec.update(driver_timing(rec["error_string"]))
+        # the goal's start: the controller's log entry of its first target (published at its outcome)
+        self.executed.wait_for(lambda m: first_taken([json.loads(m.data)], mono_send) is not None, 2.0, exec_mark)
+        with self.executed.cond:
+            entries = [json.loads(m.data) for _t, m in self.executed.messages[exec_mark:]]
+        rec["first_s"] = first_taken(entries, mono_send)
         rec["ok"] = status == GoalStatus.SUCCEEDED and result is not None and result.error_code == 0
         rec["ran"] = status not in (None, GoalStatus.REJECTED)
         # to the end: succeeded, or only the goal tolerance missed (the figures are of a whole run)
@@ -1232,6 +1304,7 @@ class Run:
                      rec["error_string"][:110], " [%s]" % rec["note"] if rec["note"] else ""), flush=True)
             if self.wrist is not None:
                 print("    %s [%s]" % (wrist_words(rec, cfg["protocol"]), " / ".join(rec["legs"])), flush=True)
+            print("    %s" % start_words(rec), flush=True)
             refused_in_a_row = 0 if rec["ran"] else refused_in_a_row + 1
             if refused_in_a_row >= 2 and not any(r["ran"] for r in recs):
                 raise Failure("unsupported: the first goals were refused (%s)" % rec["error_string"])
@@ -1425,6 +1498,63 @@ def wrist_words(rec: Dict[str, Any], protocol: str) -> str:
                                          ": the deviation target is beyond any such arm" if beyond_any_arm(rec) else "")))
 
 
+def _s(value: Optional[float], fmt: str = "%.3f") -> str:
+    return "n/a" if value is None else fmt % value
+
+
+def start_differences(rec: Dict[str, Any]) -> Tuple[Optional[float], Optional[float]]:
+    """[s] the bench's figures less the driver's of one goal: the run's time (the time ratios x the
+    plan) and the start delay; None where either is missing."""
+    ratio = rec.get("driver_ratio")
+    time_diff = (rec["ratio"] - ratio) * rec["planned"] if ratio is not None and rec.get("ratio") is not None else None
+    delay = rec.get("driver_delay_s")
+    delay_diff = rec["lag_s"] - delay if delay is not None and rec.get("lag_s") is not None else None
+    return time_diff, delay_diff
+
+
+def start_words(rec: Dict[str, Any]) -> str:
+    """One goal's start in a line: goal sent -> the controller took its first target (the bench's),
+    the driver's preparation and first target (from the goal's arrival), and the time and start delay
+    as the bench and the driver measured them."""
+    time_diff, delay_diff = start_differences(rec)
+    return ("start: sent -> the G2 took the first target %s s; the driver: prepared in %s s, first target left %s s "
+            "after the goal arrived; time %.3f x plan (driver %s, %s ms apart), start delay %.3f s (driver %s, %s ms "
+            "apart)" % (_s(rec.get("first_s")), _s(rec.get("driver_prep_s")), _s(rec.get("driver_first_s")),
+                        rec["ratio"], _s(rec.get("driver_ratio"), "%.2f"),
+                        _s(None if time_diff is None else 1e3 * time_diff, "%+.0f"), rec["lag_s"],
+                        _s(rec.get("driver_delay_s")), _s(None if delay_diff is None else 1e3 * delay_diff, "%+.0f")))
+
+
+def start_summary(results: List[Dict[str, Any]]) -> None:
+    """How soon the goals moved (Markdown): per configuration, goal sent -> the controller took the
+    first target (median / p95 / max over the goals), the driver's preparation and first target
+    (median / max), and how far the bench's time and start delay are from the driver's (largest)."""
+    print("\ngoal start (issue 46: median <= %.2f s, p95 <= %.2f s from the goal to its first target; the driver's "
+          "figures within one bus cycle of the bench's):" % (START_MEDIAN, START_P95))
+    head = ("configuration", "sent -> G2 took the first target, median / p95 / max [s]",
+            "driver: prepared in [s]", "driver: first target left [s]", "time, bench - driver, largest [ms]",
+            "start delay, bench - driver, largest [ms]", "bus cycle [ms]", "target")
+    print("| " + " | ".join(head) + " |")
+    print("|" + " --- |" * len(head))
+    for r in results:
+        if "failed" in r:
+            continue
+        goals = r["goals"]
+        first = [g["first_s"] for g in goals if g.get("first_s") is not None]
+        diffs = [start_differences(g) for g in goals if g["completed"]]
+        tdiff = [abs(d[0]) for d in diffs if d[0] is not None]
+        ddiff = [abs(d[1]) for d in diffs if d[1] is not None]
+        met = bool(first) and len(first) == len(goals) and _median(first) <= START_MEDIAN \
+            and percentile(first, 0.95) <= START_P95
+        print("| %s | %s / %s / %s | %s | %s | %s | %s | %.0f | %s |" % (
+            r["title"], _s(_median(first) if first else None), _s(percentile(first, 0.95) if first else None),
+            _s(max(first) if first else None),
+            _mm([g["driver_prep_s"] for g in goals if g.get("driver_prep_s") is not None], "%.3f"),
+            _mm([g["driver_first_s"] for g in goals if g.get("driver_first_s") is not None], "%.3f"),
+            _s(1e3 * max(tdiff) if tdiff else None, "%.0f"), _s(1e3 * max(ddiff) if ddiff else None, "%.0f"),
+            1e3 / r["cycle_rate"], "met" if met else "NOT met"))
+
+
 def summary(results: List[Dict[str, Any]]) -> None:
     """The figures per configuration as Markdown tables (median / max over the goals run to the end,
     that is succeeded or missed only the goal tolerance), then the targets met or not."""
@@ -1468,6 +1598,7 @@ def summary(results: List[Dict[str, Any]]) -> None:
             print(row)
     if wrist:
         wrist_summary(results)
+    start_summary(results)
     print()
     for r in results:
         if "failed" in r:
@@ -1538,6 +1669,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                         "cruise fractions, v1 goals with %g deg tolerances; wrist = goals across and onto "
                         "joint_5 = 0, timed as topp with the accelerations matched to the arm's ramp, judged "
                         "with joint_4 / joint_6 by their sum near joint_5 = 0" % (RESAMPLE_DT, V1_TOLERANCE))
+    p.add_argument("--kinds", default="", metavar="K,K,...",
+                   help="the wrist set's goals, cycled: cross, near, on, end (across joint_5 = 0 to within %g deg "
+                        "of it); default %s" % (WRIST_END, ",".join(WRIST_KINDS)))
     p.add_argument("--plot", default="", metavar="DIR",
                    help="draw each goal's planned and executed joints over time into DIR/<config>_<goal>.png")
     p.add_argument("--speed-factor", type=float, default=1.0,
@@ -1602,16 +1736,22 @@ def main(argv: Optional[List[str]] = None) -> int:
         p.error("unknown configuration(s) %s (known: %s)" % (", ".join(bad), ", ".join(CONFIGS)))
     if args.n < 1:
         p.error("--n must be >= 1")
+    kinds = tuple(k.strip() for k in args.kinds.split(",") if k.strip())
+    if kinds and args.set != "wrist":
+        p.error("--kinds: the wrist set's (--set wrist)")
+    if any(k not in WRIST_KIND_NAMES for k in kinds):
+        p.error("--kinds: each one of %s" % ", ".join(WRIST_KIND_NAMES))
+    args.kinds = kinds or WRIST_KINDS
     if not 0 <= args.sim_rt_priority <= 99:
         p.error("--sim-rt-priority: 0 (normal scheduling) or 1..99")
     started = time.perf_counter()
-    plans = generate(args.seed, args.n, timing=args.set)
+    plans = generate(args.seed, args.n, timing=args.set, kinds=args.kinds)
     print("trajectory benchmark: %d trajectories per configuration (%s set, seed %d: %s points, %s s planned%s), "
           "configurations %s; each with its own roscore + driver.launch sim:=true"
           % (args.n, args.set, args.seed, "/".join(str(len(t.points)) for t in plans),
              "/".join("%.2f" % t.duration for t in plans),
              "; goals %s at the model's ramp (a ramp_time configuration: the same paths, timed with the planner's "
-             "accelerations matched to it)" % "/".join(WRIST_KINDS[i % len(WRIST_KINDS)] for i in range(args.n))
+             "accelerations matched to it)" % "/".join(args.kinds[i % len(args.kinds)] for i in range(args.n))
              if args.set == "wrist" else "", ", ".join(names)), flush=True)
     status, results = run_all(args, names, title_note="", model="",
                               stage="before" if args.commissioning else "")
@@ -1677,7 +1817,7 @@ def run_all(args: Any, names: Sequence[str], title_note: str, model: str, stage:
                "plot": os.path.abspath(args.plot) if args.plot else "",
                "dump": os.path.abspath(args.dump) if args.dump else "",
                "true_model": args.true_model, "model": model, "model_zero": zero,
-               "sim_rt_priority": args.sim_rt_priority}
+               "sim_rt_priority": args.sim_rt_priority, "kinds": list(args.kinds)}
         if args.true_model:
             cfg["title"] += ", true robot %s%s" % (os.path.basename(args.true_model), title_note)
         if stage == "before":

@@ -86,6 +86,20 @@ class Recorder:
             return self.messages[-1] if self.messages else None
 
 
+def top_tcp_speed(kin, samples, window: float) -> float:
+    """[mm/s] the TCP's largest speed over ``samples`` ((stamp [s], joints) in time order): each
+    sample against the latest one at least ``window`` s before it (stamps jitter by milliseconds)."""
+    xyz = [(t, kin.fk_pose(q).as_tuple()[:3]) for t, q in samples]
+    best, j = 0.0, 0
+    for i, (t, p) in enumerate(xyz):
+        while j + 1 < i and t - xyz[j + 1][0] >= window:
+            j += 1
+        t0, p0 = xyz[j]
+        if j < i and t - t0 >= window:
+            best = max(best, math.dist(p, p0) / (t - t0))
+    return best
+
+
 def cp(values) -> CartesianPose:
     return CartesianPose(*[float(v) for v in values])
 

@@ -25,7 +25,7 @@ from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
 from visualization_msgs.msg import MarkerArray
 
-from driver_check import DriverTestBase, Recorder, cp
+from driver_check import DriverTestBase, Recorder, cp, top_tcp_speed
 from vr_driver.kinematics.collision import CollisionChecker
 from vr_driver.kinematics.deps import missing_dependencies
 from vr_driver.kinematics.scene import SceneObject, load_scene
@@ -190,6 +190,21 @@ class PlanningTest(DriverTestBase):
         self.assertLess(max(abs(a - b) for a, b in zip(final, points[-1])), math.radians(0.5))
         closest = self.assert_free_run(self.checker, start, result.duration)
         rospy.loginfo("planning_check: the executed plan came within %.1f mm of the cell", closest * 1e3)
+        # said before it ran (issue 46) is what it did: v3 runs the plan's timing -- the time from its first
+        # target to its end and the TCP's top speed (joint_states at their stamps) within 10 %
+        self.assertEqual(result.run_duration, result.duration)
+        self.assertIn("protocol v3 runs the plan's timing", result.run_words)
+        self.assertNotIn("does not apply", result.run_words)
+        self.assertRegex(fjt.error_string, r"; said before it ran: protocol v3 runs the plan's timing: %.2f s, the TCP "
+                                           r"at most [0-9]+ mm/s$" % result.run_duration)
+        ran = float(re.search(r"ran ([0-9.]+) x the planned", fjt.error_string).group(1)) * result.duration
+        first = float(re.search(r"first target left ([0-9.]+) s after the goal arrived", fjt.error_string).group(1))
+        self.assertAlmostEqual(ran - first, result.run_duration, delta=0.1 * result.run_duration, msg=fjt.error_string)
+        with self.joints.cond:
+            samples = [(m.header.stamp.to_sec(), tuple(m.position)) for m in self.joints.messages[start:]]
+        top = top_tcp_speed(self.kin, samples, 0.05)
+        self.assertAlmostEqual(top, result.run_peak_tcp_speed, delta=0.1 * result.run_peak_tcp_speed,
+                               msg="said %.0f mm/s, ran %.0f mm/s" % (result.run_peak_tcp_speed, top))
 
     def test_03_a_box_on_the_path_makes_the_next_plan_go_around_it(self):
         here = tuple(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)

@@ -19,13 +19,15 @@ import unittest
 import pexpect
 import rospy
 import rostest
+from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool
 
+from vr_driver.kinematics.solver import Kinematics
 from vr_driver.msg import RobotStatus, TriState
 from vr_driver.poses import ControllerPose
 
-from driver_check import Recorder
+from driver_check import Recorder, top_tcp_speed
 
 PKG = "vr_driver"
 FIRST_PROMPT = r"X \[mm, 100\.\.1400\] \([-0-9.]+\): "     # the first prompt of every entry
@@ -40,6 +42,8 @@ class PoseTerminalTest(unittest.TestCase):
         rospy.init_node("pose_terminal_check")
         cls.executed = Recorder("/virtual_controller/executed", String)
         cls.status = Recorder("/robot_status", RobotStatus)
+        cls.true = Recorder("/virtual_controller/true_joints", JointState)
+        cls.kin = Kinematics.default()
         rospy.wait_for_service("/virtual_controller/set_estop", 30.0)
         cls.set_estop = rospy.ServiceProxy("/virtual_controller/set_estop", SetBool)
         cls.set_drives = rospy.ServiceProxy("/virtual_controller/set_drives_powered", SetBool)
@@ -405,6 +409,40 @@ class PoseTerminalTest(unittest.TestCase):
             self.quit(t)
         finally:
             rospy.set_param("/interface/workspace", saved)
+
+    def test_11_a_plan_on_v1_is_said_to_run_at_the_programs_speed_and_keeps_it(self):
+        """Issue 46: ``plan 900 300 900 0 60 0`` at the driver's default velocity scaling (0.1) on v1:
+        before it asks to run, the terminal says the scaling does not apply and the robot program's
+        speed does (the documented 10 m/min MOVEP, the virtual G2's default), with the time and the
+        top speed -- and the run keeps both within 10 % (the controller's execution log, from the
+        first target taken to the last done; the arm's true joints, over 0.2 s windows)."""
+        self.wait_motion_possible()
+        before = len(self.entries())
+        with self.true.cond:
+            mark = len(self.true.messages)
+        t = self.spawn()
+        t.sendline("plan 900 300 900 0 60 0")
+        self.expect(t, r"the run: velocity scaling 0\.1 \(the driver's default\) does not apply on this protocol: "
+                       r"the robot program's speed does \(the TCP at most [0-9]+ mm/s")
+        self.expect(t, r"protocol v1 runs (it|its ([0-9]+) targets) at the robot program's own speed, MOVEP 10 m/min "
+                       r"\(167 mm/s\), not a plan's timing, and stops at (the target|each): ([0-9.]+) s \(")
+        n = int(t.match.group(2) or 1)
+        said = float(t.match.group(4))
+        self.expect(t, r"the TCP at most ([0-9]+) mm/s")
+        top_said = float(t.match.group(1))
+        self.expect(t, r"Run this planned motion on the robot\? \[y/N\]: ")
+        t.sendline("y")
+        self.expect(t, r"Reached", timeout=60)
+        self.expect(t, FIRST_PROMPT)
+        self.quit(t)
+        entries = self.new_entries(before, n)
+        self.assertTrue(all(e["outcome"] == "executed" and e["move_type"] == "PTP" for e in entries), entries)
+        took = entries[-1]["time"] - entries[0]["start_time"]
+        self.assertAlmostEqual(took, said, delta=0.1 * said, msg="said %.2f s, ran %.2f s" % (said, took))
+        with self.true.cond:
+            samples = [(m.header.stamp.to_sec(), tuple(m.position)) for m in self.true.messages[mark:]]
+        top = top_tcp_speed(self.kin, samples, 0.2)
+        self.assertAlmostEqual(top, top_said, delta=0.1 * top_said, msg="said %.0f mm/s, ran %.0f mm/s" % (top_said, top))
 
 
 if __name__ == "__main__":

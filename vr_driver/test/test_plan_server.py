@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import pytest
 
+from vr_driver.driver.announced import Announced
+
 msg = pytest.importorskip("vr_driver.msg", reason="vr_driver messages not built (run scripts/test)")
 plan_server = pytest.importorskip("vr_driver.ros.plan_server", reason="rospy / actionlib not importable")
 
@@ -46,7 +48,18 @@ def test_bad_goal_messages_are_refused_in_words(goal, words):
 
 
 class _Core:
+    """The driver core as the plan server uses it: its joint names, and what its protocol delivers
+    (``announced``: DriverCore.announce's answer; the calls are kept)."""
     joint_names = NAMES
+
+    def __init__(self, announced=None):
+        self.announced = announced or Announced(1.5, 120.0, "protocol v3 runs the plan's timing: 1.50 s, the TCP at "
+                                                           "most 120 mm/s")
+        self.calls = []
+
+    def announce(self, times, positions):
+        self.calls.append((tuple(times), tuple(positions)))
+        return self.announced
 
 
 def test_the_result_of_a_plan_carries_the_trajectory_under_the_drivers_names():
@@ -103,7 +116,19 @@ def test_the_result_says_the_speed_the_plan_runs_at():
     assert result.peak_joint_speed == pytest.approx(math.degrees(0.1 * limit[4]))
     assert result.peak_tcp_speed == pytest.approx(peaks.tcp)
     assert result.error_string == text + ("; at its fastest the TCP moves %.0f mm/s, joint_5 %.1f deg/s (10 %% of its "
-                                          "limit)" % (peaks.tcp, math.degrees(0.1 * limit[4])))
+                                          "limit); protocol v3 runs the plan's timing: 1.50 s, the TCP at most 120 mm/s"
+                                          % (peaks.tcp, math.degrees(0.1 * limit[4])))
+    # what the protocol delivers (DriverCore.announce of the planned path)
+    assert (result.run_duration, result.run_peak_tcp_speed) == (1.5, 120.0)
+    assert result.run_words == "protocol v3 runs the plan's timing: 1.50 s, the TCP at most 120 mm/s"
+    assert server.core.calls[-1] == ((0.0, 0.5, 1.0, 1.5), tuple(positions))
+    # v1: the program's speed, and the default scaling that does not apply said first
+    server.core.announced = Announced(3.2, 167.0, "protocol v1 runs it at the robot program's own speed ...", True)
+    result = server._result(PlanOutcome(P.SUCCESS, text, plan, 0.012, "RRTConnect"), 0.1, default=True)
+    assert result.run_words.startswith("velocity scaling 0.1 (the driver's default) does not apply on this protocol: "
+                                       "the robot program's speed does (the TCP at most 167 mm/s, ")
+    assert result.run_words.endswith("; protocol v1 runs it at the robot program's own speed ...")
+    assert result.error_string.endswith(result.run_words)
     # words that do not name the scaling get it
     result = server._result(PlanOutcome(P.SUCCESS, "planned", plan, 0.012, "RRTConnect"), 0.25)
     assert result.error_string.startswith("planned; velocity scaling 0.25: at its fastest the TCP moves ")

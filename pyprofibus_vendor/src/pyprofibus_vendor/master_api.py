@@ -106,6 +106,11 @@ class SlaveView:
         self._outputs = bytes(spec.output_size or 0)
         self._inputs: Optional[bytes] = None
         self._inputs_time: Optional[float] = None
+        #: a master in a process of its own numbers the output images it is given: the serial of the
+        #: one set last, and of the one its last answered Data_Exchange carried (None: a master in the
+        #: application's thread, whose cycle carries every image it was given before it began)
+        self.serial: Optional[int] = None
+        self.carried_serial: Optional[int] = None
 
     @property
     def connected(self) -> bool:

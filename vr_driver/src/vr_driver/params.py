@@ -215,6 +215,8 @@ class ControllerFacts:
     not_measured: Tuple[str, ...] = ()   # keys the commissioning could not measure (the bus hid them):
     #                                      their assumptions stand, and interpreter_lookahead among them
     #                                      makes every stream point a stop (stream_smooth 0)
+    program_speed: float = 10.0          # [m/min] v1: the program's MOVEP speed (a PTP target)
+    program_path_speed: float = 5.0      # [m/min] v1: its MOVEL / MOVEC speed (a LIN, a CIRC)
 
     @classmethod
     def from_dict(cls, value: Any, joint_names: Tuple[str, ...]) -> "ControllerFacts":
@@ -248,6 +250,9 @@ class ControllerFacts:
                 accelerations=_accelerations(value.get("accelerations"), joint_names),
                 check_word=_boolean(value, "check_word", d.check_word),
                 not_measured=_not_measured(value, known),
+                program_speed=_number(value, "program_speed", d.program_speed, 0.0, 1000.0, lo_open=True),
+                program_path_speed=_number(value, "program_path_speed", d.program_path_speed, 0.0, 1000.0,
+                                           lo_open=True),
             )
         except ParamError as exc:
             if exc.name.startswith("controller/"):

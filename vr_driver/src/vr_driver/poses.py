@@ -268,6 +268,8 @@ class ControllerPose:
     rz: float
 
     def __post_init__(self) -> None:
+        if all(type(v) is float and math.isfinite(v) for v in (self.x, self.y, self.z, self.rx, self.ry, self.rz)):
+            return      # already what the checks below make of a value (a goal's stream makes thousands)
         for name, unit in zip(CONTROLLER_FIELDS, _UNITS):
             label = "%s [%s]" % (_label(name), unit)
             object.__setattr__(self, name, finite_number(getattr(self, name), label))

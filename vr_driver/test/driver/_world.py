@@ -76,9 +76,11 @@ class World:
     def __init__(self, kin, params: Optional[Dict[str, Any]] = None, *, speed_factor: float = 1.0,
                  brake_time: float = 0.3, initial_pose: Any = HOME_POSE, loop_period: float = 0.01,
                  planner=None, protocol: str = "v1", interpreter_lookahead: int = 1,
-                 controller_kin=None, ramp_time: Optional[float] = None) -> None:
+                 controller_kin=None, ramp_time: Optional[float] = None,
+                 program_speeds: Optional[Tuple[float, float]] = None) -> None:
         """``kin``: the driver's model (None: the driver builds it from ``params``, e.g. ``model``;
-        then the controller needs ``controller_kin``)."""
+        then the controller needs ``controller_kin``). ``program_speeds``: v1, the program's MOVEP and
+        MOVEL / MOVEC speeds [m/min] (None: the arm's full speed, as the stepped tests were written)."""
         if kin is None and controller_kin is None:
             raise ValueError("World: kin=None needs controller_kin")
         self.clock = FakeClock()
@@ -100,7 +102,7 @@ class World:
             self.program = ControllerProgramV2(self.slave, self.arm, execution_log=self.log)
         else:
             self.arm = SimArm(kin or controller_kin, planner, speed_factor=speed_factor, initial_pose=initial_pose,
-                              clock=self.clock, brake_time=brake_time)
+                              clock=self.clock, brake_time=brake_time, program_speeds=program_speeds)
             self.program = ControllerProgram(self.slave, self.arm, execution_log=self.log,
                                              confirm_records=True)
         self.link = SteppedLink(self.slave, self.clock)

@@ -4,6 +4,7 @@ run the supervisor on the stepped driver core and virtual controller (_world.Wor
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import pytest
 
@@ -324,6 +325,52 @@ def test_a_constant_start_delay_is_fitted_out_of_the_deviation_at_the_same_time(
     out = sup.finish(T0 + 2.4, True, END)
     assert out.start_delay == pytest.approx(0.2, abs=0.006) and out.max_delayed_deviation < 0.01
     assert "after a start delay of 0.20" in out.note
+
+
+def test_a_run_is_timed_from_the_goals_arrival_with_its_preparation_said_apart():
+    """Issue 46: the figures count from the goal's arrival (the run's ``started``); how long it took
+    to prepare and when its first target left are said first. Arrived at T0, queued 0.04 s later, the
+    first target on the wire 0.06 s after the arrival, the arm on the plan's schedule from then on: the
+    time ratio includes the 0.06 s, the fitted start delay is 0.06 s."""
+    traj = plan(V2)
+    job = MoveJob(None, points=(StreamPoint(MID, 500, 3, 1.0, 1), StreamPoint(END, 500, 0, 2.0, 2)), start=HOME)
+    job.left_at = T0 + 0.06
+    run = TrajectoryRun(traj, [0, 1, 2], [job], T0, prepared=T0 + 0.04)
+    sup = TrajectorySupervisor(traj, run, run.started, V2, NAMES)
+    follow(sup, traj, until=2.1, lag=0.06)
+    succeed(run)
+    out = sup.finish(T0 + 2.1, True, END)
+    assert out.note.startswith("prepared in 0.040 s; first target left 0.060 s after the goal arrived; "
+                               "ran 1.05 x the planned 2.00 s (protocol v2"), out.note
+    assert out.start_delay == pytest.approx(0.06, abs=0.003) and "after a start delay of 0.06" in out.note
+    # a goal whose header stamp starts it later: counted from that start
+    late = replace(traj, delay=0.5)
+    sup = TrajectorySupervisor(late, run, run.started, V2, NAMES)
+    assert sup.start_words() == "prepared in 0.040 s; first target left 0.060 s after its start time (the goal's " \
+                                "header stamp); "
+
+
+def test_the_first_target_leaves_with_the_bus_cycle_after_the_goal_is_queued(kin):
+    """On the stepped core (no preparation time on the fake clock): the record with the first target
+    is made in the bus step after the goal was queued and carried by the next cycle -- within two bus
+    cycles of the arrival."""
+    from _world import World
+    world = World(kin, protocol="v2")
+    world.ready()
+    world.run_for(0.3)
+    q0 = world.status().joints
+    goal = TrajectoryGoal(NAMES, ((q0[0] + 0.2,) + tuple(q0[1:]),), (1.0,))
+    lim = world.kin.limits
+    traj = validate(goal, NAMES, q0, lim.lower, lim.upper, world.now,
+                    default_path_tolerance=V2.default_path_tolerance, default_goal_tolerance=V2.default_goal_tolerance)
+    arrived = world.now
+    run = world.core.submit_trajectory(traj, started=arrived)
+    assert run.started == arrived and run.prepared == arrived and run.first_sent is None
+    world.run_until(lambda: run.first_sent is not None, 1.0, "the first target")
+    job = run.jobs[0]
+    assert arrived <= job.sent_at <= job.left_at <= arrived + 2.0 / world.params.cycle_rate
+    world.run_until(lambda: run.done, 5.0, "the run")
+    assert job.ended_at is not None and job.ended_at >= job.left_at
 
 
 # ------------------------------------------------------------------------------ on the stepped core

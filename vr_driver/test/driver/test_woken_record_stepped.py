@@ -75,3 +75,46 @@ def test_without_the_rule_the_next_record_goes_on_as_if_the_start_had_been_read(
     _world, job, woken, after = run(kin, monkeypatch, rule=False)
     assert woken.describe().startswith("START #%d " % job.seqs[0])
     assert after.describe().startswith("#%d " % job.seqs[1])     # sent ahead of a START nobody read
+
+
+def test_the_first_target_is_dated_by_the_cycle_that_carried_its_record(kin, monkeypatch):
+    """A bus process numbers each new record; its report says which one the cycle carried. On a
+    saturated line a record set after a report goes out with the cycle after the one under way: the
+    report two steps later carries it -- while the record set last (one step later, offering the next
+    target) is not carried yet. The first target's time (MoveJob.left_at, the result's "first target
+    left") is that report's, by the serial of the record that first offered it; by "the record set
+    last was carried" it came a cycle or more late."""
+    world = World(kin, protocol="v3")
+    world.ready()
+    core = world.core
+    serials, sent = [0], [b""]                       # the serial of the record set last; the record
+    at_step = []                                     # the serial set last at each step's start
+    set_outputs, step = core.link.set_outputs, core.link.step
+
+    def numbered(record):
+        if record != sent[0]:
+            sent[0] = record
+            serials[0] += 1
+        set_outputs(record)
+
+    def reported(now):
+        sample = step(now)
+        at_step.append(serials[0])
+        carried = at_step[-2] if len(at_step) >= 2 else 0        # set at the end of the step before the last
+        return replace(sample, outputs_serial=serials[0], carried_serial=carried, carried=carried >= serials[0])
+    monkeypatch.setattr(core.link, "set_outputs", numbered)
+    monkeypatch.setattr(core.link, "step", reported)
+    times_of = []
+    monkeypatch.setattr(core.sequencer, "_note_carried", lambda sample, f=core.sequencer._note_carried: (
+        times_of.append(sample.time), f(sample))[1])
+    for _ in range(5):
+        world.tick()
+    times, points = smooth_path(tuple(world.arm.joints), n=20, duration=2.0)
+    run_ = core.submit_trajectory(trajectory(world, times, points))
+    job = run_.jobs[0]
+    world.run_until(lambda: job.left_at is not None, 2.0, "the first target")
+    assert job.sent_serial is not None
+    sent_step = times_of.index(job.sent_at)
+    assert job.left_at == times_of[sent_step + 2]         # the report of the cycle after the one under way
+    record(world, job)
+    assert job.result.success, job.result.reason

@@ -53,7 +53,8 @@ import numpy as np
 from .. import validate
 from ..errors import KinematicsError, MotionError, PoseError, VrDriverError
 from ..kinematics.solver import ConfigurationRule, Kinematics
-from ..kinematics.preview import MovePreviewer, MotionSettings, MoveType, Trajectory
+from ..kinematics.preview import MovePreviewer, MotionSettings, MoveType, Trajectory, at_tcp_speed
+from ..protocol.v1 import program_speed
 from ..poses import HOME_POSE, ControllerPose, wrap_degrees
 from ..protocol.common import INT16_MAX, INT16_MIN, round_half_away
 
@@ -373,16 +374,21 @@ class SimArm(ArmBase):
 
     ``initial_joints`` wins over ``initial_pose``; the initial pose is solved by IK seeded from the
     SRDF's ``home`` state (PoseError / a KinematicsError if it is not reachable). ``configuration``:
-    the rule for a PTP target's joint solution (module docstring).
+    the rule for a PTP target's joint solution (module docstring). ``program_speeds``: (MOVEP,
+    MOVEL / MOVEC) [m/min], the program's constant move speeds (the v1 program: every move is the
+    previewed one slowed down evenly until its TCP never exceeds that speed,
+    :func:`~vr_driver.kinematics.preview.at_tcp_speed`); None: the arm's own full-speed profile.
     """
 
     def __init__(self, kinematics: Optional[Kinematics] = None, planner: Optional[MovePreviewer] = None, *,
                  speed_factor: float = 1.0, initial_pose: Any = HOME_POSE,
                  initial_joints: Optional[Sequence[float]] = None,
                  settings: Optional[MotionSettings] = None, clock: Clock = time.monotonic,
-                 brake_time: float = 0.0, configuration: Any = ConfigurationRule.PREVIOUS_TARGET) -> None:
+                 brake_time: float = 0.0, configuration: Any = ConfigurationRule.PREVIOUS_TARGET,
+                 program_speeds: Optional[Tuple[float, float]] = None) -> None:
         self._init_arm(kinematics, speed_factor, brake_time, initial_pose, initial_joints, clock, configuration)
         self.planner = planner if planner is not None else MovePreviewer(self.kin, settings)
+        self.program_speeds = None if program_speeds is None else (float(program_speeds[0]), float(program_speeds[1]))
         self._motion: Optional[_Motion] = None
         self._result: Optional[MotionResult] = None      # finished motion not yet collected by step()
         self._target: Optional[Tuple[float, ...]] = None  # the joints of the last target begun
@@ -442,16 +448,18 @@ class SimArm(ArmBase):
             return self._plan(MoveType.parse(move_type), target, via)
 
     def _plan(self, kind: MoveType, target: Any, via: Any) -> Trajectory:
-        """The motion from the current joints; a PTP to the target's solution by the rule."""
+        """The motion from the current joints, at the program's speed (``program_speeds``); a PTP to
+        the target's solution by the rule."""
+        speed = None if self.program_speeds is None else program_speed(kind, *self.program_speeds)
         seed = self.configuration_seed(self._target)
         if kind is not MoveType.PTP or seed == self._joints:
-            return self.planner.plan(kind, self._joints, target, via)
+            return at_tcp_speed(self.planner.plan(kind, self._joints, target, via), speed)
         pose = target if isinstance(target, ControllerPose) else ControllerPose.from_sequence(target)
         try:
             goal = self.kin.ik_pose(pose, seed=seed)
         except KinematicsError as exc:
             raise type(exc)("PTP target %s: %s" % (pose, exc)) from exc
-        return self.planner.ptp_joints(self._joints, goal)
+        return at_tcp_speed(self.planner.ptp_joints(self._joints, goal), speed)
 
     def begin(self, move_type: Any, target: Any, via: Any = None, now: Optional[float] = None
               ) -> Tuple[bool, str]:

@@ -12,6 +12,7 @@ from typing import IO, Optional, Sequence
 from ..kinematics.solver import ConfigurationRule
 from ..poses import HOME_POSE
 from ..protocol import registry as protocols
+from ..protocol.v1 import PROGRAM_PATH_SPEED, PROGRAM_SPEED
 from .options import (DEFAULT_ADDRESS, DEFAULT_BAUD, DEFAULT_BRAKE_TIME, DEFAULT_LOOP_PERIOD, PARAM_NAMES, PROTOCOLS,
                       SimOptions)
 from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, SendAhead
@@ -106,6 +107,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="v2, v3: per-axis acceleration limits in rad/s^2, joint_1 .. joint_6 (the mean over a "
                          "ramp from rest to full speed), instead of --ramp-time (default: none; every joint "
                          "ramps in the ramp time)")
+    g2.add_argument("--program-speed", type=float, metavar="M_PER_MIN", default=PROGRAM_SPEED,
+                    help="v1: the program's MOVEP speed in m/min (default %g, the documented program's)" % PROGRAM_SPEED)
+    g2.add_argument("--program-path-speed", type=float, metavar="M_PER_MIN", default=PROGRAM_PATH_SPEED,
+                    help="v1: its MOVEL / MOVEC speed in m/min (default %g)" % PROGRAM_PATH_SPEED)
     p.add_argument("--log-file", metavar="FILE",
                    help="append one JSON line per executed / rejected target")
     return p

@@ -20,6 +20,7 @@ from ..poses import HOME_POSE, ControllerPose
 from ..protocol import registry as protocols
 from ..protocol.base import Protocol
 from ..protocol.common import ByteOrder
+from ..protocol.v1 import PROGRAM_PATH_SPEED, PROGRAM_SPEED
 from .program_v3 import DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE, SendAhead
 from .session import Unreachable
 from .simulator import SimError, int_option, positive_option
@@ -45,13 +46,15 @@ PARAM_NAMES = {"pty_link": "pty_link", "device": "device", "addr": "address", "b
                "speed_scale": "speed_scale", "loop_blocks_during_move": "loop_blocks_during_move",
                "blend_across_input_read": "blend_across_input_read", "loop_jitter": "loop_jitter",
                "loop_jitter_seed": "loop_jitter_seed", "send_ahead": "send_ahead", "unreachable": "unreachable",
-               "ramp_shape": "ramp_shape", "accelerations": "accelerations"}
+               "ramp_shape": "ramp_shape", "accelerations": "accelerations", "program_speed": "program_speed",
+               "program_path_speed": "program_path_speed"}
 
 #: the SimOptions fields that are assumptions about the real G2 (doc/controller_program.md §10.9, one
 #: row each): what a commissioning measures and the virtual G2 lets a test set either way
 ASSUMPTIONS = ("byte_order", "loop_period", "loop_jitter", "loop_blocks_during_move", "data_exchange_bit",
                "configuration", "interpreter_lookahead", "blend_across_input_read", "send_ahead",
-               "unreachable", "speed_scale", "ramp_time", "ramp_shape", "accelerations")
+               "unreachable", "speed_scale", "ramp_time", "ramp_shape", "accelerations", "program_speed",
+               "program_path_speed")
 
 #: the controller programs (vr_driver.protocol): v1 the thesis' 14-byte handshake (default), v2
 #: streamed joint targets, v3 streamed Cartesian targets for the G2 as it is
@@ -120,6 +123,11 @@ class SimOptions:
     #: v2 / v3: per-axis acceleration limits [rad/s^2] (6 numbers, the mean over a ramp from rest to
     #: full speed), instead of one ramp_time for every joint; None: ramp_time's model
     accelerations: Optional[Tuple[float, ...]] = None
+    #: v1: the program's constant move speeds [m/min] -- MOVEP's (a PTP target) and MOVEL's / MOVEC's (a
+    #: LIN, a CIRC): each move runs the arm's own profile slowed down evenly until the TCP never exceeds
+    #: it (the documented program's 10 and 5 m/min; the protocol carries no speed)
+    program_speed: float = PROGRAM_SPEED
+    program_path_speed: float = PROGRAM_PATH_SPEED
 
     def __post_init__(self) -> None:
         protocol_option(self.protocol)
@@ -156,6 +164,11 @@ class SimOptions:
         object.__setattr__(self, "speed_scale", validate.number(self.speed_scale, lambda _: SimError(
             "speed_scale must be a finite number in (0, 10] (the real speed per commanded speed), got %r"
             % (self.speed_scale,)), 0.0, 10.0, lo_open=True))
+        for name in ("program_speed", "program_path_speed"):
+            value = getattr(self, name)
+            object.__setattr__(self, name, validate.number(value, lambda _, n=name, v=value: SimError(
+                "%s must be a finite number in (0, 1000] (m/min, the v1 program's move speed), got %r" % (n, v)),
+                0.0, 1000.0, lo_open=True))
         object.__setattr__(self, "loop_jitter", validate.number(self.loop_jitter, lambda _: SimError(
             "loop_jitter must be a finite number >= 0 and below loop_period (%g s), got %r"
             % (self.loop_period, self.loop_jitter)), 0.0))

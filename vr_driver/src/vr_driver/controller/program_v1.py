@@ -120,7 +120,8 @@ class ControllerProgramV1(SessionProgram):
     @classmethod
     def make_arm(cls, kinematics: Any, options: Any, clock: Callable[[], float]) -> SimArm:
         return SimArm(kinematics, speed_factor=options.speed_factor, initial_pose=ControllerPose(*options.initial_pose),
-                      clock=clock, brake_time=options.brake_time, configuration=options.configuration)
+                      clock=clock, brake_time=options.brake_time, configuration=options.configuration,
+                      program_speeds=(options.program_speed, options.program_path_speed))
 
     @classmethod
     def from_options(cls, slave: DpSlave, arm: SimArm, options: Any, *, execution_log: Any,

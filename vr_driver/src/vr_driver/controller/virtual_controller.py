@@ -44,7 +44,7 @@ from ..kinematics.solver import ConfigurationRule, Kinematics
 from ..poses import HOME_POSE, ControllerPose
 from ..protocol import registry as protocols
 from ..protocol.common import ByteOrder, FeedbackRecord, StreamState
-from ..protocol.v1 import ControllerState
+from ..protocol.v1 import PROGRAM_PATH_SPEED, PROGRAM_SPEED, ControllerState
 from .arm import ExecutionLog, IntPose, LogEntry, SimArm
 from .options import (DEFAULT_ADDRESS, DEFAULT_BAUD, DEFAULT_BRAKE_TIME, DEFAULT_LOOP_PERIOD, LoopTiming, SimOptions,
                       protocol_option, true_kinematics, true_zero_offsets)
@@ -143,7 +143,8 @@ class VirtualController(Simulator):
                  loop_blocks_during_move: bool = False, blend_across_input_read: bool = True,
                  loop_jitter: float = 0.0, loop_jitter_seed: int = 0, send_ahead: Any = SendAhead.ACCEPTED,
                  unreachable: Any = Unreachable.SKIP, ramp_shape: Any = RampShape.LINEAR,
-                 accelerations: Optional[Sequence[float]] = None) -> None:
+                 accelerations: Optional[Sequence[float]] = None, program_speed: float = PROGRAM_SPEED,
+                 program_path_speed: float = PROGRAM_PATH_SPEED) -> None:
         pose = initial_pose.as_tuple() if isinstance(initial_pose, ControllerPose) else initial_pose
         self.options = SimOptions(device=link if isinstance(link, str) else None, pty_link=pty_link,
                                   address=address, baud=baud, speed_factor=speed_factor,
@@ -161,7 +162,8 @@ class VirtualController(Simulator):
                                   unreachable=unreachable.value if isinstance(unreachable, Unreachable)
                                   else unreachable,
                                   ramp_shape=ramp_shape.value if isinstance(ramp_shape, RampShape) else ramp_shape,
-                                  accelerations=None if accelerations is None else tuple(accelerations))
+                                  accelerations=None if accelerations is None else tuple(accelerations),
+                                  program_speed=program_speed, program_path_speed=program_path_speed)
         if pty_link is not None and link is not None:
             raise SimError("pty_link is only for a pty the controller creates (link=None)")
         if self.options.true_model:

@@ -42,6 +42,7 @@ from pyprofibus_vendor.phy import Link
 from ..kinematics.preview import MovePreviewer
 from ..kinematics.solver import Kinematics
 from ..params import DriverParams
+from .announced import Announced, announce_moves, announce_plan
 from .arm_joints import ArmJoints
 from .bus_loop import BusLoop
 from .job_control import JobControl, PlanningThread, TrajectoryRun
@@ -275,11 +276,50 @@ class DriverCore:
         return self.jobs.submit_joint_path(names, points, on_update)
 
     def submit_trajectory(self, traj: ValidTrajectory, on_update: Optional[Callable[[MoveJob], None]] = None,
-                          mode: SubmitMode = SubmitMode.REPLACE) -> TrajectoryRun:
-        return self.jobs.submit_trajectory(traj, on_update, mode)
+                          mode: SubmitMode = SubmitMode.REPLACE, started: Optional[float] = None) -> TrajectoryRun:
+        return self.jobs.submit_trajectory(traj, on_update, mode, started)
 
     def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]):
         return self.jobs.prepare_trajectory(traj, start)
+
+    # ------------------------------------------------------------------------ said before a move
+    def bus_cycle(self) -> float:
+        """[s] the bus cycle: measured, else the configured rate's."""
+        rate = self.status().cycle_rate
+        return 1.0 / rate if rate and rate > 0.0 else 1.0 / self.bus.cycle_rate_hz
+
+    def announce(self, times: Sequence[float], positions: Sequence[Sequence[float]],
+                 previews: Optional[Sequence[Preview]] = None) -> Announced:
+        """The time and the TCP's top speed this protocol delivers for the planned path ``times`` /
+        ``positions`` (from ``positions[0]``; :func:`.announced.announce_plan`): v1 its PTP moves
+        between the plan's stop points (``previews``, made here when not given) at the program's
+        speed. Raises as :meth:`prepare_trajectory` when v1 would refuse the path."""
+        if previews is None and not self.protocol.streams and len(times) > 1:
+            from .resolution import WireResolution
+            from .trajectories import TrajectoryGoal, validate
+            lim = self.kin.limits
+            names = tuple(self.joint_names)
+            traj = validate(TrajectoryGoal(names, tuple(tuple(q) for q in positions[1:]), tuple(times[1:])), names,
+                            tuple(positions[0]), lim.lower, lim.upper, 0.0,
+                            default_path_tolerance=self.protocol.default_path_tolerance,
+                            default_goal_tolerance=self.protocol.default_goal_tolerance,
+                            wire=WireResolution.of(self.kin, self.protocol))
+            previews = self.prepare_trajectory(traj, traj.positions[0])[2]
+        return announce_plan(self.kin, self.protocol, times, positions, previews or (), self.params, self.bus_cycle())
+
+    def announce_run(self, run: TrajectoryRun) -> Announced:
+        """:meth:`announce` of a trajectory queued (v1: its jobs' previews)."""
+        previews = [job.preview for job in run.jobs if job.preview is not None]
+        return self.announce(run.traj.times, run.traj.positions, previews)
+
+    def announce_move(self, preview: Preview) -> Announced:
+        """The time and the TCP's top speed of one previewed move on this protocol: v1 at the program's
+        speed, a streaming protocol its previewed timing."""
+        if self.protocol.streams:
+            traj = preview.trajectory
+            return announce_plan(self.kin, self.protocol, [float(t) for t in traj.times],
+                                 [tuple(float(v) for v in q) for q in traj.positions])
+        return announce_moves(self.protocol, [preview], self.params, self.bus_cycle())
 
     def post_job(self, job: MoveJob) -> None:
         self.jobs.post_job(job)

@@ -34,13 +34,24 @@ __all__ = ["JobControl", "PlanningThread", "TrajectoryRun"]
 
 class TrajectoryRun:
     """A planner trajectory on its way (v1: a joint path of its thinned points). ``jobs[i]``
-    goes to ``traj.positions[kept[i + 1]]``."""
+    goes to ``traj.positions[kept[i + 1]]``. ``started``: the driver's clock at the plan's time 0
+    -- the goal's arrival (its start time, when its header stamp lies ahead), so that the figures
+    of the run (time, start delay, deviation) include the preparation; ``prepared``: when it was
+    checked and queued (the end of the preparation; None: not known)."""
 
-    def __init__(self, traj: ValidTrajectory, kept: List[int], jobs: List[MoveJob], started: float) -> None:
+    def __init__(self, traj: ValidTrajectory, kept: List[int], jobs: List[MoveJob], started: float,
+                 prepared: Optional[float] = None) -> None:
         self.traj = traj
         self.kept = kept
         self.jobs = jobs
         self.started = started
+        self.prepared = prepared
+
+    @property
+    def first_sent(self) -> Optional[float]:
+        """The clock time the bus cycle that carried the first target ran (:attr:`MoveJob.left_at`);
+        None while none did (or the run sends nothing)."""
+        return self.jobs[0].left_at if self.jobs else None
 
     @property
     def done(self) -> bool:
@@ -250,7 +261,7 @@ class JobControl:
 
     def submit_trajectory(self, traj: ValidTrajectory,
                           on_update: Optional[Callable[[MoveJob], None]] = None,
-                          mode: SubmitMode = SubmitMode.REPLACE) -> TrajectoryRun:
+                          mode: SubmitMode = SubmitMode.REPLACE, started: Optional[float] = None) -> TrajectoryRun:
         """Run a validated planner trajectory: its samples and the chords between them checked
         against the cell (CollisionError, nothing queued), then what :meth:`prepare_trajectory`
         makes of it, queued.
@@ -264,13 +275,16 @@ class JobControl:
         tolerance (:func:`trajectories.thin`), each kept point a PTP target of a joint path (it
         replaces the queued targets of an earlier path). The v1 program stops at every point and
         moves at its own speed: the result says how much slower than planned it ran. Raises
-        DriverError (nothing queued) naming the point or segment refused."""
+        DriverError (nothing queued) naming the point or segment refused.
+
+        ``started``: the clock time of the plan's time 0 (the goal's arrival; default: now, when it
+        is queued) -- the run's :attr:`TrajectoryRun.started`."""
         try:
             self.checks.check_collision_path(traj.positions, "trajectory", traj.times)
         except CollisionError as exc:
             raise CollisionError("%s; nothing was sent" % exc, exc.contacts, exc.sample, exc.time) from None
         if self.streams is None and len(traj.positions) < 2:   # only the start, where the arm is
-            return TrajectoryRun(traj, [0], [], self.clock())
+            return self._run(traj, [0], [], started)
         self._require_motion_possible()
         start = traj.positions[0] if self.streams is not None else self._planning_start(SubmitMode.REPLACE)
         kept, points, previews = self.prepare_trajectory(traj, start)
@@ -278,16 +292,21 @@ class JobControl:
             jobs = self._post_path(previews, on_update)
             log.info("trajectory: %d points planned over %.2f s, %d stop points after thinning",
                      len(traj.positions) - 1, traj.duration, len(previews))
-            return TrajectoryRun(traj, kept, jobs, self.clock())
+            return self._run(traj, kept, jobs, started)
         if not points:                          # a stream that does not move
-            return TrajectoryRun(traj, kept, [], self.clock())
+            return self._run(traj, kept, [], started)
         job = MoveJob(None, on_update, points=points, start=tuple(traj.positions[0]))
         self._last_posted = job
         self.sequencer.add([job], mode)
         self.wake()
         log.info("trajectory: %d points planned over %.2f s streamed as %d targets (job %d)",
                  len(traj.positions) - 1, traj.duration, len(points), job.id)
-        return TrajectoryRun(traj, kept, [job], self.clock())
+        return self._run(traj, kept, [job], started)
+
+    def _run(self, traj: ValidTrajectory, kept: List[int], jobs: List[MoveJob], started: Optional[float]
+             ) -> TrajectoryRun:
+        now = self.clock()
+        return TrajectoryRun(traj, kept, jobs, now if started is None else min(started, now), now)
 
     # ------------------------------------------------------------------------ the queue
     def claim_ticket(self) -> int:

@@ -132,6 +132,15 @@ class MoveJob:
         self.next_command = 0           # index into preview.commands of the next one to send
         self.seqs: List[int] = []       # handshake sequence numbers of what was sent
         self.stop_reason = ""           # set when a stop was requested for it
+        #: the clock time of the bus step that first put one of its targets in the record handed to
+        #: the bus (it goes out with the next bus cycle); None while none was
+        self.sent_at: Optional[float] = None
+        #: ... and of the bus cycle that carried that record to the controller (when the driver learnt
+        #: that it ran: the controller has the target by then)
+        self.left_at: Optional[float] = None
+        self.sent_serial: Optional[int] = None    # a bus process's serial of the record that first offered it
+        #: the clock time of the bus step that ended it (None: not ended by a bus step, or not yet)
+        self.ended_at: Optional[float] = None
         # protocol v2: the stream of joint targets (empty for a v1 job), where it was planned to
         # start, how many of its points the controller took / reached so far, and how often the
         # arm stood at a point waiting for the next target (a gap: the look-ahead ran dry)

@@ -113,6 +113,9 @@ class LinkSample:
     carried: bool = True                   # the cycle carried the record set last (False: a bus
     #                                        process's cycle was under way when it was set; the
     #                                        record set next replaces it before any telegram does)
+    outputs_serial: Optional[int] = None   # a bus process's: the serial of the record set last (None:
+    #                                        an in-process master, whose cycle carries every record)
+    carried_serial: Optional[int] = None   # ... and of the record its last answered cycle carried
 
     @property
     def connected(self) -> bool:
@@ -376,7 +379,9 @@ class LinkSupervisor:
             record_time=self._record_stamp if connected else None,
             session=self._session, session_records=self._session_records,
             error_code=self._error_code, error_reason=self._error_reason, cycled=cycled,
-            carried=self._slave.carried if self._slave is not None else True)
+            carried=self._slave.carried if self._slave is not None else True,
+            outputs_serial=self._slave.serial if self._slave is not None else None,
+            carried_serial=self._slave.carried_serial if self._slave is not None else None)
 
     def _down(self, state: LinkState, reason: str) -> None:
         if self._state is LinkState.CONNECTED and state is not LinkState.CONNECTED:

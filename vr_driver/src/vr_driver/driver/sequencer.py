@@ -45,6 +45,7 @@ from ..params import DriverParams
 from ..poses import ControllerPose
 from ..protocol.common import FeedbackRecord, StatusBits
 from ..protocol.v1 import Accepted, Command, Done, Feedback, MasterHandshake, MasterPhase, Rejected, TimedOut
+from .announced import program_duration
 from .inbox import AddJobs, CancelJobs, ExtendJob, Inbox, Replanned, Request
 from .jobs import JobPhase, MoveJob, SubmitMode
 from .link import LinkSample
@@ -231,11 +232,37 @@ class SequencerBase(SequencerHooks):
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
         """One bus iteration: take the requests, follow the controller, end jobs, send the next
         target when everything allows it. Returns the command to send."""
+        watched = self._unended()
+        try:
+            return self._step(now, sample, joints)
+        finally:
+            for job in watched:
+                if job.done and job.ended_at is None:
+                    job.ended_at = now
+            job = self._job
+            if job is not None and job.sent_at == now and job.sent_serial is None \
+                    and sample.outputs_serial is not None:
+                job.sent_serial = sample.outputs_serial + 1      # the serial this step's record gets
+
+    def _unended(self) -> List[MoveJob]:
+        """The jobs this step may end (in flight, waiting for rest, queued): each gets
+        :attr:`MoveJob.ended_at` = the step's time when it does (a status taken at or after it shows
+        the arm after the job)."""
+        out = list(self._queue)
+        if self._job is not None:
+            out.append(self._job)
+        settle = self._settle
+        if settle is not None and settle.job is not None:
+            out.append(settle.job)
+        return out
+
+    def _step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
         fb = self._begin_step(now, sample)
         if fb is None:
             command = self.idle_command(now)
             self._publish()
             return command
+        self._note_carried(sample)
         self._settling.track(now, fb)
         self.follow(now, fb, sample)
         self._settling.check(now, fb, self.resting)
@@ -244,6 +271,22 @@ class SequencerBase(SequencerHooks):
         command = self.record(now)
         self._publish()                 # after the record: the view's live_anchor is what it put on the wire
         return command
+
+    def _note_carried(self, sample: LinkSample) -> None:
+        """The job in flight's first target went out with this bus cycle (:attr:`MoveJob.left_at`):
+        the first cycle that carried the record that first offered it (a bus process's serials: the
+        record set last may be a newer one) or a later one, dated when the
+        driver learnt that it ran (its end: an upper bound of when the target left; the record's own
+        stamp dates the controller's reply, which it may have written before it read the target)."""
+        job = self._job
+        if job is None or job.sent_at is None or job.left_at is not None or not sample.cycled:
+            return
+        if job.sent_serial is not None and sample.carried_serial is not None:
+            carried = sample.carried_serial >= job.sent_serial    # that record, or a later one offering it again
+        else:
+            carried = sample.carried
+        if carried:
+            job.left_at = sample.time
 
     def before_record(self, sample: LinkSample) -> None:
         """Hook before :meth:`record`: ``sample`` says whether this step follows a bus cycle and
@@ -553,7 +596,8 @@ class HandshakeSequencer(SequencerBase):
         if job.next_command == 0 and not self.starts_here(job, joints):
             return
         command = job.preview.commands[job.next_command]
-        timeout = (self.params.motion_timeout_factor * job.preview.duration
+        # the move at the program's own speed (MOVEP / MOVEL), not the arm's full speed it was previewed at
+        timeout = (self.params.motion_timeout_factor * program_duration(job.preview, self.params.controller)
                    + self.params.motion_timeout_margin)
         try:
             seq = self.handshake.submit(command, timeout, now)
@@ -561,6 +605,8 @@ class HandshakeSequencer(SequencerBase):
             log.warning("job %d: %s", job.id, exc)
             return
         job.seqs.append(seq)
+        if job.sent_at is None:
+            job.sent_at = now
         job.next_command += 1
         self.targets_sent += 1
         log.info("job %d: sent target %d: %s", job.id, seq, command.describe())

@@ -36,11 +36,15 @@ the cell -- before anything is queued.
   of joint_4 and joint_6 was solved back onto the start's wrist halfway, at joint_5 = 0).
 
 :func:`stream_preparation` picks the family of a protocol (None for one that does not stream: v1).
+
+The preparation runs between a goal's arrival and its first target (issue 46: a goal moves within
+0.1 s of its arrival), in the goal's thread beside the bus thread: it does not hand the interpreter
+over point by point -- the node's switch interval (1 ms, ``ros/interface.py``) lets the bus thread in
+whenever it wakes, and a yield per point cost a time slice each on a loaded machine.
 """
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import replace
 from typing import Any, Callable, Optional, Sequence, Tuple
 
@@ -52,7 +56,7 @@ from .jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from .status import DriverError
 from .streaming import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
-from .wire_targets import WireTarget, wire_target
+from .wire_targets import FINE, WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
            "stream_preparation"]
@@ -157,7 +161,6 @@ class JointStreams:
                 raise type(exc)("segment %d of %d (to planned point %d): %s"
                                 % (i + 1, len(points), point.index, exc)) from None
             prev = point.joints
-            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
 
     def restream(self, job: MoveJob, joints: Tuple[float, ...]) -> Tuple[Tuple[StreamPoint, ...], Tuple[float, ...]]:
         """A stream job's points from ``joints`` (the arm is not where the stream was planned to
@@ -201,25 +204,30 @@ class CartesianStreams(JointStreams):
             if math.sqrt(sum((x - y) ** 2 for x, y in zip(a, b))) > reach:
                 return False
             try:
-                return self.target(a, b, search=False).error <= CONFIGURATION_TOLERANCE
+                # the coordinate search stops as soon as a pose lands within the tolerance: its
+                # steps are those of the full search up to there, so the answer is the same (and
+                # the plain rounding, one IK solution, answers it away from joint_5 = 0)
+                return self.target(a, b, search=False, fine=CONFIGURATION_TOLERANCE).error \
+                    <= CONFIGURATION_TOLERANCE
             except VrDriverError:
                 return False
         return reaches
 
     def target(self, prev: Sequence[float], joints: Sequence[float], search: bool = True,
-               earlier: Sequence[Sequence[float]] = ()) -> WireTarget:
+               earlier: Sequence[Sequence[float]] = (), fine: float = FINE) -> WireTarget:
         """The wire pose for ``joints`` after a target at ``prev`` and the controller's solution of
         it (:func:`.wire_targets.wire_target`: the plain rounding, or where that lands off the plan
         -- near joint_5 = 0 -- the one-step neighbour that lands nearest; ``search`` False: within
         FULL_SEARCH_BAND the coordinate search only, for a caller at a command's rate).
         ``earlier``: current_joints, the points before ``prev`` the arm may still be at (or
         between) when the controller takes the target: solved from each as well, the worst counts.
-        VrDriverError when the controller cannot solve it."""
+        ``fine``: a pose landing this near the plan ends the search. VrDriverError when the
+        controller cannot solve it."""
         also = tuple(earlier) if self.rule is ConfigurationRule.CURRENT_JOINTS else ()
         with self.checks.gate:
             if search:
-                return wire_target(self.kin, self.protocol, joints, prev, also=also)
-            return wire_target(self.kin, self.protocol, joints, prev, full_band=0.0, also=also)
+                return wire_target(self.kin, self.protocol, joints, prev, fine=fine, also=also)
+            return wire_target(self.kin, self.protocol, joints, prev, fine=fine, full_band=0.0, also=also)
 
     def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
                    ) -> Tuple[StreamPoint, ...]:
@@ -256,7 +264,6 @@ class CartesianStreams(JointStreams):
             history.append(prev)
             if len(history) > self.window:
                 del history[0]
-            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
         return tuple(out)
 
     def refusal(self, found: WireTarget, joints: Sequence[float]) -> str:

@@ -659,6 +659,8 @@ class StreamSequencer(SequencerBase):
                 break
             targets.append(self._target(job, i))
         self._offered = first + len(targets) - 1 if targets else None
+        if targets and job.sent_at is None:
+            job.sent_at = now
         if self._offered is not None:
             self._high = max(self._high, self._offered)
         return self.wire.stream_command(targets, start=first == 0 and bool(targets), outputs=outputs)

@@ -55,6 +55,8 @@ DELAY_STEP = 0.005
 FINE_DELAY_STEP = 0.00025
 #: samples kept for the fit (a 10-minute trajectory at 50 Hz)
 MAX_HISTORY = 30000
+#: samples x delays the fit judges in one array operation
+FIT_CELLS = 20000
 
 # how a goal ends (actionlib's terminal states of an accepted goal)
 SUCCEEDED = "succeeded"
@@ -250,11 +252,12 @@ class TrajectorySupervisor:
         from the plan at the same time (``fit``: :meth:`fit_delay`'s result when the caller has it)."""
         traj, run, protocol = self.traj, self.run, self.protocol
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
+        text = self.start_words()
         if protocol.streams:
             points = run.jobs[0].points if run.jobs else ()
             smooth = max((p.smooth for p in points), default=0)
             how = "smooth levels up to %d" % smooth if smooth else "an exact stop at each"
-            text = "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, %s)" % (
+            text += "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, %s)" % (
                 slower, traj.duration, protocol.name, len(points), len(traj.positions) - 1, how)
             gaps = run.jobs[0].gaps if run.jobs else 0
             if gaps:
@@ -266,7 +269,7 @@ class TrajectorySupervisor:
                          "stops at each point (its interpreter does not read the next MOVE ahead, "
                          "doc/controller_program.md section 10.9) runs this way" % (100.0 * (slower - 1.0)))
         else:
-            text = "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
+            text += "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
                 slower, traj.duration, protocol.name, len(run.jobs))
             if traj.goal_time_tolerance > 0.0:
                 text += ("; its time is reported, not judged: goal_time_tolerance (%.2f s) applies to a "
@@ -283,6 +286,21 @@ class TrajectorySupervisor:
             text += ("; no arm within the joint acceleration limits follows this plan closer than %.3f deg (%s)"
                      % (math.degrees(floor), where))
         return text
+
+    def start_words(self) -> str:
+        """How the run began, counted from its start (:attr:`started`: the goal's arrival): "prepared
+        in P s; first target left F s after the goal arrived; " (P: arrival to queued -- the checks,
+        the stream's preparation; F: arrival to the record that carried the first target handed to
+        the bus, which sends it with its next cycle). "" for a run that does not say (a test's)."""
+        prepared = getattr(self.run, "prepared", None)
+        if prepared is None:
+            return ""
+        since = "the goal arrived" if self.traj.delay <= 0.0 else "its start time (the goal's header stamp)"
+        text = "prepared in %.3f s" % max(0.0, prepared - self.started)
+        sent = getattr(self.run, "first_sent", None)
+        if sent is not None:
+            text += "; first target left %.3f s after %s" % (sent - self.started, since)
+        return text + "; "
 
     def floor(self) -> Tuple[float, str]:
         """(floor [rad], where): the least deviation from the plan at the same time any arm within
@@ -306,22 +324,28 @@ class TrajectorySupervisor:
         actual = np.array([q for _, q in self._history])
         times = np.asarray(self.traj.times, dtype=float)
         plan = np.asarray(self.traj.positions, dtype=float)
+        n, dof = actual.shape
         best = None
+        # many delays at once (the result waits for this fit: one delay at a time took ~20 ms, more
+        # than a bus cycle on a loaded machine); in chunks that keep the arrays small
+        chunk = max(1, FIT_CELLS // max(1, n))
 
-        def judge(delay: float) -> None:
+        def judge(delays: np.ndarray) -> None:
             nonlocal best
-            desired = np.column_stack([np.interp(ts - delay, times, plan[:, j]) for j in range(plan.shape[1])])
-            err = self._judged(actual, desired)
-            worst = float(err.max())
-            if best is None or worst < best[1] - 1e-12:
-                i, j = np.unravel_index(int(err.argmax()), err.shape)
-                best = (float(delay), worst, int(j), float(ts[i]))
-        for delay in np.arange(0.0, MAX_START_DELAY + 1e-9, DELAY_STEP):
-            judge(float(delay))
+            for k in range(0, len(delays), chunk):
+                part = delays[k:k + chunk]
+                at = (ts[None, :] - part[:, None]).ravel()
+                desired = np.column_stack([np.interp(at, times, plan[:, j]) for j in range(dof)])
+                err = self._judged(np.tile(actual, (len(part), 1)), desired).reshape(len(part), n, dof)
+                worst = err.max(axis=(1, 2))
+                for d in range(len(part)):        # the first delay of the smallest (as one at a time)
+                    if best is None or worst[d] < best[1] - 1e-12:
+                        i, j = np.unravel_index(int(err[d].argmax()), (n, dof))
+                        best = (float(part[d]), float(worst[d]), int(j), float(ts[i]))
+        judge(np.arange(0.0, MAX_START_DELAY + 1e-9, DELAY_STEP))
         coarse = best[0]                      # then finer around it: at 150 deg/s, 2.5 ms is 0.4 deg
-        for delay in np.arange(coarse - DELAY_STEP, coarse + DELAY_STEP + 1e-9, FINE_DELAY_STEP):
-            if 0.0 <= delay <= MAX_START_DELAY:
-                judge(float(delay))
+        fine = np.arange(coarse - DELAY_STEP, coarse + DELAY_STEP + 1e-9, FINE_DELAY_STEP)
+        judge(fine[(fine >= 0.0) & (fine <= MAX_START_DELAY)])
         return best
 
     def finish(self, now: float, joints_valid: bool, joints: Optional[Sequence[float]],

@@ -219,6 +219,36 @@ def joints_of(features: np.ndarray, seed: Sequence[float]) -> Tuple[float, ...]:
     return (float(features[0]), float(features[1]), float(features[2]), j4, j5, j6)
 
 
+def grid_joints(features: np.ndarray, seed: Sequence[float]) -> np.ndarray:
+    """:func:`joints_of` for many rows of :func:`wrist_features` at once (a row of joints each): the
+    729 predictions of a :class:`GridModel` in one array operation (one row at a time took ~5 ms,
+    the most of a target near joint_5 = 0 before its goal could start)."""
+    s3, s4, s5 = float(seed[3]), float(seed[4]), float(seed[5])
+    four = np.arctan2(features[:, 4], features[:, 3])
+    bend = np.hypot(features[:, 3], features[:, 4])
+
+    def branch(j4: np.ndarray, j5: np.ndarray) -> Tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        j4 = s3 + _remainder(j4 - s3)
+        j6 = s5 + _remainder(features[:, 5] - j4 - s5)
+        return (j4 - s3) ** 2 + (j5 - s4) ** 2 + (j6 - s5) ** 2, j4, j5, j6
+    da, a4, a5, a6 = branch(four, bend)
+    db, b4, b5, b6 = branch(four + math.pi, -bend)
+    first = da <= db
+    return np.column_stack((features[:, 0], features[:, 1], features[:, 2], np.where(first, a4, b4),
+                            np.where(first, a5, b5), np.where(first, a6, b6)))
+
+
+def _remainder(x: np.ndarray) -> np.ndarray:
+    """``math.remainder(x, 2 pi)`` element by element (the nearest multiple taken off; halves to even)."""
+    return x - TWO_PI * np.round(x / TWO_PI)
+
+
+TWO_PI = 2.0 * math.pi
+#: the 729 offsets of the grid (each number -1, 0, +1 step), as ints and as floats
+_GRID_STEPS = np.array(list(itertools.product(STEPS, repeat=6)), dtype=int)
+_GRID = _GRID_STEPS.astype(float)
+
+
 class GridModel:
     """The 729 grid offsets (each number -1, 0, +1 step) with the error a linear model predicts for
     the controller's solution of each, nearest the plan first (:attr:`order`: (offset, predicted
@@ -250,12 +280,11 @@ class GridModel:
             row[5] = math.remainder(fu[5] - fd[5], 2.0 * math.pi) / 2.0
             rows.append(row)
         self.trusted = trusted
-        grid = np.array(list(itertools.product(STEPS, repeat=6)), dtype=float)
-        predicted = f0[None, :] + grid @ np.array(rows)
-        errors = [_error(joints_of(f, seed), planned) for f in predicted]
+        predicted = f0[None, :] + _GRID @ np.array(rows)
+        errors = np.max(np.abs(grid_joints(predicted, seed) - np.asarray(planned, dtype=float)[None, :]), axis=1)
         order = np.argsort(errors, kind="stable")
-        self.order: List[Tuple[Tuple[int, ...], float]] = [
-            (tuple(int(v) for v in grid[i]), float(errors[i])) for i in order]
+        self.order: List[Tuple[Tuple[int, ...], float]] = list(zip(
+            map(tuple, _GRID_STEPS[order].tolist()), errors[order].tolist()))
 
 
 def _better(a: WireTarget, b: WireTarget) -> bool:

@@ -321,6 +321,28 @@ class MovePreviewer:
         return traj
 
 
+def peak_tcp_speed(trajectory: Trajectory) -> float:
+    """[mm/s] the TCP's largest speed along ``trajectory`` (between consecutive samples)."""
+    if len(trajectory.times) < 2:
+        return 0.0
+    dt = np.diff(trajectory.times)
+    dp = np.linalg.norm(np.diff(trajectory.tcp[:, :3, 3], axis=0), axis=1) * 1e3
+    moving = dt > 0.0
+    return float(np.max(dp[moving] / dt[moving], initial=0.0))
+
+
+def at_tcp_speed(trajectory: Trajectory, speed: Optional[float]) -> Trajectory:
+    """``trajectory`` slowed down evenly (its times stretched) so that the TCP never moves faster than
+    ``speed`` [mm/s]: how a program with a constant move speed runs a move (the v1 program's MOVEP /
+    MOVEL speed, doc/controller_program.md section 10.9) -- never faster than the arm's own profile;
+    None or a move whose TCP stays slower: unchanged."""
+    peak = peak_tcp_speed(trajectory)
+    if speed is None or peak <= speed:
+        return trajectory
+    return Trajectory(trajectory.move_type, trajectory.joint_names, trajectory.times * (peak / speed),
+                      trajectory.positions, trajectory.tcp)
+
+
 #: [mm, deg] how far a path sample may lie beyond a bound of the workspace box: float noise only.
 #: A target on a bound (bounds are inclusive) is reached as FK(IK(pose)), a few 1e-13 mm off; the
 #: next move starts there and must not be refused for it (that left the arm unable to move at all)

@@ -350,6 +350,12 @@ class Kinematics:
     def joint_vector(self, values: Any) -> Tuple[float, ...]:
         """A validated joint vector (tuple of floats) from a sequence in chain order or a mapping
         ``{joint name: value}`` naming every joint; PoseError otherwise."""
+        if type(values) is tuple and len(values) == self.dof and \
+                all(type(v) is float and math.isfinite(v) for v in values):
+            return values           # already what the checks below make of it (every IK and FK comes here)
+        if isinstance(values, np.ndarray) and values.dtype == np.float64 and values.shape == (self.dof,) \
+                and bool(np.all(np.isfinite(values))):
+            return tuple(values.tolist())       # (a path's samples: the same floats the checks make)
         if isinstance(values, Mapping):
             unknown = set(values) - set(self.joint_names)
             if unknown:

@@ -93,6 +93,20 @@ _UNITS = ("mm", "mm", "mm", "deg", "deg", "deg")
 
 # ------------------------------------------------------------------------------------------ enums
 
+#: [m/min] the documented v1 program's move speeds (doc/controller_program.md section 5, ROSLINK):
+#: MOVEP 10 m/min, MOVEL and MOVEC 5 m/min -- constants of the program, the protocol carries no
+#: speed; the driver's ``controller/program_speed`` / ``program_path_speed`` and the virtual G2's
+#: options of the same names say what the G2's program really uses (section 10.9)
+PROGRAM_SPEED = 10.0
+PROGRAM_PATH_SPEED = 5.0
+
+
+def program_speed(move_type: Any, movep: float = PROGRAM_SPEED, movel: float = PROGRAM_PATH_SPEED) -> float:
+    """[mm/s] the TCP speed the v1 program moves ``move_type`` at: ``movep`` [m/min] for a PTP (its
+    MOVEP), ``movel`` [m/min] for a LIN or a CIRC (MOVEL, MOVEC)."""
+    return (movep if MoveType.parse(move_type) is MoveType.PTP else movel) * 1000.0 / 60.0
+
+
 class WireMoveType(enum.IntEnum):
     """Byte 14 of a command: the G2 motion instruction to run."""
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from typing import Any, Callable, Dict, Optional, Union
 
 log = logging.getLogger(__name__)
@@ -56,11 +57,15 @@ class Goal:
     only): ``state``, ACCEPTED, ACTIVE or the state it ended in; ``cancel``, the event set by the
     client's cancel or a preemption; ``preempted``, True once a newer exclusive goal arrived while
     this one ran (its cancel is then set); ``work``, what the runner's check returned for it (None
-    without a check); ``ticket``, what the runner's ``ticket`` gave it at arrival (None otherwise)."""
+    without a check); ``ticket``, what the runner's ``ticket`` gave it at arrival (None otherwise);
+    ``arrived``, the runner's clock when the goal arrived, before its check (the time a goal's
+    figures count from)."""
 
-    def __init__(self, runner_name: str, handle: Any, work: Any = None, ticket: Any = None) -> None:
+    def __init__(self, runner_name: str, handle: Any, work: Any = None, ticket: Any = None,
+                 arrived: float = 0.0) -> None:
         self.name = runner_name
         self.handle = handle
+        self.arrived = arrived
         self.id: str = handle.get_goal_id().id
         self.work = work
         self.ticket = ticket
@@ -131,15 +136,18 @@ class GoalRunner:
     is the goal's ``work``; :class:`GoalRefused` rejects the goal. ``exclusive``: True, False or a
     function of the goal message: whether a goal takes part in the newest-wins rule. ``ticket(msg)``:
     called for each exclusive goal as it is accepted, in arrival order, under the runner's lock.
-    ``spawn(run, thread_name)``: starts ``run`` (a daemon thread by default; a test runs it itself)."""
+    ``spawn(run, thread_name)``: starts ``run`` (a daemon thread by default; a test runs it itself).
+    ``clock``: what :attr:`Goal.arrived` is read from (the driver's clock; default time.monotonic)."""
 
     def __init__(self, name: str, execute: Callable[[Goal], None], internal_error: Callable[[str], Any], *,
                  check: Optional[Callable[[Any], Any]] = None,
                  exclusive: Union[bool, Callable[[Any], bool]] = False,
                  ticket: Optional[Callable[[Any], Any]] = None,
                  thread_name: str = "goal",
-                 spawn: Callable[[Callable[[], None], str], None] = _thread) -> None:
+                 spawn: Callable[[Callable[[], None], str], None] = _thread,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.name = name
+        self.clock = clock
         self.execute = execute
         self.internal_error = internal_error
         self.check = check
@@ -160,6 +168,7 @@ class GoalRunner:
         """ActionServer thread (goals arrive here in the order the server received them): check, then
         take the goal's ticket and preempt the running exclusive goal now -- the newest goal wins
         however long each takes to execute --, accept, and run the goal in its own thread."""
+        arrived = self.clock()
         msg = handle.get_goal()
         work = None
         if self.check is not None:
@@ -175,7 +184,7 @@ class GoalRunner:
                 return
         exclusive = self.exclusive(msg)
         with self._lock:
-            goal = Goal(self.name, handle, work, self.ticket(msg) if exclusive and self.ticket else None)
+            goal = Goal(self.name, handle, work, self.ticket(msg) if exclusive and self.ticket else None, arrived)
             self._goals[goal.id] = goal
             if exclusive:
                 previous, self._current = self._current, goal

@@ -317,13 +317,15 @@ class InterfaceNode:
             goal.set_aborted(result, result.reason)
             return
         result.joint_target = list(preview.joint_target)
-        result.estimated_duration = preview.duration
+        announced = self.core.announce_move(preview)     # v1: at the program's speed, with its handshake
+        result.estimated_duration = announced.duration
         feedback.phase = MoveToPoseFeedback.PHASE_PREVIEW
         goal.publish_feedback(feedback)
         if job is None:
             result.success = True
             result.reached = cartesian(status.pose)
-            goal.set_succeeded(result, "preview only: reachable, %.2f s" % preview.duration)
+            result.reason = announced.words
+            goal.set_succeeded(result, "preview only: reachable, %.2f s; %s" % (announced.duration, announced.words))
             return
         self._publish_markers(job)
         period = 1.0 / max(5.0, min(50.0, self.params.joint_states_rate))

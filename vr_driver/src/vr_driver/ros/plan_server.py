@@ -46,6 +46,7 @@ from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJoi
                            PlanFeedback, PlanGoal as PlanGoalMsg, PlanResult)
 
 from ..driver import planning as core_planning
+from ..driver.announced import scaling_words
 from ..driver.plan_process import PlanningProcess
 from ..driver.planning import PlanGoal, PlanOutcome, arm_points
 from ..errors import MissingDependency, VrDriverError
@@ -171,7 +172,8 @@ class PlanServer:
             self._end(handle, PlanResult(error_code=core_planning.INVALID_GOAL, error_string="refused: %s" % exc))
             return
         outcome = self.planning.plan(goal, cancel=cancel)
-        result = self._result(outcome, goal.velocity_scaling or self.params.velocity_scaling)
+        result = self._result(outcome, goal.velocity_scaling or self.params.velocity_scaling,
+                              default=not goal.velocity_scaling)
         if outcome.code == core_planning.PREEMPTED:         # cancelled while planning: nothing planned
             rospy.loginfo("plan to %s: %s", goal.describe(), outcome.text)
             handle.set_canceled(result, result.error_string)
@@ -195,10 +197,12 @@ class PlanServer:
             return
         self._follow(handle, result, outcome, cancel)
 
-    def _result(self, outcome: PlanOutcome, velocity_scaling: float = 0.0) -> PlanResult:
+    def _result(self, outcome: PlanOutcome, velocity_scaling: float = 0.0, default: bool = False) -> PlanResult:
         """The action's result of ``outcome``; with a trajectory also the speed it runs at
-        (``velocity_scaling``: what it was timed with; the peaks when the planning's kinematics are
-        there), appended to error_string in words."""
+        (``velocity_scaling``: what it was timed with, ``default``: the parameter's; the peaks when the
+        planning's kinematics are there) and what the protocol delivers (``run_*``,
+        :meth:`DriverCore.announce`: on v1 the program's speed, with why the scaling does not apply),
+        appended to error_string in words."""
         result = PlanResult(error_code=outcome.code, error_string=outcome.text, planning_time=outcome.planning_time,
                             planner_id=outcome.planner_id)
         if outcome.trajectory is not None:
@@ -217,9 +221,24 @@ class PlanServer:
                                         "limit)" % ("" if said else "velocity scaling %g: " % velocity_scaling,
                                                     result.peak_tcp_speed, result.peak_joint,
                                                     result.peak_joint_speed, 100.0 * result.peak_joint_fraction))
+            if len(outcome.trajectory.positions) > 1:
+                self._announce(result, outcome, velocity_scaling, default)
         if outcome.target is not None:
             result.target = CartesianPose(*outcome.target.as_tuple())
         return result
+
+    def _announce(self, result: PlanResult, outcome: PlanOutcome, velocity_scaling: float, default: bool) -> None:
+        """The run's figures as the protocol delivers them (``run_*``), said in error_string."""
+        plan = outcome.trajectory
+        try:
+            announced = self.core.announce([float(t) for t in plan.times], [tuple(q) for q in plan.positions])
+        except VrDriverError as exc:
+            result.run_words = "its run not worked out: %s" % exc
+        else:
+            result.run_duration, result.run_peak_tcp_speed = announced.duration, announced.top_speed
+            warning = scaling_words(announced, velocity_scaling, default, result.peak_tcp_speed or math.inf)
+            result.run_words = "%s%s" % (warning + "; " if warning else "", announced.words)
+        result.error_string += "; " + result.run_words
 
     def trajectory_msg(self, outcome: PlanOutcome) -> JointTrajectory:
         """The plan as trajectory_msgs/JointTrajectory under the driver's joint names (the planner's
@@ -246,7 +265,8 @@ class PlanServer:
                 done.set()
         gh = self.client.send_goal(FollowJointTrajectoryGoal(trajectory=result.trajectory), transition_cb=transition)
         started = time.monotonic()
-        duration = max(outcome.trajectory.duration, 1e-3)
+        # the duration the protocol delivers (v1: the program's speed), as said before it ran
+        duration = max(result.run_duration or outcome.trajectory.duration, 1e-3)
         feedback = PlanFeedback(phase=PlanFeedback.PHASE_EXECUTING)
         cancelled = False
         while not done.wait(0.1):

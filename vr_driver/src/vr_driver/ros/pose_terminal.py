@@ -400,7 +400,7 @@ class RosBackend(Backend):
                                  unavailable=True)
         state, result = handle.outcome()
         if state == GoalStatus.SUCCEEDED and result is not None and result.success:
-            return PreviewResult(True, "", tuple(result.joint_target), result.estimated_duration)
+            return PreviewResult(True, result.reason, tuple(result.joint_target), result.estimated_duration)
         reason = result.reason if result is not None and result.reason else "the driver refused the goal"
         if reason.startswith("refused: "):
             reason = reason[len("refused: "):]
@@ -434,7 +434,8 @@ class RosBackend(Backend):
                                len(result.trajectory.points), result.planner_id, token=result.trajectory,
                                velocity_scaling=result.velocity_scaling, peak_tcp_speed=result.peak_tcp_speed,
                                peak_joint=result.peak_joint, peak_joint_speed=result.peak_joint_speed,
-                               peak_joint_fraction=result.peak_joint_fraction)
+                               peak_joint_fraction=result.peak_joint_fraction, run_duration=result.run_duration,
+                               run_peak_tcp_speed=result.run_peak_tcp_speed, run_words=result.run_words)
         reason = result.error_string if result is not None and result.error_string else "the planner refused the goal"
         if reason.startswith("refused: "):
             reason = reason[len("refused: "):]

@@ -20,7 +20,8 @@ feedback, pass on cancel / preempt / shutdown -> set the result it gives (and dr
   end when one is given.
 - The result's error_string always says how the run's time compares with the plan (v1 stops at
   each kept point and moves at the controller program's own speed; v2 streams the points with
-  their timing and blends through them).
+  their timing and blends through them), timed from the goal's arrival: how long the preparation
+  took and when the first target left are said apart.
 - Cancel stops the arm; the goal ends when it is at rest.
 """
 from __future__ import annotations
@@ -78,7 +79,7 @@ class TrajectoryServer:
         # each goal checked at arrival (a refusal preempts nothing); a new goal preempts the running one
         self.goals = GoalRunner(name, self._execute,
                                 lambda text: FollowJointTrajectoryResult(error_code=INVALID_GOAL, error_string=text),
-                                check=self._check, exclusive=True, thread_name="trajectory")
+                                check=self._check, exclusive=True, thread_name="trajectory", clock=core.clock)
         self.server = actionlib.ActionServer(name, FollowJointTrajectoryAction, goal_cb=self.goals.on_goal,
                                              cancel_cb=self.goals.on_cancel, auto_start=False)
 
@@ -151,7 +152,9 @@ class TrajectoryServer:
         if traj.delay > 0.0:
             cancel.wait(traj.delay)
         try:
-            run = self.core.submit_trajectory(traj)
+            # the plan's time 0: the goal's arrival (or the start its header stamp asks for), so the
+            # run's figures include the preparation (said apart in the result)
+            run = self.core.submit_trajectory(traj, started=goal.arrived + traj.delay)
         except (VrDriverError, DriverError) as exc:
             # one line for MoveIt's user: why, and what to change (vr_driver.moveit.refusal)
             text = for_moveit(exc, self.core.params.collision_padding)
@@ -160,6 +163,11 @@ class TrajectoryServer:
             return
         if self.on_run is not None:
             self.on_run(run)                 # feedback_states: desired = this plan from now on
+        try:
+            announced = self.core.announce_run(run).words
+        except (VrDriverError, DriverError) as exc:     # (cannot happen: the run's own checks passed)
+            announced = "not worked out (%s)" % exc
+        rospy.loginfo("joint_trajectory_action: %s", announced)
         sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names,
                                    accelerations=self._accelerations())
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
@@ -200,10 +208,15 @@ class TrajectoryServer:
             for job in run.jobs:
                 job.wait(self.core.params.stop_timeout + 5.0)
         self._draw("trajectory_executed", self._executed(sup), (0.2, 1.0, 0.2))
-        # the status of a bus iteration after the run ended (the one that ended it may not be out yet)
-        outcome = sup.finish_status(self.core.clock(), self.core.status_after(self.core.clock()))
+        # the status of the bus iteration that ended the run or a later one (the one that ended it may
+        # not be out yet; waiting for the next one delayed every result by a bus cycle)
+        ended = [job.ended_at for job in run.jobs if job.ended_at is not None]
+        since = max(ended) if run.jobs and len(ended) == len(run.jobs) else self.core.clock()
+        status = self.core.status_after(since)
+        outcome = sup.finish_status(self.core.clock(), status)
         rospy.loginfo("joint_trajectory_action: %s", outcome.note)
-        result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string=outcome.error_string)
+        result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string="%s; said before it ran: %s"
+                                             % (outcome.error_string, announced))
         if outcome.state == SUCCEEDED:
             goal.set_succeeded(result)
         elif outcome.state == CANCELED:

@@ -322,7 +322,8 @@ def parse_command(text: str) -> Optional[str]:
 @dataclass(frozen=True)
 class PreviewResult:
     ok: bool
-    reason: str = ""                                  # why not, when not ok
+    reason: str = ""                                  # why not, when not ok; when ok: how it runs (the
+    #                                                   time and top speed the protocol delivers), or ""
     joint_target: Tuple[float, ...] = ()              # rad, J1..J6
     duration: float = 0.0                             # s, the driver's estimate
     unavailable: bool = False                         # no driver / no answer (not a refusal)
@@ -366,6 +367,10 @@ class PlanPreview:
     peak_joint: str = ""                              # the joint closest to its speed limit
     peak_joint_speed: float = 0.0                     # deg/s
     peak_joint_fraction: float = 0.0                  # of that joint's speed limit
+    # what the protocol delivers (the plan action's run_*: on v1 the program's speed): s, mm/s, words
+    run_duration: float = 0.0
+    run_peak_tcp_speed: float = 0.0
+    run_words: str = ""
 
     def describe_speed(self, default: bool = False) -> str:
         """The speed the plan runs at, in words ("" when the driver did not say); ``default``: the
@@ -498,6 +503,8 @@ def plan_lines(request: PlanRequest, preview: PlanPreview) -> List[str]:
     lines.append("  speed: %s" % (speed or "not reported by the driver (velocity scaling %s)"
                                   % ("%g" % request.velocity_scaling if request.velocity_scaling
                                      else "the driver's default")))
+    if preview.run_words:
+        lines.append("  the run: %s" % preview.run_words)
     return lines
 
 
@@ -716,6 +723,8 @@ class Terminal:
             self._record(request, "refused: %s" % reason)
             return EXIT_NO_DRIVER if preview.unavailable else EXIT_REFUSED
         self.say("Preview: reachable; estimated duration %.1f s" % preview.duration)
+        if preview.reason:                 # (an accepted preview's words: what the protocol delivers)
+            self.say("  the run: %s" % preview.reason)
         self.say("  joint target [deg]: %s" % fmt_joints_deg(preview.joint_target))
         stop = self._go_ahead(request, preview_only, confirm, "previewed (not sent)",
                               "Send this %s move to the robot? [y/N]: " % request.move_type.name)
@@ -795,7 +804,8 @@ class Terminal:
         """Send the previewed ``request`` (``start``: how, the backend's start_move by default) and
         watch it to its end (:class:`MoveWatch`); it becomes the next entry's defaults."""
         started = self.clock()
-        timeout = move_timeout if move_timeout is not None else 3.0 * preview.duration + 15.0
+        duration = max(preview.duration, getattr(preview, "run_duration", 0.0))
+        timeout = move_timeout if move_timeout is not None else 3.0 * duration + 15.0
         target = getattr(request, "target", None) or getattr(preview, "target", None)
         self._sending = True
         handle = start() if start is not None else self.backend.start_move(request)

@@ -1,0 +1,117 @@
+"""What the driver says before a move (vr_driver.driver.announced) is what the move does (issue 46,
+part 4): the time and the TCP's top speed DriverCore.announce gives for a planned path agree within
+10 % with the run on the stepped world -- v3 on the plan's timing, v1 at the robot program's own speed
+(the virtual G2's program_speed, both sides of the assumption: the documented 10 m/min and twice
+that), its stops included; a velocity scaling v1 cannot honour is said in words. Fake clock, one
+thread."""
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.simulator import SimError
+from vr_driver.driver.announced import scaling_words
+from vr_driver.kinematics.preview import at_tcp_speed, peak_tcp_speed
+from vr_driver.protocol.v1 import PROGRAM_PATH_SPEED, PROGRAM_SPEED
+from vr_driver.params import ControllerFacts
+
+from _world import World
+from test_wire_supervision_stepped import validated
+
+AGREE = 0.10
+
+
+def plan_from(q0, reach):
+    """A 2 s planned path of 11 points from ``q0``: joint_1..3 by ``reach`` rad (and less)."""
+    q1 = (q0[0] + reach, q0[1] + reach / 2.0, q0[2] - reach / 3.0) + tuple(q0[3:])
+    n = 10
+    times = [2.0 * k / n for k in range(n + 1)]
+    return times, [tuple(a + (b - a) * k / n for a, b in zip(q0, q1)) for k in range(n + 1)]
+
+
+def run(world, times, points):
+    """Submit the plan as joint_trajectory_action does and step to its end: (time from the first target
+    on the wire to the end, the arm's top TCP speed [mm/s] sampled every program loop)."""
+    traj = validated(world, times[1:], points[1:])
+    run = world.core.submit_trajectory(traj, started=world.now)
+    last = [world.now, world.kin.fk_pose(world.arm.joints)]
+    top = [0.0]
+
+    def sample():
+        now, pose = world.now, world.kin.fk_pose(world.arm.joints)
+        if now - last[0] >= 0.02:
+            dp, _ = pose.distance_to(last[1])
+            top[0] = max(top[0], dp / (now - last[0]))
+            last[:] = [now, pose]
+        return run.done
+    world.run_until(sample, 60.0, "the run")
+    assert run.success, [j.result for j in run.jobs]
+    ended = max(job.ended_at for job in run.jobs)
+    return ended - run.first_sent, top[0]
+
+
+@pytest.mark.parametrize("speeds", [(PROGRAM_SPEED, PROGRAM_PATH_SPEED), (2 * PROGRAM_SPEED, 2 * PROGRAM_PATH_SPEED)])
+def test_v1_runs_at_the_program_speed_it_announces(kin, speeds):
+    world = World(kin, {"controller": {"program_speed": speeds[0], "program_path_speed": speeds[1]}}, protocol="v1",
+                  program_speeds=speeds)
+    world.ready()
+    world.run_for(0.3)
+    times, points = plan_from(world.status().joints, 0.4)
+    said = world.core.announce(times, points)
+    assert said.program
+    assert said.top_speed == pytest.approx(speeds[0] * 1000.0 / 60.0, rel=1e-6)       # the program's MOVEP speed
+    assert "MOVEP %g m/min" % speeds[0] in said.words and "not a plan's timing" in said.words
+    took, top = run(world, times, points)
+    assert took == pytest.approx(said.duration, rel=AGREE), (took, said.words)
+    assert top == pytest.approx(said.top_speed, rel=AGREE)
+    if speeds[0] == PROGRAM_SPEED:    # the plan's own timing (2 s) is not what v1 runs: at 10 m/min it takes longer
+        assert took > (1.0 + AGREE) * times[-1]
+
+
+def test_v3_runs_the_plans_timing_it_announces(kin):
+    world = World(kin, protocol="v3")
+    world.ready()
+    world.run_for(0.3)
+    times, points = plan_from(world.status().joints, 0.4)
+    said = world.core.announce(times, points)
+    assert not said.program and said.duration == times[-1]
+    assert said.words.startswith("protocol v3 runs the plan's timing: 2.00 s, the TCP at most")
+    took, top = run(world, times, points)
+    assert took == pytest.approx(said.duration, rel=AGREE)
+    assert top == pytest.approx(said.top_speed, rel=AGREE)
+    assert scaling_words(said, 0.1, True, said.top_speed) == ""            # v3 honours it
+
+
+def test_a_velocity_scaling_v1_cannot_honour_is_said_in_words(kin):
+    world = World(kin, protocol="v1")
+    world.ready()
+    world.run_for(0.3)
+    times, points = plan_from(world.status().joints, 0.4)
+    said = world.core.announce(times, points)
+    words = scaling_words(said, 0.1, True, 264.0)
+    assert words == ("velocity scaling 0.1 (the driver's default) does not apply on this protocol: the robot "
+                     "program's speed does (the TCP at most 167 mm/s, slower than the plan's 264 mm/s)")
+    assert "faster than the plan's 80 mm/s" in scaling_words(said, 0.05, False, 80.0)
+
+
+def test_a_move_at_the_program_speed_never_exceeds_it_and_never_runs_faster_than_the_arm(kin, planner):
+    home = tuple(kin.named_states["home"])
+    far = planner.ptp_joints(home, (home[0] + 0.8,) + tuple(home[1:]))
+    slowed = at_tcp_speed(far, 100.0)
+    assert peak_tcp_speed(slowed) == pytest.approx(100.0, rel=1e-9)
+    assert slowed.duration > far.duration and slowed.positions is far.positions
+    assert at_tcp_speed(far, 1e6) is far and at_tcp_speed(far, None) is far
+
+
+def test_the_program_speeds_are_options_of_the_virtual_g2_and_facts_of_the_driver():
+    options = SimOptions()
+    assert (options.program_speed, options.program_path_speed) == (PROGRAM_SPEED, PROGRAM_PATH_SPEED) == (10.0, 5.0)
+    assert SimOptions.from_mapping({"program_speed": 30, "program_path_speed": 2.5}).program_speed == 30.0
+    for bad in (0, -1, math.nan, "fast", 2000):
+        with pytest.raises(SimError, match="program_speed must be a finite number in"):
+            SimOptions(program_speed=bad)
+    facts = ControllerFacts()
+    assert (facts.program_speed, facts.program_path_speed) == (PROGRAM_SPEED, PROGRAM_PATH_SPEED)
+    assert ControllerFacts.from_dict({"program_speed": 20}, ()).program_speed == 20.0
