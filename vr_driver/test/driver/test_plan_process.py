@@ -22,8 +22,8 @@ import pytest
 
 from _world import World
 from vr_driver.driver import planning as P
-from vr_driver.driver.plan_process import (WORKER_NICE, PlanningCore, PlanningProcess, PlanningProcessError, SceneSnapshot,
-                                           worker_nice)
+from vr_driver.driver.plan_process import (WORKER_NICE, PlanningParts, PlanningProcess, PlanningProcessError,
+                                           SceneSnapshot, worker_nice)
 from vr_driver.driver.planning import PlanActionCore, PlanGoal
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
@@ -269,14 +269,18 @@ def test_the_worker_is_niced_when_the_bus_cycles_in_the_nodes_thread(kin):
         p.close()
 
 
-def test_the_workers_core_opens_no_port_and_starts_no_thread():
+def test_the_workers_parts_open_no_port_and_start_no_thread():
+    """The worker plans with the parts a plan needs (PlanningParts), never a driver core: no link, no
+    thread, no cell file read (the node sends its scene); its stream check's shortest segment is the
+    node's once a request brought it."""
     params = DriverParams.from_dict({"protocol": "v3", "scene": CELL, "port": "/dev/nonexistent-port"})
     threads = set(threading.enumerate())
-    core = PlanningCore(params)
+    parts = PlanningParts(params)
     assert set(threading.enumerate()) == threads
-    assert core.link.state.value == "starting" and core.params.scene == "" and len(core.scene()) == 0
-    core.node_min_segment = 0.123
-    assert core.min_segment() == 0.123 and core.streams.min_segment() == 0.123
+    assert not hasattr(parts, "link") and len(parts.checks.scene_guard.scene()) == 0 and parts.collision is not None
+    assert parts.min_segment() > 0.0
+    parts.node_min_segment = 0.123
+    assert parts.min_segment() == 0.123 and parts.streams.min_segment() == 0.123
 
 
 def test_a_missing_library_is_the_workers_missing_dependency(world, tmp_path, monkeypatch):
