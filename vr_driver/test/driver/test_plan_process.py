@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import select
 import signal
 import subprocess
@@ -22,6 +23,7 @@ import pytest
 
 from _world import World
 from vr_driver.driver import planning as P
+from vr_driver.driver.plan_messages import PlanFailed
 from vr_driver.driver.plan_process import (WORKER_NICE, PlanningParts, PlanningProcess, PlanningProcessError,
                                            SceneSnapshot, worker_nice)
 from vr_driver.driver.planning import PlanActionCore, PlanGoal
@@ -332,3 +334,16 @@ def test_the_worker_ends_with_its_parent_which_never_imports_the_planners_librar
         assert readable, "the worker %d outlived its parent by 30 s" % report["pid"]
     finally:
         os.close(fd)
+
+
+def test_a_malformed_request_is_answered_in_words_and_changes_nothing(planning):
+    """The worker answers a request that is not what the protocol says (plan_messages) with
+    PlanFailed naming the field, and plans the next one as before, in the same process."""
+    pid = planning.pid
+    assert planning.plan(AWAY).ok
+    with planning._lock:
+        planning._channel.conn.send_bytes(pickle.dumps(("plan", AWAY, (0.3, float("nan")), None, 0.2, None)))
+        answer = planning._channel.recv()
+    assert isinstance(answer, PlanFailed) and "start joints (0.3, nan), expected finite numbers" in answer.text, answer
+    assert planning.plan(AWAY).ok
+    assert planning.pid == pid and planning.workers_started == 1

@@ -33,13 +33,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from multiprocessing.connection import Connection
-from typing import Any, Dict, Optional, Tuple, Type
+from typing import TYPE_CHECKING, Dict, Optional, Tuple, Type
 
 from ..bus.messages import Channel, Message, message
 from ..errors import VrDriverError
 from ..kinematics.scene import Scene, SceneObject
 from ..params import DriverParams
 from .planning import PlanGoal, PlanOutcome
+
+if TYPE_CHECKING:
+    from .core import DriverCore
 
 __all__ = ["PlanMessageError", "Configure", "SceneSnapshot", "Plan", "Stop", "Ready", "Missing", "StartFailed",
            "Outcome", "PlanFailed", "Log", "TO_WORKER", "FROM_WORKER", "driver_end", "worker_end"]
@@ -83,7 +86,7 @@ class SceneSnapshot:
     checked: bool
 
     @classmethod
-    def of(cls, core: Any) -> "SceneSnapshot":
+    def of(cls, core: "DriverCore") -> "SceneSnapshot":
         """The scene of ``core``'s checker now, read under the core's planning gate (the checker,
         its scene and padding are replaced as a whole under it, never changed in place)."""
         with core.planning_gate:

@@ -61,7 +61,7 @@ import math
 import threading
 import time
 from dataclasses import replace
-from typing import Any, List, Optional, Sequence
+from typing import TYPE_CHECKING, List, Optional, Sequence, Tuple
 
 from ..bus.messages import Channel, Message
 from ..bus.worker import FD, WorkerProcess, WorkerStartError, child_end, child_scheduling, end_with_parent
@@ -70,7 +70,9 @@ from ..kinematics.preview import MovePreviewer
 from ..kinematics.scene import Scene
 from ..params import DriverParams
 from .commissioned import min_segment_cycles
-from .core import driver_kinematics
+from ..kinematics.solver import Kinematics
+from .core import DriverCore, driver_kinematics
+from .jobs import Preview, StreamPoint
 from .job_control import prepare_trajectory
 from .path_checks import PathChecks
 from .plan_messages import (Configure, Log, Missing, Outcome, Plan, PlanFailed, PlanMessageError, Ready,
@@ -79,6 +81,10 @@ from .planning import (ATTEMPTS, INVALID_ROBOT_STATE, PLANNING_FAILED, PREEMPTED
                        PlanOutcome, joints_to_plan_from)
 from .scene_guard import SceneGuard
 from .stream_prep import stream_preparation
+from .trajectories import ValidTrajectory
+
+if TYPE_CHECKING:
+    from ..kinematics.collision import CollisionChecker
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -120,11 +126,11 @@ class PlanningProcess:
     gate, checker (the scene), status (the arm's joints) and bus cycle are read here; it is never
     touched otherwise. ``ready_timeout`` [s]: the longest wait for a new worker."""
 
-    def __init__(self, core: Any, ready_timeout: float = READY_TIMEOUT) -> None:
+    def __init__(self, core: DriverCore, ready_timeout: float = READY_TIMEOUT) -> None:
         self.core = core
         self.params = core.params
         self.ready_timeout = float(ready_timeout)
-        self.kin: Any = None                 # the node's own Kinematics for the plan's markers (start())
+        self.kin: Optional[Kinematics] = None   # the node's own Kinematics for the plan's markers (start())
         self.workers_started = 0             # workers started so far (the first by start())
         self._lock = threading.Lock()        # one plan at a time; guards the worker
         self._worker: Optional[WorkerProcess] = None
@@ -229,7 +235,7 @@ class PlanningProcess:
                 return failed("no plan: %s" % exc)
             if isinstance(answer, Outcome):
                 return answer.outcome
-            raise PlanningProcessError("the planning process failed: %s" % getattr(answer, "text", answer))
+            raise PlanningProcessError("the planning process failed: %s" % _words(answer))
 
     def _answer_time(self, goal: PlanGoal) -> float:
         """[s] how long a plan of ``goal`` may take before the worker is taken for hung."""
@@ -273,7 +279,7 @@ class PlanningProcess:
             exc = MissingDependency(answer.package, answer.module, answer.feature)
             exc.args, exc.msg = (answer.text,), answer.text   # the worker's words, its reason included
             raise exc
-        raise PlanningProcessError("the planning process cannot plan here: %s" % getattr(answer, "text", answer))
+        raise PlanningProcessError("the planning process cannot plan here: %s" % _words(answer))
 
     def _receive(self, deadline: float, cancel: Optional[threading.Event], what: str) -> Message:
         """The worker's next message (its log records logged here on the way); _Cancelled when
@@ -326,6 +332,13 @@ class PlanningProcess:
             log.error("%s", exc)
 
 
+def _words(answer: Message) -> str:
+    """A failure's words (PlanFailed, StartFailed), or what came instead."""
+    if isinstance(answer, (PlanFailed, StartFailed)):
+        return answer.text
+    return "it answered with %s" % type(answer).__name__
+
+
 class _Cancelled(Exception):
     """The goal was cancelled while the node waited for the worker."""
 
@@ -355,7 +368,7 @@ class PlanningParts:
         self.streams = stream_preparation(params, self.kin, self.protocol, self.checks, self.min_segment)
 
     @property
-    def collision(self) -> Any:
+    def collision(self) -> Optional["CollisionChecker"]:
         """The checker of the scene set last (None: nothing checked), as DriverCore.collision."""
         return self.checks.collision
 
@@ -364,7 +377,8 @@ class PlanningParts:
             return self.node_min_segment
         return min_segment_cycles(self.params) / self._cycle_rate
 
-    def prepare_trajectory(self, traj: Any, start: Sequence[float]) -> Any:
+    def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]
+                           ) -> Tuple[List[int], Tuple[StreamPoint, ...], List[Preview]]:
         """What the driver would send for ``traj``, checked (job_control.prepare_trajectory)."""
         return prepare_trajectory(self.kin, self.checks, self.streams, traj, start)
 
