@@ -525,8 +525,12 @@ class BusProcessMaster(MasterApi):
             if self._closed:
                 return
             self._closed = True
-            # Close, then EOF; SIGTERM after 1 s, SIGKILL after another (bus.worker)
-            self._worker.stop(polite=lambda: self._channel.send(Close()))
+            try:
+                self._channel.send(Close())
+            except (OSError, ValueError):
+                pass
+            self._conn.close()
+        self._worker.stop()          # Close sent, EOF: 1 s to end, then SIGTERM, then SIGKILL (bus.worker)
         for fd in (self._wake_r, self._wake_w):
             try:
                 os.close(fd)
