@@ -130,7 +130,7 @@ def gap_figures(arrivals: Sequence[float], start: float, end: float) -> Dict[str
 
 def set_rig_priority() -> str:
     """SCHED_FIFO RIG_PRIORITY for this process where allowed; how it is scheduled, in words."""
-    from vr_driver.bus.process import set_priority
+    from vr_driver.bus.worker import set_priority
     words = set_priority(RIG_PRIORITY)
     return words if words.startswith("SCHED_FIFO") else words.split(":")[0] + " (SCHED_FIFO refused)"
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 import contextlib
 from typing import Iterator
 
-from vr_driver.bus.process import normal_scheduling, set_priority
+from vr_driver.bus.worker import normal_scheduling, set_priority
 
 
 @contextlib.contextmanager

@@ -216,3 +216,43 @@ def _alive(pid: int) -> bool:
             return f.read().split(")")[-1].split()[0] != "Z"
     except OSError:
         return False
+
+
+# ------------------------------------------------------------------------------ the worker process (bus.worker)
+CHILD = '''
+import os, signal, sys, time
+from vr_driver.bus.worker import child_end, child_scheduling
+conn = child_end(int(sys.argv[2]))
+if sys.argv[1] == "stubborn":
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+conn.send(child_scheduling(priority=int(sys.argv[3]), nice=int(sys.argv[4])))
+if sys.argv[1] == "polite":
+    conn.recv_bytes()                       # the polite message: the end
+    sys.exit(3)
+time.sleep(60)
+'''
+
+
+def test_a_worker_process_is_stopped_politely_then_by_sigterm_then_by_sigkill_and_says_how(tmp_path, monkeypatch):
+    """bus.worker, which starts the bus process and the planning process: a child that reads the
+    polite message ends by itself (its exit code); one that does not is ended by SIGTERM, one that
+    ignores SIGTERM by SIGKILL; each is named, our end is closed, and the child's scheduling is said
+    in words (niceness; real-time priority granted or refused, with the remedy)."""
+    from vr_driver.bus.worker import FD, WorkerProcess, exit_words
+    (tmp_path / "worker_child.py").write_text(CHILD)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    polite = WorkerProcess("worker_child", ["polite", FD, "0", "5"], "test child")
+    term = WorkerProcess("worker_child", ["term", FD, "0", "0"], "test child")
+    stubborn = WorkerProcess("worker_child", ["stubborn", FD, "1", "0"], "test child")
+    assert polite.conn.recv() == "normal scheduling, nice +5"
+    assert os.getpriority(os.PRIO_PROCESS, polite.pid) == min(19, os.getpriority(os.PRIO_PROCESS, 0) + 5)
+    assert term.conn.recv() == "normal scheduling (rt_priority 0)"
+    words = stubborn.conn.recv()
+    assert words == "SCHED_FIFO 1" or ("real-time priority 1 refused" in words and "chrt -f 1" in words), words
+    assert polite.running and polite.exit_words() == "still running"
+    assert polite.stop(polite=lambda: polite.conn.send_bytes(b"bye"), grace=10.0) == "exit code 3"
+    assert term.stop(grace=0.2, term_grace=10.0) == "killed by SIGTERM"
+    assert stubborn.stop(grace=0.2, term_grace=0.2) == "killed by SIGKILL"
+    for w in (polite, term, stubborn):
+        assert w.conn.closed and not w.running
+    assert exit_words(None) == "still running" and exit_words(-99) == "killed by signal 99"

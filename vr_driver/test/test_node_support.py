@@ -52,7 +52,7 @@ def test_own_link(tmp_path, monkeypatch):
 
 RAISE_ALL = r'''
 import os, sys, threading
-from vr_driver.bus.process import set_process_priority
+from vr_driver.bus.worker import set_process_priority
 started = threading.Event(); release = threading.Event()
 def idle():
     started.set(); release.wait()

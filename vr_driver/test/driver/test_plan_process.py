@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import pickle
 import select
 import signal
 import subprocess
@@ -22,8 +23,9 @@ import pytest
 
 from _world import World
 from vr_driver.driver import planning as P
-from vr_driver.driver.plan_process import (WORKER_NICE, PlanningCore, PlanningProcess, PlanningProcessError, SceneSnapshot,
-                                           worker_nice)
+from vr_driver.driver.plan_messages import PlanFailed
+from vr_driver.driver.plan_process import (WORKER_NICE, PlanningParts, PlanningProcess, PlanningProcessError,
+                                           SceneSnapshot, worker_nice)
 from vr_driver.driver.planning import PlanActionCore, PlanGoal
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
@@ -269,14 +271,18 @@ def test_the_worker_is_niced_when_the_bus_cycles_in_the_nodes_thread(kin):
         p.close()
 
 
-def test_the_workers_core_opens_no_port_and_starts_no_thread():
+def test_the_workers_parts_open_no_port_and_start_no_thread():
+    """The worker plans with the parts a plan needs (PlanningParts), never a driver core: no link, no
+    thread, no cell file read (the node sends its scene); its stream check's shortest segment is the
+    node's once a request brought it."""
     params = DriverParams.from_dict({"protocol": "v3", "scene": CELL, "port": "/dev/nonexistent-port"})
     threads = set(threading.enumerate())
-    core = PlanningCore(params)
+    parts = PlanningParts(params)
     assert set(threading.enumerate()) == threads
-    assert core.link.state.value == "starting" and core.params.scene == "" and len(core.scene()) == 0
-    core.node_min_segment = 0.123
-    assert core.min_segment() == 0.123 and core.streams.min_segment() == 0.123
+    assert not hasattr(parts, "link") and len(parts.checks.scene_guard.scene()) == 0 and parts.collision is not None
+    assert parts.min_segment() > 0.0
+    parts.node_min_segment = 0.123
+    assert parts.min_segment() == 0.123 and parts.streams.min_segment() == 0.123
 
 
 def test_a_missing_library_is_the_workers_missing_dependency(world, tmp_path, monkeypatch):
@@ -328,3 +334,16 @@ def test_the_worker_ends_with_its_parent_which_never_imports_the_planners_librar
         assert readable, "the worker %d outlived its parent by 30 s" % report["pid"]
     finally:
         os.close(fd)
+
+
+def test_a_malformed_request_is_answered_in_words_and_changes_nothing(planning):
+    """The worker answers a request that is not what the protocol says (plan_messages) with
+    PlanFailed naming the field, and plans the next one as before, in the same process."""
+    pid = planning.pid
+    assert planning.plan(AWAY).ok
+    with planning._lock:
+        planning._channel.conn.send_bytes(pickle.dumps(("plan", AWAY, (0.3, float("nan")), None, 0.2, None)))
+        answer = planning._channel.recv()
+    assert isinstance(answer, PlanFailed) and "start joints (0.3, nan), expected finite numbers" in answer.text, answer
+    assert planning.plan(AWAY).ok
+    assert planning.pid == pid and planning.workers_started == 1

@@ -51,7 +51,7 @@ from pyprofibus_vendor.master_api import MasterCounters, MasterSlaveState, Slave
 
 from .health import BusHealthSummary
 
-__all__ = ["MessageError", "Message", "BusSettings", "Start", "AddSlave", "Outputs", "Answer", "CycleAt", "Tick",
+__all__ = ["MessageError", "Message", "message", "BusSettings", "Start", "AddSlave", "Outputs", "Answer", "CycleAt", "Tick",
            "Close", "Opened", "OpenFailed", "SlaveReport", "StateChange", "Report", "Failed", "decode",
            "Channel", "driver_channel", "bus_channel", "TO_BUS", "FROM_BUS"]
 
@@ -94,25 +94,31 @@ class BusSettings:
         return max(0.2, 2.0 / self.cycle_rate_hz)
 
 
-def _check(tag: str, values: tuple, types: tuple) -> None:
+def _check(tag: str, values: tuple, types: tuple, noun: str = "bus message",
+           error: Type[Exception] = MessageError) -> None:
     """Each value of a message is of its field's type(s) (a tuple of types; None allowed where
-    the types include type(None))."""
+    the types include type(None)); else ``error`` naming the ``noun`` (whose message), the tag
+    and the field."""
     if len(values) != len(types):
-        raise MessageError("bus message %r: %d fields, expected %d" % (tag, len(values), len(types)))
+        raise error("%s %r: %d fields, expected %d" % (noun, tag, len(values), len(types)))
     if all(map(isinstance, values, types)):
         return
     for i, (value, kind) in enumerate(zip(values, types)):
         if not isinstance(value, kind):
-            raise MessageError("bus message %r: field %d is %s %r, expected %s" % (
-                tag, i + 1, type(value).__name__, value if len(repr(value)) < 60 else "...",
+            raise error("%s %r: field %d is %s %r, expected %s" % (
+                noun, tag, i + 1, type(value).__name__, value if len(repr(value)) < 60 else "...",
                 " or ".join(k.__name__ for k in kind)))
 
 
 class Message:
-    """A message: ``TAG`` and ``TYPES`` (one tuple of accepted types per field)."""
+    """A message: ``TAG`` and ``TYPES`` (one tuple of accepted types per field); ``NOUN`` and
+    ``ERROR`` say whose message a malformed one was, and raise what (the planning process's
+    messages, vr_driver.driver.plan_messages, are messages too)."""
 
     TAG = ""
     TYPES: tuple = ()
+    NOUN = "bus message"
+    ERROR: Type[Exception] = MessageError
 
     def values(self) -> tuple:
         """The fields as they go on the wire, in order."""
@@ -123,7 +129,7 @@ class Message:
 
     @classmethod
     def from_fields(cls, values: tuple) -> "Message":
-        _check(cls.TAG, values, cls.TYPES)
+        _check(cls.TAG, values, cls.TYPES, cls.NOUN, cls.ERROR)
         return cls(*values)  # type: ignore[call-arg]
 
 
@@ -348,24 +354,27 @@ FROM_BUS: Dict[str, Type[Message]] = {m.TAG: m for m in (Opened, OpenFailed, Rep
 
 
 def decode(data: bytes, kinds: Dict[str, Type[Message]]) -> Message:
-    """The message in ``data`` (one of ``kinds``: :data:`TO_BUS` or :data:`FROM_BUS`);
-    :class:`MessageError` when it is none of them or a field is wrong."""
+    """The message in ``data`` (one of ``kinds``: :data:`TO_BUS` or :data:`FROM_BUS`, or another
+    protocol's); :class:`MessageError` (their ``ERROR``) when it is none of them or a field is wrong."""
+    first = next(iter(kinds.values()))
+    noun, error = first.NOUN, first.ERROR
     try:
         raw = pickle.loads(data)
     except Exception as exc:  # a pickle that does not load raises anything its content makes
-        raise MessageError("bus message does not load: %s: %s" % (type(exc).__name__, exc)) from None
+        raise error("%s does not load: %s: %s" % (noun, type(exc).__name__, exc)) from None
     if not isinstance(raw, tuple) or not raw or not isinstance(raw[0], str):
-        raise MessageError("bus message %.60r is not a tagged tuple" % (raw,))
+        raise error("%s %.60r is not a tagged tuple" % (noun, raw))
     kind = kinds.get(raw[0])
     if kind is None:
-        raise MessageError("bus message %r unknown here (expected one of %s)" % (raw[0], ", ".join(sorted(kinds))))
+        raise error("%s %r unknown here (expected one of %s)" % (noun, raw[0], ", ".join(sorted(kinds))))
     return kind.from_fields(raw[1:])
 
 
 class Channel:
-    """One end of the driver's socket to its bus process: sends any message, receives only those
-    meant for this side (``kinds``). The connection's OSError/EOFError pass through (the other end
-    is gone); a malformed message raises :class:`MessageError`."""
+    """One end of the driver's socket to its bus process (or to its planning process): sends any
+    message, receives only those meant for this side (``kinds``). The connection's OSError/EOFError
+    pass through (the other end is gone); a malformed message raises :class:`MessageError` (the
+    kinds' ``ERROR``)."""
 
     def __init__(self, conn: Connection, kinds: Dict[str, Type[Message]]) -> None:
         self.conn = conn

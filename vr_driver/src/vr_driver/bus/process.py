@@ -11,7 +11,8 @@ opens the port, runs the :class:`~pyprofibus_vendor.dp_master.DpMaster` at the d
 and reports every cycle (the slaves' states, state changes, inputs with their arrival times, the
 counters, :mod:`~vr_driver.bus.health`) over a socket. It imports only the standard library and
 pyprofibus_vendor. Where the system allows it runs with real-time priority (``rt_priority``:
-SCHED_FIFO; see doc/reliability.md, "Real-time priority"), else at normal priority, and says which.
+SCHED_FIFO; see doc/reliability.md, "Real-time priority"), else at normal priority, and says which;
+it is started, watched and stopped by :mod:`vr_driver.bus.worker`.
 
 **The driver's side** is :class:`BusProcessMaster`, a stand-in for the DpMaster that the link
 supervisor (vr_driver.driver.link) and the I/O line (vr_driver.driver.stations) use unchanged: its
@@ -57,9 +58,6 @@ from __future__ import annotations
 import errno as errno_mod
 import logging
 import os
-import signal
-import socket
-import subprocess
 import sys
 import threading
 import time
@@ -75,70 +73,19 @@ from pyprofibus_vendor.master_api import (CONNECTED_STATES, MasterApi, MasterCou
 from pyprofibus_vendor.phy import Link
 
 from .health import BusHealth, BusHealthSummary
+from .worker import WorkerProcess, child_end, child_scheduling
 from .messages import (AddSlave, Answer, BusSettings, Close, CycleAt, Failed, Message, MessageError,
                        OpenFailed, Opened, Outputs, Report, SlaveReport, Start, StateChange, Tick,
                        Channel, bus_channel, driver_channel)
 
 log = logging.getLogger("vr_driver.bus")
 
-__all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "set_priority", "normal_scheduling", "main"]
+__all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "main"]
 
 #: state changes kept for a driver that does not read (the oldest are dropped beyond)
 MAX_EVENTS = 1000
 #: [s] how often the health summary (a sort of the last minute's gaps) is made
 SUMMARY_PERIOD = 1.0
-
-
-def set_priority(priority: int) -> str:
-    """Ask for SCHED_FIFO at ``priority`` (0: do not ask); returns how the process is scheduled, in
-    words (with the remedy when the system refused)."""
-    if priority <= 0:
-        return "normal scheduling (rt_priority 0)"
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(priority))
-    except (PermissionError, OSError, AttributeError) as exc:
-        return ("normal scheduling: real-time priority %d refused (%s); allow it with `ulimit -r %d` "
-                "(limits.conf rtprio) or `setcap cap_sys_nice+ep` on the Python binary, or start the "
-                "driver under `chrt -f %d`" % (priority, getattr(exc, "strerror", None) or exc,
-                                               priority, priority))
-    return "SCHED_FIFO %d" % priority
-
-
-def set_process_priority(priority: int, tasks: str = "/proc/self/task") -> str:
-    """:func:`set_priority` for the calling thread, then the same policy for every other thread the
-    process has already (on Linux the policy is a thread's: those started before -- rospy's, at
-    init_node -- keep normal scheduling, and one of them holding the interpreter's lock while a
-    CPU hog runs holds the real-time threads back with it: a virtual G2 at SCHED_FIFO 30 whose
-    loop then ran late let the arm stop at a point whose next target was already in its card).
-    Threads started later inherit the policy of the thread that starts them. Returns the words of
-    :func:`set_priority`, with the threads that could not be raised."""
-    words = set_priority(priority)
-    if priority <= 0 or not words.startswith("SCHED_FIFO"):
-        return words
-    me = threading.get_native_id()
-    failed = 0
-    try:
-        tids = [int(t) for t in os.listdir(tasks) if t.isdigit()]
-    except OSError:
-        return words
-    for tid in tids:
-        if tid == me:
-            continue
-        try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-        except (PermissionError, OSError):
-            failed += 1                     # a thread that ended meanwhile, or refused
-    return words + ("" if not failed else " (%d of its other threads not raised)" % failed)
-
-
-def normal_scheduling() -> None:
-    """The calling thread back at normal scheduling (SCHED_OTHER) -- on Linux the policy is a
-    thread's, and a thread inherits the one of the thread that starts it; leaving SCHED_FIFO needs
-    no privilege. Nothing where the system has no such call."""
-    try:
-        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
-    except (PermissionError, OSError, AttributeError):
-        pass
 
 
 class _NodeGone(Exception):
@@ -474,21 +421,9 @@ class BusProcessMaster(MasterApi):
         self._closed = False
         self._report_seq = 0                 # the last report applied
         self._send_lock = threading.Lock()
-        ours, theirs = socket.socketpair()
-        # blocking, whatever socket.setdefaulttimeout() says: rospy sets one (60 s), which makes
-        # new sockets non-blocking underneath -- and the child's end shares that flag, so its recv
-        # raised BlockingIOError on a message not all there yet
-        ours.setblocking(True)
-        theirs.setblocking(True)
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
-        try:
-            self._proc: Optional[subprocess.Popen] = subprocess.Popen(
-                [sys.executable, "-m", "vr_driver.bus.process", str(theirs.fileno())],
-                pass_fds=(theirs.fileno(),), env=env, start_new_session=True)
-        finally:
-            theirs.close()
-        self._conn = Connection(ours.detach())
+        # a new interpreter with its end of a socket pair, in a session of its own (bus.worker)
+        self._worker = WorkerProcess("vr_driver.bus.process", what="bus process", new_session=True)
+        self._conn = self._worker.conn
         self._channel = driver_channel(self._conn)
         self._wake_r, self._wake_w = os.pipe()
         os.set_blocking(self._wake_r, False)
@@ -518,7 +453,7 @@ class BusProcessMaster(MasterApi):
 
     @property
     def pid(self) -> int:
-        return self._proc.pid if self._proc is not None else 0
+        return self._worker.pid
 
     @property
     def adapter(self) -> Optional[AdapterSetup]:
@@ -595,31 +530,16 @@ class BusProcessMaster(MasterApi):
             except (OSError, ValueError):
                 pass
             self._conn.close()
+        self._worker.stop()          # Close sent, EOF: 1 s to end, then SIGTERM, then SIGKILL (bus.worker)
         for fd in (self._wake_r, self._wake_w):
             try:
                 os.close(fd)
             except OSError:
                 pass
-        proc = self._proc
-        if proc is not None:
-            try:
-                proc.wait(1.0)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait(1.0)
 
     # ------------------------------------------------------------------ reports
     def _exit_status(self) -> str:
-        proc = self._proc
-        code = proc.poll() if proc is not None else None
-        if code is None:
-            return "still running"
-        if code < 0:
-            try:
-                return "killed by %s" % signal.Signals(-code).name
-            except ValueError:
-                return "killed by signal %d" % -code
-        return "exit code %d" % code
+        return self._worker.exit_words()
 
     def _receive(self) -> bool:
         got = False
@@ -632,11 +552,7 @@ class BusProcessMaster(MasterApi):
                 elif isinstance(msg, Failed):
                     raise PhyError(msg.text)
         except (EOFError, OSError):
-            if self._proc is not None:
-                try:
-                    self._proc.wait(0.5)
-                except subprocess.TimeoutExpired:
-                    pass
+            self._worker.wait(0.5)
             raise PhyError("the bus process ended (%s)" % self._exit_status()) from None
         return got
 
@@ -679,13 +595,10 @@ def _open_serial(device: str, baud: int) -> Link:
 def main(argv: Optional[List[str]] = None) -> int:
     """The bus process: ``python3 -m vr_driver.bus.process FD`` (FD: its end of the socket)."""
     argv = sys.argv[1:] if argv is None else argv
-    signal.signal(signal.SIGINT, signal.SIG_IGN)    # the driver's Ctrl-C is the driver's: we see it end
     logging.basicConfig(level=logging.INFO, stream=sys.stderr,
                         format="[vr_driver bus %(process)d] %(levelname)s %(message)s")
     logging.getLogger("pyprofibus_vendor").setLevel(logging.WARNING)
-    fd = int(argv[0])
-    os.set_blocking(fd, True)
-    conn = Connection(fd)
+    conn = child_end(int(argv[0]))      # the driver's Ctrl-C is the driver's: we see it end
     channel = bus_channel(conn)
     try:
         start = channel.recv()
@@ -699,7 +612,7 @@ def main(argv: Optional[List[str]] = None) -> int:
                                 % type(start).__name__, None))
         return 1
     settings = start.settings
-    scheduling = set_priority(settings.rt_priority)
+    scheduling = child_scheduling(settings.rt_priority)
     try:
         link = _open_serial(settings.device, settings.baud)
     except (ProfibusError, OSError, ValueError) as exc:

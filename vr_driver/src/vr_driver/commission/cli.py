@@ -20,7 +20,7 @@ import textwrap
 import time
 from typing import Callable, List, Optional, Sequence, TextIO
 
-from ..bus.process import set_priority
+from ..bus.worker import set_priority
 from ..errors import VrDriverError
 from ..params import DriverParams, ParamError
 from .bus import CommissionBus, CommissionError, LinkDown, port_problem, port_users

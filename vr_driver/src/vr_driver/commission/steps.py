@@ -45,7 +45,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 
-from ..bus.process import normal_scheduling
+from ..bus.worker import normal_scheduling
 from ..errors import KinematicsError, PoseError
 from ..kinematics.solver import stretched_elbow
 from ..poses import ControllerPose

@@ -155,12 +155,8 @@ class DriverCore:
 
     @property
     def scene_guard(self) -> SceneGuard:
-        """The cell and its collision checks (replaceable as a whole: the plan process's scene)."""
+        """The cell and its collision checks."""
         return self.checks.scene_guard
-
-    @scene_guard.setter
-    def scene_guard(self, guard: SceneGuard) -> None:
-        self.checks.scene_guard = guard
 
     @property
     def planning_gate(self) -> threading.Lock:

@@ -208,26 +208,7 @@ class JobControl:
 
     def _ptp_path(self, points: Sequence[Sequence[float]], order: Sequence[int], start: Sequence[float],
                   describe: Callable[[int], str]) -> List[Preview]:
-        """The PTP preview of each joint point (its values in the joint order ``order``: controller
-        index of each) from the end of the one before (the first from ``start``); DriverError
-        naming the point (``describe(index)``) when one is refused."""
-        previews = []
-        for index, point in enumerate(points):
-            try:
-                if len(point) != len(order):
-                    raise DriverError("has %d positions for %d joint names" % (len(point), len(order)))
-                q = [0.0] * len(order)
-                for src, dst in enumerate(order):
-                    q[dst] = float(point[src])
-                q = self.kin.check_limits(self.kin.joint_vector(q))
-                request = MoveRequest(MoveType.PTP, self.kin.fk_pose(q), label="joint path point %d" % index)
-                preview = self.checks.preview(request, start)
-            except (VrDriverError, TypeError, ValueError) as exc:
-                raise DriverError("%s: %s; nothing was sent" % (describe(index), exc)) from None
-            previews.append(preview)
-            start = preview.joint_target
-            time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
-        return previews
+        return ptp_path(self.kin, self.checks, points, order, start, describe)
 
     def _post_path(self, previews: Sequence[Preview], on_update: Optional[Callable[[MoveJob], None]]
                    ) -> List[MoveJob]:
@@ -245,19 +226,8 @@ class JobControl:
     # ------------------------------------------------------------------------ trajectories
     def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]
                            ) -> Tuple[List[int], Tuple[StreamPoint, ...], List[Preview]]:
-        """What the driver sends for ``traj`` run from ``start``, checked, as (the planned points
-        kept, the stream's points, the PTP previews): a streaming protocol's stream (its points:
-        their configurations with a Cartesian protocol, and their segments; no previews); v1's PTP
-        moves between the plan's thinned stop points (no stream points), each previewed as the
-        controller runs it -- a straight joint move, against the box and the cell -- from the end of
-        the one before. Sends nothing; raises DriverError naming the point or segment refused."""
-        if self.streams is not None:
-            points = self.streams.trajectory(traj.times, traj.positions)
-            return [0] + [p.index for p in points], points, []
-        kept = thin(traj)
-        previews = self._ptp_path([traj.positions[k] for k in kept[1:]], range(len(traj.positions[0])), start,
-                                  lambda n: "PTP %d to stop point %d of the plan" % (n + 1, kept[n + 1]))
-        return kept, (), previews
+        """:func:`prepare_trajectory` with the driver's checks."""
+        return prepare_trajectory(self.kin, self.checks, self.streams, traj, start)
 
     def submit_trajectory(self, traj: ValidTrajectory,
                           on_update: Optional[Callable[[MoveJob], None]] = None,
@@ -394,3 +364,47 @@ class JobControl:
             raise DriverError("joint names %s do not match the controller's joints %s"
                               % (names, expected))
         return [expected.index(n) for n in names]
+
+
+def prepare_trajectory(kin: Kinematics, checks: PathChecks, streams: Optional[JointStreams],
+                       traj: ValidTrajectory, start: Sequence[float]
+                       ) -> Tuple[List[int], Tuple[StreamPoint, ...], List[Preview]]:
+    """What the driver sends for ``traj`` run from ``start``, checked, as (the planned points
+    kept, the stream's points, the PTP previews): a streaming protocol's stream (its points:
+    their configurations with a Cartesian protocol, and their segments; no previews); v1's PTP
+    moves between the plan's thinned stop points (no stream points), each previewed as the
+    controller runs it -- a straight joint move, against the box and the cell -- from the end of
+    the one before. The driver's job control and the planning process's stream check
+    (driver/plan_process.py) share it. Sends nothing; raises DriverError naming the point or
+    segment refused."""
+    if streams is not None:
+        points = streams.trajectory(traj.times, traj.positions)
+        return [0] + [p.index for p in points], points, []
+    kept = thin(traj)
+    previews = ptp_path(kin, checks, [traj.positions[k] for k in kept[1:]], range(len(traj.positions[0])), start,
+                        lambda n: "PTP %d to stop point %d of the plan" % (n + 1, kept[n + 1]))
+    return kept, (), previews
+
+
+def ptp_path(kin: Kinematics, checks: PathChecks, points: Sequence[Sequence[float]], order: Sequence[int],
+             start: Sequence[float], describe: Callable[[int], str]) -> List[Preview]:
+    """The PTP preview of each joint point (its values in the joint order ``order``: controller
+    index of each) from the end of the one before (the first from ``start``); DriverError
+    naming the point (``describe(index)``) when one is refused."""
+    previews = []
+    for index, point in enumerate(points):
+        try:
+            if len(point) != len(order):
+                raise DriverError("has %d positions for %d joint names" % (len(point), len(order)))
+            q = [0.0] * len(order)
+            for src, dst in enumerate(order):
+                q[dst] = float(point[src])
+            q = kin.check_limits(kin.joint_vector(q))
+            request = MoveRequest(MoveType.PTP, kin.fk_pose(q), label="joint path point %d" % index)
+            preview = checks.preview(request, start)
+        except (VrDriverError, TypeError, ValueError) as exc:
+            raise DriverError("%s: %s; nothing was sent" % (describe(index), exc)) from None
+        previews.append(preview)
+        start = preview.joint_target
+        time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
+    return previews

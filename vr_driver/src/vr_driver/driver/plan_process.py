@@ -14,32 +14,31 @@ delays no bus cycle: the node only sends a request and waits on a socket.
     planning.kin, planning.collision_checked                          # for the plan's markers
     planning.close()
 
-- **The worker** (``python3 -m vr_driver.driver.plan_process --fd N``, started with
-  :class:`subprocess.Popen`, never forked from the node: a fork would copy the rospy threads'
-  locks in whatever state they were): an unstarted :class:`~vr_driver.driver.core.DriverCore` of
-  the node's parameters (it opens no port and starts no thread: its link factory refuses, and
-  ``start()`` is never called) and a :class:`~vr_driver.driver.planning.PlanActionCore` on it --
-  the same code that planned in the node before, the driver's own stream checks included. It runs
-  at the node's CPU priority, or lower (``nice`` +:data:`WORKER_NICE`) when the bus cycles in the
-  node's own thread (:func:`worker_nice`), one plan at a time. It talks over a
-  ``socket.socketpair()`` (``pass_fds``) wrapped in a :class:`multiprocessing.connection.Connection`
-  (pickled messages: ``("start", DriverParams)`` -> ``("ready", None)`` | ``("missing", ...)`` |
-  ``("error", words)``; then ``("plan", PlanRequest)`` -> ``("outcome", PlanOutcome)`` |
-  ``("exception", words)``; on the way ``("log", (level, words))``: the worker's warnings, which the
-  node logs as its own). It ends when the node's end of the socket closes (EOF: the node ended
-  or closed it), also in the middle of a plan; it ignores SIGINT (a Ctrl-C, roslaunch's stop of the
-  process group is the node's to act on).
+- **The worker** (``python3 -m vr_driver.driver.plan_process --fd N``, started, watched and
+  stopped by :class:`vr_driver.bus.worker.WorkerProcess` as the bus process is: a new interpreter,
+  never a fork of the node): :class:`PlanningParts` -- the parts of a driver that a plan needs
+  (the model, the workspace box and the cell's checks, the protocol's stream preparation: the
+  driver's own stream checks), no port, no thread, no sequencer -- and a
+  :class:`~vr_driver.driver.planning.PlanActionCore` on them, the same code that planned in the node
+  before. It runs at the node's CPU priority, or lower (``nice`` +:data:`WORKER_NICE`) when the bus
+  cycles in the node's own thread (:func:`worker_nice`), one plan at a time. It talks over a socket
+  pair in typed messages (:mod:`vr_driver.driver.plan_messages`: Configure -> Ready | Missing |
+  StartFailed; Plan (with the scene when it changed) -> Outcome | PlanFailed; Stop; on the way
+  Log: the worker's warnings, which the node logs as its own). It ends at Stop or when the node's
+  end of the socket closes (EOF: the node ended or closed it), also in the middle of a plan; it
+  ignores SIGINT (a Ctrl-C, roslaunch's stop of the process group is the node's to act on).
 - **Started once**: :meth:`PlanningProcess.start` (the plan server calls it when it starts) waits
   until the worker has imported its libraries and built its models (about a second), so no plan pays
   for that, and so that a missing library is reported at once, by the worker, in
   MissingDependency's words (the node never imports the planner's OMPL and TOPP-RA; pinocchio and
   coal it has for its own collision checks).
-- **The one scene**: each request carries the driver's scene as it is when the plan starts
-  (:class:`SceneSnapshot`: the objects and the padding of the driver's checker, and whether it
-  checks collisions, read under the driver's planning gate, the checker being replaced as a whole
-  under it), the arm's joints then, and the bus's measured cycle time (the stream check's shortest
-  segment). The worker plans against exactly that scene, rebuilding its checker only when the scene
-  differs from its last; a scene change is seen by the next plan.
+- **The one scene**: before each plan the node reads the driver's scene as it is then
+  (:class:`~vr_driver.driver.plan_messages.SceneSnapshot`: the objects and the padding of the
+  driver's checker, and whether it checks collisions, read under the driver's planning gate, the
+  checker being replaced as a whole under it) and sends it when it differs from the one that worker
+  got last (inside the request); the request carries the arm's joints then, and the bus's measured cycle time (the stream
+  check's shortest segment). The worker plans against exactly that scene, rebuilding its checker
+  only when the scene changed; a scene change is seen by the next plan.
 - **Cancel while planning**: the worker is stopped (SIGKILL: it holds nothing but its own copies) and
   the plan ends PREEMPTED at once; a new worker starts at the same time, for the next plan.
 - **A worker that dies** (a crash, a kill) ends the plan in progress with PLANNING_FAILED, in words
@@ -49,7 +48,8 @@ delays no bus cycle: the node only sends a request and waits on a socket.
   node's interpreter that hung the goal for good). Either way a new worker is started at once, for
   the next plan. One that ended between two plans costs no plan: the next one starts a new worker
   first.
-- **The node's side** costs a snapshot, a pickled request and a pickled trajectory per plan; while
+- **The node's side** costs a snapshot, a request (the scene only when it changed) and a pickled
+  trajectory per plan; while
   the worker plans the node waits on the socket (no interpreter lock held), waking every
   :data:`CANCEL_POLL` seconds to see whether the goal was cancelled.
 """
@@ -58,28 +58,37 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import os
-import select
-import signal
-import socket
-import subprocess
-import sys
 import threading
 import time
-from dataclasses import dataclass, replace
-from multiprocessing.connection import Connection
-from typing import Any, List, Optional, Sequence, Tuple
+from dataclasses import replace
+from typing import TYPE_CHECKING, List, Optional, Sequence, Tuple
 
+from ..bus.messages import Channel, Message
+from ..bus.worker import FD, WorkerProcess, WorkerStartError, child_end, child_scheduling, end_with_parent
 from ..errors import MissingDependency, VrDriverError
-from ..kinematics.scene import Scene, SceneObject
+from ..kinematics.preview import MovePreviewer
+from ..kinematics.scene import Scene
+from ..params import DriverParams
+from .commissioned import min_segment_cycles
+from ..kinematics.solver import Kinematics
 from .core import DriverCore, driver_kinematics
+from .jobs import Preview, StreamPoint
+from .job_control import prepare_trajectory
+from .path_checks import PathChecks
+from .plan_messages import (Configure, Log, Missing, Outcome, Plan, PlanFailed, PlanMessageError, Ready,
+                            SceneSnapshot, StartFailed, Stop, driver_end, worker_end)
 from .planning import (ATTEMPTS, INVALID_ROBOT_STATE, PLANNING_FAILED, PREEMPTED, PlanActionCore, PlanGoal,
                        PlanOutcome, joints_to_plan_from)
 from .scene_guard import SceneGuard
+from .stream_prep import stream_preparation
+from .trajectories import ValidTrajectory
+
+if TYPE_CHECKING:
+    from ..kinematics.collision import CollisionChecker
 
 log = logging.getLogger("vr_driver.driver")
 
-__all__ = ["PlanningProcess", "PlanningProcessError", "PlanRequest", "SceneSnapshot", "PlanningCore", "WORKER_NICE", "worker_nice",
+__all__ = ["PlanningProcess", "PlanningProcessError", "SceneSnapshot", "PlanningParts", "WORKER_NICE", "worker_nice",
            "READY_TIMEOUT", "ANSWER_MARGIN", "CANCEL_POLL"]
 
 #: the worker's niceness above the node's when the bus cycles in the node's own thread
@@ -89,9 +98,11 @@ __all__ = ["PlanningProcess", "PlanningProcessError", "PlanRequest", "SceneSnaps
 WORKER_NICE = 10
 
 
-def worker_nice(params: Any) -> int:
+def worker_nice(params: DriverParams) -> int:
     """The worker's niceness above the node's for the driver's parameters (WORKER_NICE)."""
-    return 0 if getattr(params, "bus_process", True) else WORKER_NICE
+    return 0 if params.bus_process else WORKER_NICE
+
+
 #: [s] the longest wait for a new worker to be ready (its imports and models take about a second;
 #: a loaded machine, at the worker's low priority, longer)
 READY_TIMEOUT = 60.0
@@ -102,66 +113,10 @@ CANCEL_POLL = 0.05
 #: the planning budget the answer deadline assumes for a budget the worker will refuse [s]
 _MAX_BUDGET = 60.0
 
-#: a scene object as the socket carries it: (name, shape, size, position, quaternion)
-ObjectTuple = Tuple[str, str, Tuple[float, ...], Tuple[float, ...], Tuple[float, ...]]
-
 
 class PlanningProcessError(VrDriverError):
     """The planning process could not start, died, did not answer, or failed inside (the words say
     which and why)."""
-
-
-@dataclass(frozen=True)
-class SceneSnapshot:
-    """The driver's scene as a plan uses it: the objects of its checker (as tuples: a SceneObject
-    itself does not pickle), the checker's padding [m], and ``checked``: whether the driver checks
-    collisions (it has a checker). Without checking the objects are left out (nothing checks them)."""
-
-    objects: Tuple[ObjectTuple, ...]
-    padding: float
-    checked: bool
-
-    @classmethod
-    def of(cls, core: Any) -> "SceneSnapshot":
-        """The scene of ``core``'s checker now, read under the core's planning gate (the checker,
-        its scene and padding are replaced as a whole under it, never changed in place)."""
-        with core.planning_gate:
-            checker = core.collision
-            if checker is None or not getattr(core.params, "collision_check", True):
-                return cls((), float(core.params.collision_padding), False)
-            objects = tuple((o.name, o.shape, tuple(o.size), tuple(o.position), tuple(o.quaternion))
-                            for o in checker.scene.objects())
-            return cls(objects, float(checker.padding), True)
-
-    def scene(self) -> Scene:
-        """The objects as a Scene (each rebuilt by SceneObject's own checks)."""
-        return Scene([SceneObject(name, shape, size, position, quaternion=quaternion)
-                      for name, shape, size, position, quaternion in self.objects])
-
-
-@dataclass(frozen=True)
-class PlanRequest:
-    """One plan for the worker: the goal, the arm's joints to plan from, the planner's seed (None:
-    random), the scene, and the node's shortest stream segment [s] (its measured bus cycle:
-    :meth:`DriverCore.min_segment`), so that the worker's stream check is the node's."""
-
-    goal: PlanGoal
-    start: Tuple[float, ...]
-    seed: Optional[int]
-    scene: SceneSnapshot
-    min_segment: float
-
-
-def _exit_words(returncode: Optional[int]) -> str:
-    if returncode is None:
-        return "still running"
-    if returncode < 0:
-        try:
-            name = signal.Signals(-returncode).name
-        except ValueError:
-            name = "signal %d" % -returncode
-        return "killed by %s" % name
-    return "exit status %d" % returncode
 
 
 class PlanningProcess:
@@ -171,15 +126,16 @@ class PlanningProcess:
     gate, checker (the scene), status (the arm's joints) and bus cycle are read here; it is never
     touched otherwise. ``ready_timeout`` [s]: the longest wait for a new worker."""
 
-    def __init__(self, core: Any, ready_timeout: float = READY_TIMEOUT) -> None:
+    def __init__(self, core: DriverCore, ready_timeout: float = READY_TIMEOUT) -> None:
         self.core = core
         self.params = core.params
         self.ready_timeout = float(ready_timeout)
-        self.kin: Any = None                 # the node's own Kinematics for the plan's markers (start())
+        self.kin: Optional[Kinematics] = None   # the node's own Kinematics for the plan's markers (start())
         self.workers_started = 0             # workers started so far (the first by start())
         self._lock = threading.Lock()        # one plan at a time; guards the worker
-        self._proc: Optional[subprocess.Popen] = None
-        self._conn: Optional[Connection] = None
+        self._worker: Optional[WorkerProcess] = None
+        self._channel: Optional[Channel] = None
+        self._scene_sent: Optional[SceneSnapshot] = None     # the scene this worker has
         self._ready = False
         self._closed = False
 
@@ -192,7 +148,7 @@ class PlanningProcess:
         with self._lock:
             if self.kin is None:
                 self.kin = driver_kinematics(self.params)   # its own: none shared with the bus thread
-            if self._proc is None:
+            if self._worker is None:
                 self._spawn()
             try:
                 self._await_ready(time.monotonic() + self.ready_timeout, None)
@@ -202,26 +158,28 @@ class PlanningProcess:
 
     def close(self, timeout: float = 5.0) -> None:
         """Stop the worker for good (the driver shuts down): a plan in progress ends PLANNING_FAILED
-        at once, saying so, and no new worker is started."""
+        at once, saying so, and no new worker is started; an idle worker is asked to stop."""
         self._closed = True
-        proc = self._proc
-        if proc is not None and proc.poll() is None:
-            proc.kill()                      # a plan waiting on it gets EOF now
-        if self._lock.acquire(timeout=timeout):
-            try:
-                self._stop_worker()
-            finally:
-                self._lock.release()
+        if not self._lock.acquire(blocking=False):
+            worker = self._worker
+            if worker is not None and worker.running:
+                worker.proc.kill()           # a plan waiting on it gets EOF now
+            if not self._lock.acquire(timeout=timeout):
+                return
+        try:
+            self._stop_worker(polite=True)
+        finally:
+            self._lock.release()
 
     @property
     def pid(self) -> Optional[int]:
         """The worker's process id (None: none running)."""
-        return self._proc.pid if self._proc is not None else None
+        return self._worker.pid if self._worker is not None else None
 
     @property
     def collision_checked(self) -> bool:
         """Whether plans are checked against the arm itself and the scene (as PlanActionCore's)."""
-        return getattr(self.core, "collision", None) is not None and getattr(self.params, "collision_check", True)
+        return self.core.collision is not None and self.params.collision_check
 
     # ------------------------------------------------------------------ planning
     def plan(self, goal: PlanGoal, start: Optional[Sequence[float]] = None, seed: Optional[int] = None,
@@ -250,12 +208,12 @@ class PlanningProcess:
                 start = joints_to_plan_from(self.core.status())
                 if isinstance(start, str):
                     return PlanOutcome(INVALID_ROBOT_STATE, start, planner_id=planner_id)
-            if self._proc is not None and self._proc.poll() is not None:     # it ended between two plans
-                log.warning("planning process %d had ended (%s): starting a new one", self._proc.pid,
-                            _exit_words(self._proc.returncode))
+            if self._worker is not None and not self._worker.running:     # it ended between two plans
+                log.warning("planning process %d had ended (%s): starting a new one", self._worker.pid,
+                            self._worker.exit_words())
                 self._restart()
             try:
-                if self._proc is None:
+                if self._worker is None:
                     self._spawn()
                 self._await_ready(time.monotonic() + self.ready_timeout, cancel)
             except _Cancelled:
@@ -263,20 +221,21 @@ class PlanningProcess:
             except (PlanningProcessError, MissingDependency) as exc:
                 self._restart()                                    # the next plan tries a new one
                 return failed("no plan: the planning process could not start: %s" % exc)
-            request = PlanRequest(goal, tuple(float(v) for v in start), seed, SceneSnapshot.of(self.core),
-                                  float(self.core.min_segment()))
+            scene = SceneSnapshot.of(self.core)
             try:
-                self._send(("plan", request))
-                kind, payload = self._receive(time.monotonic() + self._answer_time(goal), cancel, "an answer")
+                self._send(Plan(goal, tuple(float(v) for v in start), seed, float(self.core.min_segment()),
+                                None if scene == self._scene_sent else scene))
+                self._scene_sent = scene
+                answer = self._receive(time.monotonic() + self._answer_time(goal), cancel, "an answer")
             except _Cancelled:
                 self._restart()
                 return cancelled()
             except PlanningProcessError as exc:
                 self._restart()
                 return failed("no plan: %s" % exc)
-            if kind == "outcome":
-                return payload
-            raise PlanningProcessError("the planning process failed: %s" % (payload,))
+            if isinstance(answer, Outcome):
+                return answer.outcome
+            raise PlanningProcessError("the planning process failed: %s" % _words(answer))
 
     def _answer_time(self, goal: PlanGoal) -> float:
         """[s] how long a plan of ``goal`` may take before the worker is taken for hung."""
@@ -289,96 +248,77 @@ class PlanningProcess:
     def _spawn(self) -> None:
         """Start a worker (not waiting for it): a new interpreter that imports this module, with
         the node's module path, and its end of a socket pair; it gets the parameters at once."""
-        ours, theirs = socket.socketpair()
-        # blocking, whatever socket.setdefaulttimeout() says: rospy sets one (60 s), which makes new
-        # sockets non-blocking underneath -- the worker's end shares the flag and its recv raised
-        # BlockingIOError (the worker died at the node's first request)
-        ours.setblocking(True)
-        theirs.setblocking(True)
-        env = dict(os.environ)
-        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)   # the node's modules, e.g. a source tree
         try:
-            proc = subprocess.Popen([sys.executable, "-m", "vr_driver.driver.plan_process",
-                                     "--fd", str(theirs.fileno()), "--nice", str(worker_nice(self.params))],
-                                    pass_fds=(theirs.fileno(),), stdin=subprocess.DEVNULL, env=env)
-        except OSError as exc:
-            ours.close()
-            raise PlanningProcessError("cannot start the planning process (%s -m vr_driver.driver."
-                                       "plan_process): %s" % (sys.executable, exc)) from None
-        finally:
-            theirs.close()                   # the worker's copy is its only one: its death is our EOF
-        self._proc, self._conn, self._ready = proc, Connection(ours.detach()), False
+            worker = WorkerProcess("vr_driver.driver.plan_process",
+                                   ["--fd", FD, "--nice", str(worker_nice(self.params))], "planning process")
+        except WorkerStartError as exc:
+            raise PlanningProcessError(exc.strerror) from None
+        self._worker, self._channel, self._ready, self._scene_sent = worker, driver_end(worker.conn), False, None
         self.workers_started += 1
         try:
-            self._conn.send(("start", self.params))
+            self._channel.send(Configure(self.params))
         except OSError:
             pass                             # it died already: the wait for its start says how
-        log.info("planning process %d started", proc.pid)
+        log.info("planning process %d started", worker.pid)
 
-    def _send(self, message: Tuple[str, Any]) -> None:
+    def _send(self, message: Message) -> None:
         try:
-            self._conn.send(message)
+            self._channel.send(message)
         except OSError:                      # its end is closed: it is ending
             raise PlanningProcessError("the planning process (pid %d) died (%s)"
-                                       % (self._proc.pid, self._reap())) from None
+                                       % (self._worker.pid, self._worker.reap())) from None
 
     def _await_ready(self, deadline: float, cancel: Optional[threading.Event]) -> None:
         if self._ready:
             return
-        kind, payload = self._receive(deadline, cancel, "its start")
-        if kind == "ready":
+        answer = self._receive(deadline, cancel, "its start")
+        if isinstance(answer, Ready):
             self._ready = True
             return
-        if kind == "missing":
-            package, module, feature, text = payload
-            exc = MissingDependency(package, module, feature)
-            exc.args, exc.msg = (text,), text    # the worker's words, its reason included (ImportError's str: msg)
+        if isinstance(answer, Missing):
+            exc = MissingDependency(answer.package, answer.module, answer.feature)
+            exc.args, exc.msg = (answer.text,), answer.text   # the worker's words, its reason included
             raise exc
-        raise PlanningProcessError("the planning process cannot plan here: %s" % (payload,))
+        raise PlanningProcessError("the planning process cannot plan here: %s" % _words(answer))
 
-    def _receive(self, deadline: float, cancel: Optional[threading.Event], what: str) -> Tuple[str, Any]:
+    def _receive(self, deadline: float, cancel: Optional[threading.Event], what: str) -> Message:
         """The worker's next message (its log records logged here on the way); _Cancelled when
-        ``cancel`` is set first; PlanningProcessError when the worker dies or is silent until
-        ``deadline`` (time.monotonic)."""
-        conn = self._conn
+        ``cancel`` is set first; PlanningProcessError when the worker dies, sends a malformed
+        message, or is silent until ``deadline`` (time.monotonic)."""
+        channel, worker = self._channel, self._worker
         while True:
             if cancel is not None and cancel.is_set():
                 raise _Cancelled()
             left = deadline - time.monotonic()
             if left <= 0.0:
                 raise PlanningProcessError("the planning process (pid %d) did not send %s in time; it was "
-                                           "stopped" % (self._proc.pid, what))
+                                           "stopped" % (worker.pid, what))
             try:
-                if not conn.poll(min(left, CANCEL_POLL) if cancel is not None else left):
+                if not channel.poll(min(left, CANCEL_POLL) if cancel is not None else left):
                     continue
-                kind, payload = conn.recv()
+                answer = channel.recv()
             except (EOFError, OSError):
                 raise PlanningProcessError("the planning process (pid %d) died (%s)"
-                                           % (self._proc.pid, self._reap())) from None
-            if kind != "log":
-                return kind, payload
-            level, text = payload
-            log.log(level, "planning process: %s", text)
+                                           % (worker.pid, worker.reap())) from None
+            except PlanMessageError as exc:
+                raise PlanningProcessError("the planning process (pid %d) sent %s; it was stopped"
+                                           % (worker.pid, exc)) from None
+            if not isinstance(answer, Log):
+                return answer
+            log.log(answer.level, "planning process: %s", answer.text)
 
-    def _reap(self) -> str:
-        """How the worker ended (it closed its socket: it is ending)."""
-        try:
-            self._proc.wait(5.0)
-        except subprocess.TimeoutExpired:
-            self._proc.kill()
-            self._proc.wait()
-            return "its socket closed; it was stopped"
-        return _exit_words(self._proc.returncode)
-
-    def _stop_worker(self) -> None:
-        proc, conn = self._proc, self._conn
-        self._proc = self._conn = None
+    def _stop_worker(self, polite: bool = False) -> None:
+        """The worker stopped: SIGKILL (it holds nothing but its own copies), or ``polite``: Stop,
+        then EOF, SIGTERM, SIGKILL (bus.worker)."""
+        worker, channel = self._worker, self._channel
+        self._worker = self._channel = self._scene_sent = None
         self._ready = False
-        if conn is not None:
-            conn.close()                     # EOF: a worker that still reads ends by itself
-        if proc is not None and proc.poll() is None:
-            proc.kill()
-            proc.wait()
+        if worker is None:
+            return
+        if polite and channel is not None:
+            worker.stop(polite=lambda: channel.send(Stop()))
+        else:
+            worker.kill()
 
     def _restart(self) -> None:
         """Stop the worker and start a new one at once (its imports overlap the wait for the next
@@ -392,59 +332,86 @@ class PlanningProcess:
             log.error("%s", exc)
 
 
+def _words(answer: Message) -> str:
+    """A failure's words (PlanFailed, StartFailed), or what came instead."""
+    if isinstance(answer, (PlanFailed, StartFailed)):
+        return answer.text
+    return "it answered with %s" % type(answer).__name__
+
+
 class _Cancelled(Exception):
     """The goal was cancelled while the node waited for the worker."""
 
 
 # ---------------------------------------------------------------------------------- the worker side
-def _no_port(device: str, baud: int) -> Any:
-    raise PlanningProcessError("the planning process opens no port (%s)" % device)
+class PlanningParts:
+    """The parts of a driver that :class:`~vr_driver.driver.planning.PlanActionCore` plans with, and
+    nothing else: the model (:attr:`kin`), the protocol, the joint names, the planning gate, the
+    workspace box and the cell's checks (:attr:`checks`; its scene_guard replaced when the node's
+    scene changed), the protocol's stream preparation (:attr:`streams`) and
+    :meth:`prepare_trajectory` -- the driver's own check of what it would send for a plan. No port,
+    no thread, no sequencer, no I/O line, no cell file. Its shortest stream segment is the node's
+    (:attr:`node_min_segment`, set per request): the node measures its bus cycle; until a request
+    brings it, the configured cycle's."""
 
+    def __init__(self, params: DriverParams) -> None:
+        self.params = params
+        self.kin = driver_kinematics(params)
+        self.protocol = params.wire
+        self.joint_names = params.controller_joint_names
+        self.planning_gate = threading.Lock()
+        self.node_min_segment: Optional[float] = None
+        self._cycle_rate = params.bus().cycle_rate_hz
+        self.checks = PathChecks(self.kin, MovePreviewer(self.kin), params.workspace, self.planning_gate,
+                                 SceneGuard(self.kin, self.planning_gate, Scene(), params.collision_padding,
+                                            params.collision_check, params.prefix, model=params.model))
+        self.streams = stream_preparation(params, self.kin, self.protocol, self.checks, self.min_segment)
 
-class PlanningCore(DriverCore):
-    """The worker's DriverCore, never started: no port (its link factory refuses; the link is never
-    stepped), no thread (``start()`` is never called), no I/O line, no cell file (each request brings
-    the scene). Its shortest stream segment is the node's (:attr:`node_min_segment`, set per
-    request): the node measures its bus cycle, this core never runs one."""
-
-    node_min_segment: Optional[float] = None
-
-    def __init__(self, params: Any) -> None:
-        super().__init__(replace(params, scene="", io_signals=""), open_link=_no_port)
+    @property
+    def collision(self) -> Optional["CollisionChecker"]:
+        """The checker of the scene set last (None: nothing checked), as DriverCore.collision."""
+        return self.checks.collision
 
     def min_segment(self) -> float:
-        return self.node_min_segment if self.node_min_segment is not None else super().min_segment()
+        if self.node_min_segment is not None:
+            return self.node_min_segment
+        return min_segment_cycles(self.params) / self._cycle_rate
+
+    def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]
+                           ) -> Tuple[List[int], Tuple[StreamPoint, ...], List[Preview]]:
+        """What the driver would send for ``traj``, checked (job_control.prepare_trajectory)."""
+        return prepare_trajectory(self.kin, self.checks, self.streams, traj, start)
 
 
 class _Worker:
-    """The worker's planning: a PlanActionCore on an unstarted core, its scene set per request."""
+    """The worker's planning: a PlanActionCore on the planning parts, its scene set by the node."""
 
-    def __init__(self, params: Any) -> None:
-        self.core = PlanningCore(params)
-        self.planning = PlanActionCore(self.core, kinematics=self.core.kin)   # one thread: one model
+    def __init__(self, params: DriverParams) -> None:
+        self.parts = PlanningParts(params)
+        self.planning = PlanActionCore(self.parts, kinematics=self.parts.kin)   # one thread: one model
         self.scene: Optional[SceneSnapshot] = None
+        self.scene_error = ""
 
-    def plan(self, request: PlanRequest) -> PlanOutcome:
-        if request.scene != self.scene:
-            snap, params = request.scene, self.core.params
-            self.core.scene_guard = SceneGuard(self.core.kin, self.core.planning_gate, snap.scene(), snap.padding,
-                                               snap.checked, params.prefix, model=params.model)
-            self.scene = snap
-        self.core.node_min_segment = request.min_segment
+    def set_scene(self, snap: SceneSnapshot) -> None:
+        """The node's scene for the plans to come (a scene that cannot be built fails them, saying why)."""
+        if snap == self.scene:
+            return
+        params = self.parts.params
+        try:
+            guard = SceneGuard(self.parts.kin, self.parts.planning_gate, snap.scene(), snap.padding, snap.checked,
+                               params.prefix, model=params.model)
+        except VrDriverError as exc:
+            self.scene, self.scene_error = None, "the scene sent cannot be built: %s" % exc
+            return
+        self.parts.checks.scene_guard, self.scene, self.scene_error = guard, snap, ""
+
+    def plan(self, request: Plan) -> PlanOutcome:
+        if request.scene is not None:
+            self.set_scene(request.scene)
+        if self.scene_error:
+            raise PlanningProcessError(self.scene_error)
+        self.parts.node_min_segment = request.min_segment
         return self.planning.plan(request.goal, request.start, request.seed)
-
-
-def _exit_with_parent(fd: int) -> None:
-    """A daemon thread that ends the process when the node's end of the socket closes -- also while
-    a plan runs (the main thread reads the socket only between plans)."""
-    def watch() -> None:
-        poller = select.poll()
-        poller.register(fd, select.POLLRDHUP)
-        while True:
-            for _fd, events in poller.poll():
-                if events & (select.POLLRDHUP | select.POLLHUP | select.POLLERR | select.POLLNVAL):
-                    os._exit(0)
-    threading.Thread(target=watch, name="plan_process-parent", daemon=True).start()
 
 
 class _ToNode(logging.Handler):
@@ -452,9 +419,9 @@ class _ToNode(logging.Handler):
     then planned again) sent to the node, which logs them as its own (rosout); the main thread's
     only -- the socket is the main thread's -- others' on stderr."""
 
-    def __init__(self, conn: Connection) -> None:
+    def __init__(self, channel: Channel) -> None:
         super().__init__(logging.WARNING)
-        self.conn = conn
+        self.channel = channel
         self.thread = threading.get_ident()
         self.fallback = logging.StreamHandler()
 
@@ -463,9 +430,20 @@ class _ToNode(logging.Handler):
             self.fallback.handle(record)
             return
         try:
-            self.conn.send(("log", (record.levelno, self.format(record))))
+            self.channel.send(Log(record.levelno, self.format(record)))
         except OSError:
             pass                             # the node is gone: so is this process, soon
+
+
+def _answer(worker: _Worker, message: Message) -> Message:
+    """The worker's answer to one of the node's messages."""
+    if not isinstance(message, Plan):
+        return PlanFailed("planning message %s not expected once the process plans" % type(message).__name__)
+    try:
+        return Outcome(worker.plan(message))
+    except Exception as exc:  # a planner bug: the node's goal ends with it, this process goes on
+        log.exception("plan failed")
+        return PlanFailed("%s: %s" % (type(exc).__name__, exc))
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -477,50 +455,44 @@ def main(argv: Optional[List[str]] = None) -> int:
                         % WORKER_NICE)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING, format="plan_process[%(process)d] %(levelname)s: %(message)s")
-    if args.nice > 0:
-        os.nice(args.nice)
-    # a Ctrl-C (roslaunch's SIGINT to the process group) is the node's to act on: this process ends
-    # when the node's end of the socket closes (a SIGTERM or SIGKILL still ends it at once)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    os.set_blocking(args.fd, True)
-    conn = Connection(args.fd)
-    _exit_with_parent(args.fd)
+    child_scheduling(nice=args.nice)
+    channel = worker_end(child_end(args.fd))
+    end_with_parent(args.fd)
     for name in ("vr_driver", "pyprofibus_vendor"):
         logger = logging.getLogger(name)
-        logger.addHandler(_ToNode(conn))
+        logger.addHandler(_ToNode(channel))
         logger.propagate = False
     try:
-        kind, params = conn.recv()
-    except EOFError:
+        first = channel.recv()
+        if not isinstance(first, Configure):
+            raise PlanMessageError("the first message must be the parameters, got %s" % type(first).__name__)
+        worker = _Worker(first.params)
+    except (EOFError, OSError):
         return 0
-    try:
-        if kind != "start":
-            raise PlanningProcessError("the first message must be the parameters, got %r" % (kind,))
-        worker = _Worker(params)
     except MissingDependency as exc:
-        conn.send(("missing", (exc.package, exc.module, exc.feature, str(exc))))
+        channel.send(Missing(exc.package, exc.module, exc.feature, str(exc)))
         return 1
-    except Exception as exc:  # a model it cannot plan for (limits, a model file): said in words
-        conn.send(("error", "%s: %s" % (type(exc).__name__, exc)))
+    except Exception as exc:  # a model it cannot plan for (limits, a model file), a bad start: said in words
+        channel.send(StartFailed("%s: %s" % (type(exc).__name__, exc)))
         return 1
-    conn.send(("ready", None))
+    channel.send(Ready())
     while True:
         try:
-            kind, request = conn.recv()
-        except EOFError:
+            message = channel.recv()
+        except (EOFError, OSError):
             return 0
+        except PlanMessageError as exc:      # changes nothing: the plan it was ends with the words
+            answer: Message = PlanFailed(str(exc))
+        else:
+            if isinstance(message, Stop):
+                return 0
+            answer = _answer(worker, message)
         try:
-            answer: Tuple[str, Any] = ("outcome", worker.plan(request))
-        except Exception as exc:  # a planner bug: the node's goal ends with it, this process goes on
-            log.exception("plan failed")
-            answer = ("exception", "%s: %s" % (type(exc).__name__, exc))
-        try:
-            conn.send(answer)
+            channel.send(answer)
         except OSError:                       # the node is gone
             return 0
 
 
 if __name__ == "__main__":
-    # run as the module itself, not as __main__: the pickled messages name its classes
-    from vr_driver.driver import plan_process
-    sys.exit(plan_process.main())
+    import sys
+    sys.exit(main())

@@ -20,9 +20,9 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   joint_command steps (a stream's commands would time out behind it). The node does not call it in
   its own interpreter: OMPL's solve and the planner's other C++ calls hold the interpreter lock for
   0.6 to 5 s, which starved the bus thread past the card's watchdog. The plan action runs it in a
-  worker process (:mod:`vr_driver.driver.plan_process`: an unstarted DriverCore of the node's
-  parameters, the node's scene, joints and bus cycle sent with each request); tests and benches
-  call it directly.
+  worker process (:mod:`vr_driver.driver.plan_process`: on the parts of a driver a plan needs,
+  PlanningParts, with the node's scene, joints and bus cycle sent with the requests); tests and
+  benches call it directly.
 - **What the driver will accept**: with a Cartesian protocol (v1, v3) the controller solves each
   target's pose itself, taking the solution nearest the previous target: near the wrist singularity
   (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another

@@ -45,9 +45,9 @@ VIRTUAL_RT_PRIORITY = 0
 def virtual_hardware_priority(name: str) -> str:
     """Ask for SCHED_FIFO ``~rt_priority`` (default VIRTUAL_RT_PRIORITY: 0, normal) for this node's
     threads -- the calling one and those rospy started at init_node
-    (:func:`~vr_driver.bus.process.set_process_priority`); call it before the device's threads
+    (:func:`~vr_driver.bus.worker.set_process_priority`); call it before the device's threads
     start: they inherit it -- and log how it is scheduled, once. Returns that, in words."""
-    from ..bus.process import set_process_priority
+    from ..bus.worker import set_process_priority
     try:
         priority = int(rospy.get_param("~rt_priority", VIRTUAL_RT_PRIORITY))
     except (TypeError, ValueError):
