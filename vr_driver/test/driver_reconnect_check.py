@@ -3,7 +3,8 @@
 
 robot_status must show the loss within 1 s and keep publishing; position feedback stops; the goal
 in flight is aborted with the reason and never re-sent; control is back within 2 s of the
-controller's return. Run by test/driver_reconnect.test."""
+controller's return. Run by test/driver.test, the last of its checks (its stack's virtual
+controller is the respawned one after this)."""
 from __future__ import annotations
 
 import json

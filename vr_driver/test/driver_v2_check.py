@@ -1,6 +1,6 @@
 #!/usr/bin/python3
-"""rostest of protocol v2 (test/driver_v2.test): the driver and the virtual controller both on v2,
-a real pty carrying the 72-byte records. A planner's trajectory through joint_trajectory_action
+"""rostest of protocol v2 (test/ros_industrial.test, after its client): the driver and the virtual
+controller both on v2, a real pty carrying the 72-byte records. A planner's trajectory through joint_trajectory_action
 runs as planned -- on time, on path, each target exactly once in the controller's own log -- and
 refusals, cancel, joint_path_command and Cartesian goals keep their rules on the streaming path."""
 from __future__ import annotations

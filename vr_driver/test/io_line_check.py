@@ -15,7 +15,7 @@ virtual I/O island joined by the line hub, real telegrams over ptys.
   bus_node_timeout, sends the stop for bus_stop_hold, then closes the port) -> the island's outputs
   at their safe values within its DP watchdog (300 ms, + slack) after that; SIGCONT -> the driver
   takes the island back.
-Run by test/io_line.test."""
+Run by test/driver.test, second of its checks (before anything there may lose the link)."""
 from __future__ import annotations
 
 import os

@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""rostest of the joint_command topic (test/joint_command.test: protocol v3; joint_command_v1.test:
+"""rostest of the joint_command topic (test/joint_command.test: protocol v3; driver.test's joint_command_v1:
 protocol v1), written against the ROS-Industrial driver specification, not against this driver's
 code: it publishes trajectory_msgs/JointTrajectory of one point on ``joint_command`` and reads
 ``joint_states``, the ``robot_description`` (joint limits) and standard ``/diagnostics``.

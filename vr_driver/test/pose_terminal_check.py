@@ -3,9 +3,9 @@
 in a pseudo-terminal (pexpect), against the driver and the virtual controller of
 launch/driver.launch (a real pty carrying real PROFIBUS telegrams).
 
-Run by test/pose_terminal.test. What the controller did is read from its execution log on
-/virtual_controller/executed (one JSON object per handled target), so "nothing was sent" is
-checked on the controller's side. Every wait is on a prompt, an output or a message, with a
+Run by test/driver.test, before driver_check.py, against the same launched stack. What the
+controller did is read from its execution log on /virtual_controller/executed (one JSON object per
+handled target), so "nothing was sent" is checked on the controller's side. Every wait is on a prompt, an output or a message, with a
 deadline (pexpect timeouts); nothing sleeps to synchronise."""
 from __future__ import annotations
 

@@ -308,6 +308,29 @@ def test_a_link_cut_fails_the_job_without_resending_and_recovers(world):
     assert world.finish(world.core.submit(lin(ControllerPose(1000, 0, 800, 0, 45, 0)))).success
 
 
+@pytest.mark.parametrize("cycle_rate", [20.0, 100.0])
+def test_the_status_keeps_its_rate_while_the_link_is_down_and_reconnecting(kin, cycle_rate):
+    """robot_status is published also while the link is down: a bus iteration must not wait on
+    the card's back-off longer than a bus period (it waited max(0.2 s, two periods): the status
+    stood still 4 periods at 20 Hz, 20 at 100 Hz, and the soak's status paused while its line was
+    cut). Down and reconnecting, a snapshot at least every two periods (a telegram's reply window
+    may end in the next one); in Data_Exchange the cycle under way ends first, as before."""
+    world = World(kin, {"cycle_rate": cycle_rate})
+    world.ready()
+    period = 1.0 / cycle_rate
+    before = len(world.statuses)
+    world.link.cut = True
+    world.run_until(lambda: not world.status().connected, 2.0, "link lost")
+    world.run_for(1.5)                                   # the card backs off, the port stays open
+    world.link.cut = False
+    world.ready(5.0)
+    statuses = world.statuses[before:]
+    down = [(b.time - a.time, b.link.value) for a, b in zip(statuses, statuses[1:])
+            if not a.connected and not b.connected]
+    assert len(down) > 1.5 / (2.0 * period)
+    assert max(gap for gap, _ in down) <= 2.0 * period + 1e-9, (max(down), period)
+
+
 def test_refusals_while_the_link_is_down(world):
     world.link.cut = True
     world.run_for(1.0)

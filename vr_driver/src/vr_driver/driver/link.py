@@ -279,7 +279,7 @@ class LinkSupervisor:
         master = self._master
         begin = now
         try:
-            ran = master.cycle(timeout=max(0.2, 2.0 / self.bus.cycle_rate_hz))
+            ran = master.cycle(timeout=self._cycle_timeout())
         except ProfibusError as exc:
             self.counters.port_errors += 1
             self.close()
@@ -309,6 +309,18 @@ class LinkSupervisor:
         fresh = self._judge(now, stalled)
         self._check_line(now)
         return self._sample(now, fresh, cycled=True)
+
+    def _cycle_timeout(self) -> float:
+        """How long one step may wait for the master's cycle: in Data_Exchange, until the cycle
+        under way ends (two periods, at least 0.2 s: a slow line's telegrams); while the card is
+        brought up or backs off (the link down or reconnecting), one bus period -- the cycle goes on
+        at the next step, and the status keeps its rate (it stood still for the back-off's 0.2 s,
+        20 periods at 100 Hz)."""
+        period = 1.0 / self.bus.cycle_rate_hz
+        slave = self._slave
+        if slave is not None and slave.connected:
+            return max(0.2, 2.0 * period)
+        return period
 
     def _judge(self, now: float, stalled: bool = False) -> Optional[FeedbackRecord]:
         """Take the cycle's record if a new one arrived; update the link state. ``stalled``: the

@@ -20,7 +20,7 @@ import rospy
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from ..controller.program import AUTO_LINK
+from ..controller.pty_link import AUTO_LINK
 from ..controller.io_island import ISLAND_ADDRESS, VirtualIoIsland
 from .support import (open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
                       watch_simulator)

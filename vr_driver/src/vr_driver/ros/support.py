@@ -60,13 +60,13 @@ def virtual_hardware_priority(name: str) -> str:
 
 def own_link(value: Any, station: str) -> Optional[str]:
     """A virtual device's ``~pty_link``: "" or None for no symlink; ``auto`` / ``auto:NAME`` this
-    launch's own link of ``station`` / NAME (``controller.program.resolve_link``), its folder made;
+    launch's own link of ``station`` / NAME (``controller.pty_link.resolve_link``), its folder made;
     any other value, the path as given."""
-    from ..controller.program import AUTO_LINK, resolve_link
+    from ..controller.pty_link import AUTO_LINK, resolve_link
     if not value:
         return None
     if not isinstance(value, str):
-        from ..controller.program import SimError
+        from ..controller.simulator import SimError
         raise SimError("~pty_link must be a path, %r or \"\", got %r" % (AUTO_LINK, value))
     if value.startswith(AUTO_LINK):
         value = resolve_link(value, station)
@@ -77,7 +77,7 @@ def own_link(value: Any, station: str) -> Optional[str]:
 def open_device(name: str, make: Callable[[], Any]) -> Tuple[Any, int]:
     """``make()``, which opens a virtual device on its serial port, and EXIT_OK; or, after a fatal
     log in words, (None, EXIT_DEVICE) when the port failed, (None, EXIT_USAGE) for a wrong setting."""
-    from ..controller.program import EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError
+    from ..controller.simulator import EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError
     try:
         return make(), EXIT_OK
     except SimDeviceError as exc:
@@ -123,7 +123,7 @@ def watch_simulator(sim: Any, name: str, stop: threading.Event, hz: float,
     """A simulator node's main loop: until ``stop``, a ROS shutdown, or an error of ``sim``'s threads
     (logged fatal: its serial device -> EXIT_DEVICE, its program loop -> EXIT_FAILURE), calling
     ``each()`` (if given) ``hz`` times a second. Returns the exit status."""
-    from ..controller.program import EXIT_DEVICE, EXIT_FAILURE, EXIT_OK
+    from ..controller.simulator import EXIT_DEVICE, EXIT_FAILURE, EXIT_OK
     rate = rospy.Rate(hz)
     while not rospy.is_shutdown() and not stop.is_set():
         if sim.server_error is not None:

@@ -23,7 +23,8 @@ import rospy
 
 from pyprofibus_vendor.errors import PhyError
 
-from ..controller.program import AUTO_LINK, EXIT_DEVICE, EXIT_OK, SimError, resolve_link
+from ..controller.pty_link import AUTO_LINK, resolve_link
+from ..controller.simulator import EXIT_DEVICE, EXIT_OK, SimError
 from .support import open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority
 from ..controller.adapter_model import AdapterBehaviour
 from ..controller.line import LineHub
