@@ -146,7 +146,6 @@ class LinkSupervisor:
         # the controller's records, decoded by the protocol (vr_driver.protocol)
         wire, order = params.wire, params.byte_order
         self._decode: Callable[[bytes], Any] = lambda data: wire.decode_feedback(data, order)
-        self._link: Optional[Link] = None
         self._master: Optional[MasterApi] = None
         self._slave: Optional[SlaveView] = None
         self._state = LinkState.STARTING
@@ -429,7 +428,6 @@ class LinkSupervisor:
         self._slave = master.add_slave(spec)
         self._slave.outputs = idle_record(self.params)
         self._master = master
-        self._link = link
         if self.stations is not None:
             self.stations.add_slaves(master, self.bus)   # the I/O stations, cycled by the same master
         self.line_check = LineCheck(
@@ -442,7 +440,7 @@ class LinkSupervisor:
 
     def close(self) -> None:
         master = self._master
-        self._link, self._master, self._slave = None, None, None
+        self._master, self._slave = None, None
         if self.stations is not None:
             self.stations.detach()
         if master is not None:
