@@ -310,6 +310,13 @@ class TestConfig:
                                      "has_acceleration_limits": True, "max_acceleration": 8.0}
         # v3 on an interpreter without look-ahead stops at every point: v1's allowance
         assert config.execution_limits("v3", str(commissioning))["allowed_execution_duration_scaling"] == 2.5
+        # ... and so does one whose look-ahead the commissioning could not measure (the driver streams
+        # with stream_smooth 0 then); a measured look-ahead keeps v3's own allowance
+        commissioning.write_text("controller: {not_measured: [interpreter_lookahead, ring_size]}\n")
+        assert config.execution_limits("v3", str(commissioning))["allowed_execution_duration_scaling"] == 2.5
+        commissioning.write_text("controller: {interpreter_lookahead: 2}\n")
+        assert config.execution_limits("v3", str(commissioning))["allowed_execution_duration_scaling"] == 1.2
+        commissioning.write_text("controller: {interpreter_lookahead: 0}\n")
         (tmp_path / "joint_limits.yaml").write_text("joint_limits: {joint_1: {has_velocity_limits: true}}\n")
         with pytest.raises(config.MoveItConfigError, match="joint_limits/joint_1/max_velocity|joint_2"):
             config.joint_limits(str(commissioning))

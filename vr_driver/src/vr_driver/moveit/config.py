@@ -120,18 +120,20 @@ STOPPING = EXECUTION["v1"]
 
 def execution_limits(protocol: str, commissioning: str = "") -> Dict[str, Any]:
     """``trajectory_execution/*`` of move_group for ``protocol`` (v1 | v2 | v3) and the commissioning
-    file (its ``controller/interpreter_lookahead`` 0 makes every streamed point a stop)."""
+    file (its ``controller/interpreter_lookahead`` 0, or listed under ``controller/not_measured``,
+    makes every streamed point a stop: the driver then streams with ``stream_smooth`` 0)."""
     if protocol not in EXECUTION:
         raise MoveItConfigError("protocol must be one of %s, got %r" % (", ".join(sorted(EXECUTION)), protocol))
     scaling, margin = EXECUTION[protocol]
-    if commissioning and protocol != "v1":
+    if commissioning and (scaling, margin) != STOPPING:
         import yaml
         try:
             doc = yaml.safe_load(_read(commissioning)) or {}
         except yaml.YAMLError as exc:
             raise MoveItConfigError("%s: not YAML: %s" % (commissioning, exc)) from None
         controller = doc.get("controller") if isinstance(doc, dict) else None
-        if isinstance(controller, dict) and controller.get("interpreter_lookahead") == 0:
+        if isinstance(controller, dict) and (controller.get("interpreter_lookahead") == 0
+                                             or "interpreter_lookahead" in (controller.get("not_measured") or ())):
             scaling, margin = STOPPING
     return {"execution_duration_monitoring": True, "allowed_execution_duration_scaling": scaling,
             "allowed_goal_duration_margin": margin}
