@@ -23,6 +23,9 @@ from .poses import ControllerPose, Workspace
 if TYPE_CHECKING:
     from pyprofibus_vendor.config import BusConfig
 
+#: parameters as the node (rospy.get_param) or a test gives them: a mapping whose values are not
+#: checked yet
+RawParams = Mapping[str, Any]
 DEFAULT_PORT = "/dev/ttyUSB0"
 DEFAULT_JOINT_NAMES = tuple("joint_%d" % i for i in range(1, 7))
 #: the DP watchdog's largest value: factors 255 x 255 x 10 ms
@@ -78,14 +81,14 @@ def _io_protocols() -> Tuple[str, ...]:
 class ParamError(VrDriverError, ValueError):
     """A bad driver parameter. ``name`` is the parameter (e.g. ``workspace/x``)."""
 
-    def __init__(self, name: str, value: Any, reason: str) -> None:
+    def __init__(self, name: str, value: object, reason: str) -> None:
         self.name = name
         self.value = value
         self.reason = reason
         super().__init__("parameter ~%s = %r: %s" % (name, value, reason))
 
 
-def _number(params: Mapping[str, Any], name: str, default: float, lo: float, hi: float,
+def _number(params: RawParams, name: str, default: float, lo: float, hi: float,
             lo_open: bool = False) -> float:
     value = params.get(name, default)
 
@@ -96,7 +99,7 @@ def _number(params: Mapping[str, Any], name: str, default: float, lo: float, hi:
     return validate.number(value, fail, lo, hi, lo_open=lo_open, text=False)
 
 
-def _integer(params: Mapping[str, Any], name: str, default: Optional[int], lo: int, hi: int
+def _integer(params: RawParams, name: str, default: Optional[int], lo: int, hi: int
              ) -> Optional[int]:
     value = params.get(name, default)
     if value is None:
@@ -105,7 +108,7 @@ def _integer(params: Mapping[str, Any], name: str, default: Optional[int], lo: i
         name, value, "expected an integer" if got is None else "must be in [%d, %d]" % (lo, hi)), lo, hi)
 
 
-def _string(params: Mapping[str, Any], name: str, default: str, allowed: Tuple[str, ...] = ()
+def _string(params: RawParams, name: str, default: str, allowed: Tuple[str, ...] = ()
             ) -> str:
     value = params.get(name, default)
     if not isinstance(value, str):
@@ -115,7 +118,7 @@ def _string(params: Mapping[str, Any], name: str, default: str, allowed: Tuple[s
     return value
 
 
-def _port(params: Mapping[str, Any], default: str) -> str:
+def _port(params: RawParams, default: str) -> str:
     """``port``; ``auto`` becomes the link the virtual controller of this launch makes (the same
     resolution as its ``pty_link: auto``, :func:`resolve_link`); ``auto:NAME`` this launch's link of
     station NAME (``auto:line``: the virtual line's master end)."""
@@ -126,7 +129,7 @@ def _port(params: Mapping[str, Any], default: str) -> str:
         raise ParamError("port", value, str(exc)) from None
 
 
-def _prefix(params: Mapping[str, Any], default: str) -> str:
+def _prefix(params: RawParams, default: str) -> str:
     value = _string(params, "prefix", default)
     if not PREFIX_PATTERN.match(value):
         raise ParamError("prefix", value, "expected empty or a letter followed by letters, digits "
@@ -177,14 +180,14 @@ def resolve_link(value: str, station: str = "g2") -> str:
     return value
 
 
-def _boolean(params: Mapping[str, Any], name: str, default: bool) -> bool:
+def _boolean(params: RawParams, name: str, default: bool) -> bool:
     value = params.get(name, default)
     if not isinstance(value, bool):
         raise ParamError(name, value, "expected true or false")
     return value
 
 
-def _vector(params: Mapping[str, Any], name: str, default: Tuple[float, ...], length: int
+def _vector(params: RawParams, name: str, default: Tuple[float, ...], length: int
             ) -> Tuple[float, ...]:
     value = params.get(name, default)
     if not isinstance(value, (list, tuple)) or len(value) != length:
@@ -193,7 +196,7 @@ def _vector(params: Mapping[str, Any], name: str, default: Tuple[float, ...], le
                                                             % length), text=False) for item in value)
 
 
-def _model(params: Mapping[str, Any], default: str) -> str:
+def _model(params: RawParams, default: str) -> str:
     """``model``: "" or a kinematics YAML that panasonic_vr006l_support.true_model accepts (checked
     here, at start: a missing or bad file is a ParamError naming ``model`` with the file's key)."""
     value = _string(params, "model", default)
@@ -253,7 +256,7 @@ class ControllerFacts:
     #                                      makes every stream point a stop (stream_smooth 0)
 
     @classmethod
-    def from_dict(cls, value: Any, joint_names: Tuple[str, ...]) -> "ControllerFacts":
+    def from_dict(cls, value: object, joint_names: Tuple[str, ...]) -> "ControllerFacts":
         """Validate the ``controller`` mapping (missing keys: the assumptions; unknown keys are
         errors). ``joint_names``: the plain joint names ``accelerations`` may name."""
         if value is None:
@@ -295,7 +298,7 @@ class ControllerFacts:
         return dict(self.accelerations).get(name)
 
 
-def _not_measured(value: Mapping[str, Any], known: List[str]) -> Tuple[str, ...]:
+def _not_measured(value: RawParams, known: List[str]) -> Tuple[str, ...]:
     """``controller/not_measured``: a list of the other keys. A key listed keeps the value it is given
     (the config file's: the assumption), and the driver treats it as not measured."""
     names = value.get("not_measured")
@@ -312,7 +315,7 @@ def _not_measured(value: Mapping[str, Any], known: List[str]) -> Tuple[str, ...]
     return tuple(sorted(set(out)))
 
 
-def _accelerations(value: Any, joint_names: Tuple[str, ...]) -> Tuple[Tuple[str, float], ...]:
+def _accelerations(value: object, joint_names: Tuple[str, ...]) -> Tuple[Tuple[str, float], ...]:
     """``controller/accelerations``: {plain joint name: rad/s^2 in (0, 1000]}, or empty."""
     if value is None:
         return ()
@@ -369,7 +372,7 @@ def _cycles(name: str, value: float, cycle_rate: float, why: str = "") -> None:
                          % (2.0 / cycle_rate, cycle_rate, why))
 
 
-def _existing_file(params: Mapping[str, Any], name: str, default: str) -> str:
+def _existing_file(params: RawParams, name: str, default: str) -> str:
     """A string parameter naming a file: "" or a file that exists."""
     value = _string(params, name, default)
     if value and not os.path.isfile(value):
@@ -409,7 +412,7 @@ class LinkParams:
     #                                      bus process closes the port (the card's watchdog follows)
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any]) -> "LinkParams":
+    def from_dict(cls, params: RawParams) -> "LinkParams":
         d = cls()
         bus_config = _existing_file(params, "bus_config", d.bus_config)
         io_signals = _existing_file(params, "io_signals", d.io_signals)
@@ -501,7 +504,7 @@ class MotionParams:
     #                                      (commission's, beside its file); "" = the model's limits
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any], cycle_rate: float, joint_names: Tuple[str, ...]
+    def from_dict(cls, params: RawParams, cycle_rate: float, joint_names: Tuple[str, ...]
                   ) -> "MotionParams":
         """``cycle_rate``: the bus's (the timeouts cover two cycles); ``joint_names``: the plain
         names ``planning_limits`` must give limits of."""
@@ -558,7 +561,7 @@ class CheckParams:
     collision_check: bool = True         # check every path against the arm itself (SRDF) and the scene
 
     @staticmethod
-    def plain_joint_names(params: Mapping[str, Any]) -> Tuple[str, ...]:
+    def plain_joint_names(params: RawParams) -> Tuple[str, ...]:
         """``controller_joint_names`` as given (without the prefix): 6 distinct names."""
         names = params.get("controller_joint_names", list(DEFAULT_JOINT_NAMES))
         if (not isinstance(names, (list, tuple)) or len(names) != 6
@@ -567,7 +570,7 @@ class CheckParams:
         return tuple(names)
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any]) -> "CheckParams":
+    def from_dict(cls, params: RawParams) -> "CheckParams":
         """``prefix`` is applied here, once: ``controller_joint_names`` and ``base_frame`` are the
         prefixed names the rest of the driver publishes and checks."""
         d = cls()
@@ -616,7 +619,7 @@ class PublishParams:
     publish_markers: bool = True
 
     @classmethod
-    def from_dict(cls, params: Mapping[str, Any]) -> "PublishParams":
+    def from_dict(cls, params: RawParams) -> "PublishParams":
         d = cls()
         return cls(
             status_rate=_number(params, "status_rate", d.status_rate, 0.0, 1000.0, lo_open=True),
@@ -672,7 +675,7 @@ class DriverParams:
         return tuple(sorted(list(_SECTION_OF) + ["controller", "commissioning"]))
 
     @classmethod
-    def from_dict(cls, params: Optional[Mapping[str, Any]] = None) -> "DriverParams":
+    def from_dict(cls, params: Optional[RawParams] = None) -> "DriverParams":
         """Validate ``params`` (flat keys; missing keys take the defaults; unknown keys are errors),
         section by section. ``controller_joint_names`` and ``base_frame`` in ``params`` are the plain
         names (:meth:`CheckParams.from_dict` applies ``prefix``)."""
