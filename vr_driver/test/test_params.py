@@ -2,6 +2,7 @@
 refused with a message naming the parameter."""
 import math
 import os
+import pickle
 
 import pytest
 import yaml
@@ -78,6 +79,8 @@ def test_flat_keywords_build_and_replace_into_their_sections():
     assert (q.port, q.io_signals, q.stop_timeout) == ("/dev/z", "", 7.0)
     with pytest.raises(TypeError, match="no_such_key"):
         DriverParams(no_such_key=1)
+    r = pickle.loads(pickle.dumps(q))                     # as a worker process gets it
+    assert r == q and r.port == "/dev/z" and hash(r) == hash(q)
 
 
 def test_each_section_parses_alone():

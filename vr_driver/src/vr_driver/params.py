@@ -638,6 +638,17 @@ SECTIONS = {"link": LinkParams, "motion": MotionParams, "checks": CheckParams, "
 _SECTION_OF = {f.name: section for section, kind in SECTIONS.items() for f in fields(kind)}
 
 
+def _flat_attributes(cls: type) -> type:
+    """Each field of a section as a read-only attribute of ``cls`` (``cls.port`` reads
+    ``self.link.port``): one mechanism for the flat names, none written by hand."""
+    for name, section in _SECTION_OF.items():
+        if hasattr(cls, name):
+            raise TypeError("%s.%s: a section field would hide the attribute" % (cls.__name__, name))
+        setattr(cls, name, property(attrgetter(section + "." + name), doc="``%s.%s`` (read-only)" % (section, name)))
+    return cls
+
+
+@_flat_attributes
 @dataclass(frozen=True, init=False)
 class DriverParams:
     """Everything the driver reads at start (see config/vr_driver.yaml for the documentation): the
@@ -796,7 +807,3 @@ class DriverParams:
                                  "must be 0 (%s)" % (station.name, ", ".join(unsafe)))
         return signals
 
-
-for _name, _section in _SECTION_OF.items():
-    setattr(DriverParams, _name, property(attrgetter("%s.%s" % (_section, _name)),
-                                          doc="``%s.%s`` (read-only)" % (_section, _name)))
