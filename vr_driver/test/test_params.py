@@ -2,6 +2,7 @@
 refused with a message naming the parameter."""
 import math
 import os
+import pickle
 
 import pytest
 import yaml
@@ -41,11 +42,60 @@ def test_port_auto_is_the_virtual_controllers_link_of_this_launch(monkeypatch):
 
 
 def test_config_file_documents_every_parameter():
-    assert set(load()) == set(DriverParams.__dataclass_fields__)
+    assert set(load()) == set(DriverParams.keys())
     with open(CONFIG) as f:
         for line in f:
             if line[:1].isalpha():       # a top-level key line carries its own comment
                 assert "#" in line or line.rstrip().endswith(":"), line
+
+
+def test_the_sections_hold_every_flat_key_once_and_read_flat():
+    """DriverParams is made of sections (link, motion, checks, publishing), each with its own parser;
+    the files stay flat: every section field is one flat key and a read-only flat attribute."""
+    from dataclasses import FrozenInstanceError, fields
+
+    from vr_driver.params import SECTIONS
+    flat = [f.name for kind in SECTIONS.values() for f in fields(kind)]
+    assert len(flat) == len(set(flat))                     # one section per key
+    assert sorted(flat + ["commissioning", "controller"]) == list(DriverParams.keys())
+    p = DriverParams.from_dict({"port": "/dev/x", "stop_timeout": 7.0, "scene": "", "status_rate": 5.0})
+    assert (p.port, p.stop_timeout, p.status_rate) == (p.link.port, p.motion.stop_timeout, p.publishing.status_rate)
+    assert (p.port, p.stop_timeout, p.status_rate) == ("/dev/x", 7.0, 5.0)
+    assert p.base_frame == p.checks.base_frame == "base"
+    with pytest.raises(FrozenInstanceError):
+        p.port = "/dev/y"
+    with pytest.raises(FrozenInstanceError):
+        p.link = None
+
+
+def test_flat_keywords_build_and_replace_into_their_sections():
+    """``DriverParams(stop_timeout=...)`` and ``dataclasses.replace(params, scene="")`` (as plan_process
+    does) put each keyword into its section and keep the others; an unknown keyword is a TypeError."""
+    from dataclasses import replace
+    p = DriverParams(stop_settle_time=0.5, stop_timeout=4.0, collision_check=False)
+    assert (p.motion.stop_settle_time, p.motion.stop_timeout, p.checks.collision_check) == (0.5, 4.0, False)
+    assert p.link == DriverParams().link
+    q = replace(DriverParams.from_dict({"port": "/dev/x", "stop_timeout": 7.0}), io_signals="", port="/dev/z")
+    assert (q.port, q.io_signals, q.stop_timeout) == ("/dev/z", "", 7.0)
+    with pytest.raises(TypeError, match="no_such_key"):
+        DriverParams(no_such_key=1)
+    r = pickle.loads(pickle.dumps(q))                     # as a worker process gets it
+    assert r == q and r.port == "/dev/z" and hash(r) == hash(q)
+
+
+def test_each_section_parses_alone():
+    """A section's parser checks its own values (and what it is given of the others: the bus's
+    cycle rate, the plain joint names) with the same errors DriverParams.from_dict gives."""
+    from vr_driver.params import CheckParams, LinkParams, MotionParams, PublishParams
+    names = tuple("joint_%d" % i for i in range(1, 7))
+    assert MotionParams.from_dict({}, 15.0, names) == MotionParams()
+    with pytest.raises(ParamError, match="stop_settle_time.*two bus cycles .>= 0.2 s at cycle_rate 10 Hz"):
+        MotionParams.from_dict({"stop_settle_time": 0.15}, 10.0, names)
+    with pytest.raises(ParamError, match="link_timeout"):
+        LinkParams.from_dict({"cycle_rate": 100.0, "link_timeout": 0.01})
+    assert CheckParams.from_dict({"prefix": "left_"}).controller_joint_names[0] == "left_joint_1"
+    with pytest.raises(ParamError, match="publish_markers"):
+        PublishParams.from_dict({"publish_markers": 1})
 
 
 def test_bus_overrides_reach_the_profibus_config():

@@ -6,55 +6,36 @@ from __future__ import annotations
 
 import logging
 import os
-import re
 from typing import Mapping, Optional, Union
 
 from pyprofibus_vendor.errors import ProfibusError
 from pyprofibus_vendor.phy import Link
 from pyprofibus_vendor.phy_serial import PtyPair, SerialLink, open_pty_pair
 
+from ..params import AUTO_LINK, LinkNameError, auto_link
+from ..params import resolve_link as params_resolve_link
 from .simulator import SimDeviceError, SimError
 
 __all__ = ["AUTO_LINK", "auto_pty_link", "resolve_link", "pid_alive", "SimPort"]
 
 log = logging.getLogger(__name__)
 
-#: the value of ``pty_link`` (and of the driver's ``port``) that means "this launch's own link"
-AUTO_LINK = "auto"
-
-
 def auto_pty_link(environ: Optional[Mapping[str, str]] = None, station: str = "g2") -> str:
-    """This launch's pty link: ``<ROS log dir>/vr006l_virtual_<station>_<master port>`` (``station``
-    ``g2`` the virtual controller, ``io_island`` the virtual I/O island, ``line`` the line hub's
-    master end, :mod:`vr_driver.controller.line`), followed by ``_<namespace>`` for nodes in a namespace
-    (``/arm1`` -> ``..._11311_arm1``, ``/cell/arm1`` -> ``..._11311_cell_arm1``).
-
-    Both the virtual controller and the driver resolve ``auto`` with this function from the
-    environment roslaunch gives its nodes (ROS_MASTER_URI; ROS_NAMESPACE, set for the nodes of a
-    ``<group ns>``; ROS_LOG_DIR, else ROS_HOME/log, else ~/.ros/log), so they agree on the path,
-    launches on different masters never share one, and two drivers in two namespaces of one launch
-    get one each."""
-    env = os.environ if environ is None else environ
-    uri = env.get("ROS_MASTER_URI", "") or "http://localhost:11311"
-    port = uri.rstrip("/").rsplit(":", 1)[-1]
-    if not port.isdigit():
-        raise SimError("cannot take a port from ROS_MASTER_URI=%r for pty_link %r" % (uri, AUTO_LINK))
-    log_dir = env.get("ROS_LOG_DIR") or os.path.join(
-        env.get("ROS_HOME") or os.path.join(os.path.expanduser("~"), ".ros"), "log")
-    if not re.match(r"[A-Za-z0-9_]+\Z", station):
-        raise SimError("bad station name %r for an auto pty link" % (station,))
-    ns = "_".join(part for part in (env.get("ROS_NAMESPACE") or "").split("/") if part)
-    return os.path.join(log_dir, "vr006l_virtual_%s_%s" % (station, port) + ("_" + ns if ns else ""))
+    """This launch's pty link of ``station`` (:func:`vr_driver.params.auto_link`: the driver
+    resolves its ``port: auto`` with the same function); SimError where it cannot be named."""
+    try:
+        return auto_link(environ, station)
+    except LinkNameError as exc:
+        raise SimError(str(exc)) from None
 
 
 def resolve_link(value: str, station: str = "g2") -> str:
     """A pty link given as a parameter: ``auto`` is this launch's link of ``station``, ``auto:NAME``
     this launch's link of station NAME (:func:`auto_pty_link`); anything else is a path."""
-    if value == AUTO_LINK:
-        return auto_pty_link(station=station)
-    if value.startswith(AUTO_LINK + ":"):
-        return auto_pty_link(station=value[len(AUTO_LINK) + 1:])
-    return value
+    try:
+        return params_resolve_link(value, station)
+    except LinkNameError as exc:
+        raise SimError(str(exc)) from None
 
 
 def _remove_quietly(path: str) -> None:

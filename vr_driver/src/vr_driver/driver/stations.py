@@ -37,15 +37,12 @@ from pyprofibus_vendor.dp_master import SlaveSpec
 from pyprofibus_vendor.master_api import MasterApi, MasterSlaveState, SlaveView
 
 from ..errors import SignalMapError
-from ..io_signals import Signal, SignalMap, StationSignals, Value
+from ..io_signals import CONTROLLER_IO_LENGTH, Signal, SignalMap, StationSignals, Value
 
 log = logging.getLogger("vr_driver.driver")
 
 __all__ = ["SignalState", "StationState", "IoSnapshot", "IoResult", "IoLine", "ControllerIo",
            "CONTROLLER_IO_LENGTH"]
-
-#: bytes each way of the controller's own general-purpose I/O (protocol v2: 16 inputs, 16 outputs)
-CONTROLLER_IO_LENGTH = 2
 
 _CONNECTED = (MasterSlaveState.DATA_EXCHANGE, MasterSlaveState.DX_DIAG)
 

@@ -78,6 +78,7 @@ from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
 import numpy as np
 
 from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
+from ..params import PLANNERS
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
 from .plan_search import SWEEP_VALIDATED, OmplSearch
@@ -87,9 +88,6 @@ __all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT
            "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN",
            "joint_weights"]
 
-#: the planners one may name (OMPL geometric planners); RRTConnect is MoveIt's default, too
-PLANNERS = ("RRTConnect", "RRT", "RRTstar", "InformedRRTstar", "BITstar", "PRM", "PRMstar",
-            "KPIECE1", "BKPIECE1", "LBKPIECE1", "FMT", "AORRTC")
 DEFAULT_PLANNER = "RRTConnect"
 #: [m] no point of the arm moves farther than this between two checked configurations
 DEFAULT_MAX_SWEEP = 0.02
