@@ -35,7 +35,8 @@ the cell -- before anything is queued.
   quarter of the way to its flip (measured: a straight move to the flipped wrist in 18 deg steps
   of joint_4 and joint_6 was solved back onto the start's wrist halfway, at joint_5 = 0).
 
-:func:`stream_preparation` picks the family of a protocol (None for one that does not stream: v1).
+:func:`stream_preparation` makes the family a protocol names ready (``protocol.stream_family()``,
+registered by :mod:`.sequencers`; None for one that does not stream: v1).
 
 The preparation runs between a goal's arrival and its first target (issue 46: a goal moves within
 0.1 s of its arrival), in the goal's thread beside the bus thread: it does not hand the interpreter
@@ -146,6 +147,12 @@ class JointStreams:
             points = (StreamPoint(tuple(preview.joint_target), 1000, 0, 0.0, len(positions) - 1),)
             points = self.with_poses(positions[0], points)
         return points
+
+    def step_refusal(self, prev: Sequence[float], joints: Sequence[float]) -> Tuple[Optional[ControllerPose], str]:
+        """One step of a live stream (a joint command) as the controller will take it after a target
+        at ``prev``: (the pose the wire carries, "") or (..., why the controller would not run
+        ``joints``). Joint targets run as sent: (None, "")."""
+        return None, ""
 
     def check_segments(self, start: Sequence[float], points: Sequence[StreamPoint]) -> None:
         """Every straight joint move of the stream (from ``start``) inside the joint limits and the
@@ -266,6 +273,13 @@ class CartesianStreams(JointStreams):
                 del history[0]
         return tuple(out)
 
+    def step_refusal(self, prev: Sequence[float], joints: Sequence[float]) -> Tuple[Optional[ControllerPose], str]:
+        """The wire pose of ``joints`` after a target at ``prev`` (the coordinate search only: a
+        command's rate) and :meth:`refusal` of the controller's solution; VrDriverError when the
+        controller cannot solve it."""
+        found = self.target(prev, joints, search=False)
+        return found.pose, self.refusal(found, joints)
+
     def refusal(self, found: WireTarget, joints: Sequence[float]) -> str:
         """"" when the controller's solution ``found`` is the planned ``joints`` within
         CONFIGURATION_TOLERANCE, else why not, in words (naming the rule)."""
@@ -287,8 +301,9 @@ class CartesianStreams(JointStreams):
 
 def stream_preparation(params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
                        min_segment: Callable[[], float]) -> Optional[JointStreams]:
-    """The stream preparation of ``protocol``'s family; None when it does not stream (v1)."""
+    """The stream preparation of the family ``protocol`` names (registered with it:
+    :mod:`vr_driver.driver.sequencers`); None when it does not stream (v1). ProtocolError in words for
+    a streaming protocol without one."""
     if not protocol.streams:
         return None
-    family = JointStreams if protocol.joint_targets else CartesianStreams
-    return family(params, kinematics, protocol, checks, min_segment)
+    return protocol.stream_family()(params, kinematics, protocol, checks, min_segment)
