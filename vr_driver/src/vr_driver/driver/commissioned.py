@@ -37,7 +37,7 @@ from typing import Any, List, Optional, Tuple
 
 from ..params import ControllerFacts, DriverParams, read_planning_limits
 from .stream_prep import CARTESIAN_MAX_STEP
-from .streaming import MIN_SEGMENT_CYCLES
+from .stream_points import MIN_SEGMENT_CYCLES
 
 __all__ = ["controller_notes", "min_segment_cycles", "planning_kinematics", "plain_names"]
 

@@ -266,7 +266,7 @@ class JobControl:
         against the cell (CollisionError, nothing queued), then what :meth:`prepare_trajectory`
         makes of it, queued.
 
-        A streaming protocol: one streamed job (:func:`streaming.stream_points`: thinned with its
+        A streaming protocol: one streamed job (:func:`stream_points.stream_points`: thinned with its
         timing to ``stream_path_tolerance``, each segment's speed from its planned duration,
         blended through with ``stream_smooth``). ``mode`` as :meth:`submit` (REPLACE, the default:
         the points the controller already took complete, then this one).

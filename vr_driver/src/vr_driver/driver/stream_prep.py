@@ -1,6 +1,6 @@
 """A stream made ready to send, per protocol family (ROS-free, no I/O; callers' threads and the
 planning thread, never the bus thread). A planned path (times and joint positions) becomes the
-points of one stream job (:func:`vr_driver.driver.streaming.stream_points`: thinned with its
+points of one stream job (:func:`vr_driver.driver.stream_points.stream_points`: thinned with its
 timing, each segment's speed from its planned duration, blended through with ``stream_smooth``),
 and every straight joint move between them is checked -- the joint limits, the workspace box and
 the cell -- before anything is queued.
@@ -56,7 +56,7 @@ from ..poses import ControllerPose
 from .jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from .status import DriverError
-from .streaming import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
+from .stream_points import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
 from .wire_targets import FINE, WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
@@ -67,7 +67,7 @@ __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE
 #: farther, the controller would run another configuration than the one planned and checked
 CONFIGURATION_TOLERANCE = math.radians(1.0)
 #: [rad] the widest joint turn between the joints a Cartesian stream's target is solved nearest and
-#: the target (streaming.split_long): the controller takes the solution nearest them, the planned
+#: the target (stream_thinning.split_long): the controller takes the solution nearest them, the planned
 #: one only while a joint turns by well under half a turn in between -- previous_target: between
 #: two points; current_joints: over the ring_size + 1 points before (module docstring)
 CARTESIAN_MAX_STEP = math.radians(90.0)
@@ -202,7 +202,7 @@ class CartesianStreams(JointStreams):
         """The controller, after a target at ``a``, solves the wire pose of ``b`` onto ``b`` within
         CONFIGURATION_TOLERANCE (:meth:`target`, the coordinate search only): where it would not --
         another elbow or wrist branch lies nearer ``a`` than ``b`` does -- the stream keeps planned
-        points in between (:func:`.streaming.split_long`). current_joints: ``a`` the seed (one of
+        points in between (:func:`.stream_thinning.split_long`). current_joints: ``a`` the seed (one of
         those :meth:`with_poses` then checks), and ``b`` within CARTESIAN_MAX_REACH over the window
         of ``a`` (all joints together; module docstring)."""
         reach = CARTESIAN_MAX_REACH / self.window if self.rule is ConfigurationRule.CURRENT_JOINTS else math.inf

@@ -19,7 +19,6 @@ from typing import Any, Dict, List, Optional
 
 from vr_driver.errors import VrDriverError
 from vr_driver.params import read_planning_limits
-from vr_driver.protocol import registry
 
 JOINTS = tuple("joint_%d" % i for i in range(1, 7))
 #: the driver's FollowJointTrajectory action, relative to its node's namespace
@@ -125,7 +124,7 @@ def execution_limits(protocol: str, commissioning: str = "") -> Dict[str, Any]:
     if protocol not in EXECUTION:
         raise MoveItConfigError("protocol must be one of %s, got %r" % (", ".join(sorted(EXECUTION)), protocol))
     scaling, margin = EXECUTION[protocol]
-    if commissioning and registry.get(protocol).streams:     # (a handshake stops at every point anyway)
+    if commissioning and EXECUTION[protocol] != STOPPING:     # (v1 stops at every point anyway)
         import yaml
         try:
             doc = yaml.safe_load(_read(commissioning)) or {}
