@@ -48,6 +48,7 @@ from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 from ..errors import CollisionError, VrDriverError
 from ..kinematics.solver import Kinematics
 from ..params import DriverParams
+from ..protocol.base import Protocol
 from .job_control import JobControl
 from .jobs import MoveJob, StreamPoint
 from .path_checks import PathChecks
@@ -91,7 +92,7 @@ class JointCommander:
     its path checks and stream preparation (None: a protocol that does not stream).
     :meth:`command` may be called from any thread; commands are validated one at a time."""
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, clock: Callable[[], float],
+    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Protocol, clock: Callable[[], float],
                  status: Callable[[float], DriverStatus], jobs: JobControl, checks: PathChecks,
                  streams: Optional[JointStreams]) -> None:
         self.params = params

@@ -26,13 +26,14 @@ sequencer (``vr_driver/test/test_toy_protocol.py`` does it).
 from __future__ import annotations
 
 import math
+import typing
 from dataclasses import dataclass
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 from ..errors import ProtocolError
-from ..poses import ControllerPose
+from ..poses import ControllerPose, MoveType, Workspace
 
-__all__ = ["Protocol", "WireTarget", "framed_record", "rounded_pose"]
+__all__ = ["MoveCommand", "Protocol", "WireTarget", "framed_record", "rounded_pose"]
 
 
 def rounded_pose(pose: ControllerPose, resolution: Tuple[float, float]) -> ControllerPose:
@@ -86,6 +87,16 @@ class WireTarget:
     pose: Optional[ControllerPose]            # mm / deg: FK of ``joints`` (Cartesian protocols need it)
     speed: int                                # 0.1 % of the joint speed limits, 1..1000
     smooth: int                               # 0 (an exact stop) .. the protocol's largest level
+
+
+class MoveCommand(typing.Protocol):
+    """One wire target of a move (PTP / LIN / CIRC) as :meth:`Protocol.move_commands` gives it: what
+    the rest of the stack reads of it (the pose it carries, a line for logs)."""
+
+    @property
+    def pose(self) -> ControllerPose: ...
+
+    def describe(self) -> str: ...
 
 
 def _qualname(value: Any) -> str:
@@ -195,6 +206,17 @@ class Protocol:
 
     def idle_command(self) -> Any:
         """The command object of :meth:`idle_record`."""
+        raise NotImplementedError
+
+    def move_commands(self, move_type: Union[MoveType, str], target: ControllerPose, via: Optional[ControllerPose] = None,
+                      workspace: Optional[Workspace] = None) -> Tuple[MoveCommand, ...]:
+        """The wire targets of a move (``move_type`` PTP / LIN / CIRC, a MoveType or its name), in
+        sending order, validated and rounded as the wire carries them: the driver plans the move to
+        exactly these (PoseError / ProtocolError naming what is wrong; ``workspace``: the targets
+        inside its box). Every built-in protocol plans a move to the thesis' handshake targets
+        (whole mm / deg; CIRC: the via point, then the end): v1 sends them one at a time, a
+        streaming protocol the planned path's samples up to the last one
+        (:func:`vr_driver.protocol.v1.move_targets`)."""
         raise NotImplementedError
 
     def stop_record(self, record: bytes, byte_order: Any = "little") -> bytes:
