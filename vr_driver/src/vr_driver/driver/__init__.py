@@ -16,6 +16,7 @@ composed by :class:`DriverCore`.
                     protocol's stream family, registered in sequencers.py)
     wire_targets.py the wire pose of a v3 target the G2 solves on the plan (near joint_5 = 0)
     commissioned.py what the driver does with the commissioning file's G2 facts (speeds, look-ahead)
+    own_thread.py   OwnThread: the start / join of the bus loop's and the planning thread's threads
     core.py         DriverCore: owns and wires the parts; the one object the node talks to
 """
 from __future__ import annotations

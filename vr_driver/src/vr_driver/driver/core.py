@@ -149,6 +149,9 @@ class DriverCore:
                                               self.checks, self.streams)
         #: what the commissioned G2 changes, in words (logged at every connect; the node's diagnostics)
         self.controller_notes = controller_notes(params, self.kin)
+        # the bus cycles a stream segment needs at least (the commissioned G2's facts: fixed for the
+        # driver's life; min_segment, asked by every goal, then touches neither params nor them)
+        self._segment_cycles = min_segment_cycles(params)
         self._notes_said = False
         self.add_listener(self._say_controller_notes)
 
@@ -191,7 +194,7 @@ class DriverCore:
         measured = self.link.cycle_rate
         if measured > 0.0:
             rate = min(rate, measured)
-        return min_segment_cycles(self.params) / rate
+        return self._segment_cycles / rate
 
     def _say_controller_notes(self, status: DriverStatus) -> None:
         """At every connect (bus thread): what the commissioned G2 changes, in words
