@@ -4,12 +4,12 @@ with a toy protocol that lives in this test only.
 The toy ("toy", version byte 9) is protocol v2 whose records differ in one byte, the first: its
 module is :class:`ProtocolToy` (the protocol object: the version byte, the codec), its controller
 program :class:`ToyProgram` (v2's program reading and writing the toy's records), its sequencer the
-stream sequencer; the registration is ``registry.register(TOY)`` and ``TOY.implement(...)``. Nothing
+stream sequencer, its stream family joint targets sent as planned; the registration is ``registry.register(TOY)`` and ``TOY.implement(...)``. Nothing
 in ``vr_driver`` names it. It runs through the driver core and the virtual G2 (its
 :class:`~vr_driver.controller.virtual_controller.VirtualController`, on the in-memory link of
 ``driver/_world.py``, stepped with a fake clock in one thread): a target goes end to end.
 
-A protocol nobody registered a program or a sequencer for is refused in words -- even one whose
+A protocol nobody registered a program, a sequencer or a stream family for is refused in words -- even one whose
 capabilities are v2's to the letter, which the virtual G2 once ran on v2's program."""
 from __future__ import annotations
 
@@ -25,6 +25,8 @@ from vr_driver.controller.programs import BUILT_IN as PROGRAMS
 from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.driver import DriverCore
 from vr_driver.driver.sequencers import BUILT_IN as SEQUENCERS
+from vr_driver.driver.sequencers import STREAM_FAMILIES
+from vr_driver.driver.stream_prep import JointStreams
 from vr_driver.driver.streaming import StreamSequencer
 from vr_driver.errors import ProtocolError
 from vr_driver.params import DriverParams
@@ -95,10 +97,10 @@ class ToyProgram(ControllerProgramV2):
 
 @pytest.fixture
 def toy():
-    """The registration: the protocol by its name, its program and its sequencer (undone after the
-    test: the registry is the process's)."""
+    """The registration: the protocol by its name, its program, its sequencer and its stream family
+    (undone after the test: the registry is the process's)."""
     registry.register(TOY)
-    TOY.implement(controller_program=ToyProgram, sequencer=StreamSequencer)
+    TOY.implement(controller_program=ToyProgram, sequencer=StreamSequencer, stream_family=JointStreams)
     yield TOY
     registry.unregister(TOY.name)
 
@@ -192,6 +194,9 @@ def test_a_protocol_without_a_program_is_refused_in_words_never_given_another(ki
         VirtualController(MemoryLink.pair()[0], protocol=bare, kinematics=kin)
     with pytest.raises(ProtocolError, match="protocol bare has no sequencer registered: the driver cannot run it"):
         bare.sequencer()
+    with pytest.raises(ProtocolError, match="protocol bare has no stream family registered: the driver's stream "
+                                            "preparation cannot run it"):
+        bare.stream_family()
 
 
 def test_a_protocol_runs_on_one_program_only(toy):
@@ -230,3 +235,6 @@ def test_every_built_in_protocol_has_its_program_and_its_sequencer():
         assert proto.sequencer() is sequencer
     assert [p.name for p, _ in PROGRAMS] == [p.name for p, _ in SEQUENCERS] == list(registry.names())
     assert len({program for _, program in PROGRAMS}) == len(PROGRAMS)
+    for proto, family in STREAM_FAMILIES:
+        assert proto.streams and proto.stream_family() is family
+    assert {p.name for p, _ in STREAM_FAMILIES} == {p.name for p, _ in PROGRAMS if p.streams}

@@ -119,7 +119,7 @@ def test_a_flipping_trajectory_runs_through_the_wrist_singularity_to_the_flipped
     """A straight joint move to the flipped wrist (joint_4 and joint_6 + 180 deg, joint_5 negated):
     its last point is the start's pose again, so thinned to its end the controller would stay where
     it is. The stream keeps the planned points the controller needs to reach each next one as
-    planned (streaming.split_long with the controller's solution), crosses joint_5 = 0 and ends on
+    planned (stream_thinning.split_long with the controller's solution), crosses joint_5 = 0 and ends on
     the flipped wrist."""
     q0 = tuple(world.arm.joints)
     flip = (q0[0], q0[1], q0[2], q0[3] + math.pi, -q0[4], q0[5] + math.pi)

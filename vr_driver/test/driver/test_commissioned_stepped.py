@@ -26,7 +26,8 @@ from vr_driver.controller.program import ControllerProgram
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.stream_arm import SimStreamArm
 from vr_driver.driver.commissioned import controller_notes, min_segment_cycles, planning_kinematics
-from vr_driver.driver.streaming import MIN_SEGMENT_CYCLES, wire_speed
+from vr_driver.driver.stream_points import MIN_SEGMENT_CYCLES
+from vr_driver.driver.streaming import wire_speed
 from vr_driver.driver import MoveRequest
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.poses import MoveType

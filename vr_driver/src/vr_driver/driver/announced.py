@@ -25,6 +25,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..kinematics.preview import at_tcp_speed, peak_tcp_speed
+from ..protocol.base import Protocol
 from ..protocol.v1 import program_speed
 
 __all__ = ["Announced", "HANDSHAKE_CYCLES", "announce_moves", "announce_plan", "plan_peak_speed", "program_duration",
@@ -59,7 +60,7 @@ def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequen
     return float(np.max(dp[moving] / dt[moving], initial=0.0))
 
 
-def announce_plan(kin: Any, protocol: Any, times: Sequence[float], positions: Sequence[Sequence[float]],
+def announce_plan(kin: Any, protocol: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
                   previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0) -> Announced:
     """The figures of a planned trajectory on ``protocol``: a streaming protocol its timing; v1 (no
     stream) the PTP ``previews`` it sends between the plan's stop points (``JobControl.
@@ -73,7 +74,7 @@ def announce_plan(kin: Any, protocol: Any, times: Sequence[float], positions: Se
     return announce_moves(protocol, previews, params, cycle_time)
 
 
-def announce_moves(protocol: Any, previews: Sequence[Any], params: Any, cycle_time: float) -> Announced:
+def announce_moves(protocol: Protocol, previews: Sequence[Any], params: Any, cycle_time: float) -> Announced:
     """v1: the figures of its targets ``previews`` (driver.jobs.Preview: a move each, as previewed at
     the arm's full speed) at the program's speeds, one after the other, each with its handshake."""
     facts = params.controller

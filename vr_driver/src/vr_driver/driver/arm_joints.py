@@ -7,10 +7,11 @@ the pose, checks our model against the controller's (:class:`~vr_driver.driver.s
 from __future__ import annotations
 
 import logging
-from typing import Any, Optional, Tuple
+from typing import Optional, Tuple
 
 from ..kinematics.solver import Kinematics
 from ..params import DriverParams
+from ..protocol.base import Protocol
 from .jobs import MoveJob
 from .link import LinkSample
 from .status import ModelCheck
@@ -26,7 +27,7 @@ class ArmJoints:
     check of the latest connection (:attr:`model_check`); stepped by :meth:`update` once per bus
     iteration."""
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any) -> None:
+    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Protocol) -> None:
         self.params = params
         self.kin = kinematics
         self.protocol = protocol

@@ -13,12 +13,14 @@ import logging
 import math
 import threading
 from dataclasses import replace
-from typing import Any, Callable, List, Optional
+from typing import Callable, List, Optional
 
 from ..params import DriverParams
+from ..protocol.base import Protocol
 from ..protocol.common import StatusBits
 from .arm_joints import ArmJoints
 from .link import ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkSample, LinkSupervisor
+from .own_thread import OwnThread
 from .sequencer import SequencerBase
 from .stations import ControllerIo, IoLine
 from .status import DriverStatus
@@ -31,12 +33,14 @@ __all__ = ["BusLoop", "END_POLL_PERIOD"]
 END_POLL_PERIOD = 0.01
 
 
-class BusLoop:
+class BusLoop(OwnThread):
     """The bus thread of one driver and what it publishes (module docstring). ``stop``: the
     driver's stop event (shared with the planning thread)."""
 
+    thread_name = "vr_driver-bus"
+
     def __init__(self, params: DriverParams, clock: Callable[[], float], cycle_rate_hz: float,
-                 link: LinkSupervisor, sequencer: SequencerBase, protocol: Any, arm: ArmJoints,
+                 link: LinkSupervisor, sequencer: SequencerBase, protocol: Protocol, arm: ArmJoints,
                  io: Optional[IoLine], controller_io: Optional[ControllerIo], stop: threading.Event) -> None:
         self.params = params
         self.clock = clock
@@ -49,34 +53,19 @@ class BusLoop:
         self.controller_io = controller_io
         self._stop = stop
         self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
-        self._thread: Optional[threading.Thread] = None
         self._last_record = b""
-        self._repeat_now = False          # run the next bus cycle at once (a new v2 record)
+        self._repeat_now = False          # run the next bus cycle at once (a changed record, send_changes_at_once)
         self._repeated = False            # this cycle was such a repeat
         self._listeners: List[Callable[[DriverStatus], None]] = []
         self._status = self._snapshot(self.clock(), None)
         self._fresh = threading.Condition()      # notified with each new snapshot (status_after)
 
-    # ------------------------------------------------------------------------ the thread
-    @property
-    def thread(self) -> Optional[threading.Thread]:
-        """The bus thread while it runs (None: not started, or stopped)."""
-        return self._thread
-
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._run, name="vr_driver-bus", daemon=True)
-        self._thread.start()
-
+    # ------------------------------------------------------------------------ the thread (OwnThread)
     def request_stop(self) -> None:
         """Ask the bus thread to end, without waiting or taking a lock (safe from a signal handler)."""
         self._stop.set()
         self._wake.set()
         self.link.poke()
-
-    def join(self, timeout: float) -> None:
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
 
     def wake(self) -> None:
         """Run a bus cycle now (a request was posted), not at the next tick."""
@@ -104,7 +93,7 @@ class BusLoop:
                 self._publish(self.clock(), None)
             if self.link.paced:
                 # the bus process keeps the time: step() waits for its next cycle (or a wake),
-                # never a period here; an early cycle (v2's changed record, a stream's end due) is
+                # never a period here; an early cycle (a changed record sent at once, a stream's end due) is
                 # asked of it
                 now = self.clock()
                 soon = self.next_cycle(now, math.inf)
@@ -125,8 +114,9 @@ class BusLoop:
     # ------------------------------------------------------------------------ one iteration
     def next_cycle(self, now: float, scheduled: float) -> float:
         """When the bus cycle after the one that just ran starts (``scheduled``: at the cycle rate).
-        v2: a changed record (a new target, STOP) goes out at once, not a period later -- the
-        controller acts on it at the first telegram that brings it (its CRC-16); and while a
+        A protocol that sends changes at once (``send_changes_at_once``, v2): a changed record (a new
+        target, STOP) goes out at once, not a period later -- the controller acts on it at the first
+        telegram that brings it (its CRC-16); and while a
         stream's end is due (:meth:`StreamSequencer.end_due`) the bus cycles every
         END_POLL_PERIOD, so the goal's result does not wait up to a period for the arrival."""
         if self._repeat_now:

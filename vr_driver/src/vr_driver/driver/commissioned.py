@@ -36,8 +36,9 @@ import math
 from typing import Any, List, Optional, Tuple
 
 from ..params import ControllerFacts, DriverParams, read_planning_limits
+from ..protocol.base import Protocol
 from .stream_prep import CARTESIAN_MAX_STEP
-from .streaming import MIN_SEGMENT_CYCLES
+from .stream_points import MIN_SEGMENT_CYCLES
 
 __all__ = ["controller_notes", "min_segment_cycles", "planning_kinematics", "plain_names"]
 
@@ -48,7 +49,7 @@ def plain_names(params: DriverParams) -> Tuple[str, ...]:
     return tuple(name[n:] for name in params.controller_joint_names)
 
 
-def _one_per_acknowledgement(wire: Any) -> bool:
+def _one_per_acknowledgement(wire: Protocol) -> bool:
     """A one-slot streaming record whose master does not send ahead: one new target every other
     bus cycle (the acknowledgement of a record comes a cycle after it)."""
     return wire.streams and wire.look_ahead_slots <= 1 and wire.send_ahead <= wire.look_ahead_slots
@@ -107,7 +108,7 @@ def controller_notes(params: DriverParams, kin: Any = None) -> Tuple[str, ...]:
                 "the G2 reads no MOVE ahead (controller/interpreter_lookahead 0: no look-ahead, or the input "
                 "read between two MOVEPs ends the blend): protocol %s runs every stream point as an exact "
                 "stop (stream_smooth 0); each stop costs up to a ramp (%s) -- a stream of n points runs up to "
-                "n times that longer than planned" % (params.protocol, _ramp_words(params, model_ramp)))
+                "n times that longer than planned" % (params.wire.name, _ramp_words(params, model_ramp)))
         elif facts.interpreter_lookahead > 1:
             notes.append("the G2's interpreter reads %d MOVEs ahead (controller/interpreter_lookahead): stream "
                          "segments down to %g bus cycles" % (facts.interpreter_lookahead,
@@ -159,7 +160,7 @@ def _not_measured_words(params: DriverParams) -> str:
     if "interpreter_lookahead" in facts.not_measured and params.wire.streams:
         text += ("; the look-ahead unknown, protocol %s runs every stream point as an exact stop (stream_smooth 0: "
                  "right for any look-ahead, slower where the G2 could blend) and streams no shorter segments"
-                 % params.protocol)
+                 % params.wire.name)
     if {"accelerations", "ramp_time"} & set(facts.not_measured):
         text += "; the planner keeps the model's accelerations"
     return text + " -- commission again once the program changed (doc/commissioning.md)"

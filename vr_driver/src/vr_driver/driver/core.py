@@ -35,7 +35,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from typing import Callable, List, Optional, Sequence, Tuple
+from typing import Callable, Generic, List, Optional, Sequence, Tuple, TypeVar
 
 from pyprofibus_vendor.phy import Link
 
@@ -80,6 +80,25 @@ def driver_kinematics(params: DriverParams) -> Kinematics:
     return kin
 
 
+_Part = TypeVar("_Part")
+
+
+class _OfChecks(Generic[_Part]):
+    """A part of the core's path checks (:class:`PathChecks`) that the core names too: read there
+    and replaced there as a whole, so the checks always use the current one."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self.name = name
+
+    def __get__(self, core: Optional["DriverCore"], owner: Optional[type] = None) -> _Part:
+        if core is None:
+            return self     # type: ignore[return-value]  (the class's attribute: the descriptor)
+        return getattr(core.checks, self.name)
+
+    def __set__(self, core: "DriverCore", value: _Part) -> None:
+        setattr(core.checks, self.name, value)
+
+
 class DriverCore:
     """See the module docstring. ``open_link(device, baud)`` makes the link (tests may pass a
     factory for an in-memory or fault-injecting link)."""
@@ -122,7 +141,7 @@ class DriverCore:
         self.checks = PathChecks(self.kin, previewer or MovePreviewer(self.kin), params.workspace, self._planning_gate,
                                  SceneGuard(self.kin, self._planning_gate, load_cell(params.scene),
                                             params.collision_padding, params.collision_check, params.prefix,
-                                            model=params.model))
+                                            model=params.model), self.protocol)
         self.streams = stream_preparation(params, self.kin, self.protocol, self.checks, self.min_segment)
         self.jobs = JobControl(params, self.kin, clock, self.sequencer, self.checks, self.streams, self.status,
                                self.bus_loop.wake)
@@ -130,6 +149,9 @@ class DriverCore:
                                               self.checks, self.streams)
         #: what the commissioned G2 changes, in words (logged at every connect; the node's diagnostics)
         self.controller_notes = controller_notes(params, self.kin)
+        # the bus cycles a stream segment needs at least (the commissioned G2's facts: fixed for the
+        # driver's life; min_segment, asked by every goal, then touches neither params nor them)
+        self._segment_cycles = min_segment_cycles(params)
         self._notes_said = False
         self.add_listener(self._say_controller_notes)
 
@@ -144,19 +166,10 @@ class DriverCore:
         """The joints of the reported pose (v1, v3): :class:`~vr_driver.driver.tracking.JointTracker`."""
         return self.arm.tracker
 
-    @property
-    def previewer(self) -> MovePreviewer:
-        """The previews of moves (replaceable as a whole, e.g. by a test's recording previewer)."""
-        return self.checks.previewer
-
-    @previewer.setter
-    def previewer(self, previewer: MovePreviewer) -> None:
-        self.checks.previewer = previewer
-
-    @property
-    def scene_guard(self) -> SceneGuard:
-        """The cell and its collision checks."""
-        return self.checks.scene_guard
+    #: the previews of moves (replaceable as a whole, e.g. by a test's recording previewer)
+    previewer = _OfChecks[MovePreviewer]()
+    #: the cell and its collision checks
+    scene_guard = _OfChecks[SceneGuard]()
 
     @property
     def planning_gate(self) -> threading.Lock:
@@ -181,7 +194,7 @@ class DriverCore:
         measured = self.link.cycle_rate
         if measured > 0.0:
             rate = min(rate, measured)
-        return min_segment_cycles(self.params) / rate
+        return self._segment_cycles / rate
 
     def _say_controller_notes(self, status: DriverStatus) -> None:
         """At every connect (bus thread): what the commissioned G2 changes, in words

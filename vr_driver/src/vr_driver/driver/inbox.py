@@ -34,7 +34,7 @@ class CancelJobs:
 @dataclass(frozen=True)
 class Replanned:
     job: MoveJob
-    preview: Optional[Any]          # v1: a Preview; v2: the job's new stream points (None: failed)
+    preview: Optional[Any]          # a handshake job: a Preview; a stream job: its new stream points (None: failed)
     error: str
 
 

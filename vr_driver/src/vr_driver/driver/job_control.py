@@ -21,6 +21,7 @@ from ..kinematics.solver import Kinematics
 from ..params import DriverParams
 from ..poses import MoveType
 from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
+from .own_thread import OwnThread
 from .path_checks import PathChecks
 from .sequencer import SequencerBase, SequencerView
 from .status import DriverError, DriverStatus
@@ -70,7 +71,7 @@ class TrajectoryRun:
 
     def points_done(self) -> int:
         """How many planned points have been reached (kept points passed, dropped ones between)."""
-        if len(self.jobs) == 1 and self.jobs[0].points:          # a v2 stream
+        if len(self.jobs) == 1 and self.jobs[0].points:          # a stream
             job = self.jobs[0]
             return job.points[job.points_done - 1].index if job.points_done else 0
         n = 0
@@ -80,15 +81,16 @@ class TrajectoryRun:
         return n
 
 
-class PlanningThread:
+class PlanningThread(OwnThread):
     """The driver's planning thread: runs posted tasks in order, off the bus thread. ``stop``: the
     driver's stop event (shared with the bus loop)."""
+
+    thread_name = "vr_driver-planning"
 
     def __init__(self, stop: threading.Event) -> None:
         self._stop = stop
         self._tasks: Deque[Callable[[], None]] = collections.deque()
         self._cond = threading.Condition()
-        self._thread: Optional[threading.Thread] = None
 
     def post(self, task: Callable[[], None]) -> None:
         with self._cond:
@@ -106,21 +108,12 @@ class PlanningThread:
             task()
             n += 1
 
-    def start(self) -> None:
-        self._thread = threading.Thread(target=self._loop, name="vr_driver-planning", daemon=True)
-        self._thread.start()
-
     def wake_to_stop(self) -> None:
         """Let the thread see the stop event (not safe from a signal handler: takes a lock)."""
         with self._cond:
             self._cond.notify_all()
 
-    def join(self, timeout: float) -> None:
-        if self._thread is not None:
-            self._thread.join(timeout)
-            self._thread = None
-
-    def _loop(self) -> None:
+    def _run(self) -> None:
         while not self._stop.is_set():
             with self._cond:
                 self._cond.wait_for(lambda: self._tasks or self._stop.is_set())
@@ -236,7 +229,7 @@ class JobControl:
         against the cell (CollisionError, nothing queued), then what :meth:`prepare_trajectory`
         makes of it, queued.
 
-        A streaming protocol: one streamed job (:func:`streaming.stream_points`: thinned with its
+        A streaming protocol: one streamed job (:func:`stream_points.stream_points`: thinned with its
         timing to ``stream_path_tolerance``, each segment's speed from its planned duration,
         blended through with ``stream_smooth``). ``mode`` as :meth:`submit` (REPLACE, the default:
         the points the controller already took complete, then this one).

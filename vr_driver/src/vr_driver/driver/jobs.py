@@ -17,7 +17,7 @@ from typing import Callable, List, Optional, Tuple
 
 from ..kinematics.preview import Trajectory
 from ..poses import ControllerPose, MoveType
-from ..protocol.v1 import Command
+from ..protocol.base import MoveCommand
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -44,11 +44,12 @@ class MoveRequest:
 
 @dataclass(frozen=True)
 class Preview:
-    """A validated move: the wire commands (rounded, checked) and the planned trajectory, checked
+    """A validated move: its wire targets (rounded, checked: the protocol's
+    :meth:`~vr_driver.protocol.base.Protocol.move_commands`) and the planned trajectory, checked
     sample by sample against the joint limits and the workspace box."""
 
     request: MoveRequest
-    commands: Tuple[Command, ...]
+    commands: Tuple[MoveCommand, ...]
     trajectory: Trajectory
     joint_target: Tuple[float, ...]
 
@@ -63,7 +64,7 @@ class Preview:
 
 @dataclass(frozen=True)
 class StreamPoint:
-    """One joint target of a protocol v2 stream: where (controller joint order, rad), how fast
+    """One target of a stream (a streaming protocol): where (controller joint order, rad), how fast
     (speed in 0.1 % of the joint speed limits, 1..1000, as on the wire) and whether the arm may
     blend through it (smooth level; 0 = stop exactly there)."""
 
@@ -141,7 +142,7 @@ class MoveJob:
         self.sent_serial: Optional[int] = None    # a bus process's serial of the record that first offered it
         #: the clock time of the bus step that ended it (None: not ended by a bus step, or not yet)
         self.ended_at: Optional[float] = None
-        # protocol v2: the stream of joint targets (empty for a v1 job), where it was planned to
+        # a streaming protocol: the stream's targets (empty for a handshake job), where it was planned to
         # start, how many of its points the controller took / reached so far, and how often the
         # arm stood at a point waiting for the next target (a gap: the look-ahead ran dry)
         self.points = tuple(points)
@@ -159,7 +160,7 @@ class MoveJob:
         self.last_command = stamp
         self.replaced = 0               # commands that replaced a point not yet on the wire
         if preview is None and not self.points:
-            raise ValueError("a job needs a preview (v1) or stream points (v2)")
+            raise ValueError("a job needs a preview (a handshake) or stream points (a stream)")
         self._done = threading.Event()
         self._changed = threading.Condition()
 

@@ -22,7 +22,7 @@ and by how much -- when:
 - the straight joint move of the step leaves the workspace box (sampled as a PTP preview, like
   every stream segment), or collides with the arm itself or the scene (``collision``; the driver's
   collision checks, driver/scene_guard.py);
-- a Cartesian protocol (``protocol.joint_targets`` false: v3): the pose the wire carries (FK,
+- a Cartesian stream family (v3, ``stream_prep.CartesianStreams.step_refusal``): the pose the wire carries (FK,
   rounded to its resolution) is solved by the controller as the solution nearest the previous
   target's joints; that must be the commanded joints within the stream's configuration tolerance;
 - motion is not possible (link, e-stop, drives, program), or there is no valid joint state;
@@ -48,6 +48,7 @@ from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 from ..errors import CollisionError, VrDriverError
 from ..kinematics.solver import Kinematics
 from ..params import DriverParams
+from ..protocol.base import Protocol
 from .job_control import JobControl
 from .jobs import MoveJob, StreamPoint
 from .path_checks import PathChecks
@@ -91,7 +92,7 @@ class JointCommander:
     its path checks and stream preparation (None: a protocol that does not stream).
     :meth:`command` may be called from any thread; commands are validated one at a time."""
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, clock: Callable[[], float],
+    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Protocol, clock: Callable[[], float],
                  status: Callable[[float], DriverStatus], jobs: JobControl, checks: PathChecks,
                  streams: Optional[JointStreams]) -> None:
         self.params = params
@@ -303,15 +304,12 @@ class JointCommander:
             self.checks.check_collision_path((prev, q), "the step from %s" % origin)
         except CollisionError as exc:
             raise JointCommandRefused("collision", str(exc)) from None
-        if self.protocol.joint_targets:
-            return None
-        try:        # (the coordinate search only: near joint_5 = 0 a few dozen IK solutions)
-            found = self.streams.target(prev, q, search=False)      # type: ignore[union-attr]  (it streams)
+        try:        # (a Cartesian stream: the coordinate search only, near joint_5 = 0 a few dozen IK solutions)
+            pose, error = self.streams.step_refusal(prev, q)      # type: ignore[union-attr]  (it streams)
         except VrDriverError as exc:
             raise JointCommandRefused("configuration", "from %s: the controller cannot solve its pose: %s"
                                       % (origin, exc)) from None
-        error = self.streams.refusal(found, q)      # type: ignore[union-attr]
         if error:
             raise JointCommandRefused("configuration", "from %s: %s; use a protocol with joint targets"
                                       % (origin, error))
-        return found.pose
+        return pose

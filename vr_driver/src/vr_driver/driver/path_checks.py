@@ -16,7 +16,7 @@ from typing import Any, Optional, Sequence
 from ..kinematics.preview import MovePreviewer, check_envelope
 from ..kinematics.solver import Kinematics
 from ..poses import Workspace
-from ..protocol.v1 import commands_for
+from ..protocol.base import Protocol
 from .jobs import MoveRequest, Preview
 from .scene_guard import SceneGuard
 
@@ -39,11 +39,13 @@ def load_cell(path: str):
 
 class PathChecks:
     """The previews and path checks of one driver (module docstring): ``previewer`` previews,
-    ``scene_guard`` checks collisions, ``gate`` is the planning gate both run under."""
+    ``scene_guard`` checks collisions, ``gate`` is the planning gate both run under; ``protocol``
+    says what a move's wire targets are (:meth:`~vr_driver.protocol.base.Protocol.move_commands`)."""
 
     def __init__(self, kinematics: Kinematics, previewer: MovePreviewer, workspace: Workspace,
-                 gate: threading.Lock, scene_guard: SceneGuard) -> None:
+                 gate: threading.Lock, scene_guard: SceneGuard, protocol: Protocol) -> None:
         self.kin = kinematics
+        self.protocol = protocol
         self.previewer = previewer
         self.workspace = workspace
         self.gate = gate
@@ -54,7 +56,7 @@ class PathChecks:
         path must stay inside the joint limits and the workspace box and collide with nothing.
         Raises VrDriverError (PoseError, KinematicsError, MotionError, EnvelopeError,
         ProtocolError, CollisionError) with the reason."""
-        commands = tuple(commands_for(request.move_type, request.target, request.via, self.workspace))
+        commands = self.protocol.move_commands(request.move_type, request.target, request.via, self.workspace)
         # plan to exactly what will be sent (whole mm / deg)
         target = commands[-1].pose
         via = commands[0].pose if len(commands) == 2 else None

@@ -32,11 +32,12 @@ from the plan's); the sum's stays 0.008-0.01 deg (v3), 0.7-0.8 deg (v1).
 from __future__ import annotations
 
 import math
-from typing import Any, List, Optional, Sequence, Tuple
+from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
 
 from ..kinematics.solver import Kinematics
+from ..protocol.base import Protocol
 
 __all__ = ["WireResolution", "WRIST_BAND", "WRIST", "ERROR_CAP", "euler_axes"]
 
@@ -74,7 +75,7 @@ class WireResolution:
     default tolerances (:func:`vr_driver.driver.trajectories.validate`). Build with :meth:`of`:
     None for a protocol with joint targets (v2: its joints are exact to 0.001 deg everywhere)."""
 
-    def __init__(self, kin: Kinematics, protocol: Any, band: float = WRIST_BAND) -> None:
+    def __init__(self, kin: Kinematics, protocol: Protocol, band: float = WRIST_BAND) -> None:
         self.kin = kin
         self.protocol = protocol
         self.band = float(band)
@@ -84,9 +85,9 @@ class WireResolution:
         self.sign = self._wrist_sign()
 
     @classmethod
-    def of(cls, kin: Kinematics, protocol: Any) -> Optional["WireResolution"]:
+    def of(cls, kin: Kinematics, protocol: Protocol) -> Optional["WireResolution"]:
         """The rule for ``protocol`` on ``kin``; None where the protocol carries joint targets."""
-        if getattr(protocol, "joint_targets", False):
+        if protocol.joint_targets:
             return None
         return cls(kin, protocol)
 

@@ -63,7 +63,7 @@ START_TOLERANCE = 0.02
 # the first request of a Data_Exchange session waits for this many replies in the session: the
 # controller then got our record with the flag at 0 in as many telegrams, which arms it (it must
 # see the flag at 0 after a link loss; the virtual controller, like a careful G2 program, acts on
-# a v1 record only once it arrived unchanged in two consecutive telegrams; v2 keeps the same margin)
+# a v1 record only once it arrived unchanged in two consecutive telegrams; the streaming protocols keep the same margin)
 SESSION_RECORDS_BEFORE_REQUEST = 2
 
 
@@ -294,7 +294,7 @@ class SequencerBase(SequencerHooks):
         a woken step made and the next one replaces before any telegram carried it)."""
 
     def _begin_step(self, now: float, sample: LinkSample) -> Optional[Any]:
-        """The start of every step (v1 and v2): take the posted requests; on a lost link or a new
+        """The start of every step (every sequencer): take the posted requests; on a lost link or a new
         Data_Exchange session end everything in flight (:meth:`_lost`). Returns the feedback to act
         on, or None when there is none of this session."""
         fb = sample.feedback

@@ -1,6 +1,6 @@
 """A stream made ready to send, per protocol family (ROS-free, no I/O; callers' threads and the
 planning thread, never the bus thread). A planned path (times and joint positions) becomes the
-points of one stream job (:func:`vr_driver.driver.streaming.stream_points`: thinned with its
+points of one stream job (:func:`vr_driver.driver.stream_points.stream_points`: thinned with its
 timing, each segment's speed from its planned duration, blended through with ``stream_smooth``),
 and every straight joint move between them is checked -- the joint limits, the workspace box and
 the cell -- before anything is queued.
@@ -35,7 +35,8 @@ the cell -- before anything is queued.
   quarter of the way to its flip (measured: a straight move to the flipped wrist in 18 deg steps
   of joint_4 and joint_6 was solved back onto the start's wrist halfway, at joint_5 = 0).
 
-:func:`stream_preparation` picks the family of a protocol (None for one that does not stream: v1).
+:func:`stream_preparation` makes the family a protocol names ready (``protocol.stream_family()``,
+registered by :mod:`.sequencers`; None for one that does not stream: v1).
 
 The preparation runs between a goal's arrival and its first target (issue 46: a goal moves within
 0.1 s of its arrival), in the goal's thread beside the bus thread: it does not hand the interpreter
@@ -55,7 +56,7 @@ from ..poses import ControllerPose
 from .jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from .status import DriverError
-from .streaming import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
+from .stream_points import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
 from .wire_targets import FINE, WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
@@ -66,7 +67,7 @@ __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE
 #: farther, the controller would run another configuration than the one planned and checked
 CONFIGURATION_TOLERANCE = math.radians(1.0)
 #: [rad] the widest joint turn between the joints a Cartesian stream's target is solved nearest and
-#: the target (streaming.split_long): the controller takes the solution nearest them, the planned
+#: the target (stream_thinning.split_long): the controller takes the solution nearest them, the planned
 #: one only while a joint turns by well under half a turn in between -- previous_target: between
 #: two points; current_joints: over the ring_size + 1 points before (module docstring)
 CARTESIAN_MAX_STEP = math.radians(90.0)
@@ -147,6 +148,12 @@ class JointStreams:
             points = self.with_poses(positions[0], points)
         return points
 
+    def step_refusal(self, prev: Sequence[float], joints: Sequence[float]) -> Tuple[Optional[ControllerPose], str]:
+        """One step of a live stream (a joint command) as the controller will take it after a target
+        at ``prev``: (the pose the wire carries, "") or (..., why the controller would not run
+        ``joints``). Joint targets run as sent: (None, "")."""
+        return None, ""
+
     def check_segments(self, start: Sequence[float], points: Sequence[StreamPoint]) -> None:
         """Every straight joint move of the stream (from ``start``) inside the joint limits and the
         workspace box, sampled as a PTP preview; raises (EnvelopeError, KinematicsError...) naming
@@ -195,7 +202,7 @@ class CartesianStreams(JointStreams):
         """The controller, after a target at ``a``, solves the wire pose of ``b`` onto ``b`` within
         CONFIGURATION_TOLERANCE (:meth:`target`, the coordinate search only): where it would not --
         another elbow or wrist branch lies nearer ``a`` than ``b`` does -- the stream keeps planned
-        points in between (:func:`.streaming.split_long`). current_joints: ``a`` the seed (one of
+        points in between (:func:`.stream_thinning.split_long`). current_joints: ``a`` the seed (one of
         those :meth:`with_poses` then checks), and ``b`` within CARTESIAN_MAX_REACH over the window
         of ``a`` (all joints together; module docstring)."""
         reach = CARTESIAN_MAX_REACH / self.window if self.rule is ConfigurationRule.CURRENT_JOINTS else math.inf
@@ -266,6 +273,13 @@ class CartesianStreams(JointStreams):
                 del history[0]
         return tuple(out)
 
+    def step_refusal(self, prev: Sequence[float], joints: Sequence[float]) -> Tuple[Optional[ControllerPose], str]:
+        """The wire pose of ``joints`` after a target at ``prev`` (the coordinate search only: a
+        command's rate) and :meth:`refusal` of the controller's solution; VrDriverError when the
+        controller cannot solve it."""
+        found = self.target(prev, joints, search=False)
+        return found.pose, self.refusal(found, joints)
+
     def refusal(self, found: WireTarget, joints: Sequence[float]) -> str:
         """"" when the controller's solution ``found`` is the planned ``joints`` within
         CONFIGURATION_TOLERANCE, else why not, in words (naming the rule)."""
@@ -287,8 +301,9 @@ class CartesianStreams(JointStreams):
 
 def stream_preparation(params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
                        min_segment: Callable[[], float]) -> Optional[JointStreams]:
-    """The stream preparation of ``protocol``'s family; None when it does not stream (v1)."""
+    """The stream preparation of the family ``protocol`` names (registered with it:
+    :mod:`vr_driver.driver.sequencers`); None when it does not stream (v1). ProtocolError in words for
+    a streaming protocol without one."""
     if not protocol.streams:
         return None
-    family = JointStreams if protocol.joint_targets else CartesianStreams
-    return family(params, kinematics, protocol, checks, min_segment)
+    return protocol.stream_family()(params, kinematics, protocol, checks, min_segment)

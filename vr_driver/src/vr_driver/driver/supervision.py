@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 from typing import Any, List, Optional, Sequence, Tuple
 
+from ..protocol.base import Protocol
 from .following import following_floor
 from .trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL, ValidTrajectory,
                            path_check)
@@ -118,7 +119,7 @@ class TrajectorySupervisor:
     (:func:`vr_driver.driver.following.following_floor`: a plan's points joined by straight lines
     change speed at once)."""
 
-    def __init__(self, traj: ValidTrajectory, run: Any, started: float, protocol: Any,
+    def __init__(self, traj: ValidTrajectory, run: Any, started: float, protocol: Protocol,
                  joint_names: Optional[Sequence[str]] = None,
                  accelerations: Optional[Sequence[float]] = None) -> None:
         self.traj = traj
@@ -310,7 +311,8 @@ class TrajectorySupervisor:
             return 0.0, ""
         wire = self.traj.wire
         return following_floor(self.traj.times, self.traj.positions, self.accelerations,
-                               band=getattr(wire, "band", None), sign=getattr(wire, "sign", 1.0), names=self.names)
+                               band=None if wire is None else wire.band, sign=1.0 if wire is None else wire.sign,
+                               names=self.names)
 
     def fit_delay(self) -> Tuple[float, float, Optional[int], float]:
         """The constant start delay in [0, MAX_START_DELAY] that makes the samples deviate least

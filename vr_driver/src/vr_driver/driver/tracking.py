@@ -326,7 +326,7 @@ class JointTracker:
         job, path = self._job, self.path
         if job is None or path is None or path.key != job.id:
             return False
-        last = len(job.points) - (1 if job.live and not getattr(job, "closed", False) else 0)
+        last = len(job.points) - (1 if job.live and not job.closed else 0)
         upto = min(last, job.points_taken + TAKEN_AHEAD)
         if upto <= len(path.targets):
             return False

@@ -419,7 +419,7 @@ def split_keep(n: int, excess: Callable[[int, int, int], float], limit: float,
     kept points ``a`` and ``b``, the dropped point ``k`` with the largest ``excess(a, b, k)`` above
     ``limit`` is kept -- or ``choose(k, a, b)``, a point strictly between ``a`` and ``b`` to keep
     instead -- and both halves are split again. Used by :func:`thin` (v1: distance to the chord) and
-    :func:`~vr_driver.driver.streaming.thin_timed` (v2: distance at the planned time)."""
+    :func:`~vr_driver.driver.stream_thinning.thin_timed` (v2: distance at the planned time)."""
     if n <= 2:
         return list(range(n))
     keep = {0, n - 1}

@@ -118,14 +118,15 @@ EXECUTION = {"v1": (2.5, 2.0), "v2": (1.4, 0.5), "v3": (1.2, 0.5)}
 STOPPING = EXECUTION["v1"]
 
 
-def execution_limits(protocol: str, commissioning: str = "") -> Dict[str, Any]:
-    """``trajectory_execution/*`` of move_group for ``protocol`` (v1 | v2 | v3) and the commissioning
-    file (its ``controller/interpreter_lookahead`` 0, or listed under ``controller/not_measured``,
-    makes every streamed point a stop: the driver then streams with ``stream_smooth`` 0)."""
-    if protocol not in EXECUTION:
-        raise MoveItConfigError("protocol must be one of %s, got %r" % (", ".join(sorted(EXECUTION)), protocol))
-    scaling, margin = EXECUTION[protocol]
-    if commissioning and (scaling, margin) != STOPPING:
+def execution_limits(protocol_name: str, commissioning: str = "") -> Dict[str, Any]:
+    """``trajectory_execution/*`` of move_group for ``protocol_name`` (v1 | v2 | v3) and the
+    commissioning file (its ``controller/interpreter_lookahead`` 0, or listed under
+    ``controller/not_measured``, makes every streamed point a stop: the driver then streams with
+    ``stream_smooth`` 0)."""
+    if protocol_name not in EXECUTION:
+        raise MoveItConfigError("protocol must be one of %s, got %r" % (", ".join(sorted(EXECUTION)), protocol_name))
+    scaling, margin = EXECUTION[protocol_name]
+    if commissioning and (scaling, margin) != STOPPING:     # (v1 stops at every point anyway)
         import yaml
         try:
             doc = yaml.safe_load(_read(commissioning)) or {}

@@ -14,7 +14,8 @@ virtual controller ``decode_command`` / ``encode_feedback`` and the Chk_Cfg; bot
 record length, so a card configured for another protocol refuses the master at Chk_Cfg.
 
 The protocol object also names the code that runs it at each end: :meth:`Protocol.controller_program`
-(the virtual G2's program) and :meth:`Protocol.sequencer` (the driver's sequencer), each what that
+(the virtual G2's program), :meth:`Protocol.sequencer` (the driver's sequencer) and, for a streaming
+protocol, :meth:`Protocol.stream_family` (how the driver makes its streams ready), each what that
 end's package registered for it with :meth:`Protocol.implement` (the built-in protocols':
 ``vr_driver.controller.programs``, ``vr_driver.driver.sequencers``). A protocol nobody registered a
 program or a sequencer for is refused in words -- it never runs on another protocol's code, however
@@ -25,13 +26,14 @@ sequencer (``vr_driver/test/test_toy_protocol.py`` does it).
 from __future__ import annotations
 
 import math
+import typing
 from dataclasses import dataclass
-from typing import Any, Dict, Optional, Sequence, Tuple
+from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 from ..errors import ProtocolError
-from ..poses import ControllerPose
+from ..poses import ControllerPose, MoveType, Workspace
 
-__all__ = ["Protocol", "WireTarget", "framed_record", "rounded_pose"]
+__all__ = ["MoveCommand", "Protocol", "WireTarget", "framed_record", "rounded_pose"]
 
 
 def rounded_pose(pose: ControllerPose, resolution: Tuple[float, float]) -> ControllerPose:
@@ -54,6 +56,7 @@ _IMPLEMENTATIONS: Dict[Tuple[str, str], Any] = {}
 _ROLES = {
     "controller_program": ("controller program", "the virtual G2", "vr_driver.controller.programs"),
     "sequencer": ("sequencer", "the driver", "vr_driver.driver.sequencers"),
+    "stream_family": ("stream family", "the driver's stream preparation", "vr_driver.driver.sequencers"),
 }
 
 
@@ -84,6 +87,16 @@ class WireTarget:
     pose: Optional[ControllerPose]            # mm / deg: FK of ``joints`` (Cartesian protocols need it)
     speed: int                                # 0.1 % of the joint speed limits, 1..1000
     smooth: int                               # 0 (an exact stop) .. the protocol's largest level
+
+
+class MoveCommand(typing.Protocol):
+    """One wire target of a move (PTP / LIN / CIRC) as :meth:`Protocol.move_commands` gives it: what
+    the rest of the stack reads of it (the pose it carries, a line for logs)."""
+
+    @property
+    def pose(self) -> ControllerPose: ...
+
+    def describe(self) -> str: ...
 
 
 def _qualname(value: Any) -> str:
@@ -195,6 +208,17 @@ class Protocol:
         """The command object of :meth:`idle_record`."""
         raise NotImplementedError
 
+    def move_commands(self, move_type: Union[MoveType, str], target: ControllerPose, via: Optional[ControllerPose] = None,
+                      workspace: Optional[Workspace] = None) -> Tuple[MoveCommand, ...]:
+        """The wire targets of a move (``move_type`` PTP / LIN / CIRC, a MoveType or its name), in
+        sending order, validated and rounded as the wire carries them: the driver plans the move to
+        exactly these (PoseError / ProtocolError naming what is wrong; ``workspace``: the targets
+        inside its box). Every built-in protocol plans a move to the thesis' handshake targets
+        (whole mm / deg; CIRC: the via point, then the end): v1 sends them one at a time, a
+        streaming protocol the planned path's samples up to the last one
+        (:func:`vr_driver.protocol.v1.move_targets`)."""
+        raise NotImplementedError
+
     def stop_record(self, record: bytes, byte_order: Any = "little") -> bytes:
         """The master record that stops whatever ``record`` (the one on the wire now) set going: what
         the bus process sends when the driver dies (vr_driver.bus.process). A streaming protocol's
@@ -259,14 +283,19 @@ class Protocol:
         return rounded_pose(pose, self.pose_resolution)
 
     # ------------------------------------------------------------------ the code at each end
-    def implement(self, *, controller_program: Any = None, sequencer: Any = None) -> None:
+    def implement(self, *, controller_program: Any = None, sequencer: Any = None,
+                  stream_family: Any = None) -> None:
         """Register the code that runs this protocol: ``controller_program``, the virtual G2's program
         class (a :class:`~vr_driver.controller.session.SessionProgram` with ``make_arm`` /
-        ``from_options``), and / or ``sequencer``, the driver's sequencer class. Called by the package
-        of that end (never by this package, which imports neither). Registering the same class again
-        is harmless; another class for a role already taken is a ProtocolError (a protocol runs on
-        one program, never silently on the last one registered)."""
-        for role, value in (("controller_program", controller_program), ("sequencer", sequencer)):
+        ``from_options``), ``sequencer``, the driver's sequencer class, and / or ``stream_family``
+        (a streaming protocol), the class that makes the driver's streams ready to send for it
+        (:mod:`vr_driver.driver.stream_prep`: joint targets sent as planned, or Cartesian targets
+        solved as the controller will). Called by the package of that end (never by this package,
+        which imports neither). Registering the same class again is harmless; another class for a
+        role already taken is a ProtocolError (a protocol runs on one program, never silently on the
+        last one registered)."""
+        for role, value in (("controller_program", controller_program), ("sequencer", sequencer),
+                            ("stream_family", stream_family)):
             if value is None:
                 continue
             key = (self.name, role)
@@ -286,6 +315,12 @@ class Protocol:
         """The class of the driver's sequencer for this protocol (registered with :meth:`implement`:
         v1's handshake sequencer, the stream sequencer); ProtocolError in words when there is none."""
         return self._implementation("sequencer")
+
+    def stream_family(self) -> Any:
+        """The class of the driver's stream preparation for this streaming protocol (registered with
+        :meth:`implement`: joint or Cartesian streams); ProtocolError in words when there is none --
+        never the family its capabilities look like."""
+        return self._implementation("stream_family")
 
     def _implementation(self, role: str) -> Any:
         try:

@@ -32,7 +32,7 @@ import math
 import struct
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Callable, ClassVar, List, Optional, Tuple
+from typing import Any, Callable, ClassVar, List, Optional, Tuple, Union
 
 from .. import validate
 from ..errors import HandshakeError, HandshakeTimeout, PoseError, ProtocolError, TargetRejected
@@ -438,6 +438,13 @@ def commands_for(move_type: Any, target: Any, via: Any = None,
     if via is not None:
         raise ProtocolError("a via pose is only used by CIRC moves, not %s" % kind.name)
     return [Command.from_pose(target, WireMoveType.from_move_type(kind), workspace)]
+
+
+def move_targets(protocol: Protocol, move_type: Union[MoveType, WireMoveType, str], target: ControllerPose,
+                 via: Optional[ControllerPose] = None, workspace: Optional[Workspace] = None) -> Tuple[Command, ...]:
+    """``protocol.move_commands`` of every built-in protocol (:meth:`Protocol.move_commands`): a
+    move planned to the handshake's targets, :func:`commands_for` (whole mm / deg)."""
+    return tuple(commands_for(move_type, target, via, workspace))
 
 
 # ----------------------------------------------------------------------------- controller side
@@ -910,6 +917,7 @@ class ProtocolV1(Protocol):
     name = "v1"
     version = 1
     record_length = RECORD_SIZE
+    move_commands = move_targets
     streams = False
     joint_targets = False
     reports_joints = False

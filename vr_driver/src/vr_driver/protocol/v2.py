@@ -38,6 +38,7 @@ from .base import Protocol, WireTarget, framed_record
 from .common import (BLEND_MAX, BLEND_PER_LEVEL, INT32_MAX, INT32_MIN, JOINT_UNIT_DEG, SEQ_MAX, SMOOTH_MAX, Control,
                      RejectCode, Slot, SlotFormat, StatusBits, StreamFeedback, StreamState, blend_window,
                      describe_stream_feedback, joints_from_wire, joints_to_wire, next_seq, seq_after, seq_offset)
+from .v1 import move_targets
 
 __all__ = [
     "V2", "ProtocolV2", "VERSION", "RECORD_SIZE_V2", "POSITION_UNIT_MM", "SPEED_UNIT", "TargetKind", "crc16",
@@ -288,6 +289,7 @@ class ProtocolV2(Protocol):
     """Protocol v2 as one object (:mod:`vr_driver.protocol.base`): streamed joint targets."""
 
     name = "v2"
+    move_commands = move_targets             # a move: planned to the handshake's targets (whole mm / deg)
     version = VERSION
     record_length = RECORD_SIZE_V2
     gsd_modules = GSD_MODULES_V2

@@ -57,6 +57,7 @@ from .base import Protocol, WireTarget, framed_record
 from .common import (INT16_MAX, INT16_MIN, SEQ_MAX, SMOOTH_MAX, SPEED_MAX, ByteOrder, Control, RejectCode, Slot,
                      SlotFormat, StatusBits, StreamFeedback, StreamState, describe_stream_feedback, next_seq,
                      round_half_away, seq_after)
+from .v1 import move_targets
 
 __all__ = [
     "V3", "ProtocolV3", "VERSION", "COMMAND_SIZE_V3", "FEEDBACK_SIZE_V3", "POSITION_UNIT_MM", "ANGLE_UNIT_DEG",
@@ -340,6 +341,7 @@ class ProtocolV3(Protocol):
     assumes one fails loudly instead of configuring the card wrongly."""
 
     name = "v3"
+    move_commands = move_targets             # a move: planned to the handshake's targets (whole mm / deg)
     version = VERSION
     record_length = 0
     #: bytes controller -> master (the feedback; DP *input* of the master)
