@@ -364,7 +364,8 @@ class PlanningParts:
         self._cycle_rate = params.bus().cycle_rate_hz
         self.checks = PathChecks(self.kin, MovePreviewer(self.kin), params.workspace, self.planning_gate,
                                  SceneGuard(self.kin, self.planning_gate, Scene(), params.collision_padding,
-                                            params.collision_check, params.prefix, model=params.model))
+                                            params.collision_check, params.prefix, model=params.model),
+                                 self.protocol)
         self.streams = stream_preparation(params, self.kin, self.protocol, self.checks, self.min_segment)
 
     @property
