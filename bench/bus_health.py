@@ -15,7 +15,7 @@ planner, no garbage of the case before), and in it:
 
 - **The card's side**, in processes of their own (``bus_health.py --card`` / ``--line``, SCHED_FIFO 30
   where the system allows it: they stand for hardware, which is never late, and must not add delays
-  of their own): the virtual G2 (vr_driver.controller.program.VirtualController: the protocol's
+  of their own): the virtual G2 (vr_driver.controller.virtual_controller.VirtualController: the protocol's
   program and simulated arm) on a pty, and the virtual line (vr_driver.controller.line) joining it to
   the driver at the bit rate: the bytes take their wire time. The card records the arrival time of
   every Data_Exchange telegram it takes (a wrapper around its DpSlave's ``handle``: no library code
@@ -146,7 +146,7 @@ def card_main(cfg: Dict[str, Any]) -> int:
     import logging
 
     from pyprofibus_vendor.dp_slave import SlaveState
-    from vr_driver.controller.program import VirtualController
+    from vr_driver.controller.virtual_controller import VirtualController
     logging.basicConfig(level=logging.WARNING, stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s: %(message)s")
     sim = VirtualController(pty_link=cfg["path"], baud=cfg["baud"], protocol=cfg["protocol"])

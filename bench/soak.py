@@ -91,7 +91,7 @@ for _pkg in ("vr_driver", "pyprofibus_vendor", "panasonic_vr006l_support"):
 from pyprofibus_vendor.phy import FaultyLink, Link  # noqa: E402
 from pyprofibus_vendor.phy_serial import SerialLink  # noqa: E402
 
-from vr_driver.controller.program import VirtualController  # noqa: E402
+from vr_driver.controller.virtual_controller import VirtualController  # noqa: E402
 from vr_driver.driver import DriverCore, DriverError, DriverStatus, JobResult, MoveJob, MoveRequest  # noqa: E402
 from vr_driver.errors import VrDriverError  # noqa: E402
 from vr_driver.kinematics.solver import Kinematics  # noqa: E402

@@ -150,7 +150,7 @@ from driver_latency import Failure, Recorder, interrupt_once, stack_worker  # no
 
 RESULT_TAG = "@@TRAJECTORY_RESULT "
 CONFIG_FILE = os.path.join(REPO, "vr_driver", "config", "vr_driver.yaml")
-#: the virtual controller's initial pose (controller.program's default, mm / deg)
+#: the virtual controller's initial pose (controller.options' default, mm / deg)
 HOME_POSE = (1120.0, 0.0, 725.0, 0.0, 45.0, 0.0)
 #: name -> (protocol, baud, bus cycles per second, options): "paced" the virtual line carries its
 #: bytes at the bit rate (driver.launch line_baud:=, io:=true: the I/O island on the line too),

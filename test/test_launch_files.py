@@ -174,9 +174,9 @@ class DriverLaunchParamsTest(unittest.TestCase):
         return DriverParams.from_dict(nested), params
 
     def test_sim_defaults(self):
-        from vr_driver.controller.program import SimOptions
+        from vr_driver.controller.options import SimOptions
         p, params = self.check("io:=false")
-        from vr_driver.controller.program import auto_pty_link
+        from vr_driver.controller.pty_link import auto_pty_link
         # one value for both nodes (sim_port, default auto), which both resolve to the same link
         self.assertEqual(params["/virtual_controller/pty_link"], "auto")
         self.assertEqual(params["/interface/port"], "auto")
@@ -192,7 +192,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
     def test_sim_with_the_io_island_by_default(self):
         """issue 18: sim:=true (io:=true by default) puts the virtual controller and the virtual I/O island
         on one virtual line; the driver opens the line's master end and cycles both stations."""
-        from vr_driver.controller.program import auto_pty_link
+        from vr_driver.controller.pty_link import auto_pty_link
         island = ["gripper_close", "gripper_closed", "part_present"]
         own = ["g2_gripper_close", "g2_gripper_closed", "g2_part_present"]   # the controller's own I/O (v2)
         for protocol, length, names in (("v1", 14, island), ("v2", 72, island + own)):
@@ -212,7 +212,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
     def test_ramp_time_reaches_the_virtual_controller_only(self):
         """The virtual arm's ramp: unset by default (the model's joint limits give 0.1 s), ramp_time:=0.5
         (an older controller) a valid option of the virtual controller and of no other node."""
-        from vr_driver.controller.program import SimOptions
+        from vr_driver.controller.options import SimOptions
         _, params = self.check("protocol:=v3")
         self.assertFalse(any(k.endswith("/ramp_time") for k in params))
         _, params = self.check("protocol:=v3", "ramp_time:=0.5")
@@ -235,7 +235,7 @@ class DriverLaunchParamsTest(unittest.TestCase):
     def test_true_model_reaches_the_virtual_controller_only(self):
         """issue 25: true_model:=FILE gives the virtual G2 its own kinematics; the driver (and the
         robot description) keep the model's. Unset by default (the model's)."""
-        from vr_driver.controller.program import SimOptions
+        from vr_driver.controller.options import SimOptions
         example = os.path.join(REPO, "vr_driver", "test", "data", "true_model_example.yaml")
         _, params = self.check("protocol:=v3")
         self.assertFalse(any(k.endswith("/true_model") for k in params))

@@ -29,7 +29,9 @@ from std_srvs.srv import SetBool
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import MarkerArray
 
-from vr_driver.controller.program import SimDeviceError, VirtualController, auto_pty_link
+from vr_driver.controller.pty_link import auto_pty_link
+from vr_driver.controller.simulator import SimDeviceError
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.kinematics.solver import Kinematics
 from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJointTrajectoryGoal,
                            FollowJointTrajectoryResult, JointTolerance, MoveToPoseAction, MoveToPoseGoal,

@@ -18,7 +18,7 @@ from pyprofibus_vendor.phy_serial import SerialLink
 from vr_driver.bus.line_check import LineCheck
 from vr_driver.controller.adapter_model import AdapterBehaviour, AdapterModel
 from vr_driver.controller.line import LineHub
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 
 BAUD = 19200
 ROBOT_CFG = default_robot_config("virtual", phy_type="memory").slave(4).cfg

@@ -14,7 +14,7 @@ import time
 import pytest
 from vr_driver.bus.health import BusHealth
 from vr_driver.controller.arm import Outcome
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.driver import DriverCore, JobPhase, LinkState, MoveRequest
 from vr_driver.poses import ControllerPose, MoveType
 

@@ -19,7 +19,7 @@ import pytest
 import yaml
 
 from vr_driver.commission.steps import STEP_NAMES
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.params import DriverParams, ParamError
 
 from _priority import threads_at_real_time

@@ -19,8 +19,11 @@ import pytest
 from pyprofibus_vendor.dp_slave import SlaveState
 
 from vr_driver.controller.arm import Outcome, SimArm
-from vr_driver.controller.program import (ASSUMPTIONS, PARAM_NAMES, ControllerProgram, LoopTiming, SimError,
-                                          SimOptions, VirtualController, main, robot_slave)
+from vr_driver.controller.cli import main
+from vr_driver.controller.options import ASSUMPTIONS, PARAM_NAMES, LoopTiming, SimOptions
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
+from vr_driver.controller.simulator import SimError
+from vr_driver.controller.virtual_controller import robot_slave, VirtualController
 from vr_driver.controller.program_v3 import ControllerProgramV3, SendAhead
 from vr_driver.controller.session import Unreachable
 from vr_driver.controller.stream_arm import RampShape, SimStreamArm, StreamTarget

@@ -22,8 +22,11 @@ import pytest
 from pyprofibus_vendor.dp_slave import SlaveState
 
 from vr_driver.controller.arm import Outcome, SimArm
-from vr_driver.controller.program import (ControllerProgram, SimError, SimOptions, VirtualController,
-                                          _parser, robot_slave)
+from vr_driver.controller.cli import _parser
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
+from vr_driver.controller.simulator import SimError
+from vr_driver.controller.virtual_controller import robot_slave, VirtualController
 from vr_driver.controller.program_v2 import ControllerProgramV2
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.stream_arm import SimStreamArm

@@ -15,8 +15,11 @@ import pytest
 from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm
 from pyprofibus_vendor.dp_slave import SlaveState
 
-from vr_driver.controller.program import (ControllerProgram, SimError, SimOptions, VirtualController, main,
-                                      robot_slave)
+from vr_driver.controller.cli import main
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
+from vr_driver.controller.simulator import SimError
+from vr_driver.controller.virtual_controller import robot_slave, VirtualController
 from vr_driver.errors import JointLimitError, MotionError, UnreachableError
 from vr_driver.poses import HOME_POSE
 from vr_driver.protocol.v1 import (Accepted, Command, ControllerState, Done, Feedback, MasterHandshake, Rejected,
@@ -563,7 +566,7 @@ def test_set_fault_service_logic(kin, tmp_path):
 
 
 def test_core_modules_import_without_ros():
-    """controller.program and controller.arm are core modules: they import with rospy and every *_msgs blocked."""
+    """controller.virtual_controller and controller.arm are core modules: they import with rospy and every *_msgs blocked."""
     import os
     import subprocess
     import sys
@@ -574,7 +577,7 @@ def test_core_modules_import_without_ros():
               "for name in ('rospy', 'rospkg', 'roslib', 'std_msgs', 'std_srvs'):\n"
               "    sys.modules[name] = None\n"
               "sys.path[:0] = %r\n"
-              "import vr_driver.controller.program, vr_driver.controller.arm\n"
+              "import vr_driver.controller.virtual_controller, vr_driver.controller.arm\n"
               "assert not [m for m in sys.modules if m.endswith('_msgs') and sys.modules[m] is not None]\n"
               "print('ok')\n" % (paths,))
     proc = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=60)

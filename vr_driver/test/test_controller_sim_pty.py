@@ -28,7 +28,9 @@ from pyprofibus_vendor.dp_master import DpMaster
 from pyprofibus_vendor.dp_slave import SlaveState
 from pyprofibus_vendor.phy_serial import open_pty_pair
 
-from vr_driver.controller.program import SimDeviceError, SimError, VirtualController, auto_pty_link
+from vr_driver.controller.pty_link import auto_pty_link
+from vr_driver.controller.simulator import SimDeviceError, SimError
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.errors import VrDriverError
 from vr_driver.kinematics.preview import MovePreviewer, MoveType
 from vr_driver.poses import ControllerPose, Workspace
@@ -431,7 +433,7 @@ def test_cli_serves_a_pty_link_and_exits_cleanly(tmp_path, sig):
     log_file = str(tmp_path / "executed.jsonl")
     env = dict(os.environ, PYTHONPATH=PYTHONPATH)
     proc = subprocess.Popen(
-        [sys.executable, "-m", "vr_driver.controller.program", "--pty-link", link, "--speed-factor", "50",
+        [sys.executable, "-m", "vr_driver.controller", "--pty-link", link, "--speed-factor", "50",
          "--loop-period", "0.005", "--log-file", log_file, "--initial-pose", "1000", "0", "700", "0", "60", "0"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     driver = None

@@ -8,7 +8,7 @@ from typing import List, Optional, Set
 
 from pyprofibus_vendor.dp_master import DpMaster
 
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.errors import ProtocolError
 from vr_driver.protocol.v2 import (CHK_CFG_V2, RECORD_SIZE_V2, CommandV2, Control, FeedbackV2, StreamState,
                                    TargetSlot, joints_to_wire)

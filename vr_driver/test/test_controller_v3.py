@@ -14,7 +14,10 @@ import pytest
 from pyprofibus_vendor.dp_slave import SlaveState
 
 from vr_driver.controller.arm import Outcome
-from vr_driver.controller.program import SimError, SimOptions, VirtualController, main, robot_slave
+from vr_driver.controller.cli import main
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.simulator import SimError
+from vr_driver.controller.virtual_controller import robot_slave, VirtualController
 from vr_driver.controller.program_v2 import ControllerProgramV2
 from vr_driver.controller.program_v3 import (DEFAULT_INTERPRETER_LOOKAHEAD, DEFAULT_RING_SIZE,
                                              ControllerProgramV3)

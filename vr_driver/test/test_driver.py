@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.driver import DriverCore, DriverError, JobPhase, LinkState, MoveRequest
 from vr_driver.errors import VrDriverError
 from vr_driver.kinematics.preview import MoveType

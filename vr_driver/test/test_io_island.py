@@ -14,7 +14,8 @@ from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
 from pyprofibus_vendor.dp_slave import SlaveLink, SlaveState
 from pyprofibus_vendor.gsd import build_chk_cfg, load_gsd
 
-from vr_driver.controller.program import SimError, auto_pty_link, resolve_link
+from vr_driver.controller.pty_link import auto_pty_link, resolve_link
+from vr_driver.controller.simulator import SimError
 from vr_driver.controller.io_island import (GRIPPER_DELAY, ISLAND_ADDRESS, ISLAND_CFG, ISLAND_GSD, ISLAND_IDENT, IslandProgram,
                                  island_slave)
 from vr_driver.controller.line import LineHub, _lock_owner_gone

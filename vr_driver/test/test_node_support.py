@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from vr_driver.controller.program import EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError
+from vr_driver.controller.simulator import EXIT_DEVICE, EXIT_OK, EXIT_USAGE, SimDeviceError, SimError
 from vr_driver.ros.support import open_device, own_link
 
 

@@ -29,7 +29,7 @@ def test_config_file_is_valid_and_equals_the_built_in_defaults():
 def test_port_auto_is_the_virtual_controllers_link_of_this_launch(monkeypatch):
     """driver.launch passes sim_port (default auto) as both the controller's pty_link and the driver's
     port: both resolve it to <ROS log dir>/vr006l_virtual_g2_<master port>."""
-    from vr_driver.controller.program import auto_pty_link
+    from vr_driver.controller.pty_link import auto_pty_link
     monkeypatch.setenv("ROS_MASTER_URI", "http://localhost:11517/")
     monkeypatch.setenv("ROS_LOG_DIR", "/var/tmp/roslogs")
     params = DriverParams.from_dict({"port": "auto"})

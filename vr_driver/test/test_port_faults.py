@@ -31,7 +31,7 @@ import pytest
 from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy import FaultyLink
 from pyprofibus_vendor.phy_serial import SerialLink
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.driver import ERROR_LINK, DriverCore, DriverError, DriverStatus, LinkState, MoveRequest
 from vr_driver.kinematics.preview import MoveType
 

@@ -17,7 +17,7 @@ import pytest
 import yaml
 
 from vr_driver import csr
-from vr_driver.controller.program import auto_pty_link
+from vr_driver.controller.pty_link import auto_pty_link
 from vr_driver.driver import DriverCore, DriverError
 from vr_driver.driver.trajectories import INVALID_JOINTS, TrajectoryError, TrajectoryGoal, validate
 from vr_driver.kinematics.solver import Kinematics

@@ -9,7 +9,10 @@ import pytest
 
 from panasonic_vr006l_support import joint_limits as model_limits
 from vr_driver.controller.arm import SimArm
-from vr_driver.controller.program import SimError, SimOptions, VirtualController, main
+from vr_driver.controller.cli import main
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.simulator import SimError
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.controller.stream_arm import DEFAULT_RAMP_TIME, SimStreamArm, StreamTarget
 from vr_driver.errors import ModelError, MotionError
 from vr_driver.kinematics.solver import Kinematics

@@ -22,7 +22,7 @@ from pyprofibus_vendor.phy_serial import SerialLink, open_pty_pair
 from vr_driver.controller.io_island import VirtualIoIsland
 from vr_driver.controller.line import LineHub
 from vr_driver.controller.line_rate import tty_speed
-from vr_driver.controller.program import VirtualController
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.commission.scan import protocol_cfg
 
 TEST = os.path.dirname(os.path.abspath(__file__))

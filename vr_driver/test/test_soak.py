@@ -106,7 +106,8 @@ def test_final_line_format(result):
 from pyprofibus_vendor.dp import PrmStationStatus, Sap, SetPrm, request_frame  # noqa: E402
 from pyprofibus_vendor.dp_slave import SlaveState  # noqa: E402
 from pyprofibus_vendor.fdl import FcbRequester  # noqa: E402
-from vr_driver.controller.program import ControllerProgram, robot_slave  # noqa: E402
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram  # noqa: E402
+from vr_driver.controller.virtual_controller import robot_slave
 from vr_driver.protocol.v1 import Command, ControllerState, WireMoveType  # noqa: E402
 from vr_driver.controller.arm import Outcome, SimArm  # noqa: E402
 

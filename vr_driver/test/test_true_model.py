@@ -14,7 +14,10 @@ import pytest
 import yaml
 
 from panasonic_vr006l_support import description, true_model
-from vr_driver.controller.program import SimError, SimOptions, VirtualController, main
+from vr_driver.controller.cli import main
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.simulator import SimError
+from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.errors import ModelError
 from vr_driver.kinematics.solver import Kinematics

@@ -1,5 +1,5 @@
 """vr_driver.validate: the one set of value checks, and the modules that used to carry copies of it
-(params, csr.fields, controller.program, protocol.v1, poses, controller.arm, terminal.pose_input) keep their error types
+(params, csr.fields, controller.options, protocol.v1, poses, controller.arm, terminal.pose_input) keep their error types
 and wording while sharing it."""
 from __future__ import annotations
 
@@ -14,7 +14,8 @@ import pytest
 import vr_driver.protocol.v1 as protocol
 import vr_driver.terminal.pose_input as pose_input
 from vr_driver import validate
-from vr_driver.controller.program import SimError, SimOptions
+from vr_driver.controller.options import SimOptions
+from vr_driver.controller.simulator import SimError
 from vr_driver.csr.fields import _integer as csr_integer
 from vr_driver.csr.fields import _number as csr_number
 from vr_driver.controller.program_v3 import SendAhead

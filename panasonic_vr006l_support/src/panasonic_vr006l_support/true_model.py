@@ -2,7 +2,7 @@
 
 Why: the driver computes with the model (``config/kinematics_vr006l.yaml``), whose dimensions are
 placeholders; a real arm differs from it, and its controller computes with its *own* numbers. The
-virtual G2 (``vr_driver.controller.program``, option ``true_model``) uses this module to simulate such
+virtual G2 (``python3 -m vr_driver.controller``, option ``true_model``) uses this module to simulate such
 an arm, so that the effect of a wrong model shows in a simulation as it would on the robot (issue 25).
 
 The file has the layout of ``config/kinematics_vr006l.yaml``: a ``geometry`` section (``j2_height``,

@@ -18,7 +18,8 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 
 from pyprofibus_vendor.dp_slave import SlaveLink
 
-from vr_driver.controller.program import ControllerProgram, robot_slave
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
+from vr_driver.controller.virtual_controller import robot_slave
 from vr_driver.controller.program_v2 import ControllerProgramV2
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.stream_arm import SimStreamArm

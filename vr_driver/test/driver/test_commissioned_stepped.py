@@ -22,7 +22,7 @@ import _world
 from _world import World
 from test_streaming_stepped import record, smooth_path, trajectory
 from vr_driver.controller.arm import Outcome
-from vr_driver.controller.program import ControllerProgram
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.stream_arm import SimStreamArm
 from vr_driver.driver.commissioned import controller_notes, min_segment_cycles, planning_kinematics

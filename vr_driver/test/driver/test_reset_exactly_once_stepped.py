@@ -21,7 +21,7 @@ from pyprofibus_vendor.dp_slave import SlaveState
 
 import _world
 from vr_driver.controller.arm import Outcome
-from vr_driver.controller.program import ControllerProgram
+from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
 from vr_driver.controller.program_v2 import ControllerProgramV2
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.driver import JobPhase, LinkState, MoveRequest

@@ -329,7 +329,8 @@ def test_v3_targets_taken_ahead_are_solved_by_the_rule_and_the_joints_follow_it(
 
 
 def test_the_configuration_rule_is_a_parameter_of_the_virtual_g2():
-    from vr_driver.controller.program import SimError, SimOptions
+    from vr_driver.controller.options import SimOptions
+    from vr_driver.controller.simulator import SimError
     from vr_driver.controller.stream_arm import SimStreamArm
     from vr_driver.errors import MotionError
     assert SimOptions().configuration == "previous_target"

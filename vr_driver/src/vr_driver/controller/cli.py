@@ -1,4 +1,4 @@
-"""The virtual G2's command line: ``python3 -m vr_driver.controller.program`` (``--help``): options
+"""The virtual G2's command line: ``python3 -m vr_driver.controller`` (``--help``): options
 -> :class:`~vr_driver.controller.options.SimOptions` -> a started
 :class:`~vr_driver.controller.virtual_controller.VirtualController`, its device path the first line
 on stdout, stopped by SIGINT / SIGTERM (:func:`~vr_driver.controller.simulator.run_simulator`). ROS-free."""
@@ -28,7 +28,7 @@ log = logging.getLogger(__name__)
 
 def _parser() -> argparse.ArgumentParser:
     p = simulator_parser(
-        "program",
+        "",
         "Virtual Panasonic G2 controller: a PROFIBUS-DP slave (ident 0x06C6) running the "
         "robot-side program of the 14-byte protocol (or, with --protocol v2, the 72-byte "
         "joint-target streaming protocol; with --protocol v3, Cartesian-target streaming "

@@ -115,11 +115,12 @@ def _watch(sim: Any, stop: threading.Event, prog: str) -> int:
 
 
 def simulator_parser(module: str, description: str, internal_error: bool = True) -> argparse.ArgumentParser:
-    """The command line every simulator starts from: ``python3 -m vr_driver.controller.<module>``,
+    """The command line every simulator starts from: ``python3 -m vr_driver.controller.<module>`` (an
+    empty ``module``: ``python3 -m vr_driver.controller``, the virtual G2),
     its ``description``, :func:`run_simulator`'s exit statuses as the epilog (``internal_error``:
     its threads can end in EXIT_FAILURE) and ``-v`` (:func:`parse_simulator_args`)."""
     p = argparse.ArgumentParser(
-        prog="python3 -m vr_driver.controller." + module, description=description,
+        prog="python3 -m vr_driver.controller" + ("." + module if module else ""), description=description,
         epilog="exit status: %d stopped by a signal, %d bad option, %d device problem%s" % (
             EXIT_OK, EXIT_USAGE, EXIT_DEVICE, ", %d internal error" % EXIT_FAILURE if internal_error else ""))
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output on stderr")

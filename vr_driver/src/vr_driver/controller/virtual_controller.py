@@ -16,7 +16,7 @@ against a simulated arm, on a link. ROS-free.
   ``ring_size`` positions, solved by the controller's own IK, run as MOVEP with an
   ``interpreter_lookahead`` of MOVEs read ahead, on a SimStreamArm). A protocol without a
   registered program is refused in words.
-- The command line: :mod:`vr_driver.controller.cli` (``python3 -m vr_driver.controller.program``).
+- The command line: :mod:`vr_driver.controller.cli` (``python3 -m vr_driver.controller``).
 
 **Every assumption about the real G2 is a parameter** (:data:`~vr_driver.controller.options.ASSUMPTIONS`,
 the table in doc/controller_program.md §10.9; each a SimOptions field, a ``--option`` of the CLI and

@@ -1,7 +1,7 @@
 """ROS node `virtual_io_island`: the thin ROS edge of :class:`vr_driver.controller.io_island.VirtualIoIsland`.
 
 Private parameters (defaults in brackets): ``~pty_link`` ["auto"] create a pty pair and symlink its
-device end here (``auto``: this launch's own island link, ``controller.program.resolve_link``; "" no symlink); ``~device`` [""] serve this existing device instead; ``~addr`` [8];
+device end here (``auto``: this launch's own island link, ``controller.pty_link.resolve_link``; "" no symlink); ``~device`` [""] serve this existing device instead; ``~addr`` [8];
 ``~baud`` [19200]; ``~part_present`` [false] the part sensor at start.
 
 Sets ``~device_path`` to the pty the line hub (or a master) opens. Service (std_srvs/SetBool)

@@ -1,8 +1,8 @@
-"""ROS node `virtual_controller`: the thin ROS edge of :class:`vr_driver.controller.program.VirtualController`.
+"""ROS node `virtual_controller`: the thin ROS edge of :class:`vr_driver.controller.virtual_controller.VirtualController`.
 
-Private parameters (validated by ``controller.program.SimOptions``; defaults in brackets):
+Private parameters (validated by ``controller.options.SimOptions``; defaults in brackets):
 ``~pty_link`` [""] create a pty pair and symlink its device end here (``auto``: this launch's own
-link, ``controller.program.auto_pty_link``; a link another live controller holds is refused); ``~device`` [""] serve this
+link, ``controller.pty_link.auto_pty_link``; a link another live controller holds is refused); ``~device`` [""] serve this
 existing device instead; ``~addr`` [4]; ``~baud`` [19200]; ``~speed_factor`` [1.0];
 ``~initial_pose`` [[1120, 0, 725, 0, 45, 0]] (mm, deg); ``~loop_period`` [0.01] s;
 ``~byte_order`` ["little"]; ``~log_file`` [""] (JSON lines of the handled targets);
@@ -16,7 +16,7 @@ target: nearest the previous target's joints or ``current_joints`` (doc/controll
 ``~true_model`` [""] a YAML of the simulated robot's own dimensions and joint zero offsets
 (panasonic_vr006l_support.true_model; empty: the model's): the arm and the v3 program compute with
 it while the driver keeps the model, as with a real robot that differs from the model.
-The assumptions about the real G2 (``controller.program.ASSUMPTIONS``, doc/controller_program.md
+The assumptions about the real G2 (``controller.options.ASSUMPTIONS``, doc/controller_program.md
 §10.9; the defaults keep the model the stack is tested against): ``~data_exchange_bit`` [true];
 ``~speed_scale`` [1.0] (v2, v3: MOVEP's speed unit, real speed = commanded x scale);
 ``~loop_blocks_during_move`` [false] (a MOVE blocks the program loop, the feedback frozen);
@@ -48,7 +48,10 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, SetBoolResponse
 
-from ..controller.program import AUTO_LINK, EXIT_OK, PARAM_NAMES, SimOptions, VirtualController
+from ..controller.options import PARAM_NAMES, SimOptions
+from ..controller.pty_link import AUTO_LINK
+from ..controller.simulator import EXIT_OK
+from ..controller.virtual_controller import VirtualController
 from .support import (open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
                       watch_simulator)
 from ..controller.arm import LogEntry

@@ -3,7 +3,7 @@ joins the ptys of the simulated stations into one multi-drop PROFIBUS line.
 
 Private parameters: ``~stations`` [["auto", "auto:io_island"]] the stations' pty paths; ``auto`` is this
 launch's virtual controller link, ``auto:NAME`` this launch's link of station NAME
-(``controller.program.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
+(``controller.pty_link.auto_pty_link(station=NAME)``); ``~pty_link`` ["auto"] where the master's pty is
 linked (``auto``: ``<ROS log dir>/vr006l_virtual_line_<master port>``; the driver's ``port``);
 ``~baud`` [0] pace the line at this bit rate (0: as fast as the ptys); ``~rate`` [0] the stations' bit rate: a
 master whose port is set to another one meets garbled characters and no reply, as on a wire (0: any rate's
