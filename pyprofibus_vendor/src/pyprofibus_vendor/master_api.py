@@ -23,16 +23,16 @@ from __future__ import annotations
 import enum
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, List, Optional
+from typing import TYPE_CHECKING, Any, Callable, List, Optional
 
-from .errors import DpError
+from .dp import ChkCfg, PrmStationStatus, SetPrm, cfg_io_lengths, watchdog_factors
+from .errors import ConfigError, DpError
 
 if TYPE_CHECKING:
     from .adapter import AdapterSetup
     from .dp import SlaveDiag
-    from .dp_master import SlaveSpec
 
-__all__ = ["MasterSlaveState", "SlaveCounters", "MasterCounters", "SlaveView", "MasterApi",
+__all__ = ["MasterSlaveState", "SlaveCounters", "MasterCounters", "SlaveSpec", "SlaveView", "MasterApi",
            "CONNECTED_STATES"]
 
 
@@ -86,6 +86,69 @@ class MasterCounters:
     dx_timed: int = 0           # good Data_Exchange replies timed (reply_wait below)
     reply_wait: float = 0.0     # [s] their summed time beyond the telegrams' time on the wire:
     #                             the station's delay plus what the adapter held them back
+
+
+@dataclass(frozen=True)
+class SlaveSpec:
+    """What the master needs to know about one slave.
+
+    ``watchdog`` (seconds, None = off) becomes WD_Fact_1/2; sizes default to
+    what ``cfg`` describes (input = slave -> master).
+    """
+
+    address: int
+    ident: int
+    cfg: bytes
+    input_size: Optional[int] = None
+    output_size: Optional[int] = None
+    watchdog: Optional[float] = 0.3
+    user_prm_data: bytes = b""
+    group_ident: int = 0
+    min_tsdr: int = 0
+    sync_req: bool = False
+    freeze_req: bool = False
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.address <= 125:
+            raise ConfigError(f"slave address {self.address} out of range 0..125")
+        if not 0 <= self.ident <= 0xFFFF:
+            raise ConfigError(f"ident 0x{self.ident:X} out of range")
+        try:
+            cfg = ChkCfg(bytes(self.cfg)).cfg
+            n_in, n_out = cfg_io_lengths(cfg)
+        except DpError as err:
+            raise ConfigError(f"slave {self.address}: bad cfg: {err}") from err
+        object.__setattr__(self, "cfg", cfg)
+        object.__setattr__(self, "user_prm_data", bytes(self.user_prm_data))
+        if self.input_size is None:
+            object.__setattr__(self, "input_size", n_in)
+        if self.output_size is None:
+            object.__setattr__(self, "output_size", n_out)
+        if self.watchdog is not None:
+            watchdog_factors(self.watchdog)  # validates the range
+
+    @classmethod
+    def from_config(cls, slave: "Any") -> "SlaveSpec":
+        """The spec of a :class:`~.config.SlaveConfig` (its Cfg, lengths, watchdog, Set_Prm
+        settings); ``watchdog_ms`` None or 0 = watchdog off."""
+        return cls(slave.address, slave.ident, slave.cfg, input_size=slave.input_len,
+                   output_size=slave.output_len,
+                   watchdog=slave.watchdog_ms / 1000.0 if slave.watchdog_ms else None,
+                   user_prm_data=slave.user_prm_data, group_ident=slave.group_mask,
+                   sync_req=slave.sync, freeze_req=slave.freeze)
+
+    def set_prm(self) -> SetPrm:
+        status = PrmStationStatus.LOCK_REQ
+        f1 = f2 = 1
+        if self.watchdog is not None:
+            status |= PrmStationStatus.WD_ON
+            f1, f2 = watchdog_factors(self.watchdog)
+        if self.sync_req:
+            status |= PrmStationStatus.SYNC_REQ
+        if self.freeze_req:
+            status |= PrmStationStatus.FREEZE_REQ
+        return SetPrm(self.ident, status, f1, f2, self.min_tsdr, self.group_ident,
+                      self.user_prm_data)
 
 
 class SlaveView:
