@@ -335,6 +335,90 @@ class DataExchangeTest(unittest.TestCase):
         self.assertEqual(c.echoes - e0, 2)
         self.assertTrue(rig.h.connected)
 
+    def _late_second_try(self, echo: bool) -> tuple:
+        """An adapter that hands over each transmission's bytes (its echo when ``echo``, then the
+        slave's reply) ``delays[n]`` seconds after transmission n, in order: the first try of request
+        A (outputs X) is answered after its timeout, so A is resent; the first try's reply ends A's
+        turn, request B (outputs Y) goes out, and the resend's reply -- the slave's repeat of A's,
+        inputs from X -- comes before B's own. Returns (the inputs each turn ended with after B was
+        sent, the master's counters)."""
+        rig = Rig()
+        rig.until(lambda: rig.h.connected)
+        x, y = b"\x05" * 14, b"\x06" * 14
+        rig.h.outputs = x
+        rig.until(lambda: rig.h.inputs == transform(x))
+        rig.until(lambda: rig.master._pending is None)
+        link, real_send, real_recv = rig.link, rig.link.send, rig.link.recv
+        delays = [0.06, 0.04, 0.035]                       # A try 1, A try 2, B; then prompt
+        queue: List[list] = []                             # [release time, bytes], in order
+        sent: List[bytes] = []
+
+        def send(data: bytes) -> None:
+            real_send(data)
+            due = rig.clock() + (delays[len(sent)] if len(sent) < len(delays) else 0.002)
+            queue.append([max([due] + [q[0] for q in queue]),
+                          (bytes(data) if echo else b"") + real_recv(4096, 0.0)])
+            sent.append(bytes(data))
+            rig.h.outputs = y                              # B (the next new request) carries Y
+
+        def recv(n: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+            while queue and queue[0][0] <= rig.clock():
+                link._rx += queue.pop(0)[1]
+            return real_recv(n, timeout)
+
+        link.send, link.recv = send, recv
+        ends: List[Optional[bytes]] = []
+        turns = rig.master._turns
+        for _ in range(400):
+            rig.master.step()
+            if rig.master._turns != turns:
+                turns = rig.master._turns
+                if len(sent) >= 3:                          # a turn ended after B went out
+                    ends.append(rig.h.inputs)
+            rig.clock.advance(0.001)
+        self.assertEqual(sent[0], sent[1])                  # A was resent (the interleaving happened)
+        self.assertNotEqual(sent[2], sent[0])
+        self.assertTrue(rig.h.connected)
+        return ends, rig.master.counters
+
+    def test_a_late_reply_to_a_resend_is_not_taken_for_the_next_requests(self):
+        """The resend's reply of the previous request, read while the next request awaits its own:
+        not taken as that request's reply (its inputs are a cycle old), with and without an echo."""
+        for echo in (True, False):
+            with self.subTest(echo=echo):
+                ends, c = self._late_second_try(echo)
+                self.assertEqual(ends[0], transform(b"\x06" * 14))   # B's turn ends with B's inputs
+                self.assertNotIn(transform(b"\x05" * 14), ends)
+                self.assertEqual(c.late_replies, 1)
+
+    def test_an_adapter_that_stops_echoing_costs_one_resend(self):
+        """A request after an echoed one awaits its own echo before taking a reply; when the
+        adapter stops echoing, that request's reply is skipped once and its resend (no echo read
+        since the first try) takes the reply."""
+        rig = Rig()
+        real_send = rig.link.send
+        echo = {"on": True}
+
+        def maybe_echoing_send(data: bytes) -> None:
+            real_send(data)
+            if echo["on"]:
+                reply = rig.link.recv(4096, 0.0)
+                rig.link._rx[:0] = bytes(data)
+                rig.link._rx += reply
+
+        rig.link.send = maybe_echoing_send
+        rig.until(lambda: rig.h.connected)
+        rig.until(lambda: rig.master._pending is None)
+        c = rig.master.counters
+        r0, l0 = c.retries, c.late_replies
+        self.assertEqual(l0, 0)
+        echo["on"] = False
+        rig.h.outputs = b"\x07" * 14
+        rig.until(lambda: rig.h.inputs == transform(b"\x07" * 14))
+        rig.steps(200)
+        self.assertEqual((c.retries - r0, c.late_replies - l0), (1, 1))
+        self.assertTrue(rig.h.connected)
+
     def test_another_masters_request_is_no_echo(self):
         rig = Rig()
         rig.until(lambda: rig.h.connected)

@@ -248,6 +248,8 @@ class _Pending:
     retries: int = 0
     job: Optional[AcyclicRequest] = None
     sent: float = 0.0         # when the request (or its last retry) went out
+    await_echo: bool = False  # the adapter echoes: a reply counts only after this request's echo
+    replies: int = 0          # replies from the slave read while this request awaited its own
 
 
 def _adapter_latency(link: Link) -> float:
@@ -307,6 +309,12 @@ class DpMaster(MasterApi):
         self._round_idle = False
         self._timeouts: Dict[Tuple[int, int], float] = {}   # by request/reply length, for
         self._timeouts_for: Optional[Tuple[BusTiming, float, float]] = None   # these settings
+        # telling a late reply to an earlier transmission from the awaited one (_feed): an echo was
+        # read since the last transmission (the adapter echoes); the replies to a finished turn's
+        # later tries that may still come (the slave's repeats of the reply that ended it: its bytes)
+        self._echo_since_tx = False
+        self._repeats = 0
+        self._repeat_of = b""
         self._handlers: Dict[MasterSlaveState, Callable[[SlaveHandle, float], bool]] = {
             MasterSlaveState.INIT: self._do_init,
             MasterSlaveState.WAIT_DIAG: self._do_diag,
@@ -384,6 +392,8 @@ class DpMaster(MasterApi):
         self.rx_latency = _adapter_latency(link)
         self._pending = None
         self.deframer.reset()
+        self._echo_since_tx = False
+        self._repeats = 0
 
     def close(self) -> None:
         self.link.close()
@@ -455,6 +465,12 @@ class DpMaster(MasterApi):
     def _transmit(self, raw: bytes) -> None:
         # TSYN: the line must be quiet before a request; drop stale bytes
         self._drop_stale()
+        if self._pending is not None:
+            # the adapter echoed the previous transmission: it will echo this one before its reply
+            # (the bytes come in line order), so a reply read before that echo answers an earlier
+            # transmission. An adapter that stops echoing costs one resend: that one awaits no echo
+            self._pending.await_echo = self._echo_since_tx
+        self._echo_since_tx = False
         self.link.send(raw)
 
     def _drop_stale(self) -> None:
@@ -468,7 +484,12 @@ class DpMaster(MasterApi):
             if not data:
                 break
             kept = vars(self.deframer.counters).copy()
-            self.counters.echoes += sum(1 for f in self.deframer.feed(data) if self._is_echo(f))
+            for frame in self.deframer.feed(data):
+                if self._is_echo(frame):
+                    self.counters.echoes += 1
+                    self._echo_since_tx = True
+                else:
+                    self._is_repeat(frame)      # a repeat read here cannot be taken for a reply
             vars(self.deframer.counters).update(kept)
         else:
             self.link.flush_input()     # a line that keeps talking: drop the rest unseen
@@ -479,6 +500,7 @@ class DpMaster(MasterApi):
             at = _SA_AT.get(head[0])
             if at is not None and len(head) > at and head[at] & 0x7F == self.address:
                 self.counters.echoes += 1
+                self._echo_since_tx = True
         self.deframer.reset()
 
     def _is_echo(self, frame: Frame) -> bool:
@@ -488,8 +510,17 @@ class DpMaster(MasterApi):
         # past a resend, or behind a reply that ended the turn) too. Not a telegram of another station
         return isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request and frame.sa == self.address
 
+    def _is_repeat(self, frame: Frame) -> bool:
+        """``frame`` is one of the slave's repeats still owed for the turn before (a later try's
+        reply: the same bytes as the reply that ended that turn); counts it off."""
+        if self._repeats and frame.encode() == self._repeat_of:
+            self._repeats -= 1
+            return True
+        return False
+
     def _end_turn(self) -> None:
         self._pending = None
+        self._repeats = 0     # a reply that ended the turn sets them again (_feed)
         self._turns += 1
         self._turn += 1
         if self._turn >= len(self.slaves):
@@ -570,14 +601,18 @@ class DpMaster(MasterApi):
 
     def _feed(self, data: bytes, now: float) -> None:
         p = self._pending
-        if p is not None and p.kind == "dx" and not self.deframer.pending:
+        if (p is not None and p.kind == "dx" and not self.deframer.pending and not p.await_echo
+                and not self._repeats):
             # the usual good Data_Exchange reply, checked on the raw bytes: SD2 to us from the
             # slave, FC DL (response, slave, no diagnosis), no SAPs, correct framing, FCS and ED;
             # its length is checked on delivery. Anything else -- other lengths, DH, SD1 / SD3 / SC,
-            # split or merged chunks, errors -- takes the general path through the deframer.
+            # split or merged chunks, errors, a reply that may answer an earlier transmission (its
+            # echo not read yet, a repeat owed) -- takes the general path through the deframer.
             inputs = sd2_data(data, self.address, p.slave.address, _FC_DL)
             if inputs is not None and len(inputs) == (p.slave.spec.input_size or 0):
                 self._dx_done(p, inputs, ResponseStatus.DL, now)
+                if p.retries > p.replies:   # a later try's reply may still come: a repeat
+                    self._repeats, self._repeat_of = p.retries - p.replies, bytes(data)
                 return
         garbage = self.deframer.counters.garbage_bytes
         frames = self.deframer.feed(data)
@@ -585,22 +620,43 @@ class DpMaster(MasterApi):
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
         ended = False
         for frame in frames:
+            pending = self._pending
             if self._is_echo(frame):
                 self.counters.echoes += 1
+                self._echo_since_tx = True
+                if pending is not None and pending.await_echo and frame.encode() == pending.raw:
+                    pending.await_echo = False      # what follows answers this request
+                    self._repeats = 0
                 continue
             if ended:
-                continue  # after the reply that ended the turn: a later try's reply (not awaited)
-            pending = self._pending
+                self._is_repeat(frame)  # after the reply that ended the turn: a later try's reply
+                continue                # (not awaited)
             if pending is None:
                 self.counters.unexpected_frames += 1
                 continue
             if not self._addressed_to_us(pending, frame):
                 self.counters.unexpected_frames += 1
                 continue
+            pending.replies += 1
+            if pending.await_echo or self._is_repeat(frame):
+                # a reply to an earlier transmission: read before this request's echo, or the
+                # slave's repeat of the reply that ended the turn before (a later try's, late);
+                # taking it would deliver old inputs and advance the FCB on the wrong reply
+                self.counters.late_replies += 1
+                log.debug("slave %d: a late reply to an earlier transmission skipped",
+                          pending.slave.address)
+                continue
             self._reply_handlers[pending.kind](pending, frame, now)
             # the turn finished: the rest of the chunk is no reply to wait for, but an echo in
-            # it (a resend's, read after the first try's late reply) is still counted
+            # it (a resend's, read after the first try's late reply) is still counted, and the
+            # slave's repeats (replies to the later tries) counted off
+            # (one reply a transmission: those of its tries not read yet; a reply skipped in this
+            # turn counts as one of them, else a slave whose inputs stay the same would have each
+            # fresh reply taken for the repeat owed since a resend, and be resent for ever)
             ended = self._pending is None
+            if ended and pending.retries >= pending.replies:
+                self._repeats = pending.retries + 1 - pending.replies
+                self._repeat_of = frame.encode()
         if self._pending is not None:
             need = self.deframer.bytes_needed()
             if need:  # a reply is arriving: give it time to complete
