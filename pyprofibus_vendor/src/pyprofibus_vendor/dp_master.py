@@ -309,9 +309,11 @@ class DpMaster(MasterApi):
         self._round_idle = False
         self._timeouts: Dict[Tuple[int, int], float] = {}   # by request/reply length, for
         self._timeouts_for: Optional[Tuple[BusTiming, float, float]] = None   # these settings
-        # telling a late reply to an earlier transmission from the awaited one (_feed): an echo was
-        # read since the last transmission (the adapter echoes); the replies to a finished turn's
-        # later tries that may still come (the slave's repeats of the reply that ended it: its bytes)
+        # telling a late reply to an earlier transmission from the awaited one (_feed): the adapter
+        # echoes (an echo was read, and no reply since without one); an echo was read since the last
+        # transmission; the replies to a finished turn's later tries that may still come (the
+        # slave's repeats of the reply that ended it: its bytes)
+        self._echoing = False
         self._echo_since_tx = False
         self._repeats = 0
         self._repeat_of = b""
@@ -392,7 +394,7 @@ class DpMaster(MasterApi):
         self.rx_latency = _adapter_latency(link)
         self._pending = None
         self.deframer.reset()
-        self._echo_since_tx = False
+        self._echoing = self._echo_since_tx = False
         self._repeats = 0
 
     def close(self) -> None:
@@ -466,10 +468,11 @@ class DpMaster(MasterApi):
         # TSYN: the line must be quiet before a request; drop stale bytes
         self._drop_stale()
         if self._pending is not None:
-            # the adapter echoed the previous transmission: it will echo this one before its reply
-            # (the bytes come in line order), so a reply read before that echo answers an earlier
-            # transmission. An adapter that stops echoing costs one resend: that one awaits no echo
-            self._pending.await_echo = self._echo_since_tx
+            # an adapter that echoes reads this transmission back before its reply (the bytes come
+            # in line order), so a reply read before that echo answers an earlier transmission --
+            # also one of a turn that ended without a reply. One that stops echoing costs one
+            # resend: a reply read with no echo at all since the transmission ends the expectation
+            self._pending.await_echo = self._echoing
         self._echo_since_tx = False
         self.link.send(raw)
 
@@ -487,7 +490,7 @@ class DpMaster(MasterApi):
             for frame in self.deframer.feed(data):
                 if self._is_echo(frame):
                     self.counters.echoes += 1
-                    self._echo_since_tx = True
+                    self._echoing = self._echo_since_tx = True
                 else:
                     self._is_repeat(frame)      # a repeat read here cannot be taken for a reply
             vars(self.deframer.counters).update(kept)
@@ -500,7 +503,7 @@ class DpMaster(MasterApi):
             at = _SA_AT.get(head[0])
             if at is not None and len(head) > at and head[at] & 0x7F == self.address:
                 self.counters.echoes += 1
-                self._echo_since_tx = True
+                self._echoing = self._echo_since_tx = True
         self.deframer.reset()
 
     def _is_echo(self, frame: Frame) -> bool:
@@ -623,7 +626,7 @@ class DpMaster(MasterApi):
             pending = self._pending
             if self._is_echo(frame):
                 self.counters.echoes += 1
-                self._echo_since_tx = True
+                self._echoing = self._echo_since_tx = True
                 if pending is not None and pending.await_echo and frame.encode() == pending.raw:
                     pending.await_echo = False      # what follows answers this request
                     self._repeats = 0
@@ -643,6 +646,8 @@ class DpMaster(MasterApi):
                 # slave's repeat of the reply that ended the turn before (a later try's, late);
                 # taking it would deliver old inputs and advance the FCB on the wrong reply
                 self.counters.late_replies += 1
+                if not self._echo_since_tx:     # no echo before it: the adapter may have stopped
+                    self._echoing = False
                 log.debug("slave %d: a late reply to an earlier transmission skipped",
                           pending.slave.address)
                 continue
