@@ -1,100 +1,94 @@
 #!/usr/bin/python3
-"""Late replies on the virtual line (printed, never asserted): how many Data_Exchange turns took a
-reply read before their request's own echo -- necessarily an earlier transmission's reply, inputs a
-cycle old -- through an echoing USB adapter with a latency timer (controller.adapter_model), over
-real ptys at 19.2 kbit/s.
+"""Stale replies on the virtual line (printed, never asserted): how many Data_Exchange turns took a
+reply that answered an earlier request (inputs a cycle old) -- through a USB adapter with a latency
+timer, with and without echo (controller.adapter_model), over real ptys paced at 19.2 kbit/s.
 
-    scripts/bench stale_replies [-- --seconds 20 --latency-ms 16]
+    scripts/bench stale_replies [-- --seconds 15 --latency-ms 16]
 
 Run it beside busy loops (e.g. two ``python3 -c 'while 1: pass'``) to see the resends of a loaded
-machine. The link's bytes are parsed a second time beside the master (its own Deframer), chunk by
-chunk as the master reads them: ``exposed`` counts new requests that had an earlier transmission's
-reply read before their own echo; ``taken`` the Data_Exchange turns that ended while their
-request's echo was not read yet (a lower bound of the stale replies taken: a chunk is judged as a
-whole); ``late_replies`` the master's counter of the replies it skipped.
+machine. The station is our DpSlave (in a thread, on its own pty behind the line hub) whose inputs
+are its outputs XOR 0xA5; the outputs change with every request, so a turn's inputs tell exactly
+which request's reply ended it: ``stale`` counts the turns whose inputs are not their own request's.
+``late_replies`` is the master's counter of the replies it skipped as an earlier transmission's.
+Runs: echo; no echo; no echo with ``wire_timed`` (the hub paces the line at the bit rate, so a reply
+read sooner than the wire allows is an earlier transmission's).
 """
 from __future__ import annotations
 
 import argparse
+import logging
 import tempfile
+import threading
 import time
 from pathlib import Path
 
 from pyprofibus_vendor.config import ROBOT_IDENT, default_robot_config
 from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
-from pyprofibus_vendor.fdl import Deframer
-from pyprofibus_vendor.phy_serial import SerialLink
+from pyprofibus_vendor.dp_slave import DpSlave, SlaveServer
+from pyprofibus_vendor.phy_serial import SerialLink, open_pty_pair
 
 from vr_driver.controller.adapter_model import AdapterBehaviour
 from vr_driver.controller.line import LineHub
-from vr_driver.controller.program import VirtualController
 
 BAUD, MASTER, SLAVE = 19200, 2, 4
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=20.0)
-    ap.add_argument("--latency-ms", type=int, default=16)
-    args = ap.parse_args()
+def run(seconds: float, latency_ms: int, echo: bool, wire_timed: bool) -> str:
     cfg = default_robot_config("virtual", phy_type="memory").slave(SLAVE).cfg
+    stop = threading.Event()
+    pair = open_pty_pair()
+    slave = DpSlave(SLAVE, ROBOT_IDENT, cfg)
+    slave.on_outputs = lambda out: setattr(slave, "inputs", bytes(x ^ 0xA5 for x in out))
+    server = SlaveServer(pair.master_link(), slave)
+    thread = threading.Thread(target=server.serve, args=(stop,), daemon=True)
+    thread.start()
     with tempfile.TemporaryDirectory() as tmp:
-        g2 = VirtualController(pty_link=str(Path(tmp) / "g2"), baud=BAUD).start()
-        hub = LineHub([str(Path(tmp) / "g2")], pty_link=str(Path(tmp) / "line"), baud=BAUD,
-                      adapter=AdapterBehaviour(latency_ms=args.latency_ms, echo=True)).start()
+        hub = LineHub([pair.slave_path], pty_link=str(Path(tmp) / "line"), baud=BAUD,
+                      adapter=AdapterBehaviour(latency_ms=latency_ms, echo=echo)).start()
         link = SerialLink(str(Path(tmp) / "line"), BAUD)
-        master = DpMaster(link, MASTER, BAUD, dx_tolerance=0.5, retry_steps=True, backoff_max=0.3)
+        master = DpMaster(link, MASTER, BAUD, dx_tolerance=0.5, retry_steps=True, backoff_max=0.3,
+                          wire_timed=wire_timed)
         robot = master.add_slave(SlaveSpec(SLAVE, ROBOT_IDENT, cfg, watchdog=0.3))
-        seen = {"tx": b"", "own_echo": False, "reply_first": False, "new": 0, "exposed": 0,
-                "taken": 0, "dx": 0}
-        spy = Deframer()
-        real_send, real_recv, real_done = link.send, link.recv, master._dx_done
+        seen = {"dx": 0, "stale": 0}
+        real_done = master._dx_done
 
-        def send(data: bytes) -> None:
-            if bytes(data) != seen["tx"]:               # a new request (not a resend)
-                seen["new"] += 1
-                seen["own_echo"] = seen["reply_first"] = False
-            seen["tx"] = bytes(data)
-            real_send(data)
-
-        def recv(n: int = 4096, timeout: float = 0.0) -> bytes:
-            data = real_recv(n, timeout)
-            for frame in spy.feed(data) if data else ():
-                if frame.encode() == seen["tx"]:
-                    seen["own_echo"] = True
-                elif not seen["own_echo"] and getattr(frame, "da", None) == MASTER \
-                        and not frame.fc.request and not seen["reply_first"]:
-                    seen["reply_first"] = True
-                    seen["exposed"] += 1
-            return data
-
-        def done(p, data, status, now) -> None:
+        def done(p, data, status, now) -> None:       # the request's outputs: its SD2 data unit
             seen["dx"] += 1
-            if not seen["own_echo"]:
-                seen["taken"] += 1
+            if bytes(x ^ 0xA5 for x in data) != p.raw[7:-2]:
+                seen["stale"] += 1
             real_done(p, data, status, now)
 
-        link.send, link.recv, master._dx_done = send, recv, done
+        master._dx_done = done
         try:
             if not master.wait_connected(SLAVE, 15.0):
                 raise SystemExit("no Data_Exchange through the adapter")
             c = master.counters
-            n0, e0, t0, d0, r0, q0 = (seen["new"], seen["exposed"], seen["taken"], seen["dx"],
-                                      c.retries, c.requests)
-            l0 = getattr(c, "late_replies", 0)
-            end = time.monotonic() + args.seconds
+            d0, s0, r0, q0, l0 = seen["dx"], seen["stale"], c.retries, c.requests, c.late_replies
+            end, n = time.monotonic() + seconds, 0
             while time.monotonic() < end:
+                n += 1
+                robot.outputs = n.to_bytes(2, "big") * 7
                 master.cycle(timeout=1.0)
-            print(f"{args.seconds:.0f} s, latency timer {args.latency_ms} ms, echo: "
-                  f"new requests {seen['new'] - n0}, exposed {seen['exposed'] - e0}, "
-                  f"Data_Exchange replies {seen['dx'] - d0}, taken before their echo "
-                  f"{seen['taken'] - t0}, late_replies {getattr(c, 'late_replies', 0) - l0}, "
-                  f"retries {c.retries - r0} of {c.requests - q0} requests, "
-                  f"connected {robot.connected}, losses {c.losses}")
+            return (f"{seconds:.0f} s, latency timer {latency_ms} ms, echo {echo}, wire_timed "
+                    f"{wire_timed}: Data_Exchange "
+                    f"replies {seen['dx'] - d0}, stale {seen['stale'] - s0}, late_replies "
+                    f"{c.late_replies - l0}, retries {c.retries - r0} of {c.requests - q0} requests, "
+                    f"connected {robot.connected}, losses {c.losses}")
         finally:
             master.close()
             hub.stop()
-            g2.stop()
+            stop.set()
+            thread.join(2.0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=15.0)
+    ap.add_argument("--latency-ms", type=int, default=16)
+    args = ap.parse_args()
+    logging.getLogger("pyprofibus_vendor").setLevel(logging.ERROR)
+    for echo, timed in ((True, False), (False, False), (False, True)):
+        print(run(args.seconds, args.latency_ms, echo, timed), flush=True)
 
 
 if __name__ == "__main__":

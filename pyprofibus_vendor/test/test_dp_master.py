@@ -101,6 +101,20 @@ class TimingTest(unittest.TestCase):
         m.replace_link(link)
         self.assertEqual(m._reply_timeout(23, 23), 0.05)
 
+    def test_replies_are_timed_against_the_wire_on_a_serial_device_only(self):
+        from pyprofibus_vendor.adapter import AdapterSetup
+        link = SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG))
+        self.assertFalse(DpMaster(link).wire_timed)                         # no serial device
+        link.adapter, link.is_pty = AdapterSetup("/dev/pts/3", False, None, None), True
+        self.assertFalse(DpMaster(link).wire_timed)                         # a pty: no baud timing
+        link.is_pty = False
+        m = DpMaster(link)
+        self.assertTrue(m.wire_timed)
+        self.assertFalse(DpMaster(link, wire_timed=False).wire_timed)
+        link.is_pty = True
+        m.replace_link(link)
+        self.assertFalse(m.wire_timed)
+
 
 class SpecTest(unittest.TestCase):
     def test_derived(self):
@@ -336,13 +350,13 @@ class DataExchangeTest(unittest.TestCase):
         self.assertTrue(rig.h.connected)
 
     def _late_second_try(self, echo: bool, delays: tuple = (0.06, 0.04, 0.035), lead: int = 0,
-                         **kw) -> tuple:
+                         prompt: float = 0.002, wire_timed: bool = False, **kw) -> tuple:
         """An adapter that hands over each transmission's bytes (its echo when ``echo``, then the
         slave's reply) ``delays[n]`` seconds after transmission n, in order. By default the first
         try of request A (outputs X) is answered after its timeout, so A is resent; the first try's
         reply ends A's turn, request B (outputs Y) goes out, and the resend's reply -- the slave's
         repeat of A's, inputs from X -- comes before B's own. ``lead``: transmissions (answered
-        promptly, outputs X) before A. Returns (the inputs each turn ended
+        after ``prompt`` s, outputs X) before A; ``wire_timed`` from then on. Returns (the inputs each turn ended
         with after B was sent, the master's counters)."""
         rig = Rig(**kw)
         rig.until(lambda: rig.h.connected)
@@ -357,7 +371,7 @@ class DataExchangeTest(unittest.TestCase):
 
         def send(data: bytes) -> None:
             real_send(data)
-            due = rig.clock() + (delays[len(sent)] if len(sent) < len(delays) else 0.002)
+            due = rig.clock() + (delays[len(sent)] if len(sent) < len(delays) else prompt)
             queue.append([max([due] + [q[0] for q in queue]),
                           (bytes(data) if echo else b"") + real_recv(4096, 0.0)])
             sent.append(bytes(data))
@@ -370,6 +384,7 @@ class DataExchangeTest(unittest.TestCase):
             return real_recv(n, timeout)
 
         link.send, link.recv = send, recv
+        rig.master.wire_timed = wire_timed
         ends: List[Optional[bytes]] = []
         turns = rig.master._turns
         for _ in range(400):
@@ -399,6 +414,17 @@ class DataExchangeTest(unittest.TestCase):
                     self.assertEqual(c.late_replies, 2)
                 else:
                     self.assertEqual(ends[0], transform(b"\x05" * 14))
+
+    def test_late_replies_read_sooner_than_the_wire_allows_are_skipped(self):
+        """The same without an echo, on a line whose bytes take their time on the wire (every reply
+        here comes at least the request's and the reply's time on the wire, 27 ms, after its request):
+        A's replies, read 20 ms after B went out, cannot be B's; B's own, after 30 ms, is taken."""
+        ends, c = self._late_second_try(False, (0.03, 0.12, 0.07, 0.03), lead=1, prompt=0.03,
+                                        dx_tolerance=0.5, wire_timed=True)
+        self.assertEqual(c.dx_missed, 1)
+        self.assertEqual(ends[0], transform(b"\x06" * 14))
+        self.assertEqual(c.late_replies, 2)
+        self.assertNotIn(transform(b"\x05" * 14), ends)
 
     def test_a_late_reply_to_a_resend_is_not_taken_for_the_next_requests(self):
         """The resend's reply of the previous request, read while the next request awaits its own:

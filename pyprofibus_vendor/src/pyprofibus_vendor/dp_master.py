@@ -252,6 +252,11 @@ class _Pending:
     replies: int = 0          # replies from the slave read while this request awaited its own
 
 
+def _on_a_wire(link: Link) -> bool:
+    """``link`` is a serial device (not a pty, not a URL): its bytes take their time on the wire."""
+    return link.adapter is not None and getattr(link, "is_pty", True) is False
+
+
 def _adapter_latency(link: Link) -> float:
     """[s] the latency timer of the USB adapter under ``link`` where it is known, else 0."""
     ms = link.adapter.latency_timer_ms if link.adapter is not None else None
@@ -276,6 +281,7 @@ class DpMaster(MasterApi):
                  max_retry: Optional[int] = None, reply_timeout_floor: float = 0.05,
                  backoff_min: float = 0.1, backoff_max: float = 1.0,
                  state_limit: float = 1.0, dx_tolerance: float = 0.0, retry_steps: bool = False,
+                 wire_timed: Optional[bool] = None,
                  on_state_change: Optional[Callable[[SlaveHandle, MasterSlaveState,
                                                      MasterSlaveState, str], None]] = None
                  ) -> None:
@@ -290,6 +296,11 @@ class DpMaster(MasterApi):
         self.clock = clock
         self.reply_timeout_floor = reply_timeout_floor
         self.rx_latency = _adapter_latency(link)   # [s] the adapter may hold a reply this long
+        # a reply read sooner after its request's transmission than the wire allows (the request,
+        # TSDR min, the reply) answers an earlier transmission: judged on a link whose bytes take
+        # their time on the wire (None: a serial device, not a pty -- a pty has no baud timing)
+        self._wire_timed_auto = wire_timed is None
+        self.wire_timed = _on_a_wire(link) if wire_timed is None else bool(wire_timed)
         self.backoff_min = backoff_min
         self.backoff_max = backoff_max
         if not dx_tolerance >= 0.0:
@@ -392,6 +403,8 @@ class DpMaster(MasterApi):
         """Continue on a new link (e.g. a reopened serial port)."""
         self.link = link
         self.rx_latency = _adapter_latency(link)
+        if self._wire_timed_auto:
+            self.wire_timed = _on_a_wire(link)
         self._pending = None
         self.deframer.reset()
         self._echoing = self._echo_since_tx = False
@@ -602,10 +615,18 @@ class DpMaster(MasterApi):
         if data:
             self._feed(data, now)
 
+    def _too_early(self, p: _Pending, reply_len: int, read_at: float) -> bool:
+        """A reply of ``reply_len`` bytes read at ``read_at`` came sooner after ``p``'s (last)
+        transmission than the wire allows: it answers an earlier one (only on a timed wire)."""
+        t = self.timing
+        return read_at < p.sent + t.chars(len(p.raw) + reply_len) + t.bits(t.min_tsdr_bits)
+
     def _feed(self, data: bytes, now: float) -> None:
         p = self._pending
+        read_at = self.clock() if self.wire_timed else 0.0   # the bytes were here by then
         if (p is not None and p.kind == "dx" and not self.deframer.pending and not p.await_echo
-                and not self._repeats):
+                and not self._repeats
+                and not (self.wire_timed and self._too_early(p, len(data), read_at))):
             # the usual good Data_Exchange reply, checked on the raw bytes: SD2 to us from the
             # slave, FC DL (response, slave, no diagnosis), no SAPs, correct framing, FCS and ED;
             # its length is checked on delivery. Anything else -- other lengths, DH, SD1 / SD3 / SC,
@@ -641,10 +662,12 @@ class DpMaster(MasterApi):
                 self.counters.unexpected_frames += 1
                 continue
             pending.replies += 1
-            if pending.await_echo or self._is_repeat(frame):
-                # a reply to an earlier transmission: read before this request's echo, or the
-                # slave's repeat of the reply that ended the turn before (a later try's, late);
-                # taking it would deliver old inputs and advance the FCB on the wrong reply
+            if (pending.await_echo or self._is_repeat(frame) or self.wire_timed
+                    and self._too_early(pending, len(frame.encode()), read_at)):
+                # a reply to an earlier transmission: read before this request's echo, the slave's
+                # repeat of the reply that ended the turn before (a later try's, late), or read
+                # sooner than the wire allows; taking it would deliver old inputs and advance the
+                # FCB on the wrong reply
                 self.counters.late_replies += 1
                 if not self._echo_since_tx:     # no echo before it: the adapter may have stopped
                     self._echoing = False
