@@ -47,7 +47,7 @@ def run(seconds: float, latency_ms: int, echo: bool, wire_timed: bool) -> str:
                       adapter=AdapterBehaviour(latency_ms=latency_ms, echo=echo)).start()
         link = SerialLink(str(Path(tmp) / "line"), BAUD)
         master = DpMaster(link, MASTER, BAUD, dx_tolerance=0.5, retry_steps=True, backoff_max=0.3,
-                          wire_timed=wire_timed)
+                          **({"wire_timed": True} if wire_timed else {}))
         robot = master.add_slave(SlaveSpec(SLAVE, ROBOT_IDENT, cfg, watchdog=0.3))
         seen = {"dx": 0, "stale": 0}
         real_done = master._dx_done
@@ -63,7 +63,7 @@ def run(seconds: float, latency_ms: int, echo: bool, wire_timed: bool) -> str:
             if not master.wait_connected(SLAVE, 15.0):
                 raise SystemExit("no Data_Exchange through the adapter")
             c = master.counters
-            d0, s0, r0, q0, l0 = seen["dx"], seen["stale"], c.retries, c.requests, c.late_replies
+            d0, s0, r0, q0, l0 = seen["dx"], seen["stale"], c.retries, c.requests, getattr(c, "late_replies", 0)
             end, n = time.monotonic() + seconds, 0
             while time.monotonic() < end:
                 n += 1
@@ -72,7 +72,7 @@ def run(seconds: float, latency_ms: int, echo: bool, wire_timed: bool) -> str:
             return (f"{seconds:.0f} s, latency timer {latency_ms} ms, echo {echo}, wire_timed "
                     f"{wire_timed}: Data_Exchange "
                     f"replies {seen['dx'] - d0}, stale {seen['stale'] - s0}, late_replies "
-                    f"{c.late_replies - l0}, retries {c.retries - r0} of {c.requests - q0} requests, "
+                    f"{getattr(c, 'late_replies', 0) - l0}, retries {c.retries - r0} of {c.requests - q0} requests, "
                     f"connected {robot.connected}, losses {c.losses}")
         finally:
             master.close()

@@ -649,8 +649,9 @@ class DpMaster(MasterApi):
                 self.counters.echoes += 1
                 self._echoing = self._echo_since_tx = True
                 if pending is not None and pending.await_echo and frame.encode() == pending.raw:
-                    pending.await_echo = False      # what follows answers this request
-                    self._repeats = 0
+                    # what follows answers this request -- or, from a slave that answered late
+                    # (beyond its TSDR), an earlier one: the repeats owed stay owed
+                    pending.await_echo = False
                 continue
             if ended:
                 self._is_repeat(frame)  # after the reply that ended the turn: a later try's reply
