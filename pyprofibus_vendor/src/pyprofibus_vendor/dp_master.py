@@ -32,6 +32,13 @@ station whose last attempt ended in a missing reply (or a state limit) answers F
 outage. A reply that arrives garbled, with nothing of it left to complete, is repeated after
 the idle time (TSYN) instead of after the whole slot time.
 
+Late replies: a reply to an earlier transmission (an earlier request's, held by the adapter past
+the next request) is skipped and counted (``late_replies``), not taken for the awaited one: with an
+adapter that echoes, a reply counts only behind the request's own echo; the slave's repeat still
+owed for a resend (the same bytes as the reply that ended the turn) is counted off; on a timed wire
+(``wire_timed``: a serial device, not a pty) a reply read sooner after the request than the wire
+allows is an earlier one's (vr_driver/doc/adapters.md, "Late replies").
+
 A *turn* is one transaction with one slave (request, then reply or timeout
 after ``max_retry`` repetitions with the same FCB); slaves take turns in
 order and a completed round is a *cycle*. Slot time and retry limit come
