@@ -101,6 +101,20 @@ class TimingTest(unittest.TestCase):
         m.replace_link(link)
         self.assertEqual(m._reply_timeout(23, 23), 0.05)
 
+    def test_replies_are_timed_against_the_wire_on_a_serial_device_only(self):
+        from pyprofibus_vendor.adapter import AdapterSetup
+        link = SlaveLink(DpSlave(SLAVE, ROBOT_IDENT, ROBOT_CFG))
+        self.assertFalse(DpMaster(link).wire_timed)                         # no serial device
+        link.adapter, link.is_pty = AdapterSetup("/dev/pts/3", False, None, None), True
+        self.assertFalse(DpMaster(link).wire_timed)                         # a pty: no baud timing
+        link.is_pty = False
+        m = DpMaster(link)
+        self.assertTrue(m.wire_timed)
+        self.assertFalse(DpMaster(link, wire_timed=False).wire_timed)
+        link.is_pty = True
+        m.replace_link(link)
+        self.assertFalse(m.wire_timed)
+
 
 class SpecTest(unittest.TestCase):
     def test_derived(self):
@@ -333,6 +347,121 @@ class DataExchangeTest(unittest.TestCase):
         rig.link._rx += DX_REQ[:5]                 # too short to tell whose: dropped uncounted
         rig.steps(1)
         self.assertEqual(c.echoes - e0, 2)
+        self.assertTrue(rig.h.connected)
+
+    def _late_second_try(self, echo: bool, delays: tuple = (0.06, 0.04, 0.035), lead: int = 0,
+                         prompt: float = 0.002, wire_timed: bool = False, **kw) -> tuple:
+        """An adapter that hands over each transmission's bytes (its echo when ``echo``, then the
+        slave's reply) ``delays[n]`` seconds after transmission n, in order. By default the first
+        try of request A (outputs X) is answered after its timeout, so A is resent; the first try's
+        reply ends A's turn, request B (outputs Y) goes out, and the resend's reply -- the slave's
+        repeat of A's, inputs from X -- comes before B's own. ``lead``: transmissions (answered
+        after ``prompt`` s, outputs X) before A; ``wire_timed`` from then on. Returns (the inputs each turn ended
+        with after B was sent, the master's counters)."""
+        rig = Rig(**kw)
+        rig.until(lambda: rig.h.connected)
+        x, y = b"\x05" * 14, b"\x06" * 14
+        rig.h.outputs = x
+        rig.until(lambda: rig.h.inputs == transform(x))
+        rig.until(lambda: rig.master._pending is None)
+        link, real_send, real_recv = rig.link, rig.link.send, rig.link.recv
+        # delays: A try 1, A try 2, B; then prompt
+        queue: List[list] = []                             # [release time, bytes], in order
+        sent: List[bytes] = []
+
+        def send(data: bytes) -> None:
+            real_send(data)
+            due = rig.clock() + (delays[len(sent)] if len(sent) < len(delays) else prompt)
+            queue.append([max([due] + [q[0] for q in queue]),
+                          (bytes(data) if echo else b"") + real_recv(4096, 0.0)])
+            sent.append(bytes(data))
+            if len(sent) > lead:
+                rig.h.outputs = y                          # B (the next new request) carries Y
+
+        def recv(n: int = 4096, timeout: Optional[float] = 0.0) -> bytes:
+            while queue and queue[0][0] <= rig.clock():
+                link._rx += queue.pop(0)[1]
+            return real_recv(n, timeout)
+
+        link.send, link.recv = send, recv
+        rig.master.wire_timed = wire_timed
+        ends: List[Optional[bytes]] = []
+        turns = rig.master._turns
+        for _ in range(400):
+            rig.master.step()
+            if rig.master._turns != turns:
+                turns = rig.master._turns
+                if len(sent) >= lead + 3:                   # a turn ended after B went out
+                    ends.append(rig.h.inputs)
+            rig.clock.advance(0.001)
+        self.assertEqual(sent[lead], sent[lead + 1])        # A was resent (the interleaving happened)
+        self.assertNotEqual(sent[lead + 2], sent[lead])
+        self.assertTrue(rig.h.connected)
+        return ends, rig.master.counters
+
+    def test_late_replies_to_a_turn_that_ended_without_one_are_skipped_behind_an_echo(self):
+        """Both tries of A answered only after A's turn ended without a reply (tolerated), then
+        read while B awaits its reply: an adapter seen echoing (a transmission before A) shows they come before B's echo, so they are
+        skipped. Without an echo they cannot be told from B's reply (no FCB in a reply, no repeat
+        owed): the master takes the first -- the limit doc/adapters.md states."""
+        for echo in (True, False):
+            with self.subTest(echo=echo):
+                ends, c = self._late_second_try(echo, (0.002, 0.12, 0.07, 0.03), lead=1,
+                                                dx_tolerance=0.5)
+                self.assertEqual(c.dx_missed, 1)
+                if echo:
+                    self.assertEqual(ends[0], transform(b"\x06" * 14))
+                    self.assertEqual(c.late_replies, 2)
+                else:
+                    self.assertEqual(ends[0], transform(b"\x05" * 14))
+
+    def test_late_replies_read_sooner_than_the_wire_allows_are_skipped(self):
+        """The same without an echo, on a line whose bytes take their time on the wire (every reply
+        here comes at least the request's and the reply's time on the wire, 27 ms, after its request):
+        A's replies, read 20 ms after B went out, cannot be B's; B's own, after 30 ms, is taken."""
+        ends, c = self._late_second_try(False, (0.03, 0.12, 0.07, 0.03), lead=1, prompt=0.03,
+                                        dx_tolerance=0.5, wire_timed=True)
+        self.assertEqual(c.dx_missed, 1)
+        self.assertEqual(ends[0], transform(b"\x06" * 14))
+        self.assertEqual(c.late_replies, 2)
+        self.assertNotIn(transform(b"\x05" * 14), ends)
+
+    def test_a_late_reply_to_a_resend_is_not_taken_for_the_next_requests(self):
+        """The resend's reply of the previous request, read while the next request awaits its own:
+        not taken as that request's reply (its inputs are a cycle old), with and without an echo."""
+        for echo in (True, False):
+            with self.subTest(echo=echo):
+                ends, c = self._late_second_try(echo)
+                self.assertEqual(ends[0], transform(b"\x06" * 14))   # B's turn ends with B's inputs
+                self.assertNotIn(transform(b"\x05" * 14), ends)
+                self.assertEqual(c.late_replies, 1)
+
+    def test_an_adapter_that_stops_echoing_costs_one_resend(self):
+        """A request after an echoed one awaits its own echo before taking a reply; when the
+        adapter stops echoing, that request's reply is skipped once and its resend (no echo read
+        since the first try) takes the reply."""
+        rig = Rig()
+        real_send = rig.link.send
+        echo = {"on": True}
+
+        def maybe_echoing_send(data: bytes) -> None:
+            real_send(data)
+            if echo["on"]:
+                reply = rig.link.recv(4096, 0.0)
+                rig.link._rx[:0] = bytes(data)
+                rig.link._rx += reply
+
+        rig.link.send = maybe_echoing_send
+        rig.until(lambda: rig.h.connected)
+        rig.until(lambda: rig.master._pending is None)
+        c = rig.master.counters
+        r0, l0 = c.retries, c.late_replies
+        self.assertEqual(l0, 0)
+        echo["on"] = False
+        rig.h.outputs = b"\x07" * 14
+        rig.until(lambda: rig.h.inputs == transform(b"\x07" * 14))
+        rig.steps(200)
+        self.assertEqual((c.retries - r0, c.late_replies - l0), (1, 1))
         self.assertTrue(rig.h.connected)
 
     def test_another_masters_request_is_no_echo(self):

@@ -32,6 +32,13 @@ station whose last attempt ended in a missing reply (or a state limit) answers F
 outage. A reply that arrives garbled, with nothing of it left to complete, is repeated after
 the idle time (TSYN) instead of after the whole slot time.
 
+Late replies: a reply to an earlier transmission (an earlier request's, held by the adapter past
+the next request) is skipped and counted (``late_replies``), not taken for the awaited one: with an
+adapter that echoes, a reply counts only behind the request's own echo; the slave's repeat still
+owed for a resend (the same bytes as the reply that ended the turn) is counted off; on a timed wire
+(``wire_timed``: a serial device, not a pty) a reply read sooner after the request than the wire
+allows is an earlier one's (vr_driver/doc/adapters.md, "Late replies").
+
 A *turn* is one transaction with one slave (request, then reply or timeout
 after ``max_retry`` repetitions with the same FCB); slaves take turns in
 order and a completed round is a *cycle*. Slot time and retry limit come
@@ -185,6 +192,13 @@ class _Pending:
     retries: int = 0
     job: Optional[AcyclicRequest] = None
     sent: float = 0.0         # when the request (or its last retry) went out
+    await_echo: bool = False  # the adapter echoes: a reply counts only after this request's echo
+    replies: int = 0          # replies from the slave read while this request awaited its own
+
+
+def _on_a_wire(link: Link) -> bool:
+    """``link`` is a serial device (not a pty, not a URL): its bytes take their time on the wire."""
+    return link.adapter is not None and getattr(link, "is_pty", True) is False
 
 
 def _adapter_latency(link: Link) -> float:
@@ -211,6 +225,7 @@ class DpMaster(MasterApi):
                  max_retry: Optional[int] = None, reply_timeout_floor: float = 0.05,
                  backoff_min: float = 0.1, backoff_max: float = 1.0,
                  state_limit: float = 1.0, dx_tolerance: float = 0.0, retry_steps: bool = False,
+                 wire_timed: Optional[bool] = None,
                  on_state_change: Optional[Callable[[SlaveHandle, MasterSlaveState,
                                                      MasterSlaveState, str], None]] = None
                  ) -> None:
@@ -225,6 +240,11 @@ class DpMaster(MasterApi):
         self.clock = clock
         self.reply_timeout_floor = reply_timeout_floor
         self.rx_latency = _adapter_latency(link)   # [s] the adapter may hold a reply this long
+        # a reply read sooner after its request's transmission than the wire allows (the request,
+        # TSDR min, the reply) answers an earlier transmission: judged on a link whose bytes take
+        # their time on the wire (None: a serial device, not a pty -- a pty has no baud timing)
+        self._wire_timed_auto = wire_timed is None
+        self.wire_timed = _on_a_wire(link) if wire_timed is None else bool(wire_timed)
         self.backoff_min = backoff_min
         self.backoff_max = backoff_max
         if not dx_tolerance >= 0.0:
@@ -244,6 +264,14 @@ class DpMaster(MasterApi):
         self._round_idle = False
         self._timeouts: Dict[Tuple[int, int], float] = {}   # by request/reply length, for
         self._timeouts_for: Optional[Tuple[BusTiming, float, float]] = None   # these settings
+        # telling a late reply to an earlier transmission from the awaited one (_feed): the adapter
+        # echoes (an echo was read, and no reply since without one); an echo was read since the last
+        # transmission; the replies to a finished turn's later tries that may still come (the
+        # slave's repeats of the reply that ended it: its bytes)
+        self._echoing = False
+        self._echo_since_tx = False
+        self._repeats = 0
+        self._repeat_of = b""
         self._handlers: Dict[MasterSlaveState, Callable[[SlaveHandle, float], bool]] = {
             MasterSlaveState.INIT: self._do_init,
             MasterSlaveState.WAIT_DIAG: self._do_diag,
@@ -319,8 +347,12 @@ class DpMaster(MasterApi):
         """Continue on a new link (e.g. a reopened serial port)."""
         self.link = link
         self.rx_latency = _adapter_latency(link)
+        if self._wire_timed_auto:
+            self.wire_timed = _on_a_wire(link)
         self._pending = None
         self.deframer.reset()
+        self._echoing = self._echo_since_tx = False
+        self._repeats = 0
 
     def close(self) -> None:
         self.link.close()
@@ -392,6 +424,13 @@ class DpMaster(MasterApi):
     def _transmit(self, raw: bytes) -> None:
         # TSYN: the line must be quiet before a request; drop stale bytes
         self._drop_stale()
+        if self._pending is not None:
+            # an adapter that echoes reads this transmission back before its reply (the bytes come
+            # in line order), so a reply read before that echo answers an earlier transmission --
+            # also one of a turn that ended without a reply. One that stops echoing costs one
+            # resend: a reply read with no echo at all since the transmission ends the expectation
+            self._pending.await_echo = self._echoing
+        self._echo_since_tx = False
         self.link.send(raw)
 
     def _drop_stale(self) -> None:
@@ -405,7 +444,12 @@ class DpMaster(MasterApi):
             if not data:
                 break
             kept = vars(self.deframer.counters).copy()
-            self.counters.echoes += sum(1 for f in self.deframer.feed(data) if self._is_echo(f))
+            for frame in self.deframer.feed(data):
+                if self._is_echo(frame):
+                    self.counters.echoes += 1
+                    self._echoing = self._echo_since_tx = True
+                else:
+                    self._is_repeat(frame)      # a repeat read here cannot be taken for a reply
             vars(self.deframer.counters).update(kept)
         else:
             self.link.flush_input()     # a line that keeps talking: drop the rest unseen
@@ -416,6 +460,7 @@ class DpMaster(MasterApi):
             at = _SA_AT.get(head[0])
             if at is not None and len(head) > at and head[at] & 0x7F == self.address:
                 self.counters.echoes += 1
+                self._echoing = self._echo_since_tx = True
         self.deframer.reset()
 
     def _is_echo(self, frame: Frame) -> bool:
@@ -425,8 +470,17 @@ class DpMaster(MasterApi):
         # past a resend, or behind a reply that ended the turn) too. Not a telegram of another station
         return isinstance(frame, (Sd1, Sd2, Sd3)) and frame.fc.request and frame.sa == self.address
 
+    def _is_repeat(self, frame: Frame) -> bool:
+        """``frame`` is one of the slave's repeats still owed for the turn before (a later try's
+        reply: the same bytes as the reply that ended that turn); counts it off."""
+        if self._repeats and frame.encode() == self._repeat_of:
+            self._repeats -= 1
+            return True
+        return False
+
     def _end_turn(self) -> None:
         self._pending = None
+        self._repeats = 0     # a reply that ended the turn sets them again (_feed)
         self._turns += 1
         self._turn += 1
         if self._turn >= len(self.slaves):
@@ -505,16 +559,28 @@ class DpMaster(MasterApi):
         if data:
             self._feed(data, now)
 
+    def _too_early(self, p: _Pending, reply_len: int, read_at: float) -> bool:
+        """A reply of ``reply_len`` bytes read at ``read_at`` came sooner after ``p``'s (last)
+        transmission than the wire allows: it answers an earlier one (only on a timed wire)."""
+        t = self.timing
+        return read_at < p.sent + t.chars(len(p.raw) + reply_len) + t.bits(t.min_tsdr_bits)
+
     def _feed(self, data: bytes, now: float) -> None:
         p = self._pending
-        if p is not None and p.kind == "dx" and not self.deframer.pending:
+        read_at = self.clock() if self.wire_timed else 0.0   # the bytes were here by then
+        if (p is not None and p.kind == "dx" and not self.deframer.pending and not p.await_echo
+                and not self._repeats
+                and not (self.wire_timed and self._too_early(p, len(data), read_at))):
             # the usual good Data_Exchange reply, checked on the raw bytes: SD2 to us from the
             # slave, FC DL (response, slave, no diagnosis), no SAPs, correct framing, FCS and ED;
             # its length is checked on delivery. Anything else -- other lengths, DH, SD1 / SD3 / SC,
-            # split or merged chunks, errors -- takes the general path through the deframer.
+            # split or merged chunks, errors, a reply that may answer an earlier transmission (its
+            # echo not read yet, a repeat owed) -- takes the general path through the deframer.
             inputs = sd2_data(data, self.address, p.slave.address, _FC_DL)
             if inputs is not None and len(inputs) == (p.slave.spec.input_size or 0):
                 self._dx_done(p, inputs, ResponseStatus.DL, now)
+                if p.retries > p.replies:   # a later try's reply may still come: a repeat
+                    self._repeats, self._repeat_of = p.retries - p.replies, bytes(data)
                 return
         garbage = self.deframer.counters.garbage_bytes
         frames = self.deframer.feed(data)
@@ -522,22 +588,48 @@ class DpMaster(MasterApi):
         self.counters.garbage_bytes = self.deframer.counters.garbage_bytes
         ended = False
         for frame in frames:
+            pending = self._pending
             if self._is_echo(frame):
                 self.counters.echoes += 1
+                self._echoing = self._echo_since_tx = True
+                if pending is not None and pending.await_echo and frame.encode() == pending.raw:
+                    # what follows answers this request -- or, from a slave that answered late
+                    # (beyond its TSDR), an earlier one: the repeats owed stay owed
+                    pending.await_echo = False
                 continue
             if ended:
-                continue  # after the reply that ended the turn: a later try's reply (not awaited)
-            pending = self._pending
+                self._is_repeat(frame)  # after the reply that ended the turn: a later try's reply
+                continue                # (not awaited)
             if pending is None:
                 self.counters.unexpected_frames += 1
                 continue
             if not self._addressed_to_us(pending, frame):
                 self.counters.unexpected_frames += 1
                 continue
+            pending.replies += 1
+            if (pending.await_echo or self._is_repeat(frame) or self.wire_timed
+                    and self._too_early(pending, len(frame.encode()), read_at)):
+                # a reply to an earlier transmission: read before this request's echo, the slave's
+                # repeat of the reply that ended the turn before (a later try's, late), or read
+                # sooner than the wire allows; taking it would deliver old inputs and advance the
+                # FCB on the wrong reply
+                self.counters.late_replies += 1
+                if not self._echo_since_tx:     # no echo before it: the adapter may have stopped
+                    self._echoing = False
+                log.debug("slave %d: a late reply to an earlier transmission skipped",
+                          pending.slave.address)
+                continue
             self._reply_handlers[pending.kind](pending, frame, now)
             # the turn finished: the rest of the chunk is no reply to wait for, but an echo in
-            # it (a resend's, read after the first try's late reply) is still counted
+            # it (a resend's, read after the first try's late reply) is still counted, and the
+            # slave's repeats (replies to the later tries) counted off
+            # (one reply a transmission: those of its tries not read yet; a reply skipped in this
+            # turn counts as one of them, else a slave whose inputs stay the same would have each
+            # fresh reply taken for the repeat owed since a resend, and be resent for ever)
             ended = self._pending is None
+            if ended and pending.retries >= pending.replies:
+                self._repeats = pending.retries + 1 - pending.replies
+                self._repeat_of = frame.encode()
         if self._pending is not None:
             need = self.deframer.bytes_needed()
             if need:  # a reply is arriving: give it time to complete

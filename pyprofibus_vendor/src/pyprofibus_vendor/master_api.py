@@ -86,6 +86,9 @@ class MasterCounters:
     dx_timed: int = 0           # good Data_Exchange replies timed (reply_wait below)
     reply_wait: float = 0.0     # [s] their summed time beyond the telegrams' time on the wire:
     #                             the station's delay plus what the adapter held them back
+    late_replies: int = 0       # replies to an earlier transmission read while a request awaited
+    #                             its own (before its echo, or the slave's repeat of the reply
+    #                             before): skipped, not taken as its reply
 
 
 @dataclass(frozen=True)
