@@ -279,6 +279,11 @@ def test_no_path_within_the_budget_is_refused(kin):
     with pytest.raises(PlanningError, match=r"RRTConnect found no path within 0\.2 s") as info:
         Planner(kin, caged, time_budget=0.2, seed=1).plan(START, GOAL)
     assert info.value.step == "plan"
+    # through a waypoint the first leg reaches straight: the last leg searches for what it left of
+    # the budget (nearly all), not for a fixed half of it
+    mid = tuple(a + 0.2 * (b - a) for a, b in zip(START, GOAL))
+    with pytest.raises(PlanningError, match=r"RRTConnect found no path within 0\.(39|4)\d* s"):
+        Planner(kin, caged, time_budget=0.4, seed=1).plan(START, GOAL, via=[mid])
 
 
 def test_bad_parameters_are_refused(kin):
