@@ -94,6 +94,9 @@ ELBOW_HOLD = 0.1
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
+#: [rad] a plan from within this of the last plan's end (every joint) may retreat along its path on
+#: its last try (PlanActionCore._retreat)
+RETREAT_NEAR = math.radians(1.0)
 #: [rad] a goal this close to the arm's joints on every joint is where the arm is: nothing to move
 AT_GOAL = 1e-4
 #: the chain indices of the wrist bend (joint_5) and the elbow (joint_3)
@@ -319,6 +322,9 @@ class PlanActionCore:
         # the commissioned joint speed and acceleration limits (planning_limits), where measured
         self.kin = planning_kinematics(self.params, kinematics)
         self.clock = clock
+        #: the geometric path of the last plan made (its start first), or None: a way back out of
+        #: where it went, for a next plan from its end that finds no path (:meth:`_retreat`)
+        self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
 
@@ -415,8 +421,12 @@ class PlanActionCore:
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
                                           wrist=attempt < ATTEMPTS - 1 and not wrist_across))
-                    plan = self._at_goal(planner, tuple(start), target) or self._plan(planner, tuple(start), target,
-                                                                                      crossing)
+                    retreat = self._retreat(tuple(start), crossing, attempt, prof["replans"])
+                    if retreat:
+                        prof["retreat"] = 1
+                    plan = self._at_goal(planner, tuple(start), target) or (
+                        planner.plan(tuple(start), target, via=retreat) if retreat else
+                        self._plan(planner, tuple(start), target, crossing))
             except PlanningError as exc:
                 prof["planner"] += time.perf_counter() - tick
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
@@ -453,7 +463,26 @@ class PlanActionCore:
                     % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling))
         if not self.collision_checked:
             text += "; collisions NOT checked (collision_check: false)"
+        self.last_path = tuple(tuple(q) for q in plan.path)
         return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof)
+
+    def _retreat(self, start: Tuple[float, ...], crossing: Tuple[Tuple[float, ...], ...], attempt: int,
+                 replans: List[str]) -> Tuple[Tuple[float, ...], ...]:
+        """Waypoints back along the last plan's path (its start last) -- for the last try of a plan
+        from where that plan ended after every try before found no path: the arm got here along it,
+        so it leads out of a narrow place (under the hood's top, between walls), and from its start
+        the planner searches for what the straight legs back left of the budget. () otherwise: not
+        the last try, a try failed for another reason, an elbow crossing's waypoints, no last plan
+        or one that ended farther than RETREAT_NEAR from ``start`` (every joint; the arm stops near the
+        plan's end, not on it). Nothing of it is taken on trust: every leg is checked (and, if
+        not free, planned) by this plan's own validity, the cell as it is now, and the driver checks
+        the plan's stream as any other's."""
+        path = self.last_path
+        if attempt != ATTEMPTS - 1 or crossing or not path or len(path) < 2 \
+                or max(abs(a - b) for a, b in zip(path[-1], start)) > RETREAT_NEAR \
+                or len(replans) != attempt or not all(r.startswith("plan:") for r in replans):
+            return ()
+        return tuple(reversed(path[:-1]))
 
 
     def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
