@@ -34,7 +34,9 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
   all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
-  what will run. The planning time is then at most ATTEMPTS x the budget.
+  what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
+  last plan ended whose tries found no path retreats on its last try along the way the arm came
+  (:meth:`PlanActionCore._retreat`: out of a narrow place such as under a hood), every leg checked.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
 """
@@ -143,7 +145,8 @@ class PlanOutcome:
     #: ``snapshot`` (copying the checker), the planner's steps summed over the tries (``goal``,
     #: ``plan``, ``simplify``, ``time``, ``check``), ``stream_check`` (the driver's own check of each
     #: plan, :meth:`PlanActionCore.driver_refusal`), ``checks`` (validity checks made: the box and the
-    #: checker), ``tries`` (plans made) and ``replans`` (why a try was planned again, in words)
+    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words) and
+    #: ``retreat`` (1 when the last try went back along the last plan's path)
     profile: Dict[str, Any] = field(default_factory=dict)
 
     @property
