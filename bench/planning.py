@@ -246,7 +246,8 @@ class Executor:
 
 def print_profile(profiles):
     """Where the plan action's whole call went, per goal kind: the shares of its parts (the plan
-    action's PlanOutcome.profile), the validity checks, the tries and why they were made again."""
+    action's PlanOutcome.profile), the validity checks, the tries and why they were made again, the
+    last tries that went back along the last plan's path."""
     for kind in ("joints", "pose", "all"):
         rows = [(t, p) for k, t, p in profiles if kind in ("all", k)]
         if not rows:
@@ -262,13 +263,14 @@ def print_profile(profiles):
               "simplification %.0f %%, timing %.0f %%, the result's check %.0f %%), the driver's stream check %.0f %%, "
               "the elbow crossing %.0f %%, the checker's copy %.0f %%; %d validity checks (%.0f a call, %.1f us each "
               "with the planner's part around them); %d tries, re-planned: %s; a pose's nearest IK solution given up "
-              "after its share of the budget: %d"
+              "after its share of the budget: %d; last tries back along the last plan's path: %d"
               % (kind, len(rows), whole, *(100.0 * part[k] / whole for k in ("planner", "goal", "plan", "simplify",
                                                                              "time", "check", "stream_check",
                                                                              "crossing", "snapshot")),
                  checks, checks / len(rows), 1e6 * (part["plan"] + part["simplify"] + part["check"]) / max(1, checks),
                  sum(p.get("tries", 0) for _, p in rows),
-                 ", ".join("%s %d" % (c, causes.count(c)) for c in sorted(set(causes))) or "none", given_up))
+                 ", ".join("%s %d" % (c, causes.count(c)) for c in sorted(set(causes))) or "none", given_up,
+                 sum(p.get("retreat", 0) for _, p in rows)))
 
 
 def print_peer(by_kind, total, answers, version):

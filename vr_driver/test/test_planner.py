@@ -279,6 +279,16 @@ def test_no_path_within_the_budget_is_refused(kin):
     with pytest.raises(PlanningError, match=r"RRTConnect found no path within 0\.2 s") as info:
         Planner(kin, caged, time_budget=0.2, seed=1).plan(START, GOAL)
     assert info.value.step == "plan"
+    # through a waypoint the first leg reaches straight: the last leg searches for what it left of
+    # the budget (nearly all), not for a fixed half of it
+    mid = tuple(a + 0.2 * (b - a) for a, b in zip(START, GOAL))
+    with pytest.raises(PlanningError, match=r"RRTConnect found no path within 0\.(39|4)\d* s"):
+        Planner(kin, caged, time_budget=0.4, seed=1).plan(START, GOAL, via=[mid])
+    # the first leg the only one to search (into the cage; on from there straight): all of the budget
+    inside = [tuple(g + d * (1 if i == 1 else 0) for i, g in enumerate(GOAL)) for d in (0.03, -0.03)]
+    with pytest.raises(PlanningError, match=r"RRTConnect found no path within 0\.(39|4)\d* s .* to \(%.1f, %.1f"
+                       % tuple(math.degrees(v) for v in inside[0][:2])):
+        Planner(kin, caged, time_budget=0.4, seed=1).plan(START, GOAL, via=inside)
 
 
 def test_bad_parameters_are_refused(kin):

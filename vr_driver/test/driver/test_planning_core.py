@@ -326,6 +326,42 @@ def test_a_plan_the_driver_would_refuse_is_planned_again(kin, monkeypatch):
     assert out.text == "the driver would refuse each of %d plans, the last: segment 2 of 5: refused" % P.ATTEMPTS
 
 
+def test_the_last_try_from_where_a_plan_ended_retreats_along_its_path(kin, monkeypatch):
+    """After every try before found no path, the last try of a plan from where the last plan ended
+    goes back along that plan's path (the way the arm came in) and plans on from its start: the legs
+    checked by the plan's own validity, the result's stream checked by the driver. Not for a try
+    failed otherwise, nor from elsewhere, nor before the last try."""
+    w = world(kin)
+    planning = PlanActionCore(w.core, kinematics=kin)
+    home = tuple(w.status().joints)
+    first = planning.plan(PlanGoal(pose=BEHIND), seed=1)
+    assert first.ok, first.text
+    came = first.trajectory.path
+    assert planning.last_path == came and len(came) >= 3        # (a detour: not the straight move)
+    end = first.trajectory.goal
+
+    def no_path(*args, **kwargs):
+        raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+    monkeypatch.setattr(planning, "_plan", no_path)
+    out = planning.plan(AWAY, start=end, seed=2)
+    assert out.ok, out.text
+    assert out.profile["retreat"] == 1 and out.profile["tries"] == P.ATTEMPTS
+    path = out.trajectory.path
+    back = [path.index(q) for q in reversed(came[:-1])]           # every waypoint back, in turn
+    assert back == sorted(back)
+    assert free_with(w.core.collision.copy(), out.trajectory.positions) == []
+    assert planning.driver_refusal(out.trajectory) == ""
+    assert planning.last_path == path                            # (the plan made now is the last)
+    # the conditions: the last try, after tries that found no path, near the last plan's end
+    planning.last_path = came
+    plan_failed = ["plan: no path"] * (P.ATTEMPTS - 1)
+    assert planning._retreat(end, (), P.ATTEMPTS - 1, plan_failed)
+    assert planning._retreat(end, (), P.ATTEMPTS - 2, plan_failed[1:]) == ()
+    assert planning._retreat(end, (), P.ATTEMPTS - 1, ["stream: refused"] + plan_failed[1:]) == ()
+    assert planning._retreat(home, (), P.ATTEMPTS - 1, plan_failed) == ()
+    assert planning._retreat(end, ((0.0,) * 6,), P.ATTEMPTS - 1, plan_failed) == ()
+
+
 def test_the_driver_refusal_is_the_stream_check(kin):
     """A plan the v3 stream check accepts is "" (the plans above run); a jump of the wrist between
     two points of a short plan is refused in the driver's words."""

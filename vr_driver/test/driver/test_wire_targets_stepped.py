@@ -74,3 +74,65 @@ def test_a_goal_at_the_singularity_ends_on_the_planned_wrist(kin, rule):
     assert [e.seq for e in entries] == job.seqs
     off = [abs(a - b) for a, b in zip(world.arm.joints, NEAR)]
     assert max(off) <= 0.3 * DEG, [round(v / DEG, 3) for v in off]
+
+
+def _paths(kin, rng, n):
+    """``n`` planner-like paths (times, positions): straight joint lines at smoothstep timing between
+    random joints, every third across joint_5 = 0 (the wire pose's search) and every third near it at
+    both ends (the grid search), 20-50 samples each."""
+    lo, hi = kin.limits.lower, kin.limits.upper
+    out = []
+    for i in range(n):
+        a = [rng.uniform(l * 0.8, h * 0.8) for l, h in zip(lo, hi)]
+        b = [rng.uniform(l * 0.8, h * 0.8) for l, h in zip(lo, hi)]
+        if i % 3 == 0:
+            a[4], b[4] = rng.uniform(3, 30) * DEG, -rng.uniform(3, 30) * DEG
+        elif i % 3 == 1:
+            a[4], b[4] = rng.uniform(-0.5, 0.5) * DEG, rng.uniform(-0.4, 0.4) * DEG
+        else:
+            a[4], b[4] = rng.uniform(-100, 100) * DEG, rng.uniform(-100, 100) * DEG
+        m = rng.randint(20, 50)
+        times, positions = [], []
+        for k in range(m + 1):
+            u = k / m
+            s = u * u * (3.0 - 2.0 * u)
+            positions.append(tuple(x + s * (y - x) for x, y in zip(a, b)))
+            times.append(3.0 * u)
+        out.append((times, positions))
+    return out
+
+
+@pytest.mark.parametrize("rule, n", [("previous_target", 18), ("current_joints", 8)])
+def test_the_stream_checks_shared_wire_poses_change_nothing(kin, rule, n):
+    """One stream check computes each point's wire pose and the controller's solutions of it once
+    (wire_targets.WireMemo, shared by the stream's thinning -- would the G2 reach the next point? --
+    and the wire poses of the points kept): on ``n`` paths (a memo that ignored the seed fails the
+    first rule's 18) (across joint_5 = 0, on it, anywhere), by
+    either configuration rule, the points, their wire poses and the refusals' words are exactly
+    those of each wire pose computed on its own (no memo shared between the calls)."""
+    import random
+    from vr_driver.driver.streaming import MAX_STREAM_TOLERANCE
+    from vr_driver.errors import VrDriverError
+    world = World(kin, {"controller": {"configuration": rule}}, protocol="v3")
+    streams = world.core.streams
+    rng = random.Random(46)
+
+    tol = math.radians(world.core.params.stream_path_tolerance)
+
+    def run(times, positions):
+        try:     # (the part of the stream check the memo serves: its segments are checked after it)
+            return streams.points(times, positions, tol, max(tol, MAX_STREAM_TOLERANCE))
+        except VrDriverError as exc:
+            return str(exc)
+    shared = []
+    alone = []
+    paths = _paths(kin, rng, n)
+    for times, positions in paths:
+        shared.append(run(times, positions))
+    streams.memo = lambda: None          # each wire_target call with a memo of its own: as before the memo
+    for times, positions in paths:
+        alone.append(run(times, positions))
+    assert shared == alone
+    # the paths ask for the parts that changed: thinned streams with searched wire poses, and refusals
+    assert sum(isinstance(r, tuple) and len(r) > 1 for r in shared) >= 3
+    assert any(isinstance(r, str) for r in shared)

@@ -34,7 +34,9 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
   all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
-  what will run. The planning time is then at most ATTEMPTS x the budget.
+  what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
+  last plan ended whose tries found no path retreats on its last try along the way the arm came
+  (:meth:`PlanActionCore._retreat`: out of a narrow place such as under a hood), every leg checked.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
 """
@@ -94,6 +96,9 @@ ELBOW_HOLD = 0.1
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
+#: [rad] a plan from within this of the last plan's end (every joint) may retreat along its path on
+#: its last try (PlanActionCore._retreat)
+RETREAT_NEAR = math.radians(1.0)
 #: [rad] a goal this close to the arm's joints on every joint is where the arm is: nothing to move
 AT_GOAL = 1e-4
 #: the chain indices of the wrist bend (joint_5) and the elbow (joint_3)
@@ -140,7 +145,8 @@ class PlanOutcome:
     #: ``snapshot`` (copying the checker), the planner's steps summed over the tries (``goal``,
     #: ``plan``, ``simplify``, ``time``, ``check``), ``stream_check`` (the driver's own check of each
     #: plan, :meth:`PlanActionCore.driver_refusal`), ``checks`` (validity checks made: the box and the
-    #: checker), ``tries`` (plans made) and ``replans`` (why a try was planned again, in words)
+    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words) and
+    #: ``retreat`` (1 when the last try went back along the last plan's path)
     profile: Dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -319,6 +325,9 @@ class PlanActionCore:
         # the commissioned joint speed and acceleration limits (planning_limits), where measured
         self.kin = planning_kinematics(self.params, kinematics)
         self.clock = clock
+        #: the geometric path of the last plan made (its start first), or None: a way back out of
+        #: where it went, for a next plan from its end that finds no path (:meth:`_retreat`)
+        self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
 
@@ -415,8 +424,12 @@ class PlanActionCore:
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
                                           wrist=attempt < ATTEMPTS - 1 and not wrist_across))
-                    plan = self._at_goal(planner, tuple(start), target) or self._plan(planner, tuple(start), target,
-                                                                                      crossing)
+                    retreat = self._retreat(tuple(start), crossing, attempt, prof["replans"])
+                    if retreat:
+                        prof["retreat"] = 1
+                    plan = self._at_goal(planner, tuple(start), target) or (
+                        planner.plan(tuple(start), target, via=retreat) if retreat else
+                        self._plan(planner, tuple(start), target, crossing))
             except PlanningError as exc:
                 prof["planner"] += time.perf_counter() - tick
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
@@ -453,7 +466,26 @@ class PlanActionCore:
                     % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling))
         if not self.collision_checked:
             text += "; collisions NOT checked (collision_check: false)"
+        self.last_path = tuple(tuple(q) for q in plan.path)
         return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof)
+
+    def _retreat(self, start: Tuple[float, ...], crossing: Tuple[Tuple[float, ...], ...], attempt: int,
+                 replans: List[str]) -> Tuple[Tuple[float, ...], ...]:
+        """Waypoints back along the last plan's path (its start last) -- for the last try of a plan
+        from where that plan ended after every try before found no path: the arm got here along it,
+        so it leads out of a narrow place (under the hood's top, between walls), and from its start
+        the planner searches for what the straight legs back left of the budget. () otherwise: not
+        the last try, a try failed for another reason, an elbow crossing's waypoints, no last plan
+        or one that ended farther than RETREAT_NEAR from ``start`` (every joint; the arm stops near the
+        plan's end, not on it). Nothing of it is taken on trust: every leg is checked (and, if
+        not free, planned) by this plan's own validity, the cell as it is now, and the driver checks
+        the plan's stream as any other's."""
+        path = self.last_path
+        if attempt != ATTEMPTS - 1 or crossing or not path or len(path) < 2 \
+                or max(abs(a - b) for a, b in zip(path[-1], start)) > RETREAT_NEAR \
+                or len(replans) != attempt or not all(r.startswith("plan:") for r in replans):
+            return ()
+        return tuple(reversed(path[:-1]))
 
 
     def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,

@@ -57,7 +57,7 @@ from .jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from .status import DriverError
 from .stream_points import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
-from .wire_targets import FINE, WireTarget, wire_target
+from .wire_targets import FINE, WireMemo, WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
            "stream_preparation"]
@@ -102,13 +102,14 @@ class JointStreams:
         """The stream of the path ``times`` / ``positions`` (from ``positions[0]``, where the arm
         is), thinned to ``tolerance`` (at most ``max_tolerance`` where the bus could not feed the
         segments); () when the path does not move."""
+        memo = self.memo()          # (v3: the wire poses and their solutions, shared by both steps)
         points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
                                tolerance, self.min_segment(), max_tolerance,
                                corner_tolerance=math.radians(self.params.stream_path_tolerance),
-                               max_step=self.max_step, reaches=self.reaches())
+                               max_step=self.max_step, reaches=self.reaches(memo))
         if not points:
             return points
-        return self.with_poses(positions[0], points)
+        return self.with_poses(positions[0], points, memo=memo)
 
     def trajectory(self, times: Sequence[float], positions: Sequence[Sequence[float]]) -> Tuple[StreamPoint, ...]:
         """A planner trajectory's stream (thinned to ``stream_path_tolerance``) with every segment
@@ -123,13 +124,17 @@ class JointStreams:
                 raise DriverError("%s; nothing was sent" % exc) from None
         return points
 
-    def reaches(self) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
+    def memo(self) -> Optional[WireMemo]:
+        """A memo for one stream check's wire poses (None: joint targets have none)."""
+        return None
+
+    def reaches(self, memo: Optional[WireMemo] = None) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
         """Would the controller, after a target at the first joints, run the second as planned?
         (None: joint targets are run as sent.)"""
         return None
 
-    def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
-               ) -> Tuple[StreamPoint, ...]:
+    def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0,
+                   memo: Optional[WireMemo] = None) -> Tuple[StreamPoint, ...]:
         """``points`` as they go out after a target at ``start``, checked as the controller will take
         them; joint targets go out as they are."""
         return tuple(points)
@@ -198,7 +203,13 @@ class CartesianStreams(JointStreams):
         #: the widest joint step between two points: CARTESIAN_MAX_STEP over the window
         self.max_step = CARTESIAN_MAX_STEP / self.window
 
-    def reaches(self) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
+    def memo(self) -> Optional[WireMemo]:
+        """A fresh memo of wire poses and their solutions (:class:`.wire_targets.WireMemo`): one
+        stream check's :meth:`reaches` and :meth:`with_poses` solve the same points' poses, the
+        second time from the memo (the same answers: the same function of the same arguments)."""
+        return WireMemo()
+
+    def reaches(self, memo: Optional[WireMemo] = None) -> Optional[Callable[[Sequence[float], Sequence[float]], bool]]:
         """The controller, after a target at ``a``, solves the wire pose of ``b`` onto ``b`` within
         CONFIGURATION_TOLERANCE (:meth:`target`, the coordinate search only): where it would not --
         another elbow or wrist branch lies nearer ``a`` than ``b`` does -- the stream keeps planned
@@ -214,30 +225,32 @@ class CartesianStreams(JointStreams):
                 # the coordinate search stops as soon as a pose lands within the tolerance: its
                 # steps are those of the full search up to there, so the answer is the same (and
                 # the plain rounding, one IK solution, answers it away from joint_5 = 0)
-                return self.target(a, b, search=False, fine=CONFIGURATION_TOLERANCE).error \
+                return self.target(a, b, search=False, fine=CONFIGURATION_TOLERANCE, memo=memo).error \
                     <= CONFIGURATION_TOLERANCE
             except VrDriverError:
                 return False
         return reaches
 
     def target(self, prev: Sequence[float], joints: Sequence[float], search: bool = True,
-               earlier: Sequence[Sequence[float]] = (), fine: float = FINE) -> WireTarget:
+               earlier: Sequence[Sequence[float]] = (), fine: float = FINE,
+               memo: Optional[WireMemo] = None) -> WireTarget:
         """The wire pose for ``joints`` after a target at ``prev`` and the controller's solution of
         it (:func:`.wire_targets.wire_target`: the plain rounding, or where that lands off the plan
         -- near joint_5 = 0 -- the one-step neighbour that lands nearest; ``search`` False: within
         FULL_SEARCH_BAND the coordinate search only, for a caller at a command's rate).
         ``earlier``: current_joints, the points before ``prev`` the arm may still be at (or
         between) when the controller takes the target: solved from each as well, the worst counts.
-        ``fine``: a pose landing this near the plan ends the search. VrDriverError when the
-        controller cannot solve it."""
+        ``fine``: a pose landing this near the plan ends the search. ``memo``: poses and solutions
+        already computed in this stream check (:meth:`memo`). VrDriverError when the controller
+        cannot solve it."""
         also = tuple(earlier) if self.rule is ConfigurationRule.CURRENT_JOINTS else ()
         with self.checks.gate:
             if search:
-                return wire_target(self.kin, self.protocol, joints, prev, fine=fine, also=also)
-            return wire_target(self.kin, self.protocol, joints, prev, fine=fine, full_band=0.0, also=also)
+                return wire_target(self.kin, self.protocol, joints, prev, fine=fine, also=also, memo=memo)
+            return wire_target(self.kin, self.protocol, joints, prev, fine=fine, full_band=0.0, also=also, memo=memo)
 
-    def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0
-                   ) -> Tuple[StreamPoint, ...]:
+    def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0,
+                   memo: Optional[WireMemo] = None) -> Tuple[StreamPoint, ...]:
         """Each point gets the pose the wire carries -- its planned pose rounded, or the one-step
         neighbour of that rounding whose solution lands nearest the plan (:meth:`target`) -- and
         is solved as the controller will solve it by its rule: the IK solution nearest the previous
@@ -257,7 +270,7 @@ class CartesianStreams(JointStreams):
                 # (StreamSequencer.record), so the G2 takes it with the arm at that point, whatever its rule
                 history = [prev]
             try:
-                found = self.target(prev, point.joints, earlier=history[-self.window:-1])
+                found = self.target(prev, point.joints, earlier=history[-self.window:-1], memo=memo)
             except VrDriverError as exc:
                 pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
                 raise DriverError("%s: the controller cannot solve its pose %s: %s; nothing was sent"

@@ -75,8 +75,27 @@ class WireTarget:
     solved: int
 
 
+class WireMemo:
+    """What :func:`wire_target` computes for one planned point, kept for the next call on the same
+    stream (one plan's check: :func:`~.streaming.split_long`'s ``reaches`` and then
+    ``CartesianStreams.with_poses`` meet the same points, with the same seeds or others): the plain
+    rounding of a planned point's pose, each wire pose near it with its tip frame, and the
+    controller's solution of each (pose, seed) -- or its VrDriverError. Pure functions of their keys
+    for one kinematics model and one protocol: a memo must not outlive the stream check it was made
+    for (the model's TCP or conventions may change between two), nor serve two models."""
+
+    def __init__(self) -> None:
+        #: planned joints -> the plain rounding of their pose
+        self.base: dict = {}
+        #: (planned joints, steps) -> (the wire pose, its tip frame in the chain root)
+        self.poses: dict = {}
+        #: (planned joints, steps, seed) -> the controller's solution (a joint tuple) or its VrDriverError
+        self.solved: dict = {}
+
+
 def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], fine: float = FINE,
-                full_band: float = FULL_SEARCH_BAND, also: Sequence[Sequence[float]] = ()) -> WireTarget:
+                full_band: float = FULL_SEARCH_BAND, also: Sequence[Sequence[float]] = (),
+                memo: Optional[WireMemo] = None) -> WireTarget:
     """The wire pose for the planned ``joints`` whose solution by the controller's IK seeded with
     ``seed`` (its configuration rule: the previous target's solution, or its joints now) lands
     nearest ``joints``. ``also``: further seeds the controller may take instead (``current_joints``:
@@ -93,30 +112,43 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
         other = tuple(float(v) for v in other)
         if other not in seeds:
             seeds.append(other)
-    base = protocol.wire_pose(kin.fk_pose(planned))
+    if memo is None:
+        memo = WireMemo()
+    base = memo.base.get(planned)
+    if base is None:
+        base = memo.base[planned] = protocol.wire_pose(kin.fk_pose(planned))
     mm, deg = protocol.pose_resolution
     sizes = (mm, mm, mm, deg, deg, deg)
-    count = [0]
-    known: dict = {}
+    used: set = set()               # the solutions this call asked for (WireTarget.solved counts them)
+
+    def framed(steps: Tuple[int, ...]) -> Tuple[ControllerPose, object]:
+        """The wire pose ``steps`` (X Y Z Rx Ry Rz, in resolution steps) off the plain rounding, and
+        its tip frame (what ``kin.ik_pose`` solves), each made once per memo."""
+        key = (planned, steps)
+        out = memo.poses.get(key)
+        if out is None:
+            pose = base if not any(steps) else protocol.wire_pose(
+                ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
+            out = memo.poses[key] = (pose, kin.conventions.controller_to_tip(pose))
+        return out
 
     def pose_at(steps: Tuple[int, ...]) -> ControllerPose:
-        """The wire pose ``steps`` (X Y Z Rx Ry Rz, in resolution steps) off the plain rounding."""
-        if not any(steps):
-            return base
-        return protocol.wire_pose(ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
+        """The wire pose ``steps`` off the plain rounding."""
+        return framed(steps)[0]
 
     def solution(steps: Tuple[int, ...], s: Tuple[float, ...]) -> Tuple[float, ...]:
         """The controller's solution of the pose ``steps`` off the plain rounding, seeded with ``s``
-        (each computed once: the coordinate search, the model and the grid meet the same poses);
-        raises the kinematics' VrDriverError when it has none."""
-        key = (steps, s)
-        if key not in known:
-            count[0] += 1
+        (each computed once: the coordinate search, the model and the grid meet the same poses, and
+        a stream check's calls the same points); raises the kinematics' VrDriverError when it has
+        none."""
+        key = (planned, steps, s)
+        used.add(key)
+        if key not in memo.solved:
             try:
-                known[key] = tuple(kin.ik_pose(pose_at(steps), seed=s))
+                memo.solved[key] = tuple(kin.ik(framed(steps)[1], seed=s))      # = kin.ik_pose(pose, seed=s)
             except VrDriverError as exc:
-                known[key] = exc
-        out = known[key]
+                memo.solved[key] = exc
+        out = memo.solved[key]
         if isinstance(out, VrDriverError):
             raise out
         return out
@@ -152,7 +184,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
                 best = found
         if best is None:
             raise exc
-        return WireTarget(best.pose, best.joints, best.error, best.steps, count[0])
+        return WireTarget(best.pose, best.joints, best.error, best.steps, len(used))
     if best.error > fine:
         best = _coordinate_search(best, attempt, fine)
     if best.error > fine and abs(planned[WRIST_BEND]) < full_band:
@@ -180,7 +212,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
             if q is None:
                 continue
             missed = max(missed, abs(_error(q, planned) - predicted))
-    return WireTarget(best.pose, best.joints, best.error, best.steps, count[0])
+    return WireTarget(best.pose, best.joints, best.error, best.steps, len(used))
 
 
 #: [rad] the margin the grid search adds to the model's largest miss so far before it trusts the

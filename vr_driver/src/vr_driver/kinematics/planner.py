@@ -409,8 +409,8 @@ class Planner:
         """A collision-free timed trajectory from the joints ``start`` to ``goal`` (joints, a named
         state, a ControllerPose, ((x, y, z), (qx, qy, qz, qw)) of tool0 in base_link, or a 4x4 tip
         pose). Per-call overrides of the constructor's scaling, budget and seed. ``via``: joints the
-        path passes through, in order (each leg planned in an equal share of the budget; the timing
-        goes through them as through any point of the path). PlanningError when there is none (see
+        path passes through, in order (each leg that is not straight planned in an equal share of what
+        the legs before left of the budget; the timing goes through them as through any point of the path). PlanningError when there is none (see
         the module text)."""
         t0 = time.perf_counter()
         vs = self.velocity_scaling if velocity_scaling is None else _number(velocity_scaling, "velocity_scaling",
@@ -438,10 +438,20 @@ class Planner:
                 raise PlanningError("plan", "waypoint %d %s is in collision%s" % (k + 1, _fmt(w), why), contacts)
         timings = {"goal": time.perf_counter() - t0}
         path = [q0]
-        share = budget / (len(stops) + 1)
-        for k, targets in enumerate([[w] for w in stops] + [valid]):
+        legs = [[w] for w in stops] + [valid]
+        # the legs whose straight move is not free: the budget is theirs (a straight leg takes next
+        # to nothing: the elbow crossing's middle one always, its first or last often)
+        ends = [q0] + stops
+        searching = [self.motion_valid(a, targets[0], self.planning_valid) is not None
+                     for a, targets in zip(ends, legs)] if stops else [True]
+        searched = 0.0                   # [s] the legs' searches so far
+        for k, targets in enumerate(legs):
             leg: Dict[str, float] = {}
+            # an equal share of what the legs before left of the budget among the legs left to
+            # search; never more in all
+            share = max(budget - searched, 0.0) / max(1, sum(searching[k:]))
             path += self._geometric_path(path[-1], targets, share, None if seed is None else seed + k, leg)[1:]
+            searched += leg.get("plan", 0.0)
             for key, value in leg.items():
                 timings[key] = timings.get(key, 0.0) + value
         t = time.perf_counter()
