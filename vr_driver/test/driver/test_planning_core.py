@@ -355,11 +355,11 @@ def test_the_last_try_from_where_a_plan_ended_retreats_along_its_path(kin, monke
     # the conditions: the last try, after tries that found no path, near the last plan's end
     planning.last_path = came
     plan_failed = ["plan: no path"] * (P.ATTEMPTS - 1)
-    assert planning._retreat(end, (), P.ATTEMPTS - 1, plan_failed)
-    assert planning._retreat(end, (), P.ATTEMPTS - 2, plan_failed[1:]) == ()
-    assert planning._retreat(end, (), P.ATTEMPTS - 1, ["stream: refused"] + plan_failed[1:]) == ()
-    assert planning._retreat(home, (), P.ATTEMPTS - 1, plan_failed) == ()
-    assert planning._retreat(end, ((0.0,) * 6,), P.ATTEMPTS - 1, plan_failed) == ()
+    assert P.retreat_waypoints(planning.last_path, end, (), P.ATTEMPTS - 1, plan_failed)
+    assert P.retreat_waypoints(planning.last_path, end, (), P.ATTEMPTS - 2, plan_failed[1:]) == ()
+    assert P.retreat_waypoints(planning.last_path, end, (), P.ATTEMPTS - 1, ["stream: refused"] + plan_failed[1:]) == ()
+    assert P.retreat_waypoints(planning.last_path, home, (), P.ATTEMPTS - 1, plan_failed) == ()
+    assert P.retreat_waypoints(planning.last_path, end, ((0.0,) * 6,), P.ATTEMPTS - 1, plan_failed) == ()
 
 
 def test_the_driver_refusal_is_the_stream_check(kin):

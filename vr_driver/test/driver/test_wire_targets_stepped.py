@@ -111,7 +111,7 @@ def test_the_stream_checks_shared_wire_poses_change_nothing(kin, rule, n):
     either configuration rule, the points, their wire poses and the refusals' words are exactly
     those of each wire pose computed on its own (no memo shared between the calls)."""
     import random
-    from vr_driver.driver.streaming import MAX_STREAM_TOLERANCE
+    from vr_driver.driver.stream_points import MAX_STREAM_TOLERANCE
     from vr_driver.errors import VrDriverError
     world = World(kin, {"controller": {"configuration": rule}}, protocol="v3")
     streams = world.core.streams

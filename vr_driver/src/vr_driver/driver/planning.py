@@ -36,7 +36,7 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
   what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
   last plan ended whose tries found no path retreats on its last try along the way the arm came
-  (:meth:`PlanActionCore._retreat`: out of a narrow place such as under a hood), every leg checked.
+  (:func:`retreat_waypoints`: out of a narrow place such as under a hood), every leg checked.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
 """
@@ -58,7 +58,7 @@ from .commissioned import planning_kinematics
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
            "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
-           "arm_points", "code_of"]
+           "arm_points", "code_of", "retreat_waypoints"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
 SUCCESS = 1
@@ -97,7 +97,7 @@ ELBOW_HOLD = 0.1
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
 #: [rad] a plan from within this of the last plan's end (every joint) may retreat along its path on
-#: its last try (PlanActionCore._retreat)
+#: its last try (retreat_waypoints)
 RETREAT_NEAR = math.radians(1.0)
 #: [rad] a goal this close to the arm's joints on every joint is where the arm is: nothing to move
 AT_GOAL = 1e-4
@@ -326,7 +326,7 @@ class PlanActionCore:
         self.kin = planning_kinematics(self.params, kinematics)
         self.clock = clock
         #: the geometric path of the last plan made (its start first), or None: a way back out of
-        #: where it went, for a next plan from its end that finds no path (:meth:`_retreat`)
+        #: where it went, for a next plan from its end that finds no path (:func:`retreat_waypoints`)
         self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
@@ -424,7 +424,7 @@ class PlanActionCore:
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
                                           wrist=attempt < ATTEMPTS - 1 and not wrist_across))
-                    retreat = self._retreat(tuple(start), crossing, attempt, prof["replans"])
+                    retreat = retreat_waypoints(self.last_path, tuple(start), crossing, attempt, prof["replans"])
                     if retreat:
                         prof["retreat"] = 1
                     plan = self._at_goal(planner, tuple(start), target) or (
@@ -468,24 +468,6 @@ class PlanActionCore:
             text += "; collisions NOT checked (collision_check: false)"
         self.last_path = tuple(tuple(q) for q in plan.path)
         return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof)
-
-    def _retreat(self, start: Tuple[float, ...], crossing: Tuple[Tuple[float, ...], ...], attempt: int,
-                 replans: List[str]) -> Tuple[Tuple[float, ...], ...]:
-        """Waypoints back along the last plan's path (its start last) -- for the last try of a plan
-        from where that plan ended after every try before found no path: the arm got here along it,
-        so it leads out of a narrow place (under the hood's top, between walls), and from its start
-        the planner searches for what the straight legs back left of the budget. () otherwise: not
-        the last try, a try failed for another reason, an elbow crossing's waypoints, no last plan
-        or one that ended farther than RETREAT_NEAR from ``start`` (every joint; the arm stops near the
-        plan's end, not on it). Nothing of it is taken on trust: every leg is checked (and, if
-        not free, planned) by this plan's own validity, the cell as it is now, and the driver checks
-        the plan's stream as any other's."""
-        path = self.last_path
-        if attempt != ATTEMPTS - 1 or crossing or not path or len(path) < 2 \
-                or max(abs(a - b) for a, b in zip(path[-1], start)) > RETREAT_NEAR \
-                or len(replans) != attempt or not all(r.startswith("plan:") for r in replans):
-            return ()
-        return tuple(reversed(path[:-1]))
 
 
     def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
@@ -662,3 +644,22 @@ class PlanActionCore:
 
 _STEP_WORDS = {"start": "cannot plan from here", "goal": "goal refused", "plan": "no path found",
                "time": "no timing found", "check": "the planned trajectory failed its check"}
+
+
+def retreat_waypoints(path: Optional[Tuple[Tuple[float, ...], ...]], start: Tuple[float, ...],
+                      crossing: Tuple[Tuple[float, ...], ...], attempt: int,
+                      replans: List[str]) -> Tuple[Tuple[float, ...], ...]:
+    """Waypoints back along the last plan's ``path`` (its start last) -- for the last try of a plan
+    from where that plan ended after every try before found no path: the arm got here along it,
+    so it leads out of a narrow place (under the hood's top, between walls), and from its start
+    the planner searches for what the straight legs back left of the budget. () otherwise: not
+    the last try, a try failed for another reason, an elbow crossing's waypoints, no last plan
+    or one that ended farther than RETREAT_NEAR from ``start`` (every joint; the arm stops near the
+    plan's end, not on it). Nothing of it is taken on trust: every leg is checked (and, if
+    not free, planned) by this plan's own validity, the cell as it is now, and the driver checks
+    the plan's stream as any other's."""
+    if attempt != ATTEMPTS - 1 or crossing or not path or len(path) < 2 \
+            or max(abs(a - b) for a, b in zip(path[-1], start)) > RETREAT_NEAR \
+            or len(replans) != attempt or not all(r.startswith("plan:") for r in replans):
+        return ()
+    return tuple(reversed(path[:-1]))
