@@ -31,7 +31,7 @@ planner, no garbage of the case before), and in it:
                 front of the arm, about the pillar, the shelf and the table; every other one as a
                 TCP pose; the same goals for both designs;
   ``validate``  a --points-point joint trajectory goal checked as joint_trajectory_action checks it,
-                in a thread of its own (driver.trajectories.validate, segment_speeds, then
+                in a thread of its own (driver.motion.trajectories.validate, segment_speeds, then
                 DriverCore.submit_trajectory, whose collision check walks every sample): a joint_1
                 sweep that reaches the pillar at its last points, so it would be refused at the end.
                 What counts is the load while it is checked: the window ends with the validation or
@@ -41,9 +41,9 @@ planner, no garbage of the case before), and in it:
   ``plan+hog``  the plan goals with the two hogs running beside them.
 
   Designs: ``before`` -- ``bus_process`` false (the DP master in the driver's bus thread) and the
-  planning in the driver's interpreter (driver.planning.PlanActionCore, the plan action's old way);
+  planning in the driver's interpreter (driver.planning.planning.PlanActionCore, the plan action's old way);
   ``after`` -- ``bus_process`` true (vr_driver.bus.process, SCHED_FIFO 20 where allowed) and the
-  planning in a worker process (driver.plan_process.PlanningProcess, started before the window as the
+  planning in a worker process (driver.planning.plan_process.PlanningProcess, started before the window as the
   plan action starts it).
 
 Figures per case: the window's length, the Data_Exchange telegrams the card took, the longest gap
@@ -336,7 +336,7 @@ def cell_goals(core: Any, n: int, seed: int) -> List[Any]:
     within GOAL_SPREAD_DEG of it, within its limits, free (the driver's padding), the TCP inside the
     driver's workspace box, joint_5 on the side of the start's (no wrist flip for a Cartesian
     protocol); every other one as the TCP pose of those joints, the others as the joints."""
-    from vr_driver.driver.planning import PlanGoal
+    from vr_driver.driver.planning.planning import PlanGoal
     from vr_driver.kinematics.collision import CollisionChecker
     from vr_driver.kinematics.scene import load_scene
     kin, params = core.kin, core.params
@@ -371,10 +371,10 @@ class Plans(Load):
         # plan action would refuse at once: the load would end with the loss)
         self.start = tuple(self.core.status().joints)
         if self.cfg["design"] == "before":
-            from vr_driver.driver.planning import PlanActionCore
+            from vr_driver.driver.planning.planning import PlanActionCore
             self.planner: Any = PlanActionCore(self.core)
         else:
-            from vr_driver.driver.plan_process import PlanningProcess
+            from vr_driver.driver.planning.plan_process import PlanningProcess
             self.planner = PlanningProcess(self.core)
             self.planner.start()                    # as the plan action starts it: before any goal
 
@@ -410,7 +410,7 @@ class Validation(Load):
     sample; the worker then ends without waiting for it."""
 
     def prepare(self) -> None:
-        from vr_driver.driver.trajectories import TrajectoryGoal
+        from vr_driver.driver.motion.trajectories import TrajectoryGoal
         core = self.core
         start = tuple(core.status().joints)
         end = self._into_pillar(start)
@@ -447,7 +447,7 @@ class Validation(Load):
         return at(min(upper, hi + INTO_PILLAR))
 
     def _validate(self) -> None:
-        from vr_driver.driver.trajectories import segment_speeds, validate
+        from vr_driver.driver.motion.trajectories import segment_speeds, validate
         from vr_driver.errors import VrDriverError
         core = self.core
         lim, protocol = core.kin.limits, core.protocol

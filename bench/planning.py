@@ -35,7 +35,7 @@ venv is missing; never used by the driver): from the same start to the same goal
 its time measured inside its own process; figures per goal kind, ours / the peer's, printed.
 
 Execution (unless --no-execute): each plan, validated as joint_trajectory_action validates it
-(driver.trajectories.validate from the arm's reported joints, segment_speeds), runs on the in-memory
+(driver.motion.trajectories.validate from the arm's reported joints, segment_speeds), runs on the in-memory
 driver rig of the tests (vr_driver/test/driver/_world.py: DriverCore with the cell as its scene --
 it checks every sample and chord itself and refuses a path that collides --, our DP master, the
 virtual controller's slave, program and simulated arm, one fake clock; ``--protocol v2`` joint
@@ -220,7 +220,7 @@ class Executor:
 
     def run(self, plan):
         """(succeeded, reason) of one plan on the rig."""
-        from vr_driver.driver.trajectories import TrajectoryError, TrajectoryGoal, segment_speeds, validate
+        from vr_driver.driver.motion.trajectories import TrajectoryError, TrajectoryGoal, segment_speeds, validate
         from vr_driver.driver import DriverError
         w, lim = self.world, self.kin.limits
         try:
@@ -297,7 +297,7 @@ def matched_limits(kin, ramp_time, directory):
     limit / ``ramp_time``, the planning model with those limits): an arm with that ramp and the
     planner matched to it, written by the commissioning's own writer."""
     from vr_driver.commission.report import write_joint_limits
-    from vr_driver.driver.commissioned import planning_kinematics
+    from vr_driver.driver.checks.commissioned import planning_kinematics
     from vr_driver.params import DriverParams
     path = os.path.join(directory, "joint_limits.yaml")
     names = [n.split("/")[-1] for n in kin.joint_names]
@@ -322,7 +322,7 @@ def main() -> int:
     parser.add_argument("--no-execute", action="store_true", help="plan and check only, no driver rig")
     parser.add_argument("--protocol", default="v2", help="the rig's protocol (default v2: joint targets)")
     parser.add_argument("--driver", action="store_true",
-                        help="plan as the plan action does (driver.planning.PlanActionCore on the rig's driver: "
+                        help="plan as the plan action does (driver.planning.planning.PlanActionCore on the rig's driver: "
                              "its checker, the workspace box, with v1 / v3 the wrist margin, the driver's own "
                              "stream check and re-plans) instead of the bare planner")
     parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
@@ -367,7 +367,7 @@ def main() -> int:
     region = GOAL_REGIONS.get(os.path.basename(args.cell))
     driver_planning = None
     if args.driver:
-        from vr_driver.driver.planning import PlanActionCore, PlanGoal
+        from vr_driver.driver.planning.planning import PlanActionCore, PlanGoal
         driver_planning = PlanActionCore(executor.world.core)
     rng = random.Random(args.seed)
     print("planning benchmark: %d queries, seed %d, cell %s (%s), padding %.0f mm (the driver's), planner %s, "
@@ -377,7 +377,7 @@ def main() -> int:
              "" if executor is None else ", executed on the driver rig (protocol %s)" % args.protocol)
           + ("" if args.ramp_time is None else ", the arm's ramp %g s and the planner's accelerations matched "
              "(speed / %g s)" % (args.ramp_time, args.ramp_time))
-          + ("; planned by the plan action's core (driver.planning)" if driver_planning is not None else "")
+          + ("; planned by the plan action's core (driver.planning.planning)" if driver_planning is not None else "")
           + ("" if region is None else "; every other pair of goals inside %s" % (region,))
           + ("" if peer is None else "; the peer: mplib %s" % peer.version))
     start = executor.joints if executor is not None else tuple(kin.named_states["home"])

@@ -29,7 +29,7 @@ moving up to 10 deg per leg; timed as the "topp" set (velocity scaling 0.2-1: a 
 a few bus cycles in the band) with the planner's accelerations MATCHED to the configuration's arm
 (``ramp_time``: velocity / ramp_time, :meth:`Checker.accelerations`; the same paths, only the timing
 differs); every point and chord inside the limits and the box (the other singularities checked with
-joint_5 at 30 deg). Judged as the driver judges (:class:`WristRule`, vr_driver.driver.resolution's
+joint_5 at 30 deg). Judged as the driver judges (:class:`WristRule`, vr_driver.driver.joints.resolution's
 band): where joint_5 is within 5 deg of 0 in the sample or the plan, joint_4 / joint_6 by their sum,
 elsewhere each joint; the deviation, the distance to the path and the final error so. The targets
 (``WRIST_TARGETS``, per goal and per configuration): every goal SUCCESSFUL with empty tolerances, time
@@ -770,7 +770,7 @@ def wrist_plan(rng: random.Random, start: Sequence[float], chk: Checker, kind: s
 
 @dataclass(frozen=True)
 class WristRule:
-    """How the "wrist" set is judged: the driver's wrist band (vr_driver.driver.resolution:
+    """How the "wrist" set is judged: the driver's wrist band (vr_driver.driver.joints.resolution:
     ``WRIST_BAND``, ``WireResolution.in_band`` / ``sum_of``). Where joint_5 is within ``band`` of 0
     in the sample or in the plan it is compared with (the driver's rule, supervision's
     ``_judged``), joint_4 and joint_6 count by ``joint_4 + sign * joint_6`` -- the pose fixes only
@@ -784,7 +784,7 @@ class WristRule:
         """The driver's band and sign for the arm ``kin`` (the sign: its joint_4 / joint_6 axes)."""
         from types import SimpleNamespace
 
-        from vr_driver.driver.resolution import WRIST_BAND, WireResolution
+        from vr_driver.driver.joints.resolution import WRIST_BAND, WireResolution
         wire = WireResolution(kin, SimpleNamespace(pose_resolution=(1.0, 1.0)), band=WRIST_BAND)
         return cls(wire.band, wire.sign)
 
@@ -848,7 +848,7 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     by their sum where joint_5 is near 0): ``dev_joints_deg`` then has joint_4's and joint_6's
     outside the band only, ``dev_sum_deg`` the sum's inside it (None: no sample there), ``dev_joint``
     7 when the sum is the worst; ``band_samples`` how many samples were judged so."""
-    from vr_driver.driver.trajectories import ValidTrajectory, path_deviation
+    from vr_driver.driver.motion.trajectories import ValidTrajectory, path_deviation
     inside = [(t, q) for t, q in samples if 0.0 <= t <= t_result]
     out: Dict[str, Any] = {"planned": plan.duration, "elapsed": t_result, "ratio": t_result / plan.duration,
                            "margin_s": t_result - (TIME_FACTOR * plan.duration + TIME_SLACK),
@@ -929,16 +929,16 @@ def unit_band(plan: Planned, wrist: WristRule) -> Any:
     """The driver's per-configuration tolerances (``ConfigurationTolerances``) with every tolerance
     1 rad and ``wrist``'s band: the driver's distance to the path (``path_deviation``) in rad, with
     joint_4 / joint_6 by their sum within the band."""
-    from vr_driver.driver.trajectories import ConfigurationTolerances
+    from vr_driver.driver.motion.trajectories import ConfigurationTolerances
     n = len(plan.points)
     return ConfigurationTolerances(path=((1.0,) * 6,) * n, path_sum=(1.0,) * n, goal_sum=1.0,
                                    errors=((0.0,) * 6,) * n, sum_errors=(0.0,) * n, band=wrist.band,
                                    sign=wrist.sign)
 
 
-#: the driver's own figure in the result's error_string (driver.supervision's note)
+#: the driver's own figure in the result's error_string (driver.joints.supervision's note)
 DRIVER_DEV = re.compile(r"at most ([0-9.]+) deg from the plan at the same time")
-#: the driver's own timing figures in the result's error_string (driver.supervision's note, timed from
+#: the driver's own timing figures in the result's error_string (driver.joints.supervision's note, timed from
 #: the goal's arrival): key -> pattern of its value [s or x]
 DRIVER_TIMING = {
     "driver_prep_s": re.compile(r"prepared in ([0-9.]+) s"),
@@ -1099,7 +1099,7 @@ class Run:
         self.wrist = WristRule.of(self.chk.kin) if wrist else None
         self.amax = planner_setup(self.chk, cfg)
         # the virtual arm's accelerations (its ramp_time, else the model's): what bounds how closely
-        # any arm could follow a plan (vr_driver.driver.following)
+        # any arm could follow a plan (vr_driver.driver.joints.following)
         self.arm_acc = (self.chk.accelerations(cfg["ramp_time"]) if cfg.get("ramp_time")
                         else tuple(self.chk.kin.limits.acceleration))
 
@@ -1259,7 +1259,7 @@ class Run:
                    error_string=result.error_string if result is not None else "no result within %.0f s" % timeout,
                    note=note)
         if self.wrist is not None:
-            from vr_driver.driver.following import following_floor
+            from vr_driver.driver.joints.following import following_floor
             # the least deviation any arm with the virtual arm's accelerations could have from this plan
             floor, where = following_floor(plan.times, plan.points, self.arm_acc, band=self.wrist.band,
                                            sign=self.wrist.sign)
@@ -1371,7 +1371,7 @@ def planner_limits(commissioning: str, config: str = CONFIG_FILE) -> Tuple[str, 
     ValueError naming the file when it is not a commissioning's."""
     import yaml
 
-    from vr_driver.driver.commissioned import plain_names
+    from vr_driver.driver.checks.commissioned import plain_names
     from vr_driver.errors import VrDriverError
     from vr_driver.params import DriverParams, read_planning_limits
     with open(config) as fh:
@@ -1472,7 +1472,7 @@ def goal_verdicts(rec: Dict[str, Any], protocol: str) -> List[Tuple[str, Optiona
 
 def beyond_any_arm(rec: Dict[str, Any]) -> bool:
     """Whether the goal's plan asks more than any arm with the virtual arm's accelerations can do for
-    the deviation target (its floor, vr_driver.driver.following, above the target)."""
+    the deviation target (its floor, vr_driver.driver.joints.following, above the target)."""
     return rec.get("floor_deg") is not None and rec["floor_deg"] > dict(
         (key, limit) for _label, key, limit in WRIST_TARGETS)["dev_deg"]
 
@@ -1608,7 +1608,7 @@ def summary(results: List[Dict[str, Any]]) -> None:
             r["name"], ", ".join("%s %s" % (label, _met(met)) for label, met in verdicts(r))))
         beyond = [g for g in r["goals"] if beyond_any_arm(g)]
         if beyond:
-            print("  beyond any arm that keeps the virtual arm's accelerations (vr_driver.driver.following; the "
+            print("  beyond any arm that keeps the virtual arm's accelerations (vr_driver.driver.joints.following; the "
                   "virtual arm itself exceeds them in blends and moves shorter than its ramp): %s" % "; ".join(
                 "goal %d no closer than %.2f deg (%s), measured %.2f by joint_states' samples (which may miss the "
                 "moment)" % (g["index"], g["floor_deg"], g["floor_where"], g["dev_deg"]) for g in beyond))

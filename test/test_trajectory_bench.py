@@ -54,7 +54,7 @@ class TrajectoryGeneratorTest(unittest.TestCase):
         self.assertNotEqual(other[0].to_json(), self.trajs[0].to_json())
 
     def test_the_driver_accepts_them_and_speeds_are_50_to_100_percent(self):
-        from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+        from vr_driver.driver.motion.trajectories import TrajectoryGoal, segment_speeds, validate
         names = self.params.controller_joint_names
         lim = self.kin.limits
         for k, t in enumerate(self.trajs):
@@ -153,7 +153,7 @@ class TimeOptimalSetTest(unittest.TestCase):
                            "acceleration limit")
 
     def test_resampled_every_tenth_of_a_second_and_the_driver_accepts_them(self):
-        from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+        from vr_driver.driver.motion.trajectories import TrajectoryGoal, segment_speeds, validate
         from vr_driver.kinematics.preview import check_envelope
         names = self.params.controller_joint_names
         lim = self.kin.limits
@@ -268,7 +268,7 @@ class WristSetTest(unittest.TestCase):
         self.assertEqual([leg.split()[0] for leg in after_near.legs], ["side", "cross"])
 
     def test_points_and_chords_inside_the_limits_and_the_box_and_the_driver_accepts_them(self):
-        from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+        from vr_driver.driver.motion.trajectories import TrajectoryGoal, segment_speeds, validate
         from vr_driver.kinematics.preview import check_envelope
         names = self.params.controller_joint_names
         lim = self.kin.limits
@@ -355,7 +355,7 @@ class WristJudgingTest(unittest.TestCase):
         return [(t, change(t, list(self.plan.sample(t)))) for t in self.times]
 
     def test_the_driver_s_band_and_sign(self):
-        from vr_driver.driver.resolution import WRIST_BAND, WireResolution
+        from vr_driver.driver.joints.resolution import WRIST_BAND, WireResolution
         from vr_driver.kinematics.solver import Kinematics
         from types import SimpleNamespace
         kin = Kinematics.default()
@@ -459,7 +459,7 @@ class WristJudgingTest(unittest.TestCase):
         self.assertFalse(dict(b.verdicts({"set": "wrist", "protocol": "v1", "goals": [good, failed]}))[
             "all goals SUCCESSFUL"])
         self.assertEqual([m for _l, m in b.goal_verdicts(failed, "v3")], [False] * 4)
-        # a goal whose plan no arm follows within the target says so in its line (the floor: vr_driver.driver.following)
+        # a goal whose plan no arm follows within the target says so in its line (the floor: vr_driver.driver.joints.following)
         words = dict(good, samples=10, dev_joints_deg=[0.6] * 6, j5_deg=[20.0, 1.0, -20.0], floor_deg=0.75,
                      floor_where="joint_6 at point 3 of 3 (stops from 162 deg/s)")
         self.assertTrue(b.beyond_any_arm(words))

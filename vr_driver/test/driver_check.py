@@ -204,7 +204,7 @@ class DriverTestBase(unittest.TestCase):
     def check_on_path(self, points, times, q0, start, tol=None):
         """joint_states from message ``start`` on stayed within the path tolerance of the planned
         path (``tol``, or 1 deg: validate's fallback) -- and some were seen on the way, not only at its ends."""
-        from vr_driver.driver.trajectories import TrajectoryGoal, path_deviation, validate
+        from vr_driver.driver.motion.trajectories import TrajectoryGoal, path_deviation, validate
         names = tuple("joint_%d" % i for i in range(1, 7))
         lim = self.kin.limits
         plan = validate(TrajectoryGoal(names, tuple(map(tuple, points)), tuple(times),

@@ -18,7 +18,7 @@ import rospy
 from sensor_msgs.msg import JointState
 
 from driver_check import PKG, DriverTestBase, Recorder
-from vr_driver.driver.resolution import WireResolution
+from vr_driver.driver.joints.resolution import WireResolution
 from driver_v2_check import smooth_points
 from vr_driver.msg import FollowJointTrajectoryResult
 from vr_driver.poses import ControllerPose
@@ -87,7 +87,7 @@ class DriverV3Test(DriverTestBase):
         self.assertEqual(list(msg.name), ["joint_%d" % i for i in range(1, 7)])
         self.assertLess(abs(msg.header.stamp.to_sec() - rospy.get_time()), 1.0)
         # within what the wire's 0.1 mm / 0.01 deg pose allows the driver to know there (its joints
-        # are read from the reported pose against what was sent: driver/tracking.py)
+        # are read from the reported pose against what was sent: driver/joints/tracking.py)
         bounds, _ = WireResolution.of(self.kin, V3).errors(final)
         for name, a, b, bound in zip(msg.name, msg.position, final, bounds):
             self.assertLessEqual(abs(a - b), max(0.01 * DEG, bound) + 1e-9,

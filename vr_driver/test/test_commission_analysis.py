@@ -292,7 +292,7 @@ def test_loops_are_counted_by_the_heartbeats_advance_not_by_the_records():
     five new loops: a 0.4 s move with the loop running is ~40 loops, not the ~8 records that brought
     them (the tool once took that for a loop blocked by the MOVE and wrote protocol v1)."""
     from vr_driver.commission.bus import heartbeat_brackets, Cycle
-    from vr_driver.driver.link import LinkState
+    from vr_driver.driver.link.link import LinkState
     loop, cycle = 0.010, 0.050
     cycles = []
     for i in range(9):                                   # 0.4 s of records, one every 50 ms

@@ -10,7 +10,7 @@ Both settings of the virtual G2's assumption ``data_exchange_bit`` (controller.s
 card's Data_Exchange status the program sees every reset; with its input bytes only it sees a reset
 where the card's safe image is no record (v2, v3) and a loop read it -- and v1, whose idle record
 *is* the safe image, cannot keep exactly once across a reset by itself: there it rests on the
-master's idle record at the start of every session (driver/link.py;
+master's idle record at the start of every session (driver/link/link.py;
 driver/test_reset_exactly_once_stepped.py runs both ends). Nothing here sleeps."""
 from __future__ import annotations
 
@@ -124,7 +124,7 @@ def test_v1_a_request_still_in_the_inputs_after_a_reset(kin, dx_bit, how):
         # only its bytes, and it read the safe image (all zero) for several loops: that *is* v1's
         # idle record -- DONE released, and the raised flag of the new session is a new request:
         # A runs a second time. This program cannot keep v1 exactly once across a reset; the
-        # master's idle record at the start of every session does (driver/link.py)
+        # master's idle record at the start of every session does (driver/link/link.py)
         assert not rig.prog.sees_resets and rig.prog.link_losses == 0
         assert rig.outcomes() == [(A.values, Outcome.EXECUTED, False), (A.values, Outcome.EXECUTED, False)]
     # in every case: after the idle record the next request runs, once

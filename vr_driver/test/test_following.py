@@ -1,4 +1,4 @@
-"""driver.following: the least deviation any arm with given accelerations can have from a plan's
+"""driver.joints.following: the least deviation any arm with given accelerations can have from a plan's
 points joined by straight lines -- checked against arms simulated finely (the bound must never be
 beaten, and the best arm must come close to it)."""
 from __future__ import annotations
@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from vr_driver.driver.following import CORNER_FACTOR, REST_FACTOR, following_floor
+from vr_driver.driver.joints.following import CORNER_FACTOR, REST_FACTOR, following_floor
 
 
 def linear(times, values, t):

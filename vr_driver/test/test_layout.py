@@ -9,7 +9,13 @@ Layers (the first name below ``vr_driver``):
 - ``protocol`` (v1, v2): imports only the vocabulary. ``kinematics`` (solver, preview): imports only
   the vocabulary. The code has no import between the two in either direction, and the test keeps it
   so (the wire codec needs no PyKDL, the kinematics no wire format).
-- ``driver``: imports the vocabulary, protocol and kinematics; never controller, terminal, csr or ros.
+- ``driver``: imports the vocabulary, protocol, kinematics and bus; never controller, terminal, csr or
+  ros. Inside it, one room per job (DRIVER_MAY_IMPORT), each importing only the rooms below it:
+  ``link`` (the bus side) < ``motion`` (jobs, sequencers, streams, the status) < ``joints`` (the
+  arm's joints, supervision) and ``checks`` (a job's way in: submit, path checks, stream
+  preparation) < the top (``core``, ``bus_loop``, ``sequencers``, ``__init__``) < ``planning`` (the
+  plan action and its worker process). ``own_thread`` (top level) imports nothing of the driver;
+  the top and ``checks`` use it.
 - ``controller`` (the virtual G2 and the simulated devices): never imports driver, terminal or ros.
 - ``csr`` and ``terminal``: never import ros.
 - ``ros``: may import everything. Only ros imports rospy, actionlib, the other ROS client packages
@@ -63,6 +69,18 @@ MAY_IMPORT = {
     # what MoveIt 1 is given (the cell as .scene text, the prefixed config, OPW): the cell and the errors
     "moveit": {"vocabulary", "kinematics", "moveit"},
 }
+#: inside ``driver``: per room (its subpackage; ``core`` for the top-level modules but own_thread) the
+#: rooms it may import (one way: no two rooms import each other)
+DRIVER_MAY_IMPORT = {
+    "own_thread": {"own_thread"},
+    "link": {"link"},
+    "motion": {"link", "motion"},
+    "joints": {"link", "motion", "joints"},
+    "checks": {"own_thread", "link", "motion", "checks"},
+    "core": {"own_thread", "link", "motion", "joints", "checks", "core"},
+    "planning": {"own_thread", "link", "motion", "joints", "checks", "core", "planning"},
+}
+DRIVER_ROOMS = ("link", "motion", "joints", "checks", "planning")
 #: ... or the layers it must not import (blacklist)
 MUST_NOT_IMPORT = {
     "controller": {"driver", "terminal", "ros"},
@@ -76,7 +94,7 @@ ROS_PACKAGES = {"rospy", "rosgraph", "rospkg", "roslib", "rosparam", "rosservice
 #: (importing module, imported module): allowed only inside a function, each with why it is needed.
 #: (What params once took from above and no longer does: ``port: auto``'s link name lives in params
 #: (controller.pty_link uses it), the OMPL planners' names too (kinematics.planner uses them), the
-#: controller's own I/O length in io_signals (driver.stations uses it).)
+#: controller's own I/O length in io_signals (driver.link.stations uses it).)
 KNOWN = {
     # the protocol parameter is checked against the registered protocol objects and resolved to one
     # (DriverParams.wire: streams? controller I/O? GSD modules and record lengths for the bus config);
@@ -107,6 +125,14 @@ def layer(name):
     if parts[1] in ("msg", "srv"):
         return "ros"
     return parts[1] if parts[1] in SUBPACKAGES else "unknown:" + parts[1]
+
+
+def driver_room(name):
+    """The room inside ``driver`` of an absolute module name of that layer."""
+    parts = name.split(".")
+    if len(parts) > 3 and parts[2] in DRIVER_ROOMS:
+        return parts[2]
+    return "own_thread" if parts[2:3] == ["own_thread"] else "core"
 
 
 def is_ros(name):
@@ -206,6 +232,9 @@ def violations(root=PACKAGE):
                     reason = "%s may import only %s" % (mine, ", ".join(sorted(MAY_IMPORT[mine])))
                 elif theirs in MUST_NOT_IMPORT.get(mine, ()):
                     reason = "%s must not import %s" % (mine, theirs)
+                elif mine == theirs == "driver" and driver_room(target) not in DRIVER_MAY_IMPORT[driver_room(name)]:
+                    reason = "driver.%s may import only driver.%s" % (
+                        driver_room(name), ", driver.".join(sorted(DRIVER_MAY_IMPORT[driver_room(name)])))
             elif is_ros(target) and mine != "ros":
                 reason = "only vr_driver.ros imports ROS"
             if reason is None:
@@ -344,7 +373,7 @@ def test_the_layout_is_as_documented():
     assert top == sorted(VOCABULARY + ("__init__",))
     for sub in SUBPACKAGES:
         assert os.path.isfile(os.path.join(PACKAGE, sub, "__init__.py")), sub
-    for sub in ("protocol", "kinematics", "controller", "terminal", "ros"):
+    for sub in ("protocol", "kinematics", "controller", "terminal", "ros") + tuple("driver/" + r for r in DRIVER_ROOMS):
         with open(os.path.join(PACKAGE, sub, "__init__.py")) as f:
             body = ast.parse(f.read()).body
         assert len(body) == 1 and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant), sub
@@ -354,7 +383,8 @@ def test_setup_py_installs_every_subpackage():
     with open(os.path.join(os.path.dirname(SRC), "setup.py")) as f:
         setup = f.read()
     packages = ast.literal_eval(setup.split("packages=", 1)[1].split("]", 1)[0] + "]")
-    assert sorted(packages) == sorted(["vr_driver"] + ["vr_driver." + s for s in SUBPACKAGES])
+    assert sorted(packages) == sorted(["vr_driver"] + ["vr_driver." + s for s in SUBPACKAGES]
+                                      + ["vr_driver.driver." + r for r in DRIVER_ROOMS])
 
 
 # (module file to break, the import statement added at module level, what the checker must say)
@@ -366,8 +396,16 @@ BREAKS = [
     ("kinematics/solver.py", "from ..protocol.v1 import Command", "kinematics may import only"),
     ("kinematics/preview.py", "from ..controller.arm import SimArm", "kinematics may import only"),
     ("driver/core.py", "from ..controller.virtual_controller import VirtualController", "driver may import only"),
-    ("driver/link.py", "from ..terminal.pose_input import Backend", "driver may import only"),
-    ("driver/jobs.py", "from ..ros.support import route_to_rosout", "driver may import only"),
+    ("driver/link/link.py", "from ...terminal.pose_input import Backend", "driver may import only"),
+    ("driver/motion/jobs.py", "from ...ros.support import route_to_rosout", "driver may import only"),
+    ("driver/link/link.py", "def later():\n    from ..motion.jobs import MoveJob", "driver.link may import only"),
+    ("driver/motion/status.py", "from ..joints.tracking import JointTracker", "driver.motion may import only"),
+    ("driver/motion/jobs.py", "from ..checks.path_checks import PathChecks", "driver.motion may import only"),
+    ("driver/joints/tracking.py", "from ..checks.scene_guard import SceneGuard", "driver.joints may import only"),
+    ("driver/checks/path_checks.py", "from ..joints.resolution import WireResolution", "driver.checks may import only"),
+    ("driver/checks/job_control.py", "from ..core import DriverCore", "driver.checks may import only"),
+    ("driver/core.py", "def later():\n    from .planning.planning import PlanActionCore", "driver.core may import only"),
+    ("driver/own_thread.py", "from .motion.jobs import MoveJob", "driver.own_thread may import only"),
     ("controller/virtual_controller.py", "from ..driver.core import DriverCore", "controller must not import driver"),
     ("controller/arm.py", "from ..terminal import pose_input", "controller must not import terminal"),
     ("controller/line.py", "import vr_driver.ros.support", "controller must not import ros"),
@@ -379,7 +417,7 @@ BREAKS = [
     ("kinematics/solver.py", "from vr_driver.msg import RobotStatus", "only vr_driver.ros imports ROS"),
     ("csr/cli.py", "import rospy", "known exception, but at module level"),
     ("params.py", "from .protocol import registry", "known exception, but at module level"),
-    ("params.py", "def later():\n    from .driver.stations import IoLine", "vocabulary may import only"),
+    ("params.py", "def later():\n    from .driver.link.stations import IoLine", "vocabulary may import only"),
     ("params.py", "def later():\n    from .controller.pty_link import SimPort", "vocabulary may import only"),
     ("stray.py", '"""A module beside the vocabulary that is not part of it."""', "not in any layer"),
 ]
@@ -388,11 +426,11 @@ BREAKS = [
 #: the shape rules: (module file to break, the text appended to it, what the checker must say)
 LONG_CLASS = "class Sprawling:\n" + "    x = 1\n" * MAX_CLASS_LINES
 SHAPE_BREAKS = [
-    ("driver/jobs.py", LONG_CLASS, "class Sprawling is %d lines" % (MAX_CLASS_LINES + 1)),
-    ("driver/jobs.py", "from .core import DriverCore", "import circle: "),
-    ("driver/stream_prep.py", "def later():\n    from .job_control import JobControl",
-     "import circle: vr_driver.driver.job_control <-> "),
-    ("driver/path_checks.py", "def later():\n    from . import stream_prep", "vr_driver.driver.stream_prep"),
+    ("driver/motion/jobs.py", LONG_CLASS, "class Sprawling is %d lines" % (MAX_CLASS_LINES + 1)),
+    ("driver/motion/jobs.py", "from ..core import DriverCore", "import circle: "),
+    ("driver/checks/stream_prep.py", "def later():\n    from .job_control import JobControl",
+     "import circle: vr_driver.driver.checks.job_control <-> "),
+    ("driver/checks/path_checks.py", "def later():\n    from . import stream_prep", "vr_driver.driver.checks.stream_prep"),
 ]
 
 

@@ -1,4 +1,4 @@
-"""The messages between the driver and its planning process (vr_driver.driver.plan_messages), the
+"""The messages between the driver and its planning process (vr_driver.driver.planning.plan_messages), the
 same pattern as the bus process's: each goes over the wire and comes back equal; one that is
 malformed, unknown, or meant for the other side is refused with an error that says what is wrong
 (and the worker answers it with PlanFailed, changing nothing)."""
@@ -10,10 +10,10 @@ from multiprocessing import Pipe
 import pytest
 
 from vr_driver.bus.messages import decode
-from vr_driver.driver.plan_messages import (FROM_WORKER, TO_WORKER, Configure, Log, Missing, Outcome, Plan,
+from vr_driver.driver.planning.plan_messages import (FROM_WORKER, TO_WORKER, Configure, Log, Missing, Outcome, Plan,
                                             PlanFailed, PlanMessageError, Ready, SceneSnapshot, StartFailed, Stop,
                                             driver_end, worker_end)
-from vr_driver.driver.planning import SUCCESS, PlanGoal, PlanOutcome
+from vr_driver.driver.planning.planning import SUCCESS, PlanGoal, PlanOutcome
 from vr_driver.params import DriverParams
 
 PARAMS = DriverParams.from_dict({"protocol": "v3"})

@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import pytest
 
-from vr_driver.driver.announced import Announced
+from vr_driver.driver.motion.announced import Announced
 
 msg = pytest.importorskip("vr_driver.msg", reason="vr_driver messages not built (run scripts/test)")
 plan_server = pytest.importorskip("vr_driver.ros.plan_server", reason="rospy / actionlib not importable")
 
-from vr_driver.driver import planning as P  # noqa: E402
-from vr_driver.driver.planning import PlanOutcome  # noqa: E402
+from vr_driver.driver.planning import planning as P  # noqa: E402
+from vr_driver.driver.planning.planning import PlanOutcome  # noqa: E402
 from vr_driver.errors import MissingDependency, VrDriverError  # noqa: E402
 from vr_driver.kinematics.planner import PlannedTrajectory  # noqa: E402
 from vr_driver.params import DriverParams  # noqa: E402
@@ -149,7 +149,7 @@ def test_without_ompl_the_action_is_not_advertised_and_says_why_once(monkeypatch
             pass
 
         def start(self):
-            raise MissingDependency("ompl", "ompl", "the plan action (vr_driver.driver.planning)",
+            raise MissingDependency("ompl", "ompl", "the plan action (vr_driver.driver.planning.planning)",
                                     "ModuleNotFoundError: No module named 'ompl'")
     monkeypatch.setattr(plan_server, "PlanningProcess", WithoutOmpl)
     warnings = []
@@ -159,7 +159,7 @@ def test_without_ompl_the_action_is_not_advertised_and_says_why_once(monkeypatch
     assert server.server is None and server.client is None and server.marker_pub is None and server.planning is None
     assert len(warnings) == 1
     assert warnings[0].startswith("interface: the plan action is not served: the plan action (vr_driver.driver."
-                                  "planning) needs the Python package ompl"), warnings[0]
+                                  "planning.planning) needs the Python package ompl"), warnings[0]
     assert "scripts/setup" in warnings[0] and "No module named 'ompl'" in warnings[0]
     assert server.unavailable and "ompl" in server.unavailable
 

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from vr_driver.driver.trajectories import TrajectoryGoal, segment_speeds, validate
+from vr_driver.driver.motion.trajectories import TrajectoryGoal, segment_speeds, validate
 from vr_driver.errors import MissingDependency, MotionError
 from vr_driver.kinematics import deps
 from vr_driver.kinematics.planner import PLANNERS, Planner, PlanningError
@@ -482,12 +482,12 @@ def test_plans_around_the_pillar_of_the_example_cell(kin, cell_checker):
 
 
 def test_the_driver_collision_guard_accepts_a_plan_made_with_its_padding(kin, cell_checker):
-    """The driver's own path check (driver.scene_guard, collision_padding 10 mm, the cell as its
+    """The driver's own path check (driver.checks.scene_guard, collision_padding 10 mm, the cell as its
     scene) accepts what the planner plans with a checker of the same padding -- and refuses the
     straight move the planner went around."""
     import threading
 
-    from vr_driver.driver.scene_guard import SceneGuard
+    from vr_driver.driver.checks.scene_guard import SceneGuard
     from vr_driver.errors import CollisionError
     from vr_driver.kinematics.scene import load_scene
     guard = SceneGuard(kin, threading.Lock(), scene=load_scene(CELL), padding=0.01)

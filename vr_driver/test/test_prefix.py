@@ -19,7 +19,7 @@ import yaml
 from vr_driver import csr
 from vr_driver.controller.pty_link import auto_pty_link
 from vr_driver.driver import DriverCore, DriverError
-from vr_driver.driver.trajectories import INVALID_JOINTS, TrajectoryError, TrajectoryGoal, validate
+from vr_driver.driver.motion.trajectories import INVALID_JOINTS, TrajectoryError, TrajectoryGoal, validate
 from vr_driver.kinematics.solver import Kinematics
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.terminal.pose_input import build_arg_parser, in_namespace
@@ -120,7 +120,7 @@ def test_the_virtual_controller_link_is_one_per_namespace():
 def test_a_socket_url_is_a_port_the_driver_opens(monkeypatch):
     """doc/multi_robot.md: a serial line reached over the network (an RS-485 / TCP converter, or ser2net):
     the port is pyserial's socket:// URL; the driver's link opens it (a real TCP connection)."""
-    from vr_driver.driver.link import open_serial_link
+    from vr_driver.driver.link.link import open_serial_link
     server = socket.socket()
     server.bind(("127.0.0.1", 0))
     server.listen(1)

@@ -21,7 +21,7 @@ from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
 from pyprofibus_vendor.phy_serial import SerialLink
 
 from vr_driver.controller.virtual_controller import VirtualController
-from vr_driver.driver.stations import IoLine
+from vr_driver.driver.link.stations import IoLine
 from vr_driver.io_signals import lengths_from_bus, load_signal_map
 from vr_driver.controller.line import LineHub
 

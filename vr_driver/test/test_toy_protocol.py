@@ -26,8 +26,8 @@ from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.driver import DriverCore
 from vr_driver.driver.sequencers import BUILT_IN as SEQUENCERS
 from vr_driver.driver.sequencers import STREAM_FAMILIES
-from vr_driver.driver.stream_prep import JointStreams
-from vr_driver.driver.streaming import StreamSequencer
+from vr_driver.driver.checks.stream_prep import JointStreams
+from vr_driver.driver.motion.streaming import StreamSequencer
 from vr_driver.errors import ProtocolError
 from vr_driver.params import DriverParams
 from vr_driver.poses import ControllerPose, MoveType
@@ -35,7 +35,7 @@ from vr_driver.protocol import registry
 from vr_driver.protocol.base import framed_record
 from vr_driver.protocol.v2 import RECORD_SIZE_V2, V2, CommandV2, FeedbackV2, ProtocolV2, crc16
 from vr_driver.controller.options import SimError
-from vr_driver.driver.jobs import MoveRequest
+from vr_driver.driver.motion.jobs import MoveRequest
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "driver"))
 from _world import WORLD_PARAMS, FakeClock, SteppedLink  # noqa: E402

@@ -37,7 +37,7 @@ from .errors import SignalMapError
 
 #: bytes each way of the controller's own general-purpose I/O in the records of a protocol that
 #: carries it (``controller_io``: 16 inputs, 16 outputs): the station the signal map may name at the
-#: controller's address (driver.stations.ControllerIo serves it)
+#: controller's address (driver.link.stations.ControllerIo serves it)
 CONTROLLER_IO_LENGTH = 2
 
 __all__ = ["TYPES", "DIRECTIONS", "Value", "Signal", "StationSignals", "SignalMap", "load_signal_map",

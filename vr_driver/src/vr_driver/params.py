@@ -229,7 +229,7 @@ class ControllerFacts:
     (doc/commissioning.md). The defaults are the assumptions (the virtual G2's defaults): a driver
     without a commissioning file runs as before. Every value is range-checked at start; a bad one is a
     ParamError naming ``controller/<key>``. What the driver does with them:
-    :mod:`vr_driver.driver.commissioned` (the words it says at connect, the stream timing, the
+    :mod:`vr_driver.driver.checks.commissioned` (the words it says at connect, the stream timing, the
     planner's limits) and :class:`DriverParams` (a program loop that blocks during a MOVE refuses a
     streaming protocol; no look-ahead makes every stream point a stop, ``stream_smooth`` 0; a target
     sent ahead refused: one target per acknowledgement, :attr:`DriverParams.wire`)."""

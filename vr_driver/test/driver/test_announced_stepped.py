@@ -1,4 +1,4 @@
-"""What the driver says before a move (vr_driver.driver.announced) is what the move does (issue 46,
+"""What the driver says before a move (vr_driver.driver.motion.announced) is what the move does (issue 46,
 part 4): the time and the TCP's top speed DriverCore.announce gives for a planned path agree within
 10 % with the run on the stepped world -- v3 on the plan's timing, v1 at the robot program's own speed
 (the virtual G2's program_speed, both sides of the assumption: the documented 10 m/min and twice
@@ -12,7 +12,7 @@ import pytest
 
 from vr_driver.controller.options import SimOptions
 from vr_driver.controller.simulator import SimError
-from vr_driver.driver.announced import scaling_words
+from vr_driver.driver.motion.announced import scaling_words
 from vr_driver.kinematics.preview import at_tcp_speed, peak_tcp_speed
 from vr_driver.protocol.v1 import PROGRAM_PATH_SPEED, PROGRAM_SPEED
 from vr_driver.params import ControllerFacts

@@ -13,7 +13,7 @@ import os
 
 from vr_driver.csr import read_program
 from vr_driver.csr.calibration import PairRecorder, RestDetector, model_errors, taught_points
-from vr_driver.driver.trajectories import TrajectoryGoal, validate
+from vr_driver.driver.motion.trajectories import TrajectoryGoal, validate
 from vr_driver.kinematics.solver import Kinematics
 from vr_driver.ros.calibration_recorder import Recording, main as calibrate
 

@@ -13,8 +13,8 @@ import pytest
 
 from vr_driver.controller.arm import Outcome
 from vr_driver.driver import DriverError
-from vr_driver.driver.stream_prep import CONFIGURATION_TOLERANCE
-from vr_driver.driver.jobs import StreamPoint
+from vr_driver.driver.checks.stream_prep import CONFIGURATION_TOLERANCE
+from vr_driver.driver.motion.jobs import StreamPoint
 from vr_driver.protocol.registry import get
 from vr_driver.protocol.v2 import StreamState
 
@@ -147,7 +147,7 @@ def test_a_wrist_turn_past_half_a_turn_is_streamed_in_steps_the_controller_solve
     start's turned by -90 deg, which the controller (nearest the previous target) would run. The
     stream puts planned points back so no joint moves more than CARTESIAN_MAX_STEP between two
     targets: accepted, run, and the arm ends 270 deg on."""
-    from vr_driver.driver.stream_prep import CARTESIAN_MAX_STEP
+    from vr_driver.driver.checks.stream_prep import CARTESIAN_MAX_STEP
     q0 = tuple(world.arm.joints)
     turn = 1.5 * math.pi
     end = q0[:5] + (q0[5] + turn,)
@@ -173,7 +173,7 @@ def test_the_commanded_path_is_searched_with_the_reported_pose_in_mm_and_deg(wor
     rounding pushes a pose past a reach or joint limit, or near the wrist singularity). The plan's
     lookup was once made with the record's raw integers (0.1 mm / 0.01 deg on v3), which never lay
     near the plan: every lookup missed."""
-    from vr_driver.driver.tracking import CommandedPath
+    from vr_driver.driver.joints.tracking import CommandedPath
     calls = []
     original = CommandedPath.locate
 

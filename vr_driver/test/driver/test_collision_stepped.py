@@ -1,4 +1,4 @@
-"""The driver's collision checks (issue 27; driver/scene_guard.py) on a stepped world with the fake
+"""The driver's collision checks (issue 27; driver/checks/scene_guard.py) on a stepped world with the fake
 clock: every path is checked before anything is queued -- a move's preview (PTP), a joint path's
 PTPs, a trajectory, a joint_command step -- against the example cell and the arm itself; a refusal
 names the sample, the link and the object, and nothing reaches the controller (its execution log
@@ -13,9 +13,9 @@ import pytest
 
 from _world import World
 from vr_driver.driver import DriverCore, DriverError, MoveRequest
-from vr_driver.driver import scene_guard
-from vr_driver.driver.joint_command import JointCommandRefused
-from vr_driver.driver.trajectories import TrajectoryGoal, validate
+from vr_driver.driver.checks import scene_guard
+from vr_driver.driver.checks.joint_command import JointCommandRefused
+from vr_driver.driver.motion.trajectories import TrajectoryGoal, validate
 from vr_driver.errors import CollisionError, MissingDependency, SceneError
 from vr_driver.kinematics.deps import missing_dependencies
 from vr_driver.kinematics.scene import SceneObject

@@ -26,7 +26,7 @@ from vr_driver.commission.steps import CardStep, Context, LookAheadStep, LoopSte
 from vr_driver.controller.options import LoopTiming, SimOptions
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.virtual_controller import robot_slave
-from vr_driver.driver.commissioned import controller_notes
+from vr_driver.driver.checks.commissioned import controller_notes
 from vr_driver.params import DriverParams
 from vr_driver.protocol import registry
 

@@ -1,4 +1,4 @@
-"""The driver set from the commissioning (driver/commissioned.py, params.ControllerFacts), stepped with
+"""The driver set from the commissioning (driver/checks/commissioned.py, params.ControllerFacts), stepped with
 the fake clock in one thread (_world.World): the virtual G2 set one way (one of its assumptions about
 the real G2, doc/controller_program.md §10.9) and the driver told the same by its ``controller``
 parameters -- or not told, to show what the setting costs.
@@ -25,9 +25,9 @@ from vr_driver.controller.arm import Outcome
 from vr_driver.controller.program_v1 import ControllerProgramV1 as ControllerProgram
 from vr_driver.controller.program_v3 import ControllerProgramV3
 from vr_driver.controller.stream_arm import SimStreamArm
-from vr_driver.driver.commissioned import controller_notes, min_segment_cycles, planning_kinematics
-from vr_driver.driver.stream_points import MIN_SEGMENT_CYCLES
-from vr_driver.driver.streaming import wire_speed
+from vr_driver.driver.checks.commissioned import controller_notes, min_segment_cycles, planning_kinematics
+from vr_driver.driver.motion.stream_points import MIN_SEGMENT_CYCLES
+from vr_driver.driver.motion.streaming import wire_speed
 from vr_driver.driver import MoveRequest
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.poses import MoveType
@@ -271,7 +271,7 @@ def test_planning_limits_are_the_plan_actions(kin, tmp_path):
     if missing:
         pytest.skip("; ".join(r for _, r in missing))
     from vr_driver.commission.report import joint_limits, write_joint_limits
-    from vr_driver.driver.planning import PlanActionCore, PlanGoal
+    from vr_driver.driver.planning.planning import PlanActionCore, PlanGoal
     lim = kin.limits
     slow = {axis: v / 0.5 for axis, v in enumerate(lim.velocity, 1)}     # a 0.5 s ramp on every joint
     limits = joint_limits(lim.names, lim.velocity, lim.acceleration, {"accelerations": slow})

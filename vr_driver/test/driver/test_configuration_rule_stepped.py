@@ -19,10 +19,10 @@ import numpy as np
 import pytest
 
 from vr_driver.driver import DriverError, MoveRequest
-from vr_driver.driver.jobs import StreamPoint
-from vr_driver.driver.stream_prep import CARTESIAN_MAX_STEP, CONFIGURATION_TOLERANCE
-from vr_driver.driver.supervision import ABORTED
-from vr_driver.driver.trajectories import PATH_TOLERANCE_VIOLATED
+from vr_driver.driver.motion.jobs import StreamPoint
+from vr_driver.driver.checks.stream_prep import CARTESIAN_MAX_STEP, CONFIGURATION_TOLERANCE
+from vr_driver.driver.joints.supervision import ABORTED
+from vr_driver.driver.motion.trajectories import PATH_TOLERANCE_VIOLATED
 from vr_driver.kinematics.solver import ConfigurationRule
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol.registry import get

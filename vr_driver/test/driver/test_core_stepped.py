@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from vr_driver.driver import DriverError, JobPhase, LinkState, MoveRequest, SubmitMode
-from vr_driver.driver.tracking import CommandedPath
+from vr_driver.driver.joints.tracking import CommandedPath
 from vr_driver.kinematics.preview import MovePreviewer
 from vr_driver.errors import EnvelopeError, VrDriverError
 from vr_driver.poses import ControllerPose, MoveType
@@ -375,7 +375,7 @@ def test_a_planner_trajectory_runs_through_its_thinned_points_each_once(world):
     """v1: a 30-point trajectory becomes the fewest PTP stops that keep the path within the path
     tolerance; each is executed once; the arm stays near the planned path all along."""
     import math
-    from vr_driver.driver.trajectories import TrajectoryGoal, path_deviation, validate
+    from vr_driver.driver.motion.trajectories import TrajectoryGoal, path_deviation, validate
     status = world.ready()
     q0 = status.joints
     points, times = [], []

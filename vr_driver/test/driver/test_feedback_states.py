@@ -1,10 +1,10 @@
-"""feedback_states' desired / actual / error (driver/feedback_states.py), with stand-ins for the
+"""feedback_states' desired / actual / error (driver/joints/feedback_states.py), with stand-ins for the
 status, the jobs and the trajectory run (no bus, no ROS)."""
 from types import SimpleNamespace
 
 import pytest
 
-from vr_driver.driver.feedback_states import DesiredJoints
+from vr_driver.driver.joints.feedback_states import DesiredJoints
 
 
 class Traj:

@@ -13,7 +13,7 @@ from pyprofibus_vendor.dp_master import DpMaster, SlaveSpec
 from pyprofibus_vendor.dp_slave import SlaveState
 
 from vr_driver.controller.virtual_controller import robot_slave
-from vr_driver.driver.stations import IoLine
+from vr_driver.driver.link.stations import IoLine
 from vr_driver.errors import SignalMapError
 from vr_driver.controller.io_island import GRIPPER_DELAY, IslandProgram, island_slave
 from vr_driver.io_signals import SignalMap, lengths_from_bus, load_signal_map

@@ -15,10 +15,10 @@ import math
 import pytest
 
 from vr_driver.driver import JobPhase
-from vr_driver.driver.joint_command import JointCommandRefused
+from vr_driver.driver.checks.joint_command import JointCommandRefused
 from vr_driver.params import DriverParams, ParamError
 from vr_driver.poses import ControllerPose
-from vr_driver.driver.jobs import MoveRequest, StreamPoint
+from vr_driver.driver.motion.jobs import MoveRequest, StreamPoint
 from vr_driver.poses import MoveType
 
 from _world import World

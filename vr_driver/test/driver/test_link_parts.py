@@ -1,6 +1,6 @@
-"""The link supervisor's parts on their own, stepped by hand: Reopening (driver/link_port.py: when
+"""The link supervisor's parts on their own, stepped by hand: Reopening (driver/link/link_port.py: when
 the port is opened again; a port that cannot be opened is a warning, then once an error after
-PORT_ERROR_AFTER) and CardDiagnosis (driver/card_diagnosis.py: why the controller's card is not in
+PORT_ERROR_AFTER) and CardDiagnosis (driver/link/card_diagnosis.py: why the controller's card is not in
 Data_Exchange, logged once for each kind of failure). The supervisor with both is tested in
 test_core_stepped.py and, on a pty with real faults, in test_port_faults.py."""
 from __future__ import annotations
@@ -8,8 +8,8 @@ from __future__ import annotations
 import logging
 from types import SimpleNamespace
 
-from vr_driver.driver.card_diagnosis import CardDiagnosis
-from vr_driver.driver.link_port import PORT_ERROR_AFTER, Reopening
+from vr_driver.driver.link.card_diagnosis import CardDiagnosis
+from vr_driver.driver.link.link_port import PORT_ERROR_AFTER, Reopening
 
 LOGGER = "vr_driver.driver"
 

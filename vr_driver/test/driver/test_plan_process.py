@@ -1,4 +1,4 @@
-"""The plan action's planning in a worker process (driver/plan_process.py) on a stepped world of the
+"""The plan action's planning in a worker process (driver/planning/plan_process.py) on a stepped world of the
 example cell (protocol v3): a plan through the process is PlanActionCore's (the codes and the words of
 a refusal the same as in-process, a plan the driver's own checks accept); a scene object added after
 a plan reaches the next; a worker killed mid-plan ends that plan PLANNING_FAILED in words and the
@@ -22,11 +22,11 @@ import time
 import pytest
 
 from _world import World
-from vr_driver.driver import planning as P
-from vr_driver.driver.plan_messages import PlanFailed
-from vr_driver.driver.plan_process import (WORKER_NICE, PlanningParts, PlanningProcess, PlanningProcessError,
+from vr_driver.driver.planning import planning as P
+from vr_driver.driver.planning.plan_messages import PlanFailed
+from vr_driver.driver.planning.plan_process import (WORKER_NICE, PlanningParts, PlanningProcess, PlanningProcessError,
                                            SceneSnapshot, worker_nice)
-from vr_driver.driver.planning import PlanActionCore, PlanGoal
+from vr_driver.driver.planning.planning import PlanActionCore, PlanGoal
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
 from vr_driver.kinematics.scene import SceneObject
@@ -304,8 +304,8 @@ def test_a_missing_library_is_the_workers_missing_dependency(world, tmp_path, mo
 PARENT = textwrap.dedent("""
     import json, os, sys
     from vr_driver.driver import DriverCore
-    from vr_driver.driver.plan_process import PlanningProcess
-    from vr_driver.driver.planning import PlanGoal
+    from vr_driver.driver.planning.plan_process import PlanningProcess
+    from vr_driver.driver.planning.planning import PlanGoal
     from vr_driver.params import DriverParams
     core = DriverCore(DriverParams.from_dict({"protocol": "v3", "scene": sys.argv[1]}))
     planning = PlanningProcess(core)

@@ -1,4 +1,4 @@
-"""The plan action's core (driver/planning.py) on a stepped world of the example cell with the fake
+"""The plan action's core (driver/planning/planning.py) on a stepped world of the example cell with the fake
 clock: a pose behind the pillar is planned from the arm's joints against a snapshot of the driver's
 checker, inside the workspace box, and what it plans is accepted and run by the driver's own
 trajectory path (protocol v3) with every sample free; refusals come back as codes and words naming
@@ -12,9 +12,9 @@ import os
 import pytest
 
 from _world import World
-from vr_driver.driver import planning as P
-from vr_driver.driver.planning import CellValidity, PlanActionCore, PlanGoal, arm_points, code_of
-from vr_driver.driver.trajectories import TrajectoryGoal, validate
+from vr_driver.driver.planning import planning as P
+from vr_driver.driver.planning.planning import CellValidity, PlanActionCore, PlanGoal, arm_points, code_of
+from vr_driver.driver.motion.trajectories import TrajectoryGoal, validate
 from vr_driver.errors import MissingDependency
 from vr_driver.kinematics import deps
 from vr_driver.kinematics.planner import PlanningError

@@ -1,4 +1,4 @@
-"""RecordClock (driver/record_clock.py): a record's time from the controller's loop counter. A
+"""RecordClock (driver/link/record_clock.py): a record's time from the controller's loop counter. A
 simulated program loops at a steady period; each record waits a random part of a loop in the card
 before the master reads it. The clock must stamp each record with the time it was taken, to a small
 part of the loop period, where the observation alone is off by up to a whole period."""
@@ -8,7 +8,7 @@ import random
 
 import pytest
 
-from vr_driver.driver.record_clock import RecordClock
+from vr_driver.driver.link.record_clock import RecordClock
 
 PERIOD = 0.010          # the program loop
 BUS = 0.053             # the bus cycle (not a multiple of the loop)

@@ -1,5 +1,5 @@
-"""The sequencer's parts on their own, stepped by hand: Settling (driver/settling.py: a stopped job
-ends at rest with the pose reported, or fails after stop_timeout) and Inbox (driver/inbox.py: the
+"""The sequencer's parts on their own, stepped by hand: Settling (driver/motion/settling.py: a stopped job
+ends at rest with the pose reported, or fails after stop_timeout) and Inbox (driver/motion/inbox.py: the
 requests in the order posted, the tickets that keep goals in arrival order). The sequencers with
 both are tested through the driver core in test_core_stepped.py, test_streaming_stepped.py and the
 other stepped tests."""
@@ -7,9 +7,9 @@ from __future__ import annotations
 
 from types import SimpleNamespace
 
-from vr_driver.driver.inbox import AddJobs, CancelJobs, Inbox
-from vr_driver.driver.jobs import JobPhase, SubmitMode
-from vr_driver.driver.settling import Settling
+from vr_driver.driver.motion.inbox import AddJobs, CancelJobs, Inbox
+from vr_driver.driver.motion.jobs import JobPhase, SubmitMode
+from vr_driver.driver.motion.settling import Settling
 from vr_driver.params import DriverParams
 from vr_driver.poses import ControllerPose
 from vr_driver.protocol.common import StatusBits

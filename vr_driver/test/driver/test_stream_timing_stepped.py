@@ -12,8 +12,8 @@ import math
 
 import pytest
 
-from vr_driver.driver.supervision import ABORTED, SUCCEEDED
-from vr_driver.driver.trajectories import PATH_TOLERANCE_VIOLATED, SUCCESSFUL
+from vr_driver.driver.joints.supervision import ABORTED, SUCCEEDED
+from vr_driver.driver.motion.trajectories import PATH_TOLERANCE_VIOLATED, SUCCESSFUL
 
 from _paced import PacedWorld
 from test_wire_supervision_stepped import START, block_joint, supervise, sweep, validated

@@ -11,10 +11,10 @@ import pytest
 
 from vr_driver.driver import JobPhase, LinkState, MoveRequest, SubmitMode
 from vr_driver.driver.bus_loop import END_POLL_PERIOD
-from vr_driver.driver.stream_points import _motion, corner_levels, corner_rounding, stream_points, stream_speeds
-from vr_driver.driver.stream_thinning import thin_timed
-from vr_driver.driver.streaming import END_LEAD, END_WATCH, seq_offset
-from vr_driver.driver.trajectories import TrajectoryGoal, validate
+from vr_driver.driver.motion.stream_points import _motion, corner_levels, corner_rounding, stream_points, stream_speeds
+from vr_driver.driver.motion.stream_thinning import thin_timed
+from vr_driver.driver.motion.streaming import END_LEAD, END_WATCH, seq_offset
+from vr_driver.driver.motion.trajectories import TrajectoryGoal, validate
 from vr_driver.poses import ControllerPose, MoveType
 from vr_driver.protocol.v2 import SEQ_MAX, StreamState, blend_window
 from vr_driver.controller.arm import Outcome
@@ -69,7 +69,7 @@ def record(world, job, timeout=30.0):
 
 # ------------------------------------------------------------------------------ pure functions
 def test_split_long_puts_planned_points_back_where_a_joint_would_turn_too_far():
-    from vr_driver.driver.stream_thinning import split_long
+    from vr_driver.driver.motion.stream_thinning import split_long
     line = [(0.0, 0.1 * k) for k in range(11)]                 # joint 2 turns 1.0 in steps of 0.1
     assert split_long(line, [0, 10], 2.0) == [0, 10]           # within the step: unchanged
     out = split_long(line, [0, 10], 0.35)
@@ -83,7 +83,7 @@ def test_split_long_puts_planned_points_back_where_the_controller_would_not_reac
     """``reaches`` (a Cartesian controller: would it solve the next pose onto the planned joints
     after a target here?) splits a step within ``max_step`` too; a planned step it does not reach
     is sent as planned (the stream check then refuses it in words)."""
-    from vr_driver.driver.stream_thinning import split_long
+    from vr_driver.driver.motion.stream_thinning import split_long
     line = [(0.0, 0.1 * k) for k in range(11)]
     calls = []
 
@@ -104,7 +104,7 @@ def test_split_long_skips_planned_points_the_controller_would_not_reach_to_one_i
     reached one -- dropping a thinned-in point too -- when the straight move over the skipped ones
     stays within ``skip_tolerance`` of each at its planned time; else they stay (the stream check
     says why)."""
-    from vr_driver.driver.stream_thinning import split_long
+    from vr_driver.driver.motion.stream_thinning import split_long
     line = [(0.0, 0.1 * k) for k in range(11)]
     times = [0.1 * k for k in range(11)]
     stretch = 0.45                        # between points 4 and 5

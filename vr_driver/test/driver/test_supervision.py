@@ -1,4 +1,4 @@
-"""vr_driver.driver.supervision: what joint_trajectory_action decides while a planner trajectory
+"""vr_driver.driver.joints.supervision: what joint_trajectory_action decides while a planner trajectory
 runs and when it ends -- stepped with a fake clock in one thread, no ROS, no sleeps. The last tests
 run the supervisor on the stepped driver core and virtual controller (_world.World), v1 and v2."""
 from __future__ import annotations
@@ -9,10 +9,10 @@ from dataclasses import replace
 import pytest
 
 from vr_driver.driver.core import TrajectoryRun
-from vr_driver.driver.jobs import JobPhase, MoveJob, StreamPoint
-from vr_driver.driver.supervision import (ABORTED, CANCELED, CANCELLED, PREEMPTED, SHUTDOWN, SUCCEEDED,
+from vr_driver.driver.motion.jobs import JobPhase, MoveJob, StreamPoint
+from vr_driver.driver.joints.supervision import (ABORTED, CANCELED, CANCELLED, PREEMPTED, SHUTDOWN, SUCCEEDED,
                                           TrajectorySupervisor)
-from vr_driver.driver.trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
+from vr_driver.driver.motion.trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL,
                                            TrajectoryGoal, validate)
 from vr_driver.poses import ControllerPose
 from vr_driver.protocol import registry
@@ -103,11 +103,11 @@ def test_a_run_on_plan_succeeds_with_its_note():
 
 
 def test_the_note_says_how_closely_any_arm_could_follow_the_plan():
-    """Given the arm's accelerations, the result says the plan's floor (driver.following) where it is
+    """Given the arm's accelerations, the result says the plan's floor (driver.joints.following) where it is
     FLOOR_WORDS or more, in the controller's joint names: this plan starts and stops joint_1 at
     0.5 rad/s at once; at 1 rad/s^2 no arm follows it closer than 1.23 deg, at the model's 20.9 rad/s^2
     0.06 deg (not said)."""
-    from vr_driver.driver.following import REST_FACTOR
+    from vr_driver.driver.joints.following import REST_FACTOR
     traj = plan(V2)
     names = tuple("arm/j%d" % i for i in range(1, 7))
     words = {}

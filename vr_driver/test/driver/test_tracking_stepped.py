@@ -1,4 +1,4 @@
-"""The driver's joints are the arm's on the Cartesian protocols (v1, v3): driver/tracking.py stepped
+"""The driver's joints are the arm's on the Cartesian protocols (v1, v3): driver/joints/tracking.py stepped
 with a fake clock, in one thread, against the virtual G2 (_world.World).
 
 The controller reports only a pose; near joint_5 = 0 (the wrist singularity) a pose fixes
@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from vr_driver.driver import MoveRequest
-from vr_driver.driver.tracking import VELOCITY_MARGIN
+from vr_driver.driver.joints.tracking import VELOCITY_MARGIN
 from vr_driver.kinematics.preview import MovePreviewer, MotionSettings
 from vr_driver.kinematics.solver import ConfigurationRule
 from vr_driver.poses import ControllerPose, MoveType
@@ -345,7 +345,7 @@ def test_a_record_farther_than_the_arm_can_move_is_believed_only_when_the_next_a
     """The tracker alone, without a commanded path: a single record 40 deg of joint_1 away (the
     arm cannot turn that far in 50 ms) changes nothing; when the next records agree, the joints go
     there as fast as the arm can, and stay once there."""
-    from vr_driver.driver.tracking import JointTracker
+    from vr_driver.driver.joints.tracking import JointTracker
     tracker = JointTracker(kin, (1.0, 1.0))
     here = (0.1, 0.55, -0.2, 0.5, 30.0 * DEG, -0.7)
     there = (0.1 + 40.0 * DEG,) + here[1:]

@@ -1,4 +1,4 @@
-"""vr_driver.driver.trajectories: goal validation with control_msgs' error codes, the speed each
+"""vr_driver.driver.motion.trajectories: goal validation with control_msgs' error codes, the speed each
 segment needs for the planned timing, and thinning for the v1 program."""
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import random
 
 import pytest
 
-from vr_driver.driver.trajectories import (INVALID_GOAL, INVALID_JOINTS, OLD_HEADER_TIMESTAMP,
+from vr_driver.driver.motion.trajectories import (INVALID_GOAL, INVALID_JOINTS, OLD_HEADER_TIMESTAMP,
                                            TrajectoryError, TrajectoryGoal, segment_speeds, thin,
                                            validate)
 

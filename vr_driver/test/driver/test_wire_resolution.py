@@ -1,5 +1,5 @@
-"""What a Cartesian wire can know of the joints (vr_driver.driver.resolution) and the tolerances,
-path check, thinning and goal check built on it (driver.trajectories, driver.supervision): the
+"""What a Cartesian wire can know of the joints (vr_driver.driver.joints.resolution) and the tolerances,
+path check, thinning and goal check built on it (driver.motion.trajectories, driver.joints.supervision): the
 per-configuration bound against the IK of rounded poses, the wrist band where joint_4 / joint_6 are
 judged by their sum, and that a real departure is still outside. Pure functions and the supervisor
 stepped by hand; the runs on the stepped driver and virtual G2 are in
@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from vr_driver.driver.core import TrajectoryRun
-from vr_driver.driver.jobs import JobPhase, MoveJob, StreamPoint
-from vr_driver.driver.resolution import ERROR_CAP, WRIST_BAND, WireResolution, euler_axes
-from vr_driver.driver.supervision import ABORTED, SUCCEEDED, TrajectorySupervisor
-from vr_driver.driver.trajectories import (GOAL_TOLERANCE_VIOLATED, SUCCESSFUL, THIN_SHARE, TrajectoryGoal,
+from vr_driver.driver.motion.jobs import JobPhase, MoveJob, StreamPoint
+from vr_driver.driver.joints.resolution import ERROR_CAP, WRIST_BAND, WireResolution, euler_axes
+from vr_driver.driver.joints.supervision import ABORTED, SUCCEEDED, TrajectorySupervisor
+from vr_driver.driver.motion.trajectories import (GOAL_TOLERANCE_VIOLATED, SUCCESSFUL, THIN_SHARE, TrajectoryGoal,
                                            path_check, thin, validate)
 from vr_driver.errors import KinematicsError
 from vr_driver.poses import rpy_to_matrix

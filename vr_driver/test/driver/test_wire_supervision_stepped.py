@@ -13,9 +13,9 @@ import re
 import pytest
 
 from vr_driver.driver import DriverError
-from vr_driver.driver.resolution import WireResolution
-from vr_driver.driver.supervision import ABORTED, SUCCEEDED, TrajectorySupervisor
-from vr_driver.driver.trajectories import PATH_TOLERANCE_VIOLATED, SUCCESSFUL, TrajectoryGoal, validate
+from vr_driver.driver.joints.resolution import WireResolution
+from vr_driver.driver.joints.supervision import ABORTED, SUCCEEDED, TrajectorySupervisor
+from vr_driver.driver.motion.trajectories import PATH_TOLERANCE_VIOLATED, SUCCESSFUL, TrajectoryGoal, validate
 
 from _world import World
 

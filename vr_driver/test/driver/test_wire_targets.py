@@ -1,4 +1,4 @@
-"""driver.wire_targets: the wire pose of a v3 stream target chosen among the 3^6 neighbours of its
+"""driver.checks.wire_targets: the wire pose of a v3 stream target chosen among the 3^6 neighbours of its
 rounding so that the controller's IK of it lands on the planned joints -- near joint_5 = 0, where
 the plain rounding swings the wrist by degrees."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import random
 
 import pytest
 
-from vr_driver.driver.wire_targets import FINE, GOOD_ENOUGH, MODEL_MARGIN, GridModel, WireTarget, wire_target
+from vr_driver.driver.checks.wire_targets import FINE, GOOD_ENOUGH, MODEL_MARGIN, GridModel, WireTarget, wire_target
 from vr_driver.errors import VrDriverError
 from vr_driver.poses import ControllerPose
 from vr_driver.protocol import registry

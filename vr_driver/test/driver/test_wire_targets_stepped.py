@@ -3,15 +3,15 @@
 own IK, the streaming arm). A target within a few hundredths of a degree of joint_5 = 0, whose plain
 rounding the G2 would solve tens of degrees off the plan (the pose hardly fixes joint_4 - joint_6
 there), goes out as the one-step neighbour of that rounding the G2 solves on the plan
-(driver.wire_targets): the stream is no longer refused, and the arm ends on the planned wrist."""
+(driver.checks.wire_targets): the stream is no longer refused, and the arm ends on the planned wrist."""
 from __future__ import annotations
 
 import math
 
 import pytest
 
-from vr_driver.driver.jobs import StreamPoint
-from vr_driver.driver.stream_prep import CONFIGURATION_TOLERANCE
+from vr_driver.driver.motion.jobs import StreamPoint
+from vr_driver.driver.checks.stream_prep import CONFIGURATION_TOLERANCE
 from vr_driver.protocol.registry import get
 
 from _world import World
@@ -111,7 +111,7 @@ def test_the_stream_checks_shared_wire_poses_change_nothing(kin, rule, n):
     either configuration rule, the points, their wire poses and the refusals' words are exactly
     those of each wire pose computed on its own (no memo shared between the calls)."""
     import random
-    from vr_driver.driver.stream_points import MAX_STREAM_TOLERANCE
+    from vr_driver.driver.motion.stream_points import MAX_STREAM_TOLERANCE
     from vr_driver.errors import VrDriverError
     world = World(kin, {"controller": {"configuration": rule}}, protocol="v3")
     streams = world.core.streams

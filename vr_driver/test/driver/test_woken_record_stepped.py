@@ -11,8 +11,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 
-from vr_driver.driver.sequencer import SequencerBase
-from vr_driver.driver.streaming import StreamSequencer
+from vr_driver.driver.motion.sequencer import SequencerBase
+from vr_driver.driver.motion.streaming import StreamSequencer
 
 from _world import World
 from test_streaming_stepped import record, smooth_path, trajectory

@@ -12,7 +12,7 @@ the same goals in real time: real processes, ptys, the virtual line; bench/READM
 twelve meet every target. Two ask what no arm that keeps its accelerations can do: the shortest
 goal's plan (0.32 s, joint_6 at up to 300 deg/s) joined by straight lines stops joint_6 from 162
 deg/s at once at its last point, and no arm within the model's accelerations comes within 0.75 deg
-of that at any start delay (:mod:`vr_driver.driver.following`); at the 0.5 s ramp its corners keep
+of that at any start delay (:mod:`vr_driver.driver.joints.following`); at the 0.5 s ramp its corners keep
 any such arm 0.51 deg away. (The virtual arm is not quite such an arm: its blends and its moves
 shorter than its ramp change speed faster than its ramp, as documented in
 :mod:`vr_driver.controller.stream_arm`.) For those two the deviation is held to FLOOR_FACTOR times
@@ -28,9 +28,9 @@ import os
 
 import pytest
 
-from vr_driver.driver.following import following_floor
-from vr_driver.driver.supervision import SUCCEEDED
-from vr_driver.driver.trajectories import SUCCESSFUL
+from vr_driver.driver.joints.following import following_floor
+from vr_driver.driver.joints.supervision import SUCCEEDED
+from vr_driver.driver.motion.trajectories import SUCCESSFUL
 
 from _paced import PacedWorld
 from test_wire_supervision_stepped import supervise, validated
@@ -77,7 +77,7 @@ KNOWN_GAPS = {
     ("v3-paced", 5): "0.51 deg from the plan at the model's ramp (its floor: 0.19 deg)",
 }
 #: (configuration, goal) whose plan no arm with the arm's accelerations follows within MAX_DEVIATION
-#: (driver.following.following_floor): their deviation is held to FLOOR_FACTOR x that floor
+#: (driver.joints.following.following_floor): their deviation is held to FLOOR_FACTOR x that floor
 BEYOND_ANY_ARM = {("v3-paced", 1), ("v3-paced-ramp05", 1)}
 FLOOR_FACTOR = 1.6
 

@@ -8,7 +8,7 @@ planner, no kinematics, no ROS).
     health.py    BusHealth: the gaps between the card's Data_Exchange replies, the jitter, the
                  watchdog margin
 
-The driver's link supervisor (vr_driver.driver.link) uses :class:`BusProcessMaster` in place of an
+The driver's link supervisor (vr_driver.driver.link.link) uses :class:`BusProcessMaster` in place of an
 in-process :class:`~pyprofibus_vendor.dp_master.DpMaster` when ``bus_process`` is on (the node's
 default): the serial port and the DP master then live in a process that does nothing but cycle the
 bus, so nothing the node computes (planning, validation, collision checks, IK, ROS callbacks) can

@@ -113,7 +113,7 @@ def _check(tag: str, values: tuple, types: tuple, noun: str = "bus message",
 class Message:
     """A message: ``TAG`` and ``TYPES`` (one tuple of accepted types per field); ``NOUN`` and
     ``ERROR`` say whose message a malformed one was, and raise what (the planning process's
-    messages, vr_driver.driver.plan_messages, are messages too)."""
+    messages, vr_driver.driver.planning.plan_messages, are messages too)."""
 
     TAG = ""
     TYPES: tuple = ()

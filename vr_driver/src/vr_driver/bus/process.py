@@ -15,7 +15,7 @@ SCHED_FIFO; see doc/reliability.md, "Real-time priority"), else at normal priori
 it is started, watched and stopped by :mod:`vr_driver.bus.worker`.
 
 **The driver's side** is :class:`BusProcessMaster`, a stand-in for the DpMaster that the link
-supervisor (vr_driver.driver.link) and the I/O line (vr_driver.driver.stations) use unchanged: its
+supervisor (vr_driver.driver.link.link) and the I/O line (vr_driver.driver.link.stations) use unchanged: its
 :meth:`~BusProcessMaster.cycle` waits for the bus process's next report (or a :meth:`poke`) and
 replays its state changes through ``on_state_change`` in order, its slaves' ``outputs`` go to the
 bus process at once. The driver's loop is paced by the bus (``paced``), not the other way round.
@@ -38,7 +38,7 @@ Rules:
   decides a record at each report and, woken by a request, between two reports: one made while a
   cycle was under way is replaced by the next report's before any telegram carried it, and the
   driver learns so from that report (:attr:`RemoteSlave.carried`) -- its stream then offers again
-  what that record offered (vr_driver.driver.streaming), instead of going on as if the controller
+  what that record offered (vr_driver.driver.motion.streaming), instead of going on as if the controller
   could have read it (a stream's START replaced by its next target: the arm stood at point 1).
 - **Exactly once across a reset.** When the controller's card leaves Data_Exchange (its watchdog, a
   new Set_Prm), its outputs become the idle record at once, and every outputs message carries the

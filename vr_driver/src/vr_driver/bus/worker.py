@@ -1,6 +1,6 @@
 """A worker process: a Python module run as a child with its end of a socket pair, its scheduling,
 its exit watched and named, its stop. The bus process (:mod:`vr_driver.bus.process`) and the plan
-action's planning process (:mod:`vr_driver.driver.plan_process`) are both started, watched and
+action's planning process (:mod:`vr_driver.driver.planning.plan_process`) are both started, watched and
 stopped here; it imports nothing of vr_driver.
 
 The parent's side, :class:`WorkerProcess`::

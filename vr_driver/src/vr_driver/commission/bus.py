@@ -1,7 +1,7 @@
 """The commissioning tool's own bus: the driver's link supervisor on the serial port, one DP cycle per
 call, every cycle logged. ROS-free.
 
-:class:`CommissionBus` runs :class:`~vr_driver.driver.link.LinkSupervisor` in this process (no bus
+:class:`CommissionBus` runs :class:`~vr_driver.driver.link.link.LinkSupervisor` in this process (no bus
 process: the tool does nothing else while the bus runs, and it must see *every* record, where a bus
 process hands over only the newest) at the configured cycle rate. Each :meth:`CommissionBus.cycle`
 sends the record it is given, runs one Data_Exchange and appends a :class:`Cycle` -- the request's
@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Dict, Iterable, Iterator, List, Optional, Tuple
 
-from ..driver.link import LinkSample, LinkState, LinkSupervisor
+from ..driver.link.link import LinkSample, LinkState, LinkSupervisor
 from ..errors import VrDriverError
 from ..params import DriverParams
 from ..protocol.v3 import FeedbackV3

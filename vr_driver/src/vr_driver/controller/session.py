@@ -37,7 +37,7 @@ knows that a reset happened is an assumption about the G2 (``data_exchange_bit``
   loop that reads it is a link loss (the arm stops, the program disarms); where it reads as the
   idle record (v1: flag 0, all zero) the program cannot tell a reset at all -- it releases a held
   DONE on it like on the master's flag 0, so exactly once across a reset then rests on the master,
-  whose first record of every session is the idle record (driver/link.py). A reset over before any
+  whose first record of every session is the idle record (driver/link/link.py). A reset over before any
   loop read the safe image is not seen either; the records go on as if there was none.
 
 Two more assumptions about the G2's program loop live here, shared by every protocol

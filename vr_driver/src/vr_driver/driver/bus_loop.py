@@ -1,6 +1,6 @@
 """The bus loop (ROS-free): one bus iteration (:meth:`BusLoop.spin_once`) steps the parts -- the
 link runs a DP cycle and returns a sample, the arm's joints are read from it, the sequencer decides
-what to send -- and publishes an immutable :class:`~vr_driver.driver.status.DriverStatus` snapshot
+what to send -- and publishes an immutable :class:`~vr_driver.driver.motion.status.DriverStatus` snapshot
 to the listeners. :meth:`BusLoop.start` runs that iteration at ``cycle_rate`` in the bus thread;
 stepped tests call :meth:`spin_once` and :meth:`next_cycle` themselves with a fake clock.
 
@@ -18,12 +18,12 @@ from typing import Callable, List, Optional
 from ..params import DriverParams
 from ..protocol.base import Protocol
 from ..protocol.common import StatusBits
-from .arm_joints import ArmJoints
-from .link import ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkSample, LinkSupervisor
+from .joints.arm_joints import ArmJoints
+from .link.link import ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, LinkSample, LinkSupervisor
 from .own_thread import OwnThread
-from .sequencer import SequencerBase
-from .stations import ControllerIo, IoLine
-from .status import DriverStatus
+from .motion.sequencer import SequencerBase
+from .link.stations import ControllerIo, IoLine
+from .motion.status import DriverStatus
 
 log = logging.getLogger("vr_driver.driver")
 

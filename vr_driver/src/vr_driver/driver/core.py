@@ -3,17 +3,17 @@
 :class:`DriverCore` owns and wires the parts, each with one job, and is the one object the node
 and the tests talk to:
 
-- :class:`~vr_driver.driver.link.LinkSupervisor` (port, DP master, session, freshness, counters),
-- the sequencer (:class:`~vr_driver.driver.sequencer.HandshakeSequencer`, v1's handshake, or
-  :class:`~vr_driver.driver.streaming.StreamSequencer`: queue, stops, outcomes),
+- :class:`~vr_driver.driver.link.link.LinkSupervisor` (port, DP master, session, freshness, counters),
+- the sequencer (:class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer`, v1's handshake, or
+  :class:`~vr_driver.driver.motion.streaming.StreamSequencer`: queue, stops, outcomes),
 - :class:`~vr_driver.driver.bus_loop.BusLoop` (the bus thread: one iteration steps the link, the
-  joints and the sequencer and publishes a :class:`~vr_driver.driver.status.DriverStatus`),
-- :class:`~vr_driver.driver.arm_joints.ArmJoints` (the joints of each record, the model check),
-- :class:`~vr_driver.driver.job_control.JobControl` (submit, cancel, stop; the planning thread),
-- :class:`~vr_driver.driver.path_checks.PathChecks` (previews, the workspace box, the cell) and,
+  joints and the sequencer and publishes a :class:`~vr_driver.driver.motion.status.DriverStatus`),
+- :class:`~vr_driver.driver.joints.arm_joints.ArmJoints` (the joints of each record, the model check),
+- :class:`~vr_driver.driver.checks.job_control.JobControl` (submit, cancel, stop; the planning thread),
+- :class:`~vr_driver.driver.checks.path_checks.PathChecks` (previews, the workspace box, the cell) and,
   for a streaming protocol, the stream preparation of its family
-  (:mod:`vr_driver.driver.stream_prep`),
-- :class:`~vr_driver.driver.joint_command.JointCommander` (the ``joint_command`` topic).
+  (:mod:`vr_driver.driver.checks.stream_prep`),
+- :class:`~vr_driver.driver.checks.joint_command.JointCommander` (the ``joint_command`` topic).
 
 :meth:`DriverCore.start` runs the bus thread and the planning thread; tests call
 :meth:`spin_once`, :meth:`next_cycle` and :meth:`run_planning` themselves with a fake clock, in
@@ -42,20 +42,20 @@ from pyprofibus_vendor.phy import Link
 from ..kinematics.preview import MovePreviewer
 from ..kinematics.solver import Kinematics
 from ..params import DriverParams
-from .announced import Announced, announce_moves, announce_plan
-from .arm_joints import ArmJoints
+from .motion.announced import Announced, announce_moves, announce_plan
+from .joints.arm_joints import ArmJoints
 from .bus_loop import BusLoop
-from .job_control import JobControl, PlanningThread, TrajectoryRun
-from .jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
-from .joint_command import JointCommander
-from .commissioned import controller_notes, min_segment_cycles
-from .link import LinkState, LinkSupervisor, open_serial_link
-from .path_checks import PathChecks, load_cell
-from .scene_guard import SceneGuard
-from .stations import ControllerIo, IoLine
-from .status import DriverError, DriverStatus
-from .stream_prep import stream_preparation
-from .trajectories import ValidTrajectory
+from .checks.job_control import JobControl, PlanningThread, TrajectoryRun
+from .motion.jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
+from .checks.joint_command import JointCommander
+from .checks.commissioned import controller_notes, min_segment_cycles
+from .link.link import LinkState, LinkSupervisor, open_serial_link
+from .checks.path_checks import PathChecks, load_cell
+from .checks.scene_guard import SceneGuard
+from .link.stations import ControllerIo, IoLine
+from .motion.status import DriverError, DriverStatus
+from .checks.stream_prep import stream_preparation
+from .motion.trajectories import ValidTrajectory
 
 Clock = Callable[[], float]
 log = logging.getLogger("vr_driver.driver")
@@ -163,7 +163,7 @@ class DriverCore:
 
     @property
     def tracker(self):
-        """The joints of the reported pose (v1, v3): :class:`~vr_driver.driver.tracking.JointTracker`."""
+        """The joints of the reported pose (v1, v3): :class:`~vr_driver.driver.joints.tracking.JointTracker`."""
         return self.arm.tracker
 
     #: the previews of moves (replaceable as a whole, e.g. by a test's recording previewer)
@@ -189,7 +189,7 @@ class DriverCore:
         """The shortest stream segment the bus feeds without a gap: MIN_SEGMENT_CYCLES of the
         configured cycle, or of the measured one when the wire is slower (a 72-byte record at
         19.2 kbit/s); for the commissioned G2 (its look-ahead, one target per acknowledgement)
-        :func:`~vr_driver.driver.commissioned.min_segment_cycles` of them."""
+        :func:`~vr_driver.driver.checks.commissioned.min_segment_cycles` of them."""
         rate = self.bus.cycle_rate_hz
         measured = self.link.cycle_rate
         if measured > 0.0:
@@ -304,8 +304,8 @@ class DriverCore:
         between the plan's stop points (``previews``, made here when not given) at the program's
         speed. Raises as :meth:`prepare_trajectory` when v1 would refuse the path."""
         if previews is None and not self.protocol.streams and len(times) > 1:
-            from .resolution import WireResolution
-            from .trajectories import TrajectoryGoal, validate
+            from .joints.resolution import WireResolution
+            from .motion.trajectories import TrajectoryGoal, validate
             lim = self.kin.limits
             names = tuple(self.joint_names)
             traj = validate(TrajectoryGoal(names, tuple(tuple(q) for q in positions[1:]), tuple(times[1:])), names,

@@ -3,11 +3,11 @@ registers each built-in protocol's with the protocol object
 (:meth:`vr_driver.protocol.base.Protocol.implement`), and the driver core asks the protocol object
 for them (:meth:`~vr_driver.protocol.base.Protocol.sequencer`,
 :meth:`~vr_driver.protocol.base.Protocol.stream_family`): v1 the handshake sequencer
-(:class:`~vr_driver.driver.sequencer.HandshakeSequencer`, one target at a time), v2 and v3 the stream
-sequencer (:class:`~vr_driver.driver.streaming.StreamSequencer`, which puts targets on the wire
+(:class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer`, one target at a time), v2 and v3 the stream
+sequencer (:class:`~vr_driver.driver.motion.streaming.StreamSequencer`, which puts targets on the wire
 through the protocol object's ``stream_command``) with their stream families (v2 joint targets sent
-as planned: :class:`~vr_driver.driver.stream_prep.JointStreams`; v3 Cartesian targets solved as the
-controller will: :class:`~vr_driver.driver.stream_prep.CartesianStreams`). A protocol without them
+as planned: :class:`~vr_driver.driver.checks.stream_prep.JointStreams`; v3 Cartesian targets solved as the
+controller will: :class:`~vr_driver.driver.checks.stream_prep.CartesianStreams`). A protocol without them
 is refused in words, never run on another protocol's. ROS-free.
 
 A new streaming protocol whose records the stream sequencer can drive registers them from its own
@@ -18,9 +18,9 @@ from __future__ import annotations
 from ..protocol.v1 import V1
 from ..protocol.v2 import V2
 from ..protocol.v3 import V3
-from .sequencer import HandshakeSequencer
-from .stream_prep import CartesianStreams, JointStreams
-from .streaming import StreamSequencer
+from .motion.sequencer import HandshakeSequencer
+from .checks.stream_prep import CartesianStreams, JointStreams
+from .motion.streaming import StreamSequencer
 
 __all__ = ["BUILT_IN", "STREAM_FAMILIES"]
 

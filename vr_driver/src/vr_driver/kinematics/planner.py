@@ -8,7 +8,7 @@ part of the MoveIt stand-in (issue 27).
     plan = planner.plan(start, ControllerPose(...))   # TCP in ``base``, mm / deg (the controller's)
     plan = planner.plan(start, ((x, y, z), (qx, qy, qz, qw)))  # tool0 in base_link, m / quaternion
     plan.joint_names, plan.times, plan.positions, plan.velocities, plan.accelerations
-    TrajectoryGoal.of(plan)                            # the driver's goal (driver.trajectories)
+    TrajectoryGoal.of(plan)                            # the driver's goal (driver.motion.trajectories)
     plan.to_msg(JointTrajectory, JointTrajectoryPoint, rospy.Duration.from_sec)
 
 What :meth:`Planner.plan` does, in order; every failure is a :class:`PlanningError` saying which

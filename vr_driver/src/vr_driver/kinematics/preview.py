@@ -127,7 +127,7 @@ class MovePreviewer:
     :class:`Kinematics` (its frame conventions, TCP and limits). Poses are controller poses
     (ControllerPose or (X, Y, Z mm, Rx, Ry, Rz deg)). No obstacles, no search: collision-free paths
     are planned by :class:`~vr_driver.kinematics.planner.Planner` (OMPL), the plan action runs it
-    (:class:`~vr_driver.driver.planning.PlanActionCore`)."""
+    (:class:`~vr_driver.driver.planning.planning.PlanActionCore`)."""
 
     def __init__(self, kinematics: Kinematics, settings: Optional[MotionSettings] = None):
         self.kin = kinematics

@@ -143,7 +143,7 @@ class ConfigurationRule(enum.Enum):
     The two differ only where the arm is not at the previous target then: a target taken ahead
     while the arm is still on its way (v3's ring), or after a stop short of the previous one. The
     virtual G2 has it as a parameter (``configuration``); the driver applies the same rule to what
-    it sent to know which joints the arm is at (:mod:`vr_driver.driver.tracking`)."""
+    it sent to know which joints the arm is at (:mod:`vr_driver.driver.joints.tracking`)."""
 
     PREVIOUS_TARGET = "previous_target"
     CURRENT_JOINTS = "current_joints"
@@ -424,7 +424,7 @@ class Kinematics:
     def tcp_position(self, q: Sequence[float]) -> Tuple[float, float, float]:
         """The TCP's position in ``base`` [mm] at joints ``q`` (the X, Y, Z of :meth:`fk_pose`),
         without validating ``q`` and without the orientation: the fast path of a check that runs
-        per configuration (the plan action's workspace box, ``driver.planning.CellValidity``),
+        per configuration (the plan action's workspace box, ``driver.planning.planning.CellValidity``),
         all in KDL's C++ (one ``fk_pose`` builds and checks a ControllerPose: 5 x as long)."""
         conv = self.conventions
         cached = self._tcp_frames

@@ -128,7 +128,7 @@ class Protocol:
       carries (rounding of a Cartesian target, solved again by the controller's IK), away from
       singularities: the scalar default path and goal tolerances are built on it
       (:attr:`default_goal_tolerance`); with the arm's kinematics a Cartesian protocol's are built
-      on the same rule per configuration (:mod:`vr_driver.driver.resolution`);
+      on the same rule per configuration (:mod:`vr_driver.driver.joints.resolution`);
     - ``summary``: one line for logs and ``--help``.
     """
 
@@ -170,7 +170,7 @@ class Protocol:
         [rad] off: twice that (the target's rounding, solved again by the controller, and the
         reported pose's), at least :attr:`goal_tolerance_floor`. The rule behind
         :attr:`default_goal_tolerance` (``wire_error`` = ``target_error``) and, per configuration,
-        behind the Cartesian protocols' tolerances (:mod:`vr_driver.driver.resolution`: the error
+        behind the Cartesian protocols' tolerances (:mod:`vr_driver.driver.joints.resolution`: the error
         there through the Jacobian)."""
         return max(self.goal_tolerance_floor, 2.0 * wire_error)
 
@@ -263,7 +263,7 @@ class Protocol:
     def feedback_heartbeat(self, feedback: Any) -> Optional[int]:
         """The program's loop counter in a feedback record (+1 every program loop, modulo 65536),
         or None where the protocol has none (v1). It dates the record
-        (:mod:`vr_driver.driver.record_clock`)."""
+        (:mod:`vr_driver.driver.link.record_clock`)."""
         return None
 
     # ------------------------------------------------------------------ controller side
@@ -289,7 +289,7 @@ class Protocol:
         class (a :class:`~vr_driver.controller.session.SessionProgram` with ``make_arm`` /
         ``from_options``), ``sequencer``, the driver's sequencer class, and / or ``stream_family``
         (a streaming protocol), the class that makes the driver's streams ready to send for it
-        (:mod:`vr_driver.driver.stream_prep`: joint targets sent as planned, or Cartesian targets
+        (:mod:`vr_driver.driver.checks.stream_prep`: joint targets sent as planned, or Cartesian targets
         solved as the controller will). Called by the package of that end (never by this package,
         which imports neither). Registering the same class again is harmless; another class for a
         role already taken is a ProtocolError (a protocol runs on one program, never silently on the

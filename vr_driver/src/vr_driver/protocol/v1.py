@@ -928,8 +928,8 @@ class ProtocolV1(Protocol):
     #: whole-mm / whole-degree targets solved again by the controller put a joint up to ~1.5 deg
     #: off a planned joint point (measured over random configurations): the scalar defaults (3 deg
     #: goal / 4 deg path, for a caller without the arm's kinematics) and the thinning without them
-    #: (driver.trajectories.V1_WIRE_ERROR). With the kinematics the tolerances and the thinning
-    #: use the error at each configuration instead (driver.resolution: 0.06 deg for joint_1 at
+    #: (driver.motion.trajectories.V1_WIRE_ERROR). With the kinematics the tolerances and the thinning
+    #: use the error at each configuration instead (driver.joints.resolution: 0.06 deg for joint_1 at
     #: home, several degrees for joint_4 / joint_6 near joint_5 = 0)
     target_error = math.radians(1.5)
     summary = "the thesis' Cartesian targets in whole mm / deg, one at a time (request / done handshake)"

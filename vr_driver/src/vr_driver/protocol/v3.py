@@ -370,7 +370,7 @@ class ProtocolV3(Protocol):
     #: rounding can push the pose into another configuration (a flip: doc §10.8). Checked by
     #: test_protocol_v3.py::test_target_error_bounds_the_rounding (a smaller sample). The scalar
     #: defaults for a caller without the arm's kinematics are built on it; with them, the
-    #: tolerances use the error at each configuration (driver.resolution), near joint_5 = 0
+    #: tolerances use the error at each configuration (driver.joints.resolution), near joint_5 = 0
     #: judging joint_4 / joint_6 by their sum.
     target_error = math.radians(0.07)
     summary = ("Cartesian targets in 0.1 mm / 0.01 deg streamed one per record into the G2 program's "

@@ -27,7 +27,7 @@ from ..protocol.common import StatusBits
 
 def _add_controller_notes(stat, notes: Sequence[str]):
     """The commissioned G2's differences and what the driver does about each
-    (:func:`vr_driver.driver.commissioned.controller_notes`), one entry each, on the controller's
+    (:func:`vr_driver.driver.checks.commissioned.controller_notes`), one entry each, on the controller's
     diagnostics (also logged at every connect)."""
     for k, note in enumerate(notes, 1):
         stat.add("commissioning %d" % k, note)

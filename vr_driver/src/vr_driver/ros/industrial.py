@@ -4,7 +4,7 @@ joint_trajectory_action) use it unchanged. ROS adapter only: the decisions are t
 
 - ``feedback_states`` (control_msgs/FollowJointTrajectoryFeedback): with each ``joint_states``
   sample, same stamp, only while the link is up; desired / actual / error from
-  :class:`vr_driver.driver.feedback_states.DesiredJoints`.
+  :class:`vr_driver.driver.joints.feedback_states.DesiredJoints`.
 - ``stop_motion`` (industrial_msgs/StopMotion): drop the queue, stop the target in flight.
 - ``start_motion`` (industrial_msgs/StartMotion): the G2's drives and program are switched at the
   pendant and stop_motion latches nothing, so there is nothing to re-enable: SUCCESS when a motion
@@ -27,7 +27,7 @@ from vr_driver.srv import (CmdJointTrajectory, CmdJointTrajectoryResponse, GetRo
                            StartMotion, StartMotionResponse, StopMotion, StopMotionResponse)
 
 from ..driver import DriverStatus
-from ..driver.feedback_states import DesiredJoints
+from ..driver.joints.feedback_states import DesiredJoints
 from ..params import ParamError
 
 #: the message type of feedback_states: the action's own feedback message, whose MD5 is

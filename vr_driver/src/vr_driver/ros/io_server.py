@@ -1,5 +1,5 @@
 """The I/O line's ROS interface of the node `interface` (ROS adapter only; the supervision and the
-checks are in :class:`vr_driver.driver.stations.IoLine`, doc/io_line.md):
+checks are in :class:`vr_driver.driver.link.stations.IoLine`, doc/io_line.md):
 
 - service ``set_io`` (vr_driver/SetIO): set an output signal by name, the value as text. Refused --
   ``success: false``, the reason, nothing sent and nothing kept to be sent later -- for an unknown
@@ -27,7 +27,7 @@ from vr_driver.msg import IOState, IOStates
 from vr_driver.srv import GetIO, GetIOResponse, SetIO, SetIOResponse
 
 from ..driver import DriverCore
-from ..driver.stations import IoResult, IoSnapshot
+from ..driver.link.stations import IoResult, IoSnapshot
 from ..params import DriverParams
 
 

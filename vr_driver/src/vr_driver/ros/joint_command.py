@@ -1,5 +1,5 @@
 """The ``joint_command`` topic of the node `interface` (ROS adapter only; the rules are
-:mod:`vr_driver.driver.joint_command`'s): trajectory_msgs/JointTrajectory of one point, streamed on
+:mod:`vr_driver.driver.checks.joint_command`'s): trajectory_msgs/JointTrajectory of one point, streamed on
 the fly (industrial_robot_client's streamer, MoveIt Servo with ``command_out_type:
 trajectory_msgs/JointTrajectory``, ``rosrun vr_driver jog``).
 
@@ -20,7 +20,7 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from trajectory_msgs.msg import JointTrajectory
 
 from ..driver import DriverCore
-from ..driver.joint_command import REFUSAL_KINDS, JointCommandRefused
+from ..driver.checks.joint_command import REFUSAL_KINDS, JointCommandRefused
 
 #: s between two log lines of refused commands
 LOG_PERIOD = 1.0

@@ -1,7 +1,7 @@
 """`plan`: the collision-aware planning action of the node `interface` (vr_driver/Plan.action). ROS
-adapter only: the planning is :class:`vr_driver.driver.planning.PlanActionCore` (OMPL, TOPP-RA, a
+adapter only: the planning is :class:`vr_driver.driver.planning.planning.PlanActionCore` (OMPL, TOPP-RA, a
 snapshot of the driver's collision checker and scene, the workspace box), run in a worker process of
-its own by :class:`vr_driver.driver.plan_process.PlanningProcess` -- never in the node's interpreter,
+its own by :class:`vr_driver.driver.planning.plan_process.PlanningProcess` -- never in the node's interpreter,
 whose bus thread a plan would starve (OMPL holds the interpreter lock for seconds); execution is the node's own
 ``joint_trajectory_action`` -- the planned trajectory is sent to it as a FollowJointTrajectory goal, as
 MoveIt's controller manager would, so it is validated, collision-checked, streamed and supervised by
@@ -45,10 +45,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 from vr_driver.msg import (CartesianPose, FollowJointTrajectoryAction, FollowJointTrajectoryGoal, PlanAction,
                            PlanFeedback, PlanGoal as PlanGoalMsg, PlanResult)
 
-from ..driver import planning as core_planning
-from ..driver.announced import scaling_words
-from ..driver.plan_process import PlanningProcess
-from ..driver.planning import PlanGoal, PlanOutcome, arm_points
+from ..driver.planning import planning as core_planning
+from ..driver.motion.announced import scaling_words
+from ..driver.planning.plan_process import PlanningProcess
+from ..driver.planning.planning import PlanGoal, PlanOutcome, arm_points
 from ..errors import MissingDependency, VrDriverError
 from ..poses import ControllerPose
 from .goal_runner import Goal, GoalRunner

@@ -1,5 +1,5 @@
 """The collision scene's ROS interface of the node `interface` (issue 27). ROS adapter only: the
-scene, its checks and every decision are the core's (:mod:`vr_driver.driver.scene_guard`).
+scene, its checks and every decision are the core's (:mod:`vr_driver.driver.checks.scene_guard`).
 
 - ``~scene/add`` (vr_driver/AddSceneObject): a vr_driver/SceneObject (name, shape box | cylinder |
   sphere, dimensions, pose in base_link) and ``replace``;

@@ -1,8 +1,8 @@
 """`joint_trajectory_action`: the FollowJointTrajectory action server of the node `interface`
 (the ROS-Industrial name; what MoveIt's simple controller manager drives). ROS adapter only: it
-translates messages. The checks are in :mod:`vr_driver.driver.trajectories`, the execution in
+translates messages. The checks are in :mod:`vr_driver.driver.motion.trajectories`, the execution in
 :meth:`vr_driver.driver.DriverCore.submit_trajectory`, what is decided while it runs and how it
-ends in :class:`vr_driver.driver.supervision.TrajectorySupervisor`; here: goal message ->
+ends in :class:`vr_driver.driver.joints.supervision.TrajectorySupervisor`; here: goal message ->
 TrajectoryGoal -> validate -> submit -> step the supervisor with the driver's status, publish its
 feedback, pass on cancel / preempt / shutdown -> set the result it gives (and draw in RViz).
 
@@ -35,10 +35,10 @@ from trajectory_msgs.msg import JointTrajectoryPoint
 from vr_driver.msg import FollowJointTrajectoryAction, FollowJointTrajectoryFeedback, FollowJointTrajectoryResult
 
 from ..driver import DriverCore, DriverError
-from ..driver.commissioned import planning_kinematics
-from ..driver.resolution import WireResolution
-from ..driver.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
-from ..driver.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
+from ..driver.checks.commissioned import planning_kinematics
+from ..driver.joints.resolution import WireResolution
+from ..driver.joints.supervision import CANCELED, SUCCEEDED, TrajectorySupervisor
+from ..driver.motion.trajectories import INVALID_GOAL, TrajectoryError, TrajectoryGoal, segment_speeds, validate
 from ..errors import VrDriverError
 from ..moveit.refusal import for_moveit
 from .goal_runner import Goal, GoalRefused, GoalRunner
@@ -105,7 +105,7 @@ class TrajectoryServer:
         lim = self.core.kin.limits
         protocol = self.core.protocol
         if self._wire is None:
-            # the Cartesian protocols' per-configuration tolerances (driver/resolution.py): what the
+            # the Cartesian protocols' per-configuration tolerances (driver/joints/resolution.py): what the
             # wire's pose resolution allows at each planned point, joint_4 / joint_6 by their sum
             # near joint_5 = 0; None with joint targets (v2: the protocol's fixed defaults)
             self._wire = (WireResolution.of(self.core.kin, protocol),)

@@ -1,0 +1,121 @@
+"""What a move will do, said before anything moves (ROS-free, no I/O): the time and the TCP's top
+speed the protocol delivers for a plan or a move -- one function for the terminal (through the move
+and plan actions), the plan action and the trajectory action, so that the figures a user reads before
+confirming are those of the run (issue 46).
+
+- A streaming protocol (v2, v3) runs a plan on its own timing: the plan's duration, the TCP's top
+  speed along it (the planned samples, the straight joint moves between them).
+- v1 runs each target at the robot program's own constant speed (MOVEP ``controller/program_speed``
+  for a PTP target, MOVEL / MOVEC ``program_path_speed`` for a LIN / CIRC; the documented program's
+  10 and 5 m/min, doc/controller_program.md section 5), whatever the plan's timing, and stops at
+  every target: each move is the arm's own profile slowed down evenly until its TCP stays within
+  that speed (:func:`~vr_driver.kinematics.preview.at_tcp_speed`, the model the virtual G2 runs,
+  section 10.9), plus the handshake of each target (:data:`HANDSHAKE_CYCLES` bus cycles). A velocity
+  scaling asked for does not apply there: :func:`scaling_words` says so in words.
+
+The durations count from the first target on the wire to the arm at rest at the end: the
+preparation before it is said apart (the trajectory action's result).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from ...kinematics.preview import at_tcp_speed, peak_tcp_speed
+from ...protocol.base import Protocol
+from ...protocol.v1 import program_speed
+
+__all__ = ["Announced", "HANDSHAKE_CYCLES", "announce_moves", "announce_plan", "plan_peak_speed", "program_duration",
+           "scaling_words"]
+
+#: bus cycles one v1 target costs besides its motion: the record with the request reaches the program,
+#: its DONE comes back, the master clears the flag and sees READY before it sends the next
+#: (doc/controller_program.md section 4)
+HANDSHAKE_CYCLES = 4.0
+
+
+@dataclass(frozen=True)
+class Announced:
+    """``duration`` [s] from the first target to the arm at rest at the end; ``top_speed`` [mm/s] the
+    TCP's largest speed; ``words`` both in words, naming where they come from; ``program``: v1 (the
+    program's speed, not the plan's)."""
+
+    duration: float
+    top_speed: float
+    words: str
+    program: bool = False
+
+
+def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequence[float]]) -> float:
+    """[mm/s] the TCP's largest speed along a planned joint path (between consecutive samples)."""
+    if len(times) < 2:
+        return 0.0
+    xyz = np.array([kin.fk_pose(q).as_tuple()[:3] for q in positions])
+    dt = np.diff(np.asarray(times, dtype=float))
+    dp = np.linalg.norm(np.diff(xyz, axis=0), axis=1)
+    moving = dt > 0.0
+    return float(np.max(dp[moving] / dt[moving], initial=0.0))
+
+
+def announce_plan(kin: Any, protocol: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
+                  previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0) -> Announced:
+    """The figures of a planned trajectory on ``protocol``: a streaming protocol its timing; v1 (no
+    stream) the PTP ``previews`` it sends between the plan's stop points (``JobControl.
+    prepare_trajectory``), at ``params.controller``'s program speed, each with its handshake
+    (``cycle_time``: the bus cycle [s])."""
+    if protocol.streams:
+        duration = float(times[-1]) if len(times) else 0.0
+        top = plan_peak_speed(kin, times, positions)
+        return Announced(duration, top, "protocol %s runs the plan's timing: %.2f s, the TCP at most %.0f mm/s"
+                         % (protocol.name, duration, top))
+    return announce_moves(protocol, previews, params, cycle_time)
+
+
+def announce_moves(protocol: Protocol, previews: Sequence[Any], params: Any, cycle_time: float) -> Announced:
+    """v1: the figures of its targets ``previews`` (driver.motion.jobs.Preview: a move each, as previewed at
+    the arm's full speed) at the program's speeds, one after the other, each with its handshake."""
+    facts = params.controller
+    duration = top = 0.0
+    kinds = set()
+    for preview in previews:
+        kind = preview.request.move_type
+        kinds.add(kind.name)
+        moved = at_tcp_speed(preview.trajectory, program_speed(kind, facts.program_speed, facts.program_path_speed))
+        duration += moved.duration + HANDSHAKE_CYCLES * cycle_time       # (program_duration)
+        top = max(top, peak_tcp_speed(moved))
+    speeds = []
+    if "PTP" in kinds:
+        speeds.append("MOVEP %g m/min (%.0f mm/s)" % (facts.program_speed, facts.program_speed * 1000.0 / 60.0))
+    if kinds - {"PTP"}:
+        speeds.append("MOVEL / MOVEC %g m/min (%.0f mm/s)"
+                      % (facts.program_path_speed, facts.program_path_speed * 1000.0 / 60.0))
+    n = len(previews)
+    words = ("protocol %s runs %s at the robot program's own speed, %s, not a plan's timing, and stops at %s: "
+             "%.2f s (%.2f s of it the handshakes, %g bus cycles each), the TCP at most %.0f mm/s"
+             % (protocol.name, "it" if n == 1 else "its %d targets" % n, " and ".join(speeds) or "none",
+                "the target" if n == 1 else "each", duration, n * HANDSHAKE_CYCLES * cycle_time,
+                HANDSHAKE_CYCLES, top))
+    return Announced(duration, top, words, program=True)
+
+
+def program_duration(preview: Any, facts: Any) -> float:
+    """[s] a previewed move (driver.motion.jobs.Preview) as the v1 program runs it, at its speed
+    (``facts``: ``params.controller``)."""
+    kind = preview.request.move_type
+    return at_tcp_speed(preview.trajectory, program_speed(kind, facts.program_speed, facts.program_path_speed)).duration
+
+
+def scaling_words(announced: Announced, scaling: float, default: bool, planned_speed: float) -> str:
+    """The warning where a plan's velocity scaling cannot be honoured ("" where it is): on v1 the
+    program's speed applies whatever the plan's timing (``planned_speed`` [mm/s]: the plan's top TCP
+    speed at ``scaling``; ``default``: the scaling is the driver's default, not the user's)."""
+    if not announced.program or not scaling or not math.isfinite(planned_speed):
+        return ""
+    how = ("faster than" if announced.top_speed > planned_speed * 1.05 else
+           "slower than" if announced.top_speed < planned_speed * 0.95 else "about")
+    return ("velocity scaling %g%s does not apply on this protocol: the robot program's speed does (the TCP at "
+            "most %.0f mm/s, %s the plan's %.0f mm/s)"
+            % (scaling, " (the driver's default)" if default else "", announced.top_speed, how, planned_speed))

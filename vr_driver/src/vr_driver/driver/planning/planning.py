@@ -1,0 +1,665 @@
+"""The plan action's core, ROS-free: a goal (joints, a named state of the SRDF, or a TCP pose in the
+controller's units) planned from the arm's joints with :class:`vr_driver.kinematics.planner.Planner`
+against a snapshot of the driver's collision checker and scene, inside the driver's workspace box,
+and the outcome as a code and words (the node vr_driver.ros.plan_server only translates messages).
+
+    planning = PlanActionCore(core)          # MissingDependency when OMPL / TOPP-RA / the checker's
+                                             # libraries cannot be imported (the action is then not served)
+    outcome = planning.plan(PlanGoal(pose=ControllerPose(500, 866, 725, 0, 45, 60)))
+    outcome.ok, outcome.code, outcome.text, outcome.trajectory (a PlannedTrajectory), outcome.target
+
+- **Consistent snapshot**: each plan takes its own copy of the driver's checker (CollisionChecker.copy:
+  the scene and padding of that moment, own pinocchio data), so a scene changed while it plans does
+  not change what it plans against; the next plan sees the change.
+- **The workspace box**: every configuration the planner accepts also has its TCP inside the driver's
+  workspace box (what the driver checks the stream's segments against), with the planner's clearance
+  as a margin on the box too, so the trajectory it returns is one the driver's own checks accept.
+- **Where it runs**: in the caller's thread, one plan at a time (a lock of its own: OMPL's random
+  numbers are process-wide), on a Kinematics and a checker of its own. The driver's planning gate is
+  taken only to copy the checker: a plan's budget does not hold up previews, trajectory checks or
+  joint_command steps (a stream's commands would time out behind it). The node does not call it in
+  its own interpreter: OMPL's solve and the planner's other C++ calls hold the interpreter lock for
+  0.6 to 5 s, which starved the bus thread past the card's watchdog. The plan action runs it in a
+  worker process (:mod:`vr_driver.driver.planning.plan_process`: on the parts of a driver a plan needs,
+  PlanningParts, with the node's scene, joints and bus cycle sent with the requests); tests and
+  benches call it directly.
+- **What the driver will accept**: with a Cartesian protocol (v1, v3) the controller solves each
+  target's pose itself, taking the solution nearest the previous target: near the wrist singularity
+  (joint_5 = 0) that is not always the planned one, and the driver refuses such a stream ("in another
+  configuration than planned"); near the stretched-out arm the two elbow branches of a pose meet,
+  with the same effect. So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` and joint_3
+  :data:`ELBOW_MARGIN` from the stretch away from the start and the goal (as it keeps its clearance);
+  a goal on the other elbow branch is planned through the stretch where the controller does change
+  branch (:meth:`PlanActionCore._elbow_crossing`); and a plan is checked by the driver's own stream
+  checks (its points, their configurations and segments) before it is returned; one they refuse,
+  no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
+  all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
+  what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
+  last plan ended whose tries found no path retreats on its last try along the way the arm came
+  (:func:`retreat_waypoints`: out of a narrow place such as under a hood), every leg checked.
+- **Words**: a start or goal in collision names the link and the object (the checker's contacts);
+  a TCP outside the box says which field and by how much.
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Dict, List, Optional, Sequence, Tuple
+
+from ...errors import MissingDependency, VrDriverError
+from ...kinematics import deps
+from ...kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError, pose_target
+from ...kinematics.solver import ConfigurationRule, stretched_elbow
+from ...poses import ControllerPose, Workspace
+from ..checks.commissioned import planning_kinematics
+
+__all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
+           "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
+           "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
+           "arm_points", "code_of", "retreat_waypoints"]
+
+# the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
+SUCCESS = 1
+PLANNING_FAILED = -1
+INVALID_MOTION_PLAN = -2
+CONTROL_FAILED = -4
+PREEMPTED = -7
+START_STATE_IN_COLLISION = -10
+GOAL_IN_COLLISION = -12
+INVALID_GOAL = -16
+INVALID_ROBOT_STATE = -17
+NO_IK_SOLUTION = -31
+
+_FEATURE = "the plan action (vr_driver.driver.planning.planning)"
+#: [rad] a Cartesian protocol's plan keeps |joint_5| at least this far from the wrist singularity
+#: (except near its start and goal: the planner's escape zone)
+WRIST_MARGIN = 0.0524          # 3 deg
+#: [rad] ... and joint_3 at least this far from the stretched-out arm (kinematics.solver.stretched_elbow),
+#: where the pose's two elbow branches lie within twice this of each other: the controller's IK of a
+#: rounded pose may take the other one, or find the pose beyond its reach (0.1 mm past a stretched
+#: arm); 8 deg costs the arm about 3 mm of its reach
+ELBOW_MARGIN = math.radians(8.0)
+#: [rad] a plan across the stretched elbow turns joint_3 alone from this near the stretch on the
+#: start's side to ELBOW_CROSS past it (PlanActionCore._elbow_crossing): after a target e from the
+#: stretch, one d past it is nearest the planned branch once d > about 4 e (joint_2's share of the
+#: mirror); 2 deg keeps the first target's wire pose well solved (at the stretch the rounding alone
+#: moves the wrist by 1.5 deg: bench/planning.py, query 52)
+ELBOW_APPROACH = math.radians(2.0)
+ELBOW_CROSS = math.radians(12.0)
+#: [rad] ... with |joint_5| at least this there
+ELBOW_WRIST = math.radians(6.0)
+#: [s] under the G2 rule current_joints the arm holds this long at the first of the two
+#: (PlanActionCore._plan)
+ELBOW_HOLD = 0.1
+#: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
+#: stream the driver refuses is planned again (a sampling planner's next path differs)
+ATTEMPTS = 3
+#: [rad] a plan from within this of the last plan's end (every joint) may retreat along its path on
+#: its last try (retreat_waypoints)
+RETREAT_NEAR = math.radians(1.0)
+#: [rad] a goal this close to the arm's joints on every joint is where the arm is: nothing to move
+AT_GOAL = 1e-4
+#: the chain indices of the wrist bend (joint_5) and the elbow (joint_3)
+_WRIST = 4
+_ELBOW = 2
+
+
+@dataclass(frozen=True)
+class PlanGoal:
+    """One goal: exactly one of ``joints`` ((names, positions [rad])), ``named`` (an SRDF state) and
+    ``pose`` (TCP in ``base``, mm / deg). ``planner_id`` "" / ``planning_time`` 0 /
+    ``velocity_scaling`` 0 take the driver's parameters."""
+
+    joints: Optional[Tuple[Tuple[str, ...], Tuple[float, ...]]] = None
+    named: str = ""
+    pose: Optional[ControllerPose] = None
+    planner_id: str = ""
+    planning_time: float = 0.0
+    velocity_scaling: float = 0.0
+
+    def describe(self) -> str:
+        if self.pose is not None:
+            return "the pose X %g  Y %g  Z %g  Rx %g  Ry %g  Rz %g" % self.pose.as_tuple()
+        if self.named:
+            return "the named state %r" % self.named
+        if self.joints is not None:
+            return "the joints (%s) deg" % ", ".join("%.1f" % math.degrees(v) for v in self.joints[1])
+        return "no goal"
+
+
+@dataclass(frozen=True)
+class PlanOutcome:
+    """``code`` one of the result codes, ``text`` in words; on success ``trajectory`` and ``target``
+    (the TCP pose at its end), ``planning_time`` [s] (also on failure: how long it tried)."""
+
+    code: int
+    text: str
+    trajectory: Optional[PlannedTrajectory] = None
+    planning_time: float = 0.0
+    planner_id: str = ""
+    target: Optional[ControllerPose] = None
+    contacts: Tuple[Any, ...] = field(default=())
+    #: where the call's time went [s] and what it did: ``crossing`` (the elbow crossing's waypoints),
+    #: ``snapshot`` (copying the checker), the planner's steps summed over the tries (``goal``,
+    #: ``plan``, ``simplify``, ``time``, ``check``), ``stream_check`` (the driver's own check of each
+    #: plan, :meth:`PlanActionCore.driver_refusal`), ``checks`` (validity checks made: the box and the
+    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words) and
+    #: ``retreat`` (1 when the last try went back along the last plan's path)
+    profile: Dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        return self.code == SUCCESS
+
+
+class WorkspaceContact:
+    """A 'contact' with the workspace box: the TCP outside it (a field and by how much), in the form of
+    the checker's Contact (``link_a``, ``other``, ``distance`` [m], ``world``)."""
+
+    def __init__(self, link: str, field_name: str, excess: float, unit: str) -> None:
+        self.link_a = link
+        self.other = "workspace box"
+        self.world = True
+        self.distance = -excess / 1000.0 if unit == "mm" else 0.0
+        self._text = "%s outside the workspace box (%s by %.1f %s)" % (link, field_name, excess, unit)
+
+    def __str__(self) -> str:
+        return self._text
+
+
+def joints_to_plan_from(status: Any) -> Any:
+    """The arm's joints in the driver's ``status`` (a DriverStatus), or -- when they are not known --
+    the refusal in words (a str)."""
+    if status.joints is None or not getattr(status, "joints_valid", True):
+        return "refused: the arm's joints are not known (%s)" % (
+            status.why_no_motion() or "no feedback from the controller")
+    return tuple(status.joints)
+
+
+class CellValidity:
+    """A collision checker (or None: nothing to collide with) and the workspace box as one validity
+    the planner takes like a checker: ``in_collision(q)`` (the arm hits something, or its TCP is
+    outside the box shrunk by ``margin`` [mm]), ``contacts(q)`` naming them, ``copy()``, ``padding`` /
+    ``set_padding`` (the planner's clearance: raising the padding by x also shrinks the box by x)."""
+
+    def __init__(self, checker: Any, kinematics: Any, workspace: Workspace, margin: float = 0.0,
+                 padding: float = 0.0, counter: Optional[List[int]] = None) -> None:
+        self.checker = checker
+        #: [checks made by this validity and its copies] (the plan action's profile)
+        self.counter = counter if counter is not None else [0]
+        self._tcp: Any = None           # _tcp_by_checker's finding
+        self.kin = kinematics
+        self.workspace = workspace
+        self.margin = float(margin)
+        self._padding = float(checker.padding) if checker is not None else float(padding)
+
+    @property
+    def padding(self) -> float:
+        return self._padding
+
+    def set_padding(self, padding: float) -> None:
+        self.margin += (padding - self._padding) * 1000.0
+        self._padding = padding
+        if self.checker is not None:
+            self.checker.set_padding(padding)
+
+    def copy(self) -> "CellValidity":
+        return CellValidity(self.checker.copy() if self.checker is not None else None, self.kin, self.workspace,
+                            self.margin, self._padding, self.counter)
+
+    def _outside(self, q: Sequence[float]) -> Optional[Tuple[str, float, str]]:
+        """(field, excess, unit) of the TCP's worst field beyond the box less the margin, or None."""
+        worst = None
+        for name, value in zip(("x", "y", "z"), self.kin.tcp_position(q)):
+            lo, hi = getattr(self.workspace, name)
+            excess = max(lo + self.margin - value, value - (hi - self.margin))
+            if excess > 0 and (worst is None or excess > worst[1]):
+                worst = (name.upper(), excess, "mm")
+        return worst
+
+    def _tcp_by_checker(self) -> Any:
+        """(the checker's frame of the chain's tip, the TCP in it [m], the 4x4 from the root to
+        ``base``) when the checker's model puts the TCP where the kinematics do (checked at three
+        configurations, to 1e-6 mm), else False: then the box is checked by KDL's FK."""
+        if self._tcp is None:
+            self._tcp = False
+            if self.checker is not None and hasattr(self.checker, "frame_point") \
+                    and hasattr(self.kin, "tcp_in_tip"):
+                base, offset = self.kin.tcp_in_tip()
+                try:
+                    n = len(self.kin.joint_names)
+                    for q in ((0.0,) * n, tuple(0.3 + 0.1 * i for i in range(n)), tuple(-0.9 + 0.2 * i for i in range(n))):
+                        p = base[:3, :3] @ self.checker.frame_point(q, self.kin.tip, offset) + base[:3, 3]
+                        if max(abs(a - b / 1000.0) for a, b in zip(p, self.kin.tcp_position(q))) > 1e-9:
+                            return self._tcp
+                except (VrDriverError, ValueError, TypeError):
+                    return self._tcp
+                self._tcp = (self.kin.tip, offset, base)
+        return self._tcp
+
+    def in_collision(self, q: Sequence[float]) -> bool:
+        self.counter[0] += 1
+        tcp = self._tcp_by_checker()
+        if not tcp:
+            # the box first: the TCP's position alone (KDL), a third of the checker's time
+            if self._outside(q) is not None:
+                return True
+            return self.checker is not None and self.checker.in_collision(q)
+        # one forward kinematics (the checker's pinocchio) for the box and the collisions
+        frame, offset, base = tcp
+        p = self.checker.frame_point(q, frame, offset)
+        ws, m = self.workspace, self.margin
+        for value, (lo, hi) in zip(base[:3, :3] @ p + base[:3, 3], (ws.x, ws.y, ws.z)):
+            if not lo + m <= value * 1000.0 <= hi - m:
+                return True
+        return self.checker.in_collision_here()
+
+    def contacts(self, q: Sequence[float]) -> List[Any]:
+        out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
+        outside = self._outside(q)
+        if outside is not None:
+            out.append(WorkspaceContact("the TCP", *outside))
+        return out
+
+
+def code_of(exc: PlanningError) -> int:
+    """The result code of a planner's refusal (its step and whether it named contacts)."""
+    text = str(exc)
+    if exc.step == "start":
+        return START_STATE_IN_COLLISION if exc.contacts or "in collision" in text else INVALID_ROBOT_STATE
+    if exc.step == "goal":
+        if exc.contacts or "in collision" in text:
+            return GOAL_IN_COLLISION
+        if "unreachable" in text:
+            return NO_IK_SOLUTION
+        return INVALID_GOAL
+    if exc.step == "plan":
+        return PLANNING_FAILED
+    return INVALID_MOTION_PLAN
+
+
+def arm_points(kinematics: Any, q: Sequence[float]) -> List[Tuple[float, float, float]]:
+    """The origins of the chain's segments at ``q`` in the chain root [m], base to tip, repeated points
+    left out: a stick figure of the arm (the planned sweep in RViz)."""
+    import PyKDL as kdl
+    chain = kinematics.chain
+    solver = kdl.ChainFkSolverPos_recursive(chain)
+    jnt = kdl.JntArray(len(q))
+    for i, v in enumerate(q):
+        jnt[i] = float(v)
+    out: List[Tuple[float, float, float]] = [(0.0, 0.0, 0.0)]
+    for seg in range(1, chain.getNrOfSegments() + 1):
+        f = kdl.Frame()
+        if solver.JntToCart(jnt, f, seg) < 0:
+            continue
+        p = (f.p[0], f.p[1], f.p[2])
+        if math.dist(p, out[-1]) > 1e-6:
+            out.append(p)
+    return out
+
+
+class PlanActionCore:
+    """The plan action's ROS-free part (``ros/plan_server.py`` is its ROS edge): plans for a
+    :class:`~vr_driver.driver.core.DriverCore` with the OMPL planner
+    (:class:`~vr_driver.kinematics.planner.Planner`) against the driver's own checks (see the module
+    text). Not the previews of single moves: :class:`~vr_driver.kinematics.preview.MovePreviewer`. Raises
+    MissingDependency when the planner's libraries (OMPL, TOPP-RA) cannot be imported, or when the
+    driver checks collisions (``collision_check``) but has no checker (its libraries are missing)."""
+
+    def __init__(self, core: Any, kinematics: Any = None, clock=time.perf_counter) -> None:
+        for module in ("ompl", "toppra"):
+            deps.require(module, _FEATURE)
+        self.core = core
+        self.params = core.params
+        self._lock = threading.Lock()        # one plan at a time
+        if getattr(self.params, "collision_check", True) and getattr(core, "collision", None) is None:
+            # the core leaves it None only when its libraries are missing: say which
+            for module in ("pinocchio", "coal"):
+                deps.require(module, _FEATURE)
+            raise MissingDependency("pin", "pinocchio", _FEATURE, "the driver has no collision checker")
+        if kinematics is None:
+            from ..core import driver_kinematics
+            kinematics = driver_kinematics(self.params)   # its own: no solver shared with the bus thread
+        # the commissioned joint speed and acceleration limits (planning_limits), where measured
+        self.kin = planning_kinematics(self.params, kinematics)
+        self.clock = clock
+        #: the geometric path of the last plan made (its start first), or None: a way back out of
+        #: where it went, for a next plan from its end that finds no path (:func:`retreat_waypoints`)
+        self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
+        # a Planner is cheap; making one checks its libraries and the limits once, here
+        Planner(self.kin, None, planner=self.params.planner_id)
+
+    @property
+    def collision_checked(self) -> bool:
+        return getattr(self.core, "collision", None) is not None and getattr(self.params, "collision_check", True)
+
+    def snapshot(self) -> CellValidity:
+        """The validity a plan uses: a copy of the driver's checker (its scene and padding now) and the
+        workspace box."""
+        checker = getattr(self.core, "collision", None) if self.collision_checked else None
+        return CellValidity(checker.copy() if checker is not None else None, self.kin, self.params.workspace)
+
+    def resolve(self, goal: PlanGoal) -> Tuple[Any, str, float, float]:
+        """(the planner's goal, planner, budget [s], velocity scaling) or PlanningError('goal', ...)."""
+        given = [goal.joints is not None, bool(goal.named), goal.pose is not None]
+        if sum(given) != 1:
+            raise PlanningError("request", "a goal is exactly one of joints, a named state or a pose (got %d)"
+                                % sum(given))
+        planner_id = goal.planner_id or self.params.planner_id
+        if planner_id not in PLANNERS:
+            raise PlanningError("request", "unknown planner_id %r: the planners are %s"
+                                % (planner_id, ", ".join(PLANNERS)))
+        budget = goal.planning_time if goal.planning_time else self.params.planning_time
+        if not (isinstance(budget, (int, float)) and math.isfinite(budget) and 0.0 < budget <= 60.0):
+            raise PlanningError("request", "allowed_planning_time must be in (0, 60] s (0: the parameter "
+                                "planning_time), got %r" % (goal.planning_time,))
+        scaling = goal.velocity_scaling if goal.velocity_scaling else self.params.velocity_scaling
+        if not (isinstance(scaling, (int, float)) and math.isfinite(scaling) and 0.0 < scaling <= 1.0):
+            raise PlanningError("request", "velocity_scaling must be in (0, 1] (0: the parameter "
+                                "velocity_scaling), got %r" % (goal.velocity_scaling,))
+        if goal.pose is not None:
+            try:
+                target = self.params.workspace.check(goal.pose)
+            except VrDriverError as exc:
+                raise PlanningError("request", "goal pose: %s" % exc) from None
+        elif goal.named:
+            target = goal.named
+        else:
+            names, positions = goal.joints
+            if len(names) != len(positions) or len(set(names)) != len(names):
+                raise PlanningError("request", "a joint goal needs one position per joint name, each name once "
+                                    "(got %d names, %d positions)" % (len(names), len(positions)))
+            expected = tuple(self.core.joint_names)
+            if set(names) != set(expected):
+                raise PlanningError("request", "a joint goal names every joint of the arm (%s), got %s"
+                                    % (", ".join(expected), ", ".join(names) or "none"))
+            by_name = dict(zip(names, positions))
+            target = tuple(float(by_name[n]) for n in expected)
+            if not all(math.isfinite(v) for v in target):
+                raise PlanningError("request", "joint goal: every position must be a finite number, got %r"
+                                    % (target,))
+        return target, planner_id, float(budget), float(scaling)
+
+    def plan(self, goal: PlanGoal, start: Optional[Sequence[float]] = None, seed: Optional[int] = None
+             ) -> PlanOutcome:
+        """Plan ``goal`` from ``start`` (default: the arm's joints now; motion need not be possible:
+        a preview is allowed while the arm cannot move). Never raises for a bad goal: the outcome says."""
+        t0 = self.clock()
+        try:
+            target, planner_id, budget, scaling = self.resolve(goal)
+        except PlanningError as exc:
+            return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planner_id=goal.planner_id)
+        if start is None:
+            start = joints_to_plan_from(self.core.status())
+            if isinstance(start, str):
+                return PlanOutcome(INVALID_ROBOT_STATE, start, planner_id=planner_id)
+        refusal = ""
+        prof: Dict[str, Any] = {"crossing": 0.0, "snapshot": 0.0, "planner": 0.0, "stream_check": 0.0, "checks": 0,
+                                "tries": 0, "replans": []}
+        tick = time.perf_counter()
+        try:
+            crossing, target = self._elbow_crossing(tuple(start), target)
+        except PlanningError:
+            crossing = ()           # (the planner says why, below)
+        prof["crossing"] = time.perf_counter() - tick
+        # a joint goal with joint_5 of the other sign: the wrist margin would wall every path off
+        wrist_across = isinstance(target, tuple) and len(target) == len(start) and start[_WRIST] * target[_WRIST] < 0.0
+        validity = None
+        for attempt in range(ATTEMPTS):
+            if validity is not None:
+                prof["checks"] += validity.counter[0]
+            prof["tries"] += 1
+            tick = time.perf_counter()
+            try:
+                with self._lock:
+                    with self.core.planning_gate:     # the checker is replaced as a whole under it
+                        validity = self.snapshot()
+                    prof["snapshot"] += time.perf_counter() - tick
+                    planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
+                                      seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
+                                      acceleration_scaling=scaling, planning_validity=self._planning_validity(
+                                          validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
+                                          elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
+                                      goal_preference=self._candidate_rank(
+                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across))
+                    retreat = retreat_waypoints(self.last_path, tuple(start), crossing, attempt, prof["replans"])
+                    if retreat:
+                        prof["retreat"] = 1
+                    plan = self._at_goal(planner, tuple(start), target) or (
+                        planner.plan(tuple(start), target, via=retreat) if retreat else
+                        self._plan(planner, tuple(start), target, crossing))
+            except PlanningError as exc:
+                prof["planner"] += time.perf_counter() - tick
+                if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
+                    prof["replans"].append("%s: %s" % (exc.step, str(exc)[:80]))
+                    continue
+                prof["checks"] += validity.counter[0] if validity is not None else 0
+                return PlanOutcome(code_of(exc), "%s: %s" % (_STEP_WORDS.get(exc.step, "refused"), exc),
+                                   planning_time=self.clock() - t0, planner_id=planner_id, contacts=exc.contacts,
+                                   profile=prof)
+            except (VrDriverError, ValueError, TypeError) as exc:
+                return PlanOutcome(INVALID_GOAL, "refused: %s" % exc, planning_time=self.clock() - t0,
+                                   planner_id=planner_id)
+            prof["planner"] += time.perf_counter() - tick
+            for key, value in plan.timings.items():
+                prof[key] = prof.get(key, 0.0) + value
+            tick = time.perf_counter()
+            refusal = self.driver_refusal(plan)
+            prof["stream_check"] += time.perf_counter() - tick
+            if not refusal:
+                break
+            prof["replans"].append("stream: %s" % refusal[:80])
+        else:
+            prof["checks"] += validity.counter[0] if validity is not None else 0
+            return PlanOutcome(INVALID_MOTION_PLAN, "the driver would refuse each of %d plans, the last: %s%s"
+                               % (ATTEMPTS, refusal, self._across_the_elbow(start, plan.goal)),
+                               planning_time=self.clock() - t0, planner_id=planner_id, profile=prof)
+        prof["checks"] += validity.counter[0] if validity is not None else 0
+        elapsed = self.clock() - t0
+        end = self.kin.fk_pose(plan.goal)
+        if len(plan.times) == 1:
+            text = "planned with %s in %.0f ms: the arm is at the goal, nothing to move" % (planner_id, elapsed * 1e3)
+        else:
+            text = ("planned with %s in %.0f ms: %d points over %.2f s (velocity scaling %g)"
+                    % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling))
+        if not self.collision_checked:
+            text += "; collisions NOT checked (collision_check: false)"
+        self.last_path = tuple(tuple(q) for q in plan.path)
+        return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof)
+
+
+    def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
+              crossing: Tuple[Tuple[float, ...], ...]) -> PlannedTrajectory:
+        """``planner``'s plan from ``start`` to ``target`` through ``crossing`` (:meth:`_elbow_crossing`'s
+        waypoints, or none). A G2 that solves a target nearest its joints when it takes it
+        (``current_joints``) may take the target past the stretch while the arm is still points back on
+        the start's branch: there the plan holds ELBOW_HOLD at the first waypoint (a pause: the next
+        target goes out once the arm is at rest there, StreamSequencer.record) and goes on from it."""
+        if not crossing or ConfigurationRule.parse(self.params.controller.configuration) \
+                is not ConfigurationRule.CURRENT_JOINTS:
+            return planner.plan(start, target, via=crossing)
+        near, past = crossing
+        return planner.plan(start, near).then(planner.plan(near, target, via=(past,)), ELBOW_HOLD)
+
+    def _at_goal(self, planner: Planner, start: Tuple[float, ...], target: Any) -> Optional[PlannedTrajectory]:
+        """A one-point trajectory (at rest where the arm is) when a joint solution of the goal is within
+        AT_GOAL of ``start`` on every joint, else None. The planner times such a move of 1e-6..1e-5 rad
+        not at all (TOPP-RA finds no timing), and the arm reported at a named state is that close to it
+        (its joints are the IK of the reported pose)."""
+        near = [q for q in planner.goal_candidates(start, target)
+                if max(abs(a - b) for a, b in zip(q, start)) <= AT_GOAL]
+        if not near:
+            return None
+        zero = (0.0,) * len(start)
+        return PlannedTrajectory(tuple(planner.names), (0.0,), (start,), (zero,), (zero,), (start,),
+                                 planner.planner_name, {"total": 0.0})
+
+    def _across_the_elbow(self, start: Sequence[float], goal: Sequence[float]) -> str:
+        """"" -- or, with a Cartesian protocol and ``goal`` on the other side of the stretched elbow
+        from ``start``, why that matters, in words."""
+        rank = self._goal_preference()
+        if rank is None or not rank(start, goal):
+            return ""
+        return ("; the goal (joint_3 %.1f deg) is across the stretched elbow (joint_3 %.1f deg) from the start "
+                "(%.1f deg): the controller solves each pose nearest its previous target, which there is often "
+                "the start's elbow branch -- a goal on the start's side, a path through a pose goal's other "
+                "solutions, or a protocol with joint targets (v2) avoids it"
+                % (math.degrees(goal[_ELBOW]), math.degrees(stretched_elbow(self.kin)), math.degrees(start[_ELBOW])))
+
+    def _goal_preference(self):
+        """With a Cartesian protocol, the rank of a pose goal's IK solution: 0 on the start's side of
+        the stretched elbow, 1 across it. The controller solves each target nearest the previous
+        one: across the stretch the two elbow branches of a pose lie either side of it, the nearer
+        is the start's, so a stream that must change the branch is refused by the driver's check far
+        more often than not (bench/planning.py: 4 of the last 10 failures). A joint goal is what it
+        is; None (nearest first) with joint targets."""
+        if self.core.protocol.joint_targets:
+            return None
+        stretched = stretched_elbow(self.kin)
+        if stretched is None:
+            return None
+
+        def rank(start: Sequence[float], q: Sequence[float]) -> int:
+            side = math.remainder(start[_ELBOW] - stretched, 2.0 * math.pi)
+            other = math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)
+            return 0 if side * other >= 0.0 else 1
+        return rank
+
+    def _candidate_rank(self, wrist: bool):
+        """The rank of a pose goal's IK solution the planner orders them by (lower first, then the
+        nearest): with a Cartesian protocol, :meth:`_goal_preference`'s (the start's elbow branch
+        first) and, while the plan keeps the wrist margin (``wrist``), the solutions with joint_5
+        on the start's side of 0 before the others: the margin walls joint_5 = 0 off, and the nearest
+        solution across it cost a try half its budget to find no path (bench/planning.py: 3 of
+        10 pose goals; their next solutions, on the start's side, were planned in the rest). A start
+        within the margin of 0 leaves both sides open. None with joint targets."""
+        elbow = self._goal_preference()
+        if elbow is None:
+            return None
+        if not wrist:
+            return elbow
+
+        def rank(start: Sequence[float], q: Sequence[float]) -> int:
+            across = abs(start[_WRIST]) >= WRIST_MARGIN and start[_WRIST] * q[_WRIST] < 0.0
+            return 2 * elbow(start, q) + int(across)
+        return rank
+
+    def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:
+        """(the two waypoints a plan crosses the stretched elbow by, the target), with a Cartesian
+        protocol and a goal across the stretch from ``start`` -- a joint goal, a named state, or a
+        pose with no valid solution on the start's side (then the target becomes the valid solution
+        the planner would take, its joints); else ((), ``target``).
+
+        The controller solves each target nearest the one before: a pose just past the stretch it
+        solves onto the branch it is on (the other branch's solution lies farther than its mirror),
+        and a plan that crosses in the direction joint_2 and joint_3 fold in together (the wrist
+        centre out to full reach and back) never leaves it. Turning joint_3 alone from near the
+        stretch does: from ELBOW_APPROACH on the start's side, ELBOW_CROSS past it the planned
+        branch is the nearest (bench/README.md, "Planning"). So the plan passes
+        the stretch where the straight joint line from the start to the goal does (joint_5 moved
+        to ELBOW_WRIST from 0, on the start's side, if it is nearer: the wrist singularity there too
+        would leave joint_4 / joint_6 to the controller) -- or, where that is not valid, with the
+        other joints at the start's, or at the goal's -- and turns joint_3 alone between those two
+        places. No waypoints for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair
+        is valid (the planner's clearance, the limits, the box): the plan is made as before and the
+        driver's stream check decides."""
+        none: Tuple[Tuple[float, ...], ...] = ()
+        rank = self._goal_preference()
+        stretched = stretched_elbow(self.kin)
+        if rank is None or stretched is None:
+            return none, target
+        pose = not isinstance(target, str) and pose_target(self.kin, target) is not None
+        goal = self.kin.named_states.get(target) if isinstance(target, str) else target
+        if not pose and (goal is None or len(goal) != len(start) or not rank(start, goal)):
+            return none, target     # (a goal on the start's side: no copy of the checker made)
+        with self.core.planning_gate:
+            validity = self.snapshot()
+        if pose:
+            planner = Planner(self.kin, validity, goal_preference=rank)
+            valid = [q for q in planner.goal_candidates(start, target) if planner.is_valid(q)]
+            if not valid or not rank(start, valid[0]):
+                return none, target
+            goal = valid[0]
+        a, b = start[_ELBOW], goal[_ELBOW]
+        if abs(b - stretched) < ELBOW_CROSS / 2.0:
+            return none, target     # that close to the stretch, the planned branch is not the nearest
+        strict = self._planning_validity(validity, wrist_margin=False, elbow_margin=False)
+        lim = self.kin.limits
+        # the other joints where the straight line crosses; else the start's, else the goal's
+        for f in ((stretched - a) / (b - a), 0.0, 1.0):
+            near = [x + f * (y - x) for x, y in zip(start, goal)]
+            if abs(near[_WRIST]) < ELBOW_WRIST:
+                near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
+            near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
+            past = list(near)
+            past[_ELBOW] = stretched + math.copysign(min(ELBOW_CROSS, abs(b - stretched)), b - stretched)
+            if all(all(lo <= v <= hi for v, lo, hi in zip(q, lim.lower, lim.upper)) and strict(q)
+                   for q in (near, past)):
+                return (tuple(near), tuple(past)), tuple(goal)
+        return none, target
+
+    def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True, elbow_margin: bool = True):
+        """What the planner plans with (away from the start and the goal): ``validity`` padded by the
+        planner's clearance and, with a Cartesian protocol, |joint_5| >= WRIST_MARGIN (``wrist_margin``)
+        and joint_3 ELBOW_MARGIN from the stretched arm (``elbow_margin``). The margins wall joint_5 = 0
+        and the stretch off, and a goal on the other side of one (joint_5 of the other sign, the
+        other elbow branch, farther than the start's and goal's own zones) then has no path at all:
+        :meth:`plan` drops the wrist's for a joint goal with joint_5 of the other sign, the elbow's
+        for a plan through the stretch (:meth:`_elbow_crossing`), and both on its last try; without
+        them the driver's stream check still decides whether the controller would run the plan."""
+        strict = validity.copy()
+        strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
+        if self.core.protocol.joint_targets or not (wrist_margin or elbow_margin):
+            return lambda q: not strict.in_collision(q)
+        stretched = stretched_elbow(self.kin)
+
+        def clear(q) -> bool:
+            return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
+                stretched is None or not elbow_margin
+                or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
+        return lambda q: clear(q) and not strict.in_collision(q)
+
+    def driver_refusal(self, plan: PlannedTrajectory) -> str:
+        """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked
+        as ``submit_trajectory`` checks it (``DriverCore.prepare_trajectory``) -- a streaming
+        protocol's stream (its points: their configurations with a Cartesian protocol, and their
+        segments); v1's PTP moves between the plan's thinned stop points, each previewed as the
+        controller runs it, a straight joint move, against the box and the cell (the plan's samples
+        between two stop points are not what v1 runs). Call it without the planning gate: the
+        checks take it."""
+        if len(plan.positions) < 2:
+            return ""
+        from ..motion.trajectories import TrajectoryGoal, validate
+        lim = self.kin.limits
+        try:
+            traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), plan.positions[0], lim.lower,
+                            lim.upper, 0.0)
+            self.core.prepare_trajectory(traj, traj.positions[0])
+        except VrDriverError as exc:
+            return str(exc)
+        return ""
+
+
+_STEP_WORDS = {"start": "cannot plan from here", "goal": "goal refused", "plan": "no path found",
+               "time": "no timing found", "check": "the planned trajectory failed its check"}
+
+
+def retreat_waypoints(path: Optional[Tuple[Tuple[float, ...], ...]], start: Tuple[float, ...],
+                      crossing: Tuple[Tuple[float, ...], ...], attempt: int,
+                      replans: List[str]) -> Tuple[Tuple[float, ...], ...]:
+    """Waypoints back along the last plan's ``path`` (its start last) -- for the last try of a plan
+    from where that plan ended after every try before found no path: the arm got here along it,
+    so it leads out of a narrow place (under the hood's top, between walls), and from its start
+    the planner searches for what the straight legs back left of the budget. () otherwise: not
+    the last try, a try failed for another reason, an elbow crossing's waypoints, no last plan
+    or one that ended farther than RETREAT_NEAR from ``start`` (every joint; the arm stops near the
+    plan's end, not on it). Nothing of it is taken on trust: every leg is checked (and, if
+    not free, planned) by this plan's own validity, the cell as it is now, and the driver checks
+    the plan's stream as any other's."""
+    if attempt != ATTEMPTS - 1 or crossing or not path or len(path) < 2 \
+            or max(abs(a - b) for a, b in zip(path[-1], start)) > RETREAT_NEAR \
+            or len(replans) != attempt or not all(r.startswith("plan:") for r in replans):
+        return ()
+    return tuple(reversed(path[:-1]))
