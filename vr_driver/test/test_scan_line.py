@@ -9,17 +9,15 @@ from __future__ import annotations
 
 import os
 import random
-import select
 import subprocess
 import sys
-import threading
 import time
 from typing import List, Optional
 
-from pyprofibus_vendor.errors import PhyError
 from pyprofibus_vendor.phy_serial import SerialLink, open_pty_pair
 
 from vr_driver.controller.io_island import VirtualIoIsland
+from vr_driver.controller.adapter_model import AdapterBehaviour
 from vr_driver.controller.line import LineHub
 from vr_driver.controller.line_rate import tty_speed
 from vr_driver.controller.virtual_controller import VirtualController
@@ -40,11 +38,12 @@ SEED = int(os.environ.get("SCAN_SEED") or random.SystemRandom().randrange(1 << 3
 class Line:
     """The virtual G2 and island on the line hub, at ``rate``."""
 
-    def __init__(self, tmp, rate: int, g2: int, island: int, protocol: str) -> None:
+    def __init__(self, tmp, rate: int, g2: int, island: int, protocol: str,
+                 adapter: Optional[AdapterBehaviour] = None) -> None:
         self.controller = VirtualController(pty_link=str(tmp / "g2"), address=g2, baud=rate, protocol=protocol).start()
         self.island = VirtualIoIsland(pty_link=str(tmp / "island"), address=island, baud=rate).start()
         self.hub = LineHub([str(tmp / "g2"), str(tmp / "island")], pty_link=str(tmp / "line"), rate=rate,
-                           reopen_period=0.05).start()
+                           reopen_period=0.05, adapter=adapter).start()
         self.path = str(tmp / "line")
         deadline = time.monotonic() + 10.0
         while len(self.hub.connected()) < 2:                  # the hub opens both at its first step
@@ -56,52 +55,6 @@ class Line:
         self.island.stop()
         self.controller.stop()
         assert self.hub.error is None
-
-
-class EchoRelay:
-    """An adapter that echoes: a pty of its own whose every byte written comes back to the writer,
-    then goes on to the line -- at the rate the writer set on the relay's pty (the line judges it).
-    (The virtual line's own adapter model may offer an echo as well; this one lives in the test.)"""
-
-    def __init__(self, line_path: str) -> None:
-        self.pty = open_pty_pair()
-        self.path = self.pty.slave_path
-        self.up = self.pty.master_link()
-        self.line_path = line_path
-        self.down: Optional[SerialLink] = None
-        self.rate: Optional[int] = None
-        self.echoed = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="echo-relay", daemon=True)
-        self._thread.start()
-
-    def _run(self) -> None:
-        while not self._stop.is_set():
-            down = self.down.serial.fileno() if self.down is not None else None
-            ready = select.select([self.up.fd] + ([down] if down is not None else []), [], [], 0.05)[0]
-            if self.up.fd in ready:
-                data = self.up.recv(4096, 0.0)
-                rate = tty_speed(self.pty.keep_fd)
-                if rate != self.rate:
-                    if self.down is not None:
-                        self.down.close()
-                    self.down, self.rate = SerialLink(self.line_path, rate), rate
-                self.up.send(data)                            # the echo, at once
-                self.echoed += len(data)
-                self.down.send(data)
-            elif down is not None and down in ready:
-                try:
-                    self.up.send(self.down.recv(4096, 0.0))
-                except PhyError:
-                    pass
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5.0)
-        if self.down is not None:
-            self.down.close()
-        self.up.close()
-        self.pty.close()
 
 
 def run_scan(device: str, *args: str) -> subprocess.CompletedProcess:
@@ -179,20 +132,19 @@ def test_scan_through_an_echoing_adapter_names_the_echo(tmp_path):
     g2 = rng.choice([a for a in range(1, 8) if a != DRIVER_MASTER])
     island = rng.choice([a for a in range(1, 8) if a != g2])
     drawn = "SCAN_SEED=%d: rate 45450, G2 at %d (v3), island at %d" % (SEED, g2, island)
-    line = Line(tmp_path, 45450, g2, island, "v3")
-    relay = EchoRelay(line.path)
+    # the line's USB adapter model echoes what the master writes (at the master's rate, whatever the line's)
+    line = Line(tmp_path, 45450, g2, island, "v3", adapter=AdapterBehaviour(echo=True))
     try:
-        run = run_scan(relay.path, "--rates", "19200,45450", "--addresses", "0..7")
+        run = run_scan(line.path, "--rates", "19200,45450", "--addresses", "0..7")
     finally:
-        relay.close()
         line.close()
     out = run.stdout
     info = "%s\nstdout:\n%s\nstderr:\n%s" % (drawn, out, run.stderr)
-    assert run.returncode == 0 and relay.echoed > 0, info
+    assert run.returncode == 0 and line.hub.adapter.counters.echoed > 0, info
     assert "the adapter echoes its transmission: each request came back verbatim before the reply" in out, info
     assert "bit rate: 45450 bit/s" in out and "station %d: passive" % island in out, info
     assert "the G2 card: station %d (ident 0x06C6, PAN06C6.gsd): its modules fit protocol v3" % g2 in out, info
-    assert "rosrun vr_driver commission --port %s --baud 45450 --slave-address %d" % (relay.path, g2) in out, info
+    assert "rosrun vr_driver commission --port %s --baud 45450 --slave-address %d" % (line.path, g2) in out, info
 
 
 def test_scan_without_a_g2_says_so_and_fails(tmp_path):
