@@ -314,7 +314,7 @@ class PlanActionCore:
         self.core = core
         self.params = core.params
         self._lock = threading.Lock()        # one plan at a time
-        if getattr(self.params, "collision_check", True) and getattr(core, "collision", None) is None:
+        if self.params.collision_check and core.collision is None:
             # the core leaves it None only when its libraries are missing: say which
             for module in ("pinocchio", "coal"):
                 deps.require(module, _FEATURE)
@@ -333,12 +333,12 @@ class PlanActionCore:
 
     @property
     def collision_checked(self) -> bool:
-        return getattr(self.core, "collision", None) is not None and getattr(self.params, "collision_check", True)
+        return self.core.collision is not None and self.params.collision_check
 
     def snapshot(self) -> CellValidity:
         """The validity a plan uses: a copy of the driver's checker (its scene and padding now) and the
         workspace box."""
-        checker = getattr(self.core, "collision", None) if self.collision_checked else None
+        checker = self.core.collision if self.collision_checked else None
         return CellValidity(checker.copy() if checker is not None else None, self.kin, self.params.workspace)
 
     def resolve(self, goal: PlanGoal) -> Tuple[Any, str, float, float]:
