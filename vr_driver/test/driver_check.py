@@ -102,6 +102,33 @@ def top_tcp_speed(kin, samples, window: float) -> float:
     return best
 
 
+def plan_as_sampled(times, positions, samples, step: float = 0.005):
+    """The plan (``times`` [s], joint ``positions``: piecewise linear between them, held before its
+    start and after its end) at the stamps of the measured ``samples`` ((stamp [s], joints) in time
+    order), shifted by the start that fits them best (searched in ``step`` s over the samples' span):
+    (that start [stamp], the largest joint difference there [rad], [(stamp, planned joints)]).
+
+    A top speed measured from joint_states is an average over the time between two samples (a bus
+    cycle or, on a loaded machine, a late one: 190 ms was seen): compared with the same average of
+    the plan at the same stamps it measures the run, not the sampling."""
+    import numpy as np
+    times = np.asarray(times, dtype=float)
+    plan = np.asarray(positions, dtype=float)
+    stamps = np.array([t for t, _ in samples], dtype=float)
+    measured = np.array([q for _, q in samples], dtype=float)
+
+    def at(start):
+        return np.stack([np.interp(stamps - start, times, plan[:, j]) for j in range(plan.shape[1])], axis=1)
+
+    best = None
+    for start in np.arange(stamps[0] - float(times[-1]), stamps[-1] + step, step):
+        err = float(np.max(np.abs(at(start) - measured)))
+        if best is None or err < best[1]:
+            best = (float(start), err)
+    start, err = best
+    return start, err, [(float(t), tuple(float(v) for v in q)) for t, q in zip(stamps, at(start))]
+
+
 def cp(values) -> CartesianPose:
     return CartesianPose(*[float(v) for v in values])
 

@@ -25,7 +25,7 @@ from actionlib_msgs.msg import GoalStatus
 from geometry_msgs.msg import Pose
 from visualization_msgs.msg import MarkerArray
 
-from driver_check import DriverTestBase, Recorder, cp, top_tcp_speed
+from driver_check import DriverTestBase, Recorder, cp, plan_as_sampled, top_tcp_speed
 from vr_driver.kinematics.collision import CollisionChecker
 from vr_driver.kinematics.deps import missing_dependencies
 from vr_driver.kinematics.scene import SceneObject, load_scene
@@ -192,11 +192,14 @@ class PlanningTest(DriverTestBase):
         rospy.loginfo("planning_check: the executed plan came within %.1f mm of the cell", closest * 1e3)
         # said before it ran (issue 46) is what it did: v3 runs the plan's timing -- the time from its first
         # target to its end and the TCP's top speed (joint_states at their stamps) within 10 %
-        self.assertEqual(result.run_duration, result.duration)
+        # (the plan's time and the bus's few cycles to the arm and back)
+        self.assertGreater(result.run_duration, result.duration)
+        self.assertLess(result.run_duration, result.duration + 0.5)
         self.assertIn("protocol v3 runs the plan's timing", result.run_words)
         self.assertNotIn("does not apply", result.run_words)
-        self.assertRegex(fjt.error_string, r"; said before it ran: protocol v3 runs the plan's timing: %.2f s, the TCP "
-                                           r"at most [0-9]+ mm/s$" % result.run_duration)
+        self.assertRegex(fjt.error_string, r"; said before it ran: protocol v3 runs the plan's timing: [0-9.]+ s \(the "
+                                           r"plan's %.2f s and the bus's 3 cycles to the arm and back\), the TCP "
+                                           r"at most [0-9]+ mm/s$" % result.duration)
         ran = float(re.search(r"ran ([0-9.]+) x the planned", fjt.error_string).group(1)) * result.duration
         first = float(re.search(r"first target left ([0-9.]+) s after the goal arrived", fjt.error_string).group(1))
         waited = re.search(r"the arm stopped [0-9]+ time\(s\) on the way waiting for its next target: the bus",
@@ -214,8 +217,20 @@ class PlanningTest(DriverTestBase):
         with self.joints.cond:
             samples = [(m.header.stamp.to_sec(), tuple(m.position)) for m in self.joints.messages[start:]]
         top = top_tcp_speed(self.kin, samples, 0.05)
-        self.assertAlmostEqual(top, result.run_peak_tcp_speed, delta=0.1 * result.run_peak_tcp_speed,
-                               msg="said %.0f mm/s, ran %.0f mm/s" % (result.run_peak_tcp_speed, top))
+        # the TCP's top speed: joint_states sample the run at the bus cycle (a late cycle on a loaded
+        # machine: 190 ms, seen in CI), so the top measured is an average over each sample's interval;
+        # the plan is averaged the same way -- at the same stamps, from the start that fits the run best
+        times = [p.time_from_start.to_sec() for p in result.trajectory.points]
+        _, off, planned = plan_as_sampled(times, points, samples)
+        expected = top_tcp_speed(self.kin, planned, 0.05)
+        said = "said %.0f mm/s, the plan at the run's stamps %.0f mm/s, ran %.0f mm/s" % (
+            result.run_peak_tcp_speed, expected, top)
+        rospy.loginfo("planning_check: %s (the run at most %.2f deg from the plan)", said, math.degrees(off))
+        self.assertLessEqual(expected, 1.05 * result.run_peak_tcp_speed, said)
+        if waited is None:
+            self.assertAlmostEqual(top, expected, delta=0.1 * expected, msg=said)
+        else:
+            self.assertLess(top, 1.1 * result.run_peak_tcp_speed, said)
 
     def test_03_a_box_on_the_path_makes_the_next_plan_go_around_it(self):
         here = tuple(self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position)

@@ -327,7 +327,7 @@ class DriverCore:
         if self.protocol.streams:
             traj = preview.trajectory
             return announce_plan(self.kin, self.protocol, [float(t) for t in traj.times],
-                                 [tuple(float(v) for v in q) for q in traj.positions])
+                                 [tuple(float(v) for v in q) for q in traj.positions], cycle_time=self.bus_cycle())
         return announce_moves(self.protocol, [preview], self.params, self.bus_cycle())
 
     def post_job(self, job: MoveJob) -> None:

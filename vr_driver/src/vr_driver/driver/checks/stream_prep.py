@@ -56,7 +56,8 @@ from ...poses import ControllerPose
 from ..motion.jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from ..motion.status import DriverError
-from ..motion.stream_points import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
+from ..motion.stream_points import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGMENT_CYCLES, stream_points,
+                                    stream_speeds)
 from .wire_targets import FINE, WireMemo, WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
@@ -106,7 +107,7 @@ class JointStreams:
         points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
                                tolerance, self.min_segment(), max_tolerance,
                                corner_tolerance=math.radians(self.params.stream_path_tolerance),
-                               max_step=self.max_step, reaches=self.reaches(memo))
+                               max_step=self.max_step, reaches=self.reaches(memo), feed=self.feed_period())
         if not points:
             return points
         return self.with_poses(positions[0], points, memo=memo)
@@ -123,6 +124,12 @@ class JointStreams:
             except VrDriverError as exc:
                 raise DriverError("%s; nothing was sent" % exc) from None
         return points
+
+    def feed_period(self) -> float:
+        """[s] how long the bus takes to bring the controller one target: ``min_segment()`` is
+        MIN_SEGMENT_CYCLES of them, divided by the interpreter's look-ahead (which lets a segment be
+        shorter once the ring is full, not at a stream's start)."""
+        return self.min_segment() * max(1, self.params.controller.interpreter_lookahead) / MIN_SEGMENT_CYCLES
 
     def memo(self) -> Optional[WireMemo]:
         """A memo for one stream check's wire poses (None: joint targets have none)."""

@@ -13,8 +13,9 @@ confirming are those of the run (issue 46).
   section 10.9), plus the handshake of each target (:data:`HANDSHAKE_CYCLES` bus cycles). A velocity
   scaling asked for does not apply there: :func:`scaling_words` says so in words.
 
-The durations count from the first target on the wire to the arm at rest at the end: the
-preparation before it is said apart (the trajectory action's result).
+The durations count from the first target on the wire to the arm at rest at the end, as the driver
+sees it (a stream: the plan's time and :data:`STREAM_LATENCY_CYCLES` bus cycles): the preparation
+before it is said apart (the trajectory action's result).
 """
 from __future__ import annotations
 
@@ -28,8 +29,14 @@ from ...kinematics.preview import at_tcp_speed, peak_tcp_speed
 from ...protocol.base import Protocol
 from ...protocol.v1 import program_speed
 
-__all__ = ["Announced", "HANDSHAKE_CYCLES", "announce_moves", "announce_plan", "plan_peak_speed", "program_duration",
-           "scaling_words"]
+__all__ = ["Announced", "HANDSHAKE_CYCLES", "STREAM_LATENCY_CYCLES", "announce_moves", "announce_plan",
+           "plan_peak_speed", "program_duration", "scaling_words"]
+
+#: bus cycles a stream takes besides the plan's time: its first target reaches the controller's program
+#: a cycle after it left, and the feedback that says the arm reached the last point comes back two
+#: records later (doc/controller_program.md section 10.4 rule 7); on the stepped world a plan ran 3.1-3.3
+#: cycles longer than planned (0.12-0.13 s at 25 cycles/s)
+STREAM_LATENCY_CYCLES = 3.0
 
 #: bus cycles one v1 target costs besides its motion: the record with the request reaches the program,
 #: its DONE comes back, the master clears the flag and sees READY before it sends the next
@@ -62,15 +69,19 @@ def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequen
 
 def announce_plan(kin: Any, protocol: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
                   previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0) -> Announced:
-    """The figures of a planned trajectory on ``protocol``: a streaming protocol its timing; v1 (no
+    """The figures of a planned trajectory on ``protocol``: a streaming protocol its timing and
+    :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); v1 (no
     stream) the PTP ``previews`` it sends between the plan's stop points (``JobControl.
     prepare_trajectory``), at ``params.controller``'s program speed, each with its handshake
     (``cycle_time``: the bus cycle [s])."""
     if protocol.streams:
-        duration = float(times[-1]) if len(times) else 0.0
+        planned = float(times[-1]) if len(times) else 0.0
+        latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         top = plan_peak_speed(kin, times, positions)
-        return Announced(duration, top, "protocol %s runs the plan's timing: %.2f s, the TCP at most %.0f mm/s"
-                         % (protocol.name, duration, top))
+        return Announced(planned + latency, top,
+                         "protocol %s runs the plan's timing: %.2f s%s, the TCP at most %.0f mm/s" % (protocol.name, planned + latency,
+                            " (the plan's %.2f s and the bus's %g cycles to the arm and back)"
+                            % (planned, STREAM_LATENCY_CYCLES) if latency else "", top))
     return announce_moves(protocol, previews, params, cycle_time)
 
 

@@ -19,7 +19,7 @@ from .jobs import StreamPoint
 from .stream_thinning import PAUSE_EPS, SKIP_TOLERANCE, split_long, thin_timed
 
 __all__ = ["MAX_CARTESIAN_TOLERANCE", "MAX_STREAM_TOLERANCE", "MIN_SEGMENT_CYCLES", "corner_levels",
-           "corner_rounding", "stream_points", "stream_speeds"]
+           "corner_rounding", "fed_times", "stream_points", "stream_speeds"]
 
 #: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
 #: longer than MIN_SEGMENT_CYCLES (a quarter of the default path tolerance: the thinning, the blended
@@ -58,6 +58,33 @@ def stream_speeds(start: Sequence[float], points: Sequence[Sequence[float]], tim
         prev = q
     return speeds
 
+
+
+def fed_times(times: Sequence[float], held: Sequence[bool], releases: Sequence[float], feed: float) -> List[float]:
+    """The times [s from the stream's start] the arm reaches each target so that the next is in the
+    controller by then: the bus brings one target every ``feed`` s (a bus cycle; two where the master
+    sends one per acknowledgement) and the arm starts with the first -- target ``j + 1`` (1-based)
+    arrives about ``j`` feeds after it, so point ``j`` is reached no sooner than ``j + 1`` feeds (one
+    for the cycle's jitter) after the start, or after the end of a pause (``held[j]``: the arm
+    stops at point ``j`` for a pause of the plan ending at ``releases[j + 1]``: the ring runs dry
+    there and the next targets come as at a start).
+
+    A point that would come too soon is delayed, and every point after it by as much: the segments
+    keep their planned durations (never faster than planned: the top speed said before the run
+    holds), the plan runs that much later (at most a feed or two, at the start of a plan whose first
+    samples are shorter than the feed). On a slow line a plan's first samples (the arm speeding up,
+    50 ms apart) came faster than the bus: the arm reached point 1 before point 2 came and stopped
+    there (the planning rostest, 4 runs in 6 at 23 cycles/s)."""
+    out = []
+    origin, count, shift = 0.0, 0, 0.0
+    for j, t in enumerate(times):
+        count += 1
+        if feed > 0.0 and j < len(times) - 1:
+            shift = max(shift, origin + (count + 1) * feed - float(t))
+        out.append(float(t) + shift)
+        if j < len(held) and held[j] and j + 1 < len(releases):
+            origin, count = releases[j + 1] + shift, 0
+    return out
 
 
 def _motion(start: Sequence[float], points: Sequence[Sequence[float]], speeds: Sequence[int],
@@ -105,14 +132,28 @@ def _levels(moves: Sequence[float], velocities: Sequence[Sequence[float]], smoot
 
 
 def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: Sequence[int],
-           vmax: Sequence[float], smooth: int, corner_tolerance: float
+           vmax: Sequence[float], smooth: int, corner_tolerance: float, feed: float = 0.0
            ) -> Tuple[Tuple[StreamPoint, ...], List[int]]:
-    """The stream of the planned points ``kept`` (indices, not the start): timed, pauses held,
-    corners blended (see :func:`stream_points`); and the planned indices of the corners even
+    """The stream of the planned points ``kept`` (indices, not the start): timed (no point reached
+    before the bus can have brought the next, :func:`fed_times`, ``feed`` [s] a target), pauses
+    held, corners blended (see :func:`stream_points`); and the planned indices of the corners even
     smooth level 1 rounds by more than ``corner_tolerance``."""
     pts = [tuple(float(v) for v in positions[k]) for k in kept]
     ts = [float(times[k]) for k in kept]
-    speeds = stream_speeds(positions[0], pts, ts, vmax)
+    if feed > 0.0:
+        # the motion's targets (a pause's end repeats the point before it: not one of them)
+        before = [tuple(float(v) for v in positions[0])] + pts[:-1]
+        moving = [max(abs(a - b) for a, b in zip(p, q)) > PAUSE_EPS for p, q in zip(before, pts)]
+        idx = [i for i, m in enumerate(moving) if m]
+        held = [i + 1 < len(moving) and not moving[i + 1] for i in idx]
+        releases = [ts[i - 1] if i > 0 and not moving[i - 1] else 0.0 for i in idx]
+        fed = fed_times([ts[i] for i in idx], held, releases, feed)
+        arrive = list(ts)
+        for i, t in zip(idx, fed):
+            arrive[i] = t
+        speeds = stream_speeds(positions[0], pts, arrive, vmax)
+    else:
+        speeds = stream_speeds(positions[0], pts, ts, vmax)
     # a pause of the plan (a kept point where the previous one is): not a target; the arm stops
     # exactly at the point before it, and the point after it is offered only when the pause ends
     out_pts: List[Tuple[float, ...]] = []
@@ -144,8 +185,8 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
 def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], vmax: Sequence[float],
                   smooth: int, tolerance: float, min_dt: float, max_tolerance: Optional[float] = None,
                   corner_tolerance: Optional[float] = None, max_step: Optional[float] = None,
-                  reaches: Optional[Callable[[Sequence[float], Sequence[float]], bool]] = None
-                  ) -> Tuple[StreamPoint, ...]:
+                  reaches: Optional[Callable[[Sequence[float], Sequence[float]], bool]] = None,
+                  feed: float = 0.0) -> Tuple[StreamPoint, ...]:
     """The stream for a planned joint path (``positions[0]`` = the start at ``times[0]`` = 0):
     thinned (:func:`thin_timed`), timed (:func:`stream_speeds`), each point but the last blended
     with the level :func:`corner_levels` gives for ``corner_tolerance`` (default: ``tolerance``;
@@ -161,6 +202,9 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
     A kept segment shorter than ``min_dt`` may starve the look-ahead (the controller would stop at a
     point and wait: a gap): the thinning tolerance is then doubled, up to ``max_tolerance`` (default
     ``tolerance``), until no segment is that short; short segments left then are sent as they are.
+
+    ``feed`` [s] (0: none): the time the bus takes to bring one target; each point's speed makes the
+    arm reach it no sooner than the next can be there (:func:`fed_times`).
 
     A sharp corner (the planned velocity jumps there) that even smooth level 1 would round by more
     than ``corner_tolerance`` gets back the planned points nearest to it on both sides that thinning
@@ -181,7 +225,7 @@ def stream_points(times: Sequence[float], positions: Sequence[Sequence[float]], 
                                                           max(tol, SKIP_TOLERANCE)))
     while True:
         order = sorted(chosen)
-        stream, tight = _timed(times, positions, order[1:], vmax, smooth, corner_tol)
+        stream, tight = _timed(times, positions, order[1:], vmax, smooth, corner_tol, feed)
         added = False
         for k in tight:
             at = order.index(k)
