@@ -89,3 +89,40 @@ def test_a_run_whose_arm_is_held_back_is_still_stopped(kin, protocol):
     assert (out.state, out.error_code) == (ABORTED, PATH_TOLERANCE_VIOLATED), out.error_string
     assert sup.stops_arm and not world.arm.moving
     assert max(abs(a - b) for a, b in zip(world.arm.joints, end)) > 1.0 * DEG
+
+
+def hard_start(q0, accel=10.0, dt=0.03, speed=1.0, duration=1.0):
+    """joint_1 speeding up at ``accel`` rad/s^2 to ``speed``, sampled every ``dt`` s: a plan whose first
+    samples the thinning keeps (the chord misses the parabola) and that come faster than the bus."""
+    times, points = [], []
+    ramp = speed / accel
+    for k in range(1, int(round(duration / dt)) + 1):
+        t = k * dt
+        s = 0.5 * accel * t * t if t < ramp else 0.5 * accel * ramp * ramp + speed * (t - ramp)
+        times.append(t)
+        points.append((q0[0] - s,) + tuple(q0[1:]))
+    return times, points
+
+
+@pytest.mark.parametrize("fed", [True, False], ids=["fed in time", "not fed (the check can fail)"])
+def test_a_plan_whose_first_samples_come_faster_than_the_bus_keeps_moving(kin, monkeypatch, fed):
+    """30 ms samples at the start of a plan on the 19.2 kbit/s line (a 53 ms cycle): each point is
+    reached no sooner than the bus can have brought the next (stream_points.fed_times), so the arm
+    never waits for a target -- without it, it waited at the first points -- and no segment runs faster
+    than planned."""
+    from vr_driver.driver.checks.stream_prep import JointStreams
+    if not fed:
+        monkeypatch.setattr(JointStreams, "feed_period", lambda self: 0.0)
+    world = paced_world(kin, "v3")
+    world.run_for(1.0)
+    traj = validated(world, *hard_start(world.status().joints))
+    run = world.core.submit_trajectory(traj)
+    world.run_until(lambda: run.done, 30.0, "the run")
+    job = run.jobs[0]
+    assert run.success
+    planned = [p.time for p in job.points]
+    assert planned[1] - planned[0] < 1.0 / world.status().cycle_rate      # shorter than a bus cycle
+    if fed:
+        assert job.gaps == 0, "the arm waited %d times" % job.gaps
+    else:
+        assert job.gaps >= 1

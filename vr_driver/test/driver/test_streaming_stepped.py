@@ -623,3 +623,23 @@ def test_a_joint_path_without_timing_is_refused_naming_the_protocol(kin, protoco
     with pytest.raises(DriverError, match="protocol %s runs a joint path with its timing" % protocol):
         w.core.submit_joint_path(w.core.joint_names, [q])
     assert w.core.status().job is None
+
+
+def test_fed_times_reach_no_point_before_the_next_can_be_there_and_never_shorten_a_segment():
+    from vr_driver.driver.motion.stream_points import fed_times
+    feed = 0.05
+    times = [0.03, 0.06, 0.09, 0.5, 0.52, 1.0]
+    fed = fed_times(times, [False] * 6, [0.0] * 6, feed)
+    # point j (1-based) no sooner than j + 1 feeds; the last point is not waited for by anything
+    for j, t in enumerate(fed[:-1], start=1):
+        assert t >= (j + 1) * feed - 1e-12, (j, t)
+    # shifted, never compressed: every segment at least its planned duration, the shift monotone
+    for (a, b), (c, d) in zip(zip(times, times[1:]), zip(fed, fed[1:])):
+        assert d - c >= b - a - 1e-12
+    assert fed == pytest.approx([0.1, 0.15, 0.2, 0.61, 0.63, 1.11])
+    # a plan the bus keeps up with is unchanged; no feed: unchanged
+    assert fed_times([0.2, 0.4, 0.6], [False] * 3, [0.0] * 3, feed) == [0.2, 0.4, 0.6]
+    assert fed_times(times, [False] * 6, [0.0] * 6, 0.0) == times
+    # after a pause (the arm held at point 2 until 2.0 s) the ring is empty: the feed starts again
+    after = fed_times([0.2, 0.4, 2.03, 2.06], [False, True, False, False], [0.0, 0.0, 2.0, 0.0], feed)
+    assert after == pytest.approx([0.2, 0.4, 2.1, 2.13])        # (the last point: shifted only)
