@@ -190,6 +190,7 @@ class SequencerBase(SequencerHooks):
     def __init__(self, params: DriverParams, clock: Callable[[], float],
                  replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
         self.params = params
+        self.wire = params.wire                   # the protocol object (the string: params.protocol)
         self.clock = clock
         self.replan = replan
         self._inbox = Inbox()                     # the only state other threads touch
@@ -597,7 +598,8 @@ class HandshakeSequencer(SequencerBase):
             return
         command = job.preview.commands[job.next_command]
         # the move at the program's own speed (MOVEP / MOVEL), not the arm's full speed it was previewed at
-        timeout = (self.params.motion_timeout_factor * program_duration(job.preview, self.params.controller)
+        timeout = (self.params.motion_timeout_factor * program_duration(self.wire, job.preview,
+                                                                    self.params.controller)
                    + self.params.motion_timeout_margin)
         try:
             seq = self.handshake.submit(command, timeout, now)
