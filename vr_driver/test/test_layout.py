@@ -126,7 +126,7 @@ KNOWN = {
 PROTOCOL_SPECIFIC = {
     "vr_driver.driver.sequencers": "registers the driver's sequencer and stream family with each built-in "
                                    "protocol object (Protocol.implement)",
-    "vr_driver.driver.motion.sequencer": "v1's sequencer (HandshakeSequencer, registered for v1) runs v1's "
+    "vr_driver.driver.motion.handshake": "v1's sequencer (HandshakeSequencer, registered for v1) runs v1's "
                                          "request / done handshake (MasterHandshake, Command, Feedback)",
     "vr_driver.commission.bus": "the commissioning tool measures v3's assumptions about the G2 on v3's records",
     "vr_driver.commission.steps": "the commissioning tool measures v3's assumptions about the G2 on v3's records",

@@ -4,7 +4,7 @@
 and the tests talk to:
 
 - :class:`~vr_driver.driver.link.link.LinkSupervisor` (port, DP master, session, freshness, counters),
-- the sequencer (:class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer`, v1's handshake, or
+- the sequencer (:class:`~vr_driver.driver.motion.handshake.HandshakeSequencer`, v1's handshake, or
   :class:`~vr_driver.driver.motion.streaming.StreamSequencer`: queue, stops, outcomes),
 - :class:`~vr_driver.driver.bus_loop.BusLoop` (the bus thread: one iteration steps the link, the
   joints and the sequencer and publishes a :class:`~vr_driver.driver.motion.status.DriverStatus`),
