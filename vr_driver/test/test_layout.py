@@ -315,9 +315,20 @@ def _import_froms(path, tree):
     return _FROMS[key]
 
 
+_GRAPHS = {}
+
+
 def import_graph(root=PACKAGE):
     """{module: {the vr_driver modules it imports}}, every import statement counted (module
-    docstring); an import of a module outside the package is left out."""
+    docstring); an import of a module outside the package is left out. Made once per version of
+    the package's files (several checks walk it)."""
+    key = (root, tuple(_key(path) for path in modules(root)))
+    if key not in _GRAPHS:
+        _GRAPHS[key] = _import_graph(root)
+    return _GRAPHS[key]
+
+
+def _import_graph(root):
     paths = {module_name(root, path): path for path in modules(root)}
     graph = {}
     for name, path in paths.items():
@@ -449,44 +460,56 @@ def _bound_name(target):
     return None
 
 
+_WIRE_NAMES = {}
+
+
 def wire_names(root=PACKAGE):
     """Every parameter, field, attribute or variable that breaks the protocol's two names (module
     docstring), as readable lines."""
     bad = []
     for path in modules(root):
-        name = module_name(root, path)
-        source = _source(path)
-        annotated = []                     # (what, its name, its annotation, line)
-        assigned = []                      # (its name, its value, line)
-        for node in ast.walk(parsed(path)):
-            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
-                args = node.args
-                for arg in args.posonlyargs + args.args + args.kwonlyargs + [args.vararg, args.kwarg]:
-                    if arg is not None and arg.annotation is not None:
-                        annotated.append(("parameter", arg.arg, arg.annotation, arg.lineno))
-            elif isinstance(node, ast.AnnAssign) and _bound_name(node.target):
-                annotated.append(("field" if isinstance(node.target, ast.Name) else "attribute",
-                                  _bound_name(node.target), node.annotation, node.lineno))
-                if node.value is not None:
-                    assigned.append((_bound_name(node.target), node.value, node.lineno))
-            elif isinstance(node, ast.Assign):
-                for target in node.targets:
-                    if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple) \
-                            and len(target.elts) == len(node.value.elts):
-                        assigned += [(_bound_name(t), v, node.lineno) for t, v in zip(target.elts, node.value.elts)]
-                    else:
-                        assigned.append((_bound_name(target), node.value, node.lineno))
-        for what, bound, annotation, line in annotated:
-            if _names_protocol_class(annotation) and bound not in WIRE_NAMES:
-                bad.append("%s:%d: %s %s holds the protocol object: call it wire (protocol is the user's "
-                           "string)" % (name, line, what, bound))
-            elif bound in WIRE_NAMES and not _names_protocol_class(annotation):
-                bad.append("%s:%d: %s %s is annotated %s: wire is the protocol object's name (the string is "
-                           "protocol)" % (name, line, what, bound, ast.get_source_segment(source, annotation)))
-        for bound, value, line in assigned:
-            if bound is not None and bound not in WIRE_NAMES and _gives_protocol_object(value):
-                bad.append("%s:%d: %s = %s holds the protocol object: call it wire (protocol is the user's "
-                           "string)" % (name, line, bound, ast.get_source_segment(source, value)))
+        key = (_key(path), module_name(root, path))
+        if key not in _WIRE_NAMES:
+            _WIRE_NAMES[key] = _wire_names(path, key[1])
+        bad += _WIRE_NAMES[key]
+    return bad
+
+
+def _wire_names(path, name):
+    """wire_names of one module."""
+    bad = []
+    source = _source(path)
+    annotated = []                     # (what, its name, its annotation, line)
+    assigned = []                      # (its name, its value, line)
+    for node in ast.walk(parsed(path)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            args = node.args
+            for arg in args.posonlyargs + args.args + args.kwonlyargs + [args.vararg, args.kwarg]:
+                if arg is not None and arg.annotation is not None:
+                    annotated.append(("parameter", arg.arg, arg.annotation, arg.lineno))
+        elif isinstance(node, ast.AnnAssign) and _bound_name(node.target):
+            annotated.append(("field" if isinstance(node.target, ast.Name) else "attribute",
+                              _bound_name(node.target), node.annotation, node.lineno))
+            if node.value is not None:
+                assigned.append((_bound_name(node.target), node.value, node.lineno))
+        elif isinstance(node, ast.Assign):
+            for target in node.targets:
+                if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple) \
+                        and len(target.elts) == len(node.value.elts):
+                    assigned += [(_bound_name(t), v, node.lineno) for t, v in zip(target.elts, node.value.elts)]
+                else:
+                    assigned.append((_bound_name(target), node.value, node.lineno))
+    for what, bound, annotation, line in annotated:
+        if _names_protocol_class(annotation) and bound not in WIRE_NAMES:
+            bad.append("%s:%d: %s %s holds the protocol object: call it wire (protocol is the user's "
+                       "string)" % (name, line, what, bound))
+        elif bound in WIRE_NAMES and not _names_protocol_class(annotation):
+            bad.append("%s:%d: %s %s is annotated %s: wire is the protocol object's name (the string is "
+                       "protocol)" % (name, line, what, bound, ast.get_source_segment(source, annotation)))
+    for bound, value, line in assigned:
+        if bound is not None and bound not in WIRE_NAMES and _gives_protocol_object(value):
+            bad.append("%s:%d: %s = %s holds the protocol object: call it wire (protocol is the user's "
+                       "string)" % (name, line, bound, ast.get_source_segment(source, value)))
     return bad
 
 
