@@ -450,12 +450,12 @@ class Validation(Load):
         from vr_driver.driver.motion.trajectories import segment_speeds, validate
         from vr_driver.errors import VrDriverError
         core = self.core
-        lim, protocol = core.kin.limits, core.protocol
+        lim, wire = core.kin.limits, core.wire
         t = time.monotonic()
         try:
             traj = validate(self.goal, core.joint_names, core.status().joints, lim.lower, lim.upper, time.time(),
-                            default_path_tolerance=protocol.default_path_tolerance,
-                            default_goal_tolerance=protocol.default_goal_tolerance)
+                            default_path_tolerance=wire.default_path_tolerance,
+                            default_goal_tolerance=wire.default_goal_tolerance)
             self.phases.append(("validate", time.monotonic() - t))
             segment_speeds(traj, lim.velocity, core.joint_names)
             self.phases.append(("segment_speeds", time.monotonic() - t))

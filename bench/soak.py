@@ -562,7 +562,7 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
                             loop_period=config.loop_period, kinematics=kin,
                             confirm_records=config.confirm_records, protocol=config.protocol).start()
     core = DriverCore(params, kinematics=kin, open_link=line.open_link)
-    proto = protocols.get(config.protocol)
+    wire = protocols.get(config.protocol)
 
     rest: List[object] = [None, 0.0]        # the arm's pose at the last bus cycle, seen since
 
@@ -586,7 +586,7 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
         if status.feedback_time is None or status.feedback_time < rest[1] or \
                 status.joints is None or not status.joints_valid or status.pose is None:
             return              # (feedback that arrived while the arm was at rest already)
-        if not proto.reports_joints:
+        if not wire.reports_joints:
             reported = sim.feedback         # the pose the controller reports, rounded as on the wire
             if reported is None or tuple(status.pose.as_tuple()) != tuple(reported.pose.as_tuple()):
                 return          # (the driver has not seen this pose yet)
@@ -595,7 +595,7 @@ def run_soak(config: SoakConfig, kin: Optional[Kinematics] = None,
             result.mismatch_samples += 1
             result.mismatch_max = max(result.mismatch_max, math.degrees(off))
 
-    recorder = StatusRecorder(handshake_ready=(lambda: True) if proto.streams
+    recorder = StatusRecorder(handshake_ready=(lambda: True) if wire.streams
                               else (lambda: core.handshake.ready), probe=probe)
     core.add_listener(recorder)
     cutter = (Cutter(line, config, random.Random(rng.getrandbits(64)), recorder)

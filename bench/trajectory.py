@@ -911,7 +911,7 @@ def analyse(plan: Planned, samples: Sequence[Tuple[float, Sequence[float]]], t_r
     out["dev_send_deg"], out["lag_s"] = math.degrees(raw), lag
     path = ValidTrajectory(positions=plan.points, times=plan.times, path_tolerance=(1.0,) * 6,
                            goal_tolerance=(1.0,) * 6, goal_time_tolerance=0.0, delay=0.0,
-                           wire=unit_band(plan, wrist) if wrist is not None else None)
+                           per_configuration=unit_band(plan, wrist) if wrist is not None else None)
     out["path_deg"] = math.degrees(max((path_deviation(path, q)[0] for _t, q in inside), default=0.0))
     out["final_deg"] = (math.degrees(max(errors(final, plan.points[-1]))) if final is not None else None)
     if wrist is not None:

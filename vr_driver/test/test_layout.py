@@ -41,12 +41,27 @@ The shape of the code, checked the same way:
   reason) are left out; an edge there that no longer closes a circle fails the test, so that list
   only shrinks too.
 
+The protocol's two names (doc/layout.md, "Names"), checked the same way:
+
+- **One name for the object, one for the string**: a function parameter, a dataclass field or an
+  annotated attribute whose annotation names the protocol object's class (``Protocol``,
+  ``ProtocolV1``, ...) is called ``wire`` (``_wire`` when private), and one called ``wire`` is
+  annotated with that class (never ``str`` or another type); an unannotated assignment of the
+  object (``x.wire``, ``registry.get(...)``, ``protocols.get(...)``, ``protocol_option(...)``,
+  ``with_send_ahead(...)``) binds ``wire`` / ``_wire`` too. ``protocol`` is the user's string: the
+  ROS parameter ``~protocol``, ``--protocol``, the launch argument.
+- **Protocol-specific modules stay behind the seam**: only ``protocol`` itself and ``controller``
+  (the virtual G2's programs implement the protocols) import ``vr_driver.protocol.v1`` / ``v2`` /
+  ``v3``, and the modules of PROTOCOL_SPECIFIC, each with its reason (one that no longer imports
+  them fails the test); everything else asks the protocol object.
+
 ``test_each_rule_can_fail`` breaks a copy of the package once per rule and checks that the checker
 reports it."""
 from __future__ import annotations
 
 import ast
 import os
+import re
 
 import pytest
 
@@ -106,6 +121,22 @@ KNOWN = {
     ("vr_driver.csr.cli", "rospy"): "csr_export --from-topic",
     ("vr_driver.csr.cli", "trajectory_msgs.msg"): "csr_export --from-topic",
 }
+#: modules outside ``protocol`` and ``controller`` that import a protocol's own module
+#: (vr_driver.protocol.v1 / v2 / v3), and why: each is that protocol's registered implementation
+PROTOCOL_SPECIFIC = {
+    "vr_driver.driver.sequencers": "registers the driver's sequencer and stream family with each built-in "
+                                   "protocol object (Protocol.implement)",
+    "vr_driver.driver.motion.handshake": "v1's sequencer (HandshakeSequencer, registered for v1) runs v1's "
+                                         "request / done handshake (MasterHandshake, Command, Feedback)",
+    "vr_driver.commission.bus": "the commissioning tool measures v3's assumptions about the G2 on v3's records",
+    "vr_driver.commission.steps": "the commissioning tool measures v3's assumptions about the G2 on v3's records",
+}
+#: the protocol object's names: a parameter, field or attribute holding it (doc/layout.md, "Names")
+WIRE_NAMES = ("wire", "_wire")
+#: the annotations that name the protocol object's class (the seam's and each protocol's subclass)
+PROTOCOL_CLASS = re.compile(r"\AProtocol(V[0-9]+)?\Z")
+#: a protocol's own module
+PROTOCOL_MODULE = re.compile(r"\Avr_driver\.protocol\.v[0-9]+\Z")
 #: the longest a class may be [lines]
 MAX_CLASS_LINES = 350
 #: import edges (importer, imported) left out of the circle check, and why; each closes a circle today
@@ -160,6 +191,14 @@ def parsed(path):
 
 
 _IMPORTS = {}
+
+
+def _source(path):
+    """The module's text (as :func:`parsed` reads it)."""
+    if path in _OVERRIDE:
+        return _OVERRIDE[path]
+    with open(path) as f:
+        return f.read()
 
 
 def _key(path):
@@ -276,9 +315,20 @@ def _import_froms(path, tree):
     return _FROMS[key]
 
 
+_GRAPHS = {}
+
+
 def import_graph(root=PACKAGE):
     """{module: {the vr_driver modules it imports}}, every import statement counted (module
-    docstring); an import of a module outside the package is left out."""
+    docstring); an import of a module outside the package is left out. Made once per version of
+    the package's files (several checks walk it)."""
+    key = (root, tuple(_key(path) for path in modules(root)))
+    if key not in _GRAPHS:
+        _GRAPHS[key] = _import_graph(root)
+    return _GRAPHS[key]
+
+
+def _import_graph(root):
     paths = {module_name(root, path): path for path in modules(root)}
     graph = {}
     for name, path in paths.items():
@@ -352,6 +402,143 @@ def import_circles(root=PACKAGE):
                 for edge in sorted(CIRCLE_EDGES)
                 if edge[1] not in graph.get(edge[0], ()) or not any(set(edge) <= c for c in whole)]
     return bad
+
+
+def _names_protocol_class(annotation) -> bool:
+    """The annotation is the protocol object's class (``Protocol``, ``Optional[Protocol]``,
+    ``"ProtocolV3"``, ``Protocol | None``, ...; a container of them -- ``Dict[str, Protocol]`` -- is
+    another thing, and so is ``typing.Protocol``)."""
+    node = annotation
+    if isinstance(node, ast.Name):
+        return bool(PROTOCOL_CLASS.match(node.id))
+    if isinstance(node, ast.Constant) and isinstance(node.value, str):
+        try:
+            return _names_protocol_class(ast.parse(node.value, mode="eval").body)
+        except SyntaxError:
+            return False
+    if isinstance(node, ast.BinOp) and isinstance(node.op, ast.BitOr):
+        return _names_protocol_class(node.left) or _names_protocol_class(node.right)
+    if isinstance(node, ast.Subscript):
+        outer = node.value.id if isinstance(node.value, ast.Name) else getattr(node.value, "attr", "")
+        inner = node.slice
+        if type(inner).__name__ == "Index":                      # Python 3.8: an ast.Index around it
+            inner = inner.value
+        if outer == "Optional":
+            return _names_protocol_class(inner)
+        if outer == "Union":
+            return any(_names_protocol_class(e) for e in getattr(inner, "elts", [inner]))
+    return False
+
+
+def _gives_protocol_object(value) -> bool:
+    """``value`` is an expression that evaluates to the protocol object: ``x.wire``, the registry's
+    ``get`` (``registry.get`` / ``protocols.get`` / ``_registry().get``), ``protocol_option(...)``,
+    ``x.with_send_ahead(...)``."""
+    if isinstance(value, ast.Attribute):
+        return value.attr in WIRE_NAMES
+    if not isinstance(value, ast.Call):
+        return False
+    func = value.func
+    if isinstance(func, ast.Name):
+        return func.id == "protocol_option"
+    if isinstance(func, ast.Attribute):
+        if func.attr == "with_send_ahead":
+            return True
+        owner = func.value
+        return func.attr == "get" and ((isinstance(owner, ast.Name) and owner.id in ("registry", "protocols"))
+                                       or (isinstance(owner, ast.Call) and isinstance(owner.func, ast.Name)
+                                           and owner.func.id == "_registry"))
+    return False
+
+
+def _bound_name(target):
+    """The name an assignment target binds (a variable or an attribute), None for anything else."""
+    if isinstance(target, ast.Name):
+        return target.id
+    if isinstance(target, ast.Attribute):
+        return target.attr
+    return None
+
+
+_WIRE_NAMES = {}
+
+
+def wire_names(root=PACKAGE):
+    """Every parameter, field, attribute or variable that breaks the protocol's two names (module
+    docstring), as readable lines."""
+    bad = []
+    for path in modules(root):
+        key = (_key(path), module_name(root, path))
+        if key not in _WIRE_NAMES:
+            _WIRE_NAMES[key] = _wire_names(path, key[1])
+        bad += _WIRE_NAMES[key]
+    return bad
+
+
+def _wire_names(path, name):
+    """wire_names of one module."""
+    bad = []
+    source = _source(path)
+    annotated = []                     # (what, its name, its annotation, line)
+    assigned = []                      # (its name, its value, line)
+    for node in ast.walk(parsed(path)):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            args = node.args
+            for arg in args.posonlyargs + args.args + args.kwonlyargs + [args.vararg, args.kwarg]:
+                if arg is not None and arg.annotation is not None:
+                    annotated.append(("parameter", arg.arg, arg.annotation, arg.lineno))
+        elif isinstance(node, ast.AnnAssign) and _bound_name(node.target):
+            annotated.append(("field" if isinstance(node.target, ast.Name) else "attribute",
+                              _bound_name(node.target), node.annotation, node.lineno))
+            if node.value is not None:
+                assigned.append((_bound_name(node.target), node.value, node.lineno))
+        elif isinstance(node, ast.Assign):
+            for target in node.targets:
+                if isinstance(target, ast.Tuple) and isinstance(node.value, ast.Tuple) \
+                        and len(target.elts) == len(node.value.elts):
+                    assigned += [(_bound_name(t), v, node.lineno) for t, v in zip(target.elts, node.value.elts)]
+                else:
+                    assigned.append((_bound_name(target), node.value, node.lineno))
+    for what, bound, annotation, line in annotated:
+        if _names_protocol_class(annotation) and bound not in WIRE_NAMES:
+            bad.append("%s:%d: %s %s holds the protocol object: call it wire (protocol is the user's "
+                       "string)" % (name, line, what, bound))
+        elif bound in WIRE_NAMES and not _names_protocol_class(annotation):
+            bad.append("%s:%d: %s %s is annotated %s: wire is the protocol object's name (the string is "
+                       "protocol)" % (name, line, what, bound, ast.get_source_segment(source, annotation)))
+    for bound, value, line in assigned:
+        if bound is not None and bound not in WIRE_NAMES and _gives_protocol_object(value):
+            bad.append("%s:%d: %s = %s holds the protocol object: call it wire (protocol is the user's "
+                       "string)" % (name, line, bound, ast.get_source_segment(source, value)))
+    return bad
+
+
+def protocol_specific_imports(root=PACKAGE):
+    """Every import of a protocol's own module (vr_driver.protocol.v1 / v2 / v3) outside ``protocol``,
+    ``controller`` and PROTOCOL_SPECIFIC, as readable lines; and each entry of PROTOCOL_SPECIFIC
+    that imports none (for the real package)."""
+    bad, used = [], set()
+    for module, targets in sorted(import_graph(root).items()):
+        specific = sorted(t for t in targets if PROTOCOL_MODULE.match(t))
+        if not specific or layer(module) in ("protocol", "controller"):
+            continue
+        if module in PROTOCOL_SPECIFIC:
+            used.add(module)
+            continue
+        bad.append("%s imports %s: protocol-specific code outside the seam (ask the protocol object, or "
+                   "register the code with it)" % (module, ", ".join(specific)))
+    if root == PACKAGE:
+        bad += ["%s imports no protocol's own module any more: remove it from PROTOCOL_SPECIFIC" % module
+                for module in sorted(set(PROTOCOL_SPECIFIC) - used)]
+    return bad
+
+
+def test_the_protocol_object_is_called_wire_and_the_string_protocol():
+    assert wire_names() == []
+
+
+def test_protocol_specific_modules_are_imported_only_behind_the_seam():
+    assert protocol_specific_imports() == []
 
 
 def test_no_class_is_longer_than_the_limit():
@@ -431,11 +618,25 @@ SHAPE_BREAKS = [
     ("driver/checks/stream_prep.py", "def later():\n    from .job_control import JobControl",
      "import circle: vr_driver.driver.checks.job_control <-> "),
     ("driver/checks/path_checks.py", "def later():\n    from . import stream_prep", "vr_driver.driver.checks.stream_prep"),
+    ("driver/motion/announced.py", "def later(kin, protocol: Protocol):\n    pass",
+     "parameter protocol holds the protocol object: call it wire"),
+    ("driver/motion/announced.py", "def later(kin, wire: Optional['ProtocolV3'] = None):\n    pass", ""),
+    ("driver/motion/announced.py", "def later(wire: str):\n    pass", "parameter wire is annotated str"),
+    ("driver/motion/trajectories.py", "@dataclass\nclass Later:\n    wire: Optional[ConfigurationTolerances]",
+     "field wire is annotated Optional[ConfigurationTolerances]: wire is the protocol object's name"),
+    ("driver/core.py", "class Later:\n    def __init__(self, params):\n        self.protocol = params.wire",
+     "protocol = params.wire holds the protocol object"),
+    ("ros/industrial.py", "def later(core):\n    lim, proto = core.kin.limits, core.wire",
+     "proto = core.wire holds the protocol object"),
+    ("commission/scan.py", "def later(name):\n    fit = protocols.get(name)", "fit = protocols.get(name) holds"),
+    ("driver/motion/announced.py", "from ...protocol.v1 import program_speed",
+     "vr_driver.driver.motion.announced imports vr_driver.protocol.v1: protocol-specific code outside"),
+    ("ros/jog.py", "def later():\n    from ..protocol import v3", "vr_driver.ros.jog imports vr_driver.protocol.v3"),
 ]
 
 
 def shape_violations(root):
-    return long_classes(root) + import_circles(root)
+    return long_classes(root) + import_circles(root) + wire_names(root) + protocol_specific_imports(root)
 
 
 @pytest.mark.parametrize("path, statement, expected", BREAKS + SHAPE_BREAKS,
@@ -455,4 +656,7 @@ def test_each_rule_can_fail(path, statement, expected):
         found = violations(PACKAGE) + shape_violations(PACKAGE)
     finally:
         del _OVERRIDE[full]
+    if not expected:                        # a statement the rules allow: nothing is reported
+        assert found == [], found
+        return
     assert any(expected in v for v in found), found

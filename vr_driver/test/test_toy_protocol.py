@@ -123,12 +123,12 @@ class ToyWorld:
     virtual G2 built by VirtualController (its program the one the protocol names), its slave
     answering the driver's master on the in-memory link synchronously (_world.SteppedLink)."""
 
-    def __init__(self, kin, protocol) -> None:
+    def __init__(self, kin, wire) -> None:
         self.clock = FakeClock()
         unused, _ = MemoryLink.pair()            # the controller's own port: never served here
-        self.g2 = VirtualController(unused, protocol=protocol, kinematics=kin, clock=self.clock)
+        self.g2 = VirtualController(unused, protocol=wire, kinematics=kin, clock=self.clock)
         self.link = SteppedLink(self.g2.slave, self.clock)
-        self.params = DriverParams.from_dict(dict(WORLD_PARAMS, protocol=protocol.name))
+        self.params = DriverParams.from_dict(dict(WORLD_PARAMS, protocol=wire.name))
         self.core = DriverCore(self.params, kinematics=kin, clock=self.clock,
                                open_link=lambda device, baud: self.link)
         self.next_bus = self.next_loop = self.clock.t

@@ -723,10 +723,10 @@ class DriverParams:
         the G2 does not take a target sent ahead (``controller/send_ahead`` other than accepted), a
         copy of it that sends one target per acknowledgement (``with_send_ahead``, offered by the
         protocols that send ahead of their slots)."""
-        proto = _registry().get(self.protocol)
-        if self.controller.send_ahead != "accepted" and proto.send_ahead > proto.look_ahead_slots:
-            proto = proto.with_send_ahead(proto.look_ahead_slots)
-        return proto
+        wire = _registry().get(self.protocol)
+        if self.controller.send_ahead != "accepted" and wire.send_ahead > wire.look_ahead_slots:
+            wire = wire.with_send_ahead(wire.look_ahead_slots)
+        return wire
 
     def bus(self) -> "BusConfig":
         """The PROFIBUS bus configuration: the bus config file (or the package default) with
@@ -741,13 +741,13 @@ class DriverParams:
         except ConfigError as exc:
             raise ParamError("bus_config", self.bus_config, str(exc)) from None
         data: Dict[str, Any] = base.to_dict()
-        proto = self.wire
-        if not self.bus_config and proto.gsd_modules:
+        wire = self.wire
+        if not self.bus_config and wire.gsd_modules:
             for slave in data["slaves"]:
                 slave.pop("cfg", None)
-                slave["modules"] = list(proto.gsd_modules)
-                slave["input_len"] = proto.input_length
-                slave["output_len"] = proto.output_length
+                slave["modules"] = list(wire.gsd_modules)
+                slave["input_len"] = wire.input_length
+                slave["output_len"] = wire.output_length
         data["cycle_rate_hz"] = self.cycle_rate
         if self.port:
             data["phy"]["device"] = self.port
@@ -776,10 +776,10 @@ class DriverParams:
         slave = bus.slaves[0]
         self.check_watchdog(slave.watchdog_ms, "the bus config %s" % (self.bus_config or "(built in)")
                             if self.watchdog_ms is None else "watchdog_ms")
-        if slave.input_len != proto.input_length or slave.output_len != proto.output_length:
+        if slave.input_len != wire.input_length or slave.output_len != wire.output_length:
             raise ParamError("bus_config", self.bus_config, "the controller protocol %s needs %d bytes "
                              "in / %d out; the configured modules give %d in / %d out"
-                             % (self.protocol, proto.input_length, proto.output_length,
+                             % (self.protocol, wire.input_length, wire.output_length,
                                 slave.input_len, slave.output_len))
         return bus
 

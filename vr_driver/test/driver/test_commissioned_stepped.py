@@ -220,7 +220,7 @@ def test_no_lookahead_every_point_a_stop_and_the_time_it_costs_said_and_kept(kin
 def test_send_ahead_refused_one_target_per_acknowledgement(kin, monkeypatch, caplog):
     caplog.set_level(logging.WARNING, logger="vr_driver.driver")
     w = g2_world(kin, monkeypatch, told={"send_ahead": "refused"}, program={"send_ahead": "refused"})
-    assert w.core.protocol.send_ahead == 1 and w.core.sequencer.wire.send_ahead == 1
+    assert w.core.wire.send_ahead == 1 and w.core.sequencer.wire.send_ahead == 1
     from vr_driver.protocol.v3 import V3
     assert V3.send_ahead == 2                                # the protocol's own rule unchanged
     assert w.core.min_segment() == pytest.approx(2 * MIN_SEGMENT_CYCLES / 20.0)

@@ -91,7 +91,7 @@ def test_a_sine_at_50_hz_is_followed_and_ends_at_rest_at_the_last_target(kin, pr
     # plus the bus cycle and the program loop on the way there and the record on the way back
     assert lag <= 2 * 0.02 + 3 * world.bus_period, lag
     # (the other joints stay: within the wire's rounding, v3 the controller's IK of the rounded pose)
-    still = 0.001 * DEG if protocol == "v2" else world.core.protocol.target_error
+    still = 0.001 * DEG if protocol == "v2" else world.core.wire.target_error
     assert all(max(abs(a - b) for a, b in zip(q[1:], q0[1:])) <= still for _t, q in samples)
     print("lag %.3f s, %.4f deg off" % (lag, err(lag) / DEG))
     # the end: within one bus cycle + joint_command_timeout the stream is over and the arm at rest
@@ -100,7 +100,7 @@ def test_a_sine_at_50_hz_is_followed_and_ends_at_rest_at_the_last_target(kin, pr
     world.run_until(lambda: job.done, deadline - world.now + 1e-9, "the stream's end")
     assert world.now <= deadline + 1e-9
     assert job.result.success, job.result.reason
-    tol = 0.001 * DEG if protocol == "v2" else world.core.protocol.target_error
+    tol = 0.001 * DEG if protocol == "v2" else world.core.wire.target_error
     assert max(abs(a - b) for a, b in zip(world.arm.joints, commands[-1])) <= tol
     # every point on the wire once, in order
     seqs = wire_seqs(world)
@@ -211,7 +211,7 @@ def test_bad_commands_are_refused_and_change_nothing(kin, protocol):
     assert "last accepted command" in str(info.value)
     world.run_until(lambda: job.done, 1.0)
     assert len(job.points) == 1
-    assert max(abs(a - b) for a, b in zip(world.arm.joints, ok)) <= world.core.protocol.target_error + 1e-9
+    assert max(abs(a - b) for a, b in zip(world.arm.joints, ok)) <= world.core.wire.target_error + 1e-9
 
 
 def test_time_from_start_sets_the_step_time(kin):

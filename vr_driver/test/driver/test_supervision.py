@@ -29,13 +29,13 @@ V2 = registry.get("v2")
 T0 = 500.0                     # the fake clock's time at the start of the run
 
 
-def plan(protocol, goal_time_tolerance=0.0, **tolerances):
+def plan(wire, goal_time_tolerance=0.0, **tolerances):
     """HOME -> MID (1 s) -> END (2 s) along joint_1, validated with the protocol's defaults."""
     goal = TrajectoryGoal(NAMES, (MID, END), (1.0, 2.0), goal_time_tolerance=goal_time_tolerance,
                           **tolerances)
     return validate(goal, NAMES, HOME, LOWER, UPPER, T0,
-                    default_path_tolerance=protocol.default_path_tolerance,
-                    default_goal_tolerance=protocol.default_goal_tolerance)
+                    default_path_tolerance=wire.default_path_tolerance,
+                    default_goal_tolerance=wire.default_goal_tolerance)
 
 
 class FakeJob:
@@ -266,11 +266,11 @@ def test_default_tolerances_follow_what_each_protocol_reaches():
     assert V1.default_path_tolerance == pytest.approx(4.0 * DEG)
     assert V2.default_goal_tolerance == pytest.approx(0.05 * DEG)
     assert V2.default_path_tolerance == pytest.approx(1.05 * DEG)
-    for protocol in (V1, V2):
-        traj = plan(protocol)
-        assert traj.goal_tolerance == pytest.approx((protocol.default_goal_tolerance,) * 6)
-        assert traj.path_tolerance == pytest.approx((protocol.default_path_tolerance,) * 6)
-        assert protocol.default_goal_tolerance >= 2.0 * protocol.target_error
+    for wire in (V1, V2):
+        traj = plan(wire)
+        assert traj.goal_tolerance == pytest.approx((wire.default_goal_tolerance,) * 6)
+        assert traj.path_tolerance == pytest.approx((wire.default_path_tolerance,) * 6)
+        assert wire.default_goal_tolerance >= 2.0 * wire.target_error
 
 
 def test_a_v1_goal_with_empty_tolerances_does_not_fail_on_the_wires_rounding():
@@ -376,7 +376,7 @@ def test_the_first_target_leaves_with_the_bus_cycle_after_the_goal_is_queued(kin
 # ------------------------------------------------------------------------------ on the stepped core
 def _supervise(world, traj, dt=0.05):
     run = world.core.submit_trajectory(traj)
-    sup = TrajectorySupervisor(traj, run, run.started, world.core.protocol, world.core.joint_names)
+    sup = TrajectorySupervisor(traj, run, run.started, world.core.wire, world.core.joint_names)
     next_step = [world.now]
 
     def stepped():
@@ -396,7 +396,7 @@ def test_a_run_on_the_stepped_core_succeeds_with_the_defaults(kin, protocol):
     q0 = world.status().joints
     points = [tuple(q + f * d for q, d in zip(q0, (0.4, 0.15, -0.1, 0.2, 0.2, 0.3))) for f in (0.5, 1.0)]
     lim = world.kin.limits
-    p = world.core.protocol
+    p = world.core.wire
     traj = validate(TrajectoryGoal(NAMES, tuple(points), (1.5, 3.0)), NAMES, q0, lim.lower, lim.upper,
                     world.now, default_path_tolerance=p.default_path_tolerance,
                     default_goal_tolerance=p.default_goal_tolerance)

@@ -31,7 +31,7 @@ T0 = 100.0
 
 
 @pytest.fixture(scope="module")
-def wires(kin):
+def resolutions(kin):
     return {p.name: WireResolution.of(kin, p) for p in (V1, V3)}
 
 
@@ -45,10 +45,10 @@ def with_j5(q, j5, j4=None, j6=None):
     return tuple(q)
 
 
-def rounded_ik(kin, protocol, q):
+def rounded_ik(kin, wire, q):
     """The joints the controller lands on for the planned joints ``q``: FK, the pose rounded as
     the wire carries it, the IK solution nearest ``q``."""
-    return np.array(kin.ik_pose(protocol.wire_pose(kin.fk_pose(q)), seed=q))
+    return np.array(kin.ik_pose(wire.wire_pose(kin.fk_pose(q)), seed=q))
 
 
 # ------------------------------------------------------------------------------ the bound
@@ -65,18 +65,18 @@ def test_euler_axes_are_the_rotation_of_each_angles_change():
     assert np.linalg.norm(axes, axis=0) == pytest.approx([1.0, 1.0, 1.0])        # bounded at any Ry
 
 
-def test_joint_targets_have_no_per_configuration_rule(kin, wires):
+def test_joint_targets_have_no_per_configuration_rule(kin, resolutions):
     assert WireResolution.of(kin, V2) is None                  # v2 stays as it is
-    assert wires["v1"].sign == 1.0 and wires["v3"].sign == 1.0  # joint_4 and joint_6 turn about one x axis
+    assert resolutions["v1"].sign == 1.0 and resolutions["v3"].sign == 1.0  # joint_4 and joint_6 turn about one x axis
 
 
 @pytest.mark.parametrize("name", ["v1", "v3"])
-def test_the_bound_holds_for_the_ik_of_rounded_poses_and_is_not_loose(kin, wires, name):
+def test_the_bound_holds_for_the_ik_of_rounded_poses_and_is_not_loose(kin, resolutions, name):
     """Random configurations away from singularities (smallest singular value of the Jacobian
     >= 0.05) and outside the wrist band: the IK of the rounded pose (nearest the planned joints)
     stays within the bound -- 10 % over it allowed for the second-order terms the linear bound
     leaves out (up to 0.97 x seen) -- and the bound is a fair one (its median use > 25 %)."""
-    wire = wires[name]
+    resolution = resolutions[name]
     rng = random.Random(7)
     ratios = []
     while len(ratios) < 120:
@@ -84,26 +84,26 @@ def test_the_bound_holds_for_the_ik_of_rounded_poses_and_is_not_loose(kin, wires
         if abs(q[4]) < 2 * WRIST_BAND or np.linalg.svd(kin.jacobian(q), compute_uv=False)[-1] < 0.05:
             continue
         try:
-            landed = rounded_ik(kin, wire.protocol, q)
+            landed = rounded_ik(kin, resolution.wire, q)
         except KinematicsError:
             continue                               # rounded past a joint limit: another matter
         off = np.abs(landed - q)
         if off.max() > 0.5:
             continue                               # another branch (a flip at a limit), not rounding
-        bound, _ = wire.errors(q)
+        bound, _ = resolution.errors(q)
         ratios.append(float(np.max(off / np.array(bound))))
     assert max(ratios) <= 1.1, max(ratios)
     assert float(np.median(ratios)) > 0.25, float(np.median(ratios))
 
 
 @pytest.mark.parametrize("name, sum_limit", [("v1", 2.0 * DEG), ("v3", 0.02 * DEG)])
-def test_near_the_wrist_singularity_the_sum_is_bounded_and_the_split_is_not(kin, wires, name, sum_limit):
-    wire = wires[name]
+def test_near_the_wrist_singularity_the_sum_is_bounded_and_the_split_is_not(kin, resolutions, name, sum_limit):
+    resolution = resolutions[name]
     for j5_deg in (0.0, 0.5, 1.0, 3.0):
         q = with_j5(ARM, j5_deg * DEG)
-        bound, bound_sum = wire.errors(q)
+        bound, bound_sum = resolution.errors(q)
         assert bound_sum < sum_limit, (j5_deg, bound_sum / DEG)
-        landed = rounded_ik(kin, wire.protocol, q)
+        landed = rounded_ik(kin, resolution.wire, q)
         off_sum = abs((landed[3] - q[3]) + (landed[5] - q[5]))
         assert off_sum <= 1.1 * bound_sum, (j5_deg, off_sum / DEG, bound_sum / DEG)
         for i in (0, 1, 2, 4):                                # the other joints stay bounded too
@@ -111,16 +111,16 @@ def test_near_the_wrist_singularity_the_sum_is_bounded_and_the_split_is_not(kin,
         if j5_deg:
             assert min(bound[3], bound[5]) > 10.0 * bound_sum   # the split: what the wire cannot tell
     # at joint_5 = 0 the individual bound is capped, never a nan or an infinity
-    bound, _ = wire.errors(with_j5(ARM, 0.0))
+    bound, _ = resolution.errors(with_j5(ARM, 0.0))
     assert all(math.isfinite(b) and b <= ERROR_CAP for b in bound)
 
 
-def test_the_bound_is_linear_in_the_resolution(wires):
+def test_the_bound_is_linear_in_the_resolution(resolutions):
     """v1's steps are 10 x v3's in position (1 mm / 0.1 mm) and 100 x in angle (1 deg / 0.01 deg):
     each joint's bound is a mix of the two."""
     home = (0.0, 0.645469, -0.280043, 0.0, 0.419972, 0.0)
-    e1, s1 = wires["v1"].errors(home)
-    e3, s3 = wires["v3"].errors(home)
+    e1, s1 = resolutions["v1"].errors(home)
+    e3, s3 = resolutions["v3"].errors(home)
     for a, b in list(zip(e1, e3)) + [(s1, s3)]:
         assert 10.0 * b * (1 - 1e-9) <= a <= 100.0 * b * (1 + 1e-9)
     assert max(e3) < 0.07 * DEG                      # the protocol's scalar target_error covers home
@@ -138,31 +138,31 @@ def sweep(q0, end, n=30, duration=3.0):
     return times, points
 
 
-def valid(kin, protocol, q0, points, times, wire=True, **tolerances):
+def valid(kin, wire, q0, points, times, per_configuration=True, **tolerances):
     lim = kin.limits
     return validate(TrajectoryGoal(NAMES, tuple(points), tuple(times), **tolerances), NAMES, q0, lim.lower,
-                    lim.upper, T0, default_path_tolerance=protocol.default_path_tolerance,
-                    default_goal_tolerance=protocol.default_goal_tolerance,
-                    wire=WireResolution.of(kin, protocol) if wire else None)
+                    lim.upper, T0, default_path_tolerance=wire.default_path_tolerance,
+                    default_goal_tolerance=wire.default_goal_tolerance,
+                    resolution=WireResolution.of(kin, wire) if per_configuration else None)
 
 
-def test_default_tolerances_follow_the_protocols_rule_at_each_point(kin, wires):
+def test_default_tolerances_follow_the_protocols_rule_at_each_point(kin, resolutions):
     end = with_j5(ARM, -24 * DEG)
     times, points = sweep(ARM, end)
     for name in ("v1", "v3"):
-        wire = wires[name]
-        p = wire.protocol
+        resolution = resolutions[name]
+        p = resolution.wire
         traj = valid(kin, p, ARM, points, times, path_tolerance={"joint_2": 0.02, "joint_3": -1.0},
                      goal_tolerance={"joint_1": 0.01})
-        tol = traj.wire
+        tol = traj.per_configuration
         assert len(tol.path) == len(traj.positions) == 31
         for k, q in enumerate(traj.positions):
-            e, s = wire.errors(q)
+            e, s = resolution.errors(q)
             assert tol.errors[k] == pytest.approx(e) and tol.sum_errors[k] == pytest.approx(s)
             assert tol.path[k][0] == pytest.approx(p.path_tolerance_for(e[0]))
             assert tol.path[k][1] == 0.02 and math.isinf(tol.path[k][2])          # given: kept
             assert tol.path_sum[k] == pytest.approx(2.0 * p.path_tolerance_for(s / 2.0))
-        e_end, s_end = wire.errors(traj.positions[-1])
+        e_end, s_end = resolution.errors(traj.positions[-1])
         assert traj.goal_tolerance[0] == 0.01
         assert traj.goal_tolerance[1:] == pytest.approx([p.goal_tolerance_for(v) for v in e_end[1:]])
         assert tol.goal_sum == pytest.approx(2.0 * p.goal_tolerance_for(s_end / 2.0))
@@ -170,10 +170,10 @@ def test_default_tolerances_follow_the_protocols_rule_at_each_point(kin, wires):
     # at joint_5 = 24 deg v1's joint_6 is some 2 deg off after rounding: its tolerance is wider than
     # the scalar default's 4 deg there, and narrower where the wire knows better
     v1 = valid(kin, V1, ARM, points, times)
-    assert v1.wire.path[0][5] > V1.default_path_tolerance > v1.wire.path[0][0]
+    assert v1.per_configuration.path[0][5] > V1.default_path_tolerance > v1.per_configuration.path[0][0]
     # v2 and a caller without kinematics: the scalar defaults, as before
     v2 = valid(kin, V2, ARM, points, times)
-    assert v2.wire is None and v2.path_tolerance == pytest.approx((V2.default_path_tolerance,) * 6)
+    assert v2.per_configuration is None and v2.path_tolerance == pytest.approx((V2.default_path_tolerance,) * 6)
 
 
 def test_the_scalar_defaults_are_the_same_rule_of_the_protocols_target_error():
@@ -219,22 +219,22 @@ def test_without_the_rule_the_path_check_is_the_scalar_one(kin):
 
 
 # ------------------------------------------------------------------------------ thinning (v1)
-def _dropped_within(traj, kept, wire):
+def _dropped_within(traj, kept, tolerances):
     """Every dropped point within THIN_SHARE of its tolerance from the chord between the kept
     points around it, the wire's error at the ends (interpolated) and at the point added."""
     for a, b in zip(kept, kept[1:]):
         for k in range(a + 1, b):
             qa, qb, qk = (np.array(traj.positions[i]) for i in (a, b, k))
-            band = wire.in_band(traj.positions[k])
+            band = tolerances.in_band(traj.positions[k])
             if band:
                 def proj(q):
-                    return np.array([q[0], q[1], q[2], q[4], q[3] + wire.sign * q[5]])
+                    return np.array([q[0], q[1], q[2], q[4], q[3] + tolerances.sign * q[5]])
                 qa, qb, qk = proj(qa), proj(qb), proj(qk)
-                tol = np.array([wire.path[k][i] for i in (0, 1, 2, 4)] + [wire.path_sum[k]])
-                err = [np.array([wire.errors[i][j] for j in (0, 1, 2, 4)] + [wire.sum_errors[i]]) for i in (a, b, k)]
+                tol = np.array([tolerances.path[k][i] for i in (0, 1, 2, 4)] + [tolerances.path_sum[k]])
+                err = [np.array([tolerances.errors[i][j] for j in (0, 1, 2, 4)] + [tolerances.sum_errors[i]]) for i in (a, b, k)]
             else:
-                tol = np.array(wire.path[k])
-                err = [np.array(wire.errors[i]) for i in (a, b, k)]
+                tol = np.array(tolerances.path[k])
+                err = [np.array(tolerances.errors[i]) for i in (a, b, k)]
             best = min(np.max((np.abs(qk - (qa + f * (qb - qa))) + (1 - f) * err[0] + f * err[1] + err[2]) / tol)
                        for f in np.linspace(0.0, 1.0, 201))
             assert best <= THIN_SHARE + 0.02, (a, b, k, best)
@@ -245,7 +245,7 @@ def test_v1_thinning_keeps_a_straight_crossing_to_its_ends(kin):
     traj = valid(kin, V1, ARM, points, times)
     kept = thin(traj)
     assert kept == [0, 30]
-    _dropped_within(traj, kept, traj.wire)
+    _dropped_within(traj, kept, traj.per_configuration)
 
 
 def test_v1_thinning_keeps_more_stops_where_the_path_bends(kin):
@@ -256,7 +256,7 @@ def test_v1_thinning_keeps_more_stops_where_the_path_bends(kin):
     traj = valid(kin, V1, ARM, bent, times)
     b = thin(traj)
     assert len(a) == 2 and len(b) > 3
-    _dropped_within(traj, b, traj.wire)
+    _dropped_within(traj, b, traj.per_configuration)
 
 
 def test_v1_thinning_puts_no_stop_inside_the_band_but_the_goal(kin):
@@ -266,10 +266,10 @@ def test_v1_thinning_puts_no_stop_inside_the_band_but_the_goal(kin):
     times, points = sweep(ARM, with_j5(ARM, 1.5 * DEG))
     traj = valid(kin, V1, ARM, points, times)
     kept = thin(traj)
-    inside = [k for k, q in enumerate(traj.positions) if traj.wire.in_band(q)]
+    inside = [k for k, q in enumerate(traj.positions) if traj.per_configuration.in_band(q)]
     assert inside and set(kept) & set(inside) == {30}
     assert kept[-2] == inside[0] - 1
-    _dropped_within(traj, kept, traj.wire)
+    _dropped_within(traj, kept, traj.per_configuration)
 
 
 # ------------------------------------------------------------------------------ the goal check
@@ -282,11 +282,11 @@ def _finished_run(traj):
 @pytest.mark.parametrize("j5_end", [0.0, 1.5 * DEG])
 def test_a_goal_in_the_band_ends_successful_by_the_sum_and_says_so(kin, j5_end):
     times, points = sweep(ARM, with_j5(ARM, j5_end))
-    for protocol in (V1, V3):
-        traj = valid(kin, protocol, ARM, points, times)
+    for wire in (V1, V3):
+        traj = valid(kin, wire, ARM, points, times)
         goal = traj.positions[-1]
         landed = goal[:3] + (goal[3] - 20 * DEG, goal[4], goal[5] + 20 * DEG)     # the split of its own
-        sup = TrajectorySupervisor(traj, _finished_run(traj), T0, protocol, NAMES)
+        sup = TrajectorySupervisor(traj, _finished_run(traj), T0, wire, NAMES)
         out = sup.finish(T0 + 3.0, True, landed)
         assert (out.state, out.error_code) == (SUCCEEDED, SUCCESSFUL), out.error_string
         text = out.error_string
@@ -294,11 +294,12 @@ def test_a_goal_in_the_band_ends_successful_by_the_sum_and_says_so(kin, j5_end):
         assert "their split is the controller's: joint_4 -20.00 deg, joint_6 20.00 deg from the plan's" in text
         assert "the goal within the tolerances the wire's resolution allows there (closest: " in text
         # the tool turned about the forearm by more than the sum's tolerance: violated, in words
-        turned = goal[:3] + (goal[3] + 2.0 * traj.wire.goal_sum, goal[4], goal[5])
-        out = TrajectorySupervisor(traj, _finished_run(traj), T0, protocol, NAMES).finish(T0 + 3.0, True, turned)
+        goal_sum = traj.per_configuration.goal_sum
+        turned = goal[:3] + (goal[3] + 2.0 * goal_sum, goal[4], goal[5])
+        out = TrajectorySupervisor(traj, _finished_run(traj), T0, wire, NAMES).finish(T0 + 3.0, True, turned)
         assert (out.state, out.error_code) == (ABORTED, GOAL_TOLERANCE_VIOLATED)
         assert out.error_string.startswith("joint_4 + joint_6 ended %.4f rad from the goal (tolerance %.4f; "
-                                           "joint_5 ends at " % (2.0 * traj.wire.goal_sum, traj.wire.goal_sum)), \
+                                           "joint_5 ends at " % (2.0 * goal_sum, goal_sum)), \
             out.error_string
 
 
@@ -317,9 +318,9 @@ def test_outside_the_band_each_joint_is_judged_by_the_wire_there(kin):
 
 def test_v1s_time_is_reported_not_judged(kin):
     times, points = sweep(ARM, with_j5(ARM, 40 * DEG))
-    for protocol, state in ((V1, SUCCEEDED), (V3, ABORTED)):
-        traj = valid(kin, protocol, ARM, points, times, goal_time_tolerance=0.5)
-        out = TrajectorySupervisor(traj, _finished_run(traj), T0, protocol, NAMES).finish(
+    for wire, state in ((V1, SUCCEEDED), (V3, ABORTED)):
+        traj = valid(kin, wire, ARM, points, times, goal_time_tolerance=0.5)
+        out = TrajectorySupervisor(traj, _finished_run(traj), T0, wire, NAMES).finish(
             T0 + 9.0, True, traj.positions[-1])
         assert out.state == state, out.error_string
     assert "its time is reported, not judged: goal_time_tolerance (0.50 s) applies to a streaming protocol" \

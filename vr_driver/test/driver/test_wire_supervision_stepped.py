@@ -1,7 +1,7 @@
 """joint_trajectory_action's supervision on the Cartesian protocols (v1, v3), stepped with a fake
 clock in one thread (_world.World: the driver core, the virtual G2 with its own IK, the simulated
 arm): goals with empty tolerances, validated with the per-configuration tolerances the wire's
-resolution allows (``validate(..., wire=WireResolution.of(kin, protocol))``, as the action server
+resolution allows (``validate(..., resolution=WireResolution.of(kin, wire))``, as the action server
 does), end SUCCESSFUL where they only suffer the rounding -- across joint_5 = 0, within 2 deg of it
 and on it -- and a run the arm really leaves (a blocked joint, an arm pushed off its path, a
 controller that runs another branch) is stopped with PATH_TOLERANCE_VIOLATED."""
@@ -49,18 +49,18 @@ def validated(world, times, points, **tolerances):
     per-configuration rule."""
     names = world.core.joint_names
     lim = world.kin.limits
-    p = world.core.protocol
+    p = world.core.wire
     return validate(TrajectoryGoal(tuple(names), tuple(points), tuple(times), **tolerances), names,
                     world.status().joints, lim.lower, lim.upper, world.now,
                     default_path_tolerance=p.default_path_tolerance, default_goal_tolerance=p.default_goal_tolerance,
-                    wire=WireResolution.of(world.kin, p))
+                    resolution=WireResolution.of(world.kin, p))
 
 
 def supervise(world, traj, dt=0.05):
     """Submit and supervise as joint_trajectory_action does (a sample every ``dt``; the arm stopped
     when the supervisor says so, then at rest): the supervisor and its outcome."""
     run = world.core.submit_trajectory(traj)
-    sup = TrajectorySupervisor(traj, run, run.started, world.core.protocol, world.core.joint_names)
+    sup = TrajectorySupervisor(traj, run, run.started, world.core.wire, world.core.joint_names)
     next_step = [world.now]
 
     def stepped():
@@ -85,13 +85,13 @@ def succeeded(out):
 def arm_within_goal(world, traj):
     """The arm's true joints (not only what the driver reads) within the goal tolerances, joint_4 /
     joint_6 by their sum where joint_5 ends within the band."""
-    q, goal, wire = world.arm.joints, traj.positions[-1], traj.wire
-    by_sum = wire.in_band(goal) or wire.in_band(q)
+    q, goal, tolerances = world.arm.joints, traj.positions[-1], traj.per_configuration
+    by_sum = tolerances.in_band(goal) or tolerances.in_band(q)
     for i, (a, b, t) in enumerate(zip(q, goal, traj.goal_tolerance)):
         if not (by_sum and i in (3, 5)):
             assert abs(a - b) <= t, (i, math.degrees(a - b), math.degrees(t))
     if by_sum:
-        assert abs(wire.sum_of(q) - wire.sum_of(goal)) <= wire.goal_sum
+        assert abs(tolerances.sum_of(q) - tolerances.sum_of(goal)) <= tolerances.goal_sum
 
 
 # ------------------------------------------------------------------------------ only the rounding
@@ -115,13 +115,14 @@ def test_a_goal_within_2_deg_of_the_singularity_succeeds_with_empty_tolerances(k
     world = world_at(kin, protocol)
     end = START[:4] + (1.5 * DEG,) + START[5:]
     traj = validated(world, *sweep(world.status().joints, end))
-    assert traj.wire.in_band(traj.positions[-1])
+    tolerances = traj.per_configuration
+    assert tolerances.in_band(traj.positions[-1])
     _sup, out = supervise(world, traj)
     succeeded(out)
     assert "joint_5 ends at " in out.error_string and "their split is the controller's" in out.error_string
     arm_within_goal(world, traj)
     # the sum is what a pose fixes: the arm's is the plan's within the wire's bound, whatever its split
-    assert abs(traj.wire.sum_of(world.arm.joints) - traj.wire.sum_of(end)) <= traj.wire.goal_sum
+    assert abs(tolerances.sum_of(world.arm.joints) - tolerances.sum_of(end)) <= tolerances.goal_sum
 
 
 @pytest.mark.parametrize("protocol", ["v1", "v3"])

@@ -24,12 +24,12 @@ def off(kin, pose, seed, planned):
     return max(abs(a - b) for a, b in zip(q, planned))
 
 
-def on_grid(pose, protocol):
-    return protocol.wire_pose(pose).as_tuple() == pytest.approx(pose.as_tuple(), abs=1e-9)
+def on_grid(pose, wire):
+    return wire.wire_pose(pose).as_tuple() == pytest.approx(pose.as_tuple(), abs=1e-9)
 
 
-def within_one_step(pose, base, protocol):
-    mm, deg = protocol.pose_resolution
+def within_one_step(pose, base, wire):
+    mm, deg = wire.pose_resolution
     return all(abs(a - b) <= s * 1.0001 for a, b, s in zip(pose.as_tuple(), base.as_tuple(), (mm,) * 3 + (deg,) * 3))
 
 

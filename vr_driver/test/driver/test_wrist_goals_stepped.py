@@ -87,7 +87,8 @@ def floor_of(kin, configuration, goal, traj):
     have from the goal's plan, judged by the driver's band rule."""
     ramp = RAMPS[configuration]
     acc = kin.limits.acceleration if ramp is None else [v / ramp for v in kin.limits.velocity]
-    return following_floor(goal["times"], goal["points"], acc, band=traj.wire.band, sign=traj.wire.sign)
+    tolerances = traj.per_configuration
+    return following_floor(goal["times"], goal["points"], acc, band=tolerances.band, sign=tolerances.sign)
 
 
 def cases():
@@ -115,7 +116,7 @@ def test_the_bench_wrist_goal_meets_the_targets(kin, configuration, goal):
     assert out.max_delayed_deviation <= limit, (
         "%.3f deg from the plan at the same time (start delay %.3f s; no arm comes closer than %.3f deg: %s)"
         % (math.degrees(out.max_delayed_deviation), out.start_delay, math.degrees(floor), where))
-    end = final_error(traj.wire, world.status().joints, goal["points"][-1])
+    end = final_error(traj.per_configuration, world.status().joints, goal["points"][-1])
     assert end <= MAX_FINAL, "%.4f deg from the goal at the end" % math.degrees(end)
 
 

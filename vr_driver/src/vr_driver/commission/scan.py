@@ -44,8 +44,8 @@ COMMISSION_PROTOCOL = "v3"
 
 def protocol_cfg(name: str) -> bytes:
     """The Chk_Cfg the driver sends for protocol ``name`` (v1: the built-in bus config's)."""
-    proto = protocols.get(name)
-    return proto.chk_cfg or default_robot_config("virtual", phy_type="memory").slaves[0].cfg
+    wire = protocols.get(name)
+    return wire.chk_cfg or default_robot_config("virtual", phy_type="memory").slaves[0].cfg
 
 
 @dataclass(frozen=True)

@@ -70,9 +70,9 @@ def robot_slave(address: int = DEFAULT_ADDRESS, clock: Clock = time.monotonic,
     """The G2's DP slave: ident 0x06C6 and the protocol's Chk_Cfg (v1: the one of
     ``config.default_robot_config()``, 14 bytes each way; v2: ``protocol.v2.CHK_CFG_V2``, 72 bytes;
     v3: ``protocol.v3.CHK_CFG_V3``, 28 bytes in, 24 out)."""
-    proto = protocol_option(protocol)
+    wire = protocol_option(protocol)
     slave_cfg = default_robot_config("virtual", phy_type="memory", slave_address=address).slave(address)
-    cfg = proto.chk_cfg or slave_cfg.cfg
+    cfg = wire.chk_cfg or slave_cfg.cfg
     return DpSlave(address, slave_cfg.ident, cfg, clock=clock)
 
 

@@ -7,7 +7,8 @@ composed by :class:`DriverCore`. One room per job, each importing only the rooms
       link_port.py, card_diagnosis.py, record_clock.py, stations.py  its parts; the controller's I/O
     motion/         the motion side
       jobs.py         MoveRequest, Preview, MoveJob, JobPhase, JobResult, SubmitMode
-      sequencer.py    HandshakeSequencer: queue, handshake, stops at rest, outcomes -> the record to send
+      sequencer.py    SequencerBase: queue, stops at rest, outcomes -> the record to send (no protocol's records)
+      handshake.py    HandshakeSequencer (v1): the same through the request / done handshake
       streaming.py    StreamSequencer (v2, v3): the same for streamed targets, the stream job's life
       stream_points.py  a plan made a timed stream (speeds, corner levels, pauses held)
       stream_thinning.py  which planned points a stream keeps (thinning, Cartesian steps, elbow skip)
@@ -31,8 +32,8 @@ from .core import DriverCore
 from .motion.jobs import JobPhase, JobResult, MoveJob, MoveRequest, Preview, SubmitMode
 from .link.link import (ERROR_CONTROLLER, ERROR_LINK, ERROR_NONE, ERROR_PROTOCOL, LinkCounters, LinkSample,
                    LinkState, LinkSupervisor, open_serial_link)
-from .motion.sequencer import (SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, HandshakeSequencer,
-                        SequencerView, why_no_motion)
+from .motion.handshake import HandshakeSequencer
+from .motion.sequencer import SESSION_RECORDS_BEFORE_REQUEST, START_TOLERANCE, SequencerView, why_no_motion
 from . import sequencers  # noqa: F401  (registers each built-in protocol's sequencer and stream family with it)
 from .motion.status import DriverError, DriverStatus
 

@@ -40,14 +40,14 @@ class BusLoop(OwnThread):
     thread_name = "vr_driver-bus"
 
     def __init__(self, params: DriverParams, clock: Callable[[], float], cycle_rate_hz: float,
-                 link: LinkSupervisor, sequencer: SequencerBase, protocol: Protocol, arm: ArmJoints,
+                 link: LinkSupervisor, sequencer: SequencerBase, wire: Protocol, arm: ArmJoints,
                  io: Optional[IoLine], controller_io: Optional[ControllerIo], stop: threading.Event) -> None:
         self.params = params
         self.clock = clock
         self.cycle_rate_hz = cycle_rate_hz
         self.link = link
         self.sequencer = sequencer
-        self.protocol = protocol
+        self.wire = wire
         self.arm = arm
         self.io = io
         self.controller_io = controller_io
@@ -137,8 +137,8 @@ class BusLoop(OwnThread):
             self.io.update(now)          # judge the I/O stations after the cycle (io.snapshot())
         joints = self.arm.update(sample, self.sequencer.view.job)
         command = self.sequencer.step(now, sample, joints)
-        record = self.protocol.encode(command, self.params.byte_order)
-        if self.protocol.send_changes_at_once and record != self._last_record and sample.connected \
+        record = self.wire.encode(command, self.params.byte_order)
+        if self.wire.send_changes_at_once and record != self._last_record and sample.connected \
                 and not self._repeated:
             self._repeat_now = True
         self._repeated = False

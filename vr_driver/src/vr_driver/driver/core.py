@@ -4,7 +4,7 @@
 and the tests talk to:
 
 - :class:`~vr_driver.driver.link.link.LinkSupervisor` (port, DP master, session, freshness, counters),
-- the sequencer (:class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer`, v1's handshake, or
+- the sequencer (:class:`~vr_driver.driver.motion.handshake.HandshakeSequencer`, v1's handshake, or
   :class:`~vr_driver.driver.motion.streaming.StreamSequencer`: queue, stops, outcomes),
 - :class:`~vr_driver.driver.bus_loop.BusLoop` (the bus thread: one iteration steps the link, the
   joints and the sequencer and publishes a :class:`~vr_driver.driver.motion.status.DriverStatus`),
@@ -117,19 +117,19 @@ class DriverCore:
         signals = params.signal_map(self.bus)
         self.io: Optional[IoLine] = IoLine(signals, params.link_timeout) if signals is not None else None
         self.link = LinkSupervisor(params, self.bus, clock, open_link, stations=self.io)
-        self.protocol = params.wire
-        self.streaming = self.protocol.streams
+        self.wire = params.wire
+        self.streaming = self.wire.streams
         # the protocol object names its sequencer (driver/sequencers.py registers v1 / v2 / v3's)
-        self.sequencer = self.protocol.sequencer()(params, clock, self._schedule_replan)
+        self.sequencer = self.wire.sequencer()(params, clock, self._schedule_replan)
         # the controller's own I/O (v2) as a station of the signal map at the controller's address
         self.controller_io: Optional[ControllerIo] = None
-        if self.io is not None and self.protocol.controller_io and \
+        if self.io is not None and self.wire.controller_io and \
                 any(st.address == self.slave_config.address for st in self.io.map.stations):
             self.controller_io = ControllerIo(self.slave_config.address, self._set_controller_outputs)
             self.io.add_local(self.controller_io)
         self._stop = threading.Event()      # ends the bus thread and the planning thread
-        self.arm = ArmJoints(params, self.kin, self.protocol)
-        self.bus_loop = BusLoop(params, clock, self.bus.cycle_rate_hz, self.link, self.sequencer, self.protocol,
+        self.arm = ArmJoints(params, self.kin, self.wire)
+        self.bus_loop = BusLoop(params, clock, self.bus.cycle_rate_hz, self.link, self.sequencer, self.wire,
                                 self.arm, self.io, self.controller_io, self._stop)
         self.planning_thread = PlanningThread(self._stop)
         # one planner at a time: requests plan in their callers' threads (an action server runs one
@@ -141,11 +141,11 @@ class DriverCore:
         self.checks = PathChecks(self.kin, previewer or MovePreviewer(self.kin), params.workspace, self._planning_gate,
                                  SceneGuard(self.kin, self._planning_gate, load_cell(params.scene),
                                             params.collision_padding, params.collision_check, params.prefix,
-                                            model=params.model), self.protocol)
-        self.streams = stream_preparation(params, self.kin, self.protocol, self.checks, self.min_segment)
+                                            model=params.model), self.wire)
+        self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.min_segment)
         self.jobs = JobControl(params, self.kin, clock, self.sequencer, self.checks, self.streams, self.status,
                                self.bus_loop.wake)
-        self.joint_commander = JointCommander(params, self.kin, self.protocol, clock, self.status, self.jobs,
+        self.joint_commander = JointCommander(params, self.kin, self.wire, clock, self.status, self.jobs,
                                               self.checks, self.streams)
         #: what the commissioned G2 changes, in words (logged at every connect; the node's diagnostics)
         self.controller_notes = controller_notes(params, self.kin)
@@ -303,18 +303,18 @@ class DriverCore:
         ``positions`` (from ``positions[0]``; :func:`.announced.announce_plan`): v1 its PTP moves
         between the plan's stop points (``previews``, made here when not given) at the program's
         speed. Raises as :meth:`prepare_trajectory` when v1 would refuse the path."""
-        if previews is None and not self.protocol.streams and len(times) > 1:
+        if previews is None and not self.wire.streams and len(times) > 1:
             from .joints.resolution import WireResolution
             from .motion.trajectories import TrajectoryGoal, validate
             lim = self.kin.limits
             names = tuple(self.joint_names)
             traj = validate(TrajectoryGoal(names, tuple(tuple(q) for q in positions[1:]), tuple(times[1:])), names,
                             tuple(positions[0]), lim.lower, lim.upper, 0.0,
-                            default_path_tolerance=self.protocol.default_path_tolerance,
-                            default_goal_tolerance=self.protocol.default_goal_tolerance,
-                            wire=WireResolution.of(self.kin, self.protocol))
+                            default_path_tolerance=self.wire.default_path_tolerance,
+                            default_goal_tolerance=self.wire.default_goal_tolerance,
+                            resolution=WireResolution.of(self.kin, self.wire))
             previews = self.prepare_trajectory(traj, traj.positions[0])[2]
-        return announce_plan(self.kin, self.protocol, times, positions, previews or (), self.params, self.bus_cycle())
+        return announce_plan(self.kin, self.wire, times, positions, previews or (), self.params, self.bus_cycle())
 
     def announce_run(self, run: TrajectoryRun) -> Announced:
         """:meth:`announce` of a trajectory queued (v1: its jobs' previews)."""
@@ -324,11 +324,11 @@ class DriverCore:
     def announce_move(self, preview: Preview) -> Announced:
         """The time and the TCP's top speed of one previewed move on this protocol: v1 at the program's
         speed, a streaming protocol its previewed timing."""
-        if self.protocol.streams:
+        if self.wire.streams:
             traj = preview.trajectory
-            return announce_plan(self.kin, self.protocol, [float(t) for t in traj.times],
+            return announce_plan(self.kin, self.wire, [float(t) for t in traj.times],
                                  [tuple(float(v) for v in q) for q in traj.positions], cycle_time=self.bus_cycle())
-        return announce_moves(self.protocol, [preview], self.params, self.bus_cycle())
+        return announce_moves(self.wire, [preview], self.params, self.bus_cycle())
 
     def post_job(self, job: MoveJob) -> None:
         self.jobs.post_job(job)
@@ -359,7 +359,7 @@ class DriverCore:
 
     def _streams(self):
         if self.streams is None:
-            raise DriverError("protocol %s does not stream" % self.protocol.name)
+            raise DriverError("protocol %s does not stream" % self.wire.name)
         return self.streams
 
     # ------------------------------------------------------------------------ the cell (scene_guard)

@@ -3,7 +3,7 @@ registers each built-in protocol's with the protocol object
 (:meth:`vr_driver.protocol.base.Protocol.implement`), and the driver core asks the protocol object
 for them (:meth:`~vr_driver.protocol.base.Protocol.sequencer`,
 :meth:`~vr_driver.protocol.base.Protocol.stream_family`): v1 the handshake sequencer
-(:class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer`, one target at a time), v2 and v3 the stream
+(:class:`~vr_driver.driver.motion.handshake.HandshakeSequencer`, one target at a time), v2 and v3 the stream
 sequencer (:class:`~vr_driver.driver.motion.streaming.StreamSequencer`, which puts targets on the wire
 through the protocol object's ``stream_command``) with their stream families (v2 joint targets sent
 as planned: :class:`~vr_driver.driver.checks.stream_prep.JointStreams`; v3 Cartesian targets solved as the
@@ -18,7 +18,7 @@ from __future__ import annotations
 from ..protocol.v1 import V1
 from ..protocol.v2 import V2
 from ..protocol.v3 import V3
-from .motion.sequencer import HandshakeSequencer
+from .motion.handshake import HandshakeSequencer
 from .checks.stream_prep import CartesianStreams, JointStreams
 from .motion.streaming import StreamSequencer
 

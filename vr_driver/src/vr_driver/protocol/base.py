@@ -185,7 +185,7 @@ class Protocol:
         that has no kinematics (:meth:`goal_tolerance_for` of ``target_error``): a goal with empty
         tolerances never fails because of the wire's own resolution away from singularities. With
         the arm's kinematics the Cartesian protocols' defaults are per configuration instead
-        (``validate(..., wire=WireResolution.of(kin, protocol))``)."""
+        (``validate(..., resolution=WireResolution.of(kin, wire))``)."""
         return self.goal_tolerance_for(self.target_error)
 
     @property
@@ -229,6 +229,14 @@ class Protocol:
         """A controller record as this protocol's feedback object; ProtocolError (with the reason)
         for bytes that are not one."""
         raise NotImplementedError
+
+    def program_speed(self, move_type: Union[MoveType, str], movep: float, movel: float) -> Optional[float]:
+        """[mm/s] the TCP speed the controller's program runs a target of ``move_type`` (PTP / LIN /
+        CIRC) at, whatever a plan's timing, given the program's speeds [m/min]: ``movep`` for a PTP,
+        ``movel`` for a LIN or a CIRC (``controller/program_speed`` / ``program_path_speed``); None
+        where the protocol runs a plan's own timing (a streaming protocol). v1 (MOVEP / MOVEL /
+        MOVEC: :func:`vr_driver.protocol.v1.program_speed`)."""
+        return None
 
     def feedback_joints(self, feedback: Any) -> Optional[Tuple[float, ...]]:
         """The joints [rad] a feedback record reports, or None where the protocol reports only the

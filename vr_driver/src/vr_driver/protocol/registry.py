@@ -34,23 +34,23 @@ def get(name: Any) -> Protocol:
         raise ProtocolError("unknown protocol %r (known: %s)" % (name, ", ".join(_ALL))) from None
 
 
-def register(protocol: Protocol) -> Protocol:
-    """Make ``protocol`` one of the protocols the ``protocol`` parameter may name (returned as it
+def register(wire: Protocol) -> Protocol:
+    """Make ``wire`` one of the protocols the ``protocol`` parameter may name (returned as it
     is). ProtocolError for an object that is no Protocol, without a name, or whose name or version
     byte another protocol has (a record must name the protocol that sent it). The code that runs it
     at each end registers with the protocol object (:meth:`~vr_driver.protocol.base.Protocol.implement`)."""
-    if not isinstance(protocol, Protocol) or not protocol.name:
-        raise ProtocolError("register() takes a Protocol with a name, got %r" % (protocol,))
+    if not isinstance(wire, Protocol) or not wire.name:
+        raise ProtocolError("register() takes a Protocol with a name, got %r" % (wire,))
     for other in _ALL.values():
-        if other is protocol:
-            return protocol
-        if other.name == protocol.name or other.version == protocol.version:
+        if other is wire:
+            return wire
+        if other.name == wire.name or other.version == wire.version:
             raise ProtocolError("protocol %s (version byte %d): %s already has that %s"
-                                % (protocol.name, protocol.version, other.name,
-                                   "name" if other.name == protocol.name else "version byte"))
-    _ALL[protocol.name] = protocol
-    _VERSIONS[protocol.name] = protocol.version
-    return protocol
+                                % (wire.name, wire.version, other.name,
+                                   "name" if other.name == wire.name else "version byte"))
+    _ALL[wire.name] = wire
+    _VERSIONS[wire.name] = wire.version
+    return wire
 
 
 def unregister(name: str) -> None:

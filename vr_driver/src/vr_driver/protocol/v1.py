@@ -440,9 +440,9 @@ def commands_for(move_type: Any, target: Any, via: Any = None,
     return [Command.from_pose(target, WireMoveType.from_move_type(kind), workspace)]
 
 
-def move_targets(protocol: Protocol, move_type: Union[MoveType, WireMoveType, str], target: ControllerPose,
+def move_targets(wire: Protocol, move_type: Union[MoveType, WireMoveType, str], target: ControllerPose,
                  via: Optional[ControllerPose] = None, workspace: Optional[Workspace] = None) -> Tuple[Command, ...]:
-    """``protocol.move_commands`` of every built-in protocol (:meth:`Protocol.move_commands`): a
+    """``wire.move_commands`` of every built-in protocol (:meth:`Protocol.move_commands`): a
     move planned to the handshake's targets, :func:`commands_for` (whole mm / deg)."""
     return tuple(commands_for(move_type, target, via, workspace))
 
@@ -951,6 +951,9 @@ class ProtocolV1(Protocol):
 
     def decode_feedback(self, data: Any, byte_order: Any = ByteOrder.LITTLE) -> Feedback:
         return Feedback.decode(data, byte_order)
+
+    def program_speed(self, move_type: Any, movep: float, movel: float) -> float:
+        return program_speed(move_type, movep, movel)
 
     def decode_command(self, data: Any, byte_order: Any = ByteOrder.LITTLE) -> Command:
         return Command.decode(data, byte_order)

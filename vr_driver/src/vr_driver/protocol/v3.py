@@ -418,9 +418,9 @@ class ProtocolV3(Protocol):
                 or not self.look_ahead_slots <= send_ahead <= type(self).send_ahead:
             raise ProtocolError("send_ahead must be an integer in [%d, %d], got %r"
                                 % (self.look_ahead_slots, type(self).send_ahead, send_ahead))
-        proto = copy.copy(self)
-        proto.send_ahead = send_ahead
-        return proto
+        wire = copy.copy(self)
+        wire.send_ahead = send_ahead
+        return wire
 
     def stream_command(self, targets: Sequence[WireTarget], start: bool = False, stop: bool = False,
                        outputs: int = 0) -> CommandV3:

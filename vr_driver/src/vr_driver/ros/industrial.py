@@ -126,12 +126,12 @@ class IndustrialInterface:
 
     def _get_robot_info(self, _req) -> GetRobotInfoResponse:
         sc = self.core.slave_config
-        protocol = self.core.protocol
+        wire = self.core.wire
         controller = DeviceInfo(
-            model="%s, robot program protocol %s" % (CONTROLLER_MODEL, protocol.name),
+            model="%s, robot program protocol %s" % (CONTROLLER_MODEL, wire.name),
             serial_number="",
             hw_version="PROFIBUS-DP slave card, ident 0x%04X" % sc.ident,
-            sw_version="vr_driver %s; protocol %s" % (self.version or "(version unknown)", protocol.describe()),
+            sw_version="vr_driver %s; protocol %s" % (self.version or "(version unknown)", wire.describe()),
             address="PROFIBUS-DP slave %d on %s at %d bit/s" % (sc.address, self.core.bus.phy.device,
                                                                 self.core.bus.baud))
         robot = DeviceInfo(model=ROBOT_MODEL, serial_number="", hw_version="", sw_version="",

@@ -73,7 +73,7 @@ class TrajectoryServer:
         self.on_run: Optional[Callable[[object], None]] = None     # told each run it starts
         self.core = core
         self.names = list(core.joint_names)
-        self._wire: Optional[Tuple[Optional[WireResolution]]] = None     # made at the first goal
+        self._resolution: Optional[Tuple[Optional[WireResolution]]] = None     # made at the first goal
         self._acc: Optional[Tuple[float, ...]] = None                      # read at the first goal
         self.period = 1.0 / max(1.0, feedback_rate)
         # each goal checked at arrival (a refusal preempts nothing); a new goal preempts the running one
@@ -103,15 +103,15 @@ class TrajectoryServer:
         if not status.motion_possible or status.joints is None:
             raise TrajectoryError(INVALID_GOAL, "motion is not possible: %s" % status.why_no_motion())
         lim = self.core.kin.limits
-        protocol = self.core.protocol
-        if self._wire is None:
+        wire = self.core.wire
+        if self._resolution is None:
             # the Cartesian protocols' per-configuration tolerances (driver/joints/resolution.py): what the
             # wire's pose resolution allows at each planned point, joint_4 / joint_6 by their sum
             # near joint_5 = 0; None with joint targets (v2: the protocol's fixed defaults)
-            self._wire = (WireResolution.of(self.core.kin, protocol),)
+            self._resolution = (WireResolution.of(self.core.kin, wire),)
         traj = validate(goal, self.names, status.joints, lim.lower, lim.upper, rospy.get_time(),
-                        default_path_tolerance=protocol.default_path_tolerance,
-                        default_goal_tolerance=protocol.default_goal_tolerance, wire=self._wire[0])
+                        default_path_tolerance=wire.default_path_tolerance,
+                        default_goal_tolerance=wire.default_goal_tolerance, resolution=self._resolution[0])
         segment_speeds(traj, lim.velocity, self.names)
         return traj
 
@@ -168,7 +168,7 @@ class TrajectoryServer:
         except (VrDriverError, DriverError) as exc:     # (cannot happen: the run's own checks passed)
             announced = "not worked out (%s)" % exc
         rospy.loginfo("joint_trajectory_action: %s", announced)
-        sup = TrajectorySupervisor(traj, run, run.started, self.core.protocol, self.names,
+        sup = TrajectorySupervisor(traj, run, run.started, self.core.wire, self.names,
                                    accelerations=self._accelerations())
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
         last_draw = rospy.get_time()

@@ -192,7 +192,7 @@ class JobControl:
             return []
         if self.streams is not None:
             raise DriverError("protocol %s runs a joint path with its timing: give each point a "
-                              "time_from_start (see submit_trajectory); nothing was sent" % self.streams.protocol.name)
+                              "time_from_start (see submit_trajectory); nothing was sent" % self.streams.wire.name)
         order = self._joint_order(names)
         self._require_motion_possible()
         previews = self._ptp_path(points, order, self._planning_start(SubmitMode.REPLACE),

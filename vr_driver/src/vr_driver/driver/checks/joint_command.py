@@ -8,7 +8,7 @@ controller's joints, in any order: reordered) and one point of positions, option
 ``time_from_start``. It is refused -- nothing is sent, :class:`JointCommandRefused` says which rule
 and by how much -- when:
 
-- the protocol cannot stream (``protocol.streams`` false: v1, one target at a time);
+- the protocol cannot stream (``wire.streams`` false: v1, one target at a time);
 - the names are not the controller's joints (unknown, missing, repeated), or the positions do not
   match them in number;
 - a value or ``time_from_start`` is not finite (NaN, inf), or ``time_from_start`` is negative;
@@ -92,12 +92,12 @@ class JointCommander:
     its path checks and stream preparation (None: a protocol that does not stream).
     :meth:`command` may be called from any thread; commands are validated one at a time."""
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Protocol, clock: Callable[[], float],
+    def __init__(self, params: DriverParams, kinematics: Kinematics, wire: Protocol, clock: Callable[[], float],
                  status: Callable[[float], DriverStatus], jobs: JobControl, checks: PathChecks,
                  streams: Optional[JointStreams]) -> None:
         self.params = params
         self.kin = kinematics
-        self.protocol = protocol
+        self.wire = wire
         self.clock = clock
         self.status = status
         self.jobs = jobs
@@ -156,12 +156,12 @@ class JointCommander:
 
     # ------------------------------------------------------------------ the rules
     def _command(self, names: Sequence[str], positions: Sequence[Any], time_from_start: Any) -> MoveJob:
-        protocol = self.protocol
-        if not protocol.streams:
+        wire = self.wire
+        if not wire.streams:
             raise JointCommandRefused(
                 "protocol", "protocol %s cannot stream joint targets (one target at a time, the arm "
                 "stops at each); use joint_path_command or joint_trajectory_action, or a streaming "
-                "protocol (v2, v3)" % protocol.name)
+                "protocol (v2, v3)" % wire.name)
         q = self._reordered(names, positions)
         try:
             dt_given = float(time_from_start)

@@ -39,13 +39,13 @@ def load_cell(path: str):
 
 class PathChecks:
     """The previews and path checks of one driver (module docstring): ``previewer`` previews,
-    ``scene_guard`` checks collisions, ``gate`` is the planning gate both run under; ``protocol``
-    says what a move's wire targets are (:meth:`~vr_driver.protocol.base.Protocol.move_commands`)."""
+    ``scene_guard`` checks collisions, ``gate`` is the planning gate both run under; ``wire`` (the
+    protocol object) says what a move's wire targets are (:meth:`~vr_driver.protocol.base.Protocol.move_commands`)."""
 
     def __init__(self, kinematics: Kinematics, previewer: MovePreviewer, workspace: Workspace,
-                 gate: threading.Lock, scene_guard: SceneGuard, protocol: Protocol) -> None:
+                 gate: threading.Lock, scene_guard: SceneGuard, wire: Protocol) -> None:
         self.kin = kinematics
-        self.protocol = protocol
+        self.wire = wire
         self.previewer = previewer
         self.workspace = workspace
         self.gate = gate
@@ -56,7 +56,7 @@ class PathChecks:
         path must stay inside the joint limits and the workspace box and collide with nothing.
         Raises VrDriverError (PoseError, KinematicsError, MotionError, EnvelopeError,
         ProtocolError, CollisionError) with the reason."""
-        commands = self.protocol.move_commands(request.move_type, request.target, request.via, self.workspace)
+        commands = self.wire.move_commands(request.move_type, request.target, request.via, self.workspace)
         # plan to exactly what will be sent (whole mm / deg)
         target = commands[-1].pose
         via = commands[0].pose if len(commands) == 2 else None

@@ -35,7 +35,7 @@ the cell -- before anything is queued.
   quarter of the way to its flip (measured: a straight move to the flipped wrist in 18 deg steps
   of joint_4 and joint_6 was solved back onto the start's wrist halfway, at joint_5 = 0).
 
-:func:`stream_preparation` makes the family a protocol names ready (``protocol.stream_family()``,
+:func:`stream_preparation` makes the family a protocol names ready (``wire.stream_family()``,
 registered by :mod:`.sequencers`; None for one that does not stream: v1).
 
 The preparation runs between a goal's arrival and its first target (issue 46: a goal moves within
@@ -47,12 +47,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
-from typing import Any, Callable, Optional, Sequence, Tuple
+from typing import Callable, Optional, Sequence, Tuple
 
 from ...errors import VrDriverError
 from ...kinematics.solver import ConfigurationRule, Kinematics
 from ...params import DriverParams
 from ...poses import ControllerPose
+from ...protocol.base import Protocol
 from ..motion.jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from ..motion.status import DriverError
@@ -90,11 +91,11 @@ class JointStreams:
     #: the widest joint step between two points (None: any)
     max_step: Optional[float] = None
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
+    def __init__(self, params: DriverParams, kinematics: Kinematics, wire: Protocol, checks: PathChecks,
                  min_segment: Callable[[], float]) -> None:
         self.params = params
         self.kin = kinematics
-        self.protocol = protocol
+        self.wire = wire
         self.checks = checks
         self.min_segment = min_segment
 
@@ -199,9 +200,9 @@ class CartesianStreams(JointStreams):
     controller will by its configuration rule, ``params.controller.configuration`` (module
     docstring)."""
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
+    def __init__(self, params: DriverParams, kinematics: Kinematics, wire: Protocol, checks: PathChecks,
                  min_segment: Callable[[], float]) -> None:
-        super().__init__(params, kinematics, protocol, checks, min_segment)
+        super().__init__(params, kinematics, wire, checks, min_segment)
         #: the controller's rule for a target's joint solution
         self.rule = ConfigurationRule.parse(params.controller.configuration)
         #: the points before a target whose joints the controller may solve it nearest: the
@@ -253,8 +254,8 @@ class CartesianStreams(JointStreams):
         also = tuple(earlier) if self.rule is ConfigurationRule.CURRENT_JOINTS else ()
         with self.checks.gate:
             if search:
-                return wire_target(self.kin, self.protocol, joints, prev, fine=fine, also=also, memo=memo)
-            return wire_target(self.kin, self.protocol, joints, prev, fine=fine, full_band=0.0, also=also, memo=memo)
+                return wire_target(self.kin, self.wire, joints, prev, fine=fine, also=also, memo=memo)
+            return wire_target(self.kin, self.wire, joints, prev, fine=fine, full_band=0.0, also=also, memo=memo)
 
     def with_poses(self, start: Sequence[float], points: Sequence[StreamPoint], first: int = 0,
                    memo: Optional[WireMemo] = None) -> Tuple[StreamPoint, ...]:
@@ -279,7 +280,7 @@ class CartesianStreams(JointStreams):
             try:
                 found = self.target(prev, point.joints, earlier=history[-self.window:-1], memo=memo)
             except VrDriverError as exc:
-                pose = self.protocol.wire_pose(self.kin.fk_pose(point.joints))
+                pose = self.wire.wire_pose(self.kin.fk_pose(point.joints))
                 raise DriverError("%s: the controller cannot solve its pose %s: %s; nothing was sent"
                                   % (where, fmt_pose(pose), exc)) from None
             refusal = self.refusal(found, point.joints)
@@ -319,11 +320,11 @@ class CartesianStreams(JointStreams):
                    nearest))
 
 
-def stream_preparation(params: DriverParams, kinematics: Kinematics, protocol: Any, checks: PathChecks,
+def stream_preparation(params: DriverParams, kinematics: Kinematics, wire: Protocol, checks: PathChecks,
                        min_segment: Callable[[], float]) -> Optional[JointStreams]:
-    """The stream preparation of the family ``protocol`` names (registered with it:
+    """The stream preparation of the family the protocol ``wire`` names (registered with it:
     :mod:`vr_driver.driver.sequencers`); None when it does not stream (v1). ProtocolError in words for
     a streaming protocol without one."""
-    if not protocol.streams:
+    if not wire.streams:
         return None
-    return protocol.stream_family()(params, kinematics, protocol, checks, min_segment)
+    return wire.stream_family()(params, kinematics, wire, checks, min_segment)

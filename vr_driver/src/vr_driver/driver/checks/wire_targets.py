@@ -93,7 +93,7 @@ class WireMemo:
         self.solved: dict = {}
 
 
-def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], fine: float = FINE,
+def wire_target(kin, wire, joints: Sequence[float], seed: Sequence[float], fine: float = FINE,
                 full_band: float = FULL_SEARCH_BAND, also: Sequence[Sequence[float]] = (),
                 memo: Optional[WireMemo] = None) -> WireTarget:
     """The wire pose for the planned ``joints`` whose solution by the controller's IK seeded with
@@ -116,8 +116,8 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
         memo = WireMemo()
     base = memo.base.get(planned)
     if base is None:
-        base = memo.base[planned] = protocol.wire_pose(kin.fk_pose(planned))
-    mm, deg = protocol.pose_resolution
+        base = memo.base[planned] = wire.wire_pose(kin.fk_pose(planned))
+    mm, deg = wire.pose_resolution
     sizes = (mm, mm, mm, deg, deg, deg)
     used: set = set()               # the solutions this call asked for (WireTarget.solved counts them)
 
@@ -127,7 +127,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
         key = (planned, steps)
         out = memo.poses.get(key)
         if out is None:
-            pose = base if not any(steps) else protocol.wire_pose(
+            pose = base if not any(steps) else wire.wire_pose(
                 ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
             out = memo.poses[key] = (pose, kin.conventions.controller_to_tip(pose))
         return out

@@ -27,13 +27,13 @@ class ArmJoints:
     check of the latest connection (:attr:`model_check`); stepped by :meth:`update` once per bus
     iteration."""
 
-    def __init__(self, params: DriverParams, kinematics: Kinematics, protocol: Protocol) -> None:
+    def __init__(self, params: DriverParams, kinematics: Kinematics, wire: Protocol) -> None:
         self.params = params
         self.kin = kinematics
-        self.protocol = protocol
+        self.wire = wire
         # the joints of the reported pose (v1, v3): the commanded branch, the configuration held,
         # each target solved by the controller's configuration rule (controller/configuration)
-        self.tracker = JointTracker(kinematics, self.protocol.pose_resolution,
+        self.tracker = JointTracker(kinematics, self.wire.pose_resolution,
                                     rule=params.controller.configuration)
         self.joints: Optional[Tuple[float, ...]] = None
         self.valid = False
@@ -56,7 +56,7 @@ class ArmJoints:
         if fb is None:
             self.valid = False               # (the tracker keeps the last joints as its reference)
             return None
-        reported = self.protocol.feedback_joints(fb)
+        reported = self.wire.feedback_joints(fb)
         if reported is not None:            # v2 reports the joints themselves (0.001 deg)
             self.joints, self.valid = reported, True
             return self.joints
@@ -71,7 +71,7 @@ class ArmJoints:
         joints and the pose: the reported pose against our FK of the reported joints. One FK on the
         bus thread per connection. A mismatch is a warning in the log (and /diagnostics)."""
         fb = sample.fresh
-        if fb is None or joints is None or not self.protocol.reports_joints:
+        if fb is None or joints is None or not self.wire.reports_joints:
             return
         if self.model_check is not None and self.model_check.session == sample.session:
             return

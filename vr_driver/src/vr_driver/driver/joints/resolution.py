@@ -7,7 +7,7 @@ where the arm is: it is the joint error of half a unit in each of the six pose n
 and the Euler angles Rx, Ry, Rz of ``R = Rz Ry Rx``, :mod:`vr_driver.poses`), mapped through the
 inverse of the arm's Jacobian. :class:`WireResolution` gives that bound per joint at any joints
 ``q`` (:meth:`WireResolution.errors`); :mod:`vr_driver.driver.motion.trajectories` builds the default
-path and goal tolerances of a trajectory on it, point by point (``validate(..., wire=...)``), and
+path and goal tolerances of a trajectory on it, point by point (``validate(..., resolution=...)``), and
 :mod:`vr_driver.driver.joints.supervision` judges the run with them.
 
 The bound, linearised: a pose error ``dP`` (mm, deg) is a TCP displacement ``dp = dP[:3]`` and a
@@ -70,26 +70,26 @@ def _skew(v: np.ndarray) -> np.ndarray:
 
 class WireResolution:
     """The joint error a Cartesian protocol's pose resolution allows, per configuration, for the
-    arm ``kin`` (the driver's model). ``protocol``: its ``pose_resolution`` (mm, deg) sets the
+    arm ``kin`` (the driver's model). ``wire`` (the protocol object): its ``pose_resolution`` (mm, deg) sets the
     box; its tolerance rule (``goal_tolerance_for`` / ``path_tolerance_for``) turns the bound into
     default tolerances (:func:`vr_driver.driver.motion.trajectories.validate`). Build with :meth:`of`:
     None for a protocol with joint targets (v2: its joints are exact to 0.001 deg everywhere)."""
 
-    def __init__(self, kin: Kinematics, protocol: Protocol, band: float = WRIST_BAND) -> None:
+    def __init__(self, kin: Kinematics, wire: Protocol, band: float = WRIST_BAND) -> None:
         self.kin = kin
-        self.protocol = protocol
+        self.wire = wire
         self.band = float(band)
-        mm, deg = protocol.pose_resolution
+        mm, deg = wire.pose_resolution
         #: half a unit of each pose number, in m and rad
         self.half = np.array([mm / 2000.0] * 3 + [math.radians(deg) / 2.0] * 3)
         self.sign = self._wrist_sign()
 
     @classmethod
-    def of(cls, kin: Kinematics, protocol: Protocol) -> Optional["WireResolution"]:
-        """The rule for ``protocol`` on ``kin``; None where the protocol carries joint targets."""
-        if protocol.joint_targets:
+    def of(cls, kin: Kinematics, wire: Protocol) -> Optional["WireResolution"]:
+        """The rule for the protocol ``wire`` on ``kin``; None where the protocol carries joint targets."""
+        if wire.joint_targets:
             return None
-        return cls(kin, protocol)
+        return cls(kin, wire)
 
     def _wrist_sign(self) -> float:
         """+1 when joint_4's and joint_6's axes point the same way at joint_5 = 0 (the pose fixes

@@ -18,7 +18,7 @@ status (or just the joints), publishes what each step returns, and sets the :cla
   the run's time compared with the plan, in the protocol's own terms (its ``name`` and whether it
   ``streams``). v1 stops at each point and moves at the controller's own speed: its time is
   reported, never judged (``goal_time_tolerance`` is not applied, and the note says so).
-- On a Cartesian protocol with per-configuration tolerances (the trajectory's ``wire``,
+- On a Cartesian protocol with per-configuration tolerances (the trajectory's ``per_configuration``,
   :class:`~vr_driver.driver.motion.trajectories.ConfigurationTolerances`): each joint is judged against
   what the wire's resolution allows where the arm is, and within the wrist band (joint_5 near 0,
   the plan's or the arm's) joint_4 and joint_6 by their sum -- the path check, the goal check
@@ -105,7 +105,7 @@ class Outcome:
 
 class TrajectorySupervisor:
     """Watches one run of ``traj`` (``run``: what :meth:`DriverCore.submit_trajectory` returned,
-    started at ``started`` on the driver's clock) for ``protocol``
+    started at ``started`` on the driver's clock) for the protocol ``wire``
     (:class:`vr_driver.protocol.base.Protocol`). ``joint_names``: the controller's joint names, for
     the texts (default joint_1..joint_n).
 
@@ -119,14 +119,14 @@ class TrajectorySupervisor:
     (:func:`vr_driver.driver.joints.following.following_floor`: a plan's points joined by straight lines
     change speed at once)."""
 
-    def __init__(self, traj: ValidTrajectory, run: Any, started: float, protocol: Protocol,
+    def __init__(self, traj: ValidTrajectory, run: Any, started: float, wire: Protocol,
                  joint_names: Optional[Sequence[str]] = None,
                  accelerations: Optional[Sequence[float]] = None) -> None:
         self.traj = traj
         self.accelerations = None if accelerations is None else tuple(float(a) for a in accelerations)
         self.run = run
         self.started = started
-        self.protocol = protocol
+        self.wire = wire
         n = len(traj.positions[0])
         self.names = list(joint_names) if joint_names is not None else ["joint_%d" % (i + 1) for i in range(n)]
         self.executed: List[Tuple[float, float, float]] = []   # TCP positions seen [mm]
@@ -207,9 +207,9 @@ class TrajectorySupervisor:
 
     def _joint_words(self, joint: int, by_sum: bool) -> str:
         """A joint's name, or within the wrist band the sum's with the rule."""
-        wire = self.traj.wire
-        if by_sum and wire is not None and joint == wire.wrist[0]:
-            return "%s: %s" % (wire.sum_name(self.names), wire.band_words(self.names))
+        tolerances = self.traj.per_configuration
+        if by_sum and tolerances is not None and joint == tolerances.wrist[0]:
+            return "%s: %s" % (tolerances.sum_name(self.names), tolerances.band_words(self.names))
         return self.names[joint]
 
     def _judged(self, actual: np.ndarray, desired: np.ndarray) -> np.ndarray:
@@ -217,26 +217,26 @@ class TrajectorySupervisor:
         applies (a per-configuration trajectory, joint_5 within the band in either): there
         joint_4's column holds |the error of joint_4 + sign * joint_6| and joint_6's 0."""
         err = np.abs(actual - desired)
-        wire = self.traj.wire
-        if wire is None or not len(err):
+        tolerances = self.traj.per_configuration
+        if tolerances is None or not len(err):
             return err
-        i4, i5, i6 = wire.wrist
-        band = (np.abs(actual[:, i5]) < wire.band) | (np.abs(desired[:, i5]) < wire.band)
+        i4, i5, i6 = tolerances.wrist
+        band = (np.abs(actual[:, i5]) < tolerances.band) | (np.abs(desired[:, i5]) < tolerances.band)
         if band.any():
             diff = actual - desired
-            err[band, i4] = np.abs(diff[band, i4] + wire.sign * diff[band, i6])
+            err[band, i4] = np.abs(diff[band, i4] + tolerances.sign * diff[band, i6])
             err[band, i6] = 0.0
         return err
 
     def _label(self, joint: int, t: float, delay: float = 0.0) -> str:
         """The name of the worst joint of the deviation at the same time, the sample ``t`` s after
         the start against the plan ``delay`` s earlier (joint_4's index in the band: the sum)."""
-        wire = self.traj.wire
-        if wire is not None and joint == wire.wrist[0]:
+        tolerances = self.traj.per_configuration
+        if tolerances is not None and joint == tolerances.wrist[0]:
             q = [v for tt, v in self._history if tt == t]
             desired = self.traj.sample(t - delay)
-            if (q and wire.in_band(q[0])) or wire.in_band(desired):
-                return wire.sum_name(self.names)
+            if (q and tolerances.in_band(q[0])) or tolerances.in_band(desired):
+                return tolerances.sum_name(self.names)
         return self.names[joint]
 
     def step_status(self, now: float, status: Any) -> Optional[Sample]:
@@ -251,15 +251,15 @@ class TrajectorySupervisor:
              fit: Optional[Tuple[float, float, Optional[int], float]] = None) -> str:
         """How the run's time compared with the plan, in the protocol's terms, and how far it was
         from the plan at the same time (``fit``: :meth:`fit_delay`'s result when the caller has it)."""
-        traj, run, protocol = self.traj, self.run, self.protocol
+        traj, run, wire = self.traj, self.run, self.wire
         slower = elapsed / traj.duration if traj.duration > 0 else 1.0
         text = self.start_words()
-        if protocol.streams:
+        if wire.streams:
             points = run.jobs[0].points if run.jobs else ()
             smooth = max((p.smooth for p in points), default=0)
             how = "smooth levels up to %d" % smooth if smooth else "an exact stop at each"
             text += "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, %s)" % (
-                slower, traj.duration, protocol.name, len(points), len(traj.positions) - 1, how)
+                slower, traj.duration, wire.name, len(points), len(traj.positions) - 1, how)
             gaps = run.jobs[0].gaps if run.jobs else 0
             if gaps:
                 text += ("; the arm stopped %d time(s) on the way waiting for its next target: the bus "
@@ -271,7 +271,7 @@ class TrajectorySupervisor:
                          "doc/controller_program.md section 10.9) runs this way" % (100.0 * (slower - 1.0)))
         else:
             text += "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
-                slower, traj.duration, protocol.name, len(run.jobs))
+                slower, traj.duration, wire.name, len(run.jobs))
             if traj.goal_time_tolerance > 0.0:
                 text += ("; its time is reported, not judged: goal_time_tolerance (%.2f s) applies to a "
                          "streaming protocol" % traj.goal_time_tolerance)
@@ -280,8 +280,9 @@ class TrajectorySupervisor:
             text += ("; at most %.3f deg from the plan at the same time after a start delay of %.3f s "
                      "(%s, %.2f s after the start; %.3f deg without the delay)" % (
                          math.degrees(off), delay, self._label(joint, at, delay), at, math.degrees(self.max_time_deviation)))
-        if traj.wire is not None and self.samples_by_sum:
-            text += "; %s (%d of %d samples)" % (traj.wire.band_words(self.names), self.samples_by_sum, self.samples)
+        tolerances = traj.per_configuration
+        if tolerances is not None and self.samples_by_sum:
+            text += "; %s (%d of %d samples)" % (tolerances.band_words(self.names), self.samples_by_sum, self.samples)
         floor, where = self.floor()
         if floor >= FLOOR_WORDS:
             text += ("; no arm within the joint acceleration limits follows this plan closer than %.3f deg (%s)"
@@ -309,10 +310,10 @@ class TrajectorySupervisor:
         their sum in the wrist band); (0.0, "") without accelerations."""
         if self.accelerations is None or len(self.accelerations) != len(self.traj.positions[0]):
             return 0.0, ""
-        wire = self.traj.wire
+        tolerances = self.traj.per_configuration
         return following_floor(self.traj.times, self.traj.positions, self.accelerations,
-                               band=None if wire is None else wire.band, sign=1.0 if wire is None else wire.sign,
-                               names=self.names)
+                               band=None if tolerances is None else tolerances.band,
+                               sign=1.0 if tolerances is None else tolerances.sign, names=self.names)
 
     def fit_delay(self) -> Tuple[float, float, Optional[int], float]:
         """The constant start delay in [0, MAX_START_DELAY] that makes the samples deviate least
@@ -381,10 +382,10 @@ class TrajectorySupervisor:
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "%s ended %.4f rad from the goal (tolerance "
                            "%.4f%s); %s" % (name, err, tol, self._band_note(joints) if in_band else "", note))
         late = elapsed - traj.duration
-        if self.protocol.streams and traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
+        if self.wire.streams and traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "reached %.2f s after the planned end "
                            "(goal_time_tolerance %.2f s); %s" % (late, traj.goal_time_tolerance, note))
-        if traj.wire is not None:
+        if traj.per_configuration is not None:
             return outcome(SUCCEEDED, SUCCESSFUL, "%s; %s" % (note, self._goal_words(joints, checks, in_band)))
         return outcome(SUCCEEDED, SUCCESSFUL, note)
 
@@ -395,22 +396,23 @@ class TrajectorySupervisor:
         band's rule applied."""
         traj = self.traj
         final = traj.positions[-1]
-        wire = traj.wire
+        tolerances = traj.per_configuration
         off = [abs(a - b) for a, b in zip(joints, final)]
         checks = [(self.names[i], off[i], t) for i, t in enumerate(traj.goal_tolerance)]
-        if wire is None or not (wire.in_band(final) or wire.in_band(joints)):
+        if tolerances is None or not (tolerances.in_band(final) or tolerances.in_band(joints)):
             return checks, False
-        i4, _i5, i6 = wire.wrist
+        i4, _i5, i6 = tolerances.wrist
         checks = [c for i, c in enumerate(checks) if i not in (i4, i6)]
-        checks.insert(i4, (wire.sum_name(self.names), abs(wire.sum_of(joints) - wire.sum_of(final)), wire.goal_sum))
+        checks.insert(i4, (tolerances.sum_name(self.names), abs(tolerances.sum_of(joints) - tolerances.sum_of(final)),
+                           tolerances.goal_sum))
         return checks, True
 
     def _band_note(self, joints: Sequence[float]) -> str:
-        wire = self.traj.wire
-        i5 = wire.wrist[1]
+        tolerances = self.traj.per_configuration
+        i5 = tolerances.wrist[1]
         return "; %s ends at %.2f deg (the goal's %.2f deg): %s" % (
             self.names[i5], math.degrees(joints[i5]), math.degrees(self.traj.positions[-1][i5]),
-            wire.band_words(self.names))
+            tolerances.band_words(self.names))
 
     def _goal_words(self, joints: Sequence[float], checks: List[Tuple[str, float, float]], in_band: bool) -> str:
         """The goal's bound in words: the joint nearest its tolerance, and within the wrist band the
@@ -421,8 +423,8 @@ class TrajectorySupervisor:
             name, err, tol = max(finite, key=lambda c: c[1] / c[2])
             text += " (closest: %s %.3f deg of %.3f deg)" % (name, math.degrees(err), math.degrees(tol))
         if in_band:
-            wire = self.traj.wire
-            i4, _i5, i6 = wire.wrist
+            tolerances = self.traj.per_configuration
+            i4, _i5, i6 = tolerances.wrist
             final = self.traj.positions[-1]
             text += ("%s; their split is the controller's: %s %.2f deg, %s %.2f deg from the plan's"
                      % (self._band_note(joints), self.names[i4], math.degrees(joints[i4] - final[i4]),

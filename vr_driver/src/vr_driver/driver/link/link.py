@@ -5,7 +5,7 @@ records, stepped by the bus loop. ROS-free.
 ``reconnect_period``) the port, runs one DP cycle with the outputs it was given, decodes a record
 that arrived in this cycle, and returns a :class:`LinkSample` -- the link state, the controller's
 latest good feedback (never older than ``link_timeout``) and the counters. It decides nothing
-about motions; the :class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer` does, from the sample.
+about motions; the :class:`~vr_driver.driver.motion.handshake.HandshakeSequencer` does, from the sample.
 
 Rules:
 - the link is CONNECTED while the slave is in Data_Exchange and the last good record of this

@@ -25,9 +25,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ...errors import ProtocolError
 from ...kinematics.preview import at_tcp_speed, peak_tcp_speed
 from ...protocol.base import Protocol
-from ...protocol.v1 import program_speed
 
 __all__ = ["Announced", "HANDSHAKE_CYCLES", "STREAM_LATENCY_CYCLES", "announce_moves", "announce_plan",
            "plan_peak_speed", "program_duration", "scaling_words"]
@@ -67,25 +67,25 @@ def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequen
     return float(np.max(dp[moving] / dt[moving], initial=0.0))
 
 
-def announce_plan(kin: Any, protocol: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
+def announce_plan(kin: Any, wire: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
                   previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0) -> Announced:
-    """The figures of a planned trajectory on ``protocol``: a streaming protocol its timing and
-    :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); v1 (no
-    stream) the PTP ``previews`` it sends between the plan's stop points (``JobControl.
-    prepare_trajectory``), at ``params.controller``'s program speed, each with its handshake
-    (``cycle_time``: the bus cycle [s])."""
-    if protocol.streams:
+    """The figures of a planned trajectory on the protocol ``wire``: a streaming protocol its timing and
+    :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); v1 (no stream) the PTP
+    ``previews`` it sends between the plan's stop points (``JobControl.prepare_trajectory``), at
+    ``params.controller``'s program speed, each with its handshake."""
+    if wire.streams:
         planned = float(times[-1]) if len(times) else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         top = plan_peak_speed(kin, times, positions)
         return Announced(planned + latency, top,
-                         "protocol %s runs the plan's timing: %.2f s%s, the TCP at most %.0f mm/s" % (protocol.name, planned + latency,
+                         "protocol %s runs the plan's timing: %.2f s%s, the TCP at most %.0f mm/s"
+                         % (wire.name, planned + latency,
                             " (the plan's %.2f s and the bus's %g cycles to the arm and back)"
                             % (planned, STREAM_LATENCY_CYCLES) if latency else "", top))
-    return announce_moves(protocol, previews, params, cycle_time)
+    return announce_moves(wire, previews, params, cycle_time)
 
 
-def announce_moves(protocol: Protocol, previews: Sequence[Any], params: Any, cycle_time: float) -> Announced:
+def announce_moves(wire: Protocol, previews: Sequence[Any], params: Any, cycle_time: float) -> Announced:
     """v1: the figures of its targets ``previews`` (driver.motion.jobs.Preview: a move each, as previewed at
     the arm's full speed) at the program's speeds, one after the other, each with its handshake."""
     facts = params.controller
@@ -94,7 +94,7 @@ def announce_moves(protocol: Protocol, previews: Sequence[Any], params: Any, cyc
     for preview in previews:
         kind = preview.request.move_type
         kinds.add(kind.name)
-        moved = at_tcp_speed(preview.trajectory, program_speed(kind, facts.program_speed, facts.program_path_speed))
+        moved = at_tcp_speed(preview.trajectory, _program_speed(wire, preview, facts))
         duration += moved.duration + HANDSHAKE_CYCLES * cycle_time       # (program_duration)
         top = max(top, peak_tcp_speed(moved))
     speeds = []
@@ -106,17 +106,26 @@ def announce_moves(protocol: Protocol, previews: Sequence[Any], params: Any, cyc
     n = len(previews)
     words = ("protocol %s runs %s at the robot program's own speed, %s, not a plan's timing, and stops at %s: "
              "%.2f s (%.2f s of it the handshakes, %g bus cycles each), the TCP at most %.0f mm/s"
-             % (protocol.name, "it" if n == 1 else "its %d targets" % n, " and ".join(speeds) or "none",
+             % (wire.name, "it" if n == 1 else "its %d targets" % n, " and ".join(speeds) or "none",
                 "the target" if n == 1 else "each", duration, n * HANDSHAKE_CYCLES * cycle_time,
                 HANDSHAKE_CYCLES, top))
     return Announced(duration, top, words, program=True)
 
 
-def program_duration(preview: Any, facts: Any) -> float:
+def program_duration(wire: Protocol, preview: Any, facts: Any) -> float:
     """[s] a previewed move (driver.motion.jobs.Preview) as the v1 program runs it, at its speed
     (``facts``: ``params.controller``)."""
-    kind = preview.request.move_type
-    return at_tcp_speed(preview.trajectory, program_speed(kind, facts.program_speed, facts.program_path_speed)).duration
+    return at_tcp_speed(preview.trajectory, _program_speed(wire, preview, facts)).duration
+
+
+def _program_speed(wire: Protocol, preview: Any, facts: Any) -> float:
+    """[mm/s] the TCP speed the program of ``wire`` runs ``preview``'s move at
+    (:meth:`~vr_driver.protocol.base.Protocol.program_speed` of ``facts``' program speeds); ProtocolError
+    for a protocol that runs a plan's own timing (a streaming one: no program speed)."""
+    speed = wire.program_speed(preview.request.move_type, facts.program_speed, facts.program_path_speed)
+    if speed is None:
+        raise ProtocolError("protocol %s runs a plan's own timing: it has no program speed" % wire.name)
+    return speed
 
 
 def scaling_words(announced: Announced, scaling: float, default: bool, planned_speed: float) -> str:

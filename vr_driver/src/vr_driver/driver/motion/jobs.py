@@ -3,7 +3,7 @@ it through the sequencer, and its result. ROS-free, no I/O.
 
 A :class:`MoveJob` is created by :class:`~vr_driver.driver.core.DriverCore` (in the caller's
 thread, after validation) and from then on changed only by the bus thread's
-:class:`~vr_driver.driver.motion.sequencer.HandshakeSequencer`. Other threads wait on it
+:class:`~vr_driver.driver.motion.handshake.HandshakeSequencer`. Other threads wait on it
 (:meth:`MoveJob.wait`, :meth:`MoveJob.wait_change`) or read its phase.
 """
 from __future__ import annotations

@@ -81,7 +81,6 @@ class StreamSequencer(SequencerBase):
     def __init__(self, params: DriverParams, clock: Callable[[], float],
                  replan: Callable[[MoveJob, Tuple[float, ...]], None]) -> None:
         super().__init__(params, clock, replan)
-        self.wire = params.wire
         self._base = 0                     # sequence number of the current job's point 0 (0: not started)
         self._limit = 0                    # points of the current job still offered up to (REPLACE cuts it)
         self._rejected_before = 0          # the controller's rejected_seq when the job started

@@ -9,7 +9,7 @@ control_msgs result code), :func:`segment_speeds` says how fast each segment mus
 path stays within the path tolerance.
 
 Tolerances a goal leaves empty (0) are the protocol's defaults. On the Cartesian protocols (v1,
-v3), given the arm's kinematics (``validate(..., wire=WireResolution.of(kin, protocol))``), they
+v3), given the arm's kinematics (``validate(..., resolution=WireResolution.of(kin, wire))``), they
 are per configuration: at each planned point, the protocol's rule
 (``goal_tolerance_for`` / ``path_tolerance_for``) of the joint error the wire's resolution allows
 there (:mod:`vr_driver.driver.joints.resolution`); within the wrist band (joint_5 near 0) joint_4 and
@@ -95,7 +95,7 @@ class TrajectoryGoal:
 @dataclass(frozen=True)
 class ConfigurationTolerances:
     """A trajectory's tolerances on a Cartesian protocol, per planned point (``validate(...,
-    wire=...)``): a joint the goal left at 0 gets, at each point, the protocol's rule of the joint
+    resolution=...)``): a joint the goal left at 0 gets, at each point, the protocol's rule of the joint
     error the wire's resolution allows there (``errors``); a given one keeps its value. Where
     joint_5 is within ``band`` of 0 (the plan's or the arm's) joint_4 and joint_6 are judged by
     ``joint_4 + sign * joint_6`` (the pose fixes only that): against ``path_sum`` / ``goal_sum``,
@@ -130,8 +130,9 @@ class ConfigurationTolerances:
 class ValidTrajectory:
     """A checked trajectory in the controller's joint order, starting where the arm is.
     ``path_tolerance`` / ``goal_tolerance``: per joint; with per-configuration tolerances
-    (``wire``) the path tolerance is the smallest over the points and the goal tolerance the one
-    at the end -- the checks (:func:`path_check`, the supervisor's goal check) use ``wire``."""
+    (``per_configuration``) the path tolerance is the smallest over the points and the goal tolerance
+    the one at the end -- the checks (:func:`path_check`, the supervisor's goal check) use
+    ``per_configuration``."""
 
     positions: Tuple[Tuple[float, ...], ...]         # point 0 = the arm's joints now
     times: Tuple[float, ...]                         # times[0] = 0
@@ -139,7 +140,7 @@ class ValidTrajectory:
     goal_tolerance: Tuple[float, ...]
     goal_time_tolerance: float
     delay: float                                     # how long after "now" the motion starts
-    wire: Optional[ConfigurationTolerances] = None   # per-configuration tolerances (Cartesian protocols)
+    per_configuration: Optional[ConfigurationTolerances] = None     # Cartesian protocols' tolerances
 
     @property
     def duration(self) -> float:
@@ -168,28 +169,28 @@ def _left_empty(names: Sequence[str], given: Dict[str, float]) -> Tuple[bool, ..
     return tuple(given.get(name, 0.0) == 0 for name in names)
 
 
-def _per_configuration(points: Sequence[Tuple[float, ...]], wire: Any, path_given: Tuple[float, ...],
+def _per_configuration(points: Sequence[Tuple[float, ...]], resolution: Any, path_given: Tuple[float, ...],
                        goal_given: Tuple[float, ...], path_empty: Tuple[bool, ...],
                        goal_empty: Tuple[bool, ...]) -> Tuple[ConfigurationTolerances, Tuple[float, ...]]:
     """The tolerances at each point and the goal tolerance at the end: the protocol's rule of the
     wire's error there for the joints left empty, the given ones otherwise (see
     :class:`ConfigurationTolerances`)."""
-    protocol = wire.protocol
-    errors, sums = wire.errors_along(points)
+    wire = resolution.wire
+    errors, sums = resolution.errors_along(points)
     w4, _w5, w6 = wrist = (3, 4, 5)
     path, path_sum = [], []
     for err, err_sum in zip(errors, sums):
-        path.append(tuple(protocol.path_tolerance_for(e) if empty else given
+        path.append(tuple(wire.path_tolerance_for(e) if empty else given
                           for e, empty, given in zip(err, path_empty, path_given)))
-        half = protocol.path_tolerance_for(err_sum / 2.0)
+        half = wire.path_tolerance_for(err_sum / 2.0)
         path_sum.append(sum(half if path_empty[i] else path_given[i] for i in (w4, w6)))
-    half = protocol.goal_tolerance_for(sums[-1] / 2.0)
+    half = wire.goal_tolerance_for(sums[-1] / 2.0)
     goal_sum = sum(half if goal_empty[i] else goal_given[i] for i in (w4, w6))
-    goal = tuple(protocol.goal_tolerance_for(e) if empty else given
+    goal = tuple(wire.goal_tolerance_for(e) if empty else given
                  for e, empty, given in zip(errors[-1], goal_empty, goal_given))
     return ConfigurationTolerances(path=tuple(path), path_sum=tuple(path_sum), goal_sum=goal_sum,
-                                   errors=tuple(errors), sum_errors=tuple(sums), band=wire.band,
-                                   sign=wire.sign, wrist=wrist), goal
+                                   errors=tuple(errors), sum_errors=tuple(sums), band=resolution.band,
+                                   sign=resolution.sign, wrist=wrist), goal
 
 
 def _tolerances(names: Sequence[str], given: Dict[str, float], default: float, what: str
@@ -210,7 +211,7 @@ def validate(goal: TrajectoryGoal, controller_names: Sequence[str], current: Seq
              lower: Sequence[float], upper: Sequence[float], now: float,
              start_tolerance: float = math.radians(2.0), late_start: float = 0.5,
              default_path_tolerance: float = DEFAULT_PATH_TOLERANCE,
-             default_goal_tolerance: float = DEFAULT_PATH_TOLERANCE, wire: Any = None) -> ValidTrajectory:
+             default_goal_tolerance: float = DEFAULT_PATH_TOLERANCE, resolution: Any = None) -> ValidTrajectory:
     """Check a goal and bring it into the controller's joint order. Raises TrajectoryError:
 
     - INVALID_JOINTS: names missing, unknown, duplicated;
@@ -226,9 +227,9 @@ def validate(goal: TrajectoryGoal, controller_names: Sequence[str], current: Seq
 
     A joint the goal's path / goal tolerance leaves at 0 (or does not name) gets
     ``default_path_tolerance`` / ``default_goal_tolerance`` [rad]; a negative one means no limit.
-    ``wire`` (a :class:`~vr_driver.driver.joints.resolution.WireResolution`: a Cartesian protocol on the
-    arm's kinematics; None: the scalar defaults) makes those defaults per configuration instead
-    (:class:`ConfigurationTolerances`, the trajectory's ``wire``).
+    ``resolution`` (a :class:`~vr_driver.driver.joints.resolution.WireResolution`: a Cartesian protocol on
+    the arm's kinematics; None: the scalar defaults) makes those defaults per configuration instead
+    (:class:`ConfigurationTolerances`, the trajectory's ``per_configuration``).
     """
     names = list(goal.joint_names)
     expected = list(controller_names)
@@ -294,15 +295,15 @@ def validate(goal: TrajectoryGoal, controller_names: Sequence[str], current: Seq
     path_tolerance = _tolerances(expected, goal.path_tolerance, default_path_tolerance, "path_tolerance")
     goal_tolerance = _tolerances(expected, goal.goal_tolerance, default_goal_tolerance, "goal_tolerance")
     per_configuration = None
-    if wire is not None:
+    if resolution is not None:
         per_configuration, goal_tolerance = _per_configuration(
-            points, wire, path_tolerance, goal_tolerance, _left_empty(expected, goal.path_tolerance),
+            points, resolution, path_tolerance, goal_tolerance, _left_empty(expected, goal.path_tolerance),
             _left_empty(expected, goal.goal_tolerance))
         path_tolerance = tuple(min(column) for column in zip(*per_configuration.path))
     return ValidTrajectory(
         positions=tuple(points), times=tuple(times), path_tolerance=path_tolerance,
         goal_tolerance=goal_tolerance, goal_time_tolerance=max(0.0, float(goal.goal_time_tolerance)),
-        delay=delay, wire=per_configuration)
+        delay=delay, per_configuration=per_configuration)
 
 
 def segment_speeds(traj: ValidTrajectory, vmax: Sequence[float], names: Sequence[str]
@@ -331,7 +332,7 @@ def thin(traj: ValidTrajectory, reserve: float = V1_WIRE_ERROR) -> List[int]:
     far from a dropped point (recursive split at the worst point). A joint without a path
     tolerance (inf) never forces a point.
 
-    With per-configuration tolerances (``traj.wire``: a Cartesian protocol) ``reserve`` is not
+    With per-configuration tolerances (``traj.per_configuration``: a Cartesian protocol) ``reserve`` is not
     used: a dropped point's distance to the chord plus the wire's error at the chord's two ends
     (interpolated: the controller lands each stop point that far off) and at the point itself (the
     reported pose's rounding) must stay within :data:`THIN_SHARE` of its path tolerance; within the
@@ -340,29 +341,29 @@ def thin(traj: ValidTrajectory, reserve: float = V1_WIRE_ERROR) -> List[int]:
     the controller's IK of the rounded pose chooses the split of joint_4 / joint_6 itself (on v1 by
     tens of degrees), which the next move would carry out of the band."""
     pts = traj.positions
-    if traj.wire is not None:
-        return _thin_per_configuration(traj, traj.wire)
+    if traj.per_configuration is not None:
+        return _thin_per_configuration(traj, traj.per_configuration)
     tol = [max(t - reserve, 0.25 * t) if math.isfinite(t) else math.inf for t in traj.path_tolerance]
     return split_keep(len(pts), lambda a, b, k: _deviation(pts[a], pts[b], pts[k], tol), 1.0)
 
 
-def _wrist_coordinates(wire: ConfigurationTolerances) -> List[int]:
+def _wrist_coordinates(tolerances: ConfigurationTolerances) -> List[int]:
     """The joints judged one by one inside the band (all but joint_4 and joint_6)."""
-    return [i for i in range(len(wire.path[0])) if i not in (wire.wrist[0], wire.wrist[2])]
+    return [i for i in range(len(tolerances.path[0])) if i not in (tolerances.wrist[0], tolerances.wrist[2])]
 
 
-def _thin_per_configuration(traj: ValidTrajectory, wire: ConfigurationTolerances) -> List[int]:
+def _thin_per_configuration(traj: ValidTrajectory, tolerances: ConfigurationTolerances) -> List[int]:
     pts = np.asarray(traj.positions, dtype=float)
     n = len(pts)
-    tol = np.asarray(wire.path, dtype=float)
-    err = np.asarray(wire.errors, dtype=float)
-    others = _wrist_coordinates(wire)
-    sums = pts[:, wire.wrist[0]] + wire.sign * pts[:, wire.wrist[2]]
+    tol = np.asarray(tolerances.path, dtype=float)
+    err = np.asarray(tolerances.errors, dtype=float)
+    others = _wrist_coordinates(tolerances)
+    sums = pts[:, tolerances.wrist[0]] + tolerances.sign * pts[:, tolerances.wrist[2]]
     # inside the band: the joints but joint_4 / joint_6, and their sum
     band_q = np.column_stack([pts[:, others], sums])
-    band_tol = np.column_stack([tol[:, others], np.asarray(wire.path_sum, dtype=float)])
-    band_err = np.column_stack([err[:, others], np.asarray(wire.sum_errors, dtype=float)])
-    inside = [wire.in_band(p) for p in traj.positions]
+    band_tol = np.column_stack([tol[:, others], np.asarray(tolerances.path_sum, dtype=float)])
+    band_err = np.column_stack([err[:, others], np.asarray(tolerances.sum_errors, dtype=float)])
+    inside = [tolerances.in_band(p) for p in traj.positions]
 
     def excess(a: int, b: int, k: int) -> float:
         q, t, e = (band_q, band_tol, band_err) if inside[k] else (pts, tol, err)
@@ -482,34 +483,35 @@ def path_deviation(traj: ValidTrajectory, q: Sequence[float]) -> Tuple[float, in
 def path_check(traj: ValidTrajectory, q: Sequence[float]) -> PathCheck:
     """:func:`path_deviation` with the joint that deviates most. The distance to each segment is
     measured at its point nearest ``q`` (in the space scaled by the tolerances, which with
-    per-configuration tolerances are interpolated along the segment). With ``traj.wire``, where
+    per-configuration tolerances are interpolated along the segment). With ``traj.per_configuration``, where
     ``q``'s joint_5 or that point's is within the wrist band, joint_4 and joint_6 are judged by
     their sum (``by_sum``) against the sum's tolerance."""
     pts = np.asarray(traj.positions, dtype=float)
     if len(pts) == 1:
         pts = np.vstack([pts, pts])
     q = np.asarray(q, dtype=float)
-    wire = traj.wire
-    if wire is None:
+    tolerances = traj.per_configuration
+    if tolerances is None:
         tol = np.tile(np.asarray(traj.path_tolerance, dtype=float), (len(pts), 1))
     else:
-        tol = np.asarray(wire.path, dtype=float)
+        tol = np.asarray(tolerances.path, dtype=float)
         if len(tol) == 1:
             tol = np.vstack([tol, tol])
     dev, joint, c = _segment_deviations(pts, tol, q)
     by_sum = np.zeros(len(dev), dtype=bool)
-    if wire is not None:
-        others = _wrist_coordinates(wire)
-        i4, i5, i6 = wire.wrist
-        path_sum = np.asarray(wire.path_sum, dtype=float)
+    if tolerances is not None:
+        others = _wrist_coordinates(tolerances)
+        i4, i5, i6 = tolerances.wrist
+        path_sum = np.asarray(tolerances.path_sum, dtype=float)
         if len(path_sum) == 1:
             path_sum = np.concatenate([path_sum, path_sum])
-        band_pts = np.column_stack([pts[:, others], pts[:, i4] + wire.sign * pts[:, i6]])
+        band_pts = np.column_stack([pts[:, others], pts[:, i4] + tolerances.sign * pts[:, i6]])
         band_tol = np.column_stack([tol[:, others], path_sum])
-        band_q = np.concatenate([q[others], [q[i4] + wire.sign * q[i6]]])
+        band_q = np.concatenate([q[others], [q[i4] + tolerances.sign * q[i6]]])
         band_dev, band_joint, band_c = _segment_deviations(band_pts, band_tol, band_q)
         j5 = others.index(i5)
-        by_sum = (abs(q[i5]) < wire.band) | (np.abs(band_c[:, j5]) < wire.band) | (np.abs(c[:, i5]) < wire.band)
+        band = tolerances.band
+        by_sum = (abs(q[i5]) < band) | (np.abs(band_c[:, j5]) < band) | (np.abs(c[:, i5]) < band)
         dev = np.where(by_sum, band_dev, dev)
         mapped = np.array(others + [i4])
         joint = np.where(by_sum, mapped[band_joint], joint)

@@ -357,7 +357,7 @@ class PlanningParts:
     def __init__(self, params: DriverParams) -> None:
         self.params = params
         self.kin = driver_kinematics(params)
-        self.protocol = params.wire
+        self.wire = params.wire
         self.joint_names = params.controller_joint_names
         self.planning_gate = threading.Lock()
         self.node_min_segment: Optional[float] = None
@@ -365,8 +365,8 @@ class PlanningParts:
         self.checks = PathChecks(self.kin, MovePreviewer(self.kin), params.workspace, self.planning_gate,
                                  SceneGuard(self.kin, self.planning_gate, Scene(), params.collision_padding,
                                             params.collision_check, params.prefix, model=params.model),
-                                 self.protocol)
-        self.streams = stream_preparation(params, self.kin, self.protocol, self.checks, self.min_segment)
+                                 self.wire)
+        self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.min_segment)
 
     @property
     def collision(self) -> Optional["CollisionChecker"]:

@@ -515,7 +515,7 @@ class PlanActionCore:
         is the start's, so a stream that must change the branch is refused by the driver's check far
         more often than not (bench/planning.py: 4 of the last 10 failures). A joint goal is what it
         is; None (nearest first) with joint targets."""
-        if self.core.protocol.joint_targets:
+        if self.core.wire.joint_targets:
             return None
         stretched = stretched_elbow(self.kin)
         if stretched is None:
@@ -611,7 +611,7 @@ class PlanActionCore:
         them the driver's stream check still decides whether the controller would run the plan."""
         strict = validity.copy()
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
-        if self.core.protocol.joint_targets or not (wrist_margin or elbow_margin):
+        if self.core.wire.joint_targets or not (wrist_margin or elbow_margin):
             return lambda q: not strict.in_collision(q)
         stretched = stretched_elbow(self.kin)
 
