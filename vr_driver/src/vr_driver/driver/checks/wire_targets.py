@@ -123,6 +123,16 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
     mm, deg = protocol.pose_resolution
     sizes = (mm, mm, mm, deg, deg, deg)
     nearest = _analytic_nearest(kin)
+    tcp_to_tip = kin.conventions.tcp_to_tip
+
+    def tip_frame(pose: ControllerPose) -> np.ndarray:
+        """``kin.conventions.controller_to_tip(pose)`` of a wire pose (a ControllerPose of finite
+        floats: its 4x4 built without checking its numbers again -- the same floats, a fifth of a
+        neighbour's cost was the checks)."""
+        t = np.eye(4)
+        t[:3, :3] = pose.rotation()
+        t[:3, 3] = pose.position_m
+        return tcp_to_tip(t)
     used: set = set()               # the solutions this call asked for (WireTarget.solved counts them)
 
     def framed(steps: Tuple[int, ...]) -> Tuple[ControllerPose, object, object]:
@@ -134,7 +144,7 @@ def wire_target(kin, protocol, joints: Sequence[float], seed: Sequence[float], f
         if out is None:
             pose = base if not any(steps) else protocol.wire_pose(
                 ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
-            out = memo.poses[key] = (pose, kin.conventions.controller_to_tip(pose), None)
+            out = memo.poses[key] = (pose, tip_frame(pose), None)
         return out
 
     def pose_at(steps: Tuple[int, ...]) -> ControllerPose:
