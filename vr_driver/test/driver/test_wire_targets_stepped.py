@@ -12,6 +12,7 @@ import pytest
 
 from vr_driver.driver.motion.jobs import StreamPoint
 from vr_driver.driver.checks.stream_prep import CONFIGURATION_TOLERANCE
+from vr_driver.kinematics.deps import missing_dependencies
 from vr_driver.protocol.registry import get
 
 from _world import World
@@ -136,3 +137,55 @@ def test_the_stream_checks_shared_wire_poses_change_nothing(kin, rule, n):
     # the paths ask for the parts that changed: thinned streams with searched wire poses, and refusals
     assert sum(isinstance(r, tuple) and len(r) > 1 for r in shared) >= 3
     assert any(isinstance(r, str) for r in shared)
+
+
+@pytest.mark.skipif(bool(missing_dependencies(("pinocchio", "coal"))), reason="the cell check needs pinocchio and coal")
+@pytest.mark.parametrize("rule, n", [("previous_target", 16), ("current_joints", 6)])
+def test_the_stream_checks_fast_paths_change_nothing(kin, rule, n, monkeypatch):
+    """The stream check's shortcuts -- a segment clearly inside the box passed without its timed
+    preview (PathChecks._clearly_inside), the cell check of the chords in one call
+    (CollisionChecker.first_in_collision), the wire poses' IK without kin.ik's wrapper
+    (wire_targets._analytic_nearest) and the analytic solver's nearest candidate alone
+    (AnalyticSolver.solve nearest=True) -- give the points, their wire poses and the refusals'
+    words of the checks without them, on the trajectory bench's twelve wrist goals (real plans
+    across and onto joint_5 = 0: data/wrist_goals_seed1.json) and ``n`` paths (across joint_5 = 0,
+    on it, anywhere; many leave the box), by either configuration rule, in the example cell."""
+    import json
+    import os
+    import random
+    from vr_driver.driver.checks.path_checks import PathChecks
+    from vr_driver.driver.checks import wire_targets
+    from vr_driver.errors import VrDriverError
+    from vr_driver.kinematics.analytic import AnalyticSolver
+    from vr_driver.kinematics.collision import CollisionChecker
+    repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+    world = World(kin, {"controller": {"configuration": rule},
+                        "scene": os.path.join(repo, "panasonic_vr006l_support", "config", "cell_example.yaml")},
+                  protocol="v3")
+    streams = world.core.streams
+    data = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "wrist_goals_seed1.json")
+    with open(data, encoding="utf-8") as fh:
+        goals = [g for s in json.load(fh)["sets"] for g in s["goals"]]
+    paths = [(g["times"], [tuple(q) for q in g["points"]]) for g in goals] + _paths(kin, random.Random(47), n)
+
+    def run():
+        out = []
+        for times, positions in paths:
+            try:
+                out.append(streams.trajectory(times, positions))
+            except VrDriverError as exc:
+                out.append(str(exc))
+        return out
+    fast = run()
+    solve = AnalyticSolver.solve
+    monkeypatch.delattr(CollisionChecker, "first_in_collision")
+    monkeypatch.setattr(PathChecks, "_clearly_inside", lambda self, start, end: False)
+    monkeypatch.setattr(wire_targets, "_analytic_nearest", lambda kin: None)
+    monkeypatch.setattr(AnalyticSolver, "solve", lambda self, r, p, seed, lower, upper, nearest=False:
+                        solve(self, r, p, seed, lower, upper))
+    assert run() == fast
+    # the paths ask for every part: streams with searched wire poses, refusals by the box, the
+    # cell and the configuration
+    assert sum(isinstance(r, tuple) and len(r) > 1 for r in fast) >= 12
+    for words in ("workspace", "collides", "configuration"):
+        assert any(isinstance(r, str) and words in r for r in fast), words

@@ -104,12 +104,18 @@ class AnalyticSolver:
         self.reach_min = abs(self.l2 - self.r3)
         self.reach_max = self.l2 + self.r3
 
-    def solve(self, r, p, seed, lower, upper):
+    def solve(self, r, p, seed, lower, upper, nearest=False):
         """All branches for the tip rotation ``r`` (row-major 9-tuple) and position ``p``, each joint
         moved by +-2 pi towards ``seed`` within [lower, upper].
 
         Returns (candidates sorted by squared distance to the seed as (distance, q), number of
         geometric branches, [(joint index, value) that broke a limit], reason when none exists).
+
+        ``nearest``: the arm branches (joint_1..3) within the limits nearest the seed first, and
+        none whose arm alone is farther from the seed than a candidate found already (each of its
+        wrist's would be farther still): the first candidate is the one of all branches, later
+        ones may be missing, and the counts, limits and reasons are those of the branches solved
+        (a caller that needs more than the first candidate solves again without it).
         """
         a = self.a
         a1, a2, a4, a5, a6 = a[0], a[1], a[3], a[4], a[5]
@@ -148,6 +154,9 @@ class AnalyticSolver:
         reason = ""
         miss = math.inf
         s0, s1, s2, s3, s4, s5 = seed
+        # the arm branches in order: (arm distance to the seed, q2, q3, joints 1..3, the wrist's
+        # targets), or (None, joint index, value) where a joint of the arm breaks its limits
+        arms = []
         for q1 in q1s:
             x = _rotate(a1, -q1, u)
             xp0 = e1[0] * x[0] + e1[1] * x[1] + e1[2] * x[2] + dot(e1, p1) - c2[0]
@@ -174,55 +183,66 @@ class AnalyticSolver:
                 q2 = ang_x - math.atan2(c3[1] + r3 * math.sin(ang) - c2[1], c3[0] + r3 * math.cos(ang) - c2[0])
                 n_raw += 2
                 if j1 is None:
-                    rejected.append((0, q1))
+                    arms.append((None, 0, q1))
                     continue
                 j2 = turn(q2, s1, lower[1], upper[1])
                 if j2 is None:
-                    rejected.append((1, q2))
+                    arms.append((None, 1, q2))
                     continue
                 j3 = turn(q3, s2, lower[2], upper[2])
                 if j3 is None:
-                    rejected.append((2, q3))
+                    arms.append((None, 2, q3))
                     continue
-                arm_d = (j1 - s0) ** 2 + (j2 - s1) ** 2 + (j3 - s2) ** 2
-                # wrist: R4 R5 R6 = rw; first put a6 onto t (Paden-Kahan subproblem 2), then q6
-                q23 = -(q2 + s23 * q3)
-                t = _rotate(a2, q23, ta1)
-                vt = _rotate(a2, q23, tv1)
-                a4t = dot(a4, t)
-                alpha = (c45 * bnum - a4t) / den
-                beta = (c45 * a4t - bnum) / den
-                g2 = (1.0 - alpha * alpha - beta * beta - 2.0 * alpha * beta * c45) / n45
-                if g2 < -1e-9:
-                    n_raw -= 2
-                    reason = reason or "the wrist cannot reach the orientation"
+                arms.append(((j1 - s0) ** 2 + (j2 - s1) ** 2 + (j3 - s2) ** 2, q2, q3, j1, j2, j3, ta1, tv1))
+        if nearest:
+            arms = sorted((arm for arm in arms if arm[0] is not None), key=lambda arm: arm[0])
+        closest = math.inf          # (nearest: the smallest distance of a candidate so far)
+        for arm in arms:
+            if arm[0] is None:
+                rejected.append(arm[1:])
+                continue
+            arm_d, q2, q3, j1, j2, j3, ta1, tv1 = arm
+            if nearest and arm_d > closest:
+                break
+            # wrist: R4 R5 R6 = rw; first put a6 onto t (Paden-Kahan subproblem 2), then q6
+            q23 = -(q2 + s23 * q3)
+            t = _rotate(a2, q23, ta1)
+            vt = _rotate(a2, q23, tv1)
+            a4t = dot(a4, t)
+            alpha = (c45 * bnum - a4t) / den
+            beta = (c45 * a4t - bnum) / den
+            g2 = (1.0 - alpha * alpha - beta * beta - 2.0 * alpha * beta * c45) / n45
+            if g2 < -1e-9:
+                n_raw -= 2
+                reason = reason or "the wrist cannot reach the orientation"
+                continue
+            g = math.sqrt(g2) if g2 > 0.0 else 0.0
+            for gamma in ((g, -g) if g > 1e-9 else (0.0,)):
+                z = (alpha * a4[0] + beta * a5[0] + gamma * a4xa5[0],
+                     alpha * a4[1] + beta * a5[1] + gamma * a4xa5[1],
+                     alpha * a4[2] + beta * a5[2] + gamma * a4xa5[2])
+                q4 = _angle_about(a4, z, t)
+                singular = q4 is None
+                if singular:                                 # wrist singularity: keep the seed's q4
+                    q4 = s3
+                    z = _rotate(a4, -q4, t)
+                q5 = _angle_about(a5, a6, z)
+                if q5 is None:
                     continue
-                g = math.sqrt(g2) if g2 > 0.0 else 0.0
-                for gamma in ((g, -g) if g > 1e-9 else (0.0,)):
-                    z = (alpha * a4[0] + beta * a5[0] + gamma * a4xa5[0],
-                         alpha * a4[1] + beta * a5[1] + gamma * a4xa5[1],
-                         alpha * a4[2] + beta * a5[2] + gamma * a4xa5[2])
-                    q4 = _angle_about(a4, z, t)
-                    singular = q4 is None
-                    if singular:                                 # wrist singularity: keep the seed's q4
-                        q4 = s3
-                        z = _rotate(a4, -q4, t)
-                    q5 = _angle_about(a5, a6, z)
-                    if q5 is None:
-                        continue
-                    v = _rotate(a5, -q5, _rotate(a4, -q4, vt))
-                    q6 = _angle_about(a6, v6, v)
-                    j4 = turn(q4, s3, lower[3], upper[3])
-                    j5 = turn(q5, s4, lower[4], upper[4])
-                    j6 = turn(q6, s5, lower[5], upper[5])
-                    if j4 is None or j5 is None or j6 is None:
-                        bad = 3 if j4 is None else 4 if j5 is None else 5
-                        rejected.append((bad, (q4, q5, q6)[bad - 3]))
-                    else:
-                        cands.append((arm_d + (j4 - s3) ** 2 + (j5 - s4) ** 2 + (j6 - s5) ** 2,
-                                      (j1, j2, j3, j4, j5, j6)))
-                    if singular:
-                        break
+                v = _rotate(a5, -q5, _rotate(a4, -q4, vt))
+                q6 = _angle_about(a6, v6, v)
+                j4 = turn(q4, s3, lower[3], upper[3])
+                j5 = turn(q5, s4, lower[4], upper[4])
+                j6 = turn(q6, s5, lower[5], upper[5])
+                if j4 is None or j5 is None or j6 is None:
+                    bad = 3 if j4 is None else 4 if j5 is None else 5
+                    rejected.append((bad, (q4, q5, q6)[bad - 3]))
+                else:
+                    cands.append((arm_d + (j4 - s3) ** 2 + (j5 - s4) ** 2 + (j6 - s5) ** 2,
+                                  (j1, j2, j3, j4, j5, j6)))
+                    closest = min(closest, cands[-1][0])
+                if singular:
+                    break
         cands.sort()
         return cands, n_raw, rejected, reason
 

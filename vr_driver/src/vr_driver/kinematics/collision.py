@@ -265,6 +265,37 @@ class CollisionChecker:
         return bool(self._pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data,
                                                 self._config(q), True))
 
+    def first_in_collision(self, qs: Sequence[Sequence[float]], pause_every: int = 0,
+                           pause: Optional[Any] = None) -> Optional[int]:
+        """The index of the first of the configurations ``qs`` at which :meth:`in_collision` is
+        True; None when every one is free. The same check per configuration, the vectors validated
+        and put into the model's configurations all at once (the Python around each check was a
+        fifth of a path's check). ``pause()`` is called before every ``pause_every``-th check (a
+        caller that hands the interpreter over). A batch that is not all finite vectors of the
+        right length is checked one by one (:meth:`in_collision`'s errors)."""
+        try:
+            arr = np.asarray(qs, dtype=float)
+            ok = arr.ndim == 2 and arr.shape[1] == len(self._q_index) and bool(np.all(np.isfinite(arr)))
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            for i, q in enumerate(qs):
+                if pause_every and i % pause_every == pause_every - 1:
+                    pause()
+                if self.in_collision(q):
+                    return i
+            return None
+        full = np.tile(self._q, (len(arr), 1))
+        full[:, self._q_index] = arr
+        check = self._pin.computeCollisions
+        model, data, geom_model, geom_data = self.model, self.data, self.geom_model, self.geom_data
+        for i in range(len(full)):
+            if pause_every and i % pause_every == pause_every - 1:
+                pause()
+            if check(model, data, geom_model, geom_data, full[i], True):
+                return i
+        return None
+
     def frame_point(self, q: Sequence[float], frame: str, point: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
         """The point ``point`` [m] of the model's frame ``frame`` in the root frame at ``q``; the
         kinematics of ``q`` are kept for :meth:`in_collision_here`. ModelError for a frame the model

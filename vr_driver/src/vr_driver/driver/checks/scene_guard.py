@@ -246,10 +246,20 @@ class SceneGuard:
         check (the smallest signed distance over the checked pairs); from there on everything
         must be free. One that never gets free (a short jog step) must end farther out than it
         started."""
+        configurations = list(self.configurations(samples))
+        batch = getattr(checker, "first_in_collision", None)
+        if batch is not None:
+            # every configuration checked in one call (the same check, less Python around it);
+            # the first that collides is the answer unless it is the start (the rules below)
+            hit = batch([q for _, _, q in configurations], YIELD_EVERY, lambda: time.sleep(0))
+            if hit is None:
+                return None
+            if hit > 0:
+                return configurations[hit]
         escaping: Optional[set] = None
         depth = start_depth = 0.0
         last = None
-        for n, (k, f, q) in enumerate(self.configurations(samples)):
+        for n, (k, f, q) in enumerate(configurations):
             last = (k, f, q)
             if n % YIELD_EVERY == YIELD_EVERY - 1:
                 time.sleep(0)     # hand the interpreter over: the bus thread must not wait on a long check

@@ -43,6 +43,8 @@ from typing import List, Optional, Sequence, Tuple
 import numpy as np
 
 from ...errors import VrDriverError
+from ...kinematics.ik import rotation_and_position
+from ...kinematics.solver import Kinematics
 from ...poses import ControllerPose
 
 #: [rad] a solution this near the planned joints needs no search (the plain rounding of v3 costs
@@ -87,7 +89,8 @@ class WireMemo:
     def __init__(self) -> None:
         #: planned joints -> the plain rounding of their pose
         self.base: dict = {}
-        #: (planned joints, steps) -> (the wire pose, its tip frame in the chain root)
+        #: (planned joints, steps) -> (the wire pose, its tip frame in the chain root, that frame as
+        #: the IK's (rotation, position) target)
         self.poses: dict = {}
         #: (planned joints, steps, seed) -> the controller's solution (a joint tuple) or its VrDriverError
         self.solved: dict = {}
@@ -119,17 +122,29 @@ def wire_target(kin, wire, joints: Sequence[float], seed: Sequence[float], fine:
         base = memo.base[planned] = wire.wire_pose(kin.fk_pose(planned))
     mm, deg = wire.pose_resolution
     sizes = (mm, mm, mm, deg, deg, deg)
+    nearest = _analytic_nearest(kin)
+    tcp_to_tip = kin.conventions.tcp_to_tip
+
+    def tip_frame(pose: ControllerPose) -> np.ndarray:
+        """``kin.conventions.controller_to_tip(pose)`` of a wire pose (a ControllerPose of finite
+        floats: its 4x4 built without checking its numbers again -- the same floats, a fifth of a
+        neighbour's cost was the checks)."""
+        t = np.eye(4)
+        t[:3, :3] = pose.rotation()
+        t[:3, 3] = pose.position_m
+        return tcp_to_tip(t)
     used: set = set()               # the solutions this call asked for (WireTarget.solved counts them)
 
-    def framed(steps: Tuple[int, ...]) -> Tuple[ControllerPose, object]:
-        """The wire pose ``steps`` (X Y Z Rx Ry Rz, in resolution steps) off the plain rounding, and
-        its tip frame (what ``kin.ik_pose`` solves), each made once per memo."""
+    def framed(steps: Tuple[int, ...]) -> Tuple[ControllerPose, object, object]:
+        """The wire pose ``steps`` (X Y Z Rx Ry Rz, in resolution steps) off the plain rounding, its
+        tip frame (what ``kin.ik_pose`` solves) and that as the IK's target (None until
+        :func:`solution` first splits it), each made once per memo."""
         key = (planned, steps)
         out = memo.poses.get(key)
         if out is None:
             pose = base if not any(steps) else wire.wire_pose(
                 ControllerPose(*(v + s * d for v, s, d in zip(base.as_tuple(), steps, sizes))))
-            out = memo.poses[key] = (pose, kin.conventions.controller_to_tip(pose))
+            out = memo.poses[key] = (pose, tip_frame(pose), None)
         return out
 
     def pose_at(steps: Tuple[int, ...]) -> ControllerPose:
@@ -145,7 +160,14 @@ def wire_target(kin, wire, joints: Sequence[float], seed: Sequence[float], fine:
         used.add(key)
         if key not in memo.solved:
             try:
-                memo.solved[key] = tuple(kin.ik(framed(steps)[1], seed=s))      # = kin.ik_pose(pose, seed=s)
+                if nearest is None:
+                    memo.solved[key] = tuple(kin.ik(framed(steps)[1], seed=s))      # = kin.ik_pose(pose, seed=s)
+                else:
+                    pose, tip, rp = framed(steps)
+                    if rp is None:          # (split here: its PoseError is the solution's, as kin.ik's)
+                        rp = rotation_and_position(tip)
+                        memo.poses[(planned, steps)] = (pose, tip, rp)
+                    memo.solved[key] = tuple(nearest(rp[0], rp[1], kin.joint_vector(s), 0.0, 0.0))
             except VrDriverError as exc:
                 memo.solved[key] = exc
         out = memo.solved[key]
@@ -213,6 +235,19 @@ def wire_target(kin, wire, joints: Sequence[float], seed: Sequence[float], fine:
                 continue
             missed = max(missed, abs(_error(q, planned) - predicted))
     return WireTarget(best.pose, best.joints, best.error, best.steps, len(used))
+
+
+def _analytic_nearest(kin):
+    """``kin.ik`` without its wrapper, where that is all it does -- the analytic solver's solution
+    nearest a validated seed, of a target already split into (rotation, position)
+    (``IkSolver.nearest``: what ``Kinematics.ik`` calls with the seed validated, its deadline unused
+    by the analytic solver): the search solves each wire pose from one or more seeds, and the
+    target's split and checks per solution were an eighth of an IK's time. None (``kin.ik`` is
+    called): a model without the analytic solver, or one whose ``ik`` is another."""
+    solver = getattr(kin, "ik_solver", None)
+    if type(kin).ik is not Kinematics.ik or solver is None or solver.analytic is None:
+        return None
+    return solver.nearest
 
 
 #: [rad] the margin the grid search adds to the model's largest miss so far before it trusts the
