@@ -38,7 +38,8 @@ def planner(kin):
 LANE_OF = {
     "test_driver.py": "realtime",                  # DriverCore and the virtual G2 over a real pty
     "test_port_faults.py": "realtime",
-    "test_controller_sim_pty.py": "pty",           # the v1 program on a real pty: a lane of its own (84 s)
+    "test_controller_sim_pty.py": "pty",           # the v1 program on a real pty, at SCHED_FIFO: a lane of its own
+                                                   # beside the computing groups, as the soak (71 s; scripts/test)
     "test_controller_v2_pty.py": "realtime",
     "test_sim_line_pty.py": "realtime",
     "test_scan_line.py": "realtime",               # `scan` on the virtual line at a drawn rate

@@ -46,8 +46,8 @@ class ReconnectTest(unittest.TestCase):
         diag = Recorder("/diagnostics", DiagnosticArray)
         rosout = Recorder("/rosout", Log)     # the controller's start-up line marks its return
         # ... or, when that line left before this node was connected to the new process (a log line
-        # is not latched: seen once in a fresh clone), its first ~true_joints sample, stamped when
-        # read, a few ms after the same start-up
+        # is not latched: seen once in a fresh clone), its first ~true_joints sample, stamped
+        # with its program loop's first step (the time the arm was there), a few ms after the same start-up
         true_joints = Recorder("/virtual_controller/true_joints", JointState)
         client = actionlib.SimpleActionClient("/move_to_pose", MoveToPoseAction)
         self.assertTrue(client.wait_for_server(rospy.Duration(20.0)))

@@ -80,7 +80,7 @@ class DriverV3Test(DriverTestBase):
         final = self.joints.wait_for(lambda m: True, 2.0, after=time.monotonic()).position
         off = max(abs(a - b) for a, b in zip(final, points[-1]))
         self.assertLessEqual(off, V3.default_goal_tolerance, "%.3f deg from the last point" % math.degrees(off))
-        # the virtual G2's ~true_joints (no true_model here: the arm's own joints), stamped when read
+        # the virtual G2's ~true_joints (no true_model here: the arm's own joints), stamped when the arm was there
         true = Recorder("/virtual_controller/true_joints", JointState)
         msg = true.wait_for(lambda m: True, 2.0)
         self.assertIsNotNone(msg, "no /virtual_controller/true_joints")

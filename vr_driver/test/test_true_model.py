@@ -248,3 +248,23 @@ def test_a_pose_streamed_from_the_drivers_fk_lands_where_the_true_robot_puts_it(
         assert max(abs(a - b) for a, b in zip(reported[:3], stream[-1].controller_pose.as_tuple()[:3])) < 1e-6
     finally:
         rig.vc.stop()
+
+
+def test_a_true_joints_sample_is_dated_by_the_arms_step_not_by_its_reading():
+    """~true_joints' stamp (ros/virtual_controller.py) is the ROS time now minus the sample's age:
+    the time since the program loop's step that put the arm there. Read 35 ms after that step (a
+    busy machine runs the publisher late), the position is dated 35 ms back, not now -- a 0.2 s
+    speed window read 13 % fast under load with the reading's time (pose_terminal_check test_11)."""
+    t = [1000.0]
+    for protocol in ("v1", "v3"):
+        vc = VirtualController(protocol=protocol, true_model=EXAMPLE, clock=lambda: t[0])
+        try:
+            joints, age = vc.true_joints_sample()
+            assert joints == vc.true_joints and age == 0.0          # before any step: as read
+            vc.step()
+            t[0] += 0.035
+            joints, age = vc.true_joints_sample()
+            assert joints == vc.true_joints and age == pytest.approx(0.035)
+            assert joints != tuple(vc.joints)                        # the true robot's angles
+        finally:
+            vc.stop()

@@ -293,6 +293,14 @@ class ArmBase:
         with self._lock:
             return self.moving, self._pose, self._joints
 
+    def stepped_joints(self) -> Tuple[Tuple[float, ...], float]:
+        """(the exact joints, the clock time of the step that brought them up to date: -inf before
+        any) read together under the arm's lock: a reader that stamps a sample with its own time
+        dates it late by the time since the step, tens of ms on a busy machine (a 0.2 s speed window
+        read 13 % fast)."""
+        with self._lock:
+            return self._joints, self._last_step
+
     @property
     def moving(self) -> bool:
         raise NotImplementedError

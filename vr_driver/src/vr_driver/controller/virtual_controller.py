@@ -31,6 +31,7 @@ streaming arm's ``speed_scale`` (MOVEP's speed unit), ``blend_across_input_read`
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from typing import IO, Any, Callable, Optional, Sequence, Tuple, Union
@@ -331,6 +332,14 @@ class VirtualController(Simulator):
         :attr:`joints` (the controller's, ``q_true - zero_offset``) plus the true model's zero
         offsets (without ``true_model``: equal to :attr:`joints`). A simulation-only read-out."""
         return tuple(q + z for q, z in zip(self.arm.joints, self.zero_offsets))
+
+    def true_joints_sample(self) -> Tuple[Tuple[float, ...], float]:
+        """(:attr:`true_joints`, their age [s]: the time since the arm's step that put it there,
+        0 before the first step), read together: a sample's stamp is then now minus the age, the
+        time the arm was there, however late the reader runs."""
+        joints, stepped = self.arm.stepped_joints()
+        age = self.arm.clock() - stepped if math.isfinite(stepped) else 0.0
+        return tuple(q + z for q, z in zip(joints, self.zero_offsets)), max(0.0, age)
 
     # ---------------------------------------------------------------------------- injections
     def set_estop(self, pressed: bool) -> None:

@@ -34,8 +34,10 @@ executed / rejected / via_stored, reason, times, final_pose; v2: ``controller.st
 ``~true_joints`` (sensor_msgs/JointState, 50 Hz; a simulation-only diagnostic): the simulated arm's
 joints [rad] in the TRUE robot's angles (``VirtualController.true_joints``: the controller's plus the
 true model's zero offsets, from the model's zero pose; without ``~true_model`` the controller's),
-names joint_1 .. joint_6, stamped with the ROS time they were read -- where the arm really is, which
-joint_states (the driver's model, v1 / v3: its IK of the reported pose) may not show.
+names joint_1 .. joint_6, stamped with the ROS time the arm was there (its program loop's step:
+``VirtualController.true_joints_sample``, not the later moment they were read, which a busy machine
+delays by tens of ms) -- where the arm really is, which joint_states (the driver's model, v1 / v3:
+its IK of the reported pose) may not show.
 
 Exit status: 0 on shutdown, 2 bad parameter, 3 device problem, 1 internal error.
 """
@@ -109,8 +111,9 @@ def main() -> int:
     true_joints = rospy.Publisher("~true_joints", JointState, queue_size=10)
 
     def publish_true_joints() -> None:
-        msg = JointState(name=list(TRUE_JOINT_NAMES), position=list(controller.true_joints))
-        msg.header.stamp = rospy.Time.now()
+        joints, age = controller.true_joints_sample()
+        msg = JointState(name=list(TRUE_JOINT_NAMES), position=list(joints))
+        msg.header.stamp = rospy.Time.now() - rospy.Duration.from_sec(age)     # when the arm was there
         true_joints.publish(msg)
     services = [rospy.Service("~" + name, SetBool, handler(fault)) for name, fault in _SERVICES]
     rospy.on_shutdown(controller.request_stop)     # e.g. rosnode kill; the real stop is below
