@@ -33,6 +33,7 @@ Safety rules enforced here and in the parts (README "Reliability"):
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from typing import Callable, Generic, List, Optional, Sequence, Tuple, TypeVar
@@ -41,6 +42,7 @@ from pyprofibus_vendor.phy import Link
 
 from ..kinematics.preview import MovePreviewer
 from ..kinematics.solver import Kinematics
+from ..errors import VrDriverError
 from ..params import DriverParams
 from .motion.announced import Announced, announce_moves, announce_plan
 from .joints.arm_joints import ArmJoints
@@ -55,6 +57,7 @@ from .checks.scene_guard import SceneGuard
 from .link.stations import ControllerIo, IoLine
 from .motion.status import DriverError, DriverStatus
 from .checks.stream_prep import stream_preparation
+from .motion.stream_points import MAX_STREAM_TOLERANCE
 from .motion.trajectories import ValidTrajectory
 
 Clock = Callable[[], float]
@@ -298,11 +301,20 @@ class DriverCore:
         return 1.0 / rate if rate and rate > 0.0 else 1.0 / self.bus.cycle_rate_hz
 
     def announce(self, times: Sequence[float], positions: Sequence[Sequence[float]],
-                 previews: Optional[Sequence[Preview]] = None) -> Announced:
+                 previews: Optional[Sequence[Preview]] = None,
+                 stream: Optional[Sequence[StreamPoint]] = None) -> Announced:
         """The time and the TCP's top speed this protocol delivers for the planned path ``times`` /
         ``positions`` (from ``positions[0]``; :func:`.announced.announce_plan`): v1 its PTP moves
         between the plan's stop points (``previews``, made here when not given) at the program's
-        speed. Raises as :meth:`prepare_trajectory` when v1 would refuse the path."""
+        speed; a streaming protocol its ``stream`` as fed (made here when not given: the stream the
+        trajectory action would send, without its segment checks). Raises as
+        :meth:`prepare_trajectory` when v1 would refuse the path."""
+        if stream is None and self.wire.streams and self.streams is not None and len(times) > 1:
+            tol = math.radians(self.params.stream_path_tolerance)
+            try:
+                stream = self.streams.points(times, positions, tol, max(tol, MAX_STREAM_TOLERANCE))
+            except VrDriverError:
+                stream = ()        # (refused: the plan's own time is said; the run's check says why)
         if previews is None and not self.wire.streams and len(times) > 1:
             from .joints.resolution import WireResolution
             from .motion.trajectories import TrajectoryGoal, validate
@@ -314,12 +326,14 @@ class DriverCore:
                             default_goal_tolerance=self.wire.default_goal_tolerance,
                             resolution=WireResolution.of(self.kin, self.wire))
             previews = self.prepare_trajectory(traj, traj.positions[0])[2]
-        return announce_plan(self.kin, self.wire, times, positions, previews or (), self.params, self.bus_cycle())
+        return announce_plan(self.kin, self.wire, times, positions, previews or (), self.params, self.bus_cycle(),
+                             stream or ())
 
     def announce_run(self, run: TrajectoryRun) -> Announced:
-        """:meth:`announce` of a trajectory queued (v1: its jobs' previews)."""
+        """:meth:`announce` of a trajectory queued (v1: its jobs' previews; a stream: its job's points)."""
         previews = [job.preview for job in run.jobs if job.preview is not None]
-        return self.announce(run.traj.times, run.traj.positions, previews)
+        stream = run.jobs[0].points if self.wire.streams and len(run.jobs) == 1 else None
+        return self.announce(run.traj.times, run.traj.positions, previews, stream)
 
     def announce_move(self, preview: Preview) -> Announced:
         """The time and the TCP's top speed of one previewed move on this protocol: v1 at the program's

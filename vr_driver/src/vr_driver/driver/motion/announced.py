@@ -68,20 +68,29 @@ def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequen
 
 
 def announce_plan(kin: Any, wire: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
-                  previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0) -> Announced:
-    """The figures of a planned trajectory on the protocol ``wire``: a streaming protocol its timing and
+                  previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0,
+                  stream: Sequence[Any] = ()) -> Announced:
+    """The figures of a planned trajectory on the protocol ``wire``: a streaming protocol its timing --
+    as its ``stream`` (driver.motion.jobs.StreamPoint) is fed: its last point's ``fed`` arrival, later
+    than planned where the bus brings the first targets slower than the plan passes them -- and
     :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); v1 (no stream) the PTP
     ``previews`` it sends between the plan's stop points (``JobControl.prepare_trajectory``), at
     ``params.controller``'s program speed, each with its handshake."""
     if wire.streams:
         planned = float(times[-1]) if len(times) else 0.0
+        fed = stream[-1].fed if stream and stream[-1].fed is not None else planned
+        late = max(0.0, fed - float(stream[-1].time)) if stream and stream[-1].fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         top = plan_peak_speed(kin, times, positions)
-        return Announced(planned + latency, top,
-                         "protocol %s runs the plan's timing: %.2f s%s, the TCP at most %.0f mm/s"
-                         % (wire.name, planned + latency,
-                            " (the plan's %.2f s and the bus's %g cycles to the arm and back)"
-                            % (planned, STREAM_LATENCY_CYCLES) if latency else "", top))
+        said = planned + late + latency
+        parts = ["the plan's %.2f s" % planned]
+        if late > 0.005:
+            parts.append("%.2f s more as the bus brings its first targets" % late)
+        if latency:
+            parts.append("the bus's %g cycles to the arm and back" % STREAM_LATENCY_CYCLES)
+        how = "" if len(parts) == 1 else " (%s and %s)" % (", ".join(parts[:-1]), parts[-1])
+        return Announced(said, top, "protocol %s runs the plan's timing: %.2f s%s, the TCP at most %.0f mm/s"
+                         % (wire.name, said, how, top))
     return announce_moves(wire, previews, params, cycle_time)
 
 

@@ -78,6 +78,9 @@ class StreamPoint:
     #                              nor before the arm reached that point
     pose: Optional[ControllerPose] = None   # FK of ``joints`` in controller units (mm, deg): what a
     #                              Cartesian streaming protocol sends (None for a joint protocol)
+    fed: Optional[float] = None  # the arrival its speed is set for, seconds from the stream's start: no
+    #                              sooner than the bus can have brought the next target (later than
+    #                              ``time`` by the feed's shift, stream_points.fed_times; None: ``time``)
 
 
 class JobPhase(enum.Enum):

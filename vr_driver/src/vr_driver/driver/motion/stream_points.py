@@ -151,23 +151,23 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
         arrive = list(ts)
         for i, t in zip(idx, fed):
             arrive[i] = t
-        speeds = stream_speeds(positions[0], pts, arrive, vmax)
     else:
-        speeds = stream_speeds(positions[0], pts, ts, vmax)
+        arrive = list(ts)
+    speeds = stream_speeds(positions[0], pts, arrive, vmax)
     # a pause of the plan (a kept point where the previous one is): not a target; the arm stops
     # exactly at the point before it, and the point after it is offered only when the pause ends
     out_pts: List[Tuple[float, ...]] = []
-    out = []                                      # (speed, time, index, release) per target
+    out = []                                      # (speed, time, index, release, fed) per target
     holds = set()                                 # targets the arm stops at for a pause
     prev, release = tuple(float(v) for v in positions[0]), 0.0
-    for q, speed, t, k in zip(pts, speeds, ts, kept):
+    for q, speed, t, k, fed_at in zip(pts, speeds, ts, kept, arrive):
         if max(abs(a - b) for a, b in zip(prev, q)) <= PAUSE_EPS:
             release = t
             if out:
                 holds.add(len(out) - 1)
             continue
         out_pts.append(q)
-        out.append((speed, t, k, release))
+        out.append((speed, t, k, release, fed_at))
         prev, release = q, 0.0
     if not out:
         return (), []
@@ -176,8 +176,8 @@ def _timed(times: Sequence[float], positions: Sequence[Sequence[float]], kept: S
     tight = [] if smooth <= 0 else [
         out[i][2] for i in range(len(out) - 1)
         if i not in holds and corner_rounding(1, moves, velocities, i) > corner_tolerance]
-    stream = tuple(StreamPoint(q, speed, 0 if i in holds else level, t, k, release)
-                   for i, (q, level, (speed, t, k, release)) in enumerate(zip(out_pts, levels, out)))
+    stream = tuple(StreamPoint(q, speed, 0 if i in holds else level, t, k, release, fed=fed_at)
+                   for i, (q, level, (speed, t, k, release, fed_at)) in enumerate(zip(out_pts, levels, out)))
     return stream, tight
 
 
