@@ -220,23 +220,26 @@ class CellValidity:
         return worst
 
     def _tcp_by_checker(self) -> Any:
-        """(the checker's frame of the chain's tip, the TCP in it [m], the 4x4 from the root to
-        ``base``) when the checker's model puts the TCP where the kinematics do (checked at three
-        configurations, to 1e-6 mm), else False: then the box is checked by KDL's FK."""
+        """(the checker's probe of the TCP in ``base``: :meth:`CollisionChecker.point_probe
+        <vr_driver.kinematics.collision.CollisionChecker.point_probe>`) when the checker's model puts
+        the TCP where the kinematics do (checked at three configurations, to 1e-6 mm), else False:
+        then the box is checked by KDL's FK."""
         if self._tcp is None:
             self._tcp = False
-            if self.checker is not None and hasattr(self.checker, "frame_point") \
+            if self.checker is not None and hasattr(self.checker, "point_probe") \
                     and hasattr(self.kin, "tcp_in_tip"):
                 base, offset = self.kin.tcp_in_tip()
                 try:
+                    probe = self.checker.point_probe(self.kin.tip, offset, base)
                     n = len(self.kin.joint_names)
                     for q in ((0.0,) * n, tuple(0.3 + 0.1 * i for i in range(n)), tuple(-0.9 + 0.2 * i for i in range(n))):
-                        p = base[:3, :3] @ self.checker.frame_point(q, self.kin.tip, offset) + base[:3, 3]
+                        self.checker.in_collision(q)
+                        p = self.checker.point_here(probe)
                         if max(abs(a - b / 1000.0) for a, b in zip(p, self.kin.tcp_position(q))) > 1e-9:
                             return self._tcp
                 except (VrDriverError, ValueError, TypeError):
                     return self._tcp
-                self._tcp = (self.kin.tip, offset, base)
+                self._tcp = probe
         return self._tcp
 
     def in_collision(self, q: Sequence[float]) -> bool:
@@ -247,14 +250,14 @@ class CellValidity:
             if self._outside(q) is not None:
                 return True
             return self.checker is not None and self.checker.in_collision(q)
-        # one forward kinematics (the checker's pinocchio) for the box and the collisions
-        frame, offset, base = tcp
-        p = self.checker.frame_point(q, frame, offset)
+        # one forward kinematics (the checker's pinocchio, in its collision check) for both: the
+        # collisions first, then the TCP where that check put it
+        if self.checker.in_collision(q):
+            return True
+        x, y, z = self.checker.point_here(tcp)
         ws, m = self.workspace, self.margin
-        for value, (lo, hi) in zip(base[:3, :3] @ p + base[:3, 3], (ws.x, ws.y, ws.z)):
-            if not lo + m <= value * 1000.0 <= hi - m:
-                return True
-        return self.checker.in_collision_here()
+        return not (ws.x[0] + m <= x * 1000.0 <= ws.x[1] - m and ws.y[0] + m <= y * 1000.0 <= ws.y[1] - m
+                    and ws.z[0] + m <= z * 1000.0 <= ws.z[1] - m)
 
     def contacts(self, q: Sequence[float]) -> List[Any]:
         out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
