@@ -347,6 +347,13 @@ class CollisionChecker:
         joint, local, outer = probe
         return (outer * self._pool_data.oMi[joint]).act(local)
 
+    def point_at(self, q: Sequence[float], probe: Tuple[int, np.ndarray, Any]) -> np.ndarray:
+        """The point of ``probe`` (:meth:`point_probe`) at ``q``: a forward kinematics of its own
+        (the configurations of a batch after its verdict, :meth:`first_collision`)."""
+        joint, local, outer = probe
+        self._pin.forwardKinematics(self.model, self.data, self._config(q))
+        return (outer * self.data.oMi[joint]).act(local)
+
     def contacts(self, q: Sequence[float]) -> List[Contact]:
         """Every colliding pair at ``q`` (one per link / object pair: the deepest geometry pair),
         nearest first; [] when free."""

@@ -48,9 +48,12 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+import numpy as np
+
 from ...errors import MissingDependency, VrDriverError
 from ...kinematics import deps
-from ...kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError, pose_target
+from ...kinematics.planner import (DEFAULT_CLEARANCE, PLANNERS, BatchValidity, PlannedTrajectory, Planner, PlanningError,
+                                   pose_target)
 from ...kinematics.solver import ConfigurationRule, stretched_elbow
 from ...poses import ControllerPose, Workspace
 from ..checks.commissioned import planning_kinematics
@@ -254,10 +257,33 @@ class CellValidity:
         # collisions first, then the TCP where that check put it
         if self.checker.in_collision(q):
             return True
-        x, y, z = self.checker.point_here(tcp)
+        return self._out_of_box(self.checker.point_here(tcp))
+
+    def _out_of_box(self, p: Sequence[float]) -> bool:
+        """Whether the TCP at ``p`` [m, in ``base``] is outside the box less the margin."""
+        x, y, z = p
         ws, m = self.workspace, self.margin
         return not (ws.x[0] + m <= x * 1000.0 <= ws.x[1] - m and ws.y[0] + m <= y * 1000.0 <= ws.y[1] - m
                     and ws.z[0] + m <= z * 1000.0 <= ws.z[1] - m)
+
+    def first_invalid(self, qs: Any) -> Optional[int]:
+        """The index of the first row of ``qs`` (n x the joints) that :meth:`in_collision` finds
+        invalid, or None -- the collisions of the rows in one call of the checker (its
+        ``first_collision``, up to the first), then the box of the rows before that one."""
+        tcp = self._tcp_by_checker()
+        if not tcp or not hasattr(self.checker, "first_collision"):
+            for i, q in enumerate(qs):
+                if self.in_collision(tuple(q)):
+                    return i
+            return None
+        hit = self.checker.first_collision(qs)
+        end = len(qs) if hit is None else hit
+        for i in range(end):
+            if self._out_of_box(self.checker.point_at(qs[i], tcp)):
+                self.counter[0] += i + 1
+                return i
+        self.counter[0] += end + (hit is not None)
+        return hit
 
     def contacts(self, q: Sequence[float]) -> List[Any]:
         out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
@@ -615,14 +641,34 @@ class PlanActionCore:
         strict = validity.copy()
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
         if self.core.protocol.joint_targets or not (wrist_margin or elbow_margin):
-            return lambda q: not strict.in_collision(q)
+            return BatchValidity(lambda q: not strict.in_collision(q), strict.first_invalid)
         stretched = stretched_elbow(self.kin)
+        elbow = elbow_margin and stretched is not None
 
         def clear(q) -> bool:
             return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
-                stretched is None or not elbow_margin
-                or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
-        return lambda q: clear(q) and not strict.in_collision(q)
+                not elbow or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
+
+        def first_invalid(qs: Any) -> Optional[int]:
+            # the margins of every row (numpy; the elbow's remainder as clear's), then the cell's
+            # test of the rows before the first outside them
+            qs = np.asarray(qs, dtype=float)
+            bad = np.zeros(len(qs), dtype=bool)
+            if wrist_margin:
+                bad |= np.abs(qs[:, _WRIST]) < WRIST_MARGIN
+            if elbow:
+                turn = 2.0 * math.pi
+                off = qs[:, _ELBOW] - stretched
+                off = np.abs(off - turn * np.round(off / turn))
+                # clear's exact remainder where the rounding above could tip the comparison
+                edge = np.flatnonzero(np.abs(off - ELBOW_MARGIN) < 1e-9)
+                off[edge] = [abs(math.remainder(v - stretched, turn)) for v in qs[edge, _ELBOW].tolist()]
+                bad |= off < ELBOW_MARGIN
+            outside = np.flatnonzero(bad)
+            end = int(outside[0]) if len(outside) else len(qs)
+            hit = strict.first_invalid(qs[:end]) if end else None
+            return hit if hit is not None else (end if end < len(qs) else None)
+        return BatchValidity(lambda q: clear(q) and not strict.in_collision(q), first_invalid)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:
         """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked
