@@ -53,7 +53,7 @@ import numpy as np
 from ...errors import MissingDependency, VrDriverError
 from ...kinematics import deps
 from ...kinematics.planner import (DEFAULT_CLEARANCE, PLANNERS, BatchValidity, PlannedTrajectory, Planner, PlanningError,
-                                   pose_target)
+                                   joint_weights, pose_target)
 from ...kinematics.solver import ConfigurationRule, stretched_elbow
 from ...poses import ControllerPose, Workspace
 from ..checks.commissioned import planning_kinematics
@@ -193,6 +193,7 @@ class CellValidity:
         #: [checks made by this validity and its copies] (the plan action's profile)
         self.counter = counter if counter is not None else [0]
         self._tcp: Any = None           # _tcp_by_checker's finding
+        self._tcp_reach: Optional[np.ndarray] = None   # [m/rad] per joint: how far its turn moves the TCP at most
         self.kin = kinematics
         self.workspace = workspace
         self.margin = float(margin)
@@ -276,14 +277,38 @@ class CellValidity:
                 if self.in_collision(tuple(q)):
                     return i
             return None
+        qs = np.asarray(qs, dtype=float)
         hit = self.checker.first_collision(qs)
         end = len(qs) if hit is None else hit
-        for i in range(end):
+        for i in self._box_rows(qs[:end], tcp):
             if self._out_of_box(self.checker.point_at(qs[i], tcp)):
                 self.counter[0] += i + 1
                 return i
         self.counter[0] += end + (hit is not None)
         return hit
+
+    def _box_rows(self, qs: np.ndarray, tcp: Any) -> List[int]:
+        """The rows of ``qs`` whose TCP must be checked against the box, in order: all but those
+        proven inside it by the first or the last row's -- the TCP of a row moves no farther from
+        that row's than sum_i w_i |dq_i| (``joint_weights`` with the TCP's distance from the tip as
+        the allowance: the triangle inequality), so a row within less than the box's room around
+        that TCP is inside (the first and the last row are checked themselves)."""
+        n = len(qs)
+        if n <= 2:
+            return list(range(n))
+        if self._tcp_reach is None:
+            self._tcp_reach = np.array(joint_weights(self.kin, float(np.linalg.norm(self.kin.tcp_in_tip()[1]))))
+        ws, m = self.workspace, self.margin
+        need = np.ones(n, dtype=bool)
+        for k in (0, n - 1):
+            p = self.checker.point_at(qs[k], tcp) * 1000.0
+            room = min(p[0] - ws.x[0] - m, ws.x[1] - m - p[0], p[1] - ws.y[0] - m, ws.y[1] - m - p[1],
+                       p[2] - ws.z[0] - m, ws.z[1] - m - p[2])
+            if room > 0.0:
+                # [mm], with a micrometre's allowance for the rounding of both sides
+                need &= np.abs(qs - qs[k]) @ self._tcp_reach * 1000.0 + 1e-3 >= room
+        need[0] = need[-1] = True
+        return np.flatnonzero(need).tolist()
 
     def contacts(self, q: Sequence[float]) -> List[Any]:
         out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
