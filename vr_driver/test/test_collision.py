@@ -182,6 +182,13 @@ def test_the_broad_phase_verdicts_are_every_pairs_and_follow_the_padding_and_the
     assert checker.in_collision(free) and checker.first_collision([HOME, free]) == 1
     checker.set_scene(Scene())
     assert not checker.in_collision(free)
+    # a copy shares the models built, not its padding, scene or verdicts
+    copy = checker.copy()
+    copy.set_padding(0.06)
+    assert copy.in_collision(free) and not checker.in_collision(free)
+    copy.set_padding(0.0)
+    copy.set_scene(Scene([SceneObject("block", "box", (0.1, 0.1, 0.1), tuple(tcp))]))
+    assert copy.in_collision(free) and not checker.in_collision(free) and not checker.scene.names()
 
 
 @needs_libs
