@@ -106,15 +106,18 @@ def test_a_goal_in_collision_names_the_link_and_the_object(kin):
 
 
 def test_a_scene_change_reaches_the_next_plan(kin):
-    """A box where the goal is: the next plan is refused naming it; removed: planned again."""
+    """A box where the goal is: the next plan is refused naming it, and the roadmap of the plans
+    before is dropped (it was the cell without the box); removed: planned again."""
     w = world(kin)
     planning = PlanActionCore(w.core, kinematics=kin)
     goal = AWAY
     assert planning.plan(goal).ok
+    planning.roadmap.add([kin.named_states["home"], AWAY.joints[1]])
     x, y, z = kin.fk_pose(AWAY.joints[1]).position_m
     w.core.add_scene_object(SceneObject("crate", "box", (0.1, 0.1, 0.1), (x, y, z)))
     out = planning.plan(goal)
     assert out.code == P.GOAL_IN_COLLISION and "with object crate" in out.text, out.text
+    assert len(planning.roadmap) == 0 and planning.roadmap.counts["dropped"] == 1
     w.core.remove_scene_object("crate")
     assert planning.plan(goal).ok
 

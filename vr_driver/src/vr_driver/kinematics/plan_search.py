@@ -199,6 +199,15 @@ class OmplSearch:
         self._found = (search, pdef)          # the path is theirs: kept alive as long as this search
         return pdef.getSolutionPath()
 
+    def path_of(self, joints: Sequence[Sequence[float]]) -> Any:
+        """An OMPL path through ``joints`` [rad] (a route found elsewhere: the roadmap's), for
+        :meth:`simplified`."""
+        path = self._og.PathGeometric(self.si)
+        for q in joints:
+            path.append(self._state(q))
+        self._found = (path,)
+        return path
+
     def simplified(self, path: Any) -> List[Tuple[float, ...]]:
         """``path`` (of :meth:`solve`) simplified, as joints [rad]: OMPL's simplification steps with
         step counts, not a time limit (a seed gives one path): rounds of vertex reduction (random

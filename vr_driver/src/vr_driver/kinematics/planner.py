@@ -25,7 +25,10 @@ step and why, and nothing else happens:
    of steps 3 and 4) within ``time_budget`` seconds. The planner keeps ``clearance`` more than the
    validity asks (a checker: a copy of it padded by that much more; a callable:
    ``planning_validity`` when given) except near the start and the goal, so that what the later
-   steps deviate from the checked path stays valid.
+   steps deviate from the checked path stays valid. Given a ``roadmap`` (the paths of earlier
+   plans in the same cell, :mod:`~vr_driver.kinematics.roadmap`), a route of them joined to the
+   start and the goal is tried before the search, every motion of it checked as the search checks
+   its motions; the simplification, the timing and the checks below are the same for it.
 4. Simplification (OMPL's PathSimplifier, step counts rather than a time limit, so that a seed
    gives one result): vertex reduction, partial shortcuts, collapsing close vertices, B-spline
    smoothing of the corners; each step keeps the path valid (it checks its motions as the planner
@@ -83,6 +86,7 @@ from ..poses import ControllerPose, ros_to_matrix
 from . import deps
 from .plan_search import SWEEP_VALIDATED, BatchValidity, OmplSearch, first_invalid
 from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
+from .roadmap import Roadmap
 
 __all__ = ["PlanningError", "PlannedTrajectory", "Planner", "BatchValidity", "first_invalid", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
            "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN",
@@ -280,7 +284,8 @@ class Planner:
                  velocity_scaling: float = 1.0, acceleration_scaling: float = 1.0, dt: float = DEFAULT_DT,
                  max_sweep: float = DEFAULT_MAX_SWEEP, clearance: float = DEFAULT_CLEARANCE,
                  planning_validity: Optional[Callable[[Sequence[float]], bool]] = None,
-                 goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None) -> None:
+                 goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None,
+                 roadmap: Optional[Roadmap] = None) -> None:
         if planner not in PLANNERS:
             raise PlanningError("plan", "unknown planner %r: the planners are %s" % (planner, ", ".join(PLANNERS)))
         self.kin = kinematics
@@ -302,6 +307,8 @@ class Planner:
         if goal_preference is not None and not callable(goal_preference):
             raise TypeError("goal_preference must be a callable rank(start, q) -> int, got %r" % (goal_preference,))
         self._prefer = goal_preference
+        #: the paths of earlier plans (a Roadmap, kept by the caller) tried before the search, or None
+        self.roadmap = roadmap
         self._ends: Tuple[Tuple[float, ...], ...] = ()
         for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
             if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
@@ -524,6 +531,14 @@ class Planner:
         search = OmplSearch(self._ompl, self.weights, self.lower, self.upper, self.max_sweep,
                             self.planning_valid, seed, sweep_motions=self.planner_name in SWEEP_VALIDATED)
         stages = [(goals[:1], budget)] if len(goals) == 1 else [(goals[:1], budget * NEAREST_SHARE), (goals[1:], None)]
+        path = None
+        if self.roadmap is not None:
+            # the earlier plans' paths first: a route of them, every motion checked now
+            route = self.roadmap.route(q0, q1, lambda a, b: self.motion_valid(a, b, self.planning_valid) is None)
+            if route is not None:
+                path = search.path_of(route)
+                timings["roadmap"] = timings.get("roadmap", 0.0) + 1.0
+                stages = []
         for n_stage, (targets, share) in enumerate(stages):
             if n_stage:
                 # the others: a straight move first (nearest first); then the planner to any of them
@@ -557,6 +572,8 @@ class Planner:
                 why, contacts = self._why_invalid(bad)
                 raise PlanningError("plan", "the simplified path passes an invalid configuration %s%s"
                                     % (_fmt(bad), why), contacts)
+        if self.roadmap is not None:
+            self.roadmap.add(out)
         return out
 
     # ---------------------------------------------------------------------- the result's check

@@ -37,6 +37,11 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
   last plan ended whose tries found no path retreats on its last try along the way the arm came
   (:func:`retreat_waypoints`: out of a narrow place such as under a hood), every leg checked.
+- **Kept between plans**: the paths of the plans made (:class:`~vr_driver.kinematics.roadmap.Roadmap`,
+  one per core: in the plan action's worker process, for as long as it lives), tried as a route
+  before the next search; dropped when the scene, the padding or the box changes (the snapshot's
+  key, :meth:`PlanActionCore._cell_key`). A hint only: every motion of a route is checked again by
+  the plan's own validity, and the plan is checked as any other.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
 """
@@ -54,6 +59,7 @@ from ...errors import MissingDependency, VrDriverError
 from ...kinematics import deps
 from ...kinematics.planner import (DEFAULT_CLEARANCE, PLANNERS, BatchValidity, PlannedTrajectory, Planner, PlanningError,
                                    joint_weights, pose_target)
+from ...kinematics.roadmap import Roadmap
 from ...kinematics.solver import ConfigurationRule, stretched_elbow
 from ...poses import ControllerPose, Workspace
 from ..checks.commissioned import planning_kinematics
@@ -148,8 +154,9 @@ class PlanOutcome:
     #: ``snapshot`` (copying the checker), the planner's steps summed over the tries (``goal``,
     #: ``plan``, ``simplify``, ``time``, ``check``), ``stream_check`` (the driver's own check of each
     #: plan, :meth:`PlanActionCore.driver_refusal`), ``checks`` (validity checks made: the box and the
-    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words) and
-    #: ``retreat`` (1 when the last try went back along the last plan's path)
+    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words),
+    #: ``retreat`` (1 when the last try went back along the last plan's path) and ``roadmap``
+    #: (legs that were a route of earlier plans, :class:`~vr_driver.kinematics.roadmap.Roadmap`)
     profile: Dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -382,6 +389,9 @@ class PlanActionCore:
         #: the geometric path of the last plan made (its start first), or None: a way back out of
         #: where it went, for a next plan from its end that finds no path (:func:`retreat_waypoints`)
         self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
+        #: the paths of the plans made in this cell (kinematics.roadmap: a hint the planner checks
+        #: again), kept while the scene, the padding and the box stay (:meth:`_cell_key`)
+        self.roadmap = Roadmap(joint_weights(self.kin))
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
 
@@ -394,6 +404,14 @@ class PlanActionCore:
         workspace box."""
         checker = self.core.collision if self.collision_checked else None
         return CellValidity(checker.copy() if checker is not None else None, self.kin, self.params.workspace)
+
+    def _cell_key(self, validity: CellValidity) -> Tuple[Any, ...]:
+        """What the roadmap's paths were planned against: the scene's objects, the padding, the
+        box (another drops them: :meth:`Roadmap.keep <vr_driver.kinematics.roadmap.Roadmap.keep>`)."""
+        checker = validity.checker
+        scene = tuple(repr(o) for o in checker.scene.objects()) if checker is not None else None
+        ws = validity.workspace
+        return scene, validity.padding, (tuple(ws.x), tuple(ws.y), tuple(ws.z)), validity.margin
 
     def resolve(self, goal: PlanGoal) -> Tuple[Any, str, float, float]:
         """(the planner's goal, planner, budget [s], velocity scaling) or PlanningError('goal', ...)."""
@@ -470,6 +488,7 @@ class PlanActionCore:
                 with self._lock:
                     with self.core.planning_gate:     # the checker is replaced as a whole under it
                         validity = self.snapshot()
+                    self.roadmap.keep(self._cell_key(validity))
                     prof["snapshot"] += time.perf_counter() - tick
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
@@ -477,7 +496,7 @@ class PlanActionCore:
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
-                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across))
+                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across), roadmap=self.roadmap)
                     retreat = retreat_waypoints(self.last_path, tuple(start), crossing, attempt, prof["replans"])
                     if retreat:
                         prof["retreat"] = 1
