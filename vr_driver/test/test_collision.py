@@ -160,6 +160,7 @@ def test_the_broad_phase_verdicts_are_every_pairs_and_follow_the_padding_and_the
         checker.set_padding(padding)
         truth = [narrow(q) for q in qs]
         assert [checker.in_collision(q) for q in qs] == truth
+        assert [bool(checker.contacts(q)) for q in qs] == truth          # the words name them all
         assert 0 < sum(truth) < len(truth)
         near = sum(1 for q, hit in zip(qs, truth) if hit and checker.min_distance(q) >= 0.0)
         assert padding == 0.0 or near > 10            # verdicts inside the padding were compared

@@ -22,7 +22,7 @@ Padding inflates every shape by ``padding`` [m] for the verdict (coal's security
 counts as colliding when its distance is below ``padding``); distances reported are those of the
 true shapes. The URDF's collision geometry is made of primitives (vr006l_macro.xacro), as the scene.
 
-The verdicts (``in_collision``, ``in_collision_here``, ``first_collision``, ``check_path``) go
+The verdicts (``in_collision``, ``first_collision``, ``check_path``) go
 through a broad phase (pinocchio's tree broad-phase pool over coal's dynamic AABB tree, one
 configuration or a batch of them in one C++ call, stopping at the first collision): the same
 verdict as every pair's narrow phase (``contacts``, and the tests' brute-force comparison), about
@@ -329,9 +329,8 @@ class CollisionChecker:
         return int(hits[0]) if len(hits) else None
 
     def frame_point(self, q: Sequence[float], frame: str, point: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        """The point ``point`` [m] of the model's frame ``frame`` in the root frame at ``q``; the
-        kinematics of ``q`` are kept for :meth:`in_collision_here`. ModelError for a frame the model
-        has not. (Pinocchio's forward kinematics: a twentieth of KDL's through its Python wrapper.)"""
+        """The point ``point`` [m] of the model's frame ``frame`` in the root frame at ``q``.
+        ModelError for a frame the model has not. (Pinocchio's forward kinematics: a twentieth of KDL's through its Python wrapper.)"""
         pin = self._pin
         fid = self._frames.get(frame)
         if fid is None:
@@ -370,15 +369,22 @@ class CollisionChecker:
 
     def contacts(self, q: Sequence[float]) -> List[Contact]:
         """Every colliding pair at ``q`` (one per link / object pair: the deepest geometry pair),
-        nearest first; [] when free."""
+        nearest first; [] when free. Each pair's narrow phase on a geometry data of its own (a
+        fresh one: coal's narrow phase on a data that checked other configurations before missed
+        a pair the verdicts find, module text)."""
         pin = self._pin
-        pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data, self._config(q), False)
+        data = self.geom_model.createData()
+        for req in data.collisionRequests:
+            req.security_margin = self.padding
+        for req in data.distanceRequests:
+            req.enable_signed_distance = True
+        pin.computeCollisions(self.model, self.data, self.geom_model, data, self._config(q), False)
         best = {}
-        for k, res in enumerate(self.geom_data.collisionResults):
+        for k, res in enumerate(data.collisionResults):
             if not res.isCollision():
                 continue
-            pin.computeDistance(self.geom_model, self.geom_data, k)
-            d = float(self.geom_data.distanceResults[k].min_distance)
+            pin.computeDistance(self.geom_model, data, k)
+            d = float(data.distanceResults[k].min_distance)
             a, b, world = self._pair_names[k]
             key = (a, b, world)
             if key not in best or d < best[key].distance:

@@ -243,7 +243,6 @@ class Kinematics:
         self.named_states = {name: self.joint_vector(values) for name, values in (named_states or {}).items()}
         self.conventions = conventions or self._default_conventions()
         self._tcp_frames: Optional[Tuple[FrameConventions, Any, Any]] = None   # (tcp_position's)
-        self._tcp_arrays: Optional[Tuple[FrameConventions, np.ndarray, np.ndarray]] = None   # (tcp_positions')
 
     # ------------------------------------------------------------------------------------ factories
     @classmethod
@@ -434,20 +433,6 @@ class Kinematics:
             cached = self._tcp_frames = (conv, matrix_to_kdl_frame(base), kdl.Vector(*(float(v) for v in offset)))
         p = cached[1] * (self.fk_frame(q) * cached[2])
         return p[0] * 1000.0, p[1] * 1000.0, p[2] * 1000.0
-
-    def tcp_positions(self, qs: Any) -> np.ndarray:
-        """:meth:`tcp_position` of each row of ``qs`` (n x dof, [rad]) as an (n, 3) array [mm]: the
-        URDF chain's forward kinematics batched in numpy (``RobotModel.chain_fk``), for a check of
-        a batch of configurations against the workspace box (a motion's states at once)."""
-        conv = self.conventions
-        cached = self._tcp_arrays
-        if cached is None or cached[0] is not conv:
-            base, offset = self.tcp_in_tip()
-            cached = self._tcp_arrays = (conv, base, offset)
-        _, base, offset = cached
-        tips = self.model.chain_fk(self.base, self.tip, qs)
-        p = tips[:, :3, :3] @ offset + tips[:, :3, 3]
-        return (p @ base[:3, :3].T + base[:3, 3]) * 1000.0
 
     # -------------------------------------------------------------------------------- Jacobian
     def jacobian(self, q: Sequence[float]) -> np.ndarray:
