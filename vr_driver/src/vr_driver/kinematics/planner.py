@@ -211,6 +211,19 @@ def _checker_validity(checker: Any) -> Callable[[Sequence[float]], bool]:
     return BatchValidity(lambda q: not in_collision(q), batch)
 
 
+def chord_states(positions: Sequence[Sequence[float]], weights: Sequence[float], max_sweep: float
+                 ) -> Tuple[np.ndarray, np.ndarray]:
+    """(the states motion_valid checks on each straight chord between two of ``positions``, chord
+    after chord, as rows; the chord of each row, 0 for the first) -- ``max_sweep`` apart by the
+    sweep bound (``weights``)."""
+    pos = np.asarray(positions, dtype=float)
+    steps = np.array([max(1, int(math.ceil(sum(w * abs(x - y) for w, x, y in zip(weights, a, b)) / max_sweep)))
+                      for a, b in zip(positions, positions[1:])])
+    chord = np.repeat(np.arange(len(steps)), steps)
+    f = (np.arange(len(chord)) - np.repeat(np.cumsum(steps) - steps, steps) + 1) / steps[chord]
+    return pos[chord] + f[:, None] * (pos[1:] - pos[:-1])[chord], chord
+
+
 def _validity(validity: Any) -> Tuple[Callable[[Sequence[float]], bool], Optional[Callable[[Sequence[float]], list]]]:
     """(is_valid, contacts or None) of a checker (``in_collision`` / ``contacts``) or a callable."""
     if validity is None:
@@ -584,12 +597,7 @@ class Planner:
         in turn, its states all in one batch of the validity."""
         if len(positions) < 2:
             return None
-        pos = np.asarray(positions, dtype=float)
-        steps = np.array([max(1, int(math.ceil(self._sweep(a, b) / self.max_sweep)))
-                          for a, b in zip(positions, positions[1:])])
-        chord = np.repeat(np.arange(len(steps)), steps)
-        f = (np.arange(len(chord)) - np.repeat(np.cumsum(steps) - steps, steps) + 1) / steps[chord]
-        qs = pos[chord] + f[:, None] * (pos[1:] - pos[:-1])[chord]
+        qs, chord = chord_states(positions, self.weights, self.max_sweep)
         first = first_invalid(self.is_valid, qs)
         return None if first is None else (int(chord[first]) + 1, tuple(float(v) for v in qs[first]))
 

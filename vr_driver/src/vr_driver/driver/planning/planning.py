@@ -40,7 +40,7 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
 - **Kept between plans**: the paths of the plans made (:class:`~vr_driver.kinematics.roadmap.Roadmap`,
   one per core: in the plan action's worker process, for as long as it lives), tried as a route
   before the next search; dropped when the scene, the padding or the box changes (the snapshot's
-  key, :meth:`PlanActionCore._cell_key`). A hint only: every motion of a route is checked again by
+  key, :func:`cell_key`). A hint only: every motion of a route is checked again by
   the plan's own validity, and the plan is checked as any other.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
@@ -67,6 +67,7 @@ from ..checks.commissioned import planning_kinematics
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
            "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
+           "cell_key", "margin_validity",
            "arm_points", "code_of", "retreat_waypoints"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
@@ -361,6 +362,46 @@ def arm_points(kinematics: Any, q: Sequence[float]) -> List[Tuple[float, float, 
     return out
 
 
+def cell_key(validity: CellValidity) -> Tuple[Any, ...]:
+    """What a plan's validity depends on besides the model: the scene's objects, the padding, the
+    box and its margin (the roadmap's key: another drops its paths, :meth:`Roadmap.keep
+    <vr_driver.kinematics.roadmap.Roadmap.keep>`)."""
+    checker = validity.checker
+    scene = tuple(repr(o) for o in checker.scene.objects()) if checker is not None else None
+    ws = validity.workspace
+    return scene, validity.padding, (tuple(ws.x), tuple(ws.y), tuple(ws.z)), validity.margin
+
+
+def margin_validity(strict: CellValidity, wrist_margin: bool, stretched: Optional[float]) -> BatchValidity:
+    """``strict`` with |joint_5| >= WRIST_MARGIN (``wrist_margin``) and joint_3 ELBOW_MARGIN from
+    ``stretched`` (the stretched elbow's joint_3; None: no elbow margin), one configuration or a
+    batch (the margins in numpy, then ``strict`` on the rows before the first outside them)."""
+    elbow = stretched is not None
+
+    def clear(q) -> bool:
+        return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
+            not elbow or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
+
+    def first_invalid(qs: Any) -> Optional[int]:
+        qs = np.asarray(qs, dtype=float)
+        bad = np.zeros(len(qs), dtype=bool)
+        if wrist_margin:
+            bad |= np.abs(qs[:, _WRIST]) < WRIST_MARGIN
+        if elbow:
+            turn = 2.0 * math.pi
+            off = qs[:, _ELBOW] - stretched
+            off = np.abs(off - turn * np.round(off / turn))
+            # clear's exact remainder where the rounding above could tip the comparison
+            edge = np.flatnonzero(np.abs(off - ELBOW_MARGIN) < 1e-9)
+            off[edge] = [abs(math.remainder(v - stretched, turn)) for v in qs[edge, _ELBOW].tolist()]
+            bad |= off < ELBOW_MARGIN
+        outside = np.flatnonzero(bad)
+        end = int(outside[0]) if len(outside) else len(qs)
+        hit = strict.first_invalid(qs[:end]) if end else None
+        return hit if hit is not None else (end if end < len(qs) else None)
+    return BatchValidity(lambda q: clear(q) and not strict.in_collision(q), first_invalid)
+
+
 class PlanActionCore:
     """The plan action's ROS-free part (``ros/plan_server.py`` is its ROS edge): plans for a
     :class:`~vr_driver.driver.core.DriverCore` with the OMPL planner
@@ -390,7 +431,7 @@ class PlanActionCore:
         #: where it went, for a next plan from its end that finds no path (:func:`retreat_waypoints`)
         self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
         #: the paths of the plans made in this cell (kinematics.roadmap: a hint the planner checks
-        #: again), kept while the scene, the padding and the box stay (:meth:`_cell_key`)
+        #: again), kept while the scene, the padding and the box stay (:func:`cell_key`)
         self.roadmap = Roadmap(joint_weights(self.kin))
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
@@ -404,14 +445,6 @@ class PlanActionCore:
         workspace box."""
         checker = self.core.collision if self.collision_checked else None
         return CellValidity(checker.copy() if checker is not None else None, self.kin, self.params.workspace)
-
-    def _cell_key(self, validity: CellValidity) -> Tuple[Any, ...]:
-        """What the roadmap's paths were planned against: the scene's objects, the padding, the
-        box (another drops them: :meth:`Roadmap.keep <vr_driver.kinematics.roadmap.Roadmap.keep>`)."""
-        checker = validity.checker
-        scene = tuple(repr(o) for o in checker.scene.objects()) if checker is not None else None
-        ws = validity.workspace
-        return scene, validity.padding, (tuple(ws.x), tuple(ws.y), tuple(ws.z)), validity.margin
 
     def resolve(self, goal: PlanGoal) -> Tuple[Any, str, float, float]:
         """(the planner's goal, planner, budget [s], velocity scaling) or PlanningError('goal', ...)."""
@@ -488,7 +521,7 @@ class PlanActionCore:
                 with self._lock:
                     with self.core.planning_gate:     # the checker is replaced as a whole under it
                         validity = self.snapshot()
-                    self.roadmap.keep(self._cell_key(validity))
+                    self.roadmap.keep(cell_key(validity))
                     prof["snapshot"] += time.perf_counter() - tick
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
@@ -686,33 +719,7 @@ class PlanActionCore:
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
         if self.core.protocol.joint_targets or not (wrist_margin or elbow_margin):
             return BatchValidity(lambda q: not strict.in_collision(q), strict.first_invalid)
-        stretched = stretched_elbow(self.kin)
-        elbow = elbow_margin and stretched is not None
-
-        def clear(q) -> bool:
-            return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
-                not elbow or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
-
-        def first_invalid(qs: Any) -> Optional[int]:
-            # the margins of every row (numpy; the elbow's remainder as clear's), then the cell's
-            # test of the rows before the first outside them
-            qs = np.asarray(qs, dtype=float)
-            bad = np.zeros(len(qs), dtype=bool)
-            if wrist_margin:
-                bad |= np.abs(qs[:, _WRIST]) < WRIST_MARGIN
-            if elbow:
-                turn = 2.0 * math.pi
-                off = qs[:, _ELBOW] - stretched
-                off = np.abs(off - turn * np.round(off / turn))
-                # clear's exact remainder where the rounding above could tip the comparison
-                edge = np.flatnonzero(np.abs(off - ELBOW_MARGIN) < 1e-9)
-                off[edge] = [abs(math.remainder(v - stretched, turn)) for v in qs[edge, _ELBOW].tolist()]
-                bad |= off < ELBOW_MARGIN
-            outside = np.flatnonzero(bad)
-            end = int(outside[0]) if len(outside) else len(qs)
-            hit = strict.first_invalid(qs[:end]) if end else None
-            return hit if hit is not None else (end if end < len(qs) else None)
-        return BatchValidity(lambda q: clear(q) and not strict.in_collision(q), first_invalid)
+        return margin_validity(strict, wrist_margin, stretched_elbow(self.kin) if elbow_margin else None)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:
         """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked
