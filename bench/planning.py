@@ -263,14 +263,15 @@ def print_profile(profiles):
               "simplification %.0f %%, timing %.0f %%, the result's check %.0f %%), the driver's stream check %.0f %%, "
               "the elbow crossing %.0f %%, the checker's copy %.0f %%; %d validity checks (%.0f a call, %.1f us each "
               "with the planner's part around them); %d tries, re-planned: %s; a pose's nearest IK solution given up "
-              "after its share of the budget: %d; last tries back along the last plan's path: %d"
+              "after its share of the budget: %d; last tries back along the last plan's path: %d; paths that are a "
+              "route of earlier plans (the roadmap): %d"
               % (kind, len(rows), whole, *(100.0 * part[k] / whole for k in ("planner", "goal", "plan", "simplify",
                                                                              "time", "check", "stream_check",
                                                                              "crossing", "snapshot")),
                  checks, checks / len(rows), 1e6 * (part["plan"] + part["simplify"] + part["check"]) / max(1, checks),
                  sum(p.get("tries", 0) for _, p in rows),
                  ", ".join("%s %d" % (c, causes.count(c)) for c in sorted(set(causes))) or "none", given_up,
-                 sum(p.get("retreat", 0) for _, p in rows)))
+                 sum(p.get("retreat", 0) for _, p in rows), sum(p.get("roadmap", 0) for _, p in rows)))
 
 
 def print_peer(by_kind, total, answers, version):

@@ -511,6 +511,51 @@ def test_start_in_collision_with_the_cell_names_the_link_and_object(kin, cell_ch
     assert any(c.other == "table" for c in info.value.contacts)
 
 
+def _random_motions(kin, n, seed):
+    rng = np.random.default_rng(seed)
+    lo, hi = np.array(kin.limits.lower), np.array(kin.limits.upper)
+    ends = lo + rng.random((n + 1, 6)) * (hi - lo)
+    # long and short motions: across the cell, and 0.02 to 0.3 rad from a random configuration
+    short = ends[:n] + rng.uniform(-0.3, 0.3, (n, 6))
+    return [(tuple(a), tuple(b)) for a, b in zip(ends[:n], ends[1:])] + \
+        [(tuple(a), tuple(np.clip(b, lo, hi))) for a, b in zip(ends[:n], short)]
+
+
+def test_a_motion_checked_in_one_batch_is_checked_state_by_state(kin, cell_checker):
+    """motion_valid and the planner's test (the clearance, and the escape zone near the ends) in
+    one batch (the checker's first_collision) find the configuration the same test one state at a
+    time finds, on random motions across the cell and short ones (brute force)."""
+    from vr_driver.kinematics.plan_search import BatchValidity, first_invalid
+    planner = Planner(kin, cell_checker)
+    assert isinstance(planner.is_valid, BatchValidity) and isinstance(planner.planning_valid, BatchValidity)
+    found = {"valid": 0, "planning": 0}
+    for a, b in _random_motions(kin, 60, 4):
+        planner._ends = (a, b)
+        for name, batch, one in (("valid", planner.is_valid, lambda q: not cell_checker.in_collision(q)),
+                                 ("planning", planner.planning_valid, planner._planning_valid)):
+            n = max(1, int(math.ceil(planner._sweep(a, b) / planner.max_sweep)))
+            states = [tuple(x + k / n * (y - x) for x, y in zip(a, b)) for k in range(1, n + 1)]
+            expected = next((q for q in states if not one(q)), None)
+            got = planner.motion_valid(a, b, batch)
+            assert got == (None if expected is None else pytest.approx(expected, abs=1e-12)), name
+            found[name] += got is not None
+            assert first_invalid(one, states) == first_invalid(batch, np.array(states))
+    assert 10 < found["planning"] < 120 and found["valid"] <= found["planning"]
+    # the result's check: every chord of a sampled path in one batch, the first invalid state
+    # the one chord after chord finds
+    rng, outcomes = np.random.default_rng(8), set()
+    for a, b in _random_motions(kin, 12, 9):
+        path = [tuple(x + f * (y - x) + e for x, y, e in zip(a, b, rng.normal(0.0, 0.01, 6)))
+                for f in np.linspace(0.0, 1.0, 25)]
+        expected = next(((k, q) for k in range(1, len(path)) for q in [planner.motion_valid(path[k - 1], path[k])]
+                         if q is not None), None)
+        got = planner.chords_valid(path)
+        assert (got is None) == (expected is None)
+        assert got is None or (got[0] == expected[0] and got[1] == pytest.approx(expected[1], abs=1e-12))
+        outcomes.add(got is None)
+    assert outcomes == {True, False}
+
+
 # ------------------------------------------------------------------------- without the libraries
 
 def test_without_ompl_the_module_imports_and_the_planner_names_the_package():

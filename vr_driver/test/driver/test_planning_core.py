@@ -106,15 +106,18 @@ def test_a_goal_in_collision_names_the_link_and_the_object(kin):
 
 
 def test_a_scene_change_reaches_the_next_plan(kin):
-    """A box where the goal is: the next plan is refused naming it; removed: planned again."""
+    """A box where the goal is: the next plan is refused naming it, and the roadmap of the plans
+    before is dropped (it was the cell without the box); removed: planned again."""
     w = world(kin)
     planning = PlanActionCore(w.core, kinematics=kin)
     goal = AWAY
     assert planning.plan(goal).ok
+    planning.roadmap.add([kin.named_states["home"], AWAY.joints[1]])
     x, y, z = kin.fk_pose(AWAY.joints[1]).position_m
     w.core.add_scene_object(SceneObject("crate", "box", (0.1, 0.1, 0.1), (x, y, z)))
     out = planning.plan(goal)
     assert out.code == P.GOAL_IN_COLLISION and "with object crate" in out.text, out.text
+    assert len(planning.roadmap) == 0 and planning.roadmap.counts["dropped"] == 1
     w.core.remove_scene_object("crate")
     assert planning.plan(goal).ok
 
@@ -209,6 +212,37 @@ def test_cell_validity_checks_the_box_by_the_checker_s_kinematics_as_by_kdl(kin)
         hits = [q for q in qs if w.core.collision.in_collision(q)]
         assert outside and hits and not all(verdicts)       # each reason occurs, and free ones too
         assert fast.counter[0] == len(qs)
+
+
+def test_the_batch_validity_is_the_one_state_validity(kin):
+    """CellValidity.first_invalid (the collisions in one call, then the box) and the plan action's
+    planning validity (the wrist and elbow margins in numpy) find the row the one-state tests find
+    first, on random rows and on rows along random motions (brute force; a box small enough to be
+    left, the margins hit)."""
+    import numpy as np
+    from vr_driver.kinematics.solver import stretched_elbow
+    from vr_driver.poses import Workspace
+    w = world(kin)
+    box = Workspace.from_dict({"x": [200.0, 1200.0], "y": [-700.0, 700.0], "z": [100.0, 1300.0]})
+    planning = PlanActionCore(w.core, kinematics=kin)
+    rng = np.random.default_rng(6)
+    lo, hi = np.array(kin.limits.lower), np.array(kin.limits.upper)
+    ends = lo + rng.random((41, 6)) * (hi - lo)
+    ends[::4, 4] = rng.uniform(-0.06, 0.06, 11)                   # near the wrist singularity
+    ends[1::4, 2] = stretched_elbow(kin) + rng.uniform(-0.15, 0.15, 10)   # near the stretch
+    batches = [ends[k:k + 8] for k in range(0, 40, 8)]
+    batches += [a + np.linspace(0.0, 1.0, 30)[:, None] * (b - a) for a, b in zip(ends[:20], ends[1:21])]
+    for validity in (CellValidity(w.core.collision.copy(), kin, box, margin=10.0), planning.snapshot()):
+        for valid in (lambda q: not validity.in_collision(q), planning._planning_validity(validity),
+                      planning._planning_validity(validity, wrist_margin=False)):
+            free = np.array([q for q in lo + rng.random((400, 6)) * (hi - lo) if valid(tuple(q))][:10])
+            firsts = []
+            for qs in batches + [free, np.concatenate([free, ends[:3]])]:
+                expected = next((i for i, q in enumerate(qs) if not valid(tuple(q))), None)
+                batch = valid.first_invalid if hasattr(valid, "first_invalid") else validity.first_invalid
+                assert batch(qs) == expected
+                firsts.append(expected)
+            assert None in firsts and 0 in firsts and any(f for f in firsts)   # free, at once, later
 
 
 def _with_tcp(kin):

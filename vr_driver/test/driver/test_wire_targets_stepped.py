@@ -144,7 +144,7 @@ def test_the_stream_checks_shared_wire_poses_change_nothing(kin, rule, n):
 def test_the_stream_checks_fast_paths_change_nothing(kin, rule, n, monkeypatch):
     """The stream check's shortcuts -- a segment clearly inside the box passed without its timed
     preview (PathChecks._clearly_inside), the cell check of the chords in one call
-    (CollisionChecker.first_in_collision), the wire poses' IK without kin.ik's wrapper
+    (scene_guard.first_in_collision), the wire poses' IK without kin.ik's wrapper
     (wire_targets._analytic_nearest) and the analytic solver's nearest candidate alone
     (AnalyticSolver.solve nearest=True) -- give the points, their wire poses and the refusals'
     words of the checks without them, on the trajectory bench's twelve wrist goals (real plans
@@ -157,7 +157,6 @@ def test_the_stream_checks_fast_paths_change_nothing(kin, rule, n, monkeypatch):
     from vr_driver.driver.checks import wire_targets
     from vr_driver.errors import VrDriverError
     from vr_driver.kinematics.analytic import AnalyticSolver
-    from vr_driver.kinematics.collision import CollisionChecker
     repo = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
     world = World(kin, {"controller": {"configuration": rule},
                         "scene": os.path.join(repo, "panasonic_vr006l_support", "config", "cell_example.yaml")},
@@ -178,7 +177,10 @@ def test_the_stream_checks_fast_paths_change_nothing(kin, rule, n, monkeypatch):
         return out
     fast = run()
     solve = AnalyticSolver.solve
-    monkeypatch.delattr(CollisionChecker, "first_in_collision")
+    from vr_driver.driver.checks import scene_guard
+    monkeypatch.setattr(scene_guard, "first_in_collision",      # one configuration at a time
+                        lambda checker, qs, every=0, pause=None: next(
+                            (i for i, q in enumerate(qs) if checker.in_collision(q)), None))
     monkeypatch.setattr(PathChecks, "_clearly_inside", lambda self, start, end: False)
     monkeypatch.setattr(wire_targets, "_analytic_nearest", lambda kin: None)
     monkeypatch.setattr(AnalyticSolver, "solve", lambda self, r, p, seed, lower, upper, nearest=False:

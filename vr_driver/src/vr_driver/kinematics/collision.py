@@ -8,6 +8,7 @@ not need them.
     checker.contacts(q)            # [Contact(link_a, other, distance, world)], nearest first
     checker.check_path(qs)         # None, or (index of the first colliding sample, its contacts)
     checker.min_distance(q)        # smallest distance over the checked pairs [m] (< 0: penetration)
+    checker.first_collision(qs)    # index of the first row of qs (n x 6) in collision, or None
 
 What is checked (the pairs, fixed when the checker or its scene is built):
 
@@ -20,6 +21,13 @@ What is checked (the pairs, fixed when the checker or its scene is built):
 Padding inflates every shape by ``padding`` [m] for the verdict (coal's security margin: a pair
 counts as colliding when its distance is below ``padding``); distances reported are those of the
 true shapes. The URDF's collision geometry is made of primitives (vr006l_macro.xacro), as the scene.
+
+The verdicts (``in_collision``, ``first_collision``, ``check_path``) go
+through a broad phase (pinocchio's tree broad-phase pool over coal's dynamic AABB tree, one
+configuration or a batch of them in one C++ call, stopping at the first collision): the same
+verdict as every pair's narrow phase (``contacts``, and the tests' brute-force comparison), about
+a third of its CPU (``bench/README.md``, "Planning", Round 3). It is built for the scene and the
+padding it has and dropped with either.
 
 Joint angles: ``q`` is given in the order of ``joint_names`` (default: the URDF's six revolute
 joints joint_1..joint_6, prefixed); the URDF already holds the zero offsets, so these are the
@@ -95,6 +103,8 @@ class CollisionChecker:
         self.joint_names = tuple(names)
         self._q_index = np.array(idx, dtype=int)
         self._q = self._pin.neutral(model)
+        #: whether the checked joints are the model's whole configuration, in its order
+        self._q_whole = bool(np.array_equal(self._q_index, np.arange(len(self._q))))
         self._frames: dict = {}          # frame name -> id (frame_point)
         self.disabled = set(disabled)
         self.adjacent_free = adjacent_free
@@ -108,6 +118,8 @@ class CollisionChecker:
             b = [self._geom_link[k] for k, g in enumerate(geom_model.geometryObjects) if g.parentJoint == jid]
             self._adjacent.update(frozenset((x, y)) for x in a for y in b if x != y)
         self.padding = self._check_padding(padding)
+        self._pool: Any = None           # the broad phase of the verdicts (_broad_phase), per scene and padding
+        self._pool_data: Any = None      # its kinematics (point_here)
         self.scene = Scene()
         self.set_scene(scene if scene is not None else Scene())
 
@@ -156,9 +168,23 @@ class CollisionChecker:
         return cls.from_urdf(xml, srdf_xml, padding, scene, prefix=prefix)
 
     def copy(self) -> "CollisionChecker":
-        """An independent checker (own pinocchio data) on the same model, pairs, padding and scene."""
-        return CollisionChecker(self.model, self._robot_geom, self.joint_names, self.disabled, self.padding,
-                                self.scene, self.adjacent_free)
+        """An independent checker (own pinocchio data) on the same model, pairs, padding and scene:
+        the models built for the scene are shared (nothing changes them once built: a new scene or
+        padding of either checker builds or sets its own), the data are its own -- a tenth of
+        building the checker anew, which a plan did three or four times."""
+        new = object.__new__(type(self))
+        new.__dict__.update(self.__dict__)
+        new.data = self.model.createData()
+        new.geom_data = self.geom_model.createData()
+        for req in new.geom_data.distanceRequests:
+            req.enable_signed_distance = True
+        new._apply_padding()                 # (drops the broad phase: each checker builds its own)
+        new._pool_data = None
+        new._frames = dict(self._frames)
+        new.disabled = set(self.disabled)
+        new._adjacent = set(self._adjacent)
+        new.scene = self.scene.copy()
+        return new
 
     # ------------------------------------------------------------------------------------ scene
     @staticmethod
@@ -177,6 +203,7 @@ class CollisionChecker:
         # matrix over all geometries: setting each pair's request is simpler)
         for req in self.geom_data.collisionRequests:
             req.security_margin = self.padding
+        self._pool = None                # built again with the new margins
 
     def _shape(self, obj: SceneObject) -> Any:
         c = self._coal
@@ -224,6 +251,7 @@ class CollisionChecker:
         self._apply_padding()
         for req in self.geom_data.distanceRequests:
             req.enable_signed_distance = True
+        self._pool = None                # the old scene's: built again for this one
         self._n_robot = n_robot
         self._pairs = pairs
         self._pair_names = [(self._geom_link[i], self._geom_link[j] if j < n_robot else gm.geometryObjects[j].name,
@@ -236,13 +264,17 @@ class CollisionChecker:
 
     # ------------------------------------------------------------------------------------ queries
     def _config(self, q: Sequence[float]) -> np.ndarray:
-        full = self._q.copy()
         try:
             # the common case in one step (a planner checks hundreds of thousands of configurations
             # a plan): the right length, every value finite; anything else is looked at below
             if len(q) == len(self._q_index):          # (not broadcast from one value)
-                full[self._q_index] = q
-                if np.isfinite(full).all():
+                if self._q_whole:                     # the joints are the whole configuration
+                    full = np.array(q, dtype=float)
+                else:
+                    full = self._q.copy()
+                    full[self._q_index] = q
+                # (a sum is finite only when every value is: one overflowing is looked at below)
+                if full.shape == self._q.shape and math.isfinite(sum(q)):
                     return full
         except (TypeError, ValueError):
             pass
@@ -260,46 +292,45 @@ class CollisionChecker:
         full[self._q_index] = arr
         return full
 
+    def _broad_phase(self) -> Any:
+        """The broad-phase pool of this checker's scene and padding (one geometry model and data;
+        its pairs are the checked pairs, each with the padding as its security margin)."""
+        pool = self._pool
+        if pool is None:
+            pool = self._pin.TreeBroadPhaseManagerPool_DynamicAABBTreeCollisionManager(self.model, self.geom_model, 1)
+            for data in pool.getGeometryDatas():
+                for req in data.collisionRequests:
+                    req.security_margin = self.padding
+            self._pool, self._pool_data = pool, pool.getData(0)
+        return pool
+
+    def _colliding(self, configs: np.ndarray) -> np.ndarray:
+        """The broad phase's verdict per column of ``configs`` (model.nq x n, validated), in order,
+        stopping at the first collision: True up to and at the first colliding column; the
+        columns after it were not checked (False)."""
+        return self._pin.computeCollisionsInParallel(1, self._broad_phase(), configs, True, True)
+
     def in_collision(self, q: Sequence[float]) -> bool:
         """True when any checked pair is closer than the padding (or overlaps) at ``q``."""
-        return bool(self._pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data,
-                                                self._config(q), True))
+        return bool(self._colliding(self._config(q).reshape(-1, 1))[0])
 
-    def first_in_collision(self, qs: Sequence[Sequence[float]], pause_every: int = 0,
-                           pause: Optional[Any] = None) -> Optional[int]:
-        """The index of the first of the configurations ``qs`` at which :meth:`in_collision` is
-        True; None when every one is free. The same check per configuration, the vectors validated
-        and put into the model's configurations all at once (the Python around each check was a
-        fifth of a path's check). ``pause()`` is called before every ``pause_every``-th check (a
-        caller that hands the interpreter over). A batch that is not all finite vectors of the
-        right length is checked one by one (:meth:`in_collision`'s errors)."""
-        try:
-            arr = np.asarray(qs, dtype=float)
-            ok = arr.ndim == 2 and arr.shape[1] == len(self._q_index) and bool(np.all(np.isfinite(arr)))
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
-            for i, q in enumerate(qs):
-                if pause_every and i % pause_every == pause_every - 1:
-                    pause()
-                if self.in_collision(q):
-                    return i
+    def first_collision(self, qs: Any) -> Optional[int]:
+        """The index of the first row of ``qs`` (n x the joints, [rad]) in collision -- as
+        :meth:`in_collision` of each row in turn, in one call that stops there --, or None when
+        every row is free. Every row is validated before any is checked (PoseError)."""
+        arr = np.asarray(qs, dtype=float)
+        if arr.ndim != 2 or arr.shape[1] != len(self._q_index) or not np.isfinite(arr).all():
+            arr = np.array([self._config(q)[self._q_index] for q in qs], dtype=float).reshape(-1, len(self._q_index))
+        if not len(arr):
             return None
-        full = np.tile(self._q, (len(arr), 1))
-        full[:, self._q_index] = arr
-        check = self._pin.computeCollisions
-        model, data, geom_model, geom_data = self.model, self.data, self.geom_model, self.geom_data
-        for i in range(len(full)):
-            if pause_every and i % pause_every == pause_every - 1:
-                pause()
-            if check(model, data, geom_model, geom_data, full[i], True):
-                return i
-        return None
+        configs = np.repeat(self._q.reshape(-1, 1), len(arr), axis=1)
+        configs[self._q_index, :] = arr.T
+        hits = np.flatnonzero(self._colliding(np.asfortranarray(configs)))
+        return int(hits[0]) if len(hits) else None
 
     def frame_point(self, q: Sequence[float], frame: str, point: Sequence[float] = (0.0, 0.0, 0.0)) -> np.ndarray:
-        """The point ``point`` [m] of the model's frame ``frame`` in the root frame at ``q``; the
-        kinematics of ``q`` are kept for :meth:`in_collision_here`. ModelError for a frame the model
-        has not. (Pinocchio's forward kinematics: a twentieth of KDL's through its Python wrapper.)"""
+        """The point ``point`` [m] of the model's frame ``frame`` in the root frame at ``q``.
+        ModelError for a frame the model has not. (Pinocchio's forward kinematics: a twentieth of KDL's through its Python wrapper.)"""
         pin = self._pin
         fid = self._frames.get(frame)
         if fid is None:
@@ -309,24 +340,51 @@ class CollisionChecker:
         pin.forwardKinematics(self.model, self.data, self._config(q))
         return pin.updateFramePlacement(self.model, self.data, fid).act(np.asarray(point, dtype=float))
 
-    def in_collision_here(self) -> bool:
-        """:meth:`in_collision` at the configuration of the last :meth:`frame_point` (its
-        kinematics not computed again)."""
-        pin = self._pin
-        pin.updateGeometryPlacements(self.model, self.data, self.geom_model, self.geom_data)
-        return bool(pin.computeCollisions(self.geom_model, self.geom_data, True))
+    def point_probe(self, frame: str, point: Sequence[float] = (0.0, 0.0, 0.0), outer: Any = None) -> Tuple[int, np.ndarray, Any]:
+        """What :meth:`point_here` takes for the point ``point`` [m] of the model's frame ``frame``,
+        seen through ``outer`` (a 4x4 from the model's root to another frame; None: the root).
+        ModelError for a frame the model has not."""
+        if not self.model.existFrame(frame):
+            raise ModelError("collision model: no frame %r" % frame)
+        f = self.model.frames[self.model.getFrameId(frame)]
+        o = self._pin.SE3(np.eye(4) if outer is None else np.asarray(outer, dtype=float))
+        return f.parentJoint, f.placement.act(np.asarray(point, dtype=float)), o
+
+    def point_here(self, probe: Tuple[int, np.ndarray, Any]) -> np.ndarray:
+        """The point of ``probe`` (:meth:`point_probe`) at the configuration of the last
+        :meth:`in_collision`, from the kinematics that verdict computed (no forward kinematics
+        again): that configuration checked against something else (the plan action's workspace
+        box) at next to no cost. ModelError before any verdict."""
+        if self._pool_data is None:
+            raise ModelError("point_here: no in_collision was asked for before")
+        joint, local, outer = probe
+        return (outer * self._pool_data.oMi[joint]).act(local)
+
+    def point_at(self, q: Sequence[float], probe: Tuple[int, np.ndarray, Any]) -> np.ndarray:
+        """The point of ``probe`` (:meth:`point_probe`) at ``q``: a forward kinematics of its own
+        (the configurations of a batch after its verdict, :meth:`first_collision`)."""
+        joint, local, outer = probe
+        self._pin.forwardKinematics(self.model, self.data, self._config(q))
+        return (outer * self.data.oMi[joint]).act(local)
 
     def contacts(self, q: Sequence[float]) -> List[Contact]:
         """Every colliding pair at ``q`` (one per link / object pair: the deepest geometry pair),
-        nearest first; [] when free."""
+        nearest first; [] when free. Each pair's narrow phase on a geometry data of its own (a
+        fresh one: coal's narrow phase on a data that checked other configurations before missed
+        a pair the verdicts find, module text)."""
         pin = self._pin
-        pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data, self._config(q), False)
+        data = self.geom_model.createData()
+        for req in data.collisionRequests:
+            req.security_margin = self.padding
+        for req in data.distanceRequests:
+            req.enable_signed_distance = True
+        pin.computeCollisions(self.model, self.data, self.geom_model, data, self._config(q), False)
         best = {}
-        for k, res in enumerate(self.geom_data.collisionResults):
+        for k, res in enumerate(data.collisionResults):
             if not res.isCollision():
                 continue
-            pin.computeDistance(self.geom_model, self.geom_data, k)
-            d = float(self.geom_data.distanceResults[k].min_distance)
+            pin.computeDistance(self.geom_model, data, k)
+            d = float(data.distanceResults[k].min_distance)
             a, b, world = self._pair_names[k]
             key = (a, b, world)
             if key not in best or d < best[key].distance:
@@ -357,8 +415,10 @@ class CollisionChecker:
         """The first sample of ``qs`` in collision, as (its index, its contacts); None when every
         sample is free. Every sample is validated before any is checked."""
         configs = [self._config(q) for q in qs]
-        pin = self._pin
-        for i, full in enumerate(configs):
-            if pin.computeCollisions(self.model, self.data, self.geom_model, self.geom_data, full, True):
-                return i, self.contacts(full[self._q_index])
-        return None
+        if not configs:
+            return None
+        hits = np.flatnonzero(self._colliding(np.asfortranarray(np.stack(configs, axis=1))))
+        if not len(hits):
+            return None
+        i = int(hits[0])
+        return i, self.contacts(configs[i][self._q_index])

@@ -20,7 +20,9 @@ import random
 import time
 from typing import Any, Callable, List, Optional, Sequence, Tuple
 
-__all__ = ["OmplSearch", "SIMPLIFY_ROUNDS", "SWEEP_VALIDATED", "bisection_order"]
+import numpy as np
+
+__all__ = ["OmplSearch", "SIMPLIFY_ROUNDS", "SWEEP_VALIDATED", "BatchValidity", "bisection_order", "first_invalid"]
 
 #: rounds of shortcutting at most (each tries as many shortcuts as the path has vertices)
 SIMPLIFY_ROUNDS = 2
@@ -28,6 +30,31 @@ SIMPLIFY_ROUNDS = 2
 #: they and the simplifier ask OMPL's motion validator only whether a motion is valid, never how
 #: far it is)
 SWEEP_VALIDATED = ("RRTConnect",)
+
+
+class BatchValidity:
+    """A validity of one configuration, ``is_valid(q) -> bool`` (calling it), with the same test
+    of a batch: ``first_invalid(qs)`` the index of the first row of ``qs`` (n x dof) it refuses,
+    or None -- a motion's states checked in one call (:func:`first_invalid`)."""
+
+    def __init__(self, one: Callable[[Sequence[float]], bool], batch: Callable[[Any], Optional[int]]) -> None:
+        self._one = one
+        self.first_invalid = batch
+
+    def __call__(self, q: Sequence[float]) -> bool:
+        return self._one(q)
+
+
+def first_invalid(is_valid: Callable[[Sequence[float]], bool], qs: Any) -> Optional[int]:
+    """The index of the first row of ``qs`` (n x dof) that ``is_valid`` refuses, or None: in
+    one call where it has a batch test (``first_invalid``: a :class:`BatchValidity`), else row by row."""
+    batch = getattr(is_valid, "first_invalid", None)
+    if batch is not None:
+        return batch(qs)
+    for i, q in enumerate(qs):
+        if not is_valid(tuple(float(v) for v in q)):
+            return i
+    return None
 
 
 def bisection_order(n: int) -> Tuple[int, ...]:
@@ -110,10 +137,12 @@ class OmplSearch:
         so ceil(that / ``max_sweep``) segments keep every point of the arm within ``max_sweep``
         between two checks (as the planner's own ``motion_valid``) -- the bound OMPL's resolution
         keeps through |dx| <= max_sweep / sqrt(n), with up to sqrt(n) times as many checks (a
-        motion of one joint: 2.4 x). The end first, then the inner states in bisection order; each
-        state straight to ``is_valid`` (one Python call a motion, not one a state). False (OMPL's
-        own stays) where this OMPL cannot take a validator written in Python."""
+        motion of one joint: 2.4 x). The end first, then the inner states in bisection order, as
+        one batch (``is_valid``'s ``first_invalid`` where it has one: :func:`first_invalid`), the
+        first refusal ending it. False (OMPL's own stays) where this OMPL cannot take a validator
+        written in Python."""
         weights, dof = self.weights, self.dof
+        w = np.array(weights)
         orders: dict = {}
         counts = self.counts
 
@@ -122,19 +151,16 @@ class OmplSearch:
                 if last:                  # the form that reports how far a motion is valid: not asked
                     raise NotImplementedError("the sweep validator answers checkMotion(s1, s2) only")
                 counts["motions"] += 1
-                a = [s1[i] for i in range(dof)]
-                d = [s2[i] - a[i] for i in range(dof)]
-                if not is_valid(tuple((x + y) / w for x, y, w in zip(a, d, weights))):
-                    return False
-                n = int(math.ceil(sum(abs(v) for v in d) / max_sweep))
+                a = np.array([s1[i] for i in range(dof)])
+                d = np.array([s2[i] for i in range(dof)]) - a
+                n = int(math.ceil(float(np.abs(d).sum()) / max_sweep))
                 order = orders.get(n)
                 if order is None:
-                    order = orders[n] = tuple(k / n for k in bisection_order(n))
-                counts["states"] += len(order) + 1
-                for f in order:
-                    if not is_valid(tuple((x + f * y) / w for x, y, w in zip(a, d, weights))):
-                        return False
-                return True
+                    order = orders[n] = np.array((1.0,) + tuple(k / n for k in bisection_order(n)))
+                counts["states"] += len(order)
+                # the end first, then the inner states in bisection order: one batch, the first
+                # refusal ends it
+                return first_invalid(is_valid, (a + order[:, None] * d) / w) is None
 
         try:
             self._validator = SweepMotions(si)
@@ -172,6 +198,15 @@ class OmplSearch:
             return None
         self._found = (search, pdef)          # the path is theirs: kept alive as long as this search
         return pdef.getSolutionPath()
+
+    def path_of(self, joints: Sequence[Sequence[float]]) -> Any:
+        """An OMPL path through ``joints`` [rad] (a route found elsewhere: the roadmap's), for
+        :meth:`simplified`."""
+        path = self._og.PathGeometric(self.si)
+        for q in joints:
+            path.append(self._state(q))
+        self._found = (path,)
+        return path
 
     def simplified(self, path: Any) -> List[Tuple[float, ...]]:
         """``path`` (of :meth:`solve`) simplified, as joints [rad]: OMPL's simplification steps with

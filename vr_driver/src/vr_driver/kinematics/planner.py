@@ -25,7 +25,10 @@ step and why, and nothing else happens:
    of steps 3 and 4) within ``time_budget`` seconds. The planner keeps ``clearance`` more than the
    validity asks (a checker: a copy of it padded by that much more; a callable:
    ``planning_validity`` when given) except near the start and the goal, so that what the later
-   steps deviate from the checked path stays valid.
+   steps deviate from the checked path stays valid. Given a ``roadmap`` (the paths of earlier
+   plans in the same cell, :mod:`~vr_driver.kinematics.roadmap`), a route of them joined to the
+   start and the goal is tried before the search, every motion of it checked as the search checks
+   its motions; the simplification, the timing and the checks below are the same for it.
 4. Simplification (OMPL's PathSimplifier, step counts rather than a time limit, so that a seed
    gives one result): vertex reduction, partial shortcuts, collapsing close vertices, B-spline
    smoothing of the corners; each step keeps the path valid (it checks its motions as the planner
@@ -81,10 +84,11 @@ from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
 from ..params import PLANNERS
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
-from .plan_search import SWEEP_VALIDATED, OmplSearch
+from .plan_search import SWEEP_VALIDATED, BatchValidity, OmplSearch, first_invalid
 from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
+from .roadmap import Roadmap
 
-__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
+__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "BatchValidity", "first_invalid", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
            "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN",
            "joint_weights"]
 
@@ -197,14 +201,35 @@ def joint_weights(kinematics: Any, allowance: float = LINK_ALLOWANCE) -> Tuple[f
     return tuple(out)
 
 
+def _checker_validity(checker: Any) -> Callable[[Sequence[float]], bool]:
+    """not ``checker.in_collision(q)``, with the checker's batch test (``first_invalid`` or
+    ``first_collision``) where it has one."""
+    in_collision = checker.in_collision
+    batch = getattr(checker, "first_invalid", None) or getattr(checker, "first_collision", None)
+    if batch is None:
+        return lambda q: not in_collision(q)
+    return BatchValidity(lambda q: not in_collision(q), batch)
+
+
+def chord_states(positions: Sequence[Sequence[float]], weights: Sequence[float], max_sweep: float
+                 ) -> Tuple[np.ndarray, np.ndarray]:
+    """(the states motion_valid checks on each straight chord between two of ``positions``, chord
+    after chord, as rows; the chord of each row, 0 for the first) -- ``max_sweep`` apart by the
+    sweep bound (``weights``)."""
+    pos = np.asarray(positions, dtype=float)
+    steps = np.array([max(1, int(math.ceil(sum(w * abs(x - y) for w, x, y in zip(weights, a, b)) / max_sweep)))
+                      for a, b in zip(positions, positions[1:])])
+    chord = np.repeat(np.arange(len(steps)), steps)
+    f = (np.arange(len(chord)) - np.repeat(np.cumsum(steps) - steps, steps) + 1) / steps[chord]
+    return pos[chord] + f[:, None] * (pos[1:] - pos[:-1])[chord], chord
+
+
 def _validity(validity: Any) -> Tuple[Callable[[Sequence[float]], bool], Optional[Callable[[Sequence[float]], list]]]:
     """(is_valid, contacts or None) of a checker (``in_collision`` / ``contacts``) or a callable."""
     if validity is None:
         return (lambda q: True), None
     if hasattr(validity, "in_collision"):
-        in_collision = validity.in_collision
-        contacts = getattr(validity, "contacts", None)
-        return (lambda q: not in_collision(q)), contacts
+        return _checker_validity(validity), getattr(validity, "contacts", None)
     if callable(validity):
         return validity, None
     raise TypeError("validity must be a collision checker (in_collision(q)) or a callable is_valid(q) -> bool, "
@@ -272,7 +297,8 @@ class Planner:
                  velocity_scaling: float = 1.0, acceleration_scaling: float = 1.0, dt: float = DEFAULT_DT,
                  max_sweep: float = DEFAULT_MAX_SWEEP, clearance: float = DEFAULT_CLEARANCE,
                  planning_validity: Optional[Callable[[Sequence[float]], bool]] = None,
-                 goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None) -> None:
+                 goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None,
+                 roadmap: Optional[Roadmap] = None) -> None:
         if planner not in PLANNERS:
             raise PlanningError("plan", "unknown planner %r: the planners are %s" % (planner, ", ".join(PLANNERS)))
         self.kin = kinematics
@@ -289,9 +315,13 @@ class Planner:
         self.is_valid, self._contacts = _validity(validity)
         self.clearance = _number(clearance, "clearance [m]", 0.0, lo_open=False)
         self._strict = self._strict_validity(validity, planning_validity)
+        #: the planner's test of a configuration (and of a batch: BatchValidity), see _planning_valid
+        self.planning_valid = BatchValidity(self._planning_valid, self._planning_first_invalid)
         if goal_preference is not None and not callable(goal_preference):
             raise TypeError("goal_preference must be a callable rank(start, q) -> int, got %r" % (goal_preference,))
         self._prefer = goal_preference
+        #: the paths of earlier plans (a Roadmap, kept by the caller) tried before the search, or None
+        self.roadmap = roadmap
         self._ends: Tuple[Tuple[float, ...], ...] = ()
         for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
             if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
@@ -323,16 +353,34 @@ class Planner:
         if self.clearance > 0.0 and all(hasattr(validity, a) for a in ("copy", "set_padding", "padding")):
             strict = validity.copy()
             strict.set_padding(validity.padding + self.clearance)
-            return lambda q: not strict.in_collision(q)
+            return _checker_validity(strict)
         return self.is_valid
 
-    def planning_valid(self, q: Sequence[float]) -> bool:
-        """The planner's test: valid with the clearance -- or, within ``ESCAPE_SWEEP`` of the start
-        or the goal of the plan being made, valid (an arm that starts or ends closer than the
-        clearance to something must be able to leave or reach that place)."""
+    def _planning_valid(self, q: Sequence[float]) -> bool:
+        """The planner's test (``planning_valid``): valid with the clearance -- or, within
+        ``ESCAPE_SWEEP`` of the start or the goal of the plan being made, valid (an arm that starts
+        or ends closer than the clearance to something must be able to leave or reach that place)."""
         if self._strict(q):
             return True
+        return self._escapes(q)
+
+    def _escapes(self, q: Sequence[float]) -> bool:
         return (any(self._sweep(q, e) <= ESCAPE_SWEEP for e in self._ends)) and bool(self.is_valid(q))
+
+    def _planning_first_invalid(self, qs: Any) -> Optional[int]:
+        """:meth:`_planning_valid` of a batch (BatchValidity.first_invalid): the clearance's test
+        in one call up to its first refusal, that row in the escape zone tested again alone."""
+        qs = np.asarray(qs, dtype=float)
+        k = 0
+        while k < len(qs):
+            f = first_invalid(self._strict, qs[k:])
+            if f is None:
+                return None
+            k += f
+            if not self._escapes(tuple(float(v) for v in qs[k])):
+                return k
+            k += 1
+        return None
 
     def _why_invalid(self, q: Sequence[float]) -> Tuple[str, tuple]:
         if self._contacts is None:
@@ -352,12 +400,10 @@ class Planner:
         the check resolution (``a`` is taken as checked), else the first invalid configuration on it."""
         is_valid = is_valid or self.is_valid
         n = max(1, int(math.ceil(self._sweep(a, b) / self.max_sweep)))
-        for k in range(1, n + 1):
-            f = k / n
-            q = tuple(x + f * (y - x) for x, y in zip(a, b))
-            if not is_valid(q):
-                return q
-        return None
+        a = np.asarray(a, dtype=float)
+        qs = a + (np.arange(1, n + 1) / n)[:, None] * (np.asarray(b, dtype=float) - a)
+        bad = first_invalid(is_valid, qs)
+        return None if bad is None else tuple(float(v) for v in qs[bad])
 
     def _joints(self, q: Any, what: str) -> Tuple[float, ...]:
         try:
@@ -498,6 +544,14 @@ class Planner:
         search = OmplSearch(self._ompl, self.weights, self.lower, self.upper, self.max_sweep,
                             self.planning_valid, seed, sweep_motions=self.planner_name in SWEEP_VALIDATED)
         stages = [(goals[:1], budget)] if len(goals) == 1 else [(goals[:1], budget * NEAREST_SHARE), (goals[1:], None)]
+        path = None
+        if self.roadmap is not None:
+            # the earlier plans' paths first: a route of them, every motion checked now
+            route = self.roadmap.route(q0, q1, lambda a, b: self.motion_valid(a, b, self.planning_valid) is None)
+            if route is not None:
+                path = search.path_of(route)
+                timings["roadmap"] = timings.get("roadmap", 0.0) + 1.0
+                stages = []
         for n_stage, (targets, share) in enumerate(stages):
             if n_stage:
                 # the others: a straight move first (nearest first); then the planner to any of them
@@ -531,9 +585,22 @@ class Planner:
                 why, contacts = self._why_invalid(bad)
                 raise PlanningError("plan", "the simplified path passes an invalid configuration %s%s"
                                     % (_fmt(bad), why), contacts)
+        if self.roadmap is not None:
+            self.roadmap.add(out)
         return out
 
     # ---------------------------------------------------------------------- the result's check
+    def chords_valid(self, positions: Sequence[Sequence[float]]) -> Optional[Tuple[int, Tuple[float, ...]]]:
+        """None when every straight chord between two of ``positions`` is valid at the check
+        resolution (the first position taken as checked), else (k, the first invalid
+        configuration) of the first chord k - 1 -> k that has one: :meth:`motion_valid` of each chord
+        in turn, its states all in one batch of the validity."""
+        if len(positions) < 2:
+            return None
+        qs, chord = chord_states(positions, self.weights, self.max_sweep)
+        first = first_invalid(self.is_valid, qs)
+        return None if first is None else (int(chord[first]) + 1, tuple(float(v) for v in qs[first]))
+
     def _check(self, times, positions, velocities, accelerations) -> None:
         """Every sample inside the joint, speed and acceleration limits (less nothing: the margin
         of the timing is the slack) and valid, every chord between two samples valid and within
@@ -553,9 +620,9 @@ class Planner:
         if not self.is_valid(positions[0]):
             why, contacts = self._why_invalid(positions[0])
             raise PlanningError("check", "sample 0 is invalid%s" % why, contacts)
-        for k in range(1, len(positions)):
-            bad = self.motion_valid(positions[k - 1], positions[k])
-            if bad is not None:
-                why, contacts = self._why_invalid(bad)
-                raise PlanningError("check", "the timed trajectory between samples %d and %d (t = %.3f s) passes "
-                                    "an invalid configuration %s%s" % (k - 1, k, times[k], _fmt(bad), why), contacts)
+        found = self.chords_valid(positions)
+        if found is not None:
+            k, bad = found
+            why, contacts = self._why_invalid(bad)
+            raise PlanningError("check", "the timed trajectory between samples %d and %d (t = %.3f s) passes "
+                                "an invalid configuration %s%s" % (k - 1, k, times[k], _fmt(bad), why), contacts)

@@ -78,6 +78,21 @@ def describe_contact(contact: Any, padding: float) -> str:
     return "%s with %s (%s%s)" % (contact.link_a, contact.other, "" if contact.world else "the arm itself, ", depth)
 
 
+
+def first_in_collision(checker: Any, qs: Sequence[Sequence[float]], every: int, pause: Callable[[], Any]
+                       ) -> Optional[int]:
+    """The index of the first of ``qs`` in collision (``checker.first_collision``, one call a chunk of
+    ``every`` configurations, ``pause()`` between chunks: the bus thread must not wait on a long
+    check), or None when all are free."""
+    step = max(1, every)
+    for start in range(0, len(qs), step):
+        if start:
+            pause()
+        hit = checker.first_collision(qs[start:start + step])
+        if hit is not None:
+            return start + hit
+    return None
+
 class SceneGuard:
     """The scene, the checker built on it and the path checks of one driver core (module text).
     ``gate``: the core's planning gate (held while a check runs, and while a change is swapped in).
@@ -247,15 +262,13 @@ class SceneGuard:
         must be free. One that never gets free (a short jog step) must end farther out than it
         started."""
         configurations = list(self.configurations(samples))
-        batch = getattr(checker, "first_in_collision", None)
-        if batch is not None:
-            # every configuration checked in one call (the same check, less Python around it);
-            # the first that collides is the answer unless it is the start (the rules below)
-            hit = batch([q for _, _, q in configurations], YIELD_EVERY, lambda: time.sleep(0))
-            if hit is None:
-                return None
-            if hit > 0:
-                return configurations[hit]
+        # every configuration checked in one call a chunk (the same check, less Python around it);
+        # the first that collides is the answer unless it is the start (the rules below)
+        hit = first_in_collision(checker, [q for _, _, q in configurations], YIELD_EVERY, lambda: time.sleep(0))
+        if hit is None:
+            return None
+        if hit > 0:
+            return configurations[hit]
         escaping: Optional[set] = None
         depth = start_depth = 0.0
         last = None

@@ -37,6 +37,11 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
   last plan ended whose tries found no path retreats on its last try along the way the arm came
   (:func:`retreat_waypoints`: out of a narrow place such as under a hood), every leg checked.
+- **Kept between plans**: the paths of the plans made (:class:`~vr_driver.kinematics.roadmap.Roadmap`,
+  one per core: in the plan action's worker process, for as long as it lives), tried as a route
+  before the next search; dropped when the scene, the padding or the box changes (the snapshot's
+  key, :func:`cell_key`). A hint only: every motion of a route is checked again by
+  the plan's own validity, and the plan is checked as any other.
 - **Words**: a start or goal in collision names the link and the object (the checker's contacts);
   a TCP outside the box says which field and by how much.
 """
@@ -48,9 +53,13 @@ import time
 from dataclasses import dataclass, field
 from typing import Any, Dict, List, Optional, Sequence, Tuple
 
+import numpy as np
+
 from ...errors import MissingDependency, VrDriverError
 from ...kinematics import deps
-from ...kinematics.planner import DEFAULT_CLEARANCE, PLANNERS, PlannedTrajectory, Planner, PlanningError, pose_target
+from ...kinematics.planner import (DEFAULT_CLEARANCE, PLANNERS, BatchValidity, PlannedTrajectory, Planner, PlanningError,
+                                   joint_weights, pose_target)
+from ...kinematics.roadmap import Roadmap
 from ...kinematics.solver import ConfigurationRule, stretched_elbow
 from ...poses import ControllerPose, Workspace
 from ..checks.commissioned import planning_kinematics
@@ -58,6 +67,7 @@ from ..checks.commissioned import planning_kinematics
 __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED", "PREEMPTED",
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
            "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
+           "cell_key", "margin_validity",
            "arm_points", "code_of", "retreat_waypoints"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
@@ -145,8 +155,9 @@ class PlanOutcome:
     #: ``snapshot`` (copying the checker), the planner's steps summed over the tries (``goal``,
     #: ``plan``, ``simplify``, ``time``, ``check``), ``stream_check`` (the driver's own check of each
     #: plan, :meth:`PlanActionCore.driver_refusal`), ``checks`` (validity checks made: the box and the
-    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words) and
-    #: ``retreat`` (1 when the last try went back along the last plan's path)
+    #: checker), ``tries`` (plans made), ``replans`` (why a try was planned again, in words),
+    #: ``retreat`` (1 when the last try went back along the last plan's path) and ``roadmap``
+    #: (legs that were a route of earlier plans, :class:`~vr_driver.kinematics.roadmap.Roadmap`)
     profile: Dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -190,6 +201,7 @@ class CellValidity:
         #: [checks made by this validity and its copies] (the plan action's profile)
         self.counter = counter if counter is not None else [0]
         self._tcp: Any = None           # _tcp_by_checker's finding
+        self._tcp_reach: Optional[np.ndarray] = None   # [m/rad] per joint: how far its turn moves the TCP at most
         self.kin = kinematics
         self.workspace = workspace
         self.margin = float(margin)
@@ -220,23 +232,26 @@ class CellValidity:
         return worst
 
     def _tcp_by_checker(self) -> Any:
-        """(the checker's frame of the chain's tip, the TCP in it [m], the 4x4 from the root to
-        ``base``) when the checker's model puts the TCP where the kinematics do (checked at three
-        configurations, to 1e-6 mm), else False: then the box is checked by KDL's FK."""
+        """(the checker's probe of the TCP in ``base``: :meth:`CollisionChecker.point_probe
+        <vr_driver.kinematics.collision.CollisionChecker.point_probe>`) when the checker's model puts
+        the TCP where the kinematics do (checked at three configurations, to 1e-6 mm), else False:
+        then the box is checked by KDL's FK."""
         if self._tcp is None:
             self._tcp = False
-            if self.checker is not None and hasattr(self.checker, "frame_point") \
+            if self.checker is not None and hasattr(self.checker, "point_probe") \
                     and hasattr(self.kin, "tcp_in_tip"):
                 base, offset = self.kin.tcp_in_tip()
                 try:
+                    probe = self.checker.point_probe(self.kin.tip, offset, base)
                     n = len(self.kin.joint_names)
                     for q in ((0.0,) * n, tuple(0.3 + 0.1 * i for i in range(n)), tuple(-0.9 + 0.2 * i for i in range(n))):
-                        p = base[:3, :3] @ self.checker.frame_point(q, self.kin.tip, offset) + base[:3, 3]
+                        self.checker.in_collision(q)
+                        p = self.checker.point_here(probe)
                         if max(abs(a - b / 1000.0) for a, b in zip(p, self.kin.tcp_position(q))) > 1e-9:
                             return self._tcp
                 except (VrDriverError, ValueError, TypeError):
                     return self._tcp
-                self._tcp = (self.kin.tip, offset, base)
+                self._tcp = probe
         return self._tcp
 
     def in_collision(self, q: Sequence[float]) -> bool:
@@ -247,14 +262,61 @@ class CellValidity:
             if self._outside(q) is not None:
                 return True
             return self.checker is not None and self.checker.in_collision(q)
-        # one forward kinematics (the checker's pinocchio) for the box and the collisions
-        frame, offset, base = tcp
-        p = self.checker.frame_point(q, frame, offset)
+        # one forward kinematics (the checker's pinocchio, in its collision check) for both: the
+        # collisions first, then the TCP where that check put it
+        if self.checker.in_collision(q):
+            return True
+        return self._out_of_box(self.checker.point_here(tcp))
+
+    def _out_of_box(self, p: Sequence[float]) -> bool:
+        """Whether the TCP at ``p`` [m, in ``base``] is outside the box less the margin."""
+        x, y, z = p
         ws, m = self.workspace, self.margin
-        for value, (lo, hi) in zip(base[:3, :3] @ p + base[:3, 3], (ws.x, ws.y, ws.z)):
-            if not lo + m <= value * 1000.0 <= hi - m:
-                return True
-        return self.checker.in_collision_here()
+        return not (ws.x[0] + m <= x * 1000.0 <= ws.x[1] - m and ws.y[0] + m <= y * 1000.0 <= ws.y[1] - m
+                    and ws.z[0] + m <= z * 1000.0 <= ws.z[1] - m)
+
+    def first_invalid(self, qs: Any) -> Optional[int]:
+        """The index of the first row of ``qs`` (n x the joints) that :meth:`in_collision` finds
+        invalid, or None -- the collisions of the rows in one call of the checker (its
+        ``first_collision``, up to the first), then the box of the rows before that one."""
+        tcp = self._tcp_by_checker()
+        if not tcp or not hasattr(self.checker, "first_collision"):
+            for i, q in enumerate(qs):
+                if self.in_collision(tuple(q)):
+                    return i
+            return None
+        qs = np.asarray(qs, dtype=float)
+        hit = self.checker.first_collision(qs)
+        end = len(qs) if hit is None else hit
+        for i in self._box_rows(qs[:end], tcp):
+            if self._out_of_box(self.checker.point_at(qs[i], tcp)):
+                self.counter[0] += i + 1
+                return i
+        self.counter[0] += end + (hit is not None)
+        return hit
+
+    def _box_rows(self, qs: np.ndarray, tcp: Any) -> List[int]:
+        """The rows of ``qs`` whose TCP must be checked against the box, in order: all but those
+        proven inside it by the first or the last row's -- the TCP of a row moves no farther from
+        that row's than sum_i w_i |dq_i| (``joint_weights`` with the TCP's distance from the tip as
+        the allowance: the triangle inequality), so a row within less than the box's room around
+        that TCP is inside (the first and the last row are checked themselves)."""
+        n = len(qs)
+        if n <= 2:
+            return list(range(n))
+        if self._tcp_reach is None:
+            self._tcp_reach = np.array(joint_weights(self.kin, float(np.linalg.norm(self.kin.tcp_in_tip()[1]))))
+        ws, m = self.workspace, self.margin
+        need = np.ones(n, dtype=bool)
+        for k in (0, n - 1):
+            p = self.checker.point_at(qs[k], tcp) * 1000.0
+            room = min(p[0] - ws.x[0] - m, ws.x[1] - m - p[0], p[1] - ws.y[0] - m, ws.y[1] - m - p[1],
+                       p[2] - ws.z[0] - m, ws.z[1] - m - p[2])
+            if room > 0.0:
+                # [mm], with a micrometre's allowance for the rounding of both sides
+                need &= np.abs(qs - qs[k]) @ self._tcp_reach * 1000.0 + 1e-3 >= room
+        need[0] = need[-1] = True
+        return np.flatnonzero(need).tolist()
 
     def contacts(self, q: Sequence[float]) -> List[Any]:
         out: List[Any] = list(self.checker.contacts(q)) if self.checker is not None else []
@@ -300,6 +362,46 @@ def arm_points(kinematics: Any, q: Sequence[float]) -> List[Tuple[float, float, 
     return out
 
 
+def cell_key(validity: CellValidity) -> Tuple[Any, ...]:
+    """What a plan's validity depends on besides the model: the scene's objects, the padding, the
+    box and its margin (the roadmap's key: another drops its paths, :meth:`Roadmap.keep
+    <vr_driver.kinematics.roadmap.Roadmap.keep>`)."""
+    checker = validity.checker
+    scene = tuple(repr(o) for o in checker.scene.objects()) if checker is not None else None
+    ws = validity.workspace
+    return scene, validity.padding, (tuple(ws.x), tuple(ws.y), tuple(ws.z)), validity.margin
+
+
+def margin_validity(strict: CellValidity, wrist_margin: bool, stretched: Optional[float]) -> BatchValidity:
+    """``strict`` with |joint_5| >= WRIST_MARGIN (``wrist_margin``) and joint_3 ELBOW_MARGIN from
+    ``stretched`` (the stretched elbow's joint_3; None: no elbow margin), one configuration or a
+    batch (the margins in numpy, then ``strict`` on the rows before the first outside them)."""
+    elbow = stretched is not None
+
+    def clear(q) -> bool:
+        return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
+            not elbow or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
+
+    def first_invalid(qs: Any) -> Optional[int]:
+        qs = np.asarray(qs, dtype=float)
+        bad = np.zeros(len(qs), dtype=bool)
+        if wrist_margin:
+            bad |= np.abs(qs[:, _WRIST]) < WRIST_MARGIN
+        if elbow:
+            turn = 2.0 * math.pi
+            off = qs[:, _ELBOW] - stretched
+            off = np.abs(off - turn * np.round(off / turn))
+            # clear's exact remainder where the rounding above could tip the comparison
+            edge = np.flatnonzero(np.abs(off - ELBOW_MARGIN) < 1e-9)
+            off[edge] = [abs(math.remainder(v - stretched, turn)) for v in qs[edge, _ELBOW].tolist()]
+            bad |= off < ELBOW_MARGIN
+        outside = np.flatnonzero(bad)
+        end = int(outside[0]) if len(outside) else len(qs)
+        hit = strict.first_invalid(qs[:end]) if end else None
+        return hit if hit is not None else (end if end < len(qs) else None)
+    return BatchValidity(lambda q: clear(q) and not strict.in_collision(q), first_invalid)
+
+
 class PlanActionCore:
     """The plan action's ROS-free part (``ros/plan_server.py`` is its ROS edge): plans for a
     :class:`~vr_driver.driver.core.DriverCore` with the OMPL planner
@@ -328,6 +430,9 @@ class PlanActionCore:
         #: the geometric path of the last plan made (its start first), or None: a way back out of
         #: where it went, for a next plan from its end that finds no path (:func:`retreat_waypoints`)
         self.last_path: Optional[Tuple[Tuple[float, ...], ...]] = None
+        #: the paths of the plans made in this cell (kinematics.roadmap: a hint the planner checks
+        #: again), kept while the scene, the padding and the box stay (:func:`cell_key`)
+        self.roadmap = Roadmap(joint_weights(self.kin))
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
 
@@ -416,6 +521,7 @@ class PlanActionCore:
                 with self._lock:
                     with self.core.planning_gate:     # the checker is replaced as a whole under it
                         validity = self.snapshot()
+                    self.roadmap.keep(cell_key(validity))
                     prof["snapshot"] += time.perf_counter() - tick
                     planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
@@ -423,7 +529,7 @@ class PlanActionCore:
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
-                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across))
+                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across), roadmap=self.roadmap)
                     retreat = retreat_waypoints(self.last_path, tuple(start), crossing, attempt, prof["replans"])
                     if retreat:
                         prof["retreat"] = 1
@@ -612,14 +718,8 @@ class PlanActionCore:
         strict = validity.copy()
         strict.set_padding(validity.padding + DEFAULT_CLEARANCE)
         if self.core.wire.joint_targets or not (wrist_margin or elbow_margin):
-            return lambda q: not strict.in_collision(q)
-        stretched = stretched_elbow(self.kin)
-
-        def clear(q) -> bool:
-            return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
-                stretched is None or not elbow_margin
-                or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
-        return lambda q: clear(q) and not strict.in_collision(q)
+            return BatchValidity(lambda q: not strict.in_collision(q), strict.first_invalid)
+        return margin_validity(strict, wrist_margin, stretched_elbow(self.kin) if elbow_margin else None)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:
         """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked
