@@ -316,3 +316,24 @@ def test_with_a_calibrated_model_the_collision_model_has_its_dimensions():
     pin.framesForwardKinematics(checker.model, checker.data, checker._config(q))
     np.testing.assert_allclose(checker.data.oMf[tool0].homogeneous, core.kin.fk(q), atol=1e-9)
     assert np.abs(core.kin.fk(q)[:3, 3] - package.fk(q)[:3, 3]).max() > 0.003    # the models differ
+
+
+def test_a_long_check_hands_the_interpreter_over_only_to_another_thread(monkeypatch):
+    """scene_guard.hand_over: a sleep(0) between a long check's chunks lets another thread (the
+    bus's) run; alone in its interpreter (the plan action's worker) the check goes on without it."""
+    import threading
+    naps = []
+    monkeypatch.setattr(scene_guard.time, "sleep", naps.append)
+    with monkeypatch.context() as alone:                # (the suite's runner may keep threads of its own)
+        alone.setattr(scene_guard.threading, "active_count", lambda: 1)
+        scene_guard.hand_over()
+    assert naps == []
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        scene_guard.hand_over()
+    finally:
+        stop.set()
+        other.join()
+    assert naps == [0]

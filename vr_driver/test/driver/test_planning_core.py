@@ -245,6 +245,42 @@ def test_the_batch_validity_is_the_one_state_validity(kin):
             assert None in firsts and 0 in firsts and any(f for f in firsts)   # free, at once, later
 
 
+def test_a_box_that_holds_every_tcp_is_not_checked_and_changes_no_verdict(kin):
+    """A box wider than the TCP's reach (the planning bench's, the arm's whole reach) holds every
+    TCP: CellValidity skips the box there, with the verdicts (one state, and the first invalid row
+    of batches along random motions) of the validity that checks it; the bound it proves that by
+    holds on random configurations, with a TCP offset too; a narrower box, or a margin that eats
+    the room, is checked."""
+    import numpy as np
+    from vr_driver.poses import Workspace
+    w = world(kin)
+    wide = Workspace.from_dict({"x": [-2000.0, 2000.0], "y": [-2000.0, 2000.0], "z": [-1200.0, 2500.0]})
+    rng = np.random.default_rng(8)
+    lo, hi = np.array(kin.limits.lower), np.array(kin.limits.upper)
+    for k in (kin, _with_tcp(kin)):
+        skip = CellValidity(w.core.collision.copy(), k, wide, margin=10.0)
+        check = CellValidity(w.core.collision.copy(), k, wide, margin=10.0)
+        check._reach = False                                # the box checked as before
+        assert skip.box_holds_every_tcp() and not check.box_holds_every_tcp()
+        centre, half = skip._reach_ball()
+        tcp = np.array([k.tcp_position(tuple(q)) for q in lo + rng.random((3000, 6)) * (hi - lo)])
+        assert np.all(np.abs(tcp - centre) <= half)
+        assert np.max(np.abs(tcp - centre) / half) > 0.8     # (a bound, not a box far off)
+        qs = lo + rng.random((300, 6)) * (hi - lo)
+        verdicts = [skip.in_collision(tuple(q)) for q in qs]
+        assert verdicts == [check.in_collision(tuple(q)) for q in qs] and any(verdicts) and not all(verdicts)
+        firsts = []
+        for a, b in zip(qs[:40], qs[1:41]):
+            motion = a + np.linspace(0.0, 1.0, 25)[:, None] * (b - a)
+            firsts.append(skip.first_invalid(motion))
+            assert firsts[-1] == check.first_invalid(motion)
+        assert None in firsts and any(f for f in firsts)
+        assert skip.counter[0] == check.counter[0]
+        assert not CellValidity(w.core.collision.copy(), k, w.core.params.workspace).box_holds_every_tcp()
+        skip.set_padding(skip.padding + 0.4)                # 400 mm more of margin: z no longer holds
+        assert not skip.box_holds_every_tcp()
+
+
 def _with_tcp(kin):
     import copy
     out = copy.copy(kin)

@@ -15,6 +15,7 @@ this module imports no optional library. Not thread-safe: OMPL's seed generator 
 """
 from __future__ import annotations
 
+import functools
 import math
 import random
 import time
@@ -57,6 +58,7 @@ def first_invalid(is_valid: Callable[[Sequence[float]], bool], qs: Any) -> Optio
     return None
 
 
+@functools.lru_cache(maxsize=256)
 def bisection_order(n: int) -> Tuple[int, ...]:
     """1 .. n-1 in the order a bisection visits them (the middle first, then the middles of the
     halves, ...): a motion into an obstacle is refused after a few checks, wherever it enters."""

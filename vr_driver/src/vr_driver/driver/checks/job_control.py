@@ -23,6 +23,7 @@ from ...poses import MoveType
 from ..motion.jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from ..own_thread import OwnThread
 from .path_checks import PathChecks
+from .scene_guard import hand_over
 from ..motion.sequencer import SequencerBase, SequencerView
 from ..motion.status import DriverError, DriverStatus
 from .stream_prep import JointStreams
@@ -399,5 +400,5 @@ def ptp_path(kin: Kinematics, checks: PathChecks, points: Sequence[Sequence[floa
             raise DriverError("%s: %s; nothing was sent" % (describe(index), exc)) from None
         previews.append(preview)
         start = preview.joint_target
-        time.sleep(0)   # hand the GIL over: the bus thread must not wait on a long validation
+        hand_over()     # the bus thread must not wait on a long validation
     return previews

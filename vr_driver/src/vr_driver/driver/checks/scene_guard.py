@@ -79,6 +79,14 @@ def describe_contact(contact: Any, padding: float) -> str:
 
 
 
+def hand_over() -> None:
+    """Hand the interpreter to another thread (the bus thread must not wait on a long check) --
+    when there is one: alone (the plan action's worker process, a bench) a ``sleep(0)`` only gives
+    the CPU away to other processes."""
+    if threading.active_count() > 1:
+        time.sleep(0)
+
+
 def first_in_collision(checker: Any, qs: Sequence[Sequence[float]], every: int, pause: Callable[[], Any]
                        ) -> Optional[int]:
     """The index of the first of ``qs`` in collision (``checker.first_collision``, one call a chunk of
@@ -264,7 +272,7 @@ class SceneGuard:
         configurations = list(self.configurations(samples))
         # every configuration checked in one call a chunk (the same check, less Python around it);
         # the first that collides is the answer unless it is the start (the rules below)
-        hit = first_in_collision(checker, [q for _, _, q in configurations], YIELD_EVERY, lambda: time.sleep(0))
+        hit = first_in_collision(checker, [q for _, _, q in configurations], YIELD_EVERY, hand_over)
         if hit is None:
             return None
         if hit > 0:
@@ -275,7 +283,7 @@ class SceneGuard:
         for n, (k, f, q) in enumerate(configurations):
             last = (k, f, q)
             if n % YIELD_EVERY == YIELD_EVERY - 1:
-                time.sleep(0)     # hand the interpreter over: the bus thread must not wait on a long check
+                hand_over()
             if not checker.in_collision(q):
                 escaping = None
                 continue

@@ -202,6 +202,7 @@ class CellValidity:
         self.counter = counter if counter is not None else [0]
         self._tcp: Any = None           # _tcp_by_checker's finding
         self._tcp_reach: Optional[np.ndarray] = None   # [m/rad] per joint: how far its turn moves the TCP at most
+        self._reach: Any = None         # _reach_ball's finding
         self.kin = kinematics
         self.workspace = workspace
         self.margin = float(margin)
@@ -254,8 +255,53 @@ class CellValidity:
                 self._tcp = probe
         return self._tcp
 
+    def _reach_ball(self) -> Any:
+        """(the centre [mm, in ``base``], the half-widths along X, Y, Z [mm]) of a box the TCP never
+        leaves, whatever the joints, or False (a prismatic joint, a kinematics without the chain, a
+        chain whose first two joints are not movable one after the other). The second movable
+        joint's origin turns on a circle about the first joint's axis; the TCP stays within the
+        lengths of the chain's offsets after it plus its distance from the tip (the triangle
+        inequality, as ``joint_weights``) of that origin."""
+        if self._reach is None:
+            self._reach = False
+            joints = getattr(self.kin, "chain_joints", None)
+            if joints and hasattr(self.kin, "tcp_in_tip") and all(j.type != "prismatic" for j in joints):
+                base, offset = self.kin.tcp_in_tip()
+                frame = np.eye(4)
+                k = 0
+                while k < len(joints) and not joints[k].movable:
+                    frame = frame @ joints[k].origin
+                    k += 1
+                if k + 1 < len(joints) and joints[k + 1].movable:
+                    frame = np.asarray(base, dtype=float) @ frame @ joints[k].origin    # joint k's frame in base
+                    axis = np.asarray(joints[k].axis, dtype=float)
+                    axis = axis / np.linalg.norm(axis)
+                    o = joints[k + 1].origin[:3, 3]
+                    along = float(axis @ o)
+                    rho = float(np.linalg.norm(o - along * axis))
+                    centre = frame[:3, 3] + frame[:3, :3] @ (along * axis)
+                    turn = frame[:3, :3] @ axis            # the axis in base
+                    beyond = sum(float(np.linalg.norm(j.origin[:3, 3])) for j in joints[k + 2:])
+                    beyond += float(np.linalg.norm(offset))
+                    half = rho * np.sqrt(np.clip(1.0 - turn * turn, 0.0, 1.0)) + beyond
+                    # (a micrometre for the rounding)
+                    self._reach = (centre * 1000.0, half * 1000.0 + 1e-3)
+        return self._reach
+
+    def box_holds_every_tcp(self) -> bool:
+        """Whether the box less the margin holds :meth:`_reach_ball`'s: no configuration can put the
+        TCP outside it, so the box need not be checked (a box as wide as the arm's whole reach)."""
+        ball = self._reach_ball()
+        if not ball:
+            return False
+        centre, half = ball
+        ws, m = self.workspace, self.margin
+        return all(lo + m <= c - h and c + h <= hi - m for c, h, (lo, hi) in zip(centre, half, (ws.x, ws.y, ws.z)))
+
     def in_collision(self, q: Sequence[float]) -> bool:
         self.counter[0] += 1
+        if self.box_holds_every_tcp():
+            return self.checker is not None and self.checker.in_collision(q)
         tcp = self._tcp_by_checker()
         if not tcp:
             # the box first: the TCP's position alone (KDL), a third of the checker's time
@@ -278,9 +324,11 @@ class CellValidity:
     def first_invalid(self, qs: Any) -> Optional[int]:
         """The index of the first row of ``qs`` (n x the joints) that :meth:`in_collision` finds
         invalid, or None -- the collisions of the rows in one call of the checker (its
-        ``first_collision``, up to the first), then the box of the rows before that one."""
-        tcp = self._tcp_by_checker()
-        if not tcp or not hasattr(self.checker, "first_collision"):
+        ``first_collision``, up to the first), then the box of the rows before that one (none when
+        the box holds every TCP, :meth:`box_holds_every_tcp`)."""
+        whole = self.box_holds_every_tcp()
+        tcp = self._tcp_by_checker() if not whole else None
+        if (not whole and not tcp) or not hasattr(self.checker, "first_collision"):
             for i, q in enumerate(qs):
                 if self.in_collision(tuple(q)):
                     return i
@@ -288,7 +336,7 @@ class CellValidity:
         qs = np.asarray(qs, dtype=float)
         hit = self.checker.first_collision(qs)
         end = len(qs) if hit is None else hit
-        for i in self._box_rows(qs[:end], tcp):
+        for i in ([] if whole else self._box_rows(qs[:end], tcp)):
             if self._out_of_box(self.checker.point_at(qs[i], tcp)):
                 self.counter[0] += i + 1
                 return i
