@@ -381,6 +381,28 @@ def test_bisection_order_visits_each_inner_step_once_middle_first():
     assert bisection_order(8)[:3] == (4, 2, 6)
 
 
+def test_bisection_order_and_the_motion_fractions_are_the_span_by_span_bisection():
+    """The numpy bisection (a level at a time) visits in the order of the span-by-span one, and a
+    motion's fractions are the end, then k / n in that order, the same floats."""
+    from vr_driver.kinematics.plan_search import bisection_order, motion_fractions
+
+    def by_spans(n):
+        out, spans = [], [(0, n)]
+        while spans:
+            later = []
+            for lo, hi in spans:
+                if hi - lo >= 2:
+                    mid = (lo + hi) // 2
+                    out.append(mid)
+                    later += [(lo, mid), (mid, hi)]
+            spans = later
+        return tuple(out)
+    for n in list(range(0, 300)) + [1023, 1024, 1025, 4097]:
+        assert bisection_order(n) == by_spans(n), n
+        assert motion_fractions(n).tolist() == [1.0] + [k / n for k in by_spans(n)], n
+    assert not motion_fractions(5).flags.writeable
+
+
 def test_the_sweep_validator_checks_each_motion_at_the_sweep_and_fewer_states(kin):
     """OmplSearch with ``sweep_motions``: every motion OMPL asks about (search and simplification)
     is checked at states whose sweep bound sum_i w_i |dq_i| is at most max_sweep apart -- never more
@@ -569,3 +591,28 @@ def test_without_ompl_the_module_imports_and_the_planner_names_the_package():
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.startswith("missing ompl |") and "scripts/setup" in proc.stdout
     assert issubclass(MissingDependency, ImportError)
+
+
+def test_the_escape_zone_in_numpy_is_the_sweep_bound_s(kin):
+    """Planner._escapes (the sweeps to the start and every goal in numpy, :meth:`_sweep`'s sums
+    within 1e-9 of the bound) says what :meth:`_sweep` of each end says, on random configurations
+    around the ends, both ways, and at the bound itself."""
+    import random
+    from vr_driver.kinematics.planner import ESCAPE_SWEEP, Planner
+    planner = Planner(kin, None)
+    rng = random.Random(3)
+    for ends in ([kin.random_joints(rng)], [kin.random_joints(rng) for _ in range(9)]):
+        planner._ends = tuple(tuple(e) for e in ends)
+        seen = set()
+        for _ in range(1500):
+            e = rng.choice(ends)
+            q = tuple(v + rng.uniform(-0.6, 0.6) for v in e)
+            expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in planner._ends) and planner.is_valid(q)
+            assert planner._escapes(q) == expected
+            seen.add(expected)
+        assert seen == {True, False}
+        # one joint of the first end turned to the bound exactly (as near as floats go)
+        w = planner.weights[0]
+        q = (ends[0][0] + ESCAPE_SWEEP / w,) + tuple(ends[0][1:])
+        expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in planner._ends) and planner.is_valid(q)
+        assert planner._escapes(q) == expected

@@ -58,22 +58,28 @@ def first_invalid(is_valid: Callable[[Sequence[float]], bool], qs: Any) -> Optio
     return None
 
 
-@functools.lru_cache(maxsize=256)
 def bisection_order(n: int) -> Tuple[int, ...]:
     """1 .. n-1 in the order a bisection visits them (the middle first, then the middles of the
-    halves, ...): a motion into an obstacle is refused after a few checks, wherever it enters."""
-    out: List[int] = []
-    spans = [(0, n)]
-    while spans:
-        later = []
-        for lo, hi in spans:
-            if hi - lo < 2:
-                continue
-            mid = (lo + hi) // 2
-            out.append(mid)
-            later += [(lo, mid), (mid, hi)]
-        spans = later
-    return tuple(out)
+    halves, ...): a motion into an obstacle is refused after a few checks, wherever it enters.
+    (One level of the bisection at a time, its spans left to right, in numpy.)"""
+    out = []
+    lo, hi = np.array([0]), np.array([n])
+    while len(lo):
+        keep = hi - lo >= 2
+        lo, hi = lo[keep], hi[keep]
+        mid = (lo + hi) // 2
+        out.append(mid)
+        lo, hi = np.stack((lo, mid), axis=1).ravel(), np.stack((mid, hi), axis=1).ravel()
+    return tuple(np.concatenate(out).tolist())
+
+
+@functools.lru_cache(maxsize=4096)
+def motion_fractions(n: int) -> np.ndarray:
+    """The fractions of a motion of ``n`` steps its states are checked at, in order: the end (1)
+    first, then k / n for k in :func:`bisection_order` (read-only; kept per n)."""
+    out = np.concatenate(([1.0], np.array(bisection_order(n), dtype=float) / n))
+    out.flags.writeable = False
+    return out
 
 
 class OmplSearch:
@@ -145,7 +151,6 @@ class OmplSearch:
         written in Python."""
         weights, dof = self.weights, self.dof
         w = np.array(weights)
-        orders: dict = {}
         counts = self.counts
 
         class SweepMotions(self._ob.MotionValidator):
@@ -156,9 +161,7 @@ class OmplSearch:
                 a = np.array([s1[i] for i in range(dof)])
                 d = np.array([s2[i] for i in range(dof)]) - a
                 n = int(math.ceil(float(np.abs(d).sum()) / max_sweep))
-                order = orders.get(n)
-                if order is None:
-                    order = orders[n] = np.array((1.0,) + tuple(k / n for k in bisection_order(n)))
+                order = motion_fractions(n)
                 counts["states"] += len(order)
                 # the end first, then the inner states in bisection order: one batch, the first
                 # refusal ends it
