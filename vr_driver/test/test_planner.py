@@ -601,6 +601,7 @@ def test_the_escape_zone_in_numpy_is_the_sweep_bound_s(kin):
     from vr_driver.kinematics.planner import ESCAPE_SWEEP, Planner
     planner = Planner(kin, None)
     rng = random.Random(3)
+    assert planner._ends == () and not planner._escapes(kin.random_joints(rng))    # no plan made: no zone
     for ends in ([kin.random_joints(rng)], [kin.random_joints(rng) for _ in range(9)]):
         planner._ends = tuple(tuple(e) for e in ends)
         seen = set()

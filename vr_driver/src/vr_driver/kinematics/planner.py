@@ -369,12 +369,12 @@ class Planner:
         """Within ESCAPE_SWEEP of the start or a goal (the sweep bound :meth:`_sweep`), and valid. The
         sweeps to all of them in numpy; where one lies within 1e-9 of the bound (numpy's sum may
         round otherwise), :meth:`_sweep`'s own sums decide."""
+        if not self._ends:                # (outside a plan's search: no zone)
+            return False
         if self._ends_array is None or self._ends_array[0] is not self._ends:
             self._ends_array = (self._ends, np.array(self._ends, dtype=float).reshape(len(self._ends), -1),
                                 np.array(self.weights, dtype=float))
         ends, weights = self._ends_array[1:]
-        if not len(ends):
-            return False
         sweeps = np.abs(ends - np.asarray(q, dtype=float)) @ weights
         near = bool(np.min(sweeps) <= ESCAPE_SWEEP)
         if np.min(np.abs(sweeps - ESCAPE_SWEEP)) < 1e-9:
