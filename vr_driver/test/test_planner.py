@@ -460,6 +460,39 @@ def test_the_timing_alone_keeps_the_scaled_limits_from_rest_to_rest(kin):
     assert max(np.max(np.abs(vel) / vmax), np.max(np.abs(acc) / amax)) > 0.9     # time-optimal: near a limit
 
 
+def test_a_straight_move_is_timed_in_closed_form_as_toppra_times_it(kin):
+    """kinematics.plan_timing: a path of two points (one straight joint move) is timed in closed
+    form -- within 0.5 % of TOPP-RA's duration for the same line (given as three collinear points,
+    which go through TOPP-RA), every sample on the line and within the scaled limits, a limit
+    reached (time-optimal), from rest to rest, samples every <= dt; short moves that never reach
+    the speed limit (a triangle) and long ones (with a cruise) both occur."""
+    import random
+    import toppra
+    from vr_driver.kinematics.plan_timing import PathTiming
+    lim = kin.limits
+    timing = PathTiming(toppra, lim.velocity, lim.acceleration)
+    rng = random.Random(4)
+    cruised = set()
+    for k in range(30):
+        a = np.array(kin.random_joints(rng))
+        b = a + (np.array(kin.random_joints(rng)) - a) * (0.02 if k % 3 == 0 else 1.0)
+        vs = rng.choice((1.0, 0.5, 0.1))
+        times, pos, vel, acc = timing.time([tuple(a), tuple(b)], vs, vs, 0.05, 0.05)
+        toppra_times = timing.time([tuple(a), tuple((a + b) / 2.0), tuple(b)], vs, vs, 0.05, 0.05)[0]
+        assert times[-1] == pytest.approx(toppra_times[-1], rel=5e-3)
+        assert pos[0] == tuple(a) and pos[-1] == tuple(b) and vel[0] == vel[-1] == (0.0,) * 6
+        dt = np.diff(times)
+        assert times[0] == 0.0 and dt.max() <= 0.05 + 1e-12 and np.allclose(dt, dt[0])
+        along = (np.array(pos) - a) @ (b - a) / ((b - a) @ (b - a))
+        assert np.allclose(np.array(pos), a + along[:, None] * (b - a), atol=1e-12)
+        assert np.all(np.diff(along) > 0.0)
+        vmax, amax = vs * np.array(lim.velocity), vs * np.array(lim.acceleration)
+        assert np.all(np.abs(vel) <= vmax) and np.all(np.abs(acc) <= amax)
+        assert max(np.max(np.abs(vel) / vmax), np.max(np.abs(acc) / amax)) > 0.96
+        cruised.add(bool(np.any(np.all(np.array(acc) == 0.0, axis=1)[1:-1])))
+    assert cruised == {True, False}
+
+
 def test_a_timing_failure_is_the_planner_s_error_of_the_step_time(kin, monkeypatch):
     from vr_driver.kinematics.plan_timing import TimingError
     planner = Planner(kin, None, seed=1)

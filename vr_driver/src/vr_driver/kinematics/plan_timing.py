@@ -83,6 +83,9 @@ class PathTiming:
             return (0.0,), (q,), (zero,), (zero,)
         if float(np.max(np.abs(wp - wp[0]))) < TINY_MOVE:
             return self._time_tiny(wp[0], wp[-1], vs, acs, dt)
+        if len(path) == 2:                    # one straight joint move: TOPP-RA's answer in closed form
+            return self._time_straight(np.asarray(path[0], dtype=float), np.asarray(path[1], dtype=float),
+                                       vs, acs, dt)
         s = np.concatenate(([0.0], np.cumsum(np.linalg.norm(np.diff(wp, axis=0), axis=1))))
         s = s / s[-1]
         curve = ta.SplineInterpolator(s, wp)
@@ -119,6 +122,43 @@ class PathTiming:
             raise TimingError("the timed path keeps exceeding the speed or acceleration limits")
         pos, vel, acc = timed(u), timed(u, 1) / k, timed(u, 2) / (k * k)
         pos[0], pos[-1] = path[0], path[-1]
+        vel[0] = vel[-1] = 0.0
+        return _samples(ts, pos, vel, acc)
+
+    def _time_straight(self, a: np.ndarray, b: np.ndarray, vs: float, acs: float, dt: float) -> Samples:
+        """One straight joint move a -> b from rest to rest, time-optimal under the same limits as
+        TOPP-RA's (the scaled limits less TOPP_MARGIN): along a straight line every joint moves in
+        proportion, so the path parameter s (0..1) has one speed limit (the smallest v_i / |d_i|)
+        and one acceleration limit (a_i / |d_i|): it accelerates at its limit, cruises at its
+        speed limit if it reaches it, and brakes at its limit -- the profile TOPP-RA's grid
+        approximates, without its grid (or its spline: the samples lie on the line itself)."""
+        d = b - a
+        moving = np.abs(d) > 0.0
+        vmax = self.velocity * vs * TOPP_MARGIN
+        amax = self.acceleration * acs * TOPP_MARGIN
+        rate = float(np.min(vmax[moving] / np.abs(d[moving])))       # [1/s] ds/dt at most
+        accel = float(np.min(amax[moving] / np.abs(d[moving])))      # [1/s^2] d2s/dt2 at most
+        if rate * rate / accel >= 1.0:        # never at the speed limit: accelerate half way, brake
+            ramp = math.sqrt(1.0 / accel)
+            rate = accel * ramp
+            cruise = 0.0
+        else:
+            ramp = rate / accel
+            cruise = (1.0 - rate * ramp) / rate
+        total = 2.0 * ramp + cruise
+        n = max(1, int(math.ceil(total / dt - 1e-9)))
+        ts = np.linspace(0.0, total, n + 1)
+        braking = np.maximum(total - ts, 0.0)                         # [s] time left
+        s = np.where(ts < ramp, 0.5 * accel * ts * ts,
+                     np.where(braking < ramp, 1.0 - 0.5 * accel * braking * braking,
+                              0.5 * rate * ramp + rate * (ts - ramp)))
+        sd = np.where(ts < ramp, accel * ts, np.where(braking < ramp, accel * braking, rate))
+        sdd = np.where(ts < ramp, accel, np.where(braking < ramp, -accel, 0.0))
+        s = np.clip(s, 0.0, 1.0)
+        pos = a[None, :] + s[:, None] * d[None, :]
+        vel = sd[:, None] * d[None, :]
+        acc = sdd[:, None] * d[None, :]
+        pos[0], pos[-1] = a, b
         vel[0] = vel[-1] = 0.0
         return _samples(ts, pos, vel, acc)
 
