@@ -580,12 +580,12 @@ def test_a_motion_checked_in_one_batch_is_checked_state_by_state(kin, cell_check
     """motion_valid and the planner's test (the clearance, and the escape zone near the ends) in
     one batch (the checker's first_collision) find the configuration the same test one state at a
     time finds, on random motions across the cell and short ones (brute force)."""
-    from vr_driver.kinematics.plan_search import BatchValidity, first_invalid
+    from vr_driver.kinematics.plan_search import BatchValidity, SweepZone, first_invalid
     planner = Planner(kin, cell_checker)
     assert isinstance(planner.is_valid, BatchValidity) and isinstance(planner.planning_valid, BatchValidity)
     found = {"valid": 0, "planning": 0}
     for a, b in _random_motions(kin, 60, 4):
-        planner._ends = (a, b)
+        planner._ends = SweepZone((a, b), planner.weights)
         for name, batch, one in (("valid", planner.is_valid, lambda q: not cell_checker.in_collision(q)),
                                  ("planning", planner.planning_valid, planner._planning_valid)):
             n = max(1, int(math.ceil(planner._sweep(a, b) / planner.max_sweep)))
@@ -631,22 +631,23 @@ def test_the_escape_zone_in_numpy_is_the_sweep_bound_s(kin):
     within 1e-9 of the bound) says what :meth:`_sweep` of each end says, on random configurations
     around the ends, both ways, and at the bound itself."""
     import random
+    from vr_driver.kinematics.plan_search import SweepZone
     from vr_driver.kinematics.planner import ESCAPE_SWEEP, Planner
     planner = Planner(kin, None)
     rng = random.Random(3)
-    assert planner._ends == () and not planner._escapes(kin.random_joints(rng))    # no plan made: no zone
+    assert planner._ends.ends == () and not planner._escapes(kin.random_joints(rng))    # no plan made: no zone
     for ends in ([kin.random_joints(rng)], [kin.random_joints(rng) for _ in range(9)]):
-        planner._ends = tuple(tuple(e) for e in ends)
+        planner._ends = SweepZone(ends, planner.weights)
         seen = set()
         for _ in range(1500):
             e = rng.choice(ends)
             q = tuple(v + rng.uniform(-0.6, 0.6) for v in e)
-            expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in planner._ends) and planner.is_valid(q)
+            expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in ends) and planner.is_valid(q)
             assert planner._escapes(q) == expected
             seen.add(expected)
         assert seen == {True, False}
         # one joint of the first end turned to the bound exactly (as near as floats go)
         w = planner.weights[0]
         q = (ends[0][0] + ESCAPE_SWEEP / w,) + tuple(ends[0][1:])
-        expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in planner._ends) and planner.is_valid(q)
+        expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in ends) and planner.is_valid(q)
         assert planner._escapes(q) == expected

@@ -73,6 +73,26 @@ def bisection_order(n: int) -> Tuple[int, ...]:
     return tuple(np.concatenate(out).tolist())
 
 
+class SweepZone:
+    """The configurations within a sweep bound (sum_i w_i |q_i - e_i|, ``weights`` w) of any of
+    ``ends`` (the planner's escape zone around a plan's start and goals): :meth:`near`."""
+
+    def __init__(self, ends: Sequence[Sequence[float]], weights: Sequence[float]) -> None:
+        self.ends = tuple(tuple(e) for e in ends)
+        self._rows = np.array(self.ends, dtype=float) if self.ends else np.zeros((0, 0))
+        self._weights = np.array(weights, dtype=float)
+
+    def near(self, q: Sequence[float], bound: float, sweep: Callable[[Sequence[float], Sequence[float]], float]) -> bool:
+        """Whether ``sweep(q, e) <= bound`` for an end e: the sweeps in numpy, and where one lies
+        within 1e-9 of the bound (numpy's sum may round otherwise), ``sweep``'s own sums decide."""
+        if not self.ends:
+            return False
+        sweeps = np.abs(self._rows - np.asarray(q, dtype=float)) @ self._weights
+        if np.min(np.abs(sweeps - bound)) < 1e-9:
+            return any(sweep(q, e) <= bound for e in self.ends)
+        return bool(np.min(sweeps) <= bound)
+
+
 @functools.lru_cache(maxsize=4096)
 def motion_fractions(n: int) -> np.ndarray:
     """The fractions of a motion of ``n`` steps its states are checked at, in order: the end (1)

@@ -84,7 +84,7 @@ from ..errors import KinematicsError, MissingDependency, MotionError, PoseError
 from ..params import PLANNERS
 from ..poses import ControllerPose, ros_to_matrix
 from . import deps
-from .plan_search import SWEEP_VALIDATED, BatchValidity, OmplSearch, first_invalid
+from .plan_search import SWEEP_VALIDATED, BatchValidity, OmplSearch, SweepZone, first_invalid
 from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
 from .roadmap import Roadmap
 
@@ -322,8 +322,7 @@ class Planner:
         self._prefer = goal_preference
         #: the paths of earlier plans (a Roadmap, kept by the caller) tried before the search, or None
         self.roadmap = roadmap
-        self._ends: Tuple[Tuple[float, ...], ...] = ()
-        self._ends_array: Any = None      # (_escapes': (_ends, them as rows, the weights))
+        self._ends = SweepZone((), ())    # the plan's start and goals (_escapes)
         for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
             if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
                 raise PlanningError("time", "every joint needs a finite %s limit > 0 for the timing, got %r"
@@ -366,20 +365,7 @@ class Planner:
         return self._escapes(q)
 
     def _escapes(self, q: Sequence[float]) -> bool:
-        """Within ESCAPE_SWEEP of the start or a goal (the sweep bound :meth:`_sweep`), and valid. The
-        sweeps to all of them in numpy; where one lies within 1e-9 of the bound (numpy's sum may
-        round otherwise), :meth:`_sweep`'s own sums decide."""
-        if not self._ends:                # (outside a plan's search: no zone)
-            return False
-        if self._ends_array is None or self._ends_array[0] is not self._ends:
-            self._ends_array = (self._ends, np.array(self._ends, dtype=float).reshape(len(self._ends), -1),
-                                np.array(self.weights, dtype=float))
-        ends, weights = self._ends_array[1:]
-        sweeps = np.abs(ends - np.asarray(q, dtype=float)) @ weights
-        near = bool(np.min(sweeps) <= ESCAPE_SWEEP)
-        if np.min(np.abs(sweeps - ESCAPE_SWEEP)) < 1e-9:
-            near = any(self._sweep(q, e) <= ESCAPE_SWEEP for e in self._ends)
-        return near and bool(self.is_valid(q))
+        return self._ends.near(q, ESCAPE_SWEEP, self._sweep) and bool(self.is_valid(q))
 
     def _planning_first_invalid(self, qs: Any) -> Optional[int]:
         """:meth:`_planning_valid` of a batch (BatchValidity.first_invalid): the clearance's test
@@ -550,7 +536,7 @@ class Planner:
         t = time.perf_counter()
         goals = [tuple(g) for g in goals]
         q1 = goals[0]
-        self._ends = (tuple(q0),) + tuple(goals)
+        self._ends = SweepZone((tuple(q0),) + tuple(goals), self.weights)
         if self.motion_valid(q0, q1, self.planning_valid) is None:
             timings["plan"] = time.perf_counter() - t
             timings["simplify"] = 0.0
