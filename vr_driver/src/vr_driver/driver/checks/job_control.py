@@ -13,7 +13,6 @@ from __future__ import annotations
 import collections
 import logging
 import threading
-import time
 from typing import Callable, Deque, List, Optional, Sequence, Tuple
 
 from ...errors import CollisionError, VrDriverError
