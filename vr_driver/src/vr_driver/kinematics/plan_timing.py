@@ -1,7 +1,8 @@
 """The timing of a planned joint path, step 5 of :mod:`vr_driver.kinematics.planner`: a cubic spline
 through the path (resampled densely, so that it stays on the checked path), TOPP-RA time-optimal
 under the joint speed and acceleration limits (less :data:`TOPP_MARGIN`), from rest to rest, sampled
-evenly every ``dt`` at most; a move shorter than :data:`TINY_MOVE` in closed form.
+evenly every ``dt`` at most; a move shorter than :data:`TINY_MOVE`, and one straight joint move (a
+path of two points: the same limits, TOPP-RA's optimum without its grid), in closed form.
 
     timing = PathTiming(toppra, velocity_limits, acceleration_limits)   # the module, rad/s, rad/s^2
     times, positions, velocities, accelerations = timing.time(path, vs, acs, spline_step, dt)
