@@ -603,7 +603,7 @@ def test_a_joint_goal_across_the_stretched_elbow_is_planned_through_it_and_run(k
     assert w.arm.joints == pytest.approx(goal, abs=math.radians(0.05))         # the goal's branch: the arm's own
     assert w.status().joints == pytest.approx(goal, abs=math.radians(0.05))    # ... and what the driver reads
     # without the waypoints the controller keeps the start's branch: refused every time
-    monkeypatch.setattr(planning, "_elbow_crossing", lambda s, t: ((), t))
+    monkeypatch.setattr(planning, "_elbow_crossings", lambda s, t: ((), t))
     planning.core = fold_world(kin, "previous_target").core
     # (1 s: the tries with the elbow's margin find nothing and take their whole budget)
     out = planning.plan(PlanGoal(joints=(kin.joint_names, goal), planning_time=1.0), start=start, seed=1)
@@ -651,6 +651,33 @@ def test_under_current_joints_a_crossing_too_near_the_goal_is_refused_in_words(k
     assert "in another configuration than planned" in out.text and "current_joints" in out.text, out.text
     assert "nothing was sent" in out.text and "across the stretched elbow" in out.text, out.text
     assert w.core.status().joints == pytest.approx(tuple(math.radians(v) for v in FOLD_START), abs=1e-3)
+
+
+def test_each_try_crosses_the_stretched_elbow_by_its_own_waypoints(kin, monkeypatch):
+    """A goal across the stretch gets up to ATTEMPTS crossings, each two valid waypoints with
+    joint_3 alone between them, the first the straight line's (what _elbow_crossing gives); a try
+    whose plan through one found no path takes the next (not the same walled-in leg again: the
+    hood cell's query 52), and the last try's words still say why."""
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    start, goal = (tuple(math.radians(v) for v in q) for q in (FOLD_START, FOLD_GOAL))
+    planning = PlanActionCore(world(kin, workspace=REACH).core, kinematics=kin)
+    crossings, target = planning._elbow_crossings(start, goal)
+    assert target == goal and len(crossings) == P.ATTEMPTS and len(set(crossings)) == P.ATTEMPTS
+    assert crossings[0] == planning._elbow_crossing(start, goal)[0]
+    strict = planning._planning_validity(planning.snapshot(), wrist_margin=False, elbow_margin=False)
+    for near, past in crossings:
+        assert near[:2] + near[3:] == past[:2] + past[3:] and strict(near) and strict(past)
+        assert (near[2] - stretch) * (start[2] - stretch) > 0 > (past[2] - stretch) * (start[2] - stretch)
+    tried = []
+
+    def walled_in(planner, q0, tgt, crossing):
+        tried.append(crossing)
+        raise PlanningError("plan", "found no path (walled in)")
+    monkeypatch.setattr(planning, "_plan", walled_in)
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, goal), planning_time=0.1), start=start, seed=1)
+    assert out.code == P.PLANNING_FAILED and "walled in" in out.text, out.text
+    assert tried == list(crossings)
 
 
 def test_no_crossing_waypoints_where_they_would_not_help(kin):

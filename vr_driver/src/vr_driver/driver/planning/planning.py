@@ -114,6 +114,11 @@ AT_GOAL = 1e-4
 #: the chain indices of the wrist bend (joint_5) and the elbow (joint_3)
 _WRIST = 4
 _ELBOW = 2
+_SHOULDER = 1
+#: [rad] joint_2 of the elbow crossings tried after those on the straight line's other joints
+#: (PlanActionCore._elbow_crossings): the upper arm upright and 20 deg either way, the stretched
+#: arm pointing up, clear of what stands on a table
+CROSS_UPRIGHT = (0.0, math.radians(20.0), math.radians(-20.0))
 
 
 @dataclass(frozen=True)
@@ -505,9 +510,9 @@ class PlanActionCore:
                                 "tries": 0, "replans": []}
         tick = time.perf_counter()
         try:
-            crossing, target = self._elbow_crossing(tuple(start), target)
+            crossings, target = self._elbow_crossings(tuple(start), target)
         except PlanningError:
-            crossing = ()           # (the planner says why, below)
+            crossings = ()          # (the planner says why, below)
         prof["crossing"] = time.perf_counter() - tick
         # a joint goal with joint_5 of the other sign: the wrist margin would wall every path off
         wrist_across = isinstance(target, tuple) and len(target) == len(start) and start[_WRIST] * target[_WRIST] < 0.0
@@ -515,6 +520,8 @@ class PlanActionCore:
         for attempt in range(ATTEMPTS):
             if validity is not None:
                 prof["checks"] += validity.counter[0]
+            # each try its own crossing while there are others: one whose leg found no path is walled in
+            crossing = crossings[min(attempt, len(crossings) - 1)] if crossings else ()
             prof["tries"] += 1
             tick = time.perf_counter()
             try:
@@ -653,58 +660,75 @@ class PlanActionCore:
         return rank
 
     def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:
-        """(the two waypoints a plan crosses the stretched elbow by, the target), with a Cartesian
-        protocol and a goal across the stretch from ``start`` -- a joint goal, a named state, or a
-        pose with no valid solution on the start's side (then the target becomes the valid solution
-        the planner would take, its joints); else ((), ``target``).
+        """(the two waypoints of :meth:`_elbow_crossings`' first crossing, or (), the target)."""
+        crossings, target = self._elbow_crossings(start, target)
+        return (crossings[0] if crossings else ()), target
+
+    def _elbow_crossings(self, start: Tuple[float, ...], target: Any
+                         ) -> Tuple[Tuple[Tuple[Tuple[float, ...], ...], ...], Any]:
+        """(up to ATTEMPTS pairs of waypoints a plan may cross the stretched elbow by, each try its
+        own, the target), with a Cartesian protocol and a goal across the stretch from ``start`` -- a
+        joint goal, a named state, or a pose with no valid solution on the start's side (then the
+        target becomes the valid solution the planner would take, its joints); else ((), ``target``).
 
         The controller solves each target nearest the one before: a pose just past the stretch it
         solves onto the branch it is on (the other branch's solution lies farther than its mirror),
         and a plan that crosses in the direction joint_2 and joint_3 fold in together (the wrist
         centre out to full reach and back) never leaves it. Turning joint_3 alone from near the
         stretch does: from ELBOW_APPROACH on the start's side, ELBOW_CROSS past it the planned
-        branch is the nearest (bench/README.md, "Planning"). So the plan passes
-        the stretch where the straight joint line from the start to the goal does (joint_5 moved
-        to ELBOW_WRIST from 0, on the start's side, if it is nearer: the wrist singularity there too
-        would leave joint_4 / joint_6 to the controller) -- or, where that is not valid, with the
-        other joints at the start's, or at the goal's -- and turns joint_3 alone between those two
-        places. No waypoints for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair
-        is valid (the planner's clearance, the limits, the box): the plan is made as before and the
+        branch is the nearest (bench/README.md, "Planning"). So the plan passes the stretch where
+        the straight joint line from the start to the goal does (joint_5 moved to ELBOW_WRIST from
+        0, on the start's side, if it is nearer: the wrist singularity there too would leave
+        joint_4 / joint_6 to the controller) -- or, where that is not valid, with the other joints
+        at the start's, or at the goal's, or a quarter, half, three quarters of the way -- and
+        turns joint_3 alone between those two places. A try that found no path through one
+        crossing (a leg walled in: bench/README.md, query 52 of the hood cell) takes the next: the
+        same places, then each with the upper arm upright (joint_2 at CROSS_UPRIGHT, where the
+        stretched arm points up, away from a table, a hood or a shelf: query 88 of the hood cell,
+        whose straight line crosses the stretch with the arm reaching down into the table). No
+        waypoints for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair is valid
+        (the planner's clearance, the limits, the box): the plan is made as before and the
         driver's stream check decides."""
-        none: Tuple[Tuple[float, ...], ...] = ()
         rank = self._goal_preference()
         stretched = stretched_elbow(self.kin)
         if rank is None or stretched is None:
-            return none, target
+            return (), target
         pose = not isinstance(target, str) and pose_target(self.kin, target) is not None
         goal = self.kin.named_states.get(target) if isinstance(target, str) else target
         if not pose and (goal is None or len(goal) != len(start) or not rank(start, goal)):
-            return none, target     # (a goal on the start's side: no copy of the checker made)
+            return (), target     # (a goal on the start's side: no copy of the checker made)
         with self.core.planning_gate:
             validity = self.snapshot()
         if pose:
             planner = Planner(self.kin, validity, goal_preference=rank)
             valid = [q for q in planner.goal_candidates(start, target) if planner.is_valid(q)]
             if not valid or not rank(start, valid[0]):
-                return none, target
+                return (), target
             goal = valid[0]
         a, b = start[_ELBOW], goal[_ELBOW]
         if abs(b - stretched) < ELBOW_CROSS / 2.0:
-            return none, target     # that close to the stretch, the planned branch is not the nearest
+            return (), target     # that close to the stretch, the planned branch is not the nearest
         strict = self._planning_validity(validity, wrist_margin=False, elbow_margin=False)
         lim = self.kin.limits
-        # the other joints where the straight line crosses; else the start's, else the goal's
-        for f in ((stretched - a) / (b - a), 0.0, 1.0):
-            near = [x + f * (y - x) for x, y in zip(start, goal)]
-            if abs(near[_WRIST]) < ELBOW_WRIST:
-                near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
-            near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
-            past = list(near)
-            past[_ELBOW] = stretched + math.copysign(min(ELBOW_CROSS, abs(b - stretched)), b - stretched)
-            if all(all(lo <= v <= hi for v, lo, hi in zip(q, lim.lower, lim.upper)) and strict(q)
-                   for q in (near, past)):
-                return (tuple(near), tuple(past)), tuple(goal)
-        return none, target
+        found: List[Tuple[Tuple[float, ...], ...]] = []
+        # the other joints where the straight line crosses; else the start's, the goal's, between
+        for upright in (None,) + CROSS_UPRIGHT:
+            for f in ((stretched - a) / (b - a), 0.0, 1.0, 0.5, 0.25, 0.75):
+                near = [x + f * (y - x) for x, y in zip(start, goal)]
+                if upright is not None:
+                    near[_SHOULDER] = upright
+                if abs(near[_WRIST]) < ELBOW_WRIST:
+                    near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
+                near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
+                past = list(near)
+                past[_ELBOW] = stretched + math.copysign(min(ELBOW_CROSS, abs(b - stretched)), b - stretched)
+                pair = (tuple(near), tuple(past))
+                if pair not in found and all(all(lo <= v <= hi for v, lo, hi in zip(q, lim.lower, lim.upper))
+                                             and strict(q) for q in pair):
+                    found.append(pair)
+                    if len(found) == ATTEMPTS:
+                        return tuple(found), tuple(goal)
+        return tuple(found), (tuple(goal) if found else target)
 
     def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True, elbow_margin: bool = True):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the
