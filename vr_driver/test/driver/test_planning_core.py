@@ -396,6 +396,47 @@ def test_the_last_try_from_where_a_plan_ended_retreats_along_its_path(kin, monke
     assert P.retreat_waypoints(planning.last_path, end, ((0.0,) * 6,), P.ATTEMPTS - 1, plan_failed) == ()
 
 
+
+def test_the_way_back_ends_where_the_last_path_crossed_the_stretched_elbow():
+    """Run backwards, the last plan's elbow crossing turns joint_3 from past the stretch to near it,
+    where the controller keeps its branch (the hood cell's query 41): the retreat ends at the last
+    point on the start's side of the stretch; without a stretch (joint targets) it goes all the way."""
+    plan_failed = ["plan: no path"] * (P.ATTEMPTS - 1)
+    stretch = -1.34
+    path = tuple((0.1 * k, 0.0, j3, 0.0, 0.5, 0.0) for k, j3 in enumerate((-0.5, -1.0, -1.3, -1.5, -1.8, -2.0)))
+    end = path[-1]
+    assert P.retreat_waypoints(path, end, (), P.ATTEMPTS - 1, plan_failed) == tuple(reversed(path[:-1]))
+    assert P.retreat_waypoints(path, end, (), P.ATTEMPTS - 1, plan_failed, stretch) == (path[4], path[3])
+    assert P.retreat_waypoints(path[3:], end, (), P.ATTEMPTS - 1, plan_failed, stretch) == (path[4], path[3])
+
+
+def test_a_try_after_one_that_found_no_path_searches_with_another_planner(kin, monkeypatch):
+    """RRTConnect's try found no path: the next searches with RETRY_PLANNER (and a plan made so
+    says so); a try refused otherwise keeps the planner; RRTConnect where RETRY_PLANNER was asked."""
+    assert P.retry_planner("RRTConnect") == P.RETRY_PLANNER and P.retry_planner(P.RETRY_PLANNER) == "RRTConnect"
+    planning = PlanActionCore(world(kin).core, kinematics=kin)
+    used = []
+    real = planning._plan
+
+    def first_finds_nothing(planner, start, target, crossing):
+        used.append(planner.planner_name)
+        if len(used) == 1:
+            raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+        return real(planner, start, target, crossing)
+    monkeypatch.setattr(planning, "_plan", first_finds_nothing)
+    out = planning.plan(AWAY, seed=1)
+    assert out.ok, out.text
+    assert used == ["RRTConnect", P.RETRY_PLANNER] and "searched with %s" % P.RETRY_PLANNER in out.text
+    used.clear()
+
+    def recorded(planner, start, target, crossing):
+        used.append(planner.planner_name)
+        return real(planner, start, target, crossing)
+    monkeypatch.setattr(planning, "_plan", recorded)
+    monkeypatch.setattr(planning, "driver_refusal", lambda plan: "segment 2 of 5: refused" if len(used) < 3 else "")
+    assert planning.plan(AWAY, seed=1).ok
+    assert used == ["RRTConnect", "RRTConnect", "RRTConnect"]
+
 def test_the_driver_refusal_is_the_stream_check(kin):
     """A plan the v3 stream check accepts is "" (the plans above run); a jump of the wrist between
     two points of a short plan is refused in the driver's words."""
