@@ -722,7 +722,9 @@ def test_each_try_crosses_the_stretched_elbow_by_its_own_waypoints(kin, monkeypa
 
 
 def test_no_crossing_waypoints_where_they_would_not_help(kin):
-    """(): a goal on the start's side, a goal within ELBOW_CROSS / 2 past the stretch, joint targets (v2)."""
+    """(): a goal on the start's side, joint targets (v2). A goal within ELBOW_CROSS / 2 past the
+    stretch is crossed to ELBOW_CROSS past it and reached back along its own branch (the G2 would
+    solve a target that near the stretch onto the start's branch: the hood cell's seed 3, query 42)."""
     from vr_driver.kinematics.solver import stretched_elbow
     stretch = stretched_elbow(kin)
     start = tuple(math.radians(v) for v in FOLD_START)
@@ -731,7 +733,8 @@ def test_no_crossing_waypoints_where_they_would_not_help(kin):
     same = start[:2] + (start[2] - 0.1,) + start[3:]
     assert v3._elbow_crossing(start, same) == ((), same)
     close = start[:2] + (stretch - 0.9 * P.ELBOW_CROSS / 2,) + start[3:]
-    assert v3._elbow_crossing(start, close) == ((), close)
+    (near, past), target = v3._elbow_crossing(start, close)
+    assert target == close and past[2] - stretch == pytest.approx(-P.ELBOW_CROSS)    # beyond the goal
     goal = tuple(math.radians(v) for v in FOLD_GOAL)
     v2 = PlanActionCore(world(kin, protocol="v2", workspace=REACH).core, kinematics=kin)
     assert v2._elbow_crossing(start, goal) == ((), goal)

@@ -431,7 +431,9 @@ def elbow_crossings(start: Sequence[float], goal: Sequence[float], stretched: fl
     0, on the start's side, if it is nearer: the wrist singularity there too would leave
     joint_4 / joint_6 to the controller) -- or, where that is not valid, with the other joints
     at the start's, or at the goal's, or half, a quarter, three quarters of the way -- and
-    turns joint_3 alone between those two places. A try that found no path through one
+    turns joint_3 alone between those two places (past the goal's joint_3 when that is nearer the
+    stretch than ELBOW_CROSS / 2: a target that near it the G2 solves onto the start's branch
+    from the start's side, onto the goal's from beyond). A try that found no path through one
     crossing (a leg walled in: the hood cell's query 52) takes the next: the same places, then
     each with the upper arm upright (joint_2 at CROSS_UPRIGHT, where the stretched arm points
     up, away from a table, a hood or a shelf: the hood cell's query 88, whose straight line
@@ -439,6 +441,9 @@ def elbow_crossings(start: Sequence[float], goal: Sequence[float], stretched: fl
     valid (the planner's clearance, the limits, the box): the plan is made as before and the
     driver's stream check decides."""
     a, b = start[_ELBOW], goal[_ELBOW]
+    # to ELBOW_CROSS past the stretch, or to the goal's joint_3 if nearer; a goal nearer the stretch
+    # than ELBOW_CROSS / 2 is reached from ELBOW_CROSS past it, back along its own branch
+    turn = min(ELBOW_CROSS, abs(b - stretched)) if abs(b - stretched) >= ELBOW_CROSS / 2.0 else ELBOW_CROSS
     found: List[Tuple[Tuple[float, ...], ...]] = []
     # the other joints where the straight line crosses; else the start's, the goal's, between
     for upright in (None,) + CROSS_UPRIGHT:
@@ -450,7 +455,7 @@ def elbow_crossings(start: Sequence[float], goal: Sequence[float], stretched: fl
                 near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
             near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
             past = list(near)
-            past[_ELBOW] = stretched + math.copysign(min(ELBOW_CROSS, abs(b - stretched)), b - stretched)
+            past[_ELBOW] = stretched + math.copysign(turn, b - stretched)
             pair = (tuple(near), tuple(past))
             if pair not in found and all(all(lo <= v <= hi for v, lo, hi in zip(q, limits.lower, limits.upper))
                                          and strict(q) for q in pair):
@@ -770,8 +775,6 @@ class PlanActionCore:
             if not valid or not rank(start, valid[0]):
                 return (), target
             goal = valid[0]
-        if abs(goal[_ELBOW] - stretched) < ELBOW_CROSS / 2.0:
-            return (), target     # that close to the stretch, the planned branch is not the nearest
         found = elbow_crossings(start, goal, stretched, self._planning_validity(
             validity, wrist_margin=False, elbow_margin=False), self.kin.limits)
         return found, (tuple(goal) if found else target)
