@@ -432,6 +432,47 @@ def test_the_last_try_from_where_a_plan_ended_retreats_along_its_path(kin, monke
     assert P.retreat_waypoints(planning.last_path, end, ((0.0,) * 6,), P.ATTEMPTS - 1, plan_failed) == ()
 
 
+
+def test_the_way_back_ends_where_the_last_path_crossed_the_stretched_elbow():
+    """Run backwards, the last plan's elbow crossing turns joint_3 from past the stretch to near it,
+    where the controller keeps its branch (the hood cell's query 41): the retreat ends at the last
+    point on the start's side of the stretch; without a stretch (joint targets) it goes all the way."""
+    plan_failed = ["plan: no path"] * (P.ATTEMPTS - 1)
+    stretch = -1.34
+    path = tuple((0.1 * k, 0.0, j3, 0.0, 0.5, 0.0) for k, j3 in enumerate((-0.5, -1.0, -1.3, -1.5, -1.8, -2.0)))
+    end = path[-1]
+    assert P.retreat_waypoints(path, end, (), P.ATTEMPTS - 1, plan_failed) == tuple(reversed(path[:-1]))
+    assert P.retreat_waypoints(path, end, (), P.ATTEMPTS - 1, plan_failed, stretch) == (path[4], path[3])
+    assert P.retreat_waypoints(path[3:], end, (), P.ATTEMPTS - 1, plan_failed, stretch) == (path[4], path[3])
+
+
+def test_a_try_after_one_that_found_no_path_searches_with_another_planner(kin, monkeypatch):
+    """RRTConnect's try found no path: the next searches with RETRY_PLANNER (and a plan made so
+    says so); a try refused otherwise keeps the planner; RRTConnect where RETRY_PLANNER was asked."""
+    assert P.retry_planner("RRTConnect") == P.RETRY_PLANNER and P.retry_planner(P.RETRY_PLANNER) == "RRTConnect"
+    planning = PlanActionCore(world(kin).core, kinematics=kin)
+    used = []
+    real = planning._plan
+
+    def first_finds_nothing(planner, start, target, crossing):
+        used.append(planner.planner_name)
+        if len(used) == 1:
+            raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+        return real(planner, start, target, crossing)
+    monkeypatch.setattr(planning, "_plan", first_finds_nothing)
+    out = planning.plan(AWAY, seed=1)
+    assert out.ok, out.text
+    assert used == ["RRTConnect", P.RETRY_PLANNER] and "searched with %s" % P.RETRY_PLANNER in out.text
+    used.clear()
+
+    def recorded(planner, start, target, crossing):
+        used.append(planner.planner_name)
+        return real(planner, start, target, crossing)
+    monkeypatch.setattr(planning, "_plan", recorded)
+    monkeypatch.setattr(planning, "driver_refusal", lambda plan: "segment 2 of 5: refused" if len(used) < 3 else "")
+    assert planning.plan(AWAY, seed=1).ok
+    assert used == ["RRTConnect", "RRTConnect", "RRTConnect"]
+
 def test_the_driver_refusal_is_the_stream_check(kin):
     """A plan the v3 stream check accepts is "" (the plans above run); a jump of the wrist between
     two points of a short plan is refused in the driver's words."""
@@ -639,7 +680,7 @@ def test_a_joint_goal_across_the_stretched_elbow_is_planned_through_it_and_run(k
     assert w.arm.joints == pytest.approx(goal, abs=math.radians(0.05))         # the goal's branch: the arm's own
     assert w.status().joints == pytest.approx(goal, abs=math.radians(0.05))    # ... and what the driver reads
     # without the waypoints the controller keeps the start's branch: refused every time
-    monkeypatch.setattr(planning, "_elbow_crossing", lambda s, t: ((), t))
+    monkeypatch.setattr(planning, "_elbow_crossings", lambda s, t: ((), t))
     planning.core = fold_world(kin, "previous_target").core
     # (1 s: the tries with the elbow's margin find nothing and take their whole budget)
     out = planning.plan(PlanGoal(joints=(kin.joint_names, goal), planning_time=1.0), start=start, seed=1)
@@ -689,8 +730,37 @@ def test_under_current_joints_a_crossing_too_near_the_goal_is_refused_in_words(k
     assert w.core.status().joints == pytest.approx(tuple(math.radians(v) for v in FOLD_START), abs=1e-3)
 
 
+def test_each_try_crosses_the_stretched_elbow_by_its_own_waypoints(kin, monkeypatch):
+    """A goal across the stretch gets up to ATTEMPTS crossings, each two valid waypoints with
+    joint_3 alone between them, the first the straight line's (what _elbow_crossing gives); a try
+    whose plan through one found no path takes the next (not the same walled-in leg again: the
+    hood cell's query 52), and the last try's words still say why."""
+    from vr_driver.kinematics.solver import stretched_elbow
+    stretch = stretched_elbow(kin)
+    start, goal = (tuple(math.radians(v) for v in q) for q in (FOLD_START, FOLD_GOAL))
+    planning = PlanActionCore(world(kin, workspace=REACH).core, kinematics=kin)
+    crossings, target = planning._elbow_crossings(start, goal)
+    assert target == goal and len(crossings) == P.ATTEMPTS and len(set(crossings)) == P.ATTEMPTS
+    assert crossings[0] == planning._elbow_crossing(start, goal)[0]
+    strict = planning._planning_validity(planning.snapshot(), wrist_margin=False, elbow_margin=False)
+    for near, past in crossings:
+        assert near[:2] + near[3:] == past[:2] + past[3:] and strict(near) and strict(past)
+        assert (near[2] - stretch) * (start[2] - stretch) > 0 > (past[2] - stretch) * (start[2] - stretch)
+    tried = []
+
+    def walled_in(planner, q0, tgt, crossing):
+        tried.append(crossing)
+        raise PlanningError("plan", "found no path (walled in)")
+    monkeypatch.setattr(planning, "_plan", walled_in)
+    out = planning.plan(PlanGoal(joints=(kin.joint_names, goal), planning_time=0.1), start=start, seed=1)
+    assert out.code == P.PLANNING_FAILED and "walled in" in out.text, out.text
+    assert tried == list(crossings)
+
+
 def test_no_crossing_waypoints_where_they_would_not_help(kin):
-    """(): a goal on the start's side, a goal within ELBOW_CROSS / 2 past the stretch, joint targets (v2)."""
+    """(): a goal on the start's side, joint targets (v2). A goal within ELBOW_CROSS / 2 past the
+    stretch is crossed to ELBOW_CROSS past it and reached back along its own branch (the G2 would
+    solve a target that near the stretch onto the start's branch: the hood cell's seed 3, query 42)."""
     from vr_driver.kinematics.solver import stretched_elbow
     stretch = stretched_elbow(kin)
     start = tuple(math.radians(v) for v in FOLD_START)
@@ -699,7 +769,8 @@ def test_no_crossing_waypoints_where_they_would_not_help(kin):
     same = start[:2] + (start[2] - 0.1,) + start[3:]
     assert v3._elbow_crossing(start, same) == ((), same)
     close = start[:2] + (stretch - 0.9 * P.ELBOW_CROSS / 2,) + start[3:]
-    assert v3._elbow_crossing(start, close) == ((), close)
+    (near, past), target = v3._elbow_crossing(start, close)
+    assert target == close and past[2] - stretch == pytest.approx(-P.ELBOW_CROSS)    # beyond the goal
     goal = tuple(math.radians(v) for v in FOLD_GOAL)
     v2 = PlanActionCore(world(kin, protocol="v2", workspace=REACH).core, kinematics=kin)
     assert v2._elbow_crossing(start, goal) == ((), goal)

@@ -33,8 +33,9 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   branch (:meth:`PlanActionCore._elbow_crossing`); and a plan is checked by the driver's own stream
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
-  all, each with the whole budget: a sampling planner's next try differs), so that a preview shows
-  what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
+  all, each with the whole budget: a sampling planner's next try differs; a try after one that found
+  no path searches with another planner, :func:`retry_planner`, and crosses the stretched elbow by
+  other waypoints, :meth:`PlanActionCore._elbow_crossings`), so that a preview shows what will run. The planning time is then at most ATTEMPTS x the budget. A plan from where the
   last plan ended whose tries found no path retreats on its last try along the way the arm came
   (:func:`retreat_waypoints`: out of a narrow place such as under a hood), every leg checked.
 - **Kept between plans**: the paths of the plans made (:class:`~vr_driver.kinematics.roadmap.Roadmap`,
@@ -68,7 +69,7 @@ __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED"
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
            "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
            "cell_key", "margin_validity",
-           "arm_points", "code_of", "retreat_waypoints"]
+           "arm_points", "code_of", "elbow_crossings", "retreat_waypoints", "retry_planner"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
 SUCCESS = 1
@@ -106,6 +107,13 @@ ELBOW_HOLD = 0.1
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
 ATTEMPTS = 3
+#: the search of a try after a try that found no path (the requested planner's search otherwise):
+#: OMPL's LBKPIECE1 (lazy bidirectional KPIECE: it grows its trees along a projection of the joints
+#: and checks motions lazily) where RRTConnect was asked for, RRTConnect where another was. A goal
+#: reached only through a narrow passage -- the hood cell's query 52, a folded wrist turning under
+#: the hood's top -- was found by RRTConnect in 1 of 15 one-second tries, by LBKPIECE1 in 7 of 8
+#: (bench/README.md, "Planning"); the path is checked, simplified and timed as any other
+RETRY_PLANNER = "LBKPIECE1"
 #: [rad] a plan from within this of the last plan's end (every joint) may retreat along its path on
 #: its last try (retreat_waypoints)
 RETREAT_NEAR = math.radians(1.0)
@@ -114,6 +122,11 @@ AT_GOAL = 1e-4
 #: the chain indices of the wrist bend (joint_5) and the elbow (joint_3)
 _WRIST = 4
 _ELBOW = 2
+_SHOULDER = 1
+#: [rad] joint_2 of the elbow crossings tried after those on the straight line's other joints
+#: (PlanActionCore._elbow_crossings): the upper arm upright and 20 deg either way, the stretched
+#: arm pointing up, clear of what stands on a table
+CROSS_UPRIGHT = (0.0, math.radians(20.0), math.radians(-20.0))
 
 
 @dataclass(frozen=True)
@@ -450,6 +463,56 @@ def margin_validity(strict: CellValidity, wrist_margin: bool, stretched: Optiona
     return BatchValidity(lambda q: clear(q) and not strict.in_collision(q), first_invalid)
 
 
+def elbow_crossings(start: Sequence[float], goal: Sequence[float], stretched: float, strict: Any, limits: Any
+                    ) -> Tuple[Tuple[Tuple[float, ...], ...], ...]:
+    """Up to ATTEMPTS pairs (near, past) of waypoints that cross the stretched elbow (joint_3
+    ``stretched``) from ``start``'s side to ``goal``'s, each inside ``limits`` and valid by
+    ``strict``, the planner's validity without the margins.
+
+    The controller solves each target nearest the one before: a pose just past the stretch it
+    solves onto the branch it is on (the other branch's solution lies farther than its mirror),
+    and a plan that crosses in the direction joint_2 and joint_3 fold in together (the wrist
+    centre out to full reach and back) never leaves it. Turning joint_3 alone from near the
+    stretch does: from ELBOW_APPROACH on the start's side, ELBOW_CROSS past it the planned
+    branch is the nearest (bench/README.md, "Planning"). So the plan passes the stretch where
+    the straight joint line from the start to the goal does (joint_5 moved to ELBOW_WRIST from
+    0, on the start's side, if it is nearer: the wrist singularity there too would leave
+    joint_4 / joint_6 to the controller) -- or, where that is not valid, with the other joints
+    at the start's, or at the goal's, or half, a quarter, three quarters of the way -- and
+    turns joint_3 alone between those two places (past the goal's joint_3 when that is nearer the
+    stretch than ELBOW_CROSS / 2: a target that near it the G2 solves onto the start's branch
+    from the start's side, onto the goal's from beyond). A try that found no path through one
+    crossing (a leg walled in: the hood cell's query 52) takes the next: the same places, then
+    each with the upper arm upright (joint_2 at CROSS_UPRIGHT, where the stretched arm points
+    up, away from a table, a hood or a shelf: the hood cell's query 88, whose straight line
+    crosses the stretch with the arm reaching down into the table). None when no such pair is
+    valid (the planner's clearance, the limits, the box): the plan is made as before and the
+    driver's stream check decides."""
+    a, b = start[_ELBOW], goal[_ELBOW]
+    # to ELBOW_CROSS past the stretch, or to the goal's joint_3 if nearer; a goal nearer the stretch
+    # than ELBOW_CROSS / 2 is reached from ELBOW_CROSS past it, back along its own branch
+    turn = min(ELBOW_CROSS, abs(b - stretched)) if abs(b - stretched) >= ELBOW_CROSS / 2.0 else ELBOW_CROSS
+    found: List[Tuple[Tuple[float, ...], ...]] = []
+    # the other joints where the straight line crosses; else the start's, the goal's, between
+    for upright in (None,) + CROSS_UPRIGHT:
+        for f in ((stretched - a) / (b - a), 0.0, 1.0, 0.5, 0.25, 0.75):
+            near = [x + f * (y - x) for x, y in zip(start, goal)]
+            if upright is not None:
+                near[_SHOULDER] = upright
+            if abs(near[_WRIST]) < ELBOW_WRIST:
+                near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
+            near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
+            past = list(near)
+            past[_ELBOW] = stretched + math.copysign(turn, b - stretched)
+            pair = (tuple(near), tuple(past))
+            if pair not in found and all(all(lo <= v <= hi for v, lo, hi in zip(q, limits.lower, limits.upper))
+                                         and strict(q) for q in pair):
+                found.append(pair)
+                if len(found) == ATTEMPTS:
+                    return tuple(found)
+    return tuple(found)
+
+
 class PlanActionCore:
     """The plan action's ROS-free part (``ros/plan_server.py`` is its ROS edge): plans for a
     :class:`~vr_driver.driver.core.DriverCore` with the OMPL planner
@@ -553,16 +616,23 @@ class PlanActionCore:
                                 "tries": 0, "replans": []}
         tick = time.perf_counter()
         try:
-            crossing, target = self._elbow_crossing(tuple(start), target)
+            crossings, target = self._elbow_crossings(tuple(start), target)
         except PlanningError:
-            crossing = ()           # (the planner says why, below)
+            crossings = ()          # (the planner says why, below)
         prof["crossing"] = time.perf_counter() - tick
-        # a joint goal with joint_5 of the other sign: the wrist margin would wall every path off
-        wrist_across = isinstance(target, tuple) and len(target) == len(start) and start[_WRIST] * target[_WRIST] < 0.0
         validity = None
+        first = 0                       # the first try of the crossings
+        given = target                  # the goal as given (a pose: every solution)
+        switched = False                # the crossings are to a pose's solution across the stretch
+        search = planner_id             # the try's search: another after one that found no path
         for attempt in range(ATTEMPTS):
             if validity is not None:
                 prof["checks"] += validity.counter[0]
+            # each try its own crossing while there are others: one whose leg found no path is walled in
+            crossing = crossings[min(attempt - first, len(crossings) - 1)] if crossings else ()
+            # a joint goal with joint_5 of the other sign: the wrist margin would wall every path off
+            wrist_across = isinstance(target, tuple) and len(target) == len(start) \
+                and start[_WRIST] * target[_WRIST] < 0.0
             prof["tries"] += 1
             tick = time.perf_counter()
             try:
@@ -571,16 +641,24 @@ class PlanActionCore:
                         validity = self.snapshot()
                     self.roadmap.keep(cell_key(validity))
                     prof["snapshot"] += time.perf_counter() - tick
-                    planner = Planner(self.kin, validity, planner=planner_id, time_budget=budget,
+                    planner = Planner(self.kin, validity, planner=search, time_budget=budget,
                                       seed=None if seed is None else seed + attempt, velocity_scaling=scaling,
                                       acceleration_scaling=scaling, planning_validity=self._planning_validity(
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
                                           wrist=attempt < ATTEMPTS - 1 and not wrist_across), roadmap=self.roadmap)
-                    retreat = retreat_waypoints(self.last_path, tuple(start), crossing, attempt, prof["replans"])
+                    retreat = retreat_waypoints(self.last_path, tuple(start), () if switched else crossing, attempt,
+                                                prof["replans"], self._stretch())
                     if retreat:
                         prof["retreat"] = 1
+                        if switched and ConfigurationRule.parse(self.params.controller.configuration) \
+                                is not ConfigurationRule.CURRENT_JOINTS:
+                            # back the way the arm came, then across the stretch by the crossing
+                            retreat += crossing
+                        else:
+                            # back the way the arm came, then to any solution of the goal as given
+                            target = given
                     plan = self._at_goal(planner, tuple(start), target) or (
                         planner.plan(tuple(start), target, via=retreat) if retreat else
                         self._plan(planner, tuple(start), target, crossing))
@@ -588,6 +666,16 @@ class PlanActionCore:
                 prof["planner"] += time.perf_counter() - tick
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
                     prof["replans"].append("%s: %s" % (exc.step, str(exc)[:80]))
+                    if exc.step == "plan":
+                        search = retry_planner(planner_id)
+                        if not crossings and goal.pose is not None:
+                            # the pose's solutions on the start's side of the stretched elbow walled
+                            # in: the next tries cross to the nearest valid one across it
+                            try:
+                                crossings, target = self._elbow_crossings(tuple(start), target, across=True)
+                            except PlanningError:
+                                crossings = ()
+                            first, switched = attempt + 1, bool(crossings)
                     continue
                 prof["checks"] += validity.counter[0] if validity is not None else 0
                 return PlanOutcome(code_of(exc), "%s: %s" % (_STEP_WORDS.get(exc.step, "refused"), exc),
@@ -618,6 +706,8 @@ class PlanActionCore:
         else:
             text = ("planned with %s in %.0f ms: %d points over %.2f s (velocity scaling %g)"
                     % (planner_id, elapsed * 1e3, len(plan.times), plan.duration, scaling))
+        if search != planner_id:
+            text += "; its last try searched with %s (%s found no path)" % (search, planner_id)
         if not self.collision_checked:
             text += "; collisions NOT checked (collision_check: false)"
         self.last_path = tuple(tuple(q) for q in plan.path)
@@ -662,6 +752,10 @@ class PlanActionCore:
                 "solutions, or a protocol with joint targets (v2) avoids it"
                 % (math.degrees(goal[_ELBOW]), math.degrees(stretched_elbow(self.kin)), math.degrees(start[_ELBOW])))
 
+    def _stretch(self) -> Optional[float]:
+        """The stretched elbow's joint_3 with a Cartesian protocol (None with joint targets)."""
+        return None if self._goal_preference() is None else stretched_elbow(self.kin)
+
     def _goal_preference(self):
         """With a Cartesian protocol, the rank of a pose goal's IK solution: 0 on the start's side of
         the stretched elbow, 1 across it. The controller solves each target nearest the previous
@@ -701,58 +795,37 @@ class PlanActionCore:
         return rank
 
     def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:
-        """(the two waypoints a plan crosses the stretched elbow by, the target), with a Cartesian
-        protocol and a goal across the stretch from ``start`` -- a joint goal, a named state, or a
-        pose with no valid solution on the start's side (then the target becomes the valid solution
-        the planner would take, its joints); else ((), ``target``).
+        """(the two waypoints of :meth:`_elbow_crossings`' first crossing, or (), the target)."""
+        crossings, target = self._elbow_crossings(start, target)
+        return (crossings[0] if crossings else ()), target
 
-        The controller solves each target nearest the one before: a pose just past the stretch it
-        solves onto the branch it is on (the other branch's solution lies farther than its mirror),
-        and a plan that crosses in the direction joint_2 and joint_3 fold in together (the wrist
-        centre out to full reach and back) never leaves it. Turning joint_3 alone from near the
-        stretch does: from ELBOW_APPROACH on the start's side, ELBOW_CROSS past it the planned
-        branch is the nearest (bench/README.md, "Planning"). So the plan passes
-        the stretch where the straight joint line from the start to the goal does (joint_5 moved
-        to ELBOW_WRIST from 0, on the start's side, if it is nearer: the wrist singularity there too
-        would leave joint_4 / joint_6 to the controller) -- or, where that is not valid, with the
-        other joints at the start's, or at the goal's -- and turns joint_3 alone between those two
-        places. No waypoints for a goal nearer the stretch than ELBOW_CROSS / 2, or when no such pair
-        is valid (the planner's clearance, the limits, the box): the plan is made as before and the
-        driver's stream check decides."""
-        none: Tuple[Tuple[float, ...], ...] = ()
+    def _elbow_crossings(self, start: Tuple[float, ...], target: Any, across: bool = False
+                         ) -> Tuple[Tuple[Tuple[Tuple[float, ...], ...], ...], Any]:
+        """(:func:`elbow_crossings`: a try's each, the target) with a Cartesian protocol and a goal
+        across the stretch from ``start`` -- a joint goal, a named state, or a pose with no valid
+        solution on the start's side (the target then its valid solution the planner would take) or,
+        ``across``, its nearest valid one across (its start's side walled in); else ((), ``target``)."""
         rank = self._goal_preference()
         stretched = stretched_elbow(self.kin)
         if rank is None or stretched is None:
-            return none, target
+            return (), target
         pose = not isinstance(target, str) and pose_target(self.kin, target) is not None
         goal = self.kin.named_states.get(target) if isinstance(target, str) else target
         if not pose and (goal is None or len(goal) != len(start) or not rank(start, goal)):
-            return none, target     # (a goal on the start's side: no copy of the checker made)
+            return (), target     # (a goal on the start's side: no copy of the checker made)
         with self.core.planning_gate:
             validity = self.snapshot()
         if pose:
             planner = Planner(self.kin, validity, goal_preference=rank)
             valid = [q for q in planner.goal_candidates(start, target) if planner.is_valid(q)]
+            if across:
+                valid = [q for q in valid if rank(start, q)]
             if not valid or not rank(start, valid[0]):
-                return none, target
+                return (), target
             goal = valid[0]
-        a, b = start[_ELBOW], goal[_ELBOW]
-        if abs(b - stretched) < ELBOW_CROSS / 2.0:
-            return none, target     # that close to the stretch, the planned branch is not the nearest
-        strict = self._planning_validity(validity, wrist_margin=False, elbow_margin=False)
-        lim = self.kin.limits
-        # the other joints where the straight line crosses; else the start's, else the goal's
-        for f in ((stretched - a) / (b - a), 0.0, 1.0):
-            near = [x + f * (y - x) for x, y in zip(start, goal)]
-            if abs(near[_WRIST]) < ELBOW_WRIST:
-                near[_WRIST] = math.copysign(ELBOW_WRIST, start[_WRIST] if start[_WRIST] else 1.0)
-            near[_ELBOW] = stretched + math.copysign(ELBOW_APPROACH, a - stretched)
-            past = list(near)
-            past[_ELBOW] = stretched + math.copysign(min(ELBOW_CROSS, abs(b - stretched)), b - stretched)
-            if all(all(lo <= v <= hi for v, lo, hi in zip(q, lim.lower, lim.upper)) and strict(q)
-                   for q in (near, past)):
-                return (tuple(near), tuple(past)), tuple(goal)
-        return none, target
+        found = elbow_crossings(start, goal, stretched, self._planning_validity(
+            validity, wrist_margin=False, elbow_margin=False), self.kin.limits)
+        return found, (tuple(goal) if found else target)
 
     def _planning_validity(self, validity: CellValidity, wrist_margin: bool = True, elbow_margin: bool = True):
         """What the planner plans with (away from the start and the goal): ``validity`` padded by the
@@ -794,9 +867,15 @@ _STEP_WORDS = {"start": "cannot plan from here", "goal": "goal refused", "plan":
                "time": "no timing found", "check": "the planned trajectory failed its check"}
 
 
+def retry_planner(planner_id: str) -> str:
+    """The search of a try after one that found no path with ``planner_id``: RETRY_PLANNER, or
+    RRTConnect when that was the one."""
+    return RETRY_PLANNER if planner_id != RETRY_PLANNER else "RRTConnect"
+
+
 def retreat_waypoints(path: Optional[Tuple[Tuple[float, ...], ...]], start: Tuple[float, ...],
                       crossing: Tuple[Tuple[float, ...], ...], attempt: int,
-                      replans: List[str]) -> Tuple[Tuple[float, ...], ...]:
+                      replans: List[str], stretched: Optional[float] = None) -> Tuple[Tuple[float, ...], ...]:
     """Waypoints back along the last plan's ``path`` (its start last) -- for the last try of a plan
     from where that plan ended after every try before found no path: the arm got here along it,
     so it leads out of a narrow place (under the hood's top, between walls), and from its start
@@ -805,9 +884,17 @@ def retreat_waypoints(path: Optional[Tuple[Tuple[float, ...], ...]], start: Tupl
     or one that ended farther than RETREAT_NEAR from ``start`` (every joint; the arm stops near the
     plan's end, not on it). Nothing of it is taken on trust: every leg is checked (and, if
     not free, planned) by this plan's own validity, the cell as it is now, and the driver checks
-    the plan's stream as any other's."""
+    the plan's stream as any other's. ``stretched`` (the stretched elbow's joint_3, with a
+    Cartesian protocol): the way back ends before the last plan's path crosses it -- its elbow
+    crossing run backwards turns joint_3 from past the stretch to near it, where the controller
+    keeps the branch it is on (the hood cell's query 41: refused)."""
     if attempt != ATTEMPTS - 1 or crossing or not path or len(path) < 2 \
             or max(abs(a - b) for a, b in zip(path[-1], start)) > RETREAT_NEAR \
             or len(replans) != attempt or not all(r.startswith("plan:") for r in replans):
         return ()
-    return tuple(reversed(path[:-1]))
+    back = []
+    for q in reversed(path[:-1]):
+        if stretched is not None and (q[_ELBOW] - stretched) * (start[_ELBOW] - stretched) <= 0.0:
+            break
+        back.append(tuple(q))
+    return tuple(back)
