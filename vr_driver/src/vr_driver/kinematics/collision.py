@@ -314,7 +314,7 @@ class CollisionChecker:
         """True when any checked pair is closer than the padding (or overlaps) at ``q``."""
         return bool(self._colliding(self._config(q).reshape(-1, 1))[0])
 
-    def first_collision(self, qs: Any) -> Optional[int]:
+    def first_collision(self, qs: Sequence[Sequence[float]]) -> Optional[int]:
         """The index of the first row of ``qs`` (n x the joints, [rad]) in collision -- as
         :meth:`in_collision` of each row in turn, in one call that stops there --, or None when
         every row is free. Every row is validated before any is checked (PoseError)."""

@@ -46,7 +46,7 @@ class BatchValidity:
         return self._one(q)
 
 
-def first_invalid(is_valid: Callable[[Sequence[float]], bool], qs: Any) -> Optional[int]:
+def first_invalid(is_valid: Callable[[Sequence[float]], bool], qs: Sequence[Sequence[float]]) -> Optional[int]:
     """The index of the first row of ``qs`` (n x dof) that ``is_valid`` refuses, or None: in
     one call where it has a batch test (``first_invalid``: a :class:`BatchValidity`), else row by row."""
     batch = getattr(is_valid, "first_invalid", None)

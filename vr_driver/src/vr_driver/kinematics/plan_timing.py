@@ -46,6 +46,18 @@ class TimingError(MotionError):
     planner reports it as its PlanningError, step "time")."""
 
 
+def _on_line(ts: np.ndarray, a: np.ndarray, b: np.ndarray, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray) -> Samples:
+    """The samples at ``ts`` of the straight joint move from ``a`` to ``b`` along the path parameter
+    ``s`` (0..1) with its first and second derivatives ``sd``, ``sdd``; at rest, exactly at both ends."""
+    d = b - a
+    pos = a[None, :] + s[:, None] * d[None, :]
+    vel = sd[:, None] * d[None, :]
+    acc = sdd[:, None] * d[None, :]
+    pos[0], pos[-1] = a, b
+    vel[0] = vel[-1] = 0.0
+    return _samples(ts, pos, vel, acc)
+
+
 def _samples(ts: np.ndarray, pos: np.ndarray, vel: np.ndarray, acc: np.ndarray) -> Samples:
     """The arrays as tuples of floats (what PlannedTrajectory holds)."""
     return (tuple(float(t) for t in ts), tuple(tuple(float(v) for v in p) for p in pos),
@@ -155,13 +167,7 @@ class PathTiming:
                               0.5 * rate * ramp + rate * (ts - ramp)))
         sd = np.where(ts < ramp, accel * ts, np.where(braking < ramp, accel * braking, rate))
         sdd = np.where(ts < ramp, accel, np.where(braking < ramp, -accel, 0.0))
-        s = np.clip(s, 0.0, 1.0)
-        pos = a[None, :] + s[:, None] * d[None, :]
-        vel = sd[:, None] * d[None, :]
-        acc = sdd[:, None] * d[None, :]
-        pos[0], pos[-1] = a, b
-        vel[0] = vel[-1] = 0.0
-        return _samples(ts, pos, vel, acc)
+        return _on_line(ts, a, b, np.clip(s, 0.0, 1.0), sd, sdd)
 
     def _time_tiny(self, a: np.ndarray, b: np.ndarray, vs: float, acs: float, dt: float) -> Samples:
         """A move shorter than TINY_MOVE (TOPP-RA's grid finds no timing for it): the straight move
@@ -177,9 +183,4 @@ class PathTiming:
         shape = np.where(u < 0.5, 2.0 * u * u, 1.0 - 2.0 * (1.0 - u) ** 2)
         rate = np.where(u < 0.5, 4.0 * u, 4.0 * (1.0 - u)) / total
         curve = np.where(u < 0.5, 4.0, -4.0) / (total * total)
-        pos = a[None, :] + shape[:, None] * d[None, :]
-        vel = rate[:, None] * d[None, :]
-        acc = curve[:, None] * d[None, :]
-        pos[0], pos[-1] = a, b
-        vel[0] = vel[-1] = 0.0
-        return _samples(ts, pos, vel, acc)
+        return _on_line(ts, a, b, shape, rate, curve)

@@ -367,7 +367,7 @@ class Planner:
     def _escapes(self, q: Sequence[float]) -> bool:
         return self._ends.near(q, ESCAPE_SWEEP, self._sweep) and bool(self.is_valid(q))
 
-    def _planning_first_invalid(self, qs: Any) -> Optional[int]:
+    def _planning_first_invalid(self, qs: Sequence[Sequence[float]]) -> Optional[int]:
         """:meth:`_planning_valid` of a batch (BatchValidity.first_invalid): the clearance's test
         in one call up to its first refusal, that row in the escape zone tested again alone."""
         qs = np.asarray(qs, dtype=float)

@@ -37,11 +37,14 @@ import logging
 import math
 import threading
 import time
-from typing import Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Callable, Dict, Iterator, List, Optional, Sequence, Tuple
 
 from ...errors import CollisionError, MissingDependency, ModelError, SceneError
 from ...kinematics.planner import DEFAULT_MAX_SWEEP, joint_weights
 from ...kinematics.scene import Scene, SceneObject, load_scene
+
+if TYPE_CHECKING:        # (imported where a checker is made: pinocchio is heavy)
+    from ...kinematics.collision import CollisionChecker
 
 log = logging.getLogger("vr_driver.driver")
 
@@ -87,7 +90,7 @@ def hand_over() -> None:
         time.sleep(0)
 
 
-def first_in_collision(checker: Any, qs: Sequence[Sequence[float]], every: int, pause: Callable[[], Any]
+def first_in_collision(checker: CollisionChecker, qs: Sequence[Sequence[float]], every: int, pause: Callable[[], Any]
                        ) -> Optional[int]:
     """The index of the first of ``qs`` in collision (``checker.first_collision``, one call a chunk of
     ``every`` configurations, ``pause()`` between chunks: the bus thread must not wait on a long

@@ -334,7 +334,7 @@ class CellValidity:
         return not (ws.x[0] + m <= x * 1000.0 <= ws.x[1] - m and ws.y[0] + m <= y * 1000.0 <= ws.y[1] - m
                     and ws.z[0] + m <= z * 1000.0 <= ws.z[1] - m)
 
-    def first_invalid(self, qs: Any) -> Optional[int]:
+    def first_invalid(self, qs: Sequence[Sequence[float]]) -> Optional[int]:
         """The index of the first row of ``qs`` (n x the joints) that :meth:`in_collision` finds
         invalid, or None -- the collisions of the rows in one call of the checker (its
         ``first_collision``, up to the first), then the box of the rows before that one (none when
@@ -443,7 +443,7 @@ def margin_validity(strict: CellValidity, wrist_margin: bool, stretched: Optiona
         return (not wrist_margin or abs(q[_WRIST]) >= WRIST_MARGIN) and (
             not elbow or abs(math.remainder(q[_ELBOW] - stretched, 2.0 * math.pi)) >= ELBOW_MARGIN)
 
-    def first_invalid(qs: Any) -> Optional[int]:
+    def first_invalid(qs: Sequence[Sequence[float]]) -> Optional[int]:
         qs = np.asarray(qs, dtype=float)
         bad = np.zeros(len(qs), dtype=bool)
         if wrist_margin:
