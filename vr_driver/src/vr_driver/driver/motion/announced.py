@@ -78,8 +78,8 @@ def announce_plan(kin: Any, wire: Protocol, times: Sequence[float], positions: S
     ``params.controller``'s program speed, each with its handshake."""
     if wire.streams:
         planned = float(times[-1]) if len(times) else 0.0
-        fed = stream[-1].fed if stream and stream[-1].fed is not None else planned
-        late = max(0.0, fed - float(stream[-1].time)) if stream and stream[-1].fed is not None else 0.0
+        last = stream[-1] if stream else None
+        late = max(0.0, last.fed - float(last.time)) if last is not None and last.fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         top = plan_peak_speed(kin, times, positions)
         said = planned + late + latency
