@@ -17,6 +17,7 @@ import threading
 
 import actionlib
 import rospy
+from vr_driver.ros.support import init_node
 from actionlib_msgs.msg import GoalStatus
 from sensor_msgs.msg import JointState
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -98,7 +99,7 @@ def server(seconds: float) -> int:
 
 
 def main(argv) -> int:
-    rospy.init_node("workstation_client", anonymous=True, disable_signals=True)
+    init_node("workstation_client", anonymous=True, disable_signals=True)
     try:
         if argv[0] == "trajectory":
             return trajectory()

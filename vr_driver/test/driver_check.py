@@ -18,6 +18,7 @@ from typing import Callable, List
 import actionlib
 import rosgraph
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
@@ -142,7 +143,7 @@ class DriverTestBase(unittest.TestCase):
 
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("driver_check")
+        init_node("driver_check")
         cls.kin = Kinematics.default()
         cls.executed = Recorder("/virtual_controller/executed", String)
         cls.status = Recorder("/robot_status", RobotStatus)

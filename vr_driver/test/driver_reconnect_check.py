@@ -15,6 +15,7 @@ import unittest
 import actionlib
 import rosnode
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
@@ -39,7 +40,7 @@ def diag_value(msg, key):
 
 class ReconnectTest(unittest.TestCase):
     def test_controller_killed_and_restarted(self):
-        rospy.init_node("driver_reconnect_check")
+        init_node("driver_reconnect_check")
         status = Recorder("/robot_status", RobotStatus)
         joints = Recorder("/joint_states", JointState)
         executed = Recorder("/virtual_controller/executed", String)

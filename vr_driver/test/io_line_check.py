@@ -29,6 +29,7 @@ import actionlib
 import rosgraph
 import rosnode
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
@@ -62,7 +63,7 @@ def station_status(msg, name):
 
 class IoLineTest(unittest.TestCase):
     def setUp(self):
-        rospy.init_node("io_line_check")
+        init_node("io_line_check")
         self.io = Recorder("/io_states", IOStates)
         self.status = Recorder("/robot_status", RobotStatus)
         self.outputs = Recorder("/virtual_io_island/outputs", String)

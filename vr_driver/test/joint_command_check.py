@@ -25,6 +25,7 @@ import time
 import unittest
 
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from diagnostic_msgs.msg import DiagnosticArray
 from rosgraph_msgs.msg import Log
@@ -146,7 +147,7 @@ def urdf_limits(names):
 class JointCommandTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("joint_command_check")
+        init_node("joint_command_check")
         cls.bus_rate = rospy.get_param("~bus_rate")
         cls.streams = rospy.get_param("~streams")
         cls.js = Samples()

@@ -20,6 +20,7 @@ import unittest
 
 import actionlib
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray
@@ -66,7 +67,7 @@ class PlanningLoadTest(unittest.TestCase):
         missing = missing_dependencies()
         if missing:
             raise unittest.SkipTest("; ".join(reason for _, reason in missing))
-        rospy.init_node("planning_load_check")
+        init_node("planning_load_check")
         cls.rosout = Recorder("/rosout", Log)
         cls.diag = Recorder("/diagnostics", DiagnosticArray)
         cls.status = Recorder("/robot_status", RobotStatus)

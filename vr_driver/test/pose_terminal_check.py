@@ -18,6 +18,7 @@ import unittest
 
 import pexpect
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from sensor_msgs.msg import JointState
 from std_msgs.msg import String
@@ -39,7 +40,7 @@ TIMEOUT = 30
 class PoseTerminalTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("pose_terminal_check")
+        init_node("pose_terminal_check")
         cls.executed = Recorder("/virtual_controller/executed", String)
         cls.status = Recorder("/robot_status", RobotStatus)
         cls.true = Recorder("/virtual_controller/true_joints", JointState)

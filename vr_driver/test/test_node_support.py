@@ -62,6 +62,10 @@ words = set_process_priority(int(sys.argv[1]))
 tids = [int(t) for t in os.listdir("/proc/self/task")]
 policies = sorted({(os.sched_getscheduler(t), os.sched_getparam(t).sched_priority) for t in tids})
 print(words); print(len(tids), policies)
+if len(sys.argv) > 2:                                        # and back, as a node that ends
+    from vr_driver.bus.worker import leave_real_time
+    left = leave_real_time()
+    print(left, sorted({(os.sched_getscheduler(t), os.sched_getparam(t).sched_priority) for t in tids}))
 release.set()
 '''
 
@@ -73,8 +77,8 @@ def test_virtual_hardware_threads_started_before_are_raised_too():
     import subprocess
     import sys
 
-    def run(priority):
-        res = subprocess.run([sys.executable, "-c", RAISE_ALL, str(priority)], capture_output=True, text=True,
+    def run(priority, *more):
+        res = subprocess.run([sys.executable, "-c", RAISE_ALL, str(priority), *more], capture_output=True, text=True,
                              timeout=60, env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
         assert res.returncode == 0, res.stderr
         return res.stdout.splitlines()
@@ -85,3 +89,67 @@ def test_virtual_hardware_threads_started_before_are_raised_too():
         pytest.skip("real-time priority not granted here: " + words)
     assert words == "SCHED_FIFO 3", words
     assert threads.startswith("2 ") and threads.endswith("[(%d, 3)]" % os.SCHED_FIFO), threads
+    left, after = run(3, "leave")[2].split(" ", 1)
+    assert left == "2" and after == "[(%d, 0)]" % os.SCHED_OTHER, (left, after)
+
+
+SHUTDOWN = r'''
+import sys, threading, time
+import rospy
+from rosgraph.xmlrpc import XmlRpcNode
+from vr_driver.ros.support import end_rpc_loop
+node = XmlRpcNode(0)                                     # rospy's own XML-RPC node, no master needed
+node.start()
+while node.uri is None:
+    time.sleep(0.01)
+rospy.core.add_shutdown_hook(node.shutdown)              # as init_node keeps it
+waiter = end_rpc_loop() if sys.argv[1] == "quiet" else None
+node.shutdown("test")                                    # rospy's hook: the socket closed
+if waiter is not None:
+    waiter.join(5.0)                                     # server.shutdown() returns: serve_forever has ended
+ended = waiter is not None and not waiter.is_alive()
+c0 = time.process_time(); time.sleep(0.3); cpu = time.process_time() - c0   # the process idle, or not
+import traceback
+serving = sum(any(fs.name == "serve_forever" for fs in traceback.extract_stack(f))
+              for f in sys._current_frames().values())
+print(ended, serving, round(cpu, 3))
+'''
+
+
+def test_a_node_ends_without_spinning():
+    """rospy closes its XML-RPC server's socket while the server's thread loops in serve_forever: the
+    thread then spins at a full core until the process ends (py-spy: a virtual line at SCHED_FIFO in
+    serve_forever during shutdown, a bus process beside it without a cycle for 7 s). end_rpc_loop, the
+    first shutdown hook of our nodes (support.init_node), ends the loop first: after the socket is
+    closed no thread serves, and the process is idle. Without it the loop still runs (the check can
+    fail). rospy's own XmlRpcNode, in a process of its own."""
+    import subprocess
+    import sys
+
+    def run(mode):
+        res = subprocess.run([sys.executable, "-c", SHUTDOWN, mode], capture_output=True, text=True, timeout=60,
+                             env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
+        assert res.returncode == 0, res.stderr
+        ended, serving, cpu = res.stdout.split()
+        return ended, int(serving), float(cpu)
+    ended, serving, cpu = run("quiet")
+    assert ended == "True" and serving == 0, (ended, serving)
+    assert cpu < 0.06, cpu                  # idle: a spinning thread takes the whole 0.3 s, or its share of it
+    _, serving, _ = run("plain")
+    assert serving == 1
+
+
+#: the one node that keeps rospy's own init_node: csr_export --from-topic waits for one message and
+#: ends, and csr never imports ros (test_layout)
+OWN_INIT = {"src/vr_driver/csr/cli.py"}
+
+
+def test_every_node_starts_through_support_init_node():
+    """Each of our nodes, and the rostests' clients, start with support.init_node: its first shutdown
+    hook keeps their shutdown from spinning (above). A new node that calls rospy.init_node fails here."""
+    import pathlib
+    root = pathlib.Path(__file__).resolve().parents[1]
+    call = "rospy." + "init_node("                     # not this file's own text
+    calls = sorted(str(p.relative_to(root)) for d in ("src", "test", "scripts", "nodes") if (root / d).is_dir()
+                   for p in (root / d).rglob("*.py") if call in p.read_text(errors="replace"))
+    assert set(calls) - {"src/vr_driver/ros/support.py"} == OWN_INIT, calls

@@ -16,6 +16,7 @@ import unittest
 import actionlib
 import rosgraph
 import rospy
+from vr_driver.ros.support import init_node
 import rostest
 from actionlib_msgs.msg import GoalStatus
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -87,7 +88,7 @@ class Arm:
 class TwoArmsTest(unittest.TestCase):
     @classmethod
     def setUpClass(cls):
-        rospy.init_node("two_arms_check")
+        init_node("two_arms_check")
         cls.tf = Recorder("/tf", TFMessage)
         cls.tf_static = Recorder("/tf_static", TFMessage)
         cls.merged = Recorder("/joint_states", JointState)

@@ -225,6 +225,25 @@ def set_process_priority(priority: int, tasks: str = "/proc/self/task") -> str:
     return words + ("" if not failed else " (%d of its other threads not raised)" % failed)
 
 
+def leave_real_time(tasks: str = "/proc/self/task") -> int:
+    """Every thread of the calling process back at normal scheduling (SCHED_OTHER), those at
+    SCHED_FIFO or SCHED_RR only (leaving real-time scheduling needs no privilege); for a process that
+    ends: nothing of its shutdown runs above the host's other work. Returns how many threads left."""
+    left = 0
+    try:
+        tids: List[int] = [int(t) for t in os.listdir(tasks) if t.isdigit()]
+    except OSError:
+        return 0
+    for tid in tids:
+        try:
+            if os.sched_getscheduler(tid) in (os.SCHED_FIFO, os.SCHED_RR):
+                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
+                left += 1
+        except (PermissionError, OSError, AttributeError):
+            pass                            # a thread that ended meanwhile
+    return left
+
+
 def normal_scheduling() -> None:
     """The calling thread back at normal scheduling (SCHED_OTHER) -- on Linux the policy is a
     thread's, and a thread inherits the one of the thread that starts it; leaving SCHED_FIFO needs

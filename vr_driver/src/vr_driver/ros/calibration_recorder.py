@@ -178,7 +178,8 @@ def _record(args: argparse.Namespace) -> int:
     import rospy
     from geometry_msgs.msg import PoseStamped
 
-    rospy.init_node("calibration_recorder", anonymous=True)
+    from .support import init_node
+    init_node("calibration_recorder", anonymous=True)
     recording = Recording(recorder, detector, say=rospy.loginfo)
 
     def on_pose(msg: Any) -> None:

@@ -71,7 +71,8 @@ def clock_offset(topic: str, wait: float, samples: int = 10) -> Optional[float]:
 
     import rospy
     from sensor_msgs.msg import JointState
-    rospy.init_node("check_network", anonymous=True, disable_signals=True)
+    from .support import init_node
+    init_node("check_network", anonymous=True, disable_signals=True)
     offsets: List[float] = []
     enough = threading.Event()
 

@@ -40,7 +40,7 @@ from ..params import DriverParams, ParamError
 from ..poses import ControllerPose, MoveType
 from ..protocol.common import StatusBits
 from .trajectory_server import TrajectoryServer, trajectory_from_msg
-from .support import route_to_rosout, stop_on_signals, wait_for_shutdown
+from .support import init_node, route_to_rosout, stop_on_signals, wait_for_shutdown
 
 _MOVE_TYPES = {MoveToPoseGoal.PTP: MoveType.PTP, MoveToPoseGoal.LIN: MoveType.LIN,
                MoveToPoseGoal.CIRC: MoveType.CIRC}
@@ -408,7 +408,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     # every millisecond instead of every 5 so that a long validation delays a bus cycle less
     sys.setswitchinterval(0.001)
     stop = stop_on_signals()
-    rospy.init_node("interface", disable_signals=True)
+    init_node("interface", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     try:
         params = DriverParams.from_dict(rospy.get_param("~", {}))

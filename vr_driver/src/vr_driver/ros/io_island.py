@@ -22,7 +22,7 @@ from std_srvs.srv import SetBool, SetBoolResponse
 
 from ..controller.pty_link import AUTO_LINK
 from ..controller.io_island import ISLAND_ADDRESS, VirtualIoIsland
-from .support import (open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
+from .support import (init_node, open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
                       watch_simulator)
 
 PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path", "rt_priority")
@@ -30,7 +30,7 @@ PARAMS = ("pty_link", "device", "addr", "baud", "part_present", "device_path", "
 
 def main() -> int:
     stop = stop_on_signals()
-    rospy.init_node("virtual_io_island", disable_signals=True)
+    init_node("virtual_io_island", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     params = rospy.get_param("~", {}) or {}
     unknown = sorted(k for k in params if k not in PARAMS)

@@ -31,6 +31,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..params import DEFAULT_JOINT_NAMES
 from ..terminal.jog import Jogger, decode_keys
 from ..terminal.sent_move import ctrl_c_raises
+from .support import init_node
 
 HELP = ("keys: 1-6 joint, +/- (or arrows left/right) move, [ ] (or arrows down/up) speed, "
         "space stop, q quit")
@@ -95,7 +96,7 @@ def say(line: str) -> None:
 
 def main(argv: Optional[List[str]] = None) -> int:
     ctrl_c_raises()                      # Ctrl-C ends jogging, even where SIGINT came in ignored
-    rospy.init_node("jog", anonymous=True, disable_signals=True)
+    init_node("jog", anonymous=True, disable_signals=True)
     rate = float(rospy.get_param("~rate", 20.0))
     if not 1.0 <= rate <= 200.0:
         sys.stderr.write("jog: ~rate %g must be in [1, 200] Hz\n" % rate)

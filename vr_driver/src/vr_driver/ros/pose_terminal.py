@@ -235,7 +235,8 @@ class RosBackend(Backend):
         unreachable = own_host_error(uri)
         if unreachable is not None:
             return unreachable
-        rospy.init_node("pose_terminal", anonymous=True, disable_signals=True)
+        from .support import init_node
+        init_node("pose_terminal", anonymous=True, disable_signals=True)
 
         def name(relative: str) -> str:
             return rospy.resolve_name(in_namespace(self.ns, relative))

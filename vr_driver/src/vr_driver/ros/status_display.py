@@ -55,7 +55,8 @@ def main() -> int:
 
     from vr_driver.msg import RobotStatus
 
-    rospy.init_node("status_display")
+    from .support import init_node
+    init_node("status_display")
     frame = rospy.get_param("~frame", "base")
     height = float(rospy.get_param("~height", 1.65))
     stale_after = float(rospy.get_param("~stale_after", 2.0))

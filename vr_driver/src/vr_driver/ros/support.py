@@ -8,6 +8,7 @@ deadlocks on Ctrl-C. Our nodes therefore init with ``disable_signals=True``, let
 """
 from __future__ import annotations
 
+import inspect
 import logging
 import os
 import signal
@@ -15,6 +16,45 @@ import threading
 from typing import Any, Callable, Optional, Tuple
 
 import rospy
+
+
+def init_node(name: str, **kwargs: Any) -> None:
+    """``rospy.init_node`` for every node of ours, with a shutdown that does not spin.
+
+    rospy's shutdown closes its XML-RPC server's socket while the server's thread still loops in
+    ``serve_forever``: from then on the loop's select returns at once, its accept fails, and the
+    thread spins at a full core until the process ends -- for the half second to five seconds that
+    rospy then joins its registration thread (py-spy on a virtual line at SCHED_FIFO: 92-97 % of a
+    CPU in ``serve_forever`` during ``signal_shutdown``; a bus process at SCHED_FIFO 20 beside it went
+    7 s without a cycle, and the card's watchdog expired). The first shutdown hook here ends that loop
+    before the socket is closed, and puts every thread of the node back at normal scheduling: a node
+    that ends has no deadline left (:func:`end_rpc_loop`, :func:`~vr_driver.bus.worker.leave_real_time`)."""
+    rospy.init_node(name, **kwargs)
+    rospy.on_shutdown(_quiet_shutdown)
+
+
+def _quiet_shutdown() -> None:
+    from ..bus.worker import leave_real_time
+    leave_real_time()
+    end_rpc_loop()
+
+
+def end_rpc_loop() -> Optional[threading.Thread]:
+    """Ask this node's XML-RPC server to leave its ``serve_forever`` loop (in a thread of its own: the
+    loop notices within its poll interval, or at once once rospy has closed its socket) and its
+    node's loop not to serve again. Returns the thread that waits for the loop's end, None when there
+    is no server (no node, or ended already).
+    rospy keeps its XML-RPC node only as the bound method of one of its shutdown hooks."""
+    from rosgraph.xmlrpc import XmlRpcNode
+    nodes = [h.__self__ for h in list(rospy.core._shutdown_hooks)
+             if inspect.ismethod(h) and isinstance(h.__self__, XmlRpcNode)]
+    server = nodes[0].server if nodes else None
+    if server is None:
+        return None
+    nodes[0].is_shutdown = True         # its thread's `while not is_shutdown: serve_forever()` ends
+    waiter = threading.Thread(target=server.shutdown, name="xmlrpc-stop", daemon=True)
+    waiter.start()
+    return waiter
 
 
 class RosoutHandler(logging.Handler):
@@ -38,7 +78,9 @@ class RosoutHandler(logging.Handler):
 #: default: none (normal scheduling). ``~rt_priority`` N asks for it: the devices stand for hardware,
 #: which is never late -- but on a small machine the simulated hardware's CPU is the host's: with
 #: three tests side by side, their devices at SCHED_FIFO 30 starved the bus processes past the card's
-#: watchdog, and at 10 the driver nodes (joint_states at 13 of 20 /s, a link judged lost)
+#: watchdog, and at 10 the driver nodes (joint_states at 13 of 20 /s, a link judged lost). Much of
+#: that was each node's shutdown spinning in rospy's XML-RPC loop at its real-time priority, for
+#: seconds (found with py-spy; :func:`init_node` ends that loop first)
 VIRTUAL_RT_PRIORITY = 0
 
 

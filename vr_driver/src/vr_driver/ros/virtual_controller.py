@@ -54,7 +54,7 @@ from ..controller.options import PARAM_NAMES, SimOptions
 from ..controller.pty_link import AUTO_LINK
 from ..controller.simulator import EXIT_OK
 from ..controller.virtual_controller import VirtualController
-from .support import (open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
+from .support import (init_node, open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority,
                       watch_simulator)
 from ..controller.arm import LogEntry
 
@@ -77,7 +77,7 @@ def split_params(params: Mapping[str, Any]) -> Tuple[Dict[str, Any], Tuple[str, 
 
 def main() -> int:
     stop = stop_on_signals()
-    rospy.init_node("virtual_controller", disable_signals=True)
+    init_node("virtual_controller", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     params, unknown = split_params(rospy.get_param("~", {}) or {})
     if unknown:

@@ -25,14 +25,14 @@ from pyprofibus_vendor.errors import PhyError
 
 from ..controller.pty_link import AUTO_LINK, resolve_link
 from ..controller.simulator import EXIT_DEVICE, EXIT_OK, SimError
-from .support import open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority
+from .support import init_node, open_device, own_link, route_to_rosout, stop_on_signals, virtual_hardware_priority
 from ..controller.adapter_model import AdapterBehaviour
 from ..controller.line import LineHub
 
 
 def main() -> int:
     stop = stop_on_signals()
-    rospy.init_node("virtual_line", disable_signals=True)
+    init_node("virtual_line", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
     virtual_hardware_priority("virtual_line")
 
