@@ -292,7 +292,7 @@ class JobControl:
                     anchor: Optional[Tuple[float, ...]], now: float) -> None:
         """Add ``point`` to the live stream ``job`` (``anchored``: the same point, validated and
         its speed worked out from ``anchor``, the last target on the wire as the view showed it);
-        see :meth:`SequencerBase.extend`."""
+        see :meth:`~vr_driver.driver.motion.inbox.Inbox.extend`."""
         self.inbox.extend(job, point, anchored, anchor, now)
 
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:

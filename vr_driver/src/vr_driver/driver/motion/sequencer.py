@@ -29,9 +29,10 @@ Rules (README "Reliability", doc/README.md):
   bit clear and the reported pose unchanged for ``stop_settle_time`` -- and its result carries that
   pose; nothing new is sent before that (:mod:`vr_driver.driver.motion.settling`);
 - **order**: requests take effect in the order they were posted; a PREEMPT job whose ticket is
-  older than the newest ticket claimed (:meth:`~vr_driver.driver.motion.inbox.Inbox.claim_ticket`) is superseded, never run; a PREEMPT
-  job stops the move in flight and drops the queue; a REPLACE job (a new joint path) drops every
-  queued target, lets the one in flight complete, and runs from its end;
+  older than the newest ticket claimed (:meth:`~vr_driver.driver.motion.inbox.Inbox.claim_ticket`)
+  is superseded, never run; a PREEMPT job stops the move in flight and drops the queue; a REPLACE
+  job (a new joint path) drops every queued target, lets the one in flight complete, and runs from
+  its end;
 - **link loss**: everything in flight or queued fails with the reason (the last pose seen is
   reported; where the arm came to rest is unknown to the driver then).
 """
@@ -162,8 +163,8 @@ class SequencerHooks:
 
     def take_point(self, job: MoveJob, point: Any, anchored: Any, anchor: Optional[Tuple[float, ...]],
                    stamp: float) -> None:
-        """A new command of a live job (:meth:`~SequencerBase.extend`). Only a streaming protocol's sequencer
-        takes one (the driver core refuses joint commands on the others)."""
+        """A new command of a live job (:meth:`~vr_driver.driver.motion.inbox.Inbox.extend`). Only a
+        streaming protocol's sequencer takes one (the driver core refuses joint commands on the others)."""
         raise NotImplementedError("this protocol does not stream joint commands")
 
     def resting(self, fb: Any) -> bool:
