@@ -1,7 +1,8 @@
 """The bus in a process of its own (vr_driver.bus): its health figures (stepped, plain numbers), and
 over a REAL pty with the virtual G2: the driver on a bus process; the bus process killed mid-move
 (the node says so, nothing is sent twice, a new bus process drives again); the node killed mid-move
-(the bus process stops the arm, then ends)."""
+(the bus process stops the arm, then ends); the requests' wake-up (the inbox's) ends the link's wait
+for the bus process's next report, without a call into the bus side."""
 from __future__ import annotations
 
 import logging
@@ -16,6 +17,9 @@ from vr_driver.bus.health import BusHealth
 from vr_driver.controller.arm import Outcome
 from vr_driver.controller.virtual_controller import VirtualController
 from vr_driver.driver import DriverCore, JobPhase, LinkState, MoveRequest
+from vr_driver.driver.link.link import LinkSupervisor
+from vr_driver.driver.motion.inbox import Wake
+from vr_driver.params import DriverParams
 from vr_driver.poses import ControllerPose, MoveType
 
 from _rig import BAUD, StatusWaiter, rig_params
@@ -124,6 +128,30 @@ def test_the_driver_cycles_on_a_bus_process_and_reports_its_health(rig):
     assert 0.0 < h.max_gap < h.watchdog and h.margin > 0
     assert "process %d" % master.pid in h.scheduling
     assert status.cycle_rate > 0
+
+
+def test_the_inbox_wake_ends_the_wait_for_the_bus_process_next_report(tmp_path, kin):
+    """A thread that posted a request sets its inbox's Wake and calls nothing of the bus side: the
+    link supervisor's step, waiting for the bus process's next report (the bus at 2 Hz here),
+    returns at once without a cycle and the wake is taken; the report after it still comes."""
+    path = str(tmp_path / "g2")
+    sim = VirtualController(pty_link=path, baud=BAUD, loop_period=0.01, kinematics=kin).start()
+    params = DriverParams.from_dict({"port": path, "baud": BAUD, "cycle_rate": 2.0, "link_timeout": 3.0,
+                                     "watchdog_ms": 3000, "accept_timeout": 1.0, "stop_settle_time": 1.0,
+                                     "joint_command_timeout": 1.0})
+    wake = Wake()
+    link = LinkSupervisor(params, params.bus(), time.monotonic, wake=wake)
+    try:
+        link.step(time.monotonic())                    # opens the port: the bus process starts
+        assert link.paced
+        assert link.step(time.monotonic()).cycled      # the next report
+        wake.set()
+        sample = link.step(time.monotonic())
+        assert not sample.cycled and not wake.is_set()     # woken before the next report; the wake taken
+        assert link.step(time.monotonic()).cycled      # the report still comes
+    finally:
+        link.close()
+        sim.stop()
 
 
 def test_a_killed_bus_process_is_reported_and_replaced_and_nothing_is_sent_twice(slow_rig):

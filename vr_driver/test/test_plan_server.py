@@ -57,8 +57,9 @@ class _Core:
                                                            "most 120 mm/s")
         self.calls = []
 
-    def announce(self, times, positions):
+    def announce(self, times, positions, previews=None, stream=None):
         self.calls.append((tuple(times), tuple(positions)))
+        self.inputs = (previews, stream)
         return self.announced
 
 
@@ -122,6 +123,11 @@ def test_the_result_says_the_speed_the_plan_runs_at():
     assert (result.run_duration, result.run_peak_tcp_speed) == (1.5, 120.0)
     assert result.run_words == "protocol v3 runs the plan's timing: 1.50 s, the TCP at most 120 mm/s"
     assert server.core.calls[-1] == ((0.0, 0.5, 1.0, 1.5), tuple(positions))
+    assert server.core.inputs == (None, None)           # the outcome carries no stream: the core makes it
+    # the stream the planning's check made (the outcome's) is what the core announces: not made twice
+    sent = ("a stream point",)
+    server._result(PlanOutcome(P.SUCCESS, text, plan, 0.012, "RRTConnect", stream=sent), 0.1)
+    assert server.core.inputs == (None, sent)
     # v1: the program's speed, and the default scaling that does not apply said first
     server.core.announced = Announced(3.2, 167.0, "protocol v1 runs it at the robot program's own speed ...", True)
     result = server._result(PlanOutcome(P.SUCCESS, text, plan, 0.012, "RRTConnect"), 0.1, default=True)

@@ -113,6 +113,10 @@ def test_a_plan_through_the_process_is_the_drivers_plan(world, planning, kin):
     checker = world.core.collision.copy()
     assert [k for k, q in enumerate(plan.positions) if checker.in_collision(q)] == []
     assert local.driver_refusal(plan) == ""           # the node's own stream check takes it
+    # what the worker's stream check made comes with the outcome (the node announces the run with it)
+    assert out.stream and all(p.pose is not None for p in out.stream) and out.stream[-1].index == len(plan.times) - 1
+    times, positions = list(plan.times), [tuple(q) for q in plan.positions]
+    assert world.core.announce(times, positions, stream=out.stream) == world.core.announce(times, positions)
     # refusals: the same code and the same words as in-process
     for goal in (PlanGoal(pose=ControllerPose(1100, 0, 200, 0, 90, 0)),       # into the table
                  PlanGoal(named="nowhere"), PlanGoal(named="home", velocity_scaling=1.5),

@@ -475,11 +475,24 @@ def test_a_try_after_one_that_found_no_path_searches_with_another_planner(kin, m
 
 def test_the_driver_refusal_is_the_stream_check(kin):
     """A plan the v3 stream check accepts is "" (the plans above run); a jump of the wrist between
-    two points of a short plan is refused in the driver's words."""
+    two points of a short plan is refused in the driver's words. The outcome carries the stream
+    the check made: what the trajectory action sends for the plan, and the node's announcement of
+    it is the one it would make itself (without making the stream a second time)."""
     w = world(kin)
     planning = PlanActionCore(w.core, kinematics=kin)
     out = planning.plan(AWAY)
-    assert out.ok and planning.driver_refusal(out.trajectory) == ""
+    assert out.ok and out.stream and out.previews == ()
+    times, positions = list(out.trajectory.times), [tuple(q) for q in out.trajectory.positions]
+    traj = validate(TrajectoryGoal.of(out.trajectory), NAMES, positions[0], kin.limits.lower, kin.limits.upper, 0.0)
+    assert out.stream == w.core.prepare_trajectory(traj, positions[0])[1]
+    assert w.core.announce(times, positions, stream=out.stream) == w.core.announce(times, positions)
+    # v1: its PTP moves' previews, announced at the program's speed as the node would
+    v1 = world(kin, "v1")
+    out1 = PlanActionCore(v1.core, kinematics=kin).plan(AWAY)
+    assert out1.ok and out1.previews and out1.stream == ()
+    times1, positions1 = list(out1.trajectory.times), [tuple(q) for q in out1.trajectory.positions]
+    assert v1.core.announce(times1, positions1, previews=out1.previews) == v1.core.announce(times1, positions1)
+    assert planning.driver_refusal(out.trajectory) == ""
     start = w.status().joints
     flipped = (start[0], start[1], start[2], start[3] + 3.14159, -start[4], start[5] + 3.14159)
     fake = out.trajectory.__class__(out.trajectory.joint_names, (0.0, 2.0, 4.0), (start, flipped, start),

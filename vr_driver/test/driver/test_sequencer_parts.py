@@ -1,13 +1,15 @@
 """The sequencer's parts on their own, stepped by hand: Settling (driver/motion/settling.py: a stopped job
 ends at rest with the pose reported, or fails after stop_timeout) and Inbox (driver/motion/inbox.py: the
-requests in the order posted, the tickets that keep goals in arrival order). The sequencers with
+requests in the order posted, the tickets that keep goals in arrival order, the wake-up and the
+MotionSnapshot a request reads). The sequencers with
 both are tested through the driver core in test_core_stepped.py, test_streaming_stepped.py and the
 other stepped tests."""
 from __future__ import annotations
 
+import select
 from types import SimpleNamespace
 
-from vr_driver.driver.motion.inbox import AddJobs, CancelJobs, Inbox
+from vr_driver.driver.motion.inbox import AddJobs, CancelJobs, Inbox, MotionSnapshot, Wake
 from vr_driver.driver.motion.jobs import JobPhase, SubmitMode
 from vr_driver.driver.motion.settling import Settling
 from vr_driver.params import DriverParams
@@ -104,6 +106,38 @@ def test_requests_are_taken_once_in_the_order_posted():
     inbox.post(second)
     assert inbox.take() == [first, second]
     assert inbox.take() == []
+
+
+def test_a_request_is_posted_to_the_inbox_and_wakes_the_bus_by_its_wake():
+    """What a request's thread touches of the bus side is the inbox: posts (in order), the Wake
+    (an event, and a pipe a bus process's master waits on) -- set once, taken once."""
+    inbox = Inbox()
+    inbox.add([], SubmitMode.PREEMPT)
+    inbox.stop_all("stop")
+    assert inbox.take() == [AddJobs((), SubmitMode.PREEMPT), CancelJobs(None, "stop")]
+    wake = Wake()
+    wake.set()                                        # before the pipe is made: its byte comes with it
+    fd = wake.fileno()
+    assert wake.wait(0.0) and select.select([fd], [], [], 0.0)[0] == [fd]
+    wake.clear()
+    assert not wake.is_set() and select.select([fd], [], [], 0.0)[0] == []
+    wake.set()
+    assert select.select([fd], [], [], 0.0)[0] == [fd]
+
+
+def test_the_motion_snapshot_reads_as_a_lost_link_when_it_or_its_record_is_old():
+    """The inbox's MotionSnapshot is read as the driver's status is: fresh as published, and one
+    older than link_timeout (or whose controller record is) says why, with no motion and no valid
+    joints."""
+    inbox = Inbox()
+    assert not inbox.snapshot(0.0).motion_possible            # nothing published yet
+    inbox.publish(MotionSnapshot(10.0, True, "", (0.0,) * 6, True, "ok", 50.0, feedback_time=9.9, limit=0.5))
+    fresh = inbox.snapshot(10.3)
+    assert fresh.motion_possible and fresh.joints_valid and fresh.cycle_rate == 50.0
+    old = inbox.snapshot(10.45)                               # the record 0.55 s old
+    assert not old.motion_possible and not old.joints_valid and old.joints == (0.0,) * 6
+    assert old.why_not == "no link to the controller (stale: the controller's last record is 0.55 s old)"
+    assert "the driver's status is 0.60 s old" in inbox.snapshot(10.6).why_not
 
 
 def test_a_preempting_ticket_older_than_one_claimed_or_taken_in_is_superseded():

@@ -16,7 +16,8 @@ it is started, watched and stopped by :mod:`vr_driver.bus.worker`.
 
 **The driver's side** is :class:`BusProcessMaster`, a stand-in for the DpMaster that the link
 supervisor (vr_driver.driver.link.link) and the I/O line (vr_driver.driver.link.stations) use unchanged: its
-:meth:`~BusProcessMaster.cycle` waits for the bus process's next report (or a :meth:`poke`) and
+:meth:`~BusProcessMaster.cycle` waits for the bus process's next report (or a :meth:`poke`, or the
+application's ``wake``) and
 replays its state changes through ``on_state_change`` in order, its slaves' ``outputs`` go to the
 bus process at once. The driver's loop is paced by the bus (``paced``), not the other way round.
 
@@ -63,7 +64,7 @@ import threading
 import time
 from dataclasses import replace
 from multiprocessing.connection import Connection, wait
-from typing import Callable, Dict, List, Optional
+from typing import Any, Callable, Dict, List, Optional
 
 from pyprofibus_vendor.adapter import AdapterSetup
 from pyprofibus_vendor.dp_master import DpMaster, SlaveHandle, SlaveSpec
@@ -407,8 +408,13 @@ class BusProcessMaster(MasterApi):
 
     def __init__(self, settings: BusSettings,
                  on_state_change: Optional[Callable[..., None]] = None,
-                 clock: Callable[[], float] = time.monotonic, start_timeout: float = 10.0) -> None:
+                 clock: Callable[[], float] = time.monotonic, start_timeout: float = 10.0,
+                 wake: Optional[Any] = None) -> None:
+        """``wake``: the application's own wake-up besides :meth:`poke` (anything with ``fileno()``,
+        readable when it was set, and ``clear()``: the driver's inbox's), so that the threads
+        that post to the application wake :meth:`cycle` without calling into the master."""
         self.settings = settings
+        self._wake = wake
         self.on_state_change = on_state_change
         self.clock = clock
         self.counters = MasterCounters()
@@ -510,13 +516,17 @@ class BusProcessMaster(MasterApi):
             self._urgent = False
             self.send(CycleAt(0.0))
         self.send(Tick())
-        ready = wait([self._conn, self._wake_r], timeout)
+        woken = self._wake.fileno() if self._wake is not None else None
+        ready = wait([self._conn, self._wake_r] + ([woken] if woken is not None else []), timeout)
         if self._wake_r in ready:
             try:
                 while os.read(self._wake_r, 64):
                     pass
             except (BlockingIOError, OSError):
                 pass
+            self._urgent = True
+        if woken is not None and woken in ready:
+            self._wake.clear()
             self._urgent = True
         return self._receive() if self._conn in ready else False
 

@@ -52,12 +52,14 @@ class BusLoop(OwnThread):
         self.io = io
         self.controller_io = controller_io
         self._stop = stop
-        self._wake = threading.Event()      # set by requests: run a bus cycle now, not at the next tick
+        # set by requests (their inbox's): run a bus cycle now, not at the next tick; a bus process's
+        # master waits for it too (LinkSupervisor's wake)
+        self._wake = sequencer.inbox.wake
         self._last_record = b""
         self._repeat_now = False          # run the next bus cycle at once (a changed record, send_changes_at_once)
         self._repeated = False            # this cycle was such a repeat
         self._listeners: List[Callable[[DriverStatus], None]] = []
-        self._status = self._snapshot(self.clock(), None)
+        self._status = self._set_status(self._snapshot(self.clock(), None))
         self._fresh = threading.Condition()      # notified with each new snapshot (status_after)
 
     # ------------------------------------------------------------------------ the thread (OwnThread)
@@ -68,9 +70,9 @@ class BusLoop(OwnThread):
         self.link.poke()
 
     def wake(self) -> None:
-        """Run a bus cycle now (a request was posted), not at the next tick."""
+        """Run a bus cycle now (a request was posted), not at the next tick (the inbox's wake:
+        a bus process's master waits for it as well)."""
         self._wake.set()
-        self.link.poke()
 
     def add_listener(self, callback: Callable[[DriverStatus], None]) -> None:
         """``callback(status)`` after every bus iteration (bus thread)."""
@@ -145,7 +147,7 @@ class BusLoop(OwnThread):
         self._last_record = record
         # the snapshot before the outputs go out (to a bus process: a socket write, which lets
         # other threads run): a job that ended in this step is never seen beside an older status
-        status = self._status = self._snapshot(now, sample)
+        status = self._set_status(self._snapshot(now, sample))
         self.link.set_outputs(record)
         self._notify(status)
         return status
@@ -190,8 +192,15 @@ class BusLoop(OwnThread):
             record_time=sample.record_time if sample is not None and fb is not None else None,
             settling=view.settling, bus_health=self.link.health_summary(now), line=self.link.line_verdict())
 
+    def _set_status(self, status: DriverStatus) -> DriverStatus:
+        """The iteration's snapshot made the latest, and what requests read of it published to
+        their inbox (:class:`~vr_driver.driver.motion.inbox.MotionSnapshot`)."""
+        self._status = status
+        self.sequencer.inbox.publish(status.for_requests(self.params.link_timeout))
+        return status
+
     def _publish(self, now: float, sample: Optional[LinkSample]) -> DriverStatus:
-        status = self._status = self._snapshot(now, sample)
+        status = self._set_status(self._snapshot(now, sample))
         self._notify(status)
         return status
 

@@ -55,6 +55,7 @@ from .link.link import LinkState, LinkSupervisor, open_serial_link
 from .checks.path_checks import PathChecks, load_cell
 from .checks.scene_guard import SceneGuard
 from .link.stations import ControllerIo, IoLine
+from .motion.inbox import MotionSnapshot
 from .motion.status import DriverError, DriverStatus
 from .checks.stream_prep import stream_preparation
 from .motion.stream_points import MAX_STREAM_TOLERANCE
@@ -119,11 +120,13 @@ class DriverCore:
         # the I/O stations beside the controller (io_signals), cycled by the link's master
         signals = params.signal_map(self.bus)
         self.io: Optional[IoLine] = IoLine(signals, params.link_timeout) if signals is not None else None
-        self.link = LinkSupervisor(params, self.bus, clock, open_link, stations=self.io)
         self.wire = params.wire
         self.streaming = self.wire.streams
-        # the protocol object names its sequencer (driver/sequencers.py registers v1 / v2 / v3's)
+        # the protocol object names its sequencer (driver/sequencers.py registers v1 / v2 / v3's);
+        # its inbox is all that requests touch of the bus side (posts, the wake-up, MotionSnapshot)
         self.sequencer = self.wire.sequencer()(params, clock, self._schedule_replan)
+        self.inbox = self.sequencer.inbox
+        self.link = LinkSupervisor(params, self.bus, clock, open_link, stations=self.io, wake=self.inbox.wake)
         # the controller's own I/O (v2) as a station of the signal map at the controller's address
         self.controller_io: Optional[ControllerIo] = None
         if self.io is not None and self.wire.controller_io and \
@@ -146,8 +149,8 @@ class DriverCore:
                                             params.collision_padding, params.collision_check, params.prefix,
                                             model=params.model), self.wire)
         self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.min_segment)
-        self.jobs = JobControl(params, self.kin, clock, self.sequencer, self.checks, self.streams, self.status,
-                               self.bus_loop.wake)
+        self.jobs = JobControl(params, self.kin, clock, self.sequencer, self.checks, self.streams,
+                               self.motion_snapshot)
         self.joint_commander = JointCommander(params, self.kin, self.wire, clock, self.status, self.jobs,
                                               self.checks, self.streams)
         #: what the commissioned G2 changes, in words (logged at every connect; the node's diagnostics)
@@ -194,7 +197,7 @@ class DriverCore:
         19.2 kbit/s); for the commissioned G2 (its look-ahead, one target per acknowledgement)
         :func:`~vr_driver.driver.checks.commissioned.min_segment_cycles` of them."""
         rate = self.bus.cycle_rate_hz
-        measured = self.link.cycle_rate
+        measured = self.motion_snapshot().cycle_rate     # (the link's, as of the last bus iteration)
         if measured > 0.0:
             rate = min(rate, measured)
         return self._segment_cycles / rate
@@ -238,6 +241,12 @@ class DriverCore:
         ``link_timeout``, or with feedback older than that, reads as a lost link."""
         return self.bus_loop.status(self.clock() if now is None else now)
 
+    def motion_snapshot(self, now: Optional[float] = None) -> MotionSnapshot:
+        """What a request reads before it posts -- motion possible or why not, the arm's joints, the
+        measured bus cycle rate -- as of the latest bus iteration, read at ``now`` (default: the
+        clock) as :meth:`status` is; from the inbox, without touching the bus side."""
+        return self.inbox.snapshot(self.clock() if now is None else now)
+
     def status_after(self, t: float, timeout: Optional[float] = None) -> DriverStatus:
         """The snapshot of a bus iteration that began at ``t`` (the clock) or later -- e.g. the status
         beside a job that ended -- waiting for it at most ``timeout`` (default ``link_timeout``),
@@ -260,8 +269,8 @@ class DriverCore:
         return self.planning_thread.run_pending()
 
     def wake(self) -> None:
-        """Run a bus cycle now (a request was posted), not at the next tick."""
-        self.bus_loop.wake()
+        """Run a bus cycle now (a request was posted), not at the next tick (the inbox's wake)."""
+        self.inbox.wake.set()
 
     def _schedule_replan(self, job: MoveJob, joints: Tuple[float, ...]) -> None:
         """Called by the sequencer (bus thread): plan ``job`` again from ``joints``, off the bus."""
@@ -297,7 +306,7 @@ class DriverCore:
     # ------------------------------------------------------------------------ said before a move
     def bus_cycle(self) -> float:
         """[s] the bus cycle: measured, else the configured rate's."""
-        rate = self.status().cycle_rate
+        rate = self.motion_snapshot().cycle_rate
         return 1.0 / rate if rate and rate > 0.0 else 1.0 / self.bus.cycle_rate_hz
 
     def announce(self, times: Sequence[float], positions: Sequence[Sequence[float]],

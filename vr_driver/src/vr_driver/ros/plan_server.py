@@ -228,10 +228,13 @@ class PlanServer:
         return result
 
     def _announce(self, result: PlanResult, outcome: PlanOutcome, velocity_scaling: float, default: bool) -> None:
-        """The run's figures as the protocol delivers them (``run_*``), said in error_string."""
+        """The run's figures as the protocol delivers them (``run_*``), said in error_string: of what
+        the driver sends for the plan as the planning's stream check made it (``outcome.stream`` /
+        ``previews``; made again here only when the outcome does not carry them)."""
         plan = outcome.trajectory
         try:
-            announced = self.core.announce([float(t) for t in plan.times], [tuple(q) for q in plan.positions])
+            announced = self.core.announce([float(t) for t in plan.times], [tuple(q) for q in plan.positions],
+                                           outcome.previews or None, outcome.stream or None)
         except VrDriverError as exc:
             result.run_words = "its run not worked out: %s" % exc
         else:

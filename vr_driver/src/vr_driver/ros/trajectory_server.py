@@ -98,10 +98,11 @@ class TrajectoryServer:
                               str(exc)) from None
 
     def check(self, goal: TrajectoryGoal):
-        """Validate a goal against the arm's joints now (TrajectoryError with its code)."""
-        status = self.core.status()
-        if not status.motion_possible or status.joints is None:
-            raise TrajectoryError(INVALID_GOAL, "motion is not possible: %s" % status.why_no_motion())
+        """Validate a goal against the arm's joints now (TrajectoryError with its code): the bus
+        side's :meth:`~vr_driver.driver.DriverCore.motion_snapshot`, read without touching it."""
+        snap = self.core.motion_snapshot()
+        if not snap.motion_possible or snap.joints is None:
+            raise TrajectoryError(INVALID_GOAL, "motion is not possible: %s" % snap.why_not)
         lim = self.core.kin.limits
         wire = self.core.wire
         if self._resolution is None:
@@ -109,7 +110,7 @@ class TrajectoryServer:
             # wire's pose resolution allows at each planned point, joint_4 / joint_6 by their sum
             # near joint_5 = 0; None with joint targets (v2: the protocol's fixed defaults)
             self._resolution = (WireResolution.of(self.core.kin, wire),)
-        traj = validate(goal, self.names, status.joints, lim.lower, lim.upper, rospy.get_time(),
+        traj = validate(goal, self.names, snap.joints, lim.lower, lim.upper, rospy.get_time(),
                         default_path_tolerance=wire.default_path_tolerance,
                         default_goal_tolerance=wire.default_goal_tolerance, resolution=self._resolution[0])
         segment_speeds(traj, lim.velocity, self.names)

@@ -24,7 +24,8 @@ from ..own_thread import OwnThread
 from .path_checks import PathChecks
 from .scene_guard import hand_over
 from ..motion.sequencer import SequencerBase, SequencerView
-from ..motion.status import DriverError, DriverStatus
+from ..motion.inbox import MotionSnapshot
+from ..motion.status import DriverError
 from .stream_prep import JointStreams
 from ..motion.trajectories import ValidTrajectory, thin
 
@@ -127,20 +128,23 @@ class PlanningThread(OwnThread):
 
 
 class JobControl:
-    """The requests of one driver (module docstring). ``status()``: the driver's status now;
-    ``wake()``: run a bus cycle now; ``streams``: the protocol's stream preparation (None: v1)."""
+    """The requests of one driver (module docstring). ``snapshot()``: what the bus side says now of
+    motion and the arm's joints (:class:`~vr_driver.driver.motion.inbox.MotionSnapshot`); requests
+    are posted to the sequencer's inbox, whose wake runs a bus cycle now (:attr:`wake`): nothing of
+    the bus side runs in the caller's thread. ``streams``: the protocol's stream preparation (None: v1)."""
 
     def __init__(self, params: DriverParams, kinematics: Kinematics, clock: Callable[[], float],
                  sequencer: SequencerBase, checks: PathChecks, streams: Optional[JointStreams],
-                 status: Callable[[], DriverStatus], wake: Callable[[], None]) -> None:
+                 snapshot: Callable[[], MotionSnapshot]) -> None:
         self.params = params
         self.kin = kinematics
         self.clock = clock
         self.sequencer = sequencer
+        self.inbox = sequencer.inbox
         self.checks = checks
         self.streams = streams
-        self.status = status
-        self.wake = wake
+        self.snapshot = snapshot
+        self.wake: Callable[[], None] = self.inbox.wake.set
         self._last_posted: Optional[MoveJob] = None
 
     @property
@@ -174,7 +178,7 @@ class JobControl:
         else:
             job = MoveJob(preview, on_update, ticket=ticket)
         self._last_posted = job
-        self.sequencer.add([job], mode)
+        self.inbox.add([job], mode)
         self.wake()
         log.info("job %d queued (%s): %s %s", job.id, mode.value, request.move_type.name,
                  " then ".join(c.describe() for c in job.preview.commands))
@@ -211,7 +215,7 @@ class JobControl:
         for job in jobs[1:]:
             job.group = jobs[0].group
         self._last_posted = jobs[-1]
-        self.sequencer.add(jobs, SubmitMode.REPLACE)
+        self.inbox.add(jobs, SubmitMode.REPLACE)
         self.wake()
         log.info("joint path: %d PTP targets queued (jobs %d..%d)", len(jobs), jobs[0].id, jobs[-1].id)
         return jobs
@@ -260,7 +264,7 @@ class JobControl:
             return self._run(traj, kept, [], started)
         job = MoveJob(None, on_update, points=points, start=tuple(traj.positions[0]))
         self._last_posted = job
-        self.sequencer.add([job], mode)
+        self.inbox.add([job], mode)
         self.wake()
         log.info("trajectory: %d points planned over %.2f s streamed as %d targets (job %d)",
                  len(traj.positions) - 1, traj.duration, len(points), job.id)
@@ -276,32 +280,32 @@ class JobControl:
         """A ticket in arrival order for a goal that preempts (take it as the goal arrives, pass it
         to :meth:`submit`): of two goals, the one that arrived later wins, whichever is planned
         first; an older one submitted after a newer ticket was claimed is superseded."""
-        return self.sequencer.claim_ticket()
+        return self.inbox.claim_ticket()
 
     def post_job(self, job: MoveJob) -> None:
         """Queue ``job`` (validated already) behind the others and run a bus cycle now."""
         self._last_posted = job
-        self.sequencer.add([job], SubmitMode.APPEND)
+        self.inbox.add([job], SubmitMode.APPEND)
         self.wake()
 
     def extend_live(self, job: MoveJob, point: StreamPoint, anchored: StreamPoint,
                     anchor: Optional[Tuple[float, ...]], now: float) -> None:
         """Add ``point`` to the live stream ``job`` (``anchored``: the same point, validated and
         its speed worked out from ``anchor``, the last target on the wire as the view showed it);
-        see :meth:`SequencerBase.extend`."""
-        self.sequencer.extend(job, point, anchored, anchor, now)      # type: ignore[attr-defined]
+        see :meth:`~vr_driver.driver.motion.inbox.Inbox.extend`."""
+        self.inbox.extend(job, point, anchored, anchor, now)
 
     def cancel(self, job: MoveJob, reason: str = "cancelled") -> None:
         """Cancel one job: a queued one is dropped; the one in flight is stopped and ends when
         the arm is at rest."""
-        self.sequencer.cancel(job, reason)
+        self.inbox.cancel(job, reason)
         self.wake()
 
     def stop_motion(self, reason: str = "stop requested") -> int:
         """Drop the queue and stop the target in flight; returns the number of jobs it ends."""
         view = self.sequencer.view
         n = view.queue_length + (1 if view.job is not None and not view.settling else 0)
-        self.sequencer.stop_all(reason)
+        self.inbox.stop_all(reason)
         self.wake()
         log.info("stop motion: %s (%d job(s) to end)", reason, n)
         return n
@@ -315,23 +319,22 @@ class JobControl:
             else:
                 preview = self.preview(job.preview.request, joints)
         except VrDriverError as exc:
-            self.sequencer.replanned(job, None, str(exc))
+            self.inbox.replanned(job, None, str(exc))
         else:
-            self.sequencer.replanned(job, preview)
+            self.inbox.replanned(job, preview)
         self.wake()
 
     # ------------------------------------------------------------------------ helpers
     def _require_motion_possible(self) -> None:
-        status = self.status()
-        if not status.motion_possible:
-            raise DriverError("motion is not possible: %s" % status.why_no_motion())
+        snap = self.snapshot()
+        if not snap.motion_possible:
+            raise DriverError("motion is not possible: %s" % snap.why_not)
 
     def _current_joints(self) -> Tuple[float, ...]:
-        status = self.status()
-        if status.joints is None or not status.joints_valid:
-            raise DriverError("no valid current joint state to plan from (%s)"
-                              % (status.link_reason or status.link.value))
-        return status.joints
+        snap = self.snapshot()
+        if snap.joints is None or not snap.joints_valid:
+            raise DriverError("no valid current joint state to plan from (%s)" % snap.link_words)
+        return snap.joints
 
     def _planning_start(self, mode: SubmitMode) -> Tuple[float, ...]:
         """Where a new job will start: for APPEND the last queued job's target, for REPLACE the

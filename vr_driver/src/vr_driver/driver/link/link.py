@@ -135,13 +135,13 @@ class LinkSupervisor:
 
     def __init__(self, params: DriverParams, bus: BusConfig, clock: Callable[[], float],
                  open_link: Callable[[str, int], Link] = open_serial_link,
-                 stations: Optional[Any] = None) -> None:
+                 stations: Optional[Any] = None, wake: Optional[Any] = None) -> None:
         self.params = params
         self.bus = bus
         self.slave_config = bus.slaves[0]
         self.stations = stations             # IoLine of the other stations on the line, or None
-        self.clock = clock
-        self.open_link = open_link
+        self.wake = wake                     # the requests' wake-up (the inbox's): a bus process waits for it too
+        self.clock, self.open_link = clock, open_link
         self.counters = LinkCounters()
         # the controller's records, decoded by the protocol (vr_driver.protocol)
         wire, order = params.wire, params.byte_order
@@ -412,7 +412,8 @@ class LinkSupervisor:
         link: Optional[Link] = None
         try:
             if self.uses_bus_process:
-                master: MasterApi = start_bus_process(self.params, self.bus, spec, settings, self._on_slave_state)
+                master: MasterApi = start_bus_process(self.params, self.bus, spec, settings, self._on_slave_state,
+                                                      self.wake)
             else:
                 link = self.open_link(device, baud)
         except (ProfibusError, OSError, ValueError) as exc:

@@ -83,9 +83,10 @@ def master_settings(params: DriverParams, bus: BusConfig) -> Dict[str, Any]:
 
 
 def start_bus_process(params: DriverParams, bus: BusConfig, spec: SlaveSpec, settings: Dict[str, Any],
-                      on_state_change: Callable[..., None]) -> BusProcessMaster:
-    """The serial port and the DP master in a process of their own (:mod:`vr_driver.bus.process`).
-    Raises PhyError for a device that is not there."""
+                      on_state_change: Callable[..., None], wake: Optional[Any] = None) -> BusProcessMaster:
+    """The serial port and the DP master in a process of their own (:mod:`vr_driver.bus.process`);
+    ``wake``: the requests' wake-up its cycle waits for too (the inbox's). Raises PhyError for a
+    device that is not there."""
     device = bus.phy.device
     # a device that is not there (an unplugged adapter, a virtual controller not started yet) is
     # said here, as the serial link says it, without starting a process for it at every reconnect
@@ -98,7 +99,7 @@ def start_bus_process(params: DriverParams, bus: BusConfig, spec: SlaveSpec, set
         idle_record=idle_record(params), watchdog=spec.watchdog,
         rt_priority=params.bus_rt_priority, node_timeout=params.bus_node_timeout,
         stop_hold=params.bus_stop_hold, **settings),
-        on_state_change=on_state_change)
+        on_state_change=on_state_change, wake=wake)
 
 
 class Reopening:

@@ -12,12 +12,13 @@ by :mod:`vr_driver.driver.sequencers`).
 
 :meth:`SequencerBase.step` is called once per bus iteration with the link's
 :class:`~vr_driver.driver.link.link.LinkSample` and the arm's current joints; it returns the command to
-send next. Other threads never touch its state: they post requests (:meth:`~SequencerBase.add`,
-:meth:`~SequencerBase.cancel`, :meth:`~SequencerBase.stop_all`), which the next step takes in the
-order they were posted (:mod:`vr_driver.driver.motion.inbox`). Planning never runs here: a job whose
-planned start no longer matches the arm is handed to ``replan(job, joints)`` (the driver core runs
-it on its planning thread) and waits in REPLANNING until :meth:`~SequencerBase.replanned` brings
-the new plan back.
+send next. Other threads never touch its state: they post requests to its inbox
+(:attr:`SequencerBase.inbox`: :meth:`~vr_driver.driver.motion.inbox.Inbox.add`,
+:meth:`~vr_driver.driver.motion.inbox.Inbox.cancel`, :meth:`~vr_driver.driver.motion.inbox.Inbox.stop_all`),
+which the next step takes in the order they were posted (:mod:`vr_driver.driver.motion.inbox`).
+Planning never runs here: a job whose planned start no longer matches the arm is handed to
+``replan(job, joints)`` (the driver core runs it on its planning thread) and waits in REPLANNING
+until the inbox's :meth:`~vr_driver.driver.motion.inbox.Inbox.replanned` brings the new plan back.
 
 Rules (README "Reliability", doc/README.md):
 
@@ -28,9 +29,10 @@ Rules (README "Reliability", doc/README.md):
   bit clear and the reported pose unchanged for ``stop_settle_time`` -- and its result carries that
   pose; nothing new is sent before that (:mod:`vr_driver.driver.motion.settling`);
 - **order**: requests take effect in the order they were posted; a PREEMPT job whose ticket is
-  older than the newest ticket claimed (:meth:`claim_ticket`) is superseded, never run; a PREEMPT
-  job stops the move in flight and drops the queue; a REPLACE job (a new joint path) drops every
-  queued target, lets the one in flight complete, and runs from its end;
+  older than the newest ticket claimed (:meth:`~vr_driver.driver.motion.inbox.Inbox.claim_ticket`)
+  is superseded, never run; a PREEMPT job stops the move in flight and drops the queue; a REPLACE
+  job (a new joint path) drops every queued target, lets the one in flight complete, and runs from
+  its end;
 - **link loss**: everything in flight or queued fails with the reason (the last pose seen is
   reported; where the arm came to rest is unknown to the driver then).
 """
@@ -44,7 +46,7 @@ from typing import Any, Callable, Deque, List, Optional, Sequence, Tuple
 from ...params import DriverParams
 from ...poses import ControllerPose
 from ...protocol.common import FeedbackRecord, StatusBits
-from .inbox import AddJobs, CancelJobs, ExtendJob, Inbox, Replanned, Request
+from .inbox import AddJobs, CancelJobs, ExtendJob, Inbox, Request
 from .jobs import JobPhase, MoveJob, SubmitMode
 from ..link.link import LinkSample
 from .settling import Settle, Settling
@@ -161,8 +163,8 @@ class SequencerHooks:
 
     def take_point(self, job: MoveJob, point: Any, anchored: Any, anchor: Optional[Tuple[float, ...]],
                    stamp: float) -> None:
-        """A new command of a live job (:meth:`~SequencerBase.extend`). Only a streaming protocol's sequencer
-        takes one (the driver core refuses joint commands on the others)."""
+        """A new command of a live job (:meth:`~vr_driver.driver.motion.inbox.Inbox.extend`). Only a
+        streaming protocol's sequencer takes one (the driver core refuses joint commands on the others)."""
         raise NotImplementedError("this protocol does not stream joint commands")
 
     def resting(self, fb: Any) -> bool:
@@ -191,7 +193,9 @@ class SequencerBase(SequencerHooks):
         self.wire = params.wire                   # the protocol object (the string: params.protocol)
         self.clock = clock
         self.replan = replan
-        self._inbox = Inbox()                     # the only state other threads touch
+        # the only state other threads touch: they post there (Inbox.add ...), read the bus side's
+        # MotionSnapshot there and wake the bus thread with its Wake
+        self.inbox = Inbox()
         self._queue: Deque[MoveJob] = collections.deque()
         self._job: Optional[MoveJob] = None
         self._settling = Settling(params)         # the stopped job waiting for rest (_settle)
@@ -199,33 +203,6 @@ class SequencerBase(SequencerHooks):
         self._last_pose: Optional[ControllerPose] = None
         self.targets_sent = self.targets_done = self.targets_rejected = self.targets_aborted = 0
         self.view = SequencerView(None, 0, None, None, False)
-
-    # ------------------------------------------------------------------ any thread
-    def claim_ticket(self) -> int:
-        """A number in arrival order for a goal that will preempt (take it when the goal arrives;
-        a job carrying an older ticket than the newest claimed one is superseded)."""
-        return self._inbox.claim_ticket()
-
-    def add(self, jobs: Sequence[MoveJob], mode: SubmitMode = SubmitMode.APPEND) -> None:
-        self._inbox.post(AddJobs(tuple(jobs), mode))
-
-    def cancel(self, job: MoveJob, reason: str) -> None:
-        self._inbox.post(CancelJobs(job, reason))
-
-    def stop_all(self, reason: str) -> None:
-        self._inbox.post(CancelJobs(None, reason))
-
-    def replanned(self, job: MoveJob, preview: Optional[Any], error: str = "") -> None:
-        self._inbox.post(Replanned(job, preview, error))
-
-    def extend(self, job: MoveJob, point: Any, anchored: Any, anchor: Optional[Tuple[float, ...]],
-               stamp: float) -> None:
-        """A new command of the live job ``job`` (a joint_command stream): ``point`` follows the
-        job's last point; ``anchored`` is the same target as the successor of ``anchor`` (the
-        view's ``live_anchor`` when it was validated: the last point put on the wire then), used
-        where the new point replaces one not put on the wire yet -- and only while ``anchor`` is
-        still the last point on the wire (streaming protocols only)."""
-        self._inbox.post(ExtendJob(job, point, anchored, anchor, stamp))
 
     # ------------------------------------------------------------------ bus thread
     def step(self, now: float, sample: LinkSample, joints: Optional[Tuple[float, ...]]) -> Any:
@@ -299,7 +276,7 @@ class SequencerBase(SequencerHooks):
         fb = sample.feedback
         if fb is not None:
             self._last_pose = fb.pose
-        for request in self._inbox.take():
+        for request in self.inbox.take():
             self._take(request, now, fb)
         if not sample.connected or (self._session is not None and sample.session != self._session):
             if self._session is not None:
@@ -313,7 +290,7 @@ class SequencerBase(SequencerHooks):
 
     def shutdown(self, reason: str) -> None:
         """End every job (after the bus loop stopped): queued, in flight, posted but not taken."""
-        posted = [job for request in self._inbox.take() if isinstance(request, AddJobs)
+        posted = [job for request in self.inbox.take() if isinstance(request, AddJobs)
                   for job in request.jobs]
         self.end_all(JobPhase.CANCELLED, reason, posted)
         self._publish()
@@ -353,13 +330,13 @@ class SequencerBase(SequencerHooks):
             return
         if request.mode is SubmitMode.PREEMPT:
             ticket = jobs[0].ticket
-            if self._inbox.superseded(ticket):
+            if self.inbox.superseded(ticket):
                 for job in jobs:
                     job.finish(False, JobPhase.CANCELLED, "superseded by a newer goal (received "
                                "later, it takes precedence); nothing was sent for this one", None)
                 log.info("job %d superseded by a newer goal", jobs[0].id)
                 return
-            self._inbox.preempts(ticket)
+            self.inbox.preempts(ticket)
             self._stop_everything("preempted by a newer goal", now)
         elif request.mode is SubmitMode.REPLACE:
             dropped = len(self._queue)

@@ -12,6 +12,7 @@ from ...bus.line_check import LineVerdict
 from ...errors import VrDriverError
 from ...poses import ControllerPose
 from ...protocol.common import FeedbackRecord
+from .inbox import MotionSnapshot, no_link, stale_reason
 from .jobs import MoveJob
 from ..link.link import ERROR_LINK, LinkCounters, LinkState
 from .sequencer import why_no_motion
@@ -87,21 +88,22 @@ class DriverStatus:
     def why_no_motion(self) -> str:
         """Why motion is not possible now ("" when it is)."""
         if not self.connected or self.feedback is None:
-            return "no link to the controller (%s: %s)" % (self.link.value, self.link_reason)
+            return no_link(self.link.value, self.link_reason)
         return why_no_motion(self.feedback)
+
+    def for_requests(self, limit: float) -> MotionSnapshot:
+        """What a request reads of this snapshot before it posts (the inbox's
+        :class:`~vr_driver.driver.motion.inbox.MotionSnapshot`), read as this one is with ``limit``."""
+        return MotionSnapshot(self.time, self.motion_possible, self.why_no_motion(), self.joints, self.joints_valid,
+                              self.link_reason or self.link.value, self.cycle_rate, self.feedback_time, limit)
 
     def stale(self, now: float, limit: float) -> "DriverStatus":
         """This snapshot as it must be read at ``now``: unchanged while it and its feedback are at
         most ``limit`` seconds old; otherwise a lost link -- no feedback, no pose, no joints, in
         error -- never a repeat of old good news."""
-        age = now - self.time
-        fb_age = None if self.feedback_time is None else now - self.feedback_time
-        if age <= limit and (fb_age is None or fb_age <= limit):
+        reason = stale_reason(now, self.time, self.feedback_time, limit)
+        if not reason:
             return self
-        if age > limit:
-            reason = "the driver's status is %.2f s old (the bus loop stalled)" % age
-        else:
-            reason = "the controller's last record is %.2f s old" % fb_age
         return replace(self, link=LinkState.STALE, link_reason=reason, feedback=None, pose=None,
                        joints_valid=False, error_code=ERROR_LINK, error_reason=reason,
                        feedback_time=None, record_time=None)

@@ -23,7 +23,7 @@ of the stream is re-sent: the job fails with the reason.
 
 **A live stream** (``MoveJob.live``: the ``joint_command`` topic, :meth:`DriverCore.joint_command`):
 the same job, whose points grow while commands come (:meth:`StreamSequencer.take_point`, posted
-through :meth:`~vr_driver.driver.motion.sequencer.SequencerBase.extend`). A new point replaces the job's
+through :meth:`~vr_driver.driver.motion.inbox.Inbox.extend`). A new point replaces the job's
 last point when that one was not put on the wire yet and the point the replacement was checked from
 is still the last on the wire (at most one point is ever waiting: the newest command wins; a point
 on the wire is never changed or recalled -- the controller may have taken it); else it is appended

@@ -23,7 +23,9 @@ The planning process sends (:data:`FROM_WORKER`)::
     Ready         ("ready",)                               the parts are built: it plans
     Missing       ("missing", package, module, feature, text)   a library is missing (MissingDependency)
     StartFailed   ("error", text)                          it cannot plan for these parameters
-    Outcome       ("outcome", outcome: PlanOutcome)        a plan's result, its profile included
+    Outcome       ("outcome", outcome: PlanOutcome)        a plan's result, its profile included, and on
+                                                           success what the driver sends for it as the
+                                                           stream check made it (the node's announcement)
     PlanFailed    ("exception", text)                      the plan failed inside (a planner bug), or the
                                                            request was malformed: it goes on
     Log           ("log", level, text)                     one of its warnings, for the node's log
@@ -173,7 +175,7 @@ class StartFailed(PlanMessage):
 @message("outcome")
 class Outcome(PlanMessage):
     """("outcome", outcome): a plan's :class:`~vr_driver.driver.planning.planning.PlanOutcome` (its
-    trajectory, words and profile)."""
+    trajectory, words and profile; its stream or PTP previews, which the node announces the run with)."""
 
     outcome: PlanOutcome
 

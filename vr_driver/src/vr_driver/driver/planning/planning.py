@@ -69,7 +69,7 @@ __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED"
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
            "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
            "cell_key", "margin_validity",
-           "arm_points", "code_of", "elbow_crossings", "retreat_waypoints", "retry_planner"]
+           "arm_points", "code_of", "driver_sends", "elbow_crossings", "retreat_waypoints", "retry_planner"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
 SUCCESS = 1
@@ -172,6 +172,12 @@ class PlanOutcome:
     #: ``retreat`` (1 when the last try went back along the last plan's path) and ``roadmap``
     #: (legs that were a route of earlier plans, :class:`~vr_driver.kinematics.roadmap.Roadmap`)
     profile: Dict[str, Any] = field(default_factory=dict)
+    #: on success, what the driver sends for ``trajectory`` as its stream check made it
+    #: (:meth:`PlanActionCore.driver_refusal`): a streaming protocol's points, v1's PTP previews --
+    #: what the node announces the run with (``DriverCore.announce``) instead of making them again;
+    #: empty when not known (the node makes them)
+    stream: Tuple[Any, ...] = ()
+    previews: Tuple[Any, ...] = ()
 
     @property
     def ok(self) -> bool:
@@ -544,6 +550,8 @@ class PlanActionCore:
         #: the paths of the plans made in this cell (kinematics.roadmap: a hint the planner checks
         #: again), kept while the scene, the padding and the box stay (:func:`cell_key`)
         self.roadmap = Roadmap(joint_weights(self.kin))
+        #: the plan the stream check took last, with what the driver sends for it (PlanOutcome.stream, previews)
+        self._prepared: Tuple[Any, Tuple[Any, ...], Tuple[Any, ...]] = (None, (), ())
         # a Planner is cheap; making one checks its libraries and the limits once, here
         Planner(self.kin, None, planner=self.params.planner_id)
 
@@ -711,7 +719,9 @@ class PlanActionCore:
         if not self.collision_checked:
             text += "; collisions NOT checked (collision_check: false)"
         self.last_path = tuple(tuple(q) for q in plan.path)
-        return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof)
+        stream, previews = self._prepared[1:] if self._prepared[0] is plan else ((), ())
+        return PlanOutcome(SUCCESS, text, plan, elapsed, planner_id, end, profile=prof, stream=stream,
+                           previews=previews)
 
 
     def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
@@ -843,24 +853,33 @@ class PlanActionCore:
         return margin_validity(strict, wrist_margin, stretched_elbow(self.kin) if elbow_margin else None)
 
     def driver_refusal(self, plan: PlannedTrajectory) -> str:
-        """Why the driver would refuse ``plan``, "" when it would not: what it sends for it, checked
-        as ``submit_trajectory`` checks it (``DriverCore.prepare_trajectory``) -- a streaming
-        protocol's stream (its points: their configurations with a Cartesian protocol, and their
-        segments); v1's PTP moves between the plan's thinned stop points, each previewed as the
-        controller runs it, a straight joint move, against the box and the cell (the plan's samples
-        between two stop points are not what v1 runs). Call it without the planning gate: the
-        checks take it."""
-        if len(plan.positions) < 2:
-            return ""
-        from ..motion.trajectories import TrajectoryGoal, validate
-        lim = self.kin.limits
-        try:
-            traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), plan.positions[0], lim.lower,
-                            lim.upper, 0.0)
-            self.core.prepare_trajectory(traj, traj.positions[0])
-        except VrDriverError as exc:
-            return str(exc)
-        return ""
+        """Why the driver would refuse ``plan``, "" when it would not (:func:`driver_sends`); what it
+        sends for a plan it takes is kept for that plan's outcome. Call it without the planning gate."""
+        refusal, stream, previews = driver_sends(self.core, self.kin, plan)
+        if not refusal:
+            self._prepared = (plan, stream, previews)
+        return refusal
+
+
+def driver_sends(core: Any, kin: Any, plan: PlannedTrajectory) -> Tuple[str, Tuple[Any, ...], Tuple[Any, ...]]:
+    """What ``core`` (a DriverCore or the planning process's parts) would send for ``plan`` and why it
+    would refuse it: ("", its stream points, its previews) or (the refusal, (), ()). Checked as
+    ``submit_trajectory`` checks it (``core.prepare_trajectory``) -- a streaming protocol's stream (its
+    points: their configurations with a Cartesian protocol, and their segments); v1's PTP moves between
+    the plan's thinned stop points, each previewed as the controller runs it, a straight joint move,
+    against the box and the cell (the plan's samples between two stop points are not what v1 runs).
+    The checks take the planning gate."""
+    if len(plan.positions) < 2:
+        return "", (), ()
+    from ..motion.trajectories import TrajectoryGoal, validate
+    lim = kin.limits
+    try:
+        traj = validate(TrajectoryGoal.of(plan), tuple(plan.joint_names), plan.positions[0], lim.lower,
+                        lim.upper, 0.0)
+        _kept, points, previews = core.prepare_trajectory(traj, traj.positions[0])
+    except VrDriverError as exc:
+        return str(exc), (), ()
+    return "", tuple(points), tuple(previews)
 
 
 _STEP_WORDS = {"start": "cannot plan from here", "goal": "goal refused", "plan": "no path found",
