@@ -410,8 +410,12 @@ def test_the_last_try_from_where_a_plan_ended_retreats_along_its_path(kin, monke
     assert planning.last_path == came and len(came) >= 3        # (a detour: not the straight move)
     end = first.trajectory.goal
 
-    def no_path(*args, **kwargs):
-        raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+    real = planning._plan
+
+    def no_path(planner, start, target, crossing, before=()):
+        if not before:                      # (the retreat's try, through waypoints, plans)
+            raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+        return real(planner, start, target, crossing, before)
     monkeypatch.setattr(planning, "_plan", no_path)
     out = planning.plan(AWAY, start=end, seed=2)
     assert out.ok, out.text
@@ -454,20 +458,20 @@ def test_a_try_after_one_that_found_no_path_searches_with_another_planner(kin, m
     used = []
     real = planning._plan
 
-    def first_finds_nothing(planner, start, target, crossing):
+    def first_finds_nothing(planner, start, target, crossing, before=()):
         used.append(planner.planner_name)
         if len(used) == 1:
             raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
-        return real(planner, start, target, crossing)
+        return real(planner, start, target, crossing, before)
     monkeypatch.setattr(planning, "_plan", first_finds_nothing)
     out = planning.plan(AWAY, seed=1)
     assert out.ok, out.text
     assert used == ["RRTConnect", P.RETRY_PLANNER] and "searched with %s" % P.RETRY_PLANNER in out.text
     used.clear()
 
-    def recorded(planner, start, target, crossing):
+    def recorded(planner, start, target, crossing, before=()):
         used.append(planner.planner_name)
-        return real(planner, start, target, crossing)
+        return real(planner, start, target, crossing, before)
     monkeypatch.setattr(planning, "_plan", recorded)
     monkeypatch.setattr(planning, "driver_refusal", lambda plan: "segment 2 of 5: refused" if len(used) < 3 else "")
     assert planning.plan(AWAY, seed=1).ok
@@ -748,7 +752,7 @@ def test_each_try_crosses_the_stretched_elbow_by_its_own_waypoints(kin, monkeypa
         assert (near[2] - stretch) * (start[2] - stretch) > 0 > (past[2] - stretch) * (start[2] - stretch)
     tried = []
 
-    def walled_in(planner, q0, tgt, crossing):
+    def walled_in(planner, q0, tgt, crossing, before=()):
         tried.append(crossing)
         raise PlanningError("plan", "found no path (walled in)")
     monkeypatch.setattr(planning, "_plan", walled_in)

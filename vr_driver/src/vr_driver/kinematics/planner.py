@@ -290,7 +290,12 @@ class Planner:
     ``dt`` [s] the largest sample spacing; ``max_sweep`` [m] the motion-check resolution;
     ``goal_preference(start, q)``: a rank (lower first) that orders a pose goal's IK solutions
     before their nearness -- e.g. the driver's: a controller that solves poses itself cannot be
-    relied on to change the elbow branch, so the solutions on the start's branch come first."""
+    relied on to change the elbow branch, so the solutions on the start's branch come first;
+    ``leg_validity(a, b)``: what every state of a leg from ``a`` to ``b`` (the start, the ``via``
+    waypoints, the goal) must also pass in the search, its escape zones included -- an
+    ``is_valid(q)`` (a BatchValidity for batches) or None (nothing more) -- e.g. the driver's: a
+    leg between two configurations on one side of the stretched elbow stays on that side (the
+    controller does not follow a plan across it elsewhere than where it turns joint_3 alone)."""
 
     def __init__(self, kinematics: Any, validity: Any = None, limits: Any = None,
                  planner: str = DEFAULT_PLANNER, time_budget: float = 1.0, seed: Optional[int] = None,
@@ -298,7 +303,8 @@ class Planner:
                  max_sweep: float = DEFAULT_MAX_SWEEP, clearance: float = DEFAULT_CLEARANCE,
                  planning_validity: Optional[Callable[[Sequence[float]], bool]] = None,
                  goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None,
-                 roadmap: Optional[Roadmap] = None) -> None:
+                 roadmap: Optional[Roadmap] = None,
+                 leg_validity: Optional[Callable[[Sequence[float], Sequence[float]], Any]] = None) -> None:
         if planner not in PLANNERS:
             raise PlanningError("plan", "unknown planner %r: the planners are %s" % (planner, ", ".join(PLANNERS)))
         self.kin = kinematics
@@ -323,6 +329,10 @@ class Planner:
         #: the paths of earlier plans (a Roadmap, kept by the caller) tried before the search, or None
         self.roadmap = roadmap
         self._ends = SweepZone((), ())    # the plan's start and goals (_escapes)
+        if leg_validity is not None and not callable(leg_validity):
+            raise TypeError("leg_validity must be a callable (a, b) -> is_valid or None, got %r" % (leg_validity,))
+        self._leg_validity = leg_validity
+        self._leg: Optional[Callable[[Sequence[float]], bool]] = None   # the leg being planned's (_leg_validity)
         for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
             if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
                 raise PlanningError("time", "every joint needs a finite %s limit > 0 for the timing, got %r"
@@ -360,6 +370,8 @@ class Planner:
         """The planner's test (``planning_valid``): valid with the clearance -- or, within
         ``ESCAPE_SWEEP`` of the start or the goal of the plan being made, valid (an arm that starts
         or ends closer than the clearance to something must be able to leave or reach that place)."""
+        if self._leg is not None and not self._leg(q):
+            return False
         if self._strict(q):
             return True
         return self._escapes(q)
@@ -371,16 +383,19 @@ class Planner:
         """:meth:`_planning_valid` of a batch (BatchValidity.first_invalid): the clearance's test
         in one call up to its first refusal, that row in the escape zone tested again alone."""
         qs = np.asarray(qs, dtype=float)
+        cut = first_invalid(self._leg, qs) if self._leg is not None else None
+        if cut is not None:
+            qs = qs[:cut]                 # (the leg's own test refuses that row: none after it counts)
         k = 0
         while k < len(qs):
             f = first_invalid(self._strict, qs[k:])
             if f is None:
-                return None
+                break
             k += f
             if not self._escapes(tuple(float(v) for v in qs[k])):
                 return k
             k += 1
-        return None
+        return cut
 
     def _why_invalid(self, q: Sequence[float]) -> Tuple[str, tuple]:
         if self._contacts is None:
@@ -488,11 +503,13 @@ class Planner:
         # the legs whose straight move is not free: the budget is theirs (a straight leg takes next
         # to nothing: the elbow crossing's middle one always, its first or last often)
         ends = [q0] + stops
-        searching = [self.motion_valid(a, targets[0], self.planning_valid) is not None
-                     for a, targets in zip(ends, legs)] if stops else [True]
+        searching = [self.leg_searches(a, targets) for a, targets in zip(ends, legs)] if stops else [True]
         searched = 0.0                   # [s] the legs' searches so far
         for k, targets in enumerate(legs):
             leg: Dict[str, float] = {}
+            self._leg = self._leg_of(path[-1], targets[0])
+            # (a pose's other solutions that the leg's own test refuses are not its goals)
+            targets = [targets[0]] + [g for g in targets[1:] if self._leg is None or self._leg(g)]
             # an equal share of what the legs before left of the budget among the legs left to
             # search; never more in all
             share = max(budget - searched, 0.0) / max(1, sum(searching[k:]))
@@ -500,6 +517,7 @@ class Planner:
             searched += leg.get("plan", 0.0)
             for key, value in leg.items():
                 timings[key] = timings.get(key, 0.0) + value
+        self._leg = None
         t = time.perf_counter()
         timings["time"] = timings["check"] = 0.0
         for attempt, (step, dt) in enumerate(TIMING_ATTEMPTS):
@@ -524,6 +542,23 @@ class Planner:
         return PlannedTrajectory(self.names, times, pos, vel, acc, tuple(path), self.planner_name, timings)
 
     # ------------------------------------------------------------------- the path (OMPL's search)
+    def _leg_of(self, a: Sequence[float], b: Sequence[float]) -> Optional[Callable[[Sequence[float]], bool]]:
+        """The leg's own test from ``a`` to ``b`` (``leg_validity``), or None."""
+        return None if self._leg_validity is None else self._leg_validity(tuple(a), tuple(b))
+
+    def leg_searches(self, q0: Tuple[float, ...], goals: Sequence[Tuple[float, ...]]) -> bool:
+        """Whether a leg from ``q0`` to ``goals`` needs a search: its straight move to the first
+        is not free by the planner's test with the leg's own escape zone (as
+        :meth:`_geometric_path` checks it; the zone of another leg or plan would refuse a straight
+        crossing of a margin near this leg's ends and give the leg a share of the budget it does
+        not use)."""
+        self._ends = SweepZone((tuple(q0),) + tuple(tuple(g) for g in goals), self.weights)
+        self._leg = self._leg_of(q0, goals[0])
+        try:
+            return self.motion_valid(q0, goals[0], self.planning_valid) is not None
+        finally:
+            self._leg = None
+
     def _geometric_path(self, q0, goals: Sequence[Tuple[float, ...]], budget: float, seed: Optional[int],
                         timings: Dict[str, float]) -> List[Tuple[float, ...]]:
         """A valid path from ``q0`` to the first of ``goals`` (the nearest) -- or, when there are
