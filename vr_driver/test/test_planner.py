@@ -444,6 +444,41 @@ def test_the_sweep_validator_checks_each_motion_at_the_sweep_and_fewer_states(ki
     assert len(seen) > checks_sweep, (len(seen), checks_sweep)
 
 
+def test_a_retry_planners_motions_are_checked_at_the_sweep_bound_or_finer(kin):
+    """LBKPIECE1 (the plan action's retry planner) is not in SWEEP_VALIDATED: it asks OMPL how far a
+    motion is valid, which the sweep validator does not answer. OMPL's own validator, which it then
+    uses, checks a motion at the resolution OmplSearch sets, |dx| <= max_sweep / sqrt(n) in the
+    scaled space: on random motions the states it checks lie at most max_sweep apart by the sweep
+    bound too (never fewer than the sweep validator's), the end included. And the planner checks every
+    motion of the simplified path at the sweep bound itself (a LBKPIECE1 plan round the wall)."""
+    import importlib
+    from vr_driver.kinematics.plan_search import SWEEP_VALIDATED, OmplSearch
+    from vr_driver.kinematics.planner import joint_weights
+    assert "LBKPIECE1" not in SWEEP_VALIDATED
+    ompl = tuple(importlib.import_module(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+    lim, w = kin.limits, joint_weights(kin)
+    seen = []
+
+    def counted(q):
+        seen.append(q)
+        return True
+    own = OmplSearch(ompl, w, lim.lower, lim.upper, 0.02, counted, 7)
+    assert not own.sweep_motions
+    rng = np.random.default_rng(4)
+    lo, hi = np.array(lim.lower), np.array(lim.upper)
+    for _ in range(40):
+        a, b = lo + rng.random(6) * (hi - lo), lo + rng.random(6) * 0.3 * (hi - lo)
+        seen.clear()
+        assert own.si.checkMotion(own._state(a), own._state(b))
+        whole = float(np.abs(b - a) @ w)
+        f = sorted(float(np.abs(np.asarray(q) - a) @ w) for q in seen)
+        assert max(y - x for x, y in zip([0.0] + f, f)) <= 0.02 + 1e-9 and abs(f[-1] - whole) < 1e-9
+        assert len(seen) >= math.ceil(whole / 0.02)
+    planner = Planner(kin, wall, planner="LBKPIECE1", seed=3, time_budget=5.0)
+    plan = planner.plan(START, GOAL)
+    assert len(plan.path) > 2 and all(planner.motion_valid(x, y) is None for x, y in zip(plan.path, plan.path[1:]))
+
+
 def test_the_timing_alone_keeps_the_scaled_limits_from_rest_to_rest(kin):
     """kinematics.plan_timing: a path with a corner, timed at half speed and a quarter of the
     acceleration, sampled evenly every <= dt; it ends where the path ends, at rest."""
