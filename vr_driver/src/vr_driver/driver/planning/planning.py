@@ -30,7 +30,8 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   with the same effect. So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` and joint_3
   :data:`ELBOW_MARGIN` from the stretch away from the start and the goal (as it keeps its clearance);
   a goal on the other elbow branch is planned through the stretch where the controller does change
-  branch (:meth:`PlanActionCore._elbow_crossing`); and a plan is checked by the driver's own stream
+  branch (:meth:`PlanActionCore._elbow_crossing`), every other leg on its own side of it
+  (:func:`elbow_side_legs`); and a plan is checked by the driver's own stream
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
   all, each with the whole budget: a sampling planner's next try differs; a try after one that found
@@ -101,8 +102,9 @@ ELBOW_APPROACH = math.radians(2.0)
 ELBOW_CROSS = math.radians(12.0)
 #: [rad] ... with |joint_5| at least this there
 ELBOW_WRIST = math.radians(6.0)
-#: [s] under the G2 rule current_joints the arm holds this long at the first of the two
-#: (PlanActionCore._plan)
+#: [s] the arm holds this long at rest at the first of the two (PlanActionCore._plan): the turn
+#: from rest keeps the stream's points around the stretch close enough for the G2 to change branch
+#: on them, and under the G2 rule current_joints the target past it is taken with the arm there
 ELBOW_HOLD = 0.1
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
