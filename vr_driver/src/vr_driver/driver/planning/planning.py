@@ -688,7 +688,7 @@ class PlanActionCore:
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
                                           wrist=attempt < ATTEMPTS - 1 and not wrist_across), roadmap=self.roadmap,
-                                      leg_validity=self._elbow_sides())
+                                      leg_validity=self._elbow_sides() if crossing else None)
                     held = ConfigurationRule.parse(self.params.controller.configuration) \
                         is ConfigurationRule.CURRENT_JOINTS
                     retreat = retreat_waypoints(self.last_path, tuple(start), () if switched or not held else crossing,
