@@ -505,19 +505,21 @@ class Planner:
         ends = [q0] + stops
         searching = [self.leg_searches(a, targets) for a, targets in zip(ends, legs)] if stops else [True]
         searched = 0.0                   # [s] the legs' searches so far
-        for k, targets in enumerate(legs):
-            leg: Dict[str, float] = {}
-            self._leg = self._leg_of(path[-1], targets[0])
-            # (a pose's other solutions that the leg's own test refuses are not its goals)
-            targets = [targets[0]] + [g for g in targets[1:] if self._leg is None or self._leg(g)]
-            # an equal share of what the legs before left of the budget among the legs left to
-            # search; never more in all
-            share = max(budget - searched, 0.0) / max(1, sum(searching[k:]))
-            path += self._geometric_path(path[-1], targets, share, None if seed is None else seed + k, leg)[1:]
-            searched += leg.get("plan", 0.0)
-            for key, value in leg.items():
-                timings[key] = timings.get(key, 0.0) + value
-        self._leg = None
+        try:
+            for k, targets in enumerate(legs):
+                leg: Dict[str, float] = {}
+                self._leg = self._leg_of(path[-1], targets[0])
+                # (a pose's other solutions that the leg's own test refuses are not its goals)
+                targets = [targets[0]] + [g for g in targets[1:] if self._leg is None or self._leg(g)]
+                # an equal share of what the legs before left of the budget among the legs left to
+                # search; never more in all
+                share = max(budget - searched, 0.0) / max(1, sum(searching[k:]))
+                path += self._geometric_path(path[-1], targets, share, None if seed is None else seed + k, leg)[1:]
+                searched += leg.get("plan", 0.0)
+                for key, value in leg.items():
+                    timings[key] = timings.get(key, 0.0) + value
+        finally:
+            self._leg = None
         t = time.perf_counter()
         timings["time"] = timings["check"] = 0.0
         for attempt, (step, dt) in enumerate(TIMING_ATTEMPTS):
