@@ -778,7 +778,9 @@ class PlanActionCore:
         first = planner.plan(start, near, via=before,
                              time_budget=budget / 2.0 if planner.leg_searches(past, (target,)) else budget)
         left = max(budget - first.timings.get("plan", 0.0), 1e-3)
-        return first.then(planner.plan(near, target, via=(past,), time_budget=left), ELBOW_HOLD)
+        # (the legs after the hold seeded as in one plan through all the waypoints: leg k, seed + k)
+        seed = None if planner.seed is None else planner.seed + len(before) + 1
+        return first.then(planner.plan(near, target, via=(past,), time_budget=left, seed=seed), ELBOW_HOLD)
 
     def _at_goal(self, planner: Planner, start: Tuple[float, ...], target: Any) -> Optional[PlannedTrajectory]:
         """A one-point trajectory (at rest where the arm is) when a joint solution of the goal is within
