@@ -444,6 +444,41 @@ def test_the_sweep_validator_checks_each_motion_at_the_sweep_and_fewer_states(ki
     assert len(seen) > checks_sweep, (len(seen), checks_sweep)
 
 
+def test_a_retry_planners_motions_are_checked_at_the_sweep_bound_or_finer(kin):
+    """LBKPIECE1 (the plan action's retry planner) is not in SWEEP_VALIDATED: it asks OMPL how far a
+    motion is valid, which the sweep validator does not answer. OMPL's own validator, which it then
+    uses, checks a motion at the resolution OmplSearch sets, |dx| <= max_sweep / sqrt(n) in the
+    scaled space: on random motions the states it checks lie at most max_sweep apart by the sweep
+    bound too (never fewer than the sweep validator's), the end included. And the planner checks every
+    motion of the simplified path at the sweep bound itself (a LBKPIECE1 plan round the wall)."""
+    import importlib
+    from vr_driver.kinematics.plan_search import SWEEP_VALIDATED, OmplSearch
+    from vr_driver.kinematics.planner import joint_weights
+    assert "LBKPIECE1" not in SWEEP_VALIDATED
+    ompl = tuple(importlib.import_module(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
+    lim, w = kin.limits, joint_weights(kin)
+    seen = []
+
+    def counted(q):
+        seen.append(q)
+        return True
+    own = OmplSearch(ompl, w, lim.lower, lim.upper, 0.02, counted, 7)
+    assert not own.sweep_motions
+    rng = np.random.default_rng(4)
+    lo, hi = np.array(lim.lower), np.array(lim.upper)
+    for _ in range(40):
+        a, b = lo + rng.random(6) * (hi - lo), lo + rng.random(6) * 0.3 * (hi - lo)
+        seen.clear()
+        assert own.si.checkMotion(own._state(a), own._state(b))
+        whole = float(np.abs(b - a) @ w)
+        f = sorted(float(np.abs(np.asarray(q) - a) @ w) for q in seen)
+        assert max(y - x for x, y in zip([0.0] + f, f)) <= 0.02 + 1e-9 and abs(f[-1] - whole) < 1e-9
+        assert len(seen) >= math.ceil(whole / 0.02)
+    planner = Planner(kin, wall, planner="LBKPIECE1", seed=3, time_budget=5.0)
+    plan = planner.plan(START, GOAL)
+    assert len(plan.path) > 2 and all(planner.motion_valid(x, y) is None for x, y in zip(plan.path, plan.path[1:]))
+
+
 def test_the_timing_alone_keeps_the_scaled_limits_from_rest_to_rest(kin):
     """kinematics.plan_timing: a path with a corner, timed at half speed and a quarter of the
     acceleration, sampled evenly every <= dt; it ends where the path ends, at rest."""
@@ -585,10 +620,10 @@ def test_a_motion_checked_in_one_batch_is_checked_state_by_state(kin, cell_check
     assert isinstance(planner.is_valid, BatchValidity) and isinstance(planner.planning_valid, BatchValidity)
     found = {"valid": 0, "planning": 0}
     for a, b in _random_motions(kin, 60, 4):
-        planner._ends = SweepZone((a, b), planner.weights)
+        planner.search_test.ends = SweepZone((a, b), planner.weights)
         for name, batch, one in (("valid", planner.is_valid, lambda q: not cell_checker.in_collision(q)),
-                                 ("planning", planner.planning_valid, planner._planning_valid)):
-            n = max(1, int(math.ceil(planner._sweep(a, b) / planner.max_sweep)))
+                                 ("planning", planner.planning_valid, planner.search_test.valid)):
+            n = max(1, int(math.ceil(planner.search_test.sweep(a, b) / planner.max_sweep)))
             states = [tuple(x + k / n * (y - x) for x, y in zip(a, b)) for k in range(1, n + 1)]
             expected = next((q for q in states if not one(q)), None)
             got = planner.motion_valid(a, b, batch)
@@ -627,27 +662,27 @@ def test_without_ompl_the_module_imports_and_the_planner_names_the_package():
 
 
 def test_the_escape_zone_in_numpy_is_the_sweep_bound_s(kin):
-    """Planner._escapes (the sweeps to the start and every goal in numpy, :meth:`_sweep`'s sums
-    within 1e-9 of the bound) says what :meth:`_sweep` of each end says, on random configurations
+    """SearchTest.escapes (the sweeps to the start and every goal in numpy, :meth:`sweep`'s sums
+    within 1e-9 of the bound) says what :meth:`sweep` of each end says, on random configurations
     around the ends, both ways, and at the bound itself."""
     import random
     from vr_driver.kinematics.plan_search import SweepZone
     from vr_driver.kinematics.planner import ESCAPE_SWEEP, Planner
     planner = Planner(kin, None)
     rng = random.Random(3)
-    assert planner._ends.ends == () and not planner._escapes(kin.random_joints(rng))    # no plan made: no zone
+    assert planner.search_test.ends.ends == () and not planner.search_test.escapes(kin.random_joints(rng))    # no plan made: no zone
     for ends in ([kin.random_joints(rng)], [kin.random_joints(rng) for _ in range(9)]):
-        planner._ends = SweepZone(ends, planner.weights)
+        planner.search_test.ends = SweepZone(ends, planner.weights)
         seen = set()
         for _ in range(1500):
             e = rng.choice(ends)
             q = tuple(v + rng.uniform(-0.6, 0.6) for v in e)
-            expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in ends) and planner.is_valid(q)
-            assert planner._escapes(q) == expected
+            expected = any(planner.search_test.sweep(q, x) <= ESCAPE_SWEEP for x in ends) and planner.is_valid(q)
+            assert planner.search_test.escapes(q) == expected
             seen.add(expected)
         assert seen == {True, False}
         # one joint of the first end turned to the bound exactly (as near as floats go)
         w = planner.weights[0]
         q = (ends[0][0] + ESCAPE_SWEEP / w,) + tuple(ends[0][1:])
-        expected = any(planner._sweep(q, x) <= ESCAPE_SWEEP for x in ends) and planner.is_valid(q)
-        assert planner._escapes(q) == expected
+        expected = any(planner.search_test.sweep(q, x) <= ESCAPE_SWEEP for x in ends) and planner.is_valid(q)
+        assert planner.search_test.escapes(q) == expected

@@ -410,9 +410,13 @@ def test_the_last_try_from_where_a_plan_ended_retreats_along_its_path(kin, monke
     assert planning.last_path == came and len(came) >= 3        # (a detour: not the straight move)
     end = first.trajectory.goal
 
-    def no_path(*args, **kwargs):
-        raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
-    monkeypatch.setattr(planning, "_plan", no_path)
+    real = P.plan_with_crossing
+
+    def no_path(planner, start, target, crossing, before=()):
+        if not before:                      # (the retreat's try, through waypoints, plans)
+            raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+        return real(planner, start, target, crossing, before)
+    monkeypatch.setattr(P, "plan_with_crossing", no_path)
     out = planning.plan(AWAY, start=end, seed=2)
     assert out.ok, out.text
     assert out.profile["retreat"] == 1 and out.profile["tries"] == P.ATTEMPTS
@@ -452,23 +456,23 @@ def test_a_try_after_one_that_found_no_path_searches_with_another_planner(kin, m
     assert P.retry_planner("RRTConnect") == P.RETRY_PLANNER and P.retry_planner(P.RETRY_PLANNER) == "RRTConnect"
     planning = PlanActionCore(world(kin).core, kinematics=kin)
     used = []
-    real = planning._plan
+    real = P.plan_with_crossing
 
-    def first_finds_nothing(planner, start, target, crossing):
+    def first_finds_nothing(planner, start, target, crossing, before=()):
         used.append(planner.planner_name)
         if len(used) == 1:
             raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
-        return real(planner, start, target, crossing)
-    monkeypatch.setattr(planning, "_plan", first_finds_nothing)
+        return real(planner, start, target, crossing, before)
+    monkeypatch.setattr(P, "plan_with_crossing", first_finds_nothing)
     out = planning.plan(AWAY, seed=1)
     assert out.ok, out.text
     assert used == ["RRTConnect", P.RETRY_PLANNER] and "searched with %s" % P.RETRY_PLANNER in out.text
     used.clear()
 
-    def recorded(planner, start, target, crossing):
+    def recorded(planner, start, target, crossing, before=()):
         used.append(planner.planner_name)
-        return real(planner, start, target, crossing)
-    monkeypatch.setattr(planning, "_plan", recorded)
+        return real(planner, start, target, crossing, before)
+    monkeypatch.setattr(P, "plan_with_crossing", recorded)
     monkeypatch.setattr(planning, "driver_refusal", lambda plan: "segment 2 of 5: refused" if len(used) < 3 else "")
     assert planning.plan(AWAY, seed=1).ok
     assert used == ["RRTConnect", "RRTConnect", "RRTConnect"]
@@ -761,10 +765,10 @@ def test_each_try_crosses_the_stretched_elbow_by_its_own_waypoints(kin, monkeypa
         assert (near[2] - stretch) * (start[2] - stretch) > 0 > (past[2] - stretch) * (start[2] - stretch)
     tried = []
 
-    def walled_in(planner, q0, tgt, crossing):
+    def walled_in(planner, q0, tgt, crossing, before=()):
         tried.append(crossing)
         raise PlanningError("plan", "found no path (walled in)")
-    monkeypatch.setattr(planning, "_plan", walled_in)
+    monkeypatch.setattr(P, "plan_with_crossing", walled_in)
     out = planning.plan(PlanGoal(joints=(kin.joint_names, goal), planning_time=0.1), start=start, seed=1)
     assert out.code == P.PLANNING_FAILED and "walled in" in out.text, out.text
     assert tried == list(crossings)
@@ -787,3 +791,124 @@ def test_no_crossing_waypoints_where_they_would_not_help(kin):
     goal = tuple(math.radians(v) for v in FOLD_GOAL)
     v2 = PlanActionCore(world(kin, protocol="v2", workspace=REACH).core, kinematics=kin)
     assert v2._elbow_crossing(start, goal) == ((), goal)
+
+
+#: the hood cell of the planning bench (bench/cells/hood_post.yaml) and its queries 37 and 38 (seed 1):
+#: the start deep under the hood's top (the folded elbow), a pose and a joint goal across the
+#: stretched elbow; PATH36 the geometric path of query 36, which ended at the start (its elbow
+#: crossing at its start, joint_3 from 2 deg before the stretch to 12 deg past it)
+HOOD = os.path.join(REPO, "bench", "cells", "hood_post.yaml")
+START37 = (0.52680, 1.94061, -2.66817, 2.90263, -1.40748, -3.10177)
+GOAL37 = (0.34185, 0.66583, 0.23262, 0.09437, 0.25325, 5.90613)
+GOAL38 = (0.05929, 2.56136, -1.01520, 3.38412, -0.85791, 3.07256)
+PATH36 = ((0.94087, 1.41507, -0.20743, 3.57084, -1.18995, -2.44635),
+          (0.94087, 1.41507, -1.30779, 3.57084, -1.18995, -2.44635),
+          (0.94087, 1.41507, -1.55213, 3.57084, -1.18995, -2.44635),
+          (0.95971, 1.48507, -1.71470, 3.44058, -1.19289, -2.37115),
+          (0.97717, 1.55392, -1.87437, 3.31309, -1.19617, -2.29958),
+          (0.99182, 1.62044, -2.02824, 3.19112, -1.20011, -2.23527),
+          (1.00228, 1.68347, -2.17341, 3.07746, -1.20505, -2.18185),
+          (1.00715, 1.74186, -2.30697, 2.97485, -1.21133, -2.14295),
+          (1.00503, 1.79445, -2.42603, 2.88607, -1.21926, -2.12219),
+          (0.99453, 1.84007, -2.52768, 2.81389, -1.22920, -2.12322),
+          (0.97424, 1.87755, -2.60903, 2.76107, -1.24146, -2.14966),
+          (0.94277, 1.90575, -2.66717, 2.73036, -1.25639, -2.20515),
+          (0.90151, 1.92582, -2.70501, 2.71902, -1.27365, -2.28604),
+          (0.85187, 1.93892, -2.72544, 2.72427, -1.29291, -2.38871),
+          (0.79804, 1.94854, -2.73717, 2.73782, -1.31316, -2.50227),
+          (0.73302, 1.94886, -2.72569, 2.77349, -1.33608, -2.64488),
+          (0.66661, 1.94803, -2.71132, 2.81193, -1.35933, -2.79111),
+          (0.59740, 1.94487, -2.69114, 2.85590, -1.38325, -2.94460),
+          START37)
+
+
+def crossings_of(stretch, positions):
+    """(index of the first sample past the stretch, for every change of side) of a plan's samples."""
+    side = [math.remainder(q[2] - stretch, 2.0 * math.pi) > 0.0 for q in positions]
+    return [k for k in range(1, len(side)) if side[k] != side[k - 1]]
+
+
+def test_a_leg_keeps_to_its_side_of_the_stretched_elbow():
+    """elbow_side_legs: a leg between two configurations on one side of the stretch refuses joint_3
+    past it (the stretch itself allowed), one by one and in a batch alike; a leg across it, or from
+    the stretch, has no test of its own."""
+    stretch = -1.34
+    a, b = (0.1, 0.2, -2.0, 0.0, 0.5, 0.0), (0.3, 0.1, -1.5, 0.0, 0.5, 0.0)
+    leg = P.elbow_side_legs(stretch)(a, b)
+    assert leg(a) and leg(b) and leg((0.0, 0.0, stretch, 0.0, 0.0, 0.0))
+    assert not leg((0.0, 0.0, stretch + 1e-6, 0.0, 0.0, 0.0)) and not leg((0.0, 0.0, 0.5, 0.0, 0.0, 0.0))
+    rows = [(0.0, 0.0, j3, 0.0, 0.0, 0.0) for j3 in (-2.5, -1.9, stretch, -1.2, -1.6, 1.0)]
+    assert leg.first_invalid(rows) == 3 == [leg(q) for q in rows].index(False)
+    assert leg.first_invalid(rows[:3]) is None
+    other = P.elbow_side_legs(stretch)(b[:2] + (-1.0,) + b[3:], (0.0, 0.0, 1.0, 0.0, 0.0, 0.0))
+    assert other(rows[3]) and not other(rows[0]) and other.first_invalid(rows) == 0
+    assert P.elbow_side_legs(stretch)(a, (0.0, 0.0, -1.0, 0.0, 0.0, 0.0)) is None       # across: the crossing's turn
+    assert P.elbow_side_legs(stretch)((0.0, 0.0, stretch, 0.0, 0.0, 0.0), a) is None
+
+
+def test_the_planner_keeps_each_leg_to_its_own_test(kin):
+    """Planner(leg_validity=...): every state of a leg's search (its escape zones too) passes the
+    leg's own test -- a block in joint_1 / joint_2 to go round, the leg's test refusing one way
+    round: every path goes the other way; without it some seed's path goes that way."""
+    from vr_driver.kinematics.planner import BatchValidity, Planner
+
+    def free(q):
+        return not (abs(q[0]) < 0.3 and abs(q[1]) < 0.3)
+
+    def above(a, b):
+        return BatchValidity(lambda q: q[1] >= 0.0, lambda qs: next((i for i, q in enumerate(qs) if q[1] < 0.0), None))
+    a, b = (-0.6, 0.0, -0.5, 0.0, 0.5, 0.0), (0.6, 0.0, -0.5, 0.0, 0.5, 0.0)
+    below = 0
+    for seed in range(1, 7):
+        plan = Planner(kin, free, seed=seed, leg_validity=above).plan(a, b)
+        assert min(q[1] for q in plan.path) >= 0.0 and min(q[1] for q in plan.positions) >= -1e-6
+        below += min(q[1] for q in Planner(kin, free, seed=seed).plan(a, b).path) < 0.0
+    assert below > 0
+
+
+@pytest.fixture(scope="module")
+def hood(kin):
+    w = world(kin, scene=HOOD, workspace=REACH)
+    return w, PlanActionCore(w.core, kinematics=kin)
+
+
+def test_the_hood_cells_joint_goal_across_the_stretch_crosses_once_from_rest(hood):
+    """The hood cell's query 38 (a joint goal across the stretched elbow from deep under the hood's
+    top; refused by the driver's stream check on all three tries in 5 of 20 seeds, before): planned
+    and accepted with every seed, crossing the stretch once, turning joint_3 from rest there."""
+    w, planning = hood
+    stretch = P.stretched_elbow(planning.kin)
+    for seed in range(1, 5):
+        planning.last_path = None
+        out = planning.plan(PlanGoal(joints=(NAMES, GOAL38)), start=START37, seed=seed)
+        assert out.ok, out.text
+        plan = out.trajectory
+        [k] = crossings_of(stretch, plan.positions)
+        rest = next(i for i in range(k - 1, -1, -1) if not any(plan.velocities[i]))
+        assert all(abs(q[j] - plan.positions[rest][j]) < 1e-9 for q in plan.positions[rest:k + 1] for j in (0, 1, 3, 4, 5))
+        assert planning.driver_refusal(plan) == ""
+
+
+def test_a_walled_in_last_try_crosses_back_where_the_last_plan_crossed(hood, monkeypatch):
+    """The hood cell's query 37 (a pose across the stretched elbow; its start's side walled in
+    under the hood's top): when the tries before found no path, the last goes back along the last
+    plan's path to before the stretch where that plan crossed it, and crosses there, its other
+    joints the last path's (a crossing known to be valid and reached), then on to the goal."""
+    w, planning = hood
+    stretch = P.stretched_elbow(planning.kin)
+    real = P.plan_with_crossing
+
+    def walled_in(planner, start, target, crossing, before=()):
+        if not before:
+            raise PlanningError("plan", "RRTConnect found no path within 1 s (Timeout)")
+        return real(planner, start, target, crossing, before)
+    monkeypatch.setattr(P, "plan_with_crossing", walled_in)
+    planning.last_path = PATH36
+    out = planning.plan(PlanGoal(pose=planning.kin.fk_pose(GOAL37)), start=START37, seed=1)
+    assert out.ok, out.text
+    assert out.profile["retreat"] == 1 and out.profile["tries"] == P.ATTEMPTS
+    path = out.trajectory.path
+    assert [path.index(q) for q in reversed(PATH36[2:-1])] == sorted(path.index(q) for q in PATH36[2:-1])
+    [k] = crossings_of(stretch, out.trajectory.positions)
+    assert max(abs(a - b) for j, (a, b) in enumerate(zip(out.trajectory.positions[k], PATH36[2])) if j != 2) < 1e-3
+    assert planning.driver_refusal(out.trajectory) == ""

@@ -45,7 +45,7 @@ from vr_driver.errors import ModelError, PoseError
 from vr_driver.kinematics.deps import require
 from vr_driver.kinematics.scene import Scene, SceneObject
 
-__all__ = ["Contact", "CollisionChecker", "read_disabled_pairs"]
+__all__ = ["Contact", "CollisionChecker", "fresh_geometry_data", "read_disabled_pairs"]
 
 
 class Contact(NamedTuple):
@@ -76,6 +76,21 @@ def read_disabled_pairs(srdf_xml: str, prefix: str = "") -> Set[frozenset]:
             raise ModelError("SRDF: disable_collisions needs link1 and link2, got %r" % (el.attrib,))
         pairs.add(frozenset((prefix + a, prefix + b)))
     return pairs
+
+
+def fresh_geometry_data(geom_model: Any, padding: float) -> Any:
+    """A geometry data of its own for one query of ``geom_model`` (``padding`` as every pair's
+    security margin, signed distances): coal's narrow phase on a data that queried other
+    configurations before keeps what it found there -- a collision verdict missed link_4 inside
+    link_6, and a penetration depth came out 1 to 3 um apart from the same configuration's on a
+    fresh data (CollisionChecker.min_distance, whose depths the scene guard compares to 1 um).
+    About 0.25 ms."""
+    data = geom_model.createData()
+    for req in data.collisionRequests:
+        req.security_margin = padding
+    for req in data.distanceRequests:
+        req.enable_signed_distance = True
+    return data
 
 
 class CollisionChecker:
@@ -373,11 +388,7 @@ class CollisionChecker:
         fresh one: coal's narrow phase on a data that checked other configurations before missed
         a pair the verdicts find, module text)."""
         pin = self._pin
-        data = self.geom_model.createData()
-        for req in data.collisionRequests:
-            req.security_margin = self.padding
-        for req in data.distanceRequests:
-            req.enable_signed_distance = True
+        data = fresh_geometry_data(self.geom_model, self.padding)
         pin.computeCollisions(self.model, self.data, self.geom_model, data, self._config(q), False)
         best = {}
         for k, res in enumerate(data.collisionResults):
@@ -391,25 +402,28 @@ class CollisionChecker:
                 best[key] = Contact(a, b, d, world)
         return sorted(best.values(), key=lambda c: (c.distance, c.link_a, c.other))
 
+    def _distances(self, q: Sequence[float]) -> List[float]:
+        """Every checked pair's distance [m] at ``q`` (true shapes; < 0: the depth), on a fresh
+        geometry data: the same answer whatever was asked before."""
+        data = fresh_geometry_data(self.geom_model, self.padding)
+        self._pin.computeDistances(self.model, self.data, self.geom_model, data, self._config(q))
+        return [float(r.min_distance) for r in data.distanceResults]
+
     def min_distance(self, q: Sequence[float]) -> float:
         """Smallest distance [m] over the checked pairs at ``q`` between the true (unpadded)
         shapes; < 0 when two overlap; inf when nothing is checked."""
         if not self._pairs:
             return math.inf
-        pin = self._pin
-        pin.computeDistances(self.model, self.data, self.geom_model, self.geom_data, self._config(q))
-        return float(min(r.min_distance for r in self.geom_data.distanceResults))
+        return min(self._distances(q))
 
     def nearest(self, q: Sequence[float]) -> Contact:
         """The pair closest at ``q`` (colliding or not), as a Contact."""
         if not self._pairs:
             raise ModelError("no pair is checked")
-        pin = self._pin
-        pin.computeDistances(self.model, self.data, self.geom_model, self.geom_data, self._config(q))
-        d = [r.min_distance for r in self.geom_data.distanceResults]
+        d = self._distances(q)
         k = int(np.argmin(d))
         a, b, world = self._pair_names[k]
-        return Contact(a, b, float(d[k]), world)
+        return Contact(a, b, d[k], world)
 
     def check_path(self, qs: Iterable[Sequence[float]]) -> Optional[Tuple[int, List[Contact]]]:
         """The first sample of ``qs`` in collision, as (its index, its contacts); None when every

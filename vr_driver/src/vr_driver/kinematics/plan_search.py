@@ -29,7 +29,12 @@ __all__ = ["OmplSearch", "SIMPLIFY_ROUNDS", "SWEEP_VALIDATED", "BatchValidity", 
 SIMPLIFY_ROUNDS = 2
 #: the planners whose motions are checked at the sweep itself (:meth:`OmplSearch._sweep_validator`;
 #: they and the simplifier ask OMPL's motion validator only whether a motion is valid, never how
-#: far it is)
+#: far it is). The others -- LBKPIECE1, the plan action's retry planner, asks how far a motion is
+#: valid -- keep OMPL's own validator at the resolution :meth:`OmplSearch._space` sets, |dx| <=
+#: max_sweep / sqrt(n) in the scaled space, so their checked states lie no farther apart by the
+#: sweep bound either (sum_i |dx_i| <= sqrt(n) |dx|), at up to sqrt(n) times the checks; and the
+#: planner checks every motion of the simplified path at the sweep bound itself, the result's
+#: chords too (test_planner.py: test_a_retry_planners_motions_are_checked_at_the_sweep_bound_or_finer)
 SWEEP_VALIDATED = ("RRTConnect",)
 
 

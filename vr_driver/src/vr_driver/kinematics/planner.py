@@ -88,7 +88,7 @@ from .plan_search import SWEEP_VALIDATED, BatchValidity, OmplSearch, SweepZone, 
 from .plan_timing import TIMING_ATTEMPTS, TOPP_MARGIN, PathTiming, TimingError
 from .roadmap import Roadmap
 
-__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "BatchValidity", "first_invalid", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
+__all__ = ["PlanningError", "PlannedTrajectory", "Planner", "SearchTest", "BatchValidity", "first_invalid", "PLANNERS", "DEFAULT_PLANNER", "DEFAULT_MAX_SWEEP",
            "DEFAULT_DT", "DEFAULT_CLEARANCE", "ESCAPE_SWEEP", "NEAREST_SHARE", "LINK_ALLOWANCE", "TOPP_MARGIN",
            "joint_weights"]
 
@@ -278,6 +278,49 @@ def pose_target(kin: Any, goal: Any) -> Optional[np.ndarray]:
     return None
 
 
+class SearchTest:
+    """The planner's test of a configuration in its search (:attr:`Planner.planning_valid`): valid
+    with the clearance (``strict``) -- or, within ``ESCAPE_SWEEP`` of the start or a goal of the
+    plan being made (``ends``), valid (``is_valid``: an arm that starts or ends closer than the
+    clearance to something must be able to leave or reach that place); and, while a leg is planned,
+    that leg's own test (``leg``, see ``Planner``'s ``leg_validity``) above both."""
+
+    def __init__(self, is_valid: Callable[[Sequence[float]], bool], strict: Callable[[Sequence[float]], bool],
+                 weights: Sequence[float]) -> None:
+        self.is_valid, self.strict, self.weights = is_valid, strict, tuple(weights)
+        self.ends = SweepZone((), ())                                   # the plan's start and goals
+        self.leg: Optional[Callable[[Sequence[float]], bool]] = None    # the leg being planned's test
+
+    def sweep(self, a: Sequence[float], b: Sequence[float]) -> float:
+        return sum(w * abs(x - y) for w, x, y in zip(self.weights, a, b))
+
+    def valid(self, q: Sequence[float]) -> bool:
+        if self.leg is not None and not self.leg(q):
+            return False
+        return bool(self.strict(q)) or self.escapes(q)
+
+    def escapes(self, q: Sequence[float]) -> bool:
+        return self.ends.near(q, ESCAPE_SWEEP, self.sweep) and bool(self.is_valid(q))
+
+    def first_invalid(self, qs: Sequence[Sequence[float]]) -> Optional[int]:
+        """:meth:`valid` of a batch (BatchValidity.first_invalid): the clearance's test in one call
+        up to its first refusal, that row in the escape zone tested again alone."""
+        qs = np.asarray(qs, dtype=float)
+        cut = first_invalid(self.leg, qs) if self.leg is not None else None
+        if cut is not None:
+            qs = qs[:cut]                 # (the leg's own test refuses that row: none after it counts)
+        k = 0
+        while k < len(qs):
+            f = first_invalid(self.strict, qs[k:])
+            if f is None:
+                break
+            k += f
+            if not self.escapes(tuple(float(v) for v in qs[k])):
+                return k
+            k += 1
+        return cut
+
+
 class Planner:
     """Plans collision-free, timed joint trajectories for one chain (see the module text).
 
@@ -290,7 +333,12 @@ class Planner:
     ``dt`` [s] the largest sample spacing; ``max_sweep`` [m] the motion-check resolution;
     ``goal_preference(start, q)``: a rank (lower first) that orders a pose goal's IK solutions
     before their nearness -- e.g. the driver's: a controller that solves poses itself cannot be
-    relied on to change the elbow branch, so the solutions on the start's branch come first."""
+    relied on to change the elbow branch, so the solutions on the start's branch come first;
+    ``leg_validity(a, b)``: what every state of a leg from ``a`` to ``b`` (the start, the ``via``
+    waypoints, the goal) must also pass in the search, its escape zones included -- an
+    ``is_valid(q)`` (a BatchValidity for batches) or None (nothing more) -- e.g. the driver's: a
+    leg between two configurations on one side of the stretched elbow stays on that side (the
+    controller does not follow a plan across it elsewhere than where it turns joint_3 alone)."""
 
     def __init__(self, kinematics: Any, validity: Any = None, limits: Any = None,
                  planner: str = DEFAULT_PLANNER, time_budget: float = 1.0, seed: Optional[int] = None,
@@ -298,7 +346,8 @@ class Planner:
                  max_sweep: float = DEFAULT_MAX_SWEEP, clearance: float = DEFAULT_CLEARANCE,
                  planning_validity: Optional[Callable[[Sequence[float]], bool]] = None,
                  goal_preference: Optional[Callable[[Sequence[float], Sequence[float]], int]] = None,
-                 roadmap: Optional[Roadmap] = None) -> None:
+                 roadmap: Optional[Roadmap] = None,
+                 leg_validity: Optional[Callable[[Sequence[float], Sequence[float]], Any]] = None) -> None:
         if planner not in PLANNERS:
             raise PlanningError("plan", "unknown planner %r: the planners are %s" % (planner, ", ".join(PLANNERS)))
         self.kin = kinematics
@@ -314,15 +363,15 @@ class Planner:
         self.max_sweep = _number(max_sweep, "max_sweep [m]", 0.0)
         self.is_valid, self._contacts = _validity(validity)
         self.clearance = _number(clearance, "clearance [m]", 0.0, lo_open=False)
-        self._strict = self._strict_validity(validity, planning_validity)
-        #: the planner's test of a configuration (and of a batch: BatchValidity), see _planning_valid
-        self.planning_valid = BatchValidity(self._planning_valid, self._planning_first_invalid)
+        strict = self._strict_validity(validity, planning_validity)
         if goal_preference is not None and not callable(goal_preference):
             raise TypeError("goal_preference must be a callable rank(start, q) -> int, got %r" % (goal_preference,))
         self._prefer = goal_preference
         #: the paths of earlier plans (a Roadmap, kept by the caller) tried before the search, or None
         self.roadmap = roadmap
-        self._ends = SweepZone((), ())    # the plan's start and goals (_escapes)
+        if leg_validity is not None and not callable(leg_validity):
+            raise TypeError("leg_validity must be a callable (a, b) -> is_valid or None, got %r" % (leg_validity,))
+        self._leg_validity = leg_validity
         for what, values in (("velocity", self.limits.velocity), ("acceleration", self.limits.acceleration)):
             if len(values) != self.dof or not all(math.isfinite(v) and v > 0 for v in values):
                 raise PlanningError("time", "every joint needs a finite %s limit > 0 for the timing, got %r"
@@ -334,6 +383,9 @@ class Planner:
                 raise PlanningError("plan", "joint %s needs finite position limits to plan in, got [%r, %r]"
                                     % (n, lo, hi))
         self.weights = joint_weights(kinematics)
+        self.search_test = SearchTest(self.is_valid, strict, self.weights)
+        #: the planner's test of a configuration (and of a batch: BatchValidity), see SearchTest
+        self.planning_valid = BatchValidity(self.search_test.valid, self.search_test.first_invalid)
         ob, og, ou = (_require(m) for m in ("ompl.base", "ompl.geometric", "ompl.util"))
         ou.setLogLevel(ou.LOG_WARN)
         self._ompl = (ob, og, ou)
@@ -356,32 +408,6 @@ class Planner:
             return _checker_validity(strict)
         return self.is_valid
 
-    def _planning_valid(self, q: Sequence[float]) -> bool:
-        """The planner's test (``planning_valid``): valid with the clearance -- or, within
-        ``ESCAPE_SWEEP`` of the start or the goal of the plan being made, valid (an arm that starts
-        or ends closer than the clearance to something must be able to leave or reach that place)."""
-        if self._strict(q):
-            return True
-        return self._escapes(q)
-
-    def _escapes(self, q: Sequence[float]) -> bool:
-        return self._ends.near(q, ESCAPE_SWEEP, self._sweep) and bool(self.is_valid(q))
-
-    def _planning_first_invalid(self, qs: Sequence[Sequence[float]]) -> Optional[int]:
-        """:meth:`_planning_valid` of a batch (BatchValidity.first_invalid): the clearance's test
-        in one call up to its first refusal, that row in the escape zone tested again alone."""
-        qs = np.asarray(qs, dtype=float)
-        k = 0
-        while k < len(qs):
-            f = first_invalid(self._strict, qs[k:])
-            if f is None:
-                return None
-            k += f
-            if not self._escapes(tuple(float(v) for v in qs[k])):
-                return k
-            k += 1
-        return None
-
     def _why_invalid(self, q: Sequence[float]) -> Tuple[str, tuple]:
         if self._contacts is None:
             return "", ()
@@ -391,15 +417,12 @@ class Planner:
             return "", ()
         return (": " + "; ".join(str(c) for c in contacts)) if contacts else "", contacts
 
-    def _sweep(self, a: Sequence[float], b: Sequence[float]) -> float:
-        return sum(w * abs(x - y) for w, x, y in zip(self.weights, a, b))
-
     def motion_valid(self, a: Sequence[float], b: Sequence[float],
                      is_valid: Optional[Callable[[Sequence[float]], bool]] = None) -> Optional[Tuple[float, ...]]:
         """None when the straight joint move a -> b is valid (``is_valid``, default the validity) at
         the check resolution (``a`` is taken as checked), else the first invalid configuration on it."""
         is_valid = is_valid or self.is_valid
-        n = max(1, int(math.ceil(self._sweep(a, b) / self.max_sweep)))
+        n = max(1, int(math.ceil(self.search_test.sweep(a, b) / self.max_sweep)))
         a = np.asarray(a, dtype=float)
         qs = a + (np.arange(1, n + 1) / n)[:, None] * (np.asarray(b, dtype=float) - a)
         bad = first_invalid(is_valid, qs)
@@ -488,18 +511,23 @@ class Planner:
         # the legs whose straight move is not free: the budget is theirs (a straight leg takes next
         # to nothing: the elbow crossing's middle one always, its first or last often)
         ends = [q0] + stops
-        searching = [self.motion_valid(a, targets[0], self.planning_valid) is not None
-                     for a, targets in zip(ends, legs)] if stops else [True]
+        searching = [self.leg_searches(a, targets) for a, targets in zip(ends, legs)] if stops else [True]
         searched = 0.0                   # [s] the legs' searches so far
-        for k, targets in enumerate(legs):
-            leg: Dict[str, float] = {}
-            # an equal share of what the legs before left of the budget among the legs left to
-            # search; never more in all
-            share = max(budget - searched, 0.0) / max(1, sum(searching[k:]))
-            path += self._geometric_path(path[-1], targets, share, None if seed is None else seed + k, leg)[1:]
-            searched += leg.get("plan", 0.0)
-            for key, value in leg.items():
-                timings[key] = timings.get(key, 0.0) + value
+        try:
+            for k, targets in enumerate(legs):
+                leg: Dict[str, float] = {}
+                leg_test = self.search_test.leg = self._leg_of(path[-1], targets[0])
+                # (a pose's other solutions that the leg's own test refuses are not its goals)
+                targets = [targets[0]] + [g for g in targets[1:] if leg_test is None or leg_test(g)]
+                # an equal share of what the legs before left of the budget among the legs left to
+                # search; never more in all
+                share = max(budget - searched, 0.0) / max(1, sum(searching[k:]))
+                path += self._geometric_path(path[-1], targets, share, None if seed is None else seed + k, leg)[1:]
+                searched += leg.get("plan", 0.0)
+                for key, value in leg.items():
+                    timings[key] = timings.get(key, 0.0) + value
+        finally:
+            self.search_test.leg = None
         t = time.perf_counter()
         timings["time"] = timings["check"] = 0.0
         for attempt, (step, dt) in enumerate(TIMING_ATTEMPTS):
@@ -524,6 +552,23 @@ class Planner:
         return PlannedTrajectory(self.names, times, pos, vel, acc, tuple(path), self.planner_name, timings)
 
     # ------------------------------------------------------------------- the path (OMPL's search)
+    def _leg_of(self, a: Sequence[float], b: Sequence[float]) -> Optional[Callable[[Sequence[float]], bool]]:
+        """The leg's own test from ``a`` to ``b`` (``leg_validity``), or None."""
+        return None if self._leg_validity is None else self._leg_validity(tuple(a), tuple(b))
+
+    def leg_searches(self, q0: Tuple[float, ...], goals: Sequence[Tuple[float, ...]]) -> bool:
+        """Whether a leg from ``q0`` to ``goals`` needs a search: its straight move to the first
+        is not free by the planner's test with the leg's own escape zone (as
+        :meth:`_geometric_path` checks it; the zone of another leg or plan would refuse a straight
+        crossing of a margin near this leg's ends and give the leg a share of the budget it does
+        not use)."""
+        self.search_test.ends = SweepZone((tuple(q0),) + tuple(tuple(g) for g in goals), self.weights)
+        self.search_test.leg = self._leg_of(q0, goals[0])
+        try:
+            return self.motion_valid(q0, goals[0], self.planning_valid) is not None
+        finally:
+            self.search_test.leg = None
+
     def _geometric_path(self, q0, goals: Sequence[Tuple[float, ...]], budget: float, seed: Optional[int],
                         timings: Dict[str, float]) -> List[Tuple[float, ...]]:
         """A valid path from ``q0`` to the first of ``goals`` (the nearest) -- or, when there are
@@ -536,7 +581,7 @@ class Planner:
         t = time.perf_counter()
         goals = [tuple(g) for g in goals]
         q1 = goals[0]
-        self._ends = SweepZone((tuple(q0),) + tuple(goals), self.weights)
+        self.search_test.ends = SweepZone((tuple(q0),) + tuple(goals), self.weights)
         if self.motion_valid(q0, q1, self.planning_valid) is None:
             timings["plan"] = time.perf_counter() - t
             timings["simplify"] = 0.0

@@ -30,7 +30,8 @@ and the outcome as a code and words (the node vr_driver.ros.plan_server only tra
   with the same effect. So the planner keeps |joint_5| >= :data:`WRIST_MARGIN` and joint_3
   :data:`ELBOW_MARGIN` from the stretch away from the start and the goal (as it keeps its clearance);
   a goal on the other elbow branch is planned through the stretch where the controller does change
-  branch (:meth:`PlanActionCore._elbow_crossing`); and a plan is checked by the driver's own stream
+  branch (:meth:`PlanActionCore._elbow_crossing`), every other leg on its own side of it
+  (:func:`elbow_side_legs`); and a plan is checked by the driver's own stream
   checks (its points, their configurations and segments) before it is returned; one they refuse,
   no path within the budget, or a timing that fails its checks is planned again (:data:`ATTEMPTS` in
   all, each with the whole budget: a sampling planner's next try differs; a try after one that found
@@ -69,7 +70,8 @@ __all__ = ["SUCCESS", "PLANNING_FAILED", "INVALID_MOTION_PLAN", "CONTROL_FAILED"
            "START_STATE_IN_COLLISION", "GOAL_IN_COLLISION", "INVALID_GOAL", "INVALID_ROBOT_STATE",
            "NO_IK_SOLUTION", "PlanGoal", "PlanOutcome", "CellValidity", "WorkspaceContact", "PlanActionCore",
            "cell_key", "margin_validity",
-           "arm_points", "code_of", "driver_sends", "elbow_crossings", "retreat_waypoints", "retry_planner"]
+           "arm_points", "code_of", "driver_sends", "elbow_crossings", "elbow_side_legs", "plan_with_crossing",
+           "retreat_waypoints", "retry_planner"]
 
 # the result codes of vr_driver/Plan.action (moveit_msgs/MoveItErrorCodes' values)
 SUCCESS = 1
@@ -101,8 +103,9 @@ ELBOW_APPROACH = math.radians(2.0)
 ELBOW_CROSS = math.radians(12.0)
 #: [rad] ... with |joint_5| at least this there
 ELBOW_WRIST = math.radians(6.0)
-#: [s] under the G2 rule current_joints the arm holds this long at the first of the two
-#: (PlanActionCore._plan)
+#: [s] the arm holds this long at rest at the first of the two (plan_with_crossing): the turn
+#: from rest keeps the stream's points around the stretch close enough for the G2 to change branch
+#: on them, and under the G2 rule current_joints the target past it is taken with the arm there
 ELBOW_HOLD = 0.1
 #: plans made at most for one goal: no path within the budget, a timing that fails its checks or a
 #: stream the driver refuses is planned again (a sampling planner's next path differs)
@@ -469,6 +472,44 @@ def margin_validity(strict: CellValidity, wrist_margin: bool, stretched: Optiona
     return BatchValidity(lambda q: clear(q) and not strict.in_collision(q), first_invalid)
 
 
+def elbow_side_legs(stretched: float):
+    """The planner's ``leg_validity`` of a Cartesian protocol: a leg between two configurations on
+    one side of the stretched elbow (joint_3 ``stretched``) keeps joint_3 on that side, at the
+    stretch at most; a leg across it (an elbow crossing's turn of joint_3 alone, straight) or from
+    or to the stretch itself, nothing more. The controller solves each target nearest the one
+    before and keeps the branch it is on where a plan crosses the stretch otherwise (bench/README.md,
+    "Planning"): without this, the search legs of a crossing -- planned without the elbow margin,
+    to reach the crossing's waypoints near the stretch -- crossed the stretch and back on their own
+    and the driver's stream check refused the plan (the hood cell's query 38: 3 tries of 3 refused
+    in 5 of 20 seeds), and a last try without the margins did the same. The escape zones of the
+    search do not lift it."""
+    turn = 2.0 * math.pi
+
+    def off(v: float) -> float:
+        return math.remainder(v - stretched, turn)
+
+    def leg(a: Sequence[float], b: Sequence[float]) -> Optional[BatchValidity]:
+        side = off(a[_ELBOW])
+        if side * off(b[_ELBOW]) <= 0.0:
+            return None
+        sign = 1.0 if side > 0.0 else -1.0
+
+        def one(q: Sequence[float]) -> bool:
+            return sign * off(q[_ELBOW]) >= 0.0
+
+        def batch(qs: Sequence[Sequence[float]]) -> Optional[int]:
+            qs = np.asarray(qs, dtype=float)
+            d = qs[:, _ELBOW] - stretched
+            d = sign * (d - turn * np.round(d / turn))
+            # the exact remainder where the rounding above could tip the sign
+            for i in np.flatnonzero(np.abs(d) < 1e-9).tolist():
+                d[i] = sign * off(float(qs[i, _ELBOW]))
+            bad = np.flatnonzero(d < 0.0)
+            return int(bad[0]) if len(bad) else None
+        return BatchValidity(one, batch)
+    return leg
+
+
 def elbow_crossings(start: Sequence[float], goal: Sequence[float], stretched: float, strict: Any, limits: Any
                     ) -> Tuple[Tuple[Tuple[float, ...], ...], ...]:
     """Up to ATTEMPTS pairs (near, past) of waypoints that cross the stretched elbow (joint_3
@@ -655,21 +696,24 @@ class PlanActionCore:
                                           validity, wrist_margin=attempt < ATTEMPTS - 1 and not wrist_across,
                                           elbow_margin=attempt < ATTEMPTS - 1 and not crossing),
                                       goal_preference=self._candidate_rank(
-                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across), roadmap=self.roadmap)
-                    retreat = retreat_waypoints(self.last_path, tuple(start), () if switched else crossing, attempt,
-                                                prof["replans"], self._stretch())
+                                          wrist=attempt < ATTEMPTS - 1 and not wrist_across), roadmap=self.roadmap,
+                                      leg_validity=self._elbow_sides() if crossing else None)
+                    held = ConfigurationRule.parse(self.params.controller.configuration) \
+                        is ConfigurationRule.CURRENT_JOINTS
+                    retreat = retreat_waypoints(self.last_path, tuple(start), () if switched or not held else crossing,
+                                                attempt, prof["replans"], self._stretch())
                     if retreat:
                         prof["retreat"] = 1
-                        if switched and ConfigurationRule.parse(self.params.controller.configuration) \
-                                is not ConfigurationRule.CURRENT_JOINTS:
-                            # back the way the arm came, then across the stretch by the crossing
-                            retreat += crossing
+                        if crossing and not held:
+                            # back the way the arm came (to before the stretch where the last plan
+                            # crossed it), then across the stretch there (the hood cell's query 37:
+                            # out from under the hood's top on the start's side walled in)
+                            crossing = self._crossing_back(planner, validity, retreat[-1], target) or crossing
                         else:
                             # back the way the arm came, then to any solution of the goal as given
-                            target = given
-                    plan = self._at_goal(planner, tuple(start), target) or (
-                        planner.plan(tuple(start), target, via=retreat) if retreat else
-                        self._plan(planner, tuple(start), target, crossing))
+                            target, crossing = given, ()
+                    plan = self._at_goal(planner, tuple(start), target) or \
+                        plan_with_crossing(planner, tuple(start), target, crossing, retreat)
             except PlanningError as exc:
                 prof["planner"] += time.perf_counter() - tick
                 if exc.step in ("plan", "time", "check") and attempt < ATTEMPTS - 1:
@@ -724,19 +768,6 @@ class PlanActionCore:
                            previews=previews)
 
 
-    def _plan(self, planner: Planner, start: Tuple[float, ...], target: Any,
-              crossing: Tuple[Tuple[float, ...], ...]) -> PlannedTrajectory:
-        """``planner``'s plan from ``start`` to ``target`` through ``crossing`` (:meth:`_elbow_crossing`'s
-        waypoints, or none). A G2 that solves a target nearest its joints when it takes it
-        (``current_joints``) may take the target past the stretch while the arm is still points back on
-        the start's branch: there the plan holds ELBOW_HOLD at the first waypoint (a pause: the next
-        target goes out once the arm is at rest there, StreamSequencer.record) and goes on from it."""
-        if not crossing or ConfigurationRule.parse(self.params.controller.configuration) \
-                is not ConfigurationRule.CURRENT_JOINTS:
-            return planner.plan(start, target, via=crossing)
-        near, past = crossing
-        return planner.plan(start, near).then(planner.plan(near, target, via=(past,)), ELBOW_HOLD)
-
     def _at_goal(self, planner: Planner, start: Tuple[float, ...], target: Any) -> Optional[PlannedTrajectory]:
         """A one-point trajectory (at rest where the arm is) when a joint solution of the goal is within
         AT_GOAL of ``start`` on every joint, else None. The planner times such a move of 1e-6..1e-5 rad
@@ -761,6 +792,12 @@ class PlanActionCore:
                 "the start's elbow branch -- a goal on the start's side, a path through a pose goal's other "
                 "solutions, or a protocol with joint targets (v2) avoids it"
                 % (math.degrees(goal[_ELBOW]), math.degrees(stretched_elbow(self.kin)), math.degrees(start[_ELBOW])))
+
+    def _elbow_sides(self):
+        """With a Cartesian protocol, :func:`elbow_side_legs` of the stretched elbow (None with joint
+        targets)."""
+        stretched = self._stretch()
+        return None if stretched is None else elbow_side_legs(stretched)
 
     def _stretch(self) -> Optional[float]:
         """The stretched elbow's joint_3 with a Cartesian protocol (None with joint targets)."""
@@ -803,6 +840,18 @@ class PlanActionCore:
             across = abs(start[_WRIST]) >= WRIST_MARGIN and start[_WRIST] * q[_WRIST] < 0.0
             return 2 * elbow(start, q) + int(across)
         return rank
+
+    def _crossing_back(self, planner: Planner, validity: CellValidity, point: Tuple[float, ...],
+                       goal: Tuple[float, ...]) -> Tuple[Tuple[float, ...], ...]:
+        """The waypoints of the crossing of the stretched elbow from ``point`` (a retreat's end, just
+        before the stretch where the last plan crossed it) to the joint goal ``goal`` nearest
+        ``point`` by the sweep bound (:func:`elbow_crossings`: with ``point``'s other joints first, if
+        valid -- the last plan crossed there), or ()."""
+        found = elbow_crossings(point, goal, stretched_elbow(self.kin), self._planning_validity(
+            validity, wrist_margin=False, elbow_margin=False), self.kin.limits)
+        if not found:
+            return ()
+        return min(found, key=lambda pair: sum(w * abs(a - b) for w, a, b in zip(planner.weights, point, pair[0])))
 
     def _elbow_crossing(self, start: Tuple[float, ...], target: Any) -> Tuple[Tuple[Tuple[float, ...], ...], Any]:
         """(the two waypoints of :meth:`_elbow_crossings`' first crossing, or (), the target)."""
@@ -859,6 +908,32 @@ class PlanActionCore:
         if not refusal:
             self._prepared = (plan, stream, previews)
         return refusal
+
+
+def plan_with_crossing(planner: Planner, start: Tuple[float, ...], target: Any,
+                       crossing: Tuple[Tuple[float, ...], ...], before: Tuple[Tuple[float, ...], ...] = ()
+                       ) -> PlannedTrajectory:
+    """``planner``'s plan from ``start`` through ``before`` (a retreat's waypoints) to ``target``
+    through ``crossing`` (:meth:`PlanActionCore._elbow_crossing`'s waypoints, or none). A crossing's plan comes to
+    rest at its first waypoint, holds ELBOW_HOLD there (a pause: the next target goes out once the
+    arm is at rest there, StreamSequencer.record) and turns joint_3 from rest: passed at speed,
+    the stream's points around the stretch lay too far apart for the G2 to change branch on
+    them, and the driver's stream check refused the plan (the hood cell's queries 37 and 38; a
+    turn from 30 deg before the stretch at full speed refused at three of four crossings, the
+    same turn from rest at the first waypoint at none); and a G2 that solves a target nearest
+    its joints when it takes it (``current_joints``) solves the target past the stretch from
+    there. The search before the hold gets half the budget when the legs after it search too,
+    those the rest."""
+    if not crossing:
+        return planner.plan(start, target, via=before)
+    near, past = crossing
+    budget = planner.time_budget
+    first = planner.plan(start, near, via=before,
+                         time_budget=budget / 2.0 if planner.leg_searches(past, (target,)) else budget)
+    left = max(budget - first.timings.get("plan", 0.0), 1e-3)
+    # (the legs after the hold seeded as in one plan through all the waypoints: leg k, seed + k)
+    seed = None if planner.seed is None else planner.seed + len(before) + 1
+    return first.then(planner.plan(near, target, via=(past,), time_budget=left, seed=seed), ELBOW_HOLD)
 
 
 def driver_sends(core: Any, kin: Any, plan: PlannedTrajectory) -> Tuple[str, Tuple[Any, ...], Tuple[Any, ...]]:
