@@ -107,9 +107,10 @@ def hard_start(q0, accel=10.0, dt=0.03, speed=1.0, duration=1.0):
 @pytest.mark.parametrize("fed", [True, False], ids=["fed in time", "not fed (the check can fail)"])
 def test_a_plan_whose_first_samples_come_faster_than_the_bus_keeps_moving(kin, monkeypatch, fed):
     """30 ms samples at the start of a plan on the 19.2 kbit/s line (a 53 ms cycle): each point is
-    reached no sooner than the bus can have brought the next (stream_points.fed_times), so the arm
-    never waits for a target -- without it, it waited at the first points -- and no segment runs faster
-    than planned."""
+    reached no sooner than the bus can have brought the next (stream_points.fed_schedule), so the arm
+    never waits for a target -- without it, it waited at the first points. The stream begins with a
+    hold while the bus fills the G2's ring, and then every point keeps its planned time plus that
+    lead: no segment runs faster or slower than planned."""
     from vr_driver.driver.checks.stream_prep import JointStreams
     if not fed:
         monkeypatch.setattr(JointStreams, "feed_period", lambda self: 0.0)
@@ -120,9 +121,13 @@ def test_a_plan_whose_first_samples_come_faster_than_the_bus_keeps_moving(kin, m
     world.run_until(lambda: run.done, 30.0, "the run")
     job = run.jobs[0]
     assert run.success
-    planned = [p.time for p in job.points]
+    points = job.points[1:] if fed else job.points
+    planned = [p.time for p in points]
     assert planned[1] - planned[0] < 1.0 / world.status().cycle_rate      # shorter than a bus cycle
     if fed:
         assert job.gaps == 0, "the arm waited %d times" % job.gaps
+        hold = job.points[0]
+        assert hold.hold and hold.smooth == 0 and hold.fed > 0.0
+        assert [p.fed - p.time for p in points] == pytest.approx([hold.fed] * len(points))
     else:
-        assert job.gaps >= 1
+        assert job.gaps >= 1 and not any(p.hold for p in job.points)
