@@ -7,8 +7,12 @@ into the next segment so that the arrivals do not drift), and a smooth level: th
 ``stream_smooth`` whose rounded corner (:func:`~vr_driver.protocol.common.blend_window`) stays
 within the corner tolerance, at least 1 (the last point: 0, an exact stop; :func:`corner_levels`).
 A pause of the plan is held: the arm stops exactly at the point before it, and the next point is
-offered only when the pause ends (``StreamPoint.release``). Putting the points on the wire is
-:mod:`.streaming`'s job."""
+offered only when the pause ends (``StreamPoint.release``). Fed in time (:func:`fed_schedule`): no
+point is reached before the bus can have brought the next; where a plan's first points come sooner
+than that, the stream begins with a hold -- its first target just off the start toward the first
+point (:func:`hold_point`), reached after the lead the bus needs to fill the controller's ring --
+and then runs the plan's own timing, every point that lead later (``StreamPoint.fed``, ``hold``).
+Putting the points on the wire is :mod:`.streaming`'s job."""
 from __future__ import annotations
 
 import math
