@@ -106,7 +106,8 @@ def hard_start(q0, accel=10.0, dt=0.03, speed=1.0, duration=1.0):
 
 def run_v3(kin, monkeypatch, fed, plan):
     """``plan`` (q0 -> (times, points)) from where the arm stands, run on v3 on the paced line, fed in
-    time or not (``feed_period`` 0): (the job, the bus cycle [s]); the run must succeed."""
+    time or not (``feed_period`` 0): (the job, the bus cycle [s], the virtual G2's log entries of its
+    targets); the run must succeed."""
     from vr_driver.driver.checks.stream_prep import JointStreams
     if not fed:
         monkeypatch.setattr(JointStreams, "feed_period", lambda self: 0.0)
@@ -116,7 +117,8 @@ def run_v3(kin, monkeypatch, fed, plan):
     run = world.core.submit_trajectory(traj)
     world.run_until(lambda: run.done, 30.0, "the run")
     assert run.success
-    return run.jobs[0], 1.0 / world.status().cycle_rate
+    job = run.jobs[0]
+    return job, 1.0 / world.status().cycle_rate, world.log.entries()[-len(job.points):]
 
 
 @pytest.mark.parametrize("fed", [True, False], ids=["fed in time", "not fed (the check can fail)"])
@@ -126,7 +128,7 @@ def test_a_plan_whose_first_samples_come_faster_than_the_bus_keeps_moving(kin, m
     never waits for a target -- without it, it waited at the first points. The stream begins with a
     hold while the bus fills the G2's ring, and then every point keeps its planned time plus that
     lead: no segment runs faster or slower than planned."""
-    job, cycle = run_v3(kin, monkeypatch, fed, hard_start)
+    job, cycle, entries = run_v3(kin, monkeypatch, fed, hard_start)
     points = job.points[1:] if fed else job.points
     planned = [p.time for p in points]
     assert planned[1] - planned[0] < cycle                               # shorter than a bus cycle
@@ -135,6 +137,13 @@ def test_a_plan_whose_first_samples_come_faster_than_the_bus_keeps_moving(kin, m
         hold = job.points[0]
         assert hold.hold and hold.smooth == 0 and hold.fed > 0.0
         assert [p.fed - p.time for p in points] == pytest.approx([hold.fed] * len(points))
+        # the virtual G2 runs the hold as any MOVEP: an exact stop, as long as the lead (here joint_1's
+        # creep of 0.04 deg at 0.83 mm from the TCP: the wire's 0.1 mm rounding a few %), and goes on
+        # at once, the next targets in its ring
+        first, second = entries[0], entries[1]
+        assert (first.speed, first.smooth, first.outcome.value) == (hold.speed, 0, "executed")
+        assert first.duration == pytest.approx(hold.fed, rel=0.05)
+        assert second.start_time - first.end_time < 1e-6
     else:
         assert job.gaps >= 1 and not any(p.hold for p in job.points)
 
@@ -157,7 +166,7 @@ def test_a_plan_dense_all_along_keeps_moving(kin, monkeypatch, fed):
     4. The stream holds at the start and, where the ring cannot hold the difference, reaches later
     points later too (stream_points.fed_schedule): the arm never waits for a target; unfed it does
     (measured: 26 of the 40 points kept, a 0.19 s hold, 0.31 s later at the end, no wait)."""
-    job, cycle = run_v3(kin, monkeypatch, fed, dense)
+    job, cycle, _entries = run_v3(kin, monkeypatch, fed, dense)
     points = [p for p in job.points if not p.hold]
     short = [b.time - a.time for a, b in zip(points, points[1:]) if b.time - a.time < cycle]
     assert len(short) >= 10, short                   # dense: most segments shorter than a bus cycle

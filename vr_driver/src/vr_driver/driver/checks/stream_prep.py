@@ -306,11 +306,6 @@ class CartesianStreams(JointStreams):
             if refusal:
                 raise DriverError("%s: %s; plan a path that stays in one configuration, or use a protocol "
                                   "with joint targets; nothing was sent" % (where, refusal))
-            if point.hold:
-                # the hold's few hundredths of a degree: timed from where the controller solves its
-                # wire pose (its rounding is a good part of them), so that it lasts as planned
-                point = replace(point, speed=stream_speeds(prev, [prev, found.joints], [point.release, point.fed],
-                                                           self.kin.limits.velocity)[1])
             out.append(replace(point, pose=found.pose))
             prev = found.joints
             history.append(prev)

@@ -36,8 +36,11 @@ MAX_CARTESIAN_TOLERANCE = math.radians(0.05)
 MIN_SEGMENT_CYCLES = 2.0
 #: [rad] how far the hold at a stream's start moves the arm toward its first target (the joint that
 #: moves most; more where the slowest wire speed, 0.1 %, would cross it sooner than the hold lasts):
-#: a target with a speed the controller runs like any other, an exact stop, far enough beyond the
-#: wire's rounding (0.1 mm, 0.01 deg) that its time is the one planned (fed_schedule, hold_point)
+#: a target with a speed the controller runs like any other, an exact stop (fed_schedule,
+#: hold_point). The wire's rounding (0.1 mm, 0.01 deg) of its pose and of the arm's reported start
+#: makes its time uncertain: measured on the paced line 0.92-1.14 x the lead, at 0.05, 0.1 and
+#: 0.15 deg alike (a plan turning one joint), within the feed's cycle of margin; timing it from the
+#: solution of its wire pose did not help (0.57-1.07 x: the start's rounding stays)
 HOLD_CREEP = math.radians(0.05)
 
 
