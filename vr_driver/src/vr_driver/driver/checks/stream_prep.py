@@ -57,7 +57,8 @@ from ...protocol.base import Protocol
 from ..motion.jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from ..motion.status import DriverError
-from ..motion.stream_points import MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, stream_points, stream_speeds
+from ..motion.stream_points import (HOLD_CREEP, MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, hold_speed,
+                                    stream_points, stream_speeds)
 from .commissioned import feed_cycles, min_segment_cycles
 from .wire_targets import CARTESIAN_MAX_STEP, FINE, WireMemo, WireTarget, wire_target
 
@@ -195,6 +196,9 @@ class JointStreams:
         start): the first segment is checked again and its speed set for its planned arrival (no
         faster than the limits)."""
         points = job.points
+        if points[0].hold and len(points) > 1:
+            # the arm is elsewhere: no hold, the first segment takes its lead from the hold's release
+            points = (replace(points[1], release=points[0].release),) + tuple(points[2:])
         self.check_segments(joints, points[:1])
         first = self.with_poses(joints, points[:1])[0]     # (v3: its wire pose solved from here)
         # (a pause at the start, first.release > 0: the move begins when it ends; the arrival its
@@ -290,8 +294,15 @@ class CartesianStreams(JointStreams):
         out = []
         prev = tuple(start)
         history = [prev]            # the arm's path so far: start, then each point as solved
+        dropped: Optional[StreamPoint] = None
         for i, point in enumerate(points):
             where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
+            if dropped is not None:
+                # the hold dropped (below): this point's segment takes its lead, from the hold's release
+                point = replace(point, release=dropped.release, speed=stream_speeds(
+                    prev, [prev, point.joints], [dropped.release, point.fed if point.fed is not None else point.time],
+                    self.kin.limits.velocity)[1])
+                dropped = None
             if point.release > 0.0:
                 # after a pause of the plan: offered once the arm reached the point before, at rest there
                 # (StreamSequencer.record), so the G2 takes it with the arm at that point, whatever its rule
@@ -306,6 +317,16 @@ class CartesianStreams(JointStreams):
             if refusal:
                 raise DriverError("%s: %s; plan a path that stays in one configuration, or use a protocol "
                                   "with joint targets; nothing was sent" % (where, refusal))
+            if point.hold:
+                if max(abs(a - b) for a, b in zip(found.joints, point.joints)) > HOLD_CREEP:
+                    # near joint_5 = 0 its wire pose may land on another joint_4 / joint_6 split than
+                    # the start's (the band rule allows it): crawled at the hold's 0.1-1 %, that
+                    # excursion took seconds -- no hold then, the first segment takes the lead
+                    dropped = point
+                    continue
+                # timed from the solution of its wire pose (the split it lands on counts)
+                point = replace(point, speed=hold_speed(prev, found.joints, point.fed - point.release,
+                                                        self.kin.limits.velocity))
             out.append(replace(point, pose=found.pose))
             prev = found.joints
             history.append(prev)

@@ -23,7 +23,8 @@ from .jobs import StreamPoint
 from .stream_thinning import PAUSE_EPS, SKIP_TOLERANCE, split_long, thin_timed
 
 __all__ = ["Fed", "HOLD_CREEP", "MAX_CARTESIAN_TOLERANCE", "MAX_STREAM_TOLERANCE", "MIN_SEGMENT_CYCLES",
-           "corner_levels", "corner_rounding", "fed_schedule", "hold_point", "stream_points", "stream_speeds"]
+           "corner_levels", "corner_rounding", "fed_schedule", "hold_point", "hold_speed", "stream_points",
+           "stream_speeds"]
 
 #: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
 #: longer than MIN_SEGMENT_CYCLES (a quarter of the default path tolerance: the thinning, the blended
@@ -37,10 +38,11 @@ MIN_SEGMENT_CYCLES = 2.0
 #: [rad] how far the hold at a stream's start moves the arm toward its first target (the joint that
 #: moves most; more where the slowest wire speed, 0.1 %, would cross it sooner than the hold lasts):
 #: a target with a speed the controller runs like any other, an exact stop (fed_schedule,
-#: hold_point). The wire's rounding (0.1 mm, 0.01 deg) of its pose and of the arm's reported start
-#: makes its time uncertain: measured on the paced line 0.92-1.14 x the lead, at 0.05, 0.1 and
-#: 0.15 deg alike (a plan turning one joint), within the feed's cycle of margin; timing it from the
-#: solution of its wire pose did not help (0.57-1.07 x: the start's rounding stays)
+#: hold_point). Its speed is set from where the controller will solve its wire pose, to the nearest
+#: 0.1 % (hold_speed; CartesianStreams.with_poses), and where that solution is farther than this from
+#: the planned hold (near joint_5 = 0, another joint_4 / joint_6 split) the hold is dropped. The
+#: wire's rounding of the arm's reported start stays: measured on the paced line 0.83-1.15 x the lead
+#: (a plan turning one joint, each joint in turn), within the feed's cycle of margin
 HOLD_CREEP = math.radians(0.05)
 
 
@@ -160,6 +162,15 @@ def fed_schedule(times: Sequence[float], held: Sequence[bool], releases: Sequenc
             best = (later, lead, fed)
     assert best is not None
     return Fed(best[1], best[2])
+
+
+def hold_speed(start: Sequence[float], joints: Sequence[float], lead: float, vmax: Sequence[float]) -> int:
+    """The wire speed (0.1 %, 1..1000) at which the move from ``start`` to ``joints`` -- the hold,
+    as the controller will solve its wire pose -- lasts ``lead`` s: the nearest whole step (the
+    hold's few hundredths of a degree run at 0.1-1 %, where rounding up, as :func:`stream_speeds`
+    does, would halve a 1.02 into 2)."""
+    full = max(abs(b - a) / v for a, b, v in zip(start, joints, vmax))
+    return max(1, min(1000, int(round(1000.0 * full / lead)))) if lead > 0.0 else 1000
 
 
 def hold_point(start: Sequence[float], first: Sequence[float], lead: float, vmax: Sequence[float]) -> Tuple[float, ...]:
