@@ -57,8 +57,8 @@ from ...protocol.base import Protocol
 from ..motion.jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from ..motion.status import DriverError
-from ..motion.stream_points import (HOLD_CREEP, MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, hold_speed,
-                                    stream_points, stream_speeds)
+from ..motion.stream_points import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, hold_speed, stream_points,
+                                    stream_speeds)
 from .commissioned import feed_cycles, min_segment_cycles
 from .wire_targets import CARTESIAN_MAX_STEP, FINE, WireMemo, WireTarget, wire_target
 
@@ -294,15 +294,9 @@ class CartesianStreams(JointStreams):
         out = []
         prev = tuple(start)
         history = [prev]            # the arm's path so far: start, then each point as solved
-        dropped: Optional[StreamPoint] = None
+        held: Optional[StreamPoint] = None          # the hold, while the point after it is solved
         for i, point in enumerate(points):
             where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
-            if dropped is not None:
-                # the hold dropped (below): this point's segment takes its lead, from the hold's release
-                point = replace(point, release=dropped.release, speed=stream_speeds(
-                    prev, [prev, point.joints], [dropped.release, point.fed if point.fed is not None else point.time],
-                    self.kin.limits.velocity)[1])
-                dropped = None
             if point.release > 0.0:
                 # after a pause of the plan: offered once the arm reached the point before, at rest there
                 # (StreamSequencer.record), so the G2 takes it with the arm at that point, whatever its rule
@@ -318,15 +312,17 @@ class CartesianStreams(JointStreams):
                 raise DriverError("%s: %s; plan a path that stays in one configuration, or use a protocol "
                                   "with joint targets; nothing was sent" % (where, refusal))
             if point.hold:
-                if max(abs(a - b) for a, b in zip(found.joints, point.joints)) > HOLD_CREEP:
-                    # near joint_5 = 0 its wire pose may land on another joint_4 / joint_6 split than
-                    # the start's (the band rule allows it): crawled at the hold's 0.1-1 %, that
-                    # excursion took seconds -- no hold then, the first segment takes the lead
-                    dropped = point
-                    continue
-                # timed from the solution of its wire pose (the split it lands on counts)
+                # timed from the solution of its wire pose: near joint_5 = 0 it may take another
+                # joint_4 / joint_6 split than the start's (the band rule allows it), and the point
+                # after it is timed from there too -- crawled at the hold's 0.1-1 %, or undone at
+                # the next segment's planned speed, that excursion took seconds
                 point = replace(point, speed=hold_speed(prev, found.joints, point.fed - point.release,
                                                         self.kin.limits.velocity))
+                held = point
+            elif held is not None:
+                point = replace(point, speed=stream_speeds(prev, [found.joints], [point.fed - held.fed],
+                                                           self.kin.limits.velocity)[0])
+                held = None
             out.append(replace(point, pose=found.pose))
             prev = found.joints
             history.append(prev)
