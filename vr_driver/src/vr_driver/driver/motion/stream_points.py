@@ -39,10 +39,10 @@ MIN_SEGMENT_CYCLES = 2.0
 #: moves most; more where the slowest wire speed, 0.1 %, would cross it sooner than the hold lasts):
 #: a target with a speed the controller runs like any other, an exact stop (fed_schedule,
 #: hold_point). Its speed is set from where the controller will solve its wire pose, to the nearest
-#: 0.1 % (hold_speed; CartesianStreams.with_poses), and where that solution is farther than this from
-#: the planned hold (near joint_5 = 0, another joint_4 / joint_6 split) the hold is dropped. The
-#: wire's rounding of the arm's reported start stays: measured on the paced line 0.83-1.15 x the lead
-#: (a plan turning one joint, each joint in turn), within the feed's cycle of margin
+#: 0.1 % (hold_speed; CartesianStreams.with_poses: near joint_5 = 0 that may be another joint_4 /
+#: joint_6 split, and the point after the hold is timed from there too). The wire's rounding of the
+#: arm's reported start stays: measured on the paced line 0.83-1.15 x the lead (a plan turning one
+#: joint, each joint in turn), within the feed's cycle of margin
 HOLD_CREEP = math.radians(0.05)
 
 
