@@ -714,3 +714,20 @@ def test_a_stream_that_needs_a_lead_begins_with_a_hold_just_off_its_start():
     assert [p.joints for p in rest] == [p.joints for p in plain]
     assert [p.fed for p in rest] == pytest.approx([p.time + lead for p in plain])
     assert [p.time for p in rest] == [p.time for p in plain]
+
+
+def test_the_holds_speed_is_the_nearest_whole_step():
+    """A hold of hundredths of a degree runs at 0.1-1 %: its speed is the nearest whole 0.1 % step
+    (hold_speed), not the step above as a segment's (stream_speeds) -- a 1.02 would become 2 and the
+    hold half as long; where the controller's solution moves more (another joint_4 / joint_6 split
+    near joint_5 = 0), the speed is as much higher, so that the hold still lasts its lead."""
+    from vr_driver.driver.motion.stream_points import hold_speed, stream_speeds
+    vmax = (2.0,) * 6
+    start = (0.0,) * 6
+    lead = 0.15
+    creep = (1.02 * 0.001 * 2.0 * lead,) + (0.0,) * 5           # 1.02 steps of 0.1 % in ``lead``
+    assert hold_speed(start, creep, lead, vmax) == 1
+    assert stream_speeds(start, [creep], [lead], vmax) == [2]
+    split = (creep[0], 0.0, 0.0, 0.01, 0.0, -0.01)               # the sum kept, the split 0.01 rad off
+    assert hold_speed(start, split, lead, vmax) == round(1000.0 * 0.01 / 2.0 / lead)
+    assert hold_speed(start, start, lead, vmax) == 1 and hold_speed(start, creep, 0.0, vmax) == 1000

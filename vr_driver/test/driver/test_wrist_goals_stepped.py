@@ -18,7 +18,7 @@ shorter than its ramp change speed faster than its ramp, as documented in
 :mod:`vr_driver.controller.stream_arm`.) For those two the deviation is held to FLOOR_FACTOR times
 that floor, and the test says so if the floor drops under the target. Goal 5 (onto joint_5 = 0)
 was 0.51 deg at the model's ramp while the stream's feed shifted every point as needed from the first
-(0.52 -> 0.44 deg since the stream holds at its start and then keeps the plan's timing:
+(0.52 -> 0.42 deg since the stream holds at its start and then keeps the plan's timing:
 stream_points.fed_schedule; the twelve 0.28-1.15 -> 0.26-0.93 deg).
 Which records the driver sees (a 55 ms bus cycle) decides how much of a deviation shows: the same
 runs started 30 ms later measured 0.76 deg for the first."""
