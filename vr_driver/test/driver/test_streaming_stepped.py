@@ -625,21 +625,109 @@ def test_a_joint_path_without_timing_is_refused_naming_the_protocol(kin, protoco
     assert w.core.status().job is None
 
 
-def test_fed_times_reach_no_point_before_the_next_can_be_there_and_never_shorten_a_segment():
-    from vr_driver.driver.motion.stream_points import fed_times
+def _late(fed, feed, ring, releases=None):
+    """The targets of a fed schedule (the hold first, if any) a point of which is reached sooner
+    than one ``feed`` after the next target can be in the controller -- worked out apart from
+    fed_schedule: one target a ``feed`` after the one before, none before the ring has room (the
+    target ``ring`` before it passed), after a pause none before its end (``releases``: target ->
+    its release, shifted)."""
+    passed = ([fed.lead] if fed.lead else []) + list(fed.times)
+    arrive = []
+    for k in range(len(passed)):
+        a = 0.0 if k == 0 else arrive[-1] + feed
+        if ring and k >= ring:
+            a = max(a, passed[k - ring])
+        if releases and k in releases:
+            a = releases[k]
+        arrive.append(a)
+    return [k for k in range(len(passed) - 1)
+            if (not releases or k + 1 not in releases) and passed[k] < arrive[k + 1] + feed - 1e-12]
+
+
+def test_fed_schedule_reaches_no_point_before_the_next_can_be_there():
+    """The plan's first points come faster than the bus (one target every 50 ms): whatever the ring,
+    no point is reached before the next can be there (worked out apart: _late), and no segment runs
+    faster than planned; a plan dense all along (31 points 50 ms apart, a 62.5 ms feed, a ring of 4)
+    too -- there the ring, not the lead, limits what comes ahead, and later points wait. The check
+    can fail: the plan as it is, and the plan delayed by a lead too short, are late."""
+    from vr_driver.driver.motion.stream_points import Fed, fed_schedule
     feed = 0.05
     times = [0.03, 0.06, 0.09, 0.5, 0.52, 1.0]
-    fed = fed_times(times, [False] * 6, [0.0] * 6, feed)
-    # point j (1-based) no sooner than j + 1 feeds; the last point is not waited for by anything
-    for j, t in enumerate(fed[:-1], start=1):
-        assert t >= (j + 1) * feed - 1e-12, (j, t)
-    # shifted, never compressed: every segment at least its planned duration
-    for (a, b), (c, d) in zip(zip(times, times[1:]), zip(fed, fed[1:])):
-        assert d - c >= b - a - 1e-12
-    assert fed == pytest.approx([0.1, 0.15, 0.2, 0.61, 0.63, 1.11])
-    # a plan the bus keeps up with is unchanged; no feed: unchanged
-    assert fed_times([0.2, 0.4, 0.6], [False] * 3, [0.0] * 3, feed) == [0.2, 0.4, 0.6]
-    assert fed_times(times, [False] * 6, [0.0] * 6, 0.0) == times
+    dense = [0.05 * k for k in range(1, 32)]
+    for plan, step, ring in [(times, feed, 0), (times, feed, 4), (times, feed, 3), (dense, 0.0625, 4),
+                             (dense, 0.0625, 0)]:
+        fed = fed_schedule(plan, [False] * len(plan), [0.0] * len(plan), step, ring)
+        assert _late(fed, step, ring) == [], (plan, ring, fed)
+        for (a, b), (c, d) in zip(zip(plan, plan[1:]), zip(fed.times, fed.times[1:])):
+            assert d - c >= b - a - 1e-12
+    assert _late(Fed(0.0, times), feed, 4) == [0, 1, 2]
+    assert _late(Fed(0.1, [t + 0.1 for t in times]), feed, 4) != []
+    # a ring of 4 cannot hold a dense plan's lead: points are held back further on as well
+    fed = fed_schedule(dense, [False] * 31, [0.0] * 31, 0.0625, 4)
+    assert fed.times[-1] - dense[-1] > fed.lead + 0.1
     # after a pause (the arm held at point 2 until 2.0 s) the ring is empty: the feed starts again
-    after = fed_times([0.2, 0.4, 2.03, 2.06], [False, True, False, False], [0.0, 0.0, 2.0, 0.0], feed)
-    assert after == pytest.approx([0.2, 0.4, 2.1, 2.13])        # (the last point: shifted only)
+    after = fed_schedule([0.2, 0.4, 2.03, 2.06], [False, True, False, False], [0.0, 0.0, 2.0, 0.0], feed, 4)
+    assert after.lead == 0.0 and after.times == pytest.approx([0.2, 0.4, 2.1, 2.13])   # (the last: shifted only)
+    assert _late(after, feed, 4, {2: 2.0}) == []
+
+
+def test_fed_schedule_holds_at_the_start_and_then_keeps_the_plans_own_timing():
+    """Where the first points come too soon the stream begins with a hold (``lead``), and every point
+    after it keeps its planned time plus the lead: the run is the plan delayed by a constant (a
+    trajectory bench's fitted start delay absorbs it) -- not the plan stretched where it came too
+    soon. A plan the bus keeps up with, or no feed: unchanged, no hold. v2 (no hold): shifted as
+    needed from the first point."""
+    from vr_driver.driver.motion.stream_points import Fed, fed_schedule
+    feed = 0.05
+    times = [0.03, 0.06, 0.09, 0.5, 0.52, 1.0]
+    fed = fed_schedule(times, [False] * 6, [0.0] * 6, feed, 4)
+    # the hold is the first target: point j (0-based) is target j + 1, the next comes j + 2 feeds
+    # after the start, and one feed for the jitter: point 2 needs the most, 5 feeds - 0.09 s
+    assert fed.lead == pytest.approx(0.16)
+    assert fed.times == pytest.approx([t + fed.lead for t in times])
+    assert fed_schedule([0.2, 0.4, 0.6], [False] * 3, [0.0] * 3, feed, 4) == Fed(0.0, [0.2, 0.4, 0.6])
+    assert fed_schedule(times, [False] * 6, [0.0] * 6, 0.0, 4) == Fed(0.0, times)
+    shifted = fed_schedule(times, [False] * 6, [0.0] * 6, feed, 0, hold=False)
+    assert shifted.lead == 0.0 and shifted.times == pytest.approx([0.1, 0.15, 0.2, 0.61, 0.63, 1.11])
+
+
+def test_a_stream_that_needs_a_lead_begins_with_a_hold_just_off_its_start():
+    """The stream of a plan whose first samples come faster than the bus: its first target is the
+    hold -- HOLD_CREEP toward the first point in the joint that moves most, an exact stop, at the speed
+    that takes the lead -- and the planned points follow at their planned times plus the lead."""
+    from vr_driver.driver.motion.stream_points import HOLD_CREEP, stream_points, stream_speeds
+    vmax = (3.0,) * 6
+    start = (0.0,) * 6
+    times = [0.0, 0.03, 0.06, 0.09, 0.3, 0.5, 0.7, 0.9]      # (a curve: every sample kept)
+    positions = [(2.0 * t * t,) + (0.0,) * 5 for t in times]
+    plain = stream_points(times, positions, vmax, 5, 1e-6, 0.01)
+    fed = stream_points(times, positions, vmax, 5, 1e-6, 0.01, feed=0.05, ring=4)
+    assert not any(p.hold for p in plain)
+    hold, rest = fed[0], fed[1:]
+    assert hold.hold and hold.smooth == 0 and hold.index == 0 and hold.time == 0.0
+    lead = hold.fed
+    assert lead >= 0.1 - 1e-12                                       # at least two feeds
+    assert hold.joints[0] == pytest.approx(HOLD_CREEP, rel=0.5) and hold.joints[1:] == start[1:]
+    # its speed makes the creep last the lead (a whole wire speed: exactly)
+    assert stream_speeds(start, [hold.joints], [lead], vmax) == [hold.speed]
+    assert hold.joints[0] / (vmax[0] * hold.speed / 1000.0) == pytest.approx(lead)
+    assert [p.joints for p in rest] == [p.joints for p in plain]
+    assert [p.fed for p in rest] == pytest.approx([p.time + lead for p in plain])
+    assert [p.time for p in rest] == [p.time for p in plain]
+
+
+def test_the_holds_speed_is_the_nearest_whole_step():
+    """A hold of hundredths of a degree runs at 0.1-1 %: its speed is the nearest whole 0.1 % step
+    (hold_speed), not the step above as a segment's (stream_speeds) -- a 1.02 would become 2 and the
+    hold half as long; where the controller's solution moves more (another joint_4 / joint_6 split
+    near joint_5 = 0), the speed is as much higher, so that the hold still lasts its lead."""
+    from vr_driver.driver.motion.stream_points import hold_speed, stream_speeds
+    vmax = (2.0,) * 6
+    start = (0.0,) * 6
+    lead = 0.15
+    creep = (1.02 * 0.001 * 2.0 * lead,) + (0.0,) * 5           # 1.02 steps of 0.1 % in ``lead``
+    assert hold_speed(start, creep, lead, vmax) == 1
+    assert stream_speeds(start, [creep], [lead], vmax) == [2]
+    split = (creep[0], 0.0, 0.0, 0.01, 0.0, -0.01)               # the sum kept, the split 0.01 rad off
+    assert hold_speed(start, split, lead, vmax) == round(1000.0 * 0.01 / 2.0 / lead)
+    assert hold_speed(start, start, lead, vmax) == 1 and hold_speed(start, creep, 0.0, vmax) == 1000

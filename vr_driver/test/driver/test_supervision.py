@@ -145,6 +145,17 @@ def test_the_note_names_the_protocol_and_its_way_of_running():
     slow = TrajectorySupervisor(traj, stream_run(traj), T0, Streams, NAMES).note(3.0)
     assert "1.50 x" in slow and "50 % longer than planned although no target came late" in slow
     assert "interpreter" in slow and "longer than planned" not in note
+    # a stream that began with a hold (the bus bringing the first targets): said, and the run judged
+    # against the plan after it -- 2.6 s of a 2.0 s plan after a 0.5 s hold is not a slow controller
+    held = stream_run(traj)
+    job = held.jobs[0]
+    job.points = ((StreamPoint(HOME, 3, 0, 0.0, 0, fed=0.5, hold=True),)
+                  + tuple(replace(p, fed=p.time + 0.5) for p in job.points))
+    after = TrajectorySupervisor(traj, held, T0, Streams, NAMES).note(2.6)
+    assert "3 of 2 points streamed, smooth levels up to 3, the first a 0.50 s hold at the start" in after, after
+    assert "longer than planned" not in after
+    late = TrajectorySupervisor(traj, held, T0, Streams, NAMES).note(3.3)
+    assert "32 % longer than planned with its hold although no target came late" in late, late
 
 
 def test_samples_without_valid_joints_are_skipped():

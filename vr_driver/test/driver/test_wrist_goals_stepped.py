@@ -8,7 +8,7 @@ deg of the plan at the same time by the driver's own stamps (joint_4 / joint_6 b
 wrist band), at most 0.05 deg from the goal at the end (the same rule).
 
 This is the driver's part of those figures with the timing of every process exact (the bench runs
-the same goals in real time: real processes, ptys, the virtual line; bench/README.md). Nine of the
+the same goals in real time: real processes, ptys, the virtual line; bench/README.md). Ten of the
 twelve meet every target. Two ask what no arm that keeps its accelerations can do: the shortest
 goal's plan (0.32 s, joint_6 at up to 300 deg/s) joined by straight lines stops joint_6 from 162
 deg/s at once at its last point, and no arm within the model's accelerations comes within 0.75 deg
@@ -16,8 +16,10 @@ of that at any start delay (:mod:`vr_driver.driver.joints.following`); at the 0.
 any such arm 0.51 deg away. (The virtual arm is not quite such an arm: its blends and its moves
 shorter than its ramp change speed faster than its ramp, as documented in
 :mod:`vr_driver.controller.stream_arm`.) For those two the deviation is held to FLOOR_FACTOR times
-that floor (today 1.47 and 1.39 times), and the test says so if the floor drops under the target. One is a known gap of the driver (strict: a
-fix must update it): goal 5 (onto joint_5 = 0) 0.51 deg at the model's ramp, its floor 0.19 deg.
+that floor, and the test says so if the floor drops under the target. Goal 5 (onto joint_5 = 0)
+was 0.51 deg at the model's ramp while the stream's feed shifted every point as needed from the first
+(0.52 -> 0.42 deg since the stream holds at its start and then keeps the plan's timing:
+stream_points.fed_schedule; the twelve 0.28-1.15 -> 0.26-0.93 deg).
 Which records the driver sees (a 55 ms bus cycle) decides how much of a deviation shows: the same
 runs started 30 ms later measured 0.76 deg for the first."""
 from __future__ import annotations
@@ -73,9 +75,7 @@ def run_goal(kin, configuration, goal, **world_options):
 
 
 #: (configuration, goal): why it misses a target today (the deviation: see the module docstring)
-KNOWN_GAPS = {
-    ("v3-paced", 5): "0.51 deg from the plan at the model's ramp (its floor: 0.19 deg)",
-}
+KNOWN_GAPS: dict = {}
 #: (configuration, goal) whose plan no arm with the arm's accelerations follows within MAX_DEVIATION
 #: (driver.joints.following.following_floor): their deviation is held to FLOOR_FACTOR x that floor
 BEYOND_ANY_ARM = {("v3-paced", 1), ("v3-paced-ramp05", 1)}

@@ -37,10 +37,10 @@ from typing import Any, List, Optional, Tuple
 
 from ...params import ControllerFacts, DriverParams, read_planning_limits
 from ...protocol.base import Protocol
-from .stream_prep import CARTESIAN_MAX_STEP
 from ..motion.stream_points import MIN_SEGMENT_CYCLES
+from .wire_targets import CARTESIAN_MAX_STEP
 
-__all__ = ["controller_notes", "min_segment_cycles", "planning_kinematics", "plain_names"]
+__all__ = ["controller_notes", "feed_cycles", "min_segment_cycles", "planning_kinematics", "plain_names"]
 
 
 def plain_names(params: DriverParams) -> Tuple[str, ...]:
@@ -55,16 +55,20 @@ def _one_per_acknowledgement(wire: Protocol) -> bool:
     return wire.streams and wire.look_ahead_slots <= 1 and wire.send_ahead <= wire.look_ahead_slots
 
 
+def feed_cycles(params: DriverParams) -> float:
+    """The bus cycles the master takes to bring the controller one stream target: 1 (it sends
+    ahead), 2 where it sends one per acknowledgement (a new target only every other cycle)."""
+    return 2.0 if _one_per_acknowledgement(params.wire) else 1.0
+
+
 def min_segment_cycles(params: DriverParams) -> float:
     """The shortest stream segment [bus cycles] the bus feeds without a gap, for this G2:
     MIN_SEGMENT_CYCLES with the assumed G2 (an interpreter look-ahead of 1, targets sent ahead);
     divided by the look-ahead where it is larger (the interpreter holds that many points beyond the
-    one the arm runs to: the next target may come that much later); doubled where the master sends
-    one target per acknowledgement (a new target only every other cycle). A look-ahead of 0 counts
+    one the arm runs to: the next target may come that much later); times :func:`feed_cycles` (doubled where the master
+    sends one target per acknowledgement). A look-ahead of 0 counts
     as 1: every point is a stop there, the segments' length does not starve anything."""
-    lookahead = max(1, params.controller.interpreter_lookahead)
-    feed = 2.0 if _one_per_acknowledgement(params.wire) else 1.0
-    return MIN_SEGMENT_CYCLES * feed / lookahead
+    return MIN_SEGMENT_CYCLES * feed_cycles(params) / max(1, params.controller.interpreter_lookahead)
 
 
 def planning_kinematics(params: DriverParams, kin: Any) -> Any:

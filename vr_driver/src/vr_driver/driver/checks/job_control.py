@@ -375,7 +375,7 @@ def prepare_trajectory(kin: Kinematics, checks: PathChecks, streams: Optional[Jo
     segment refused."""
     if streams is not None:
         points = streams.trajectory(traj.times, traj.positions)
-        return [0] + [p.index for p in points], points, []
+        return [0] + [p.index for p in points if not p.hold], points, []      # (the hold: no planned point)
     kept = thin(traj)
     previews = ptp_path(kin, checks, [traj.positions[k] for k in kept[1:]], range(len(traj.positions[0])), start,
                         lambda n: "PTP %d to stop point %d of the plan" % (n + 1, kept[n + 1]))

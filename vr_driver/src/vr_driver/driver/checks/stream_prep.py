@@ -57,9 +57,10 @@ from ...protocol.base import Protocol
 from ..motion.jobs import MoveJob, Preview, StreamPoint
 from .path_checks import PathChecks
 from ..motion.status import DriverError
-from ..motion.stream_points import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, MIN_SEGMENT_CYCLES, stream_points,
+from ..motion.stream_points import (MAX_CARTESIAN_TOLERANCE, MAX_STREAM_TOLERANCE, hold_speed, stream_points,
                                     stream_speeds)
-from .wire_targets import FINE, WireMemo, WireTarget, wire_target
+from .commissioned import feed_cycles, min_segment_cycles
+from .wire_targets import CARTESIAN_MAX_STEP, FINE, WireMemo, WireTarget, wire_target
 
 __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE", "CartesianStreams", "JointStreams",
            "stream_preparation"]
@@ -68,11 +69,6 @@ __all__ = ["CARTESIAN_MAX_REACH", "CARTESIAN_MAX_STEP", "CONFIGURATION_TOLERANCE
 #: joints its configuration rule names), must land this near the planned point (every joint);
 #: farther, the controller would run another configuration than the one planned and checked
 CONFIGURATION_TOLERANCE = math.radians(1.0)
-#: [rad] the widest joint turn between the joints a Cartesian stream's target is solved nearest and
-#: the target (stream_thinning.split_long): the controller takes the solution nearest them, the planned
-#: one only while a joint turns by well under half a turn in between -- previous_target: between
-#: two points; current_joints: over the ring_size + 1 points before (module docstring)
-CARTESIAN_MAX_STEP = math.radians(90.0)
 #: [rad] current_joints: the widest straight joint distance (all joints together) over the stretch
 #: of the plan the arm may be on when the controller takes a target -- a quarter of the distance
 #: to the pose's flipped-wrist solution (joint_4 and joint_6 half a turn each: pi sqrt 2), as
@@ -108,7 +104,8 @@ class JointStreams:
         points = stream_points(times, positions, self.kin.limits.velocity, self.params.stream_smooth,
                                tolerance, self.min_segment(), max_tolerance,
                                corner_tolerance=math.radians(self.params.stream_path_tolerance),
-                               max_step=self.max_step, reaches=self.reaches(memo), feed=self.feed_period())
+                               max_step=self.max_step, reaches=self.reaches(memo), feed=self.feed_period(),
+                               ring=self.ring(), hold=self.holds())
         if not points:
             return points
         return self.with_poses(positions[0], points, memo=memo)
@@ -127,10 +124,22 @@ class JointStreams:
         return points
 
     def feed_period(self) -> float:
-        """[s] how long the bus takes to bring the controller one target: ``min_segment()`` is
-        MIN_SEGMENT_CYCLES of them, divided by the interpreter's look-ahead (which lets a segment be
-        shorter once the ring is full, not at a stream's start)."""
-        return self.min_segment() * max(1, self.params.controller.interpreter_lookahead) / MIN_SEGMENT_CYCLES
+        """[s] how long the bus takes to bring the controller one target: :func:`~.commissioned.feed_cycles`
+        bus cycles, the cycle being ``min_segment()`` over :func:`~.commissioned.min_segment_cycles`."""
+        return self.min_segment() / min_segment_cycles(self.params) * feed_cycles(self.params)
+
+    def ring(self) -> int:
+        """The targets the controller holds at once, a new one taken once the arm passed the one
+        that many before (:func:`~vr_driver.driver.motion.stream_points.fed_schedule`); 0: not
+        modelled -- v2's queue of two takes the next target once the arm passed the one before, and
+        its segments of at least MIN_SEGMENT_CYCLES keep it fed."""
+        return 0
+
+    def holds(self) -> bool:
+        """May a stream begin with a hold while the bus fills the controller's ring
+        (:func:`~vr_driver.driver.motion.stream_points.fed_schedule`)? v2: no -- its queue of two has
+        no room for the targets a hold would gather."""
+        return False
 
     def memo(self) -> Optional[WireMemo]:
         """A memo for one stream check's wire poses (None: joint targets have none)."""
@@ -187,10 +196,15 @@ class JointStreams:
         start): the first segment is checked again and its speed set for its planned arrival (no
         faster than the limits)."""
         points = job.points
+        if points[0].hold and len(points) > 1:
+            # the arm is elsewhere: no hold, the first segment takes its lead from the hold's release
+            points = (replace(points[1], release=points[0].release),) + tuple(points[2:])
         self.check_segments(joints, points[:1])
         first = self.with_poses(joints, points[:1])[0]     # (v3: its wire pose solved from here)
-        # (a pause at the start, first.release > 0: the move begins when it ends)
-        speed = stream_speeds(joints, [tuple(joints), first.joints], [first.release, first.time],
+        # (a pause at the start, first.release > 0: the move begins when it ends; the arrival its
+        # speed was set for, ``fed``: the hold's at the start, later than planned where the bus feeds it)
+        speed = stream_speeds(joints, [tuple(joints), first.joints],
+                              [first.release, first.time if first.fed is None else first.fed],
                               self.kin.limits.velocity)[1]
         return (replace(first, speed=speed),) + tuple(points[1:]), tuple(joints)
 
@@ -210,6 +224,15 @@ class CartesianStreams(JointStreams):
         self.window = 1 if self.rule is ConfigurationRule.PREVIOUS_TARGET else params.controller.ring_size + 1
         #: the widest joint step between two points: CARTESIAN_MAX_STEP over the window
         self.max_step = CARTESIAN_MAX_STEP / self.window
+
+    def ring(self) -> int:
+        """The targets the G2's ring holds (``controller/ring_size``, doc/controller_program.md §10.4
+        rule 2): a new one is taken once the arm passed the one that many before."""
+        return self.params.controller.ring_size
+
+    def holds(self) -> bool:
+        """v3: a stream may begin with a hold (a ring of at least 3 gathers the first targets)."""
+        return True
 
     def memo(self) -> Optional[WireMemo]:
         """A fresh memo of wire poses and their solutions (:class:`.wire_targets.WireMemo`): one
@@ -271,6 +294,7 @@ class CartesianStreams(JointStreams):
         out = []
         prev = tuple(start)
         history = [prev]            # the arm's path so far: start, then each point as solved
+        held: Optional[StreamPoint] = None          # the hold, while the point after it is solved
         for i, point in enumerate(points):
             where = "point %d of %d (planned point %d)" % (first + i + 1, first + len(points), point.index)
             if point.release > 0.0:
@@ -287,6 +311,18 @@ class CartesianStreams(JointStreams):
             if refusal:
                 raise DriverError("%s: %s; plan a path that stays in one configuration, or use a protocol "
                                   "with joint targets; nothing was sent" % (where, refusal))
+            if point.hold:
+                # timed from the solution of its wire pose: near joint_5 = 0 it may take another
+                # joint_4 / joint_6 split than the start's (the band rule allows it), and the point
+                # after it is timed from there too -- crawled at the hold's 0.1-1 %, or undone at
+                # the next segment's planned speed, that excursion took seconds
+                point = replace(point, speed=hold_speed(prev, found.joints, point.fed - point.release,
+                                                        self.kin.limits.velocity))
+                held = point
+            elif held is not None:
+                point = replace(point, speed=stream_speeds(prev, [found.joints], [point.fed - held.fed],
+                                                           self.kin.limits.velocity)[0])
+                held = None
             out.append(replace(point, pose=found.pose))
             prev = found.joints
             history.append(prev)

@@ -47,6 +47,11 @@ from ...kinematics.ik import rotation_and_position
 from ...kinematics.solver import Kinematics
 from ...poses import ControllerPose
 
+#: [rad] the widest joint turn between the joints a Cartesian stream's target is solved nearest and
+#: the target (stream_thinning.split_long): the controller takes the solution nearest them, the planned
+#: one only while a joint turns by well under half a turn in between -- previous_target: between
+#: two points; current_joints: over the ring_size + 1 points before (stream_prep's docstring)
+CARTESIAN_MAX_STEP = math.radians(90.0)
 #: [rad] a solution this near the planned joints needs no search (the plain rounding of v3 costs
 #: about 0.01 deg away from the singularity: searching there would cost 15 ms a target for nothing)
 FINE = math.radians(0.02)

@@ -258,6 +258,13 @@ class TrajectorySupervisor:
             points = run.jobs[0].points if run.jobs else ()
             smooth = max((p.smooth for p in points), default=0)
             how = "smooth levels up to %d" % smooth if smooth else "an exact stop at each"
+            # the stream's own timing: the plan after its hold at the start (stream_points.fed_schedule),
+            # later only where the bus fed a target later than the plan passed it
+            hold = points[0].fed - points[0].time if points and points[0].hold and points[0].fed is not None else 0.0
+            if hold > 0.005:
+                how += ", the first a %.2f s hold at the start while the bus brought the first targets" % hold
+            fed = points[-1].fed if points and points[-1].fed is not None else traj.duration
+            slower_fed = elapsed / fed if fed > 0 else slower
             text += "ran %.2f x the planned %.2f s (protocol %s: %d of %d points streamed, %s)" % (
                 slower, traj.duration, wire.name, len(points), len(traj.positions) - 1, how)
             gaps = run.jobs[0].gaps if run.jobs else 0
@@ -265,10 +272,11 @@ class TrajectorySupervisor:
                 text += ("; the arm stopped %d time(s) on the way waiting for its next target: the bus "
                          "(%.1f cycles/s) did not bring it in time -- a faster line (baud) or a larger "
                          "stream_path_tolerance gives fewer, longer segments" % (gaps, cycle_rate))
-            elif smooth and slower > SLOW_STREAM and len(points) >= 2:
-                text += ("; %.0f %% longer than planned although no target came late: a controller that "
+            elif smooth and slower_fed > SLOW_STREAM and len(points) >= 2:
+                text += ("; %.0f %% longer than planned%s although no target came late: a controller that "
                          "stops at each point (its interpreter does not read the next MOVE ahead, "
-                         "doc/controller_program.md section 10.9) runs this way" % (100.0 * (slower - 1.0)))
+                         "doc/controller_program.md section 10.9) runs this way"
+                         % (100.0 * (slower_fed - 1.0), " with its hold" if hold > 0.005 else ""))
         else:
             text += "ran %.2f x the planned %.2f s (protocol %s stops at each of %d points)" % (
                 slower, traj.duration, wire.name, len(run.jobs))

@@ -3,8 +3,10 @@ speed the protocol delivers for a plan or a move -- one function for the termina
 and plan actions), the plan action and the trajectory action, so that the figures a user reads before
 confirming are those of the run (issue 46).
 
-- A streaming protocol (v2, v3) runs a plan on its own timing: the plan's duration, the TCP's top
-  speed along it (the planned samples, the straight joint moves between them).
+- A streaming protocol (v2, v3) runs a plan on its own timing: the plan's duration -- after a hold at
+  the start where the bus brings the first targets slower than the plan passes them (v3), later
+  only where it still does -- the TCP's top speed along it (the planned samples, the straight joint
+  moves between them).
 - v1 runs each target at the robot program's own constant speed (MOVEP ``controller/program_speed``
   for a PTP target, MOVEL / MOVEC ``program_path_speed`` for a LIN / CIRC; the documented program's
   10 and 5 m/min, doc/controller_program.md section 5), whatever the plan's timing, and stops at
@@ -14,7 +16,8 @@ confirming are those of the run (issue 46).
   scaling asked for does not apply there: :func:`scaling_words` says so in words.
 
 The durations count from the first target on the wire to the arm at rest at the end, as the driver
-sees it (a stream: the plan's time and :data:`STREAM_LATENCY_CYCLES` bus cycles): the preparation
+sees it (a stream: the plan's time, its hold at the start if any, and :data:`STREAM_LATENCY_CYCLES`
+bus cycles): the preparation
 before it is said apart (the trajectory action's result).
 """
 from __future__ import annotations
@@ -71,21 +74,28 @@ def announce_plan(kin: Any, wire: Protocol, times: Sequence[float], positions: S
                   previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0,
                   stream: Sequence[Any] = ()) -> Announced:
     """The figures of a planned trajectory on the protocol ``wire``: a streaming protocol its timing --
-    as its ``stream`` (driver.motion.jobs.StreamPoint) is fed: its last point's ``fed`` arrival, later
-    than planned where the bus brings the first targets slower than the plan passes them -- and
-    :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); v1 (no stream) the PTP
-    ``previews`` it sends between the plan's stop points (``JobControl.prepare_trajectory``), at
-    ``params.controller``'s program speed, each with its handshake."""
+    as its ``stream`` (driver.motion.jobs.StreamPoint) is fed: the plan, after the hold its first
+    point may be (``hold``: the arm waits just off its start while the bus brings the first targets,
+    then runs the plan's own timing), and later than that only where the bus still brings a target
+    later than the plan passes it (its last point's ``fed`` arrival) -- and
+    :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); the TCP's top speed is the
+    plan's (the hold is slower, no segment faster). v1 (no stream): the PTP ``previews`` it sends
+    between the plan's stop points (``JobControl.prepare_trajectory``), at ``params.controller``'s
+    program speed, each with its handshake."""
     if wire.streams:
         planned = float(times[-1]) if len(times) else 0.0
+        first = stream[0] if stream else None
         last = stream[-1] if stream else None
+        lead = first.fed - float(first.time) if first is not None and first.hold and first.fed is not None else 0.0
         late = max(0.0, last.fed - float(last.time)) if last is not None and last.fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         top = plan_peak_speed(kin, times, positions)
         said = planned + late + latency
         parts = ["the plan's %.2f s" % planned]
-        if late > 0.005:
-            parts.append("%.2f s more as the bus brings its first targets" % late)
+        if lead > 0.005:
+            parts.append("a %.2f s hold at the start while the bus brings its first targets" % lead)
+        if late - lead > 0.005:
+            parts.append("%.2f s more where it brings later ones slower than the plan passes them" % (late - lead))
         if latency:
             parts.append("the bus's %g cycles to the arm and back" % STREAM_LATENCY_CYCLES)
         how = "" if len(parts) == 1 else " (%s and %s)" % (", ".join(parts[:-1]), parts[-1])

@@ -80,7 +80,11 @@ class StreamPoint:
     #                              Cartesian streaming protocol sends (None for a joint protocol)
     fed: Optional[float] = None  # the arrival its speed is set for, seconds from the stream's start: no
     #                              sooner than the bus can have brought the next target (later than
-    #                              ``time`` by the feed's shift, stream_points.fed_times; None: ``time``)
+    #                              ``time`` by the lead and any later shift, stream_points.fed_schedule;
+    #                              None: ``time``)
+    hold: bool = False           # the hold at the stream's start: a target just off it toward the first
+    #                              point, reached ``fed`` s after the start while the bus fills the
+    #                              controller's ring (stream_points.hold_point; ``index`` the start's)
 
 
 class JobPhase(enum.Enum):
