@@ -157,7 +157,7 @@ class DriverCore:
         self.controller_notes = controller_notes(params, self.kin)
         # the bus cycles a stream segment needs at least (the commissioned G2's facts: fixed for the
         # driver's life; min_segment, asked by every goal, then touches neither params nor them)
-        self._segment_cycles = min_segment_cycles(params)
+        self._segment_cycles = min_segment_cycles(params, self.wire)
         self._notes_said = False
         self.add_listener(self._say_controller_notes)
 

@@ -55,20 +55,23 @@ def _one_per_acknowledgement(wire: Protocol) -> bool:
     return wire.streams and wire.look_ahead_slots <= 1 and wire.send_ahead <= wire.look_ahead_slots
 
 
-def feed_cycles(params: DriverParams) -> float:
-    """The bus cycles the master takes to bring the controller one stream target: 1 (it sends
-    ahead), 2 where it sends one per acknowledgement (a new target only every other cycle)."""
-    return 2.0 if _one_per_acknowledgement(params.wire) else 1.0
+def feed_cycles(wire: Protocol) -> float:
+    """The bus cycles the master takes to bring the controller one stream target with the protocol
+    object ``wire`` (``params.wire``): 1 (it sends ahead), 2 where it sends one per acknowledgement
+    (a new target only every other cycle)."""
+    return 2.0 if _one_per_acknowledgement(wire) else 1.0
 
 
-def min_segment_cycles(params: DriverParams) -> float:
+def min_segment_cycles(params: DriverParams, wire: Optional[Protocol] = None) -> float:
     """The shortest stream segment [bus cycles] the bus feeds without a gap, for this G2:
     MIN_SEGMENT_CYCLES with the assumed G2 (an interpreter look-ahead of 1, targets sent ahead);
     divided by the look-ahead where it is larger (the interpreter holds that many points beyond the
     one the arm runs to: the next target may come that much later); times :func:`feed_cycles` (doubled where the master
     sends one target per acknowledgement). A look-ahead of 0 counts
-    as 1: every point is a stop there, the segments' length does not starve anything."""
-    return MIN_SEGMENT_CYCLES * feed_cycles(params) / max(1, params.controller.interpreter_lookahead)
+    as 1: every point is a stop there, the segments' length does not starve anything. ``wire``: the
+    protocol object when the caller holds it (``params.wire`` builds one at every call)."""
+    return MIN_SEGMENT_CYCLES * feed_cycles(params.wire if wire is None else wire) \
+        / max(1, params.controller.interpreter_lookahead)
 
 
 def planning_kinematics(params: DriverParams, kin: Any) -> Any:

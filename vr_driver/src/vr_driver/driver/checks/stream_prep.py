@@ -94,6 +94,8 @@ class JointStreams:
         self.wire = wire
         self.checks = checks
         self.min_segment = min_segment
+        # a target's feed in min_segment()s: the parameters' constant, not a goal's work
+        self._feed_share = feed_cycles(wire) / min_segment_cycles(params, wire)
 
     def points(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
                max_tolerance: float) -> Tuple[StreamPoint, ...]:
@@ -126,7 +128,7 @@ class JointStreams:
     def feed_period(self) -> float:
         """[s] how long the bus takes to bring the controller one target: :func:`~.commissioned.feed_cycles`
         bus cycles, the cycle being ``min_segment()`` over :func:`~.commissioned.min_segment_cycles`."""
-        return self.min_segment() / min_segment_cycles(self.params) * feed_cycles(self.params)
+        return self.min_segment() * self._feed_share
 
     def ring(self) -> int:
         """The targets the controller holds at once, a new one taken once the arm passed the one
