@@ -46,14 +46,24 @@ def virtual_hardware_priority(name: str) -> str:
     """Ask for SCHED_FIFO ``~rt_priority`` (default VIRTUAL_RT_PRIORITY: 0, normal) for this node's
     threads -- the calling one and those rospy started at init_node
     (:func:`~vr_driver.bus.worker.set_process_priority`); call it before the device's threads
-    start: they inherit it -- and log how it is scheduled, once. Returns that, in words."""
-    from ..bus.worker import set_process_priority
+    start: they inherit it -- and log how it is scheduled, once. Returns that, in words.
+
+    Raised, the node goes back to normal scheduling, every thread, as its ROS shutdown begins (a
+    client shutdown hook: before rospy closes its sockets, whoever calls the shutdown): rospy's
+    XML-RPC thread busy-loops from the moment its server socket is closed until the process ends
+    (socketserver's poll keeps reporting the closed descriptor). At SCHED_FIFO the three devices'
+    spinning threads took both cores and kept their own main threads from ever ending: each node
+    sat out roslaunch's SIGINT and SIGTERM (15 + 2 s) and was killed -- at each of a rostest's
+    launches, while everything at normal priority (the other lanes' tests) got 5 % of the CPU."""
+    from ..bus.worker import process_normal_scheduling, set_process_priority
     try:
         priority = int(rospy.get_param("~rt_priority", VIRTUAL_RT_PRIORITY))
     except (TypeError, ValueError):
         rospy.logwarn("%s: ~rt_priority must be an integer 0..99: normal scheduling", name)
         priority = 0
     words = set_process_priority(max(0, min(99, priority)))
+    if words.startswith("SCHED_FIFO"):
+        rospy.on_shutdown(process_normal_scheduling)
     rospy.loginfo("%s: %s (virtual hardware: ~rt_priority)", name, words)
     return words
 
