@@ -45,8 +45,10 @@ VIRTUAL_RT_PRIORITY = 0
 def virtual_hardware_priority(name: str) -> str:
     """Ask for SCHED_FIFO ``~rt_priority`` (default VIRTUAL_RT_PRIORITY: 0, normal) for this node's
     threads -- the calling one and those rospy started at init_node
-    (:func:`~vr_driver.bus.worker.set_process_priority`); call it before the device's threads
-    start: they inherit it -- and log how it is scheduled, once. Returns that, in words.
+    and the device's (:func:`~vr_driver.bus.worker.set_process_priority` raises every thread the
+    process has; later ones inherit it); call it once the device is made and runs, so that its
+    set-up (the virtual G2's kinematics) is not real-time work -- and log how it is scheduled, once.
+    Returns that, in words.
 
     Raised, the node goes back to normal scheduling, every thread, as its ROS shutdown begins (a
     client shutdown hook: before rospy closes its sockets, whoever calls the shutdown): rospy's
