@@ -38,7 +38,8 @@ class RosoutHandler(logging.Handler):
 #: default: none (normal scheduling). ``~rt_priority`` N asks for it: the devices stand for hardware,
 #: which is never late -- but on a small machine the simulated hardware's CPU is the host's: with
 #: three tests side by side, their devices at SCHED_FIFO 30 starved the bus processes past the card's
-#: watchdog, and at 10 the driver nodes (joint_states at 13 of 20 /s, a link judged lost)
+#: watchdog. (At 10 they once starved the driver nodes too -- joint_states at 13 of 20 /s, a link
+#: judged lost: the spin at shutdown, see virtual_hardware_priority; scripts/test now runs them at 10.)
 VIRTUAL_RT_PRIORITY = 0
 
 
