@@ -70,7 +70,8 @@ def dump_params(path, args=()):
     `roslaunch --dump-params path args` does (roslaunch.param_dump), once per file content and args."""
     import roslaunch.config
     with open(path, "rb") as fh:
-        key = (os.path.abspath(path), fh.read(), tuple(args))
+        # the environment a launch file reads ($(optenv ...)) is part of what it loads as
+        key = (os.path.abspath(path), fh.read(), tuple(args), os.environ.get("VR006L_SIM_RT_PRIORITY"))
     if key not in _LOADED:
         config = roslaunch.config.ROSLaunchConfig()
         err, out = io.StringIO(), io.StringIO()
@@ -222,15 +223,22 @@ class DriverLaunchParamsTest(unittest.TestCase):
 
     def test_sim_rt_priority_reaches_the_virtual_hardware_only(self):
         """The virtual hardware's real-time priority: 0 (normal scheduling) by default on each of
-        the virtual G2, the line and the island; sim_rt_priority:=30 (a benchmark run alone, where a
-        real G2 is never late) on those three and on no other node."""
+        the virtual G2, the line and the island, or the environment's VR006L_SIM_RT_PRIORITY
+        (scripts/test sets 10); sim_rt_priority:=30 (a benchmark run alone, where a real G2 is
+        never late) on those three and on no other node, whatever the environment says."""
+        from unittest import mock
         hardware = ["/virtual_controller/rt_priority", "/virtual_io_island/rt_priority", "/virtual_line/rt_priority"]
-        _, params = self.check()
-        self.assertEqual(sorted(k for k in params if k.endswith("/rt_priority")), hardware)
-        self.assertEqual({params[k] for k in hardware}, {0})
-        _, params = self.check("sim_rt_priority:=30")
-        self.assertEqual(sorted(k for k in params if k.endswith("/rt_priority")), hardware)
-        self.assertEqual({params[k] for k in hardware}, {30})
+        for env, expected in ((None, 0), ("10", 10)):
+            environ = {k: v for k, v in os.environ.items() if k != "VR006L_SIM_RT_PRIORITY"}
+            if env is not None:
+                environ["VR006L_SIM_RT_PRIORITY"] = env
+            with mock.patch.dict(os.environ, environ, clear=True):
+                _, params = self.check()
+                self.assertEqual(sorted(k for k in params if k.endswith("/rt_priority")), hardware)
+                self.assertEqual({params[k] for k in hardware}, {expected}, env)
+                _, params = self.check("sim_rt_priority:=30")
+                self.assertEqual(sorted(k for k in params if k.endswith("/rt_priority")), hardware)
+                self.assertEqual({params[k] for k in hardware}, {30})
 
     def test_true_model_reaches_the_virtual_controller_only(self):
         """issue 25: true_model:=FILE gives the virtual G2 its own kinematics; the driver (and the

@@ -224,7 +224,10 @@ def test_loop_blocking_during_a_move(tmp_path):
     assert {"interpreter_lookahead", "ring_size"} <= set(doc["controller"]["not_measured"])
     assert "loop blocks during a MOVE" in doc["commissioning"]["not_measured"]["interpreter_lookahead"]
     assert doc["stream_smooth"] == 0
-    assert abs(doc["controller"]["speed_scale"] - 1.0) <= 0.05           # from the move times: the ramps cancel
+    if "speed_scale" in doc["controller"]:
+        assert abs(doc["controller"]["speed_scale"] - 1.0) <= 0.05       # from the move times: the ramps cancel
+    else:   # a bus cycle late at a move's start or end (beside the suite's real-time tests): said, no figure
+        assert "came late" in doc["commissioning"]["not_measured"]["speed_scale"], text[-3000:]
     # the protocol that works with it; v3 with this G2 is refused at start, in words
     assert doc["protocol"] == "v1"
     with pytest.raises(ParamError) as err:

@@ -459,3 +459,42 @@ def test_joints_with_accelerations_of_their_own_are_not_averaged():
     assert not fit.shared and "joint_1's, the slowest" in fit.words
     for axis, (a, _) in fit.accelerations.items():
         assert a == pytest.approx(acc[axis], rel=0.05)
+
+
+def test_a_move_time_is_dated_by_its_brackets_and_a_late_cycle_says_how_unsure_it_is():
+    """The speed step's move times (a loop that blocks during a MOVE: no record while it moves): each
+    event dated at the middle of the time between the last record without it and the first with it.
+    On a bus cycling every 4 ms that is the request times' difference, sure to the cycle; a cycle 30
+    ms late at the move's end lengthened the time by all of 30 ms (by request times alone), now by
+    half that, and says those 15 ms are unsure -- the step then gives no figure (SPEED_SURE)."""
+    from vr_driver.commission.bus import Cycle
+    from vr_driver.commission.steps import _move_time
+    from vr_driver.driver.link.link import LinkState
+    from vr_driver.protocol.common import StatusBits
+    from vr_driver.protocol.v3 import StreamState
+
+    class Fb:
+        def __init__(self, active, done, moving):
+            self.active_seq, self.done_seq = active, done
+            self.state = StreamState.MOVING if moving else StreamState.IDLE
+            self.status = StatusBits.IN_MOTION if moving else StatusBits(0)
+
+    period = 0.004
+
+    def cycles(late_at_end=0.0):
+        """A move from 0.100 s to 0.520 s (the records change in the loop's writes at those times),
+        requests every 4 ms -- the one that first shows it done ``late_at_end`` s late."""
+        out, t, i = [], 0.0, 0
+        while t < 0.7:
+            fb = Fb(0, 0, False) if t < 0.100 else Fb(5, 0, True) if t < 0.520 else Fb(5, 5, False)
+            out.append(Cycle(i, t, t + 0.002, LinkState.CONNECTED, fb, t + 0.002, b""))
+            i += 1
+            t = round(t + period, 6)
+            if out[-1].feedback.done_seq == 0 and t >= 0.520:
+                t = round(t + late_at_end, 6)
+        return out
+    span, late = _move_time(cycles(), period)
+    assert span == pytest.approx(0.420, abs=period) and late == pytest.approx(0.0, abs=1e-9)
+    span, late = _move_time(cycles(late_at_end=0.030), period)
+    assert span == pytest.approx(0.420 + 0.015, abs=period) and late == pytest.approx(0.015)
+    assert _move_time(cycles()[:20], period) is None       # never seen active: no time

@@ -62,10 +62,6 @@ words = set_process_priority(int(sys.argv[1]))
 tids = [int(t) for t in os.listdir("/proc/self/task")]
 policies = sorted({(os.sched_getscheduler(t), os.sched_getparam(t).sched_priority) for t in tids})
 print(words); print(len(tids), policies)
-if len(sys.argv) > 2:                                        # and back, as a node that ends
-    from vr_driver.bus.worker import leave_real_time
-    left = leave_real_time()
-    print(left, sorted({(os.sched_getscheduler(t), os.sched_getparam(t).sched_priority) for t in tids}))
 release.set()
 '''
 
@@ -77,8 +73,8 @@ def test_virtual_hardware_threads_started_before_are_raised_too():
     import subprocess
     import sys
 
-    def run(priority, *more):
-        res = subprocess.run([sys.executable, "-c", RAISE_ALL, str(priority), *more], capture_output=True, text=True,
+    def run(priority):
+        res = subprocess.run([sys.executable, "-c", RAISE_ALL, str(priority)], capture_output=True, text=True,
                              timeout=60, env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
         assert res.returncode == 0, res.stderr
         return res.stdout.splitlines()
@@ -89,8 +85,6 @@ def test_virtual_hardware_threads_started_before_are_raised_too():
         pytest.skip("real-time priority not granted here: " + words)
     assert words == "SCHED_FIFO 3", words
     assert threads.startswith("2 ") and threads.endswith("[(%d, 3)]" % os.SCHED_FIFO), threads
-    left, after = run(3, "leave")[2].split(" ", 1)
-    assert left == "2" and after == "[(%d, 0)]" % os.SCHED_OTHER, (left, after)
 
 
 SHUTDOWN = r'''
@@ -153,3 +147,43 @@ def test_every_node_starts_through_support_init_node():
     calls = sorted(str(p.relative_to(root)) for d in ("src", "test", "scripts", "nodes") if (root / d).is_dir()
                    for p in (root / d).rglob("*.py") if call in p.read_text(errors="replace"))
     assert set(calls) - {"src/vr_driver/ros/support.py"} == OWN_INIT, calls
+
+
+BACK_AT_SHUTDOWN = r'''
+import os, sys, threading
+import rospy
+from vr_driver.ros import support
+rospy.get_param = lambda name, default=None: int(sys.argv[1])      # ~rt_priority, without a master
+started = threading.Event(); release = threading.Event()
+def idle():
+    started.set(); release.wait()
+before = threading.Thread(target=idle, daemon=True)                 # as rospy's threads, started first
+before.start(); started.wait()
+def policies():
+    tids = [int(t) for t in os.listdir("/proc/self/task")]
+    return sorted({(os.sched_getscheduler(t), os.sched_getparam(t).sched_priority) for t in tids})
+rospy.on_shutdown(support.quiet_shutdown)                          # as support.init_node does
+print(support.virtual_hardware_priority("virtual_x"))
+print(policies())
+rospy.signal_shutdown("test")
+print(policies())
+release.set()
+'''
+
+
+def test_virtual_hardware_goes_back_to_normal_scheduling_as_ros_shuts_down():
+    """A virtual device's node raised to SCHED_FIFO has every thread back at normal scheduling once
+    its ROS shutdown has begun (init_node's hook runs before rospy closes its XML-RPC socket, after which
+    that thread busy-loops until the process ends: at SCHED_FIFO three devices ending at once sat
+    out roslaunch's SIGINT and SIGTERM, 17 s of both cores each time). In a process of its own."""
+    import subprocess
+    import sys
+
+    res = subprocess.run([sys.executable, "-c", BACK_AT_SHUTDOWN, "3"], capture_output=True, text=True,
+                         timeout=60, env=dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p)))
+    assert res.returncode == 0, res.stderr
+    words, raised, after = res.stdout.splitlines()[-3:]
+    if not words.startswith("SCHED_FIFO"):
+        pytest.skip("real-time priority not granted here: " + words)
+    assert raised == "[(%d, 3)]" % os.SCHED_FIFO, raised
+    assert after == "[(%d, 0)]" % os.SCHED_OTHER, after

@@ -25,8 +25,8 @@ The parent's side, :class:`WorkerProcess`::
 The child's side: :func:`child_end` (its end of the socket, a Ctrl-C left to the parent),
 :func:`end_with_parent` (ends the process when the parent's end closes, also while it computes),
 :func:`child_scheduling` (niceness and real-time priority, in words). The scheduling helpers
-(:func:`set_priority`, :func:`set_process_priority`, :func:`normal_scheduling`) are also used by
-the nodes, the commissioning tool and the benchmarks.
+(:func:`set_priority`, :func:`set_process_priority`, :func:`process_normal_scheduling`,
+:func:`normal_scheduling`) are also used by the nodes, the commissioning tool and the benchmarks.
 """
 from __future__ import annotations
 
@@ -41,7 +41,8 @@ from multiprocessing.connection import Connection
 from typing import Callable, List, Optional, Sequence
 
 __all__ = ["WorkerProcess", "WorkerStartError", "FD", "exit_words", "child_end", "end_with_parent",
-           "child_scheduling", "set_priority", "set_process_priority", "normal_scheduling"]
+           "child_scheduling", "set_priority", "set_process_priority", "process_normal_scheduling",
+           "normal_scheduling"]
 
 #: in a worker's arguments: replaced by the number of its end of the socket pair
 FD = "{fd}"
@@ -198,6 +199,25 @@ def set_priority(priority: int) -> str:
     return "SCHED_FIFO %d" % priority
 
 
+def _other_threads(policy: int, priority: int, tasks: str) -> int:
+    """``policy`` at ``priority`` for every thread of the process but the calling one (listed in
+    ``tasks``); how many could not be set (a thread that ended meanwhile, or refused)."""
+    me = threading.get_native_id()
+    failed = 0
+    try:
+        tids: List[int] = [int(t) for t in os.listdir(tasks) if t.isdigit()]
+    except OSError:
+        return 0
+    for tid in tids:
+        if tid == me:
+            continue
+        try:
+            os.sched_setscheduler(tid, policy, os.sched_param(priority))
+        except (PermissionError, OSError):
+            failed += 1
+    return failed
+
+
 def set_process_priority(priority: int, tasks: str = "/proc/self/task") -> str:
     """:func:`set_priority` for the calling thread, then the same policy for every other thread the
     process has already (on Linux the policy is a thread's: those started before -- rospy's, at
@@ -209,39 +229,17 @@ def set_process_priority(priority: int, tasks: str = "/proc/self/task") -> str:
     words = set_priority(priority)
     if priority <= 0 or not words.startswith("SCHED_FIFO"):
         return words
-    me = threading.get_native_id()
-    failed = 0
-    try:
-        tids: List[int] = [int(t) for t in os.listdir(tasks) if t.isdigit()]
-    except OSError:
-        return words
-    for tid in tids:
-        if tid == me:
-            continue
-        try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
-        except (PermissionError, OSError):
-            failed += 1                     # a thread that ended meanwhile, or refused
+    failed = _other_threads(os.SCHED_FIFO, priority, tasks)
     return words + ("" if not failed else " (%d of its other threads not raised)" % failed)
 
 
-def leave_real_time(tasks: str = "/proc/self/task") -> int:
-    """Every thread of the calling process back at normal scheduling (SCHED_OTHER), those at
-    SCHED_FIFO or SCHED_RR only (leaving real-time scheduling needs no privilege); for a process that
-    ends: nothing of its shutdown runs above the host's other work. Returns how many threads left."""
-    left = 0
-    try:
-        tids: List[int] = [int(t) for t in os.listdir(tasks) if t.isdigit()]
-    except OSError:
-        return 0
-    for tid in tids:
-        try:
-            if os.sched_getscheduler(tid) in (os.SCHED_FIFO, os.SCHED_RR):
-                os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))
-                left += 1
-        except (PermissionError, OSError, AttributeError):
-            pass                            # a thread that ended meanwhile
-    return left
+def process_normal_scheduling(tasks: str = "/proc/self/task") -> None:
+    """Every thread of the process back at normal scheduling (:func:`normal_scheduling` for the
+    calling one, the same for the others): what a process raised with :func:`set_process_priority`
+    does before work that may spin -- a node's ROS shutdown (ros/support.py,
+    virtual_hardware_priority). Leaving SCHED_FIFO needs no privilege."""
+    normal_scheduling()
+    _other_threads(os.SCHED_OTHER, 0, tasks)
 
 
 def normal_scheduling() -> None:

@@ -36,7 +36,6 @@ def main() -> int:
     unknown = sorted(k for k in params if k not in PARAMS)
     if unknown:
         rospy.logwarn("virtual_io_island: ignoring unknown parameter(s) %s", ", ".join(unknown))
-    virtual_hardware_priority("virtual_io_island")
     device = params.get("device") or None
 
     def make() -> VirtualIoIsland:
@@ -55,6 +54,7 @@ def main() -> int:
     service = rospy.Service("~set_part_present", SetBool, set_part_present)
     rospy.on_shutdown(island.request_stop)
     island.start()
+    virtual_hardware_priority("virtual_io_island")        # once it runs: its set-up at normal priority
     rospy.set_param("~device_path", island.device_path)
     rospy.loginfo("virtual_io_island: DP slave %d on %s%s", island.address, island.device_path,
                   " (linked at %s)" % island.symlink if island.symlink else "")

@@ -28,14 +28,16 @@ def init_node(name: str, **kwargs: Any) -> None:
     CPU in ``serve_forever`` during ``signal_shutdown``; a bus process at SCHED_FIFO 20 beside it went
     7 s without a cycle, and the card's watchdog expired). The first shutdown hook here ends that loop
     before the socket is closed, and puts every thread of the node back at normal scheduling: a node
-    that ends has no deadline left (:func:`end_rpc_loop`, :func:`~vr_driver.bus.worker.leave_real_time`)."""
+    that ends has no deadline left (:func:`end_rpc_loop`, :func:`~vr_driver.bus.worker.process_normal_scheduling`)."""
     rospy.init_node(name, **kwargs)
-    rospy.on_shutdown(_quiet_shutdown)
+    rospy.on_shutdown(quiet_shutdown)
 
 
-def _quiet_shutdown() -> None:
-    from ..bus.worker import leave_real_time
-    leave_real_time()
+def quiet_shutdown() -> None:
+    """The first shutdown hook of every node of ours (:func:`init_node`): every thread back at normal
+    scheduling, rospy's XML-RPC loop ended before its socket closes."""
+    from ..bus.worker import process_normal_scheduling
+    process_normal_scheduling()
     end_rpc_loop()
 
 
@@ -78,17 +80,26 @@ class RosoutHandler(logging.Handler):
 #: default: none (normal scheduling). ``~rt_priority`` N asks for it: the devices stand for hardware,
 #: which is never late -- but on a small machine the simulated hardware's CPU is the host's: with
 #: three tests side by side, their devices at SCHED_FIFO 30 starved the bus processes past the card's
-#: watchdog, and at 10 the driver nodes (joint_states at 13 of 20 /s, a link judged lost). Much of
-#: that was each node's shutdown spinning in rospy's XML-RPC loop at its real-time priority, for
-#: seconds (found with py-spy; :func:`init_node` ends that loop first)
+#: watchdog. (At 10 they once starved the driver nodes too -- joint_states at 13 of 20 /s, a link
+#: judged lost: the spin at shutdown, see init_node; scripts/test now runs them at 10.)
 VIRTUAL_RT_PRIORITY = 0
 
 
 def virtual_hardware_priority(name: str) -> str:
     """Ask for SCHED_FIFO ``~rt_priority`` (default VIRTUAL_RT_PRIORITY: 0, normal) for this node's
     threads -- the calling one and those rospy started at init_node
-    (:func:`~vr_driver.bus.worker.set_process_priority`); call it before the device's threads
-    start: they inherit it -- and log how it is scheduled, once. Returns that, in words."""
+    and the device's (:func:`~vr_driver.bus.worker.set_process_priority` raises every thread the
+    process has; later ones inherit it); call it once the device is made and runs, so that its
+    set-up (the virtual G2's kinematics) is not real-time work -- and log how it is scheduled, once.
+    Returns that, in words.
+
+    Raised, the node goes back to normal scheduling, every thread, as its ROS shutdown begins
+    (:func:`init_node`'s first shutdown hook, which also ends rospy's XML-RPC loop before its socket
+    closes): that loop busy-loops from the moment its server socket is closed until the process
+    ends, and at SCHED_FIFO the three devices' spinning threads took both cores and kept their own
+    main threads from ever ending: each node sat out roslaunch's SIGINT and SIGTERM (15 + 2 s) and
+    was killed -- at each of a rostest's launches, while everything at normal priority (the other
+    lanes' tests) got 5 % of the CPU."""
     from ..bus.worker import set_process_priority
     try:
         priority = int(rospy.get_param("~rt_priority", VIRTUAL_RT_PRIORITY))

@@ -82,7 +82,6 @@ def main() -> int:
     params, unknown = split_params(rospy.get_param("~", {}) or {})
     if unknown:
         rospy.logwarn("virtual_controller: ignoring unknown parameter(s) %s", ", ".join(unknown))
-    virtual_hardware_priority("virtual_controller")
 
     def read_options() -> SimOptions:
         if params.get("pty_link") == AUTO_LINK:
@@ -118,6 +117,7 @@ def main() -> int:
     services = [rospy.Service("~" + name, SetBool, handler(fault)) for name, fault in _SERVICES]
     rospy.on_shutdown(controller.request_stop)     # e.g. rosnode kill; the real stop is below
     controller.start()
+    virtual_hardware_priority("virtual_controller")      # once it runs: its set-up at normal priority
     rospy.set_param("~device_path", controller.device_path)
     rospy.loginfo("virtual_controller: DP slave %d on %s%s, speed x%g", options.address, controller.device_path,
                   " (linked at %s)" % controller.symlink if controller.symlink else "", options.speed_factor)

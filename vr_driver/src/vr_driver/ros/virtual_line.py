@@ -34,7 +34,6 @@ def main() -> int:
     stop = stop_on_signals()
     init_node("virtual_line", disable_signals=True)
     route_to_rosout("vr_driver", "pyprofibus_vendor")
-    virtual_hardware_priority("virtual_line")
 
     def make() -> LineHub:
         raw = rospy.get_param("~stations", [AUTO_LINK, AUTO_LINK + ":io_island"])
@@ -60,6 +59,7 @@ def main() -> int:
                   hub.adapter.behaviour.describe() if hub.adapter is not None else "a perfect one")
     halt = threading.Event()
     rospy.on_shutdown(halt.set)
+    virtual_hardware_priority("virtual_line")             # once it is made: its set-up at normal priority
     status = EXIT_OK
     try:
         while not rospy.is_shutdown() and not stop.is_set() and not halt.is_set():
