@@ -33,12 +33,15 @@ from __future__ import annotations
 import copy
 import dataclasses
 import math
-from typing import Any, List, Optional, Tuple
+from typing import TYPE_CHECKING, List, Optional, Tuple
 
 from ...params import ControllerFacts, DriverParams, read_planning_limits
 from ...protocol.base import Protocol
 from ..motion.stream_points import MIN_SEGMENT_CYCLES
 from .wire_targets import CARTESIAN_MAX_STEP
+
+if TYPE_CHECKING:
+    from ...kinematics.solver import Kinematics
 
 __all__ = ["controller_notes", "feed_cycles", "min_segment_cycles", "planning_kinematics", "plain_names"]
 
@@ -74,7 +77,7 @@ def min_segment_cycles(params: DriverParams, wire: Optional[Protocol] = None) ->
         / max(1, params.controller.interpreter_lookahead)
 
 
-def planning_kinematics(params: DriverParams, kin: Any) -> Any:
+def planning_kinematics(params: DriverParams, kin: Kinematics) -> Kinematics:
     """The model the plan action plans with: ``kin`` itself without ``planning_limits``; else a
     shallow copy of it (the same solver: use it in one thread, as ``kin``) whose joint speed and
     acceleration limits are the file's (position limits stay the model's)."""
@@ -95,7 +98,7 @@ def _ramp_words(params: DriverParams, model_ramp: Optional[float]) -> str:
     return "the arm's ramp time"
 
 
-def controller_notes(params: DriverParams, kin: Any = None) -> Tuple[str, ...]:
+def controller_notes(params: DriverParams, kin: Optional[Kinematics] = None) -> Tuple[str, ...]:
     """What the commissioned G2 changes, in words, one sentence each (empty: the G2 as assumed, or
     no commissioning). ``kin``: the driver's model (its ramp time and speed limits, for the
     figures; None: said without them)."""
@@ -173,7 +176,7 @@ def _not_measured_words(params: DriverParams) -> str:
     return text + " -- commission again once the program changed (doc/commissioning.md)"
 
 
-def _speed_words(params: DriverParams, kin: Any) -> str:
+def _speed_words(params: DriverParams, kin: Optional[Kinematics]) -> str:
     scale = params.controller.speed_scale
     text = ("MOVEP's speed unit is x%.3g (controller/speed_scale): the driver sends each stream speed "
             "divided by %.3g so that the arm runs the planned time" % (scale, scale))

@@ -30,6 +30,7 @@ import numpy as np
 
 from ...errors import ProtocolError
 from ...kinematics.preview import at_tcp_speed, peak_tcp_speed
+from ...kinematics.solver import Kinematics
 from ...protocol.base import Protocol
 
 __all__ = ["Announced", "HANDSHAKE_CYCLES", "STREAM_LATENCY_CYCLES", "announce_moves", "announce_plan",
@@ -59,7 +60,7 @@ class Announced:
     program: bool = False
 
 
-def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequence[float]]) -> float:
+def plan_peak_speed(kin: Kinematics, times: Sequence[float], positions: Sequence[Sequence[float]]) -> float:
     """[mm/s] the TCP's largest speed along a planned joint path (between consecutive samples)."""
     if len(times) < 2:
         return 0.0
@@ -70,7 +71,7 @@ def plan_peak_speed(kin: Any, times: Sequence[float], positions: Sequence[Sequen
     return float(np.max(dp[moving] / dt[moving], initial=0.0))
 
 
-def announce_plan(kin: Any, wire: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
+def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
                   previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0,
                   stream: Sequence[Any] = ()) -> Announced:
     """The figures of a planned trajectory on the protocol ``wire``: a streaming protocol its timing --

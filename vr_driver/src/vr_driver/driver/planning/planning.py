@@ -62,7 +62,7 @@ from ...kinematics import deps
 from ...kinematics.planner import (DEFAULT_CLEARANCE, PLANNERS, BatchValidity, PlannedTrajectory, Planner, PlanningError,
                                    joint_weights, pose_target)
 from ...kinematics.roadmap import Roadmap
-from ...kinematics.solver import ConfigurationRule, stretched_elbow
+from ...kinematics.solver import ConfigurationRule, Kinematics, stretched_elbow
 from ...poses import ControllerPose, Workspace
 from ..checks.commissioned import planning_kinematics
 
@@ -217,7 +217,7 @@ class CellValidity:
     outside the box shrunk by ``margin`` [mm]), ``contacts(q)`` naming them, ``copy()``, ``padding`` /
     ``set_padding`` (the planner's clearance: raising the padding by x also shrinks the box by x)."""
 
-    def __init__(self, checker: Any, kinematics: Any, workspace: Workspace, margin: float = 0.0,
+    def __init__(self, checker: Any, kinematics: Kinematics, workspace: Workspace, margin: float = 0.0,
                  padding: float = 0.0, counter: Optional[List[int]] = None) -> None:
         self.checker = checker
         #: [checks made by this validity and its copies] (the plan action's profile)
@@ -412,7 +412,7 @@ def code_of(exc: PlanningError) -> int:
     return INVALID_MOTION_PLAN
 
 
-def arm_points(kinematics: Any, q: Sequence[float]) -> List[Tuple[float, float, float]]:
+def arm_points(kinematics: Kinematics, q: Sequence[float]) -> List[Tuple[float, float, float]]:
     """The origins of the chain's segments at ``q`` in the chain root [m], base to tip, repeated points
     left out: a stick figure of the arm (the planned sweep in RViz)."""
     import PyKDL as kdl
@@ -936,7 +936,7 @@ def plan_with_crossing(planner: Planner, start: Tuple[float, ...], target: Any,
     return first.then(planner.plan(near, target, via=(past,), time_budget=left, seed=seed), ELBOW_HOLD)
 
 
-def driver_sends(core: Any, kin: Any, plan: PlannedTrajectory) -> Tuple[str, Tuple[Any, ...], Tuple[Any, ...]]:
+def driver_sends(core: Any, kin: Kinematics, plan: PlannedTrajectory) -> Tuple[str, Tuple[Any, ...], Tuple[Any, ...]]:
     """What ``core`` (a DriverCore or the planning process's parts) would send for ``plan`` and why it
     would refuse it: ("", its stream points, its previews) or (the refusal, (), ()). Checked as
     ``submit_trajectory`` checks it (``core.prepare_trajectory``) -- a streaming protocol's stream (its
