@@ -498,3 +498,27 @@ def test_a_move_time_is_dated_by_its_brackets_and_a_late_cycle_says_how_unsure_i
     span, late = _move_time(cycles(late_at_end=0.030), period)
     assert span == pytest.approx(0.420 + 0.015, abs=period) and late == pytest.approx(0.015)
     assert _move_time(cycles()[:20], period) is None       # never seen active: no time
+
+
+def test_one_move_at_speed_from_rounds_that_agree():
+    """The speed step's time of one L at speed (a loop that blocks during a MOVE): per round of +L,
+    -2L, +L the 2L move less the mean of the L moves; two rounds must agree within SPEED_SURE, or no
+    figure is given -- a controller that answered a move late lengthens it with every bus cycle on
+    time (a fresh-clone run read x 1.094 for x 1 from one round); a round the bus's own lateness
+    leaves unsure is not used, and none usable gives no figure, in words."""
+    from vr_driver.commission.steps import SPEED_SURE, _one_move_at_speed
+    ok = [(0.468, 0.0), (0.888, 0.0), (0.468, 0.0)]
+    d, why = _one_move_at_speed(ok + ok)
+    assert d == pytest.approx(0.420) and why == ""
+    assert _one_move_at_speed(ok)[0] == pytest.approx(0.420)                   # one round: as before
+    late_answer = [(0.468, 0.0), (0.888, 0.0), (0.540, 0.0)]                     # an L move 72 ms long
+    d, why = _one_move_at_speed(late_answer + ok)
+    assert d is None and "0.384 and 0.420 s for one L at speed" in why, why
+    within = [(0.468, 0.0), (0.888 + 0.5 * SPEED_SURE * 0.42, 0.0), (0.468, 0.0)]
+    assert _one_move_at_speed(within + ok)[0] == pytest.approx(0.420 + 0.25 * SPEED_SURE * 0.42)
+    unsure = [(0.468, 0.0), (0.918, 0.015), (0.468, 0.0)]                        # a cycle late at its end
+    assert _one_move_at_speed(unsure + ok)[0] == pytest.approx(0.420)          # the sure round alone
+    d, why = _one_move_at_speed(unsure)
+    assert d is None and "unsure by up to 15 ms" in why, why
+    d, why = _one_move_at_speed([(0.5, 0.0), (0.5, 0.0), (0.5, 0.0)])
+    assert d is None and "no longer than the L moves" in why
