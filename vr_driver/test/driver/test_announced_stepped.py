@@ -143,3 +143,27 @@ def test_v3_says_the_time_the_bus_adds_to_a_plan_whose_first_samples_come_faster
     assert said.duration == pytest.approx(times[-1] + hold + STREAM_LATENCY_CYCLES * world.core.bus_cycle(), abs=0.01)
     took, _top = run(world, times, points)
     assert took == pytest.approx(said.duration, rel=AGREE), (took, said.words)
+
+
+def test_a_segment_the_bus_stretches_is_said_at_its_slower_speed(kin):
+    """Where the stream shifts later points (the bus brings them slower than the plan passes them),
+    the plan's samples between two points run as the two are shifted (fed_times), and the TCP's top
+    speed said is the plan's as it runs so: a run said at 1055 mm/s went at most 846 where its
+    fastest segment was stretched. A constant shift (the hold's lead alone) changes no speed."""
+    from types import SimpleNamespace as P
+
+    from vr_driver.driver.motion.announced import fed_times, plan_peak_speed
+    times = [0.1 * k for k in range(11)]
+    q0 = (0.0, 0.3, -0.6, 0.0, 0.5, 0.0)
+    positions = [tuple(v + (0.05 * k if j == 0 else 0.0) for j, v in enumerate(q0)) for k in range(11)]
+    constant = [P(time=t, fed=t + 0.2, hold=False) for t in (0.0, 0.5, 1.0)]
+    assert fed_times(times, constant) == pytest.approx([t + 0.2 for t in times])
+    assert plan_peak_speed(kin, fed_times(times, constant), positions) == pytest.approx(
+        plan_peak_speed(kin, times, positions))
+    stretched = [P(time=0.0, fed=0.2, hold=False), P(time=0.5, fed=0.7, hold=False), P(time=1.0, fed=1.45, hold=False),
+                 P(time=0.0, fed=0.2, hold=True)]                    # (the hold is not a point of the plan)
+    shifted = fed_times(times, stretched)
+    assert shifted[5] == pytest.approx(0.7) and shifted[10] == pytest.approx(1.45)
+    assert shifted[7] == pytest.approx(0.7 + 0.2 * 1.5)                # the segment 0.5-1.0 s runs 1.5 x its time
+    assert plan_peak_speed(kin, shifted, positions) < plan_peak_speed(kin, times, positions)
+    assert fed_times(times, []) == times

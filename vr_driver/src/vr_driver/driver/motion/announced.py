@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, List, Sequence
 
 import numpy as np
 
@@ -33,7 +33,7 @@ from ...kinematics.preview import at_tcp_speed, peak_tcp_speed
 from ...kinematics.solver import Kinematics
 from ...protocol.base import Protocol
 
-__all__ = ["Announced", "HANDSHAKE_CYCLES", "STREAM_LATENCY_CYCLES", "announce_moves", "announce_plan",
+__all__ = ["Announced", "HANDSHAKE_CYCLES", "STREAM_LATENCY_CYCLES", "announce_moves", "announce_plan", "fed_times",
            "plan_peak_speed", "program_duration", "scaling_words"]
 
 #: bus cycles a stream takes besides the plan's time: its first target reaches the controller's program
@@ -71,6 +71,18 @@ def plan_peak_speed(kin: Kinematics, times: Sequence[float], positions: Sequence
     return float(np.max(dp[moving] / dt[moving], initial=0.0))
 
 
+def fed_times(times: Sequence[float], stream: Sequence[Any]) -> List[float]:
+    """The plan's sample ``times`` as its ``stream`` (driver.motion.jobs.StreamPoint) runs them: each
+    stream point's planned ``time`` moved to its ``fed`` arrival, the samples between two points moved
+    as the two are (linearly), those before the first fed point and after the last by their shift."""
+    pts = sorted((float(p.time), float(p.fed)) for p in stream if p.fed is not None and not p.hold)
+    if not pts:
+        return [float(t) for t in times]
+    planned = np.array([t for t, _ in pts])
+    shift = np.array([f - t for t, f in pts])
+    return [float(t) + float(np.interp(t, planned, shift)) for t in times]
+
+
 def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
                   previews: Sequence[Any] = (), params: Any = None, cycle_time: float = 0.0,
                   stream: Sequence[Any] = ()) -> Announced:
@@ -80,7 +92,9 @@ def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], posit
     then runs the plan's own timing), and later than that only where the bus still brings a target
     later than the plan passes it (its last point's ``fed`` arrival) -- and
     :data:`STREAM_LATENCY_CYCLES` of ``cycle_time`` (the bus cycle [s]); the TCP's top speed is the
-    plan's (the hold is slower, no segment faster). v1 (no stream): the PTP ``previews`` it sends
+    plan's (the hold is slower, no segment faster) -- where later points are shifted, the plan's as
+    the stream runs it (:func:`fed_times`: a peak on a segment the bus stretches is lower; a run said
+    at 1055 mm/s went at most 846). v1 (no stream): the PTP ``previews`` it sends
     between the plan's stop points (``JobControl.prepare_trajectory``), at ``params.controller``'s
     program speed, each with its handshake."""
     if wire.streams:
@@ -90,7 +104,7 @@ def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], posit
         lead = first.fed - float(first.time) if first is not None and first.hold and first.fed is not None else 0.0
         late = max(0.0, last.fed - float(last.time)) if last is not None and last.fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
-        top = plan_peak_speed(kin, times, positions)
+        top = plan_peak_speed(kin, fed_times(times, stream) if late - lead > 0.005 else times, positions)
         said = planned + late + latency
         parts = ["the plan's %.2f s" % planned]
         if lead > 0.005:
