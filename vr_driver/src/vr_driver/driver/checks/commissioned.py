@@ -69,9 +69,9 @@ def min_segment_cycles(params: DriverParams, wire: Optional[Protocol] = None) ->
     """The shortest stream segment [bus cycles] the bus feeds without a gap, for this G2:
     MIN_SEGMENT_CYCLES with the assumed G2 (an interpreter look-ahead of 1, targets sent ahead);
     divided by the look-ahead where it is larger (the interpreter holds that many points beyond the
-    one the arm runs to: the next target may come that much later); times :func:`feed_cycles` (doubled where the master
-    sends one target per acknowledgement). A look-ahead of 0 counts
-    as 1: every point is a stop there, the segments' length does not starve anything. ``wire``: the
+    one the arm runs to: the next target may come that much later); times :func:`feed_cycles`
+    (doubled where the master sends one target per acknowledgement). A look-ahead of 0 counts as 1:
+    every point is a stop there, the segments' length does not starve anything. ``wire``: the
     protocol object when the caller holds it (``params.wire`` builds one at every call)."""
     return MIN_SEGMENT_CYCLES * feed_cycles(params.wire if wire is None else wire) \
         / max(1, params.controller.interpreter_lookahead)

@@ -104,12 +104,13 @@ def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], posit
         lead = first.fed - float(first.time) if first is not None and first.hold and first.fed is not None else 0.0
         late = max(0.0, last.fed - float(last.time)) if last is not None and last.fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
-        top = plan_peak_speed(kin, fed_times(times, stream) if late - lead > 0.005 else times, positions)
+        shifted = late - lead > 0.005                 # later points than the hold's lead alone
+        top = plan_peak_speed(kin, fed_times(times, stream) if shifted else times, positions)
         said = planned + late + latency
         parts = ["the plan's %.2f s" % planned]
         if lead > 0.005:
             parts.append("a %.2f s hold at the start while the bus brings its first targets" % lead)
-        if late - lead > 0.005:
+        if shifted:
             parts.append("%.2f s more where it brings later ones slower than the plan passes them" % (late - lead))
         if latency:
             parts.append("the bus's %g cycles to the arm and back" % STREAM_LATENCY_CYCLES)

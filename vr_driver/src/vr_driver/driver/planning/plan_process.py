@@ -362,6 +362,8 @@ class PlanningParts:
         self.planning_gate = threading.Lock()
         self.node_min_segment: Optional[float] = None
         self._cycle_rate = params.bus().cycle_rate_hz
+        # the bus cycles a stream segment needs at least: fixed for the worker's life, as DriverCore's
+        self._segment_cycles = min_segment_cycles(params, self.wire)
         self.checks = PathChecks(self.kin, MovePreviewer(self.kin), params.workspace, self.planning_gate,
                                  SceneGuard(self.kin, self.planning_gate, Scene(), params.collision_padding,
                                             params.collision_check, params.prefix, model=params.model),
@@ -376,7 +378,7 @@ class PlanningParts:
     def min_segment(self) -> float:
         if self.node_min_segment is not None:
             return self.node_min_segment
-        return min_segment_cycles(self.params) / self._cycle_rate
+        return self._segment_cycles / self._cycle_rate
 
     def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]
                            ) -> Tuple[List[int], Tuple[StreamPoint, ...], List[Preview]]:
