@@ -225,23 +225,19 @@ class PlanningTest(DriverTestBase):
         top = top_tcp_speed(self.kin, samples, 0.05)
         # the TCP's top speed: joint_states sample the run at the bus cycle (a late cycle on a loaded
         # machine: 190 ms, seen in CI), so the top measured is an average over each sample's interval;
-        # the plan is averaged the same way -- at the same stamps, from the start that fits the run best
-        times = [p.time_from_start.to_sec() for p in result.trajectory.points]
-        _, off, planned = plan_as_sampled(times, points, samples)
+        # the run said before it ran is averaged the same way -- the plan at its run_times (the hold,
+        # later points shifted where the bus brings them later: one start offset no longer fits the
+        # plan's own times, 13-26 deg off on the stepped world, 0.4-1.6 deg at run_times), at the run's
+        # stamps, from the start that fits the run best
+        self.assertEqual(len(result.run_times), len(points))
+        self.assertTrue(0.09 < result.run_duration - result.run_times[-1] < 0.51,       # the bus's 3 cycles
+                        (result.run_duration, result.run_times[-1]))
+        _, off, planned = plan_as_sampled(result.run_times, points, samples)
         expected = top_tcp_speed(self.kin, planned, 0.05)
-        said = "said %.0f mm/s, the plan at the run's stamps %.0f mm/s, ran %.0f mm/s" % (
+        said = "said %.0f mm/s, the run said at the run's stamps %.0f mm/s, ran %.0f mm/s" % (
             result.run_peak_tcp_speed, expected, top)
-        rospy.loginfo("planning_check: %s (the run at most %.2f deg from the plan)", said, math.degrees(off))
-        if re.search(r"s more where it brings later ones slower", result.run_words):
-            # later points shifted: where the bus stretches the plan's fastest segment the stream runs
-            # it slower, and what is said is the plan as the stream runs it (announced.fed_times); the
-            # run is sampled as the plan was at the run's stamps, so the said figure is taken down
-            # by the same ratio (a run said at 1055 mm/s, the plan at its stamps 1050, went 846)
-            raw = top_tcp_speed(self.kin, list(zip(times, points)), 0.05)
-            expected = result.run_peak_tcp_speed * (expected / raw if raw > 0 else 1.0)
-            said += ", said as sampled %.0f mm/s" % expected
-        else:
-            self.assertLessEqual(expected, 1.05 * result.run_peak_tcp_speed, said)
+        rospy.loginfo("planning_check: %s (the run at most %.2f deg from the one said)", said, math.degrees(off))
+        self.assertLessEqual(expected, 1.05 * result.run_peak_tcp_speed, said)
         if waited is None:
             self.assertAlmostEqual(top, expected, delta=0.1 * expected, msg=said)
         else:

@@ -167,3 +167,45 @@ def test_a_segment_the_bus_stretches_is_said_at_its_slower_speed(kin):
     assert shifted[7] == pytest.approx(0.7 + 0.2 * 1.5)                # the segment 0.5-1.0 s runs 1.5 x its time
     assert plan_peak_speed(kin, shifted, positions) < plan_peak_speed(kin, times, positions)
     assert fed_times(times, []) == times
+
+
+def test_a_run_whose_later_points_the_bus_brings_later_keeps_the_times_said(kin):
+    """A plan dense all along on the 19.2 kbit/s line (test_stream_timing_stepped.dense: more targets
+    than the bus brings in its time): the stream holds at the start and reaches later points later
+    (stream_points.fed_schedule). What is said before it runs gives each point's time as the stream
+    runs it (Announced.times), and the run follows those times -- not the plan's own, which no single
+    start delay fits -- and keeps the time and the TCP's top speed said within 10 %."""
+    from _paced import PacedWorld
+    from driver_check import plan_as_sampled, top_tcp_speed
+    from test_stream_timing_stepped import dense
+    from test_wire_supervision_stepped import START
+    world = PacedWorld(kin, protocol="v3", initial_pose=kin.fk_pose(START))
+    world.ready()
+    world.run_for(1.0)
+    q0 = tuple(world.status().joints)
+    times, points = dense(q0)
+    times, points = [0.0] + times, [q0] + points
+    said = world.core.announce(times, points)
+    assert "more where it brings later ones slower than the plan passes them" in said.words, said.words
+    assert len(said.times) == len(times) and said.times[-1] > times[-1] + said.times[0] + 0.05
+    assert all(b >= a for a, b in zip(said.times, said.times[1:]))
+    samples = []
+
+    def arm():
+        q, t = world.arm.stepped_joints()
+        if not samples or t > samples[-1][0]:
+            samples.append((t, tuple(q)))
+        return False
+    traj = validated(world, times[1:], points[1:])
+    trajectory_run = world.core.submit_trajectory(traj, started=world.now)
+    world.run_until(lambda: arm() or trajectory_run.done, 30.0, "the run")
+    assert trajectory_run.success and trajectory_run.jobs[0].gaps == 0
+    took = max(job.ended_at for job in trajectory_run.jobs) - trajectory_run.first_sent
+    assert took == pytest.approx(said.duration, rel=AGREE), (took, said.words)
+    moving = [s for s in samples if s[0] >= trajectory_run.first_sent]
+    _, off_said, at_said = plan_as_sampled(said.times, points, moving)
+    _, off_plan, _ = plan_as_sampled(times, points, moving)
+    assert off_said < math.radians(0.5) < off_plan, (math.degrees(off_said), math.degrees(off_plan))
+    top = top_tcp_speed(world.kin, moving, 0.02)
+    assert top == pytest.approx(said.top_speed, rel=AGREE), (top, said.top_speed)
+    assert top_tcp_speed(world.kin, at_said, 0.02) <= 1.05 * said.top_speed

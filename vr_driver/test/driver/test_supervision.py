@@ -231,6 +231,15 @@ def test_later_than_goal_time_tolerance_is_goal_tolerance_violated():
     assert out.error_string.startswith("reached 1.00 s after the planned end (goal_time_tolerance 0.50 s); "
                                        "ran 1.50 x the planned 2.00 s")
     assert sup.finish(T0 + 2.4, True, END).state == SUCCEEDED
+    # a run whose time was said before it ran (a hold at the start, the bus's cycles: 2.3 s from its
+    # first target, sent 0.05 s after the start) is late against that end, not the plan's
+    run.jobs[0].left_at = T0 + 0.05
+    said = TrajectorySupervisor(traj, run, T0, V2, NAMES, said=2.3)
+    assert said.finish(T0 + 2.8, True, END).state == SUCCEEDED           # 0.45 s after the planned end
+    out = said.finish(T0 + 2.9, True, END)                                # 0.55 s after the said end
+    assert (out.state, out.error_code) == (ABORTED, GOAL_TOLERANCE_VIOLATED)
+    assert out.error_string.startswith("reached 0.55 s after the end said before it ran (2.30 s after its first "
+                                       "target) (goal_time_tolerance 0.50 s); ")
     # without a goal_time_tolerance, late is fine
     untimed = plan(V2)
     assert TrajectorySupervisor(untimed, stream_run(untimed), T0, V2, NAMES).finish(

@@ -239,6 +239,7 @@ class PlanServer:
             result.run_words = "its run not worked out: %s" % exc
         else:
             result.run_duration, result.run_peak_tcp_speed = announced.duration, announced.top_speed
+            result.run_times = list(announced.times)
             warning = scaling_words(announced, velocity_scaling, default, result.peak_tcp_speed or math.inf)
             result.run_words = "%s%s" % (warning + "; " if warning else "", announced.words)
         result.error_string += "; " + result.run_words

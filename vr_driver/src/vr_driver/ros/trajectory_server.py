@@ -164,13 +164,15 @@ class TrajectoryServer:
             return
         if self.on_run is not None:
             self.on_run(run)                 # feedback_states: desired = this plan from now on
+        said = 0.0
         try:
-            announced = self.core.announce_run(run).words
+            announced = self.core.announce_run(run)
+            words, said = announced.words, announced.duration
         except (VrDriverError, DriverError) as exc:     # (cannot happen: the run's own checks passed)
-            announced = "not worked out (%s)" % exc
-        rospy.loginfo("joint_trajectory_action: %s", announced)
+            words = "not worked out (%s)" % exc
+        rospy.loginfo("joint_trajectory_action: %s", words)
         sup = TrajectorySupervisor(traj, run, run.started, self.core.wire, self.names,
-                                   accelerations=self._accelerations())
+                                   accelerations=self._accelerations(), said=said)
         self._draw("trajectory_plan", [self._tcp(q) for q in self._dense(traj)], (1.0, 0.9, 0.1))
         last_draw = rospy.get_time()
         fb = FollowJointTrajectoryFeedback(joint_names=self.names)
@@ -217,7 +219,7 @@ class TrajectoryServer:
         outcome = sup.finish_status(self.core.clock(), status)
         rospy.loginfo("joint_trajectory_action: %s", outcome.note)
         result = FollowJointTrajectoryResult(error_code=outcome.error_code, error_string="%s; said before it ran: %s"
-                                             % (outcome.error_string, announced))
+                                             % (outcome.error_string, words))
         if outcome.state == SUCCEEDED:
             goal.set_succeeded(result)
         elif outcome.state == CANCELED:

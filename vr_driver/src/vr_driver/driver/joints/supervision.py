@@ -13,7 +13,8 @@ status (or just the joints), publishes what each step returns, and sets the :cla
   kept; its largest value is in the note and in :attr:`Outcome.max_time_deviation`.
 - At the end (:meth:`TrajectorySupervisor.finish`): cancelled / preempted / shut down -> canceled;
   the path left or a job failed -> aborted; the final joints outside the goal tolerance, or (a
-  streaming protocol) later than ``goal_time_tolerance`` after the planned end ->
+  streaming protocol) later than ``goal_time_tolerance`` after the end said before it ran (the plan,
+  its hold at the start, later points, the bus's cycles; else the planned end) ->
   GOAL_TOLERANCE_VIOLATED; otherwise succeeded. The error_string always ends with the note on how
   the run's time compared with the plan, in the protocol's own terms (its ``name`` and whether it
   ``streams``). v1 stops at each point and moves at the controller's own speed: its time is
@@ -121,8 +122,11 @@ class TrajectorySupervisor:
 
     def __init__(self, traj: ValidTrajectory, run: Any, started: float, wire: Protocol,
                  joint_names: Optional[Sequence[str]] = None,
-                 accelerations: Optional[Sequence[float]] = None) -> None:
+                 accelerations: Optional[Sequence[float]] = None, said: float = 0.0) -> None:
         self.traj = traj
+        #: [s] the run's duration said before it ran, from its first target (announced.Announced.duration:
+        #: the plan, its hold at the start, later points, the bus's cycles to the arm and back); 0: not said
+        self.said = float(said)
         self.accelerations = None if accelerations is None else tuple(float(a) for a in accelerations)
         self.run = run
         self.started = started
@@ -389,13 +393,24 @@ class TrajectorySupervisor:
             name, err, tol = bad[0]
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "%s ended %.4f rad from the goal (tolerance "
                            "%.4f%s); %s" % (name, err, tol, self._band_note(joints) if in_band else "", note))
-        late = elapsed - traj.duration
+        late, end = self.lateness(now)
         if self.wire.streams and traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
-            return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "reached %.2f s after the planned end "
-                           "(goal_time_tolerance %.2f s); %s" % (late, traj.goal_time_tolerance, note))
+            return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "reached %.2f s after %s (goal_time_tolerance "
+                           "%.2f s); %s" % (late, end, traj.goal_time_tolerance, note))
         if traj.per_configuration is not None:
             return outcome(SUCCEEDED, SUCCESSFUL, "%s; %s" % (note, self._goal_words(joints, checks, in_band)))
         return outcome(SUCCEEDED, SUCCESSFUL, note)
+
+    def lateness(self, now: float) -> Tuple[float, str]:
+        """(how late the run ended at ``now`` [s], the end it is late against, in words): against the
+        end said before it ran (:attr:`said` after its first target left: the time the protocol adds
+        to the plan -- a hold at the start, later points, the bus's cycles -- was said, so it is not
+        lateness; a goal_time_tolerance of 0.1 s would otherwise refuse every v3 run as said), else
+        against the planned end from :attr:`started`."""
+        sent = getattr(self.run, "first_sent", None)
+        if self.said > 0.0 and sent is not None:
+            return now - sent - self.said, "the end said before it ran (%.2f s after its first target)" % self.said
+        return now - self.started - self.traj.duration, "the planned end"
 
     def goal_checks(self, joints: Sequence[float]) -> Tuple[List[Tuple[str, float, float]], bool]:
         """What the goal check compares: (name, |final - goal| [rad], tolerance [rad]) per joint --

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, List, Sequence
+from typing import Any, List, Sequence, Tuple
 
 import numpy as np
 
@@ -52,12 +52,15 @@ HANDSHAKE_CYCLES = 4.0
 class Announced:
     """``duration`` [s] from the first target to the arm at rest at the end; ``top_speed`` [mm/s] the
     TCP's largest speed; ``words`` both in words, naming where they come from; ``program``: v1 (the
-    program's speed, not the plan's)."""
+    program's speed, not the plan's); ``times`` (a streaming protocol) each planned point's time as the
+    stream runs it [s from its start]: the plan after the hold, later where the bus brings points later
+    (:func:`fed_times`) -- the run to compare with the plan at the same time (empty on v1: its stops)."""
 
     duration: float
     top_speed: float
     words: str
     program: bool = False
+    times: Tuple[float, ...] = ()
 
 
 def plan_peak_speed(kin: Kinematics, times: Sequence[float], positions: Sequence[Sequence[float]]) -> float:
@@ -105,7 +108,8 @@ def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], posit
         late = max(0.0, last.fed - float(last.time)) if last is not None and last.fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         shifted = late - lead > 0.005                 # later points than the hold's lead alone
-        top = plan_peak_speed(kin, fed_times(times, stream) if shifted else times, positions)
+        run = fed_times(times, stream)                # (the hold's lead alone shifts every point alike)
+        top = plan_peak_speed(kin, run, positions)
         said = planned + late + latency
         parts = ["the plan's %.2f s" % planned]
         if lead > 0.005:
@@ -116,7 +120,7 @@ def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], posit
             parts.append("the bus's %g cycles to the arm and back" % STREAM_LATENCY_CYCLES)
         how = "" if len(parts) == 1 else " (%s and %s)" % (", ".join(parts[:-1]), parts[-1])
         return Announced(said, top, "protocol %s runs the plan's timing: %.2f s%s, the TCP at most %.0f mm/s"
-                         % (wire.name, said, how, top))
+                         % (wire.name, said, how, top), times=tuple(run))
     return announce_moves(wire, previews, params, cycle_time)
 
 
