@@ -20,7 +20,7 @@ from vr_driver.bus.health import BusHealthSummary
 from vr_driver.bus.messages import (FROM_BUS, TO_BUS, AddSlave, Answer, BusSettings, Channel, Close,
                                     CycleAt, Failed, MessageError, OpenFailed, Opened, Outputs, Report,
                                     SlaveReport, Start, StateChange, Tick, decode)
-from vr_driver.bus.process import BusProcessMaster, RemoteSlave, _ReportSender
+from vr_driver.bus.process import BusProcessMaster, PipeWake, RemoteSlave, _ReportSender
 
 SPEC = SlaveSpec(8, 0x06C6, bytes.fromhex("1313131123232321"), watchdog=None)
 SETTINGS = BusSettings(device="/dev/ttyUSB0", baud=19200, master_address=2, timing=BusTiming.for_baud(19200),
@@ -129,6 +129,24 @@ def test_the_in_process_master_and_the_bus_processs_stand_in_share_one_interface
         handle.outputs = b"abc"
     handle.outputs = bytes(range(14))
     assert handle.outputs == bytes(range(14))
+
+
+def test_the_bus_process_masters_own_wake_is_a_pipe_set_from_any_thread_and_taken_once():
+    """Where the application gives no wake-up, BusProcessMaster's cycle waits on its own
+    (PipeWake, which its poke sets): readable once set (twice: still one wake), empty once
+    cleared; a set after close raises nothing."""
+    import select
+    wake = PipeWake()
+    fd = wake.fileno()
+    assert select.select([fd], [], [], 0.0)[0] == []
+    wake.set()
+    wake.set()
+    assert select.select([fd], [], [], 0.0)[0] == [fd]
+    wake.clear()
+    assert select.select([fd], [], [], 0.0)[0] == []
+    wake.close()
+    wake.set()
+    wake.clear()
 
 
 def test_a_report_not_yet_sent_passes_its_state_changes_and_health_on_to_the_next():

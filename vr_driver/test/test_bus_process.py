@@ -133,7 +133,8 @@ def test_the_driver_cycles_on_a_bus_process_and_reports_its_health(rig):
 def test_the_inbox_wake_ends_the_wait_for_the_bus_process_next_report(tmp_path, kin):
     """A thread that posted a request sets its inbox's Wake and calls nothing of the bus side: the
     link supervisor's step, waiting for the bus process's next report (the bus at 2 Hz here),
-    returns at once without a cycle and the wake is taken; the report after it still comes."""
+    returns at once without a cycle and the wake is taken; the report after it still comes. The
+    master's own poke sets that wake-up (one wake-up, not two pipes)."""
     path = str(tmp_path / "g2")
     sim = VirtualController(pty_link=path, baud=BAUD, loop_period=0.01, kinematics=kin).start()
     params = DriverParams.from_dict({"port": path, "baud": BAUD, "cycle_rate": 2.0, "link_timeout": 3.0,
@@ -162,6 +163,10 @@ def test_the_inbox_wake_ends_the_wait_for_the_bus_process_next_report(tmp_path, 
             until_a_report()
         assert any(woken), woken
         until_a_report()                               # the report still comes
+        link._master.poke()            # the master's poke sets the same wake-up: one way to wake it
+        assert wake.is_set()
+        link.step(time.monotonic())
+        assert not wake.is_set()
     finally:
         link.close()
         sim.stop()

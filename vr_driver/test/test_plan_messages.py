@@ -20,7 +20,7 @@ PARAMS = DriverParams.from_dict({"protocol": "v3"})
 SCENE = SceneSnapshot((("table", "box", (1.0, 1.0, 0.1), (0.8, 0.0, -0.05), (0.0, 0.0, 0.0, 1.0)),), 0.01, True)
 GOAL = PlanGoal(named="home")
 START = (0.3, 0.5, -0.2, 0.0, 0.5, 0.0)
-TO = [Configure(PARAMS), Plan(GOAL, START, 7, 0.2, SCENE), Plan(GOAL, START, None, 0.2, None), Stop()]
+TO = [Configure(PARAMS), Plan(GOAL, START, 7, 25.0, SCENE), Plan(GOAL, START, None, 25.0, None), Stop()]
 FROM = [Ready(), Missing("ompl", "ompl", "planning", "no ompl"), StartFailed("ParamError: model"),
         Outcome(PlanOutcome(SUCCESS, "planned", planning_time=0.5, profile={"tries": 1, "replans": []})),
         PlanFailed("ValueError: x"), Log(30, "a warning")]
@@ -40,7 +40,7 @@ def test_every_message_from_the_worker_comes_back_equal(message):
     (("plan", GOAL, START, 7, 0.2), "planning message 'plan': 4 fields, expected 5"),
     (("plan", "home", START, 7, 0.2, None), "planning message 'plan': field 1 is str 'home', expected PlanGoal"),
     (("plan", GOAL, (0.3, float("nan")), 7, 0.2, None), "start joints (0.3, nan), expected finite numbers"),
-    (("plan", GOAL, START, 7, 0.0, None), "min_segment 0.0, expected a positive number"),
+    (("plan", GOAL, START, 7, 0.0, None), "cycle_rate 0.0, expected a positive number"),
     (("plan", GOAL, START, 7, 0.2, SceneSnapshot((("table", "box"),), 0.01, True)),
      "a scene object ('table', 'box'), expected (name, shape, size, position, quaternion)"),
     (("start", {"protocol": "v3"}), "field 1 is dict"),
@@ -56,8 +56,8 @@ def test_a_malformed_message_to_the_worker_is_refused_naming_what_is_wrong(raw, 
 def test_a_channel_receives_only_its_sides_messages():
     ours, theirs = Pipe()
     node, worker = driver_end(ours), worker_end(theirs)
-    node.send(Plan(GOAL, START, None, 0.2, None))
-    assert worker.recv() == Plan(GOAL, START, None, 0.2, None)
+    node.send(Plan(GOAL, START, None, 25.0, None))
+    assert worker.recv() == Plan(GOAL, START, None, 25.0, None)
     worker.send(Ready())
     assert node.recv() == Ready()
     node.send(Ready())                   # the worker's message, sent by the node

@@ -223,7 +223,7 @@ def test_send_ahead_refused_one_target_per_acknowledgement(kin, monkeypatch, cap
     assert w.core.wire.send_ahead == 1 and w.core.sequencer.wire.send_ahead == 1
     from vr_driver.protocol.v3 import V3
     assert V3.send_ahead == 2                                # the protocol's own rule unchanged
-    assert w.core.min_segment() == pytest.approx(2 * MIN_SEGMENT_CYCLES / 20.0)
+    assert w.core.streams.min_segment() == pytest.approx(2 * MIN_SEGMENT_CYCLES / 20.0)
     assert any("one target per acknowledgement" in r.getMessage() for r in caplog.records)
     traj, job, _samples, elapsed = run_path(w, n=30, duration=4.0)
     assert job.result.success, job.result.reason
@@ -242,7 +242,7 @@ def test_send_ahead_refused_one_target_per_acknowledgement(kin, monkeypatch, cap
 def test_lookahead_2_feeds_shorter_segments_in_time(kin, monkeypatch):
     one = g2_world(kin, monkeypatch, lookahead=2)
     two = g2_world(kin, monkeypatch, told={"interpreter_lookahead": 2}, lookahead=2)
-    assert two.core.min_segment() == pytest.approx(one.core.min_segment() / 2)
+    assert two.core.streams.min_segment() == pytest.approx(one.core.streams.min_segment() / 2)
     results = []
     for w in (one, two):
         # joint_1 and joint_4 swing once a second about a slow drift: points 0.06 s apart keep it

@@ -22,6 +22,7 @@ import time
 import pytest
 
 from _world import World
+from vr_driver.driver.checks.commissioned import min_segment_cycles
 from vr_driver.driver.planning import planning as P
 from vr_driver.driver.planning.plan_messages import PlanFailed
 from vr_driver.driver.planning.plan_process import (WORKER_NICE, PlanningParts, PlanningProcess, PlanningProcessError,
@@ -277,16 +278,17 @@ def test_the_worker_is_niced_when_the_bus_cycles_in_the_nodes_thread(kin):
 
 def test_the_workers_parts_open_no_port_and_start_no_thread():
     """The worker plans with the parts a plan needs (PlanningParts), never a driver core: no link, no
-    thread, no cell file read (the node sends its scene); its stream check's shortest segment is the
-    node's once a request brought it."""
+    thread, no cell file read (the node sends its scene); its stream check's bus cycle rate (and so
+    its shortest segment) is the node's once a request brought it, before that the configured one."""
     params = DriverParams.from_dict({"protocol": "v3", "scene": CELL, "port": "/dev/nonexistent-port"})
     threads = set(threading.enumerate())
     parts = PlanningParts(params)
     assert set(threading.enumerate()) == threads
     assert not hasattr(parts, "link") and len(parts.checks.scene_guard.scene()) == 0 and parts.collision is not None
-    assert parts.min_segment() > 0.0
-    parts.node_min_segment = 0.123
-    assert parts.min_segment() == 0.123 and parts.streams.min_segment() == 0.123
+    assert parts.stream_cycle_rate() == params.bus().cycle_rate_hz
+    parts.node_cycle_rate = 12.5
+    assert parts.stream_cycle_rate() == 12.5
+    assert parts.streams.min_segment() == min_segment_cycles(params, parts.wire) / 12.5
 
 
 def test_a_missing_library_is_the_workers_missing_dependency(world, tmp_path, monkeypatch):

@@ -191,3 +191,29 @@ def test_the_stream_checks_fast_paths_change_nothing(kin, rule, n, monkeypatch):
     assert sum(isinstance(r, tuple) and len(r) > 1 for r in fast) >= 12
     for words in ("workspace", "collides", "configuration"):
         assert any(isinstance(r, str) and words in r for r in fast), words
+
+
+def test_a_segment_past_a_joint_limit_is_refused_as_its_preview_refuses_it(kin, monkeypatch):
+    """The segment check's fast path (PathChecks._clearly_inside) checks the joint limits of its
+    samples and both ends in one vector check, by check_limits' rule: an end beyond a limit by more
+    than its 1e-9 rad is refused with the preview's own words, one within it passes -- each the same
+    with and without the fast path, the start or the end the one beyond."""
+    from vr_driver.driver.checks.path_checks import PathChecks
+    from vr_driver.errors import JointLimitError
+    checks = World(kin, protocol="v3").core.checks
+    hi = kin.limits.upper[5]                   # joint_6: its turn moves the TCP's position nowhere
+
+    def at(q6):
+        return START[:5] + (q6,)
+
+    def outcome(a, b):
+        try:
+            checks.check_joint_move(a, b)
+        except JointLimitError as exc:
+            return str(exc)
+        return "passed"
+    cases = [(at(hi - 0.01), at(hi + 2e-9)), (at(hi + 2e-9), at(hi - 0.01)), (at(hi - 0.01), at(hi + 0.5e-9))]
+    fast = [outcome(a, b) for a, b in cases]
+    monkeypatch.setattr(PathChecks, "_clearly_inside", lambda self, start, end: False)
+    assert [outcome(a, b) for a, b in cases] == fast
+    assert "outside" in fast[0] and "outside" in fast[1] and fast[2] == "passed"

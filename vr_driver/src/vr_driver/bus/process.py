@@ -16,8 +16,9 @@ it is started, watched and stopped by :mod:`vr_driver.bus.worker`.
 
 **The driver's side** is :class:`BusProcessMaster`, a stand-in for the DpMaster that the link
 supervisor (vr_driver.driver.link.link) and the I/O line (vr_driver.driver.link.stations) use unchanged: its
-:meth:`~BusProcessMaster.cycle` waits for the bus process's next report (or a :meth:`poke`, or the
-application's ``wake``) and
+:meth:`~BusProcessMaster.cycle` waits for the bus process's next report or its one wake-up (the
+application's ``wake``, which the threads that post to the application set, or where it gives none
+the master's own; :meth:`~BusProcessMaster.poke` sets the same) and
 replays its state changes through ``on_state_change`` in order, its slaves' ``outputs`` go to the
 bus process at once. The driver's loop is paced by the bus (``paced``), not the other way round.
 
@@ -81,7 +82,7 @@ from .messages import (AddSlave, Answer, BusSettings, Close, CycleAt, Failed, Me
 
 log = logging.getLogger("vr_driver.bus")
 
-__all__ = ["BusSettings", "BusProcessMaster", "RemoteSlave", "BusServer", "main"]
+__all__ = ["BusSettings", "BusProcessMaster", "PipeWake", "RemoteSlave", "BusServer", "main"]
 
 #: state changes kept for a driver that does not read (the oldest are dropped beyond)
 MAX_EVENTS = 1000
@@ -398,6 +399,41 @@ class RemoteSlave(SlaveView):
         return self.carried_serial >= self.serial
 
 
+class PipeWake:
+    """A wake-up for a :meth:`BusProcessMaster.cycle` waiting for the next report, where the application
+    gives none of its own: a pipe a byte is written to at each :meth:`set` (safe from any thread and
+    from a signal handler), read by ``select`` (:meth:`fileno`), emptied by :meth:`clear`."""
+
+    def __init__(self) -> None:
+        self._read, self._write = os.pipe()
+        os.set_blocking(self._read, False)
+        os.set_blocking(self._write, False)
+
+    def set(self) -> None:
+        try:
+            os.write(self._write, b"!")
+        except OSError:
+            pass             # a wake is pending already (a full pipe), or closed
+
+    def fileno(self) -> int:
+        return self._read
+
+    def clear(self) -> None:
+        try:
+            while os.read(self._read, 64):
+                pass
+        except OSError:
+            pass
+
+    def close(self) -> None:
+        fds, (self._read, self._write) = (self._read, self._write), (-1, -1)    # (a set after it: EBADF)
+        for fd in fds:
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
 class BusProcessMaster(MasterApi):
     """The DpMaster stand-in of the driver's side (see the module docstring): the same
     :class:`~pyprofibus_vendor.master_api.MasterApi`. Raises OSError or PhyError with the bus
@@ -410,11 +446,13 @@ class BusProcessMaster(MasterApi):
                  on_state_change: Optional[Callable[..., None]] = None,
                  clock: Callable[[], float] = time.monotonic, start_timeout: float = 10.0,
                  wake: Optional[Any] = None) -> None:
-        """``wake``: the application's own wake-up besides :meth:`poke` (anything with ``fileno()``,
-        readable when it was set, and ``clear()``: the driver's inbox's), so that the threads
-        that post to the application wake :meth:`cycle` without calling into the master."""
+        """``wake``: the application's wake-up (anything with ``set()``, ``fileno()`` readable when
+        it was set, and ``clear()``: the driver's inbox's), so that the threads that post to the
+        application wake :meth:`cycle` without calling into the master; None: the master's own
+        (:class:`PipeWake`). :meth:`poke` sets it: one wake-up either way."""
         self.settings = settings
-        self._wake = wake
+        self._own_wake = PipeWake() if wake is None else None
+        self._wake = wake if wake is not None else self._own_wake
         self.on_state_change = on_state_change
         self.clock = clock
         self.counters = MasterCounters()
@@ -431,9 +469,6 @@ class BusProcessMaster(MasterApi):
         self._worker = WorkerProcess("vr_driver.bus.process", what="bus process", new_session=True)
         self._conn = self._worker.conn
         self._channel = driver_channel(self._conn)
-        self._wake_r, self._wake_w = os.pipe()
-        os.set_blocking(self._wake_r, False)
-        os.set_blocking(self._wake_w, False)
         try:
             self._channel.send(Start(settings))
             if not self._channel.poll(start_timeout):
@@ -496,12 +531,10 @@ class BusProcessMaster(MasterApi):
                 raise PhyError("the bus process is gone (%s)" % self._exit_status()) from None
 
     def poke(self) -> None:
-        """Wake a :meth:`cycle` waiting for the next report (a request was posted); the cycle after
-        it is asked of the bus process at once, with the outputs decided meanwhile."""
-        try:
-            os.write(self._wake_w, b"!")
-        except (BlockingIOError, OSError):
-            pass             # a wake is pending already (or we are closed)
+        """Wake a :meth:`cycle` waiting for the next report (a request was posted): sets the wake-up
+        (the application's, else the master's own); the cycle after it is asked of the bus process
+        at once, with the outputs decided meanwhile."""
+        self._wake.set()
 
     def cycle_at(self, when: float) -> None:
         """Ask for the next bus cycle no later than ``when`` (clock time)."""
@@ -510,22 +543,15 @@ class BusProcessMaster(MasterApi):
     def cycle(self, timeout: Optional[float] = None) -> bool:
         """Wait for the bus process's next report (at most ``timeout``) and take every report that
         came: state changes replayed in order, then the slaves' latest state and inputs. Returns
-        False when no report came (a :meth:`poke`, or the timeout). PhyError when the bus process
+        False when no report came (woken, or the timeout). PhyError when the bus process
         is gone or sent a malformed message."""
         if self._urgent:
             self._urgent = False
             self.send(CycleAt(0.0))
         self.send(Tick())
-        woken = self._wake.fileno() if self._wake is not None else None
-        ready = wait([self._conn, self._wake_r] + ([woken] if woken is not None else []), timeout)
-        if self._wake_r in ready:
-            try:
-                while os.read(self._wake_r, 64):
-                    pass
-            except (BlockingIOError, OSError):
-                pass
-            self._urgent = True
-        if woken is not None and woken in ready:
+        woken = self._wake.fileno()
+        ready = wait([self._conn, woken], timeout)
+        if woken in ready:
             self._wake.clear()
             self._urgent = True
         return self._receive() if self._conn in ready else False
@@ -541,11 +567,8 @@ class BusProcessMaster(MasterApi):
                 pass
             self._conn.close()
         self._worker.stop()          # Close sent, EOF: 1 s to end, then SIGTERM, then SIGKILL (bus.worker)
-        for fd in (self._wake_r, self._wake_w):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
+        if self._own_wake is not None:
+            self._own_wake.close()
 
     # ------------------------------------------------------------------ reports
     def _exit_status(self) -> str:

@@ -64,10 +64,10 @@ class BusLoop(OwnThread):
 
     # ------------------------------------------------------------------------ the thread (OwnThread)
     def request_stop(self) -> None:
-        """Ask the bus thread to end, without waiting or taking a lock (safe from a signal handler)."""
+        """Ask the bus thread to end, without waiting or taking a lock (safe from a signal handler):
+        its wake-up ends its wait, for the next period or for a bus process's next report alike."""
         self._stop.set()
         self._wake.set()
-        self.link.poke()
 
     def wake(self) -> None:
         """Run a bus cycle now (a request was posted), not at the next tick (the inbox's wake:

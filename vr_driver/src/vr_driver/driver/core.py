@@ -50,7 +50,7 @@ from .bus_loop import BusLoop
 from .checks.job_control import JobControl, PlanningThread, TrajectoryRun
 from .motion.jobs import MoveJob, MoveRequest, Preview, StreamPoint, SubmitMode
 from .checks.joint_command import JointCommander
-from .checks.commissioned import controller_notes, min_segment_cycles
+from .checks.commissioned import controller_notes
 from .link.link import LinkState, LinkSupervisor, open_serial_link
 from .checks.path_checks import PathChecks, load_cell
 from .checks.scene_guard import SceneGuard
@@ -148,16 +148,13 @@ class DriverCore:
                                  SceneGuard(self.kin, self._planning_gate, load_cell(params.scene),
                                             params.collision_padding, params.collision_check, params.prefix,
                                             model=params.model), self.wire)
-        self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.min_segment)
+        self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.stream_cycle_rate)
         self.jobs = JobControl(params, self.kin, clock, self.sequencer, self.checks, self.streams,
                                self.motion_snapshot)
         self.joint_commander = JointCommander(params, self.kin, self.wire, clock, self.status, self.jobs,
                                               self.checks, self.streams)
         #: what the commissioned G2 changes, in words (logged at every connect; the node's diagnostics)
         self.controller_notes = controller_notes(params, self.kin)
-        # the bus cycles a stream segment needs at least (the commissioned G2's facts: fixed for the
-        # driver's life; min_segment, asked by every goal, then touches neither params nor them)
-        self._segment_cycles = min_segment_cycles(params, self.wire)
         self._notes_said = False
         self.add_listener(self._say_controller_notes)
 
@@ -191,16 +188,16 @@ class DriverCore:
     def joint_names(self) -> Tuple[str, ...]:
         return self.params.controller_joint_names
 
-    def min_segment(self) -> float:
-        """The shortest stream segment the bus feeds without a gap: MIN_SEGMENT_CYCLES of the
-        configured cycle, or of the measured one when the wire is slower (a 72-byte record at
-        19.2 kbit/s); for the commissioned G2 (its look-ahead, one target per acknowledgement)
-        :func:`~vr_driver.driver.checks.commissioned.min_segment_cycles` of them."""
+    def stream_cycle_rate(self) -> float:
+        """[Hz] the bus cycles per second a stream is fed at: the configured rate, or the measured
+        one when the wire is slower (a 72-byte record at 19.2 kbit/s). The stream preparation takes
+        its shortest segment and a target's feed as cycles of it (``streams.min_segment()``,
+        ``streams.feed_period()``), the planning process the same rate with every plan."""
         rate = self.bus.cycle_rate_hz
         measured = self.motion_snapshot().cycle_rate     # (the link's, as of the last bus iteration)
         if measured > 0.0:
             rate = min(rate, measured)
-        return self._segment_cycles / rate
+        return rate
 
     def _say_controller_notes(self, status: DriverStatus) -> None:
         """At every connect (bus thread): what the commissioned G2 changes, in words

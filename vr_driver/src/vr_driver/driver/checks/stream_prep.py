@@ -81,21 +81,30 @@ def fmt_pose(pose: ControllerPose) -> str:
 
 
 class JointStreams:
-    """Streams of joint targets (v2). ``min_segment()``: the shortest segment the bus feeds without
-    a gap now [s] (the driver's bus cycle)."""
+    """Streams of joint targets (v2). ``cycle_rate()``: the bus cycles per second the stream is fed
+    at now [Hz] (the driver's: the configured rate, or the measured one where it is slower); the
+    segment and the feed it allows are that many cycles of it (:meth:`min_segment`,
+    :meth:`feed_period`)."""
 
     #: the widest joint step between two points (None: any)
     max_step: Optional[float] = None
 
     def __init__(self, params: DriverParams, kinematics: Kinematics, wire: Protocol, checks: PathChecks,
-                 min_segment: Callable[[], float]) -> None:
+                 cycle_rate: Callable[[], float]) -> None:
         self.params = params
         self.kin = kinematics
         self.wire = wire
         self.checks = checks
-        self.min_segment = min_segment
-        # a target's feed in min_segment()s: the parameters' constant, not a goal's work
-        self._feed_share = feed_cycles(wire) / min_segment_cycles(params, wire)
+        self.cycle_rate = cycle_rate
+        # the bus cycles of a segment and of a target's feed: the commissioned G2's and the
+        # protocol's, fixed for the driver's life (not a goal's work)
+        self._segment_cycles = min_segment_cycles(params, wire)
+        self._feed_cycles = feed_cycles(wire)
+
+    def min_segment(self) -> float:
+        """[s] the shortest stream segment the bus feeds without a gap now:
+        :func:`~.commissioned.min_segment_cycles` of its cycles."""
+        return self._segment_cycles / self.cycle_rate()
 
     def points(self, times: Sequence[float], positions: Sequence[Sequence[float]], tolerance: float,
                max_tolerance: float) -> Tuple[StreamPoint, ...]:
@@ -126,9 +135,9 @@ class JointStreams:
         return points
 
     def feed_period(self) -> float:
-        """[s] how long the bus takes to bring the controller one target: :func:`~.commissioned.feed_cycles`
-        bus cycles, the cycle being ``min_segment()`` over :func:`~.commissioned.min_segment_cycles`."""
-        return self.min_segment() * self._feed_share
+        """[s] how long the bus takes to bring the controller one target now:
+        :func:`~.commissioned.feed_cycles` of its cycles."""
+        return self._feed_cycles / self.cycle_rate()
 
     def ring(self) -> int:
         """The targets the controller holds at once, a new one taken once the arm passed the one
@@ -217,8 +226,8 @@ class CartesianStreams(JointStreams):
     docstring)."""
 
     def __init__(self, params: DriverParams, kinematics: Kinematics, wire: Protocol, checks: PathChecks,
-                 min_segment: Callable[[], float]) -> None:
-        super().__init__(params, kinematics, wire, checks, min_segment)
+                 cycle_rate: Callable[[], float]) -> None:
+        super().__init__(params, kinematics, wire, checks, cycle_rate)
         #: the controller's rule for a target's joint solution
         self.rule = ConfigurationRule.parse(params.controller.configuration)
         #: the points before a target whose joints the controller may solve it nearest: the
@@ -359,10 +368,10 @@ class CartesianStreams(JointStreams):
 
 
 def stream_preparation(params: DriverParams, kinematics: Kinematics, wire: Protocol, checks: PathChecks,
-                       min_segment: Callable[[], float]) -> Optional[JointStreams]:
+                       cycle_rate: Callable[[], float]) -> Optional[JointStreams]:
     """The stream preparation of the family the protocol ``wire`` names (registered with it:
-    :mod:`vr_driver.driver.sequencers`); None when it does not stream (v1). ProtocolError in words for
-    a streaming protocol without one."""
+    :mod:`vr_driver.driver.sequencers`), fed at ``cycle_rate()`` bus cycles per second; None when it
+    does not stream (v1). ProtocolError in words for a streaming protocol without one."""
     if not wire.streams:
         return None
-    return wire.stream_family()(params, kinematics, wire, checks, min_segment)
+    return wire.stream_family()(params, kinematics, wire, checks, cycle_rate)

@@ -140,7 +140,7 @@ class LinkSupervisor:
         self.bus = bus
         self.slave_config = bus.slaves[0]
         self.stations = stations             # IoLine of the other stations on the line, or None
-        self.wake = wake                     # the requests' wake-up (the inbox's): a bus process waits for it too
+        self.wake = wake                     # the requests' wake-up (the inbox's): a bus process's master waits for it beside its reports
         self.clock, self.open_link = clock, open_link
         self.counters = LinkCounters()
         # the controller's records, decoded by the protocol (vr_driver.protocol)
@@ -230,13 +230,6 @@ class LinkSupervisor:
         """True when the master keeps the bus's time itself (a bus process): :meth:`step` then
         waits for its next cycle, and the caller's loop must not sleep a period on top."""
         return self._master is not None and self._master.paced
-
-    def poke(self) -> None:
-        """Wake a :meth:`step` waiting for a paced master's next cycle (a request was posted).
-        Safe from any thread and from a signal handler."""
-        master = self._master
-        if master is not None:
-            master.poke()
 
     def cycle_at(self, when: float) -> None:
         """Ask a paced master for its next cycle no later than ``when`` (clock time)."""

@@ -7,10 +7,10 @@ and changes nothing), a plain tagged tuple on the wire, and a :class:`Channel` p
 The driver sends (:data:`TO_WORKER`)::
 
     Configure     ("start", params: DriverParams)          the first message: build the planning parts
-    Plan          ("plan", goal: PlanGoal, start, seed, min_segment, scene: SceneSnapshot or None)
+    Plan          ("plan", goal: PlanGoal, start, seed, cycle_rate, scene: SceneSnapshot or None)
                                                            one plan: the arm's joints to plan from, the
                                                            planner's seed (None: random), the node's
-                                                           shortest stream segment [s], the scene change:
+                                                           bus cycle rate [Hz], the scene change:
                                                            the driver's scene when it differs from the one
                                                            sent last (None: unchanged)
     Stop          ("stop",)                                end the process
@@ -120,24 +120,25 @@ class SceneSnapshot:
 
 @message("plan")
 class Plan(PlanMessage):
-    """("plan", goal, start, seed, min_segment, scene): plan ``goal`` from the joints ``start`` with
-    the planner's ``seed`` (None: random); ``min_segment`` [s] the node's shortest stream segment (its
-    measured bus cycle), so that the worker's stream check is the node's; ``scene`` the driver's
-    scene when it differs from the one this worker got last (None: unchanged)."""
+    """("plan", goal, start, seed, cycle_rate, scene): plan ``goal`` from the joints ``start`` with
+    the planner's ``seed`` (None: random); ``cycle_rate`` [Hz] the bus cycle rate the node's streams
+    are fed at (DriverCore.stream_cycle_rate: its measured bus cycle where slower), so that the
+    worker's stream check is the node's; ``scene`` the driver's scene when it differs from the one
+    this worker got last (None: unchanged)."""
 
     goal: PlanGoal
     start: tuple
     seed: Optional[int]
-    min_segment: float
+    cycle_rate: float
     scene: Optional[SceneSnapshot]
 
     @classmethod
     def from_fields(cls, values: tuple) -> "Plan":
         plan = super().from_fields(values)
         _numbers(plan.start, "start joints")   # type: ignore[attr-defined]
-        if not (math.isfinite(plan.min_segment) and plan.min_segment > 0.0):   # type: ignore[attr-defined]
-            raise PlanMessageError("planning message 'plan': min_segment %r, expected a positive number"
-                                   % (plan.min_segment,))   # type: ignore[attr-defined]
+        if not (math.isfinite(plan.cycle_rate) and plan.cycle_rate > 0.0):   # type: ignore[attr-defined]
+            raise PlanMessageError("planning message 'plan': cycle_rate %r, expected a positive number"
+                                   % (plan.cycle_rate,))   # type: ignore[attr-defined]
         if plan.scene is not None:   # type: ignore[attr-defined]
             plan.scene.check()   # type: ignore[attr-defined]
         return plan  # type: ignore[return-value]

@@ -69,7 +69,6 @@ from ...errors import MissingDependency, VrDriverError
 from ...kinematics.preview import MovePreviewer
 from ...kinematics.scene import Scene
 from ...params import DriverParams
-from ..checks.commissioned import min_segment_cycles
 from ...kinematics.solver import Kinematics
 from ..core import DriverCore, driver_kinematics
 from ..motion.jobs import Preview, StreamPoint
@@ -223,7 +222,7 @@ class PlanningProcess:
                 return failed("no plan: the planning process could not start: %s" % exc)
             scene = SceneSnapshot.of(self.core)
             try:
-                self._send(Plan(goal, tuple(float(v) for v in start), seed, float(self.core.min_segment()),
+                self._send(Plan(goal, tuple(float(v) for v in start), seed, float(self.core.stream_cycle_rate()),
                                 None if scene == self._scene_sent else scene))
                 self._scene_sent = scene
                 answer = self._receive(time.monotonic() + self._answer_time(goal), cancel, "an answer")
@@ -350,9 +349,9 @@ class PlanningParts:
     workspace box and the cell's checks (:attr:`checks`; its scene_guard replaced when the node's
     scene changed), the protocol's stream preparation (:attr:`streams`) and
     :meth:`prepare_trajectory` -- the driver's own check of what it would send for a plan. No port,
-    no thread, no sequencer, no I/O line, no cell file. Its shortest stream segment is the node's
-    (:attr:`node_min_segment`, set per request): the node measures its bus cycle; until a request
-    brings it, the configured cycle's."""
+    no thread, no sequencer, no I/O line, no cell file. Its streams are fed at the node's bus cycle
+    rate (:attr:`node_cycle_rate`, set per request): the node measures its bus cycle; until a
+    request brings it, the configured rate."""
 
     def __init__(self, params: DriverParams) -> None:
         self.params = params
@@ -360,25 +359,22 @@ class PlanningParts:
         self.wire = params.wire
         self.joint_names = params.controller_joint_names
         self.planning_gate = threading.Lock()
-        self.node_min_segment: Optional[float] = None
+        self.node_cycle_rate: Optional[float] = None
         self._cycle_rate = params.bus().cycle_rate_hz
-        # the bus cycles a stream segment needs at least: fixed for the worker's life, as DriverCore's
-        self._segment_cycles = min_segment_cycles(params, self.wire)
         self.checks = PathChecks(self.kin, MovePreviewer(self.kin), params.workspace, self.planning_gate,
                                  SceneGuard(self.kin, self.planning_gate, Scene(), params.collision_padding,
                                             params.collision_check, params.prefix, model=params.model),
                                  self.wire)
-        self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.min_segment)
+        self.streams = stream_preparation(params, self.kin, self.wire, self.checks, self.stream_cycle_rate)
 
     @property
     def collision(self) -> Optional["CollisionChecker"]:
         """The checker of the scene set last (None: nothing checked), as DriverCore.collision."""
         return self.checks.collision
 
-    def min_segment(self) -> float:
-        if self.node_min_segment is not None:
-            return self.node_min_segment
-        return self._segment_cycles / self._cycle_rate
+    def stream_cycle_rate(self) -> float:
+        """[Hz] the node's (DriverCore.stream_cycle_rate, sent with the plan), else the configured rate."""
+        return self._cycle_rate if self.node_cycle_rate is None else self.node_cycle_rate
 
     def prepare_trajectory(self, traj: ValidTrajectory, start: Sequence[float]
                            ) -> Tuple[List[int], Tuple[StreamPoint, ...], List[Preview]]:
@@ -413,7 +409,7 @@ class _Worker:
             self.set_scene(request.scene)
         if self.scene_error:
             raise PlanningProcessError(self.scene_error)
-        self.parts.node_min_segment = request.min_segment
+        self.parts.node_cycle_rate = request.cycle_rate
         return self.planning.plan(request.goal, request.start, request.seed)
 
 
