@@ -318,3 +318,31 @@ def test_notes_are_empty_for_the_assumed_g2_and_name_each_difference(kin):
     assert len(v1) == 1 and "joint_states apply that rule" in v1[0] and "stream" not in v1[0], v1
     assert controller_notes(DriverParams.from_dict({"protocol": "v2", "controller": rule}), kin) == ()
     assert math.isfinite(kin.limits.ramp_time)
+
+
+def test_the_hold_at_a_streams_start_lasts_its_lead_at_the_speed_unit_told(kin, monkeypatch):
+    """The hold that begins a stream whose first points come faster than the bus (stream_points.
+    hold_speed: a creep at 0.1-1 % of the joint speed) is sent as any target, its speed divided by
+    MOVEP's speed unit: told 0.6, the G2 runs it as long as the lead (the wire's rounding: within
+    20 %; 0.4 % sent as 0.7 % runs 0.42 %), stops there exactly and goes on with the targets in its
+    ring -- no wait for a target -- and the run takes the time it takes at a unit of 1 (within 5 %)."""
+    from test_stream_timing_stepped import hard_start
+    took = {}
+    for scale in (1.0, 0.6):
+        w = g2_world(kin, monkeypatch, told={"speed_scale": scale}, arm={"speed_scale": scale})
+        w.run_for(1.0)
+        q0 = tuple(w.status().joints)
+        times, points = hard_start(q0, speed=0.5)
+        run = w.core.submit_trajectory(trajectory(w, times, points), started=w.now)
+        job = run.jobs[0]
+        hold = job.points[0]
+        assert hold.hold and hold.smooth == 0 and hold.fed > 0.0
+        w.run_until(lambda: run.done, 30.0, "the run")
+        assert run.success and job.gaps == 0
+        entries = w.log.entries()[-len(job.points):]
+        first, second = entries[0], entries[1]
+        assert first.speed == wire_speed(hold.speed, scale) and first.outcome.value == "executed"
+        assert first.duration == pytest.approx(hold.fed, rel=0.2), (scale, first.duration, hold.fed)
+        assert second.start_time - first.end_time < 1e-6
+        took[scale] = max(j.ended_at for j in run.jobs) - run.first_sent
+    assert took[0.6] == pytest.approx(took[1.0], rel=0.05), took
