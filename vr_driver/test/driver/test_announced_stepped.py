@@ -32,6 +32,20 @@ def plan_from(q0, reach):
     return times, [tuple(a + (b - a) * k / n for a, b in zip(q0, q1)) for k in range(n + 1)]
 
 
+def paced_plan(kin, plan):
+    """v3 on the paced 19.2 kbit/s line, the arm at rest at START: (the world, the ``plan`` from there
+    (q0 -> (times, points)) with its start, what the driver says before it runs)."""
+    from _paced import PacedWorld
+    from test_wire_supervision_stepped import START
+    world = PacedWorld(kin, protocol="v3", initial_pose=kin.fk_pose(START))
+    world.ready()
+    world.run_for(1.0)
+    q0 = tuple(world.status().joints)
+    times, points = plan(q0)
+    times, points = [0.0] + times, [q0] + points
+    return world, times, points, world.core.announce(times, points)
+
+
 def run(world, times, points):
     """Submit the plan as joint_trajectory_action does and step to its end: (time from the first target
     on the wire to the end, the arm's top TCP speed [mm/s] sampled every program loop)."""
@@ -125,16 +139,8 @@ def test_v3_says_the_time_the_bus_adds_to_a_plan_whose_first_samples_come_faster
     brings its first targets later than the plan passes them, so the stream begins with a hold
     (stream_points.fed_schedule) and then runs the plan's own timing; what is said before the run
     is the plan, the hold and the bus's 3 cycles, and the run keeps it within 10 %."""
-    from _paced import PacedWorld
     from test_stream_timing_stepped import hard_start
-    from test_wire_supervision_stepped import START
-    world = PacedWorld(kin, protocol="v3", initial_pose=kin.fk_pose(START))
-    world.ready()
-    world.run_for(1.0)
-    q0 = tuple(world.status().joints)
-    times, points = hard_start(q0)
-    times, points = [0.0] + times, [q0] + points
-    said = world.core.announce(times, points)
+    world, times, points, said = paced_plan(kin, hard_start)
     parts = re.search(r"the plan's ([0-9.]+) s, a ([0-9.]+) s hold at the start while the bus brings its first "
                       r"targets and the bus's 3 cycles to the arm and back", said.words)
     assert parts is not None, said.words
@@ -175,17 +181,9 @@ def test_a_run_whose_later_points_the_bus_brings_later_keeps_the_times_said(kin)
     (stream_points.fed_schedule). What is said before it runs gives each point's time as the stream
     runs it (Announced.times), and the run follows those times -- not the plan's own, which no single
     start delay fits -- and keeps the time and the TCP's top speed said within 10 %."""
-    from _paced import PacedWorld
     from driver_check import plan_as_sampled, top_tcp_speed
     from test_stream_timing_stepped import dense
-    from test_wire_supervision_stepped import START
-    world = PacedWorld(kin, protocol="v3", initial_pose=kin.fk_pose(START))
-    world.ready()
-    world.run_for(1.0)
-    q0 = tuple(world.status().joints)
-    times, points = dense(q0)
-    times, points = [0.0] + times, [q0] + points
-    said = world.core.announce(times, points)
+    world, times, points, said = paced_plan(kin, dense)
     assert "more where it brings later ones slower than the plan passes them" in said.words, said.words
     assert len(said.times) == len(times) and said.times[-1] > times[-1] + said.times[0] + 0.05
     assert all(b >= a for a, b in zip(said.times, said.times[1:]))

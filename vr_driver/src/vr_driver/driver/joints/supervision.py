@@ -311,7 +311,7 @@ class TrajectorySupervisor:
             return ""
         since = "the goal arrived" if self.traj.delay <= 0.0 else "its start time (the goal's header stamp)"
         text = "prepared in %.3f s" % max(0.0, prepared - self.started)
-        sent = getattr(self.run, "first_sent", None)
+        sent = self._first_sent()
         if sent is not None:
             text += "; first target left %.3f s after %s" % (sent - self.started, since)
         return text + "; "
@@ -407,10 +407,14 @@ class TrajectorySupervisor:
         to the plan -- a hold at the start, later points, the bus's cycles -- was said, so it is not
         lateness; a goal_time_tolerance of 0.1 s would otherwise refuse every v3 run as said), else
         against the planned end from :attr:`started`."""
-        sent = getattr(self.run, "first_sent", None)
+        sent = self._first_sent()
         if self.said > 0.0 and sent is not None:
             return now - sent - self.said, "the end said before it ran (%.2f s after its first target)" % self.said
         return now - self.started - self.traj.duration, "the planned end"
+
+    def _first_sent(self) -> Optional[float]:
+        """When the first target left (the run's ``first_sent``; None: not yet, or a test's run without it)."""
+        return getattr(self.run, "first_sent", None)
 
     def goal_checks(self, joints: Sequence[float]) -> Tuple[List[Tuple[str, float, float]], bool]:
         """What the goal check compares: (name, |final - goal| [rad], tolerance [rad]) per joint --
