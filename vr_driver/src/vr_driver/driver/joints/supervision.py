@@ -104,6 +104,22 @@ class Outcome:
     max_delayed_deviation: float = 0.0           # rad, vs the plan at the same time after that delay
 
 
+def first_sent(run: object) -> Optional[float]:
+    """When the run's first target left (its ``first_sent``; None: not yet, or a test's run without it)."""
+    return getattr(run, "first_sent", None)
+
+
+def lateness(now: float, said: float, sent: Optional[float], started: float, planned: float) -> Tuple[float, str]:
+    """(how late a run ended at ``now`` [s], the end it is late against, in words): against the end
+    said before it ran (``said`` [s] after its first target left at ``sent``: the time the protocol
+    adds to the plan -- a hold at the start, later points, the bus's cycles -- was said, so it is not
+    lateness; a goal_time_tolerance of 0.1 s would otherwise refuse every v3 run as said), else
+    against the ``planned`` end from ``started``."""
+    if said > 0.0 and sent is not None:
+        return now - sent - said, "the end said before it ran (%.2f s after its first target)" % said
+    return now - started - planned, "the planned end"
+
+
 class TrajectorySupervisor:
     """Watches one run of ``traj`` (``run``: what :meth:`DriverCore.submit_trajectory` returned,
     started at ``started`` on the driver's clock) for the protocol ``wire``
@@ -311,7 +327,7 @@ class TrajectorySupervisor:
             return ""
         since = "the goal arrived" if self.traj.delay <= 0.0 else "its start time (the goal's header stamp)"
         text = "prepared in %.3f s" % max(0.0, prepared - self.started)
-        sent = self._first_sent()
+        sent = first_sent(self.run)
         if sent is not None:
             text += "; first target left %.3f s after %s" % (sent - self.started, since)
         return text + "; "
@@ -393,28 +409,13 @@ class TrajectorySupervisor:
             name, err, tol = bad[0]
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "%s ended %.4f rad from the goal (tolerance "
                            "%.4f%s); %s" % (name, err, tol, self._band_note(joints) if in_band else "", note))
-        late, end = self.lateness(now)
+        late, end = lateness(now, self.said, first_sent(run), self.started, traj.duration)
         if self.wire.streams and traj.goal_time_tolerance > 0.0 and late > traj.goal_time_tolerance:
             return outcome(ABORTED, GOAL_TOLERANCE_VIOLATED, "reached %.2f s after %s (goal_time_tolerance "
                            "%.2f s); %s" % (late, end, traj.goal_time_tolerance, note))
         if traj.per_configuration is not None:
             return outcome(SUCCEEDED, SUCCESSFUL, "%s; %s" % (note, self._goal_words(joints, checks, in_band)))
         return outcome(SUCCEEDED, SUCCESSFUL, note)
-
-    def lateness(self, now: float) -> Tuple[float, str]:
-        """(how late the run ended at ``now`` [s], the end it is late against, in words): against the
-        end said before it ran (:attr:`said` after its first target left: the time the protocol adds
-        to the plan -- a hold at the start, later points, the bus's cycles -- was said, so it is not
-        lateness; a goal_time_tolerance of 0.1 s would otherwise refuse every v3 run as said), else
-        against the planned end from :attr:`started`."""
-        sent = self._first_sent()
-        if self.said > 0.0 and sent is not None:
-            return now - sent - self.said, "the end said before it ran (%.2f s after its first target)" % self.said
-        return now - self.started - self.traj.duration, "the planned end"
-
-    def _first_sent(self) -> Optional[float]:
-        """When the first target left (the run's ``first_sent``; None: not yet, or a test's run without it)."""
-        return getattr(self.run, "first_sent", None)
 
     def goal_checks(self, joints: Sequence[float]) -> Tuple[List[Tuple[str, float, float]], bool]:
         """What the goal check compares: (name, |final - goal| [rad], tolerance [rad]) per joint --
