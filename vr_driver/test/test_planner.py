@@ -108,13 +108,27 @@ def test_a_free_straight_move_is_one_segment(kin):
         assert max(abs(a + f * (b - a) - v) for a, b, v in zip(START, GOAL, q)) < 1e-6
 
 
+def chord_distance(positions, q):
+    """[rad] how near the straight chords between ``positions`` come to ``q`` (the largest joint
+    difference at the point of each chord nearest it)."""
+    best = math.inf
+    for a, b in zip(positions, positions[1:]):
+        d = [y - x for x, y in zip(a, b)]
+        norm = sum(v * v for v in d)
+        f = 0.0 if norm == 0.0 else min(1.0, max(0.0, sum((c - x) * v for c, x, v in zip(q, a, d)) / norm))
+        best = min(best, max(abs(x + f * v - c) for x, v, c in zip(a, d, q)))
+    return best
+
+
 def test_a_plan_through_waypoints_passes_each_in_order(kin):
     """``via``: the path goes through each waypoint in turn (each leg planned, here straight), the
     timing through them too; a waypoint in collision or outside the limits is refused naming it."""
     mid = tuple((a + b) / 2.0 + (0.3 if i == 1 else 0.0) for i, (a, b) in enumerate(zip(START, GOAL)))
     plan = Planner(kin, None, seed=1).plan(START, GOAL, via=[mid])
     assert plan.path == (START, mid, GOAL)
-    assert min(max(abs(a - b) for a, b in zip(q, mid)) for q in plan.positions) < math.radians(0.5)
+    # what the driver runs, the chords between the samples, passes the waypoint (a sample need not
+    # fall on it: the timing passes the corner at speed, its chord cuts it by a fraction of a degree)
+    assert chord_distance(plan.positions, mid) < math.radians(0.5)
     assert max(q[1] for q in plan.positions) >= mid[1] - math.radians(0.5)     # not the straight line
     # around the wall: the legs are planned, the waypoint on the far side of it is passed
     over = (START[0] / 2.0, 1.3) + tuple(START[2:])
