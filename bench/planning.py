@@ -4,7 +4,7 @@
     scripts/env python3 bench/planning.py [--n 100] [--seed 1] [--budget 1.0] [--planner RRTConnect]
                                           [--velocity-scaling 1.0] [--ramp-time S]
                                           [--no-execute] [--protocol v2] [--driver] [--quick]
-                                          [--cell PATH] [--peer]
+                                          [--cell PATH] [--peer] [--per-query] [--dump PATH]
 
 The VR-006L (support package's xacro, moveit_config's SRDF) in the example cell
 (panasonic_vr006l_support/config/cell_example.yaml: table, pillar, shelf), collision padding the
@@ -34,6 +34,12 @@ or out of it: a detour around its walls and under its top; still every other goa
 venv is missing; never used by the driver): from the same start to the same goal, the same budget,
 its time measured inside its own process; figures per goal kind, ours / the peer's, printed.
 
+``--per-query``: a line per query -- its call, its path duration against the straight joint move
+from its start to the plan's end timed as the planner times one (what no path between the two can
+undercut), the holds (the elbow crossing's), the path's vertices, the tries and why they were made
+again. ``--dump PATH``: the queries as JSON lines (index, kind, start and goal joints, seed,
+duration), to replay one alone from the start it had in this run.
+
 Execution (unless --no-execute): each plan, validated as joint_trajectory_action validates it
 (driver.motion.trajectories.validate from the arm's reported joints, segment_speeds), runs on the in-memory
 driver rig of the tests (vr_driver/test/driver/_world.py: DriverCore with the cell as its scene --
@@ -50,9 +56,10 @@ each joint's acceleration limit its speed limit / S, written to a ``joint_limits
 plan action reads (``planning_limits``) and the bare planner plans with.
 
 Figures: success rate (a plan) and success within the budget (the whole call <= --budget),
-median / p95 / max planning time (the whole call, and the OMPL part alone), the share of queries
-the straight move solved, path duration (median / p95), collisions of the planned samples and
-chords, and in execution: runs that succeeded, samples checked, collisions. --quick: N = 10.
+median / p95 / max planning time (the whole call, its process time, and the OMPL part alone), the
+share of queries the straight move solved, path duration (median / p95), collisions of the planned
+samples and chords, and in execution: runs that succeeded, samples checked, collisions. --quick:
+N = 10.
 """
 from __future__ import annotations
 
@@ -355,8 +362,8 @@ def main() -> int:
                         help="a line per query: its kind, call, path duration against the straight joint move's "
                              "from the start to the plan's end (the same limits), holds, path vertices, tries")
     parser.add_argument("--dump", metavar="PATH", default="",
-                        help="write each query as a JSON line (its index, kind, start and goal joints [rad], "
-                             "outcome, path duration): a query replayed alone starts where this run's did")
+                        help="write each query as a JSON line (its index, kind, start and goal joints [rad], seed, "
+                             "the path duration when planned): a query replayed alone starts where this run's did")
     parser.add_argument("--peer", action="store_true",
                         help="an independent compiled planner (mplib, in its own venv) on the same queries: "
                              "its times and ours / its per goal kind")
