@@ -4,7 +4,7 @@
     scripts/env python3 bench/planning.py [--n 100] [--seed 1] [--budget 1.0] [--planner RRTConnect]
                                           [--velocity-scaling 1.0] [--ramp-time S]
                                           [--no-execute] [--protocol v2] [--driver] [--quick]
-                                          [--cell PATH] [--peer]
+                                          [--cell PATH] [--peer] [--per-query] [--dump PATH]
 
 The VR-006L (support package's xacro, moveit_config's SRDF) in the example cell
 (panasonic_vr006l_support/config/cell_example.yaml: table, pillar, shelf), collision padding the
@@ -34,6 +34,12 @@ or out of it: a detour around its walls and under its top; still every other goa
 venv is missing; never used by the driver): from the same start to the same goal, the same budget,
 its time measured inside its own process; figures per goal kind, ours / the peer's, printed.
 
+``--per-query``: a line per query -- its call, its path duration against the straight joint move
+from its start to the plan's end timed as the planner times one (what no path between the two can
+undercut), the holds (the elbow crossing's), the path's vertices, the tries and why they were made
+again. ``--dump PATH``: the queries as JSON lines (index, kind, start and goal joints, seed,
+duration), to replay one alone from the start it had in this run.
+
 Execution (unless --no-execute): each plan, validated as joint_trajectory_action validates it
 (driver.motion.trajectories.validate from the arm's reported joints, segment_speeds), runs on the in-memory
 driver rig of the tests (vr_driver/test/driver/_world.py: DriverCore with the cell as its scene --
@@ -50,9 +56,10 @@ each joint's acceleration limit its speed limit / S, written to a ``joint_limits
 plan action reads (``planning_limits``) and the bare planner plans with.
 
 Figures: success rate (a plan) and success within the budget (the whole call <= --budget),
-median / p95 / max planning time (the whole call, and the OMPL part alone), the share of queries
-the straight move solved, path duration (median / p95), collisions of the planned samples and
-chords, and in execution: runs that succeeded, samples checked, collisions. --quick: N = 10.
+median / p95 / max planning time (the whole call, its process time, and the OMPL part alone), the
+share of queries the straight move solved, path duration (median / p95), collisions of the planned
+samples and chords, and in execution: runs that succeeded, samples checked, collisions. --quick:
+N = 10.
 """
 from __future__ import annotations
 
@@ -274,6 +281,28 @@ def print_profile(profiles):
                  sum(p.get("retreat", 0) for _, p in rows), sum(p.get("roadmap", 0) for _, p in rows)))
 
 
+def straight_duration(planner, a, b):
+    """[s] the straight joint move from ``a`` to ``b`` from rest to rest, timed as the planner times one
+    (its limits and scaling): what no path between the two can undercut."""
+    times = planner._timing.time([tuple(a), tuple(b)], planner.velocity_scaling, planner.acceleration_scaling,
+                                 0.05, planner.dt)[0]
+    return times[-1]
+
+
+def holds(plan):
+    """The plan's pauses at rest (a sample repeated later: the elbow crossing's hold)."""
+    return sum(1 for p, q in zip(plan.positions, plan.positions[1:]) if p == q)
+
+
+def profile_words(profile):
+    """A call's tries and re-plans in a few words (PlanOutcome.profile)."""
+    if not profile:
+        return ""
+    return "tries %d%s%s" % (profile.get("tries", 0), "".join("; %s" % r[:60] for r in profile.get("replans", ())),
+                             "; back along the last path" if profile.get("retreat") else "") \
+        + ("; a route of earlier plans" if profile.get("roadmap") else "")
+
+
 def print_peer(by_kind, total, answers, version):
     """Ours and the peer's whole call per goal kind and in all (median, p95), the ratios, the
     peer's successes and path durations."""
@@ -329,6 +358,12 @@ def main() -> int:
     parser.add_argument("--quick", action="store_true", help="N = 10: a smoke run")
     parser.add_argument("--cell", default=CELL, help="the cell (a scene YAML; default the example cell; "
                         "bench/cells/hood_post.yaml: goals in and out of a hood)")
+    parser.add_argument("--per-query", action="store_true",
+                        help="a line per query: its kind, call, path duration against the straight joint move's "
+                             "from the start to the plan's end (the same limits), holds, path vertices, tries")
+    parser.add_argument("--dump", metavar="PATH", default="",
+                        help="write each query as a JSON line (its index, kind, start and goal joints [rad], seed, "
+                             "the path duration when planned): a query replayed alone starts where this run's did")
     parser.add_argument("--peer", action="store_true",
                         help="an independent compiled planner (mplib, in its own venv) on the same queries: "
                              "its times and ours / its per goal kind")
@@ -383,12 +418,15 @@ def main() -> int:
           + ("" if peer is None else "; the peer: mplib %s" % peer.version))
     start = executor.joints if executor is not None else tuple(kin.named_states["home"])
     total, solved, ompl_times, durations, failures, direct = [], [], [], [], [], 0
+    cpu = []                                       # [s] the process time of each whole call
     plan_hits = padding_hits = executed = crossing = 0
     first_hit = first_pad = ""
     exec_fail = []
     kinds = {"joints": [0, 0], "pose": [0, 0]}
     by_kind = {"joints": [], "pose": []}           # (our whole call [s], the peer's answer or None)
     profiles = []                                  # (kind, whole call [s], PlanOutcome.profile)
+    rows = []                                      # --per-query: a line per query
+    dumped = []                                    # --dump: the queries
     for i in range(n):
         target = region_free(kin, checker, rng, region) if region is not None and (i // 2) % 2 == 0 \
             else random_free(kin, checker, rng)
@@ -396,9 +434,11 @@ def main() -> int:
         goal = kin.fk_pose(target) if kind == "pose" else target
         kinds[kind][1] += 1
         answer = None
+        if args.dump:
+            dumped.append({"query": i, "kind": kind, "start": list(start), "goal": list(target), "seed": args.seed + i})
         if peer is not None:
             answer = peer.plan(start, target, kin.fk(target) if kind == "pose" else None)
-        t = time.perf_counter()
+        t, cpu0 = time.perf_counter(), time.process_time()
         try:
             if driver_planning is not None:
                 outcome = driver_planning.plan(
@@ -413,18 +453,33 @@ def main() -> int:
                 plan = planner.plan(start, goal)
         except PlanningError as exc:
             total.append(time.perf_counter() - t)
+            cpu.append(time.process_time() - cpu0)
             by_kind[kind].append((total[-1], answer))
             solved.append(False)
             failures.append("query %d (%s): %s" % (i, kind, exc))
+            if args.per_query:
+                rows.append("query %3d %-6s FAILED  call %5.0f ms  %s"
+                            % (i, kind, 1e3 * total[-1], profile_words(profiles[-1][2] if driver_planning else {})))
             crossing += start[4] * target[4] < 0.0
             continue
         total.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - cpu0)
         by_kind[kind].append((total[-1], answer))
         solved.append(True)
         kinds[kind][0] += 1
         ompl_times.append(plan.timings["plan"] + plan.timings["simplify"])
         direct += len(plan.path) == 2
         durations.append(plan.duration)
+        if args.dump:
+            dumped[-1]["duration"] = plan.duration
+        if args.per_query:
+            rows.append("query %3d %-6s ok      call %5.0f ms  duration %5.2f s, the straight move %5.2f s (x %.2f), "
+                        "holds %d, path vertices %d%s  %s"
+                        % (i, kind, 1e3 * total[-1], plan.duration, straight_duration(planner, start, plan.goal),
+                           plan.duration / max(1e-9, straight_duration(planner, start, plan.goal)), holds(plan),
+                           len(plan.path), "" if peer is None or not answer.get("ok") else
+                           ", the peer's %.2f s" % answer["duration"],
+                           profile_words(profiles[-1][2] if driver_planning else {})))
         hits, text = chord_collisions(exact, plan.positions)
         plan_hits += hits
         first_hit = first_hit or (text and "query %d: %s" % (i, text))
@@ -447,6 +502,9 @@ def main() -> int:
           % (args.budget, within, n, 100.0 * within / max(1, n)))
     print("planning time [ms]: median %.1f  p95 %.1f  max %.1f (the whole call: goal, plan, simplify, time, check)"
           % (1e3 * statistics.median(total), 1e3 * percentile(total, 95), 1e3 * max(total)))
+    print("process time of the whole call [ms] (this process's CPU: less moved by other load than the wall "
+          "time): median %.1f  p95 %.1f  total %.0f" % (1e3 * statistics.median(cpu), 1e3 * percentile(cpu, 95),
+                                                        1e3 * sum(cpu)))
     if ompl_times:
         print("OMPL part [ms] (plan + simplify): median %.1f  p95 %.1f  max %.1f; straight move free: %d / %d"
               % (1e3 * statistics.median(ompl_times), 1e3 * percentile(ompl_times, 95), 1e3 * max(ompl_times),
@@ -468,6 +526,12 @@ def main() -> int:
               "controller's nearest-solution IK may take another wrist" % (len(failures), crossing))
     for line in failures[:10]:
         print("  failed: %s" % line)
+    for line in rows:
+        print(line)
+    if args.dump:
+        import json
+        with open(args.dump, "w") as f:
+            f.writelines(json.dumps(d) + "\n" for d in dumped)
     if any(p for _, _, p in profiles):
         print_profile(profiles)
     if peer is not None:

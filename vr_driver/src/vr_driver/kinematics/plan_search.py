@@ -23,10 +23,19 @@ from typing import Any, Callable, List, Optional, Sequence, Tuple
 
 import numpy as np
 
-__all__ = ["OmplSearch", "SIMPLIFY_ROUNDS", "SWEEP_VALIDATED", "BatchValidity", "bisection_order", "first_invalid"]
+__all__ = ["OmplSearch", "SIMPLIFY_ROUNDS", "ROPE_SPACING", "SWEEP_VALIDATED", "BatchValidity", "bisection_order",
+           "first_invalid"]
 
 #: rounds of shortcutting at most (each tries as many shortcuts as the path has vertices)
 SIMPLIFY_ROUNDS = 2
+#: the rope shortcut's spacing in the scaled space (the state space's distance: joint 1 alone,
+#: 2.09 m/rad, every 55 deg): OMPL's ropeShortcutPath cuts the path into points this far apart
+#: and joins each to the farthest one its straight motion reaches. Rounds of random vertex and
+#: partial shortcuts alone stopped on detours the rope pulls straight: bench/planning.py, the hood
+#: cell's median path 2.47 -> 2.20 s, the example cell's 1.78 -> 1.70 s (bench/README.md,
+#: "Planning", round 6); OMPL's default spacing (1.0) shortened them by up to 2 % more for 6-11 %
+#: more CPU. None: no rope shortcut
+ROPE_SPACING: Optional[float] = 2.0
 #: the planners whose motions are checked at the sweep itself (:meth:`OmplSearch._sweep_validator`;
 #: they and the simplifier ask OMPL's motion validator only whether a motion is valid, never how
 #: far it is). The others -- LBKPIECE1, the plan action's retry planner, asks how far a motion is
@@ -241,14 +250,18 @@ class OmplSearch:
     def simplified(self, path: Any) -> List[Tuple[float, ...]]:
         """``path`` (of :meth:`solve`) simplified, as joints [rad]: OMPL's simplification steps with
         step counts, not a time limit (a seed gives one path): rounds of vertex reduction (random
-        shortcuts between vertices), partial shortcuts (a subset of the joints at a time) and
+        shortcuts between vertices), in the first round the rope shortcut (the path cut into
+        points ``ROPE_SPACING`` apart, each joined to the farthest it reaches straight; again in
+        the second round it shortened the paths by 1 % for 4-7 % more CPU, checking the path it
+        had pulled straight once more), partial shortcuts (a subset of the joints at a time) and
         collapsing close vertices, until a round changes nothing (at most ``SIMPLIFY_ROUNDS``),
         then B-spline smoothing of the corners. Each step keeps the path valid (it checks its
-        motions as the search does). (OMPL's rope shortcutting gave 4 % shorter motions on the
-        example cell for twice the time: left out.)"""
+        motions as the search does: the sweep validator where the planner has it)."""
         simplifier = self._og.PathSimplifier(self.si)
-        for _ in range(SIMPLIFY_ROUNDS):
+        for round_ in range(SIMPLIFY_ROUNDS):
             changed = simplifier.reduceVertices(path, 0, 0)
+            if not round_ and ROPE_SPACING:
+                changed = simplifier.ropeShortcutPath(path, ROPE_SPACING) or changed
             changed = simplifier.partialShortcutPath(path, 0, 0) or changed
             changed = simplifier.collapseCloseVertices(path) or changed
             if not changed:
