@@ -196,9 +196,12 @@ def test_ramps(tmp_path, kin, ramp_time, shape, axes, percent):
     want = {i + 1: v / ramp_time for i, v in enumerate(kin.limits.velocity)}
     got = doc["controller"]["accelerations"]
     assert set(got) == {"joint_%s" % a for a in axes.split(",")}
+    # the step's own figures in a failure's message (a fresh clone beside the computing tests read
+    # 4.71 for 4.18 rad/s^2 once in about twenty runs; its ramps' figures were not kept)
+    step = text[text.find("ramps: per-axis"):][:3000]
     for name, a in got.items():
         axis = int(name.split("_")[1])
-        assert abs(a - want[axis]) <= 0.1 * want[axis], (name, a, want[axis])
+        assert abs(a - want[axis]) <= 0.1 * want[axis], (name, a, want[axis], step)
     assert doc["controller"]["ramp_shape"] == shape
     assert doc["controller"]["ramp_time"] == pytest.approx(ramp_time, rel=0.1)
 
