@@ -39,6 +39,7 @@ from typing import Any, List, Optional, Sequence, Tuple
 
 from ...protocol.base import Protocol
 from .following import following_floor
+from ..motion.stream_points import hold_lead
 from ..motion.trajectories import (GOAL_TOLERANCE_VIOLATED, PATH_TOLERANCE_VIOLATED, SUCCESSFUL, ValidTrajectory,
                            path_check)
 
@@ -280,7 +281,7 @@ class TrajectorySupervisor:
             how = "smooth levels up to %d" % smooth if smooth else "an exact stop at each"
             # the stream's own timing: the plan after its hold at the start (stream_points.fed_schedule),
             # later only where the bus fed a target later than the plan passed it
-            hold = points[0].fed - points[0].time if points and points[0].hold and points[0].fed is not None else 0.0
+            hold = hold_lead(points)
             if hold > 0.005:
                 how += ", the first a %.2f s hold at the start while the bus brought the first targets" % hold
             fed = points[-1].fed if points and points[-1].fed is not None else traj.duration

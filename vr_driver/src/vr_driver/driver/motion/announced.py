@@ -32,6 +32,7 @@ from ...errors import ProtocolError
 from ...kinematics.preview import at_tcp_speed, peak_tcp_speed
 from ...kinematics.solver import Kinematics
 from ...protocol.base import Protocol
+from .stream_points import hold_lead
 
 __all__ = ["Announced", "HANDSHAKE_CYCLES", "STREAM_LATENCY_CYCLES", "announce_moves", "announce_plan", "fed_times",
            "plan_peak_speed", "program_duration", "scaling_words"]
@@ -102,9 +103,8 @@ def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], posit
     program speed, each with its handshake."""
     if wire.streams:
         planned = float(times[-1]) if len(times) else 0.0
-        first = stream[0] if stream else None
         last = stream[-1] if stream else None
-        lead = first.fed - float(first.time) if first is not None and first.hold and first.fed is not None else 0.0
+        lead = hold_lead(stream)
         late = max(0.0, last.fed - float(last.time)) if last is not None and last.fed is not None else 0.0
         latency = STREAM_LATENCY_CYCLES * cycle_time if planned > 0.0 else 0.0
         shifted = late - lead > 0.005                 # later points than the hold's lead alone

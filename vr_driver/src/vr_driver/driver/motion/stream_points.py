@@ -23,7 +23,7 @@ from .jobs import StreamPoint
 from .stream_thinning import PAUSE_EPS, SKIP_TOLERANCE, split_long, thin_timed
 
 __all__ = ["Fed", "HOLD_CREEP", "MAX_CARTESIAN_TOLERANCE", "MAX_STREAM_TOLERANCE", "MIN_SEGMENT_CYCLES",
-           "corner_levels", "corner_rounding", "fed_schedule", "hold_point", "hold_speed", "stream_points",
+           "corner_levels", "corner_rounding", "fed_schedule", "hold_lead", "hold_point", "hold_speed", "stream_points",
            "stream_speeds"]
 
 #: the largest thinning tolerance [rad] a planner trajectory's stream may use to keep its segments
@@ -162,6 +162,13 @@ def fed_schedule(times: Sequence[float], held: Sequence[bool], releases: Sequenc
             best = (later, lead, fed)
     assert best is not None
     return Fed(best[1], best[2])
+
+
+def hold_lead(stream: Sequence[StreamPoint]) -> float:
+    """[s] the hold a ``stream`` begins with (its first point's ``fed`` arrival past its planned time,
+    where that point is the hold of :func:`fed_schedule`); 0 without one."""
+    first = stream[0] if stream else None
+    return first.fed - float(first.time) if first is not None and first.hold and first.fed is not None else 0.0
 
 
 def hold_speed(start: Sequence[float], joints: Sequence[float], lead: float, vmax: Sequence[float]) -> int:
