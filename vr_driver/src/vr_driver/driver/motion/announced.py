@@ -84,7 +84,8 @@ def fed_times(times: Sequence[float], stream: Sequence[Any]) -> List[float]:
         return [float(t) for t in times]
     planned = np.array([t for t, _ in pts])
     shift = np.array([f - t for t, f in pts])
-    return [float(t) + float(np.interp(t, planned, shift)) for t in times]
+    at = np.asarray(times, dtype=float)
+    return (at + np.interp(at, planned, shift)).tolist()
 
 
 def announce_plan(kin: Kinematics, wire: Protocol, times: Sequence[float], positions: Sequence[Sequence[float]],
